@@ -1,0 +1,220 @@
+"""Configuration: frozen dataclasses with SI defaults and validation.
+
+Noise specs state their kind in the field name (STYLE.md §2.3):
+``*_noise_density`` is a white-noise root PSD (rad/s/√Hz or m/s²/√Hz), ``*_bias_sd`` the
+steady-state sigma of a first-order Gauss-Markov bias with correlation time ``*_bias_tau``,
+``*_bias_rw`` a bias random walk root PSD (rad/s/√s or m/s²/√s), ``*_scale_sd`` a random
+constant scale-factor sigma. Discrete variances are computed only in
+``vnav_graph.sensors.noise``.
+
+IMU presets (datasheet values, typical, 1σ; converted to SI below):
+
+- ``consumer`` — TDK InvenSense MPU-9250 (PS-MPU-9250A-01 rev 1.1): gyro rate noise
+  0.01 °/s/√Hz, accel noise 300 µg/√Hz. Bias instability is not in that datasheet; we use
+  the values commonly measured by Allan variance on this part (≈ 10 °/h gyro, ≈ 0.1 mg accel)
+  plus a turn-on residual after a static calibration (0.05 °/s, 5 mg).
+- ``industrial`` — Analog Devices ADIS16465-1 datasheet (rev. C): gyro in-run bias stability
+  2 °/h, angle random walk 0.15 °/√h; accel in-run bias stability 3.6 µg, velocity random
+  walk 0.012 m/s/√h; turn-on residual after calibration assumed 10 °/h and 1 mg.
+- ``tactical`` — Honeywell HG4930 datasheet: gyro in-run bias stability 0.25 °/h, ARW
+  0.04 °/√h; accel in-run bias stability 0.025 mg, VRW 0.03 m/s/√h; bias repeatability
+  7 °/h and 1.7 mg are not simulated as turn-on (we assume a calibrated unit: 1 °/h, 0.1 mg).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields
+from typing import Any
+
+import numpy as np
+
+DEG = np.pi / 180.0
+DEG_PER_HR = DEG / 3600.0
+G0 = 9.80665
+MG = 1e-3 * G0  # milli-g [m/s^2]
+UG = 1e-6 * G0
+
+
+def _positive(obj: Any, *names: str) -> None:
+    for n in names:
+        v = getattr(obj, n)
+        if not np.isfinite(v) or v < 0:
+            raise ValueError(f"{type(obj).__name__}.{n}: must be finite and >= 0, got {v!r}")
+
+
+@dataclass(frozen=True)
+class ImuSpec:
+    """IMU error model, identical on the three axes.
+
+    gyro_noise_density [rad/s/√Hz], gyro_bias_sd [rad/s] (Gauss-Markov, tau gyro_bias_tau [s]),
+    gyro_bias_rw [rad/s/√s], accel_noise_density [m/s²/√Hz], accel_bias_sd [m/s²],
+    accel_bias_tau [s], accel_bias_rw [m/s²/√s], accel_scale_sd [-] (random constant).
+    ``gyro_bias_tau = inf`` makes the bias a random constant.
+    """
+
+    name: str = "custom"
+    gyro_noise_density: float = 0.01 * DEG
+    gyro_bias_sd: float = 0.05 * DEG
+    gyro_bias_tau: float = 3600.0
+    gyro_bias_rw: float = 0.0
+    accel_noise_density: float = 300 * UG
+    accel_bias_sd: float = 5 * MG
+    accel_bias_tau: float = 3600.0
+    accel_bias_rw: float = 0.0
+    accel_scale_sd: float = 0.0
+
+    def __post_init__(self) -> None:
+        _positive(
+            self, "gyro_noise_density", "gyro_bias_sd", "gyro_bias_rw", "accel_noise_density",
+            "accel_bias_sd", "accel_bias_rw", "accel_scale_sd",
+        )
+        for n in ("gyro_bias_tau", "accel_bias_tau"):
+            if not getattr(self, n) > 0:
+                raise ValueError(f"ImuSpec.{n}: must be > 0 (inf for a random constant)")
+
+    def noiseless(self) -> ImuSpec:
+        return ImuSpec(name=f"{self.name}-noiseless", gyro_noise_density=0.0, gyro_bias_sd=0.0,
+                       accel_noise_density=0.0, accel_bias_sd=0.0)
+
+
+IMU_PRESETS: dict[str, ImuSpec] = {
+    "consumer": ImuSpec(
+        name="consumer",
+        gyro_noise_density=0.01 * DEG,  # MPU-9250: 0.01 °/s/√Hz
+        gyro_bias_sd=0.05 * DEG,
+        gyro_bias_tau=600.0,
+        gyro_bias_rw=10 * DEG_PER_HR / np.sqrt(600.0),
+        accel_noise_density=300 * UG,  # MPU-9250: 300 µg/√Hz
+        accel_bias_sd=5 * MG,
+        accel_bias_tau=600.0,
+        accel_bias_rw=0.1 * MG / np.sqrt(600.0),
+        accel_scale_sd=1e-3,
+    ),
+    "industrial": ImuSpec(
+        name="industrial",
+        gyro_noise_density=0.15 * DEG / 60.0,  # ADIS16465: ARW 0.15 °/√h
+        gyro_bias_sd=10 * DEG_PER_HR,
+        gyro_bias_tau=3600.0,
+        gyro_bias_rw=2 * DEG_PER_HR / np.sqrt(3600.0),  # in-run stability 2 °/h
+        accel_noise_density=0.012 / 60.0,  # VRW 0.012 m/s/√h
+        accel_bias_sd=1 * MG,
+        accel_bias_tau=3600.0,
+        accel_bias_rw=3.6 * UG / np.sqrt(3600.0),
+        accel_scale_sd=2e-4,
+    ),
+    "tactical": ImuSpec(
+        name="tactical",
+        gyro_noise_density=0.04 * DEG / 60.0,  # HG4930: ARW 0.04 °/√h
+        gyro_bias_sd=1 * DEG_PER_HR,
+        gyro_bias_tau=3600.0,
+        gyro_bias_rw=0.25 * DEG_PER_HR / np.sqrt(3600.0),  # in-run 0.25 °/h
+        accel_noise_density=0.03 / 60.0,  # VRW 0.03 m/s/√h
+        accel_bias_sd=0.1 * MG,
+        accel_bias_tau=3600.0,
+        accel_bias_rw=0.025 * MG / np.sqrt(3600.0),
+        accel_scale_sd=1e-4,
+    ),
+}
+
+
+@dataclass(frozen=True)
+class GnssSpec:
+    """GNSS receiver error model.
+
+    pos_sd_h / pos_sd_v: white position noise per fix, horizontal / vertical [m];
+    vel_sd [m/s] (0 disables velocity output); rate_hz; latency_s (fix time of validity is
+    ``latency_s`` earlier than its stamp; 0 = perfectly stamped); lever_arm_b [m];
+    outages: ((t0, t1), ...) windows without fixes [s]; outlier_prob per fix and
+    outlier_sd [m] of the added error when a fix is an outlier.
+    """
+
+    rate_hz: float = 10.0
+    pos_sd_h: float = 1.0
+    pos_sd_v: float = 2.0
+    vel_sd: float = 0.1
+    latency_s: float = 0.0
+    lever_arm_b: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    outages: tuple[tuple[float, float], ...] = ()
+    outlier_prob: float = 0.0
+    outlier_sd: float = 30.0
+
+    def __post_init__(self) -> None:
+        _positive(self, "pos_sd_h", "pos_sd_v", "vel_sd", "latency_s", "outlier_prob",
+                  "outlier_sd")
+        if not self.rate_hz > 0:
+            raise ValueError("GnssSpec.rate_hz: must be > 0")
+        if not (self.pos_sd_h > 0 and self.pos_sd_v > 0):
+            raise ValueError("GnssSpec.pos_sd_h/pos_sd_v: must be > 0")
+        for w in self.outages:
+            if len(w) != 2 or not w[1] > w[0]:
+                raise ValueError(f"GnssSpec.outages: bad window {w!r}")
+
+
+@dataclass(frozen=True)
+class BaroSpec:
+    """Barometric altimeter error model (DESIGN.md "One barometer model").
+
+    h_baro(t) = (1 + s)·h(t − τd) + b(t) + v,  ḃ = −b/τb + w.
+
+    scale_sd: sigma of the random-constant scale error s [-] (``scale`` fixes it instead);
+    latency_s: τd [s] (fixed), or drawn uniformly in ``latency_range_s`` when given;
+    bias_sd [m] / bias_tau [s]: steady-state sigma and correlation time of b;
+    noise_sd [m]: white noise v; rate_hz. The scale acts on the height above the drive
+    origin ``h0 = Drive.origin_lla[2]`` (``h`` in the formula is ``h - h0``, plus h0 back),
+    as everywhere in the package (see ``vnav_graph.sensors.baro``).
+    ``physical`` = True generates pressure through the ISA with a temperature offset (that
+    makes s) and a drifting sea-level pressure (that makes b) instead of adding s and b.
+    """
+
+    rate_hz: float = 25.0
+    scale_sd: float = 0.01
+    scale: float | None = None
+    latency_s: float = 0.1
+    latency_range_s: tuple[float, float] | None = None
+    bias_sd: float = 3.0
+    bias_tau: float = 1800.0
+    bias_init: float | None = None
+    noise_sd: float = 0.3
+    physical: bool = False
+
+    def __post_init__(self) -> None:
+        _positive(self, "scale_sd", "latency_s", "bias_sd", "noise_sd")
+        if not self.rate_hz > 0 or not self.bias_tau > 0:
+            raise ValueError("BaroSpec.rate_hz / bias_tau: must be > 0")
+        if self.latency_s > 2.0:
+            raise ValueError("BaroSpec.latency_s: above 2 s (milliseconds passed as seconds?)")
+
+
+def replace_fields(obj: Any, **changes: Any) -> Any:
+    """``dataclasses.replace`` that ignores keys which are not fields (for TOML overlays)."""
+    from dataclasses import replace
+
+    names = {f.name for f in fields(obj)}
+    unknown = set(changes) - names
+    if unknown:
+        raise ValueError(f"{type(obj).__name__}: unknown field(s) {sorted(unknown)}")
+    return replace(obj, **changes)
+
+
+@dataclass(frozen=True)
+class ScenarioConfig:
+    """A simulated test drive: trajectory kind, duration, rates and sensor error models."""
+
+    name: str
+    kind: str  # "hill-drive" | "sortie" | "vertical"
+    duration_s: float
+    imu_rate_hz: float = 200.0
+    imu: ImuSpec = field(default_factory=lambda: IMU_PRESETS["consumer"])
+    gnss: GnssSpec = field(default_factory=GnssSpec)
+    baro: BaroSpec = field(default_factory=BaroSpec)
+    origin_lat_deg: float = 47.0
+    origin_lon_deg: float = 11.0
+    origin_alt_m: float = 500.0
+    params: dict[str, Any] = field(default_factory=dict)  # kind-specific trajectory params
+    description: str = ""
+
+    def __post_init__(self) -> None:
+        if self.kind not in ("hill-drive", "sortie", "vertical"):
+            raise ValueError(f"ScenarioConfig.kind: unknown trajectory kind {self.kind!r}")
+        if not self.duration_s > 0 or not self.imu_rate_hz > 0:
+            raise ValueError("ScenarioConfig.duration_s / imu_rate_hz: must be > 0")

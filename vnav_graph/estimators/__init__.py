@@ -1,0 +1,1 @@
+"""Estimators and their registry (see ``vnav_graph.estimators.base``)."""

@@ -1,0 +1,1 @@
+"""Evaluation of estimates against truth or withheld GNSS."""

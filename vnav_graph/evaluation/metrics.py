@@ -1,0 +1,106 @@
+"""Errors of an Estimate against truth: altitude, vertical velocity, NEES, baro parameters.
+
+Truth is interpolated to the estimate's stamps, never the other way round (STYLE.md §2.4).
+``evaluate`` returns the per-estimator metric block of ``summary.json`` (DESIGN.md); metrics
+that do not apply are ``None``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..types import ERROR_STATE, BaroEstimate, Drive, Estimate, FloatArray
+
+
+@dataclass(frozen=True)
+class Errors:
+    t: FloatArray
+    alt: FloatArray  # estimate − truth [m]
+    vel_down: FloatArray | None  # [m/s]
+
+
+def errors_vs_truth(est: Estimate, drive: Drive) -> Errors:
+    if drive.truth is None:
+        raise ValueError("errors_vs_truth: the drive has no truth")
+    tr = est.trajectory
+    m = (tr.t >= drive.truth.t[0]) & (tr.t <= drive.truth.t[-1])
+    t = tr.t[m]
+    truth = drive.truth.at(t)
+    alt = tr.alt[m] - truth.alt
+    vd = None
+    if "vel_d" in est.provides:
+        vd = tr.vel_down[m] - truth.vel_down
+    return Errors(t, alt, vd)
+
+
+def nees(est: Estimate, drive: Drive) -> tuple[FloatArray, int] | None:
+    """NEES over the position/velocity error components the estimate covers (finite rows of
+    ``pos_n``/``vel_n`` in its covariance). Returns (nees per covariance epoch, dof)."""
+    if est.cov is None or est.t_cov is None or drive.truth is None:
+        return None
+    idx = np.r_[np.arange(18)[ERROR_STATE["pos_n"]], np.arange(18)[ERROR_STATE["vel_n"]]]
+    diag = np.diagonal(est.cov[0])[idx]
+    idx = idx[np.isfinite(diag)]
+    if idx.size == 0:
+        return None
+    m = (est.t_cov >= drive.truth.t[0]) & (est.t_cov <= drive.truth.t[-1])
+    t = est.t_cov[m]
+    traj = est.trajectory.at(t)
+    truth = drive.truth.at(t)
+    e = np.full((t.size, 18), np.nan)
+    if "pos_h" in est.provides:
+        e[:, 0:3] = traj.pos_n(drive.origin_lla) - truth.pos_n(drive.origin_lla)
+    # down error from heights: local vertical, independent of tangent-plane curvature
+    e[:, 2] = -(traj.alt - truth.alt)
+    e[:, 3:6] = traj.vel_n - truth.vel_n
+    e = e[:, idx]
+    p = est.cov[m][:, idx[:, None], idx[None, :]]
+    val = np.einsum("ni,ni->n", e, np.linalg.solve(p, e[..., None])[..., 0])
+    return val, int(idx.size)
+
+
+def _param(block: Any, truth: float | None) -> dict[str, Any]:
+    if block is None:
+        return {"est": None, "sd": None, "truth": truth}
+    return {"est": float(block.est), "sd": None if block.sd is None else float(block.sd),
+            "truth": truth}
+
+
+def baro_block(baro: BaroEstimate | None, drive: Drive) -> dict[str, Any]:
+    """The ``baro`` block of summary.json. Bias truth is the time average of b(t)."""
+    bt = drive.baro_truth
+    bias_truth = None
+    if drive.truth is not None and drive.truth.bias_baro is not None:
+        bias_truth = float(np.mean(drive.truth.bias_baro))
+    b = baro or BaroEstimate()
+    return {
+        "scale": _param(b.scale, None if bt is None else float(bt.scale)),
+        "latency_s": _param(b.latency_s, None if bt is None else float(bt.latency_s)),
+        "bias_m": _param(b.bias_m, bias_truth),
+    }
+
+
+def evaluate(est: Estimate, drive: Drive) -> dict[str, Any]:
+    """Metric block for summary.json / bench.json (DESIGN.md schema)."""
+    out: dict[str, Any] = {
+        "status": "ok", "error": None, "alt_rmse_m": None, "alt_max_abs_m": None,
+        "vel_down_rmse_mps": None, "nees_mean": None, "nees_dof": None,
+        "runtime_s": float(est.runtime_s),
+        "realtime_factor": (drive.duration_s / est.runtime_s) if est.runtime_s > 0 else None,
+        "gnss_rejected": est.info.get("gnss_rejected"),
+    }
+    if drive.truth is not None:
+        err = errors_vs_truth(est, drive)
+        out["alt_rmse_m"] = float(np.sqrt(np.mean(err.alt**2)))
+        out["alt_max_abs_m"] = float(np.max(np.abs(err.alt)))
+        if err.vel_down is not None:
+            out["vel_down_rmse_mps"] = float(np.sqrt(np.mean(err.vel_down**2)))
+        ne = nees(est, drive)
+        if ne is not None:
+            out["nees_mean"] = float(np.mean(ne[0]))
+            out["nees_dof"] = ne[1]
+    out["baro"] = baro_block(est.baro, drive)
+    return out

@@ -1,0 +1,1 @@
+"""Geodesy, Earth model and standard atmosphere."""

@@ -1,0 +1,90 @@
+"""Frames and rotations: lla <-> tangent-plane NED (via pymap3d), quaternions, Euler angles.
+
+Quaternions are scalar-first ``(w, x, y, z)``, Hamilton; ``q_ab`` maps b-coordinates into a.
+Euler angles are roll, pitch, yaw (z-y-x, aerospace): ``mat_nb = Rz(yaw) Ry(pitch) Rx(roll)``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pymap3d
+from numpy.typing import ArrayLike, NDArray
+from scipy.spatial.transform import Rotation, Slerp
+
+FloatArray = NDArray[np.float64]
+
+
+def lla_to_ned(lla: ArrayLike, origin_lla: ArrayLike) -> FloatArray:
+    """Geodetic (rad, rad, m) to tangent-plane NED at ``origin_lla`` [m], shape (N, 3)."""
+    a = np.atleast_2d(np.asarray(lla, dtype=float))
+    o = np.asarray(origin_lla, dtype=float)
+    n, e, d = pymap3d.geodetic2ned(a[:, 0], a[:, 1], a[:, 2], o[0], o[1], o[2], deg=False)
+    return np.column_stack([n, e, d])
+
+
+def ned_to_lla(pos_n: ArrayLike, origin_lla: ArrayLike) -> FloatArray:
+    """Tangent-plane NED at ``origin_lla`` [m] to geodetic (rad, rad, m), shape (N, 3)."""
+    p = np.atleast_2d(np.asarray(pos_n, dtype=float))
+    o = np.asarray(origin_lla, dtype=float)
+    lat, lon, h = pymap3d.ned2geodetic(p[:, 0], p[:, 1], p[:, 2], o[0], o[1], o[2], deg=False)
+    return np.column_stack([lat, lon, h])
+
+
+def skew(v: ArrayLike) -> FloatArray:
+    """Cross-product matrix [v×], shape (..., 3, 3)."""
+    v = np.asarray(v, dtype=float)
+    z = np.zeros_like(v[..., 0])
+    return np.stack(
+        [
+            np.stack([z, -v[..., 2], v[..., 1]], -1),
+            np.stack([v[..., 2], z, -v[..., 0]], -1),
+            np.stack([-v[..., 1], v[..., 0], z], -1),
+        ],
+        -2,
+    )
+
+
+def rph_to_quat(rph: ArrayLike) -> FloatArray:
+    """Roll, pitch, yaw [rad] (N, 3) to q_nb (N, 4) scalar first."""
+    r = np.atleast_2d(np.asarray(rph, dtype=float))
+    rot = Rotation.from_euler("ZYX", r[:, ::-1])
+    return _canon(rot.as_quat(scalar_first=True))
+
+
+def quat_to_rph(q_nb: ArrayLike) -> FloatArray:
+    """q_nb (N, 4) to roll, pitch, yaw [rad] (N, 3)."""
+    rot = Rotation.from_quat(np.atleast_2d(q_nb), scalar_first=True)
+    return rot.as_euler("ZYX")[:, ::-1]
+
+
+def quat_to_mat(q_nb: ArrayLike) -> FloatArray:
+    """q_nb (..., 4) to mat_nb (..., 3, 3)."""
+    q = np.asarray(q_nb, dtype=float)
+    return Rotation.from_quat(q.reshape(-1, 4), scalar_first=True).as_matrix().reshape(
+        q.shape[:-1] + (3, 3)
+    )
+
+
+def mat_to_quat(mat_nb: ArrayLike) -> FloatArray:
+    m = np.asarray(mat_nb, dtype=float)
+    q = Rotation.from_matrix(m.reshape(-1, 3, 3)).as_quat(scalar_first=True)
+    return _canon(q).reshape(m.shape[:-2] + (4,))
+
+
+def slerp_quat(t: ArrayLike, q: ArrayLike, t_query: ArrayLike) -> FloatArray:
+    """Spherical linear interpolation of q (N, 4) given at t (N,) to t_query (M,)."""
+    rot = Rotation.from_quat(np.asarray(q), scalar_first=True)
+    return _canon(Slerp(np.asarray(t), rot)(np.asarray(t_query)).as_quat(scalar_first=True))
+
+
+def attitude_error_n(q_est: ArrayLike, q_true: ArrayLike) -> FloatArray:
+    """Small-angle attitude error ψ resolved in n, (N, 3) [rad]: C_est = exp([ψ×]) C_true."""
+    r = Rotation.from_quat(np.asarray(q_est), scalar_first=True) * Rotation.from_quat(
+        np.asarray(q_true), scalar_first=True
+    ).inv()
+    return r.as_rotvec()
+
+
+def _canon(q: FloatArray) -> FloatArray:
+    """Sign convention w >= 0 so stored quaternions are unique."""
+    return np.where(q[..., :1] < 0, -q, q)

@@ -1,0 +1,1 @@
+"""Sensor error models shared by the simulator and every estimator."""

@@ -1,0 +1,96 @@
+"""Barometric altimeter error model — the one model of DESIGN.md, used everywhere.
+
+    h_b(t) − h0 = (1 + s)·(h(t − τd) − h0) + b(t) + v,   ḃ = −b/τb + w
+
+h is the true ellipsoidal height, h0 the drive-origin height (the scale acts on height above
+it), s a random-constant scale error, τd the latency, b a first-order Gauss-Markov bias and v
+white noise. Linearised in τd (seed 001 eq. 2): h_b ≈ h0 + (1+s)(h − h0 − v_up·τd) + b.
+
+``measure_baro`` is the model an estimator predicts with; ``baro_jacobian`` is its Jacobian
+with respect to (h, v_up, s, τd, b) — the EKF, the 7-state filter and the graph factor all use
+these two functions.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from ..config import BaroSpec
+from ..geo.atmosphere import isa_pressure
+from ..types import BaroStream, BaroTruth, FloatArray
+from .noise import gauss_markov
+
+HPA_PER_M = 1.0 / 8.3  # near sea level, for converting a bias sigma to pressure
+
+
+def measure_baro(
+    h: ArrayLike, v_up: ArrayLike, scale: ArrayLike, latency: ArrayLike, bias: ArrayLike,
+    h0: float,
+) -> FloatArray:
+    """Predicted baro altitude [m] from height h [m] and vertical speed v_up [m/s] at the
+    sample time, with the latency applied by first-order back-extrapolation h(t−τ) ≈ h − v·τ."""
+    h = np.asarray(h, dtype=float)
+    return h0 + (1.0 + np.asarray(scale)) * (h - h0 - np.asarray(v_up) * latency) + bias
+
+
+def baro_jacobian(
+    h: ArrayLike, v_up: ArrayLike, scale: ArrayLike, latency: ArrayLike, h0: float
+) -> FloatArray:
+    """∂h_b/∂(h, v_up, s, τd, b), shape (..., 5)."""
+    h = np.asarray(h, dtype=float)
+    v_up = np.asarray(v_up, dtype=float)
+    s = np.asarray(scale, dtype=float)
+    tau = np.asarray(latency, dtype=float)
+    one = np.ones(np.broadcast(h, v_up, s, tau).shape)
+    return np.stack(
+        [(1 + s) * one, -(1 + s) * tau * one, (h - h0 - v_up * tau) * one, -(1 + s) * v_up * one,
+         one],
+        axis=-1,
+    )
+
+
+def draw_baro_truth(spec: BaroSpec, rng: np.random.Generator) -> BaroTruth:
+    """Draw the random constants (scale, latency) of one simulated altimeter."""
+    s = spec.scale if spec.scale is not None else float(rng.normal(0.0, spec.scale_sd))
+    if spec.latency_range_s is not None:
+        tau = float(rng.uniform(*spec.latency_range_s))
+    else:
+        tau = spec.latency_s
+    return BaroTruth(scale=s, latency_s=tau)
+
+
+def simulate_baro(
+    t: FloatArray, t_truth: FloatArray, h_truth: FloatArray, h0: float, spec: BaroSpec,
+    rng: np.random.Generator,
+) -> tuple[BaroStream, BaroTruth, FloatArray]:
+    """Generate baro samples at ``t`` from the true height ``h_truth`` sampled at ``t_truth``.
+
+    Returns the stream, the drawn constants and the bias b(t) at ``t`` [m].
+    In ``physical`` mode the pressure is produced by a non-standard atmosphere (ISA + dT with
+    dT = −s·T0/(1+s), giving scale s exactly at the reference, and a sea-level pressure
+    drifting as a Gauss-Markov process that gives b); the returned bias is then the
+    indicated-altitude error at h0 (exact there; away from h0 the ISA law adds a small
+    nonlinearity that the linear model does not have), and the stream carries pressure [Pa].
+    """
+    truth = draw_baro_truth(spec, rng)
+    t_del = t - truth.latency_s
+    if t_del[0] < t_truth[0]:
+        t_del = np.maximum(t_del, t_truth[0])  # the first τd seconds repeat the first height
+    h_del = np.interp(t_del, t_truth, h_truth)
+    x0 = None if spec.bias_init is None else np.array([spec.bias_init])
+    bias = gauss_markov(t, spec.bias_tau, spec.bias_sd, rng, 1, x0=x0)[:, 0]
+    noise = rng.normal(0.0, spec.noise_sd, t.size) if spec.noise_sd > 0 else np.zeros(t.size)
+    if not spec.physical:
+        alt = h0 + (1.0 + truth.scale) * (h_del - h0) + bias + noise
+        return BaroStream(t, alt=alt, spec=spec), truth, bias
+    from ..geo.atmosphere import R_AIR, T0, isa_temperature
+
+    # ISA + dT with dT = −s·T0/(1+s) makes the standard-law altimeter read (1+s)·h.
+    dT = -truth.scale * T0 / (1.0 + truth.scale)
+    # Sea-level pressure p0(t) chosen so the indicated altitude at h0 is exactly h0 + b(t).
+    p0 = isa_pressure(h0 + bias) / isa_pressure(h0, dT, p0=1.0)
+    p = p0 * isa_pressure(h_del, dT, p0=1.0)
+    # white noise of noise_sd metres through the hydrostatic gradient dp/dh = −p·g/(R·T)
+    p = p - noise * p * 9.80665 / (R_AIR * isa_temperature(h_del, dT))
+    return BaroStream(t, pressure=p, spec=spec), truth, bias

@@ -1,0 +1,141 @@
+"""Scenarios (TOML) and ``simulate(scenario, seed) -> Drive``.
+
+Scenario files live in ``vnav_graph/scenarios/*.toml`` (``benchmarks/scenarios`` links there).
+A scenario picks a trajectory kind, a duration, sensor rates and the error models; every
+random draw comes from ``np.random.default_rng(seed)`` so a (scenario, seed) pair always gives
+the same drive.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import replace
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any
+
+import numpy as np
+
+from ..config import (
+    IMU_PRESETS,
+    BaroSpec,
+    GnssSpec,
+    ImuSpec,
+    ScenarioConfig,
+    replace_fields,
+)
+from ..sensors.baro import simulate_baro
+from ..sensors.gnss import simulate_gnss
+from ..sensors.imu import apply_imu_errors
+from ..types import Drive, Trajectory
+from .trajectories import (
+    hill_drive_profiles,
+    kinematics,
+    sortie_profiles,
+    vertical_kinematics,
+)
+
+SCENARIO_DIR = Path(__file__).resolve().parent.parent / "scenarios"
+
+
+def list_scenarios() -> list[str]:
+    return sorted(p.stem for p in SCENARIO_DIR.glob("*.toml"))
+
+
+def scenario_from_dict(d: dict[str, Any]) -> ScenarioConfig:
+    """Build a ScenarioConfig from a TOML-like dict (unknown keys are errors)."""
+    d = dict(d)
+    imu_d = dict(d.pop("imu", {}))
+    preset = imu_d.pop("preset", "consumer")
+    if preset not in IMU_PRESETS:
+        raise ValueError(f"scenario imu.preset: unknown {preset!r} (known: {sorted(IMU_PRESETS)})")
+    imu: ImuSpec = replace_fields(IMU_PRESETS[preset], **imu_d)
+    gnss_d = dict(d.pop("gnss", {}))
+    if "outages" in gnss_d:
+        gnss_d["outages"] = tuple(tuple(float(x) for x in w) for w in gnss_d["outages"])
+    if "lever_arm_b" in gnss_d:
+        gnss_d["lever_arm_b"] = tuple(float(x) for x in gnss_d["lever_arm_b"])
+    gnss: GnssSpec = replace_fields(GnssSpec(), **gnss_d)
+    baro_d = dict(d.pop("baro", {}))
+    if "latency_range_s" in baro_d:
+        baro_d["latency_range_s"] = tuple(float(x) for x in baro_d["latency_range_s"])
+    baro: BaroSpec = replace_fields(BaroSpec(), **baro_d)
+    params = dict(d.pop("params", {}))
+    try:
+        return ScenarioConfig(imu=imu, gnss=gnss, baro=baro, params=params, **d)
+    except TypeError as exc:
+        raise ValueError(f"scenario: {exc}") from None
+
+
+def load_scenario(name_or_path: str | Path, **overrides: Any) -> ScenarioConfig:
+    """Load a scenario by name (``hill-drive``) or TOML path; ``overrides`` replace top-level
+    fields (e.g. ``duration_s=120``)."""
+    p = Path(name_or_path)
+    if p.suffix != ".toml":
+        p = SCENARIO_DIR / f"{name_or_path}.toml"
+        if not p.exists():
+            raise ValueError(
+                f"unknown scenario {str(name_or_path)!r} (known: {', '.join(list_scenarios())})"
+            )
+    elif not p.exists():
+        raise ValueError(f"scenario file not found: {p}")
+    try:
+        d = tomllib.loads(p.read_text())
+    except tomllib.TOMLDecodeError as exc:
+        raise ValueError(f"scenario {p.name}: invalid TOML ({exc})") from None
+    cfg = scenario_from_dict(d)
+    return replace(cfg, **overrides) if overrides else cfg
+
+
+def simulate(scenario: ScenarioConfig | str, seed: int = 0, **overrides: Any) -> Drive:
+    """Simulate one drive. Deterministic given ``(scenario, seed)``.
+
+    The truth (``Drive.truth``) is sampled at the IMU epochs and carries the realised IMU
+    biases and the baro Gauss-Markov bias (interpolated to IMU epochs).
+    """
+    cfg = load_scenario(scenario, **overrides) if isinstance(scenario, str) else (
+        replace(scenario, **overrides) if overrides else scenario
+    )
+    rng = np.random.default_rng(seed)
+    origin = np.array([np.radians(cfg.origin_lat_deg), np.radians(cfg.origin_lon_deg),
+                       cfg.origin_alt_m])
+    dt = 1.0 / cfg.imu_rate_hz
+    t = np.arange(0.0, cfg.duration_s + 0.5 * dt, dt)
+    traj_rng = np.random.default_rng([seed, 1])  # trajectory draws independent of sensor draws
+    p = cfg.params
+    if cfg.kind == "vertical":
+        kin = vertical_kinematics(t, origin, traj_rng, **p)
+    else:
+        if cfg.kind == "hill-drive":
+            prof = hill_drive_profiles(cfg.duration_s, traj_rng, **p)
+            turns = False
+        else:
+            prof = sortie_profiles(cfg.duration_s, traj_rng, **p)
+            turns = True
+        kin = kinematics(t, *prof, origin, coordinated_turns=turns)
+    imu, imu_err = apply_imu_errors(t, kin.gyro_b, kin.accel_b, cfg.imu, rng)
+
+    def omega_nb(tq: np.ndarray) -> np.ndarray:
+        return np.column_stack([np.interp(tq, t, kin.omega_nb_b[:, j]) for j in range(3)])
+
+    gnss, outliers = simulate_gnss(kin.truth, omega_nb, cfg.gnss, rng)
+    t_baro = np.arange(0.0, cfg.duration_s + 1e-9, 1.0 / cfg.baro.rate_hz)
+    baro, baro_truth, bias_b = simulate_baro(
+        t_baro, t, kin.truth.alt, float(origin[2]), cfg.baro, rng
+    )
+    truth = Trajectory(
+        t, kin.truth.lla, kin.truth.vel_n, kin.truth.q_nb, imu_err.bias_gyro,
+        imu_err.bias_accel, np.interp(t, t_baro, bias_b),
+    )
+    meta = {
+        "name": f"{cfg.name}-seed{seed}",
+        "scenario": cfg.name,
+        "seed": seed,
+        "source": "simulated",
+        "kind": cfg.kind,
+        "imu_grade": cfg.imu.name,
+        "gnss_outages": [list(w) for w in cfg.gnss.outages],
+        "gnss_outliers": int(outliers.sum()),
+        "accel_scale_true": imu_err.accel_scale.tolist(),
+    }
+    return Drive(imu, gnss, baro, origin, truth, baro_truth, MappingProxyType(meta))

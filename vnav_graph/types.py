@@ -1,0 +1,511 @@
+"""Core data types: immutable sensor streams on one clock, drives, trajectories, estimates.
+
+Conventions (see also the package docstring)
+--------------------------------------------
+- One clock for every stream, in seconds (float64), strictly increasing.
+- ``lla`` columns are geodetic latitude [rad], longitude [rad], WGS-84 ellipsoidal height [m].
+- ``n`` is the local-level NED frame at the current position (local-level mechanization);
+  ``pos_n`` (tangent-plane NED relative to ``Drive.origin_lla``) is derived from ``lla``.
+- ``b`` is the IMU body frame, forward-right-down.
+- ``q_nb`` is a unit quaternion, scalar first ``(w, x, y, z)``, Hamilton convention, that maps
+  b-coordinates into n (``mat_nb @ accel_b`` is the specific force resolved in n).
+- ``alt`` is +up, ``down`` is +down. SI units everywhere; non-SI only at I/O boundaries.
+
+Every class validates in ``__post_init__`` and raises ``ValueError`` naming the stream and the
+field. Nothing is silently repaired: readers repair and report, types only check.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
+
+# Error-state layout shared by every estimator that reports a covariance. Rows/columns an
+# estimator does not estimate are NaN. Position and velocity errors are NED [m], [m/s];
+# attitude errors are small tilt angles resolved in n [rad] (true = exp(-[psi x]) estimated,
+# i.e. psi = estimated minus true); gyro bias [rad/s], accel bias [m/s^2]; baro scale [-],
+# baro latency [s], baro Gauss-Markov bias [m].
+ERROR_STATE: MappingProxyType[str, slice] = MappingProxyType(
+    {
+        "pos_n": slice(0, 3),
+        "vel_n": slice(3, 6),
+        "att_n": slice(6, 9),
+        "bias_gyro": slice(9, 12),
+        "bias_accel": slice(12, 15),
+        "baro_scale": slice(15, 16),
+        "baro_latency": slice(16, 17),
+        "baro_bias": slice(17, 18),
+    }
+)
+ERROR_STATE_DIM = 18
+
+# Quantities an Estimate may provide (``Estimate.provides``).
+QUANTITIES = frozenset({"alt", "vel_d", "pos_h", "vel_h", "att", "baro", "cov"})
+
+# Physical plausibility limits used by validation (generous; they catch unit mistakes).
+_MAX_GYRO = 50.0  # rad/s (≈ 2900 deg/s): larger means degrees were passed as radians
+_MAX_ACCEL = 2000.0  # m/s^2 (≈ 200 g)
+_PRESSURE_RANGE = (1.0e3, 1.2e5)  # Pa: 1 kPa (≈ 31 km) .. 1200 hPa
+_ALT_RANGE = (-1000.0, 60000.0)  # m
+
+
+def _arr(x: Any, dtype: Any = np.float64) -> FloatArray:
+    a = np.array(x, dtype=dtype, copy=True)
+    a.setflags(write=False)
+    return a
+
+
+def _check_time(name: str, t: FloatArray) -> None:
+    if t.ndim != 1:
+        raise ValueError(f"{name}.t: expected shape (N,), got {t.shape}")
+    if t.size == 0:
+        raise ValueError(f"{name}.t: stream is empty")
+    if not np.all(np.isfinite(t)):
+        raise ValueError(f"{name}.t: contains NaN or inf")
+    d = np.diff(t)
+    if np.any(d == 0):
+        i = int(np.flatnonzero(d == 0)[0])
+        raise ValueError(f"{name}.t: duplicated time stamp {t[i]!r} at index {i + 1}")
+    if np.any(d < 0):
+        i = int(np.flatnonzero(d < 0)[0])
+        raise ValueError(f"{name}.t: not monotonic (t[{i + 1}] = {t[i + 1]!r} < {t[i]!r})")
+
+
+def _check_shape(name: str, a: FloatArray | None, shape: tuple[int, ...]) -> None:
+    if a is None:
+        return
+    if a.shape != shape:
+        raise ValueError(f"{name}: expected shape {shape}, got {a.shape}")
+
+
+def _check_finite(name: str, a: FloatArray | None) -> None:
+    if a is not None and not np.all(np.isfinite(a)):
+        n_bad = int(np.sum(~np.isfinite(a)))
+        raise ValueError(f"{name}: contains {n_bad} NaN or inf value(s)")
+
+
+def _check_lla(name: str, lla: FloatArray) -> None:
+    if np.any(np.abs(lla[:, 0]) > np.pi / 2 + 1e-12) or np.any(np.abs(lla[:, 1]) > 2 * np.pi):
+        raise ValueError(
+            f"{name}: latitude/longitude out of range for radians (degrees passed as radians?)"
+        )
+    lo, hi = _ALT_RANGE
+    if np.any(lla[:, 2] < lo) or np.any(lla[:, 2] > hi):
+        raise ValueError(f"{name}: height outside [{lo:g}, {hi:g}] m")
+
+
+@dataclass(frozen=True)
+class ImuStream:
+    """Inertial samples, instantaneous (point) values at ``t``.
+
+    Parameters
+    ----------
+    t : (N,) [s]
+    gyro_b : (N, 3) angular rate of b relative to inertial space, resolved in b [rad/s]
+    accel_b : (N, 3) specific force (gravity included: a level IMU at rest reads
+        about (0, 0, -9.8)) resolved in b [m/s^2]
+    spec : the ``ImuSpec`` the data were generated with or are believed to follow
+    """
+
+    t: FloatArray
+    gyro_b: FloatArray
+    accel_b: FloatArray
+    spec: Any = None
+
+    def __post_init__(self) -> None:
+        for f in ("t", "gyro_b", "accel_b"):
+            object.__setattr__(self, f, _arr(getattr(self, f)))
+        _check_time("imu", self.t)
+        n = self.t.size
+        _check_shape("imu.gyro_b", self.gyro_b, (n, 3))
+        _check_shape("imu.accel_b", self.accel_b, (n, 3))
+        _check_finite("imu.gyro_b", self.gyro_b)
+        _check_finite("imu.accel_b", self.accel_b)
+        if np.max(np.abs(self.gyro_b)) > _MAX_GYRO:
+            raise ValueError(
+                f"imu.gyro_b: |rate| up to {np.max(np.abs(self.gyro_b)):.1f} rad/s "
+                "(degrees/s passed as rad/s?)"
+            )
+        if np.max(np.abs(self.accel_b)) > _MAX_ACCEL:
+            raise ValueError("imu.accel_b: specific force above 200 g (wrong unit?)")
+
+    def __len__(self) -> int:
+        return int(self.t.size)
+
+    @property
+    def rate_hz(self) -> float:
+        return float(1.0 / np.median(np.diff(self.t))) if self.t.size > 1 else float("nan")
+
+    def slice(self, t0: float, t1: float) -> ImuStream:
+        m = (self.t >= t0) & (self.t <= t1)
+        return ImuStream(self.t[m], self.gyro_b[m], self.accel_b[m], self.spec)
+
+
+@dataclass(frozen=True)
+class GnssStream:
+    """GNSS position (and optionally velocity) fixes of the antenna.
+
+    Parameters
+    ----------
+    t : (N,) [s] time of validity on the common clock
+    lla : (N, 3) antenna latitude [rad], longitude [rad], ellipsoidal height [m]
+    pos_sd : (N, 3) one-sigma of the fix along north, east, down [m]
+    vel_n : (N, 3) or None, antenna velocity in NED [m/s]
+    vel_sd : (N, 3) or None [m/s]
+    lever_arm_b : (3,) antenna position relative to the IMU, resolved in b [m]
+    spec : the ``GnssSpec``
+    """
+
+    t: FloatArray
+    lla: FloatArray
+    pos_sd: FloatArray
+    vel_n: FloatArray | None = None
+    vel_sd: FloatArray | None = None
+    lever_arm_b: FloatArray = field(default_factory=lambda: np.zeros(3))
+    spec: Any = None
+
+    def __post_init__(self) -> None:
+        for f in ("t", "lla", "pos_sd", "lever_arm_b"):
+            object.__setattr__(self, f, _arr(getattr(self, f)))
+        for f in ("vel_n", "vel_sd"):
+            if getattr(self, f) is not None:
+                object.__setattr__(self, f, _arr(getattr(self, f)))
+        _check_time("gnss", self.t)
+        n = self.t.size
+        _check_shape("gnss.lla", self.lla, (n, 3))
+        _check_shape("gnss.pos_sd", self.pos_sd, (n, 3))
+        _check_shape("gnss.vel_n", self.vel_n, (n, 3))
+        _check_shape("gnss.vel_sd", self.vel_sd, (n, 3))
+        _check_shape("gnss.lever_arm_b", self.lever_arm_b, (3,))
+        for f in ("lla", "pos_sd", "vel_n", "vel_sd", "lever_arm_b"):
+            _check_finite(f"gnss.{f}", getattr(self, f))
+        _check_lla("gnss.lla", self.lla)
+        if np.any(self.pos_sd <= 0):
+            raise ValueError("gnss.pos_sd: standard deviations must be > 0")
+        if (self.vel_n is None) != (self.vel_sd is None):
+            raise ValueError("gnss.vel_sd: must be given exactly when vel_n is given")
+        if self.vel_sd is not None and np.any(self.vel_sd <= 0):
+            raise ValueError("gnss.vel_sd: standard deviations must be > 0")
+        if self.vel_n is not None and np.max(np.abs(self.vel_n)) > 1000.0:
+            raise ValueError("gnss.vel_n: speed above 1000 m/s (wrong unit?)")
+
+    def __len__(self) -> int:
+        return int(self.t.size)
+
+    def select(self, mask: NDArray[np.bool_]) -> GnssStream:
+        """Sub-stream of the fixes where ``mask`` is True (used for outages and holdout)."""
+        return GnssStream(
+            self.t[mask],
+            self.lla[mask],
+            self.pos_sd[mask],
+            None if self.vel_n is None else self.vel_n[mask],
+            None if self.vel_sd is None else self.vel_sd[mask],
+            self.lever_arm_b,
+            self.spec,
+        )
+
+
+@dataclass(frozen=True)
+class BaroStream:
+    """Barometric altimeter samples: static pressure and/or the altimeter's altitude.
+
+    Parameters
+    ----------
+    t : (N,) [s]
+    pressure : (N,) or None, static pressure [Pa]
+    alt : (N,) or None, barometric altitude [m, +up]. When only ``pressure`` is given the
+        standard-atmosphere altitude is used (``vnav_graph.geo.atmosphere``).
+    spec : the ``BaroSpec``
+    """
+
+    t: FloatArray
+    pressure: FloatArray | None = None
+    alt: FloatArray | None = None
+    spec: Any = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "t", _arr(self.t))
+        _check_time("baro", self.t)
+        n = self.t.size
+        if self.pressure is None and self.alt is None:
+            raise ValueError("baro: needs pressure or alt")
+        if self.pressure is not None:
+            object.__setattr__(self, "pressure", _arr(self.pressure))
+            _check_shape("baro.pressure", self.pressure, (n,))
+            _check_finite("baro.pressure", self.pressure)
+            lo, hi = _PRESSURE_RANGE
+            if np.any(self.pressure < lo) or np.any(self.pressure > hi):
+                hint = " (hPa passed as Pa?)" if np.max(self.pressure) < 2000 else ""
+                raise ValueError(f"baro.pressure: outside [{lo:g}, {hi:g}] Pa{hint}")
+        if self.alt is not None:
+            object.__setattr__(self, "alt", _arr(self.alt))
+            _check_shape("baro.alt", self.alt, (n,))
+            _check_finite("baro.alt", self.alt)
+            lo, hi = _ALT_RANGE
+            if np.any(self.alt < lo) or np.any(self.alt > hi):
+                raise ValueError(f"baro.alt: outside [{lo:g}, {hi:g}] m (feet or Pa passed?)")
+
+    def __len__(self) -> int:
+        return int(self.t.size)
+
+    @property
+    def altitude(self) -> FloatArray:
+        """Barometric altitude [m, +up]: ``alt`` if given, else ISA altitude of ``pressure``."""
+        if self.alt is not None:
+            return self.alt
+        from .geo.atmosphere import isa_altitude
+
+        assert self.pressure is not None
+        return isa_altitude(self.pressure)
+
+    def select(self, mask: NDArray[np.bool_]) -> BaroStream:
+        return BaroStream(
+            self.t[mask],
+            None if self.pressure is None else self.pressure[mask],
+            None if self.alt is None else self.alt[mask],
+            self.spec,
+        )
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """A navigation trajectory (truth or estimate).
+
+    Parameters
+    ----------
+    t : (N,) [s]
+    lla : (N, 3) latitude [rad], longitude [rad], ellipsoidal height [m]. Estimators that
+        only estimate the vertical channel set latitude/longitude to NaN (``provides`` says so).
+    vel_n : (N, 3) NED velocity [m/s]; NaN north/east for vertical-only estimators.
+    q_nb : (N, 4) or None, attitude quaternion (w, x, y, z) mapping b into n.
+    bias_gyro, bias_accel : (N, 3) or None [rad/s], [m/s^2]
+    bias_baro : (N,) or None, baro Gauss-Markov bias b(t) [m]
+    """
+
+    t: FloatArray
+    lla: FloatArray
+    vel_n: FloatArray
+    q_nb: FloatArray | None = None
+    bias_gyro: FloatArray | None = None
+    bias_accel: FloatArray | None = None
+    bias_baro: FloatArray | None = None
+
+    def __post_init__(self) -> None:
+        for f in ("t", "lla", "vel_n", "q_nb", "bias_gyro", "bias_accel", "bias_baro"):
+            if getattr(self, f) is not None:
+                object.__setattr__(self, f, _arr(getattr(self, f)))
+        _check_time("trajectory", self.t)
+        n = self.t.size
+        _check_shape("trajectory.lla", self.lla, (n, 3))
+        _check_shape("trajectory.vel_n", self.vel_n, (n, 3))
+        _check_shape("trajectory.q_nb", self.q_nb, (n, 4))
+        _check_shape("trajectory.bias_gyro", self.bias_gyro, (n, 3))
+        _check_shape("trajectory.bias_accel", self.bias_accel, (n, 3))
+        _check_shape("trajectory.bias_baro", self.bias_baro, (n,))
+        if not np.all(np.isfinite(self.lla[:, 2])):
+            raise ValueError("trajectory.lla: height contains NaN or inf")
+
+    def __len__(self) -> int:
+        return int(self.t.size)
+
+    @property
+    def alt(self) -> FloatArray:
+        """Ellipsoidal height [m, +up]."""
+        return self.lla[:, 2]
+
+    @property
+    def vel_down(self) -> FloatArray:
+        return self.vel_n[:, 2]
+
+    def pos_n(self, origin_lla: FloatArray) -> FloatArray:
+        """Tangent-plane NED position relative to ``origin_lla`` [m], shape (N, 3)."""
+        from .geo.frames import lla_to_ned
+
+        return lla_to_ned(self.lla, origin_lla)
+
+    def at(self, t_query: FloatArray) -> Trajectory:
+        """Interpolate to ``t_query`` (linear; slerp for attitude). Queries must lie inside."""
+        tq = np.asarray(t_query, dtype=float)
+        if tq.size and (tq[0] < self.t[0] - 1e-9 or tq[-1] > self.t[-1] + 1e-9):
+            raise ValueError("trajectory.at: query times outside the trajectory span")
+        tq = np.clip(tq, self.t[0], self.t[-1])  # absorb round-off at the ends
+
+        def lin(a: FloatArray | None) -> FloatArray | None:
+            if a is None:
+                return None
+            if a.ndim == 1:
+                return np.interp(tq, self.t, a)
+            return np.column_stack([np.interp(tq, self.t, a[:, j]) for j in range(a.shape[1])])
+
+        q = None
+        if self.q_nb is not None:
+            from .geo.frames import slerp_quat
+
+            q = slerp_quat(self.t, self.q_nb, tq)
+        return Trajectory(
+            tq,
+            lin(self.lla),  # type: ignore[arg-type]
+            lin(self.vel_n),  # type: ignore[arg-type]
+            q,
+            lin(self.bias_gyro),
+            lin(self.bias_accel),
+            lin(self.bias_baro),
+        )
+
+    def slice(self, t0: float, t1: float) -> Trajectory:
+        m = (self.t >= t0) & (self.t <= t1)
+
+        def s(a: FloatArray | None) -> FloatArray | None:
+            return None if a is None else a[m]
+
+        return Trajectory(
+            self.t[m], self.lla[m], self.vel_n[m], s(self.q_nb), s(self.bias_gyro),
+            s(self.bias_accel), s(self.bias_baro),
+        )
+
+    def to_rph(self) -> FloatArray:
+        """Roll, pitch, yaw [rad], shape (N, 3) (requires ``q_nb``)."""
+        if self.q_nb is None:
+            raise ValueError("trajectory.q_nb: no attitude in this trajectory")
+        from .geo.frames import quat_to_rph
+
+        return quat_to_rph(self.q_nb)
+
+
+@dataclass(frozen=True)
+class BaroTruth:
+    """True barometer error parameters of a simulated drive (model of DESIGN.md).
+
+    ``h_baro(t) - h0 = (1 + scale) * (h(t - latency_s) - h0) + b(t) + v`` with
+    ``h0 = Drive.origin_lla[2]``; b(t) is stored in ``Drive.truth.bias_baro``.
+    """
+
+    scale: float
+    latency_s: float
+
+
+@dataclass(frozen=True)
+class Drive:
+    """One recorded or simulated test drive: streams on one clock plus optional truth."""
+
+    imu: ImuStream
+    gnss: GnssStream | None
+    baro: BaroStream | None
+    origin_lla: FloatArray
+    truth: Trajectory | None = None
+    baro_truth: BaroTruth | None = None
+    meta: MappingProxyType[str, Any] = field(default_factory=lambda: MappingProxyType({}))
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "origin_lla", _arr(self.origin_lla))
+        _check_shape("drive.origin_lla", self.origin_lla, (3,))
+        _check_lla("drive.origin_lla", self.origin_lla[None, :])
+        if not isinstance(self.meta, MappingProxyType):
+            object.__setattr__(self, "meta", MappingProxyType(dict(self.meta)))
+        t0, t1 = self.imu.t[0], self.imu.t[-1]
+        for name, s in (("gnss", self.gnss), ("baro", self.baro)):
+            if s is not None and (s.t[-1] < t0 or s.t[0] > t1):
+                raise ValueError(f"drive.{name}: stream does not overlap the IMU time span")
+
+    @property
+    def name(self) -> str:
+        return str(self.meta.get("name", "drive"))
+
+    @property
+    def duration_s(self) -> float:
+        return float(self.imu.t[-1] - self.imu.t[0])
+
+    @property
+    def source(self) -> str:
+        return str(self.meta.get("source", "log"))
+
+    def replace(self, **changes: Any) -> Drive:
+        from dataclasses import replace
+
+        return replace(self, **changes)
+
+
+@dataclass(frozen=True)
+class ParamEstimate:
+    """A scalar parameter estimate with its one-sigma uncertainty and prior sigma."""
+
+    est: float
+    sd: float | None
+    prior_sd: float | None = None
+
+    @property
+    def observable(self) -> bool | None:
+        """False when the data barely informed the parameter (posterior sd > 0.8 prior sd)."""
+        if self.sd is None or self.prior_sd is None or self.prior_sd <= 0:
+            return None
+        return bool(self.sd < 0.8 * self.prior_sd)
+
+
+@dataclass(frozen=True)
+class BaroEstimate:
+    """Estimated barometer errors. ``bias_m`` is the time average of b(t) over the drive."""
+
+    scale: ParamEstimate | None = None
+    latency_s: ParamEstimate | None = None
+    bias_m: ParamEstimate | None = None
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """What every estimator returns.
+
+    Parameters
+    ----------
+    estimator : registry name
+    trajectory : the estimate (smoothed for smoothers)
+    provides : subset of ``QUANTITIES``
+    cov : (M, 18, 18) or None, error covariance in the ``ERROR_STATE`` layout at ``t_cov``
+    baro : estimated baro errors with sigmas, or None
+    runtime_s : wall time of ``run`` [s]
+    online : for incremental smoothers, the estimate known at each time (filter-like)
+    innovations : normalised innovations per measurement type
+    info : free-form diagnostics (rejected GNSS count ``gnss_rejected``, observability, ...)
+    """
+
+    estimator: str
+    trajectory: Trajectory
+    provides: frozenset[str]
+    cov: FloatArray | None = None
+    t_cov: FloatArray | None = None
+    baro: BaroEstimate | None = None
+    runtime_s: float = 0.0
+    online: Trajectory | None = None
+    innovations: MappingProxyType[str, FloatArray] = field(
+        default_factory=lambda: MappingProxyType({})
+    )
+    info: MappingProxyType[str, Any] = field(default_factory=lambda: MappingProxyType({}))
+    config: Any = None
+
+    def __post_init__(self) -> None:
+        unknown = set(self.provides) - QUANTITIES
+        if unknown:
+            raise ValueError(f"estimate.provides: unknown quantities {sorted(unknown)}")
+        object.__setattr__(self, "provides", frozenset(self.provides))
+        if self.cov is not None:
+            cov = _arr(self.cov)
+            if self.t_cov is None:
+                raise ValueError("estimate.t_cov: required when cov is given")
+            t_cov = _arr(self.t_cov)
+            _check_shape("estimate.cov", cov, (t_cov.size, ERROR_STATE_DIM, ERROR_STATE_DIM))
+            object.__setattr__(self, "cov", cov)
+            object.__setattr__(self, "t_cov", t_cov)
+        for f in ("innovations", "info"):
+            v = getattr(self, f)
+            if not isinstance(v, MappingProxyType):
+                object.__setattr__(self, f, MappingProxyType(dict(v)))
+
+    def replace(self, **changes: Any) -> Estimate:
+        from dataclasses import replace
+
+        return replace(self, **changes)
