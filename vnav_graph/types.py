@@ -51,7 +51,7 @@ QUANTITIES = frozenset({"alt", "vel_d", "pos_h", "vel_h", "att", "baro", "cov"})
 # Physical plausibility limits used by validation (generous; they catch unit mistakes).
 _MAX_GYRO = 50.0  # rad/s (≈ 2900 deg/s): larger means degrees were passed as radians
 _MAX_ACCEL = 2000.0  # m/s^2 (≈ 200 g)
-_PRESSURE_RANGE = (1.0e3, 1.2e5)  # Pa: 1 kPa (≈ 31 km) .. 1200 hPa
+_PRESSURE_RANGE = (2.0e3, 1.2e5)  # Pa: 20 hPa (≈ 26 km) .. 1200 hPa
 _ALT_RANGE = (-1000.0, 60000.0)  # m
 
 
@@ -241,7 +241,7 @@ class BaroStream:
             _check_finite("baro.pressure", self.pressure)
             lo, hi = _PRESSURE_RANGE
             if np.any(self.pressure < lo) or np.any(self.pressure > hi):
-                hint = " (hPa passed as Pa?)" if np.max(self.pressure) < 2000 else ""
+                hint = " (hPa passed as Pa?)" if np.max(self.pressure) < 1200 else ""
                 raise ValueError(f"baro.pressure: outside [{lo:g}, {hi:g}] Pa{hint}")
         if self.alt is not None:
             object.__setattr__(self, "alt", _arr(self.alt))

@@ -1,0 +1,60 @@
+"""CLI contracts: simulate/run outputs, and bad input → one line on stderr, exit 2."""
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from vnav_graph.cli import main
+from vnav_graph.estimators.base import available
+
+
+def test_simulate_then_run_writes_summary(tmp_path, capsys):
+    drv = tmp_path / "d.npz"
+    assert main(["simulate", "--scenario", "hill-drive", "--seed", "3", "--duration", "40",
+                 "-o", str(drv)]) == 0
+    out = tmp_path / "out"
+    names = [n for n in available() if n in ("loop3", "ekf", "vkf4")]
+    args = ["run", str(drv), "--out", str(out)]
+    if names:
+        args += ["--estimators", ",".join(names)]
+    else:
+        args += ["--estimators", ""]
+    assert main(args) == 0
+    s = json.loads((out / "summary.json").read_text())
+    assert s["schema"] == "vnav_graph.summary/1"
+    assert s["drive"] == {"name": "hill-drive-seed3", "source": "simulated",
+                          "duration_s": pytest.approx(40.0)}
+    for m in s["estimators"].values():
+        assert set(m) >= {"status", "error", "alt_rmse_m", "alt_max_abs_m", "vel_down_rmse_mps",
+                          "nees_mean", "runtime_s", "realtime_factor", "baro"}
+        assert set(m["baro"]) == {"scale", "latency_s", "bias_m"}
+
+
+@pytest.mark.parametrize(
+    "argv, needle",
+    [(["run", "missing.npz"], "no such file"),
+     (["run", "--estimators", "nope"], "unknown estimator"),
+     (["run", "--scenario", "nope"], "unknown scenario"),
+     (["simulate", "--scenario", "nope", "-o", "x.npz"], "unknown scenario"),
+     (["run", "--seed", "abc"], "invalid int value")],
+)
+def test_bad_input_one_line_exit_2(tmp_path, argv, needle):
+    r = subprocess.run([sys.executable, "-m", "vnav_graph", *argv, "--out", str(tmp_path / "o")]
+                       if argv[0] == "run" else [sys.executable, "-m", "vnav_graph", *argv],
+                       capture_output=True, text=True, cwd=tmp_path)
+    assert r.returncode == 2
+    assert needle in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1  # one line, no traceback
+    assert not (tmp_path / "o" / "summary.json").exists()  # nothing written
+
+
+def test_corrupt_drive_exit_2(tmp_path):
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(b"PK\x03\x04 this is not a zip")
+    r = subprocess.run([sys.executable, "-m", "vnav_graph", "run", str(bad), "--out",
+                        str(tmp_path / "o")], capture_output=True, text=True)
+    assert r.returncode == 2 and "bad.npz" in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "o").exists()

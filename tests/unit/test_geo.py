@@ -1,0 +1,78 @@
+"""Earth model and standard atmosphere against published values and pymap3d."""
+
+import numpy as np
+import pymap3d
+import pytest
+
+from vnav_graph.geo import atmosphere as atm
+from vnav_graph.geo import earth
+from vnav_graph.geo.frames import lla_to_ned, ned_to_lla, quat_to_rph, rph_to_quat
+
+# ICAO/ISO 2533 standard atmosphere table (pressure in Pa at geopotential altitude in m);
+# the tables print 5-6 significant digits, hence the relative tolerance 2e-5.
+ISA_TABLE = [(0.0, 101325.0), (1000.0, 89874.6), (2000.0, 79495.2), (5000.0, 54019.9),
+             (8000.0, 35599.8), (11000.0, 22632.1), (15000.0, 12044.6), (20000.0, 5474.89)]
+
+
+@pytest.mark.parametrize("h, p", ISA_TABLE)
+def test_isa_pressure_matches_table(h, p):
+    assert atm.isa_pressure(h) == pytest.approx(p, rel=2e-5)
+    assert atm.isa_altitude(p) == pytest.approx(h, abs=0.3)  # 2e-5 of p ≈ 0.2 m of altitude
+
+
+def test_isa_round_trip_with_nonstandard_day():
+    h = np.linspace(-500, 19500, 101)
+    for dT, p0 in [(0.0, atm.P0), (15.0, 100800.0), (-20.0, 102300.0)]:
+        back = atm.isa_altitude(atm.isa_pressure(h, dT, p0), dT, p0)
+        np.testing.assert_allclose(back, h, atol=1e-6)  # exact inverse up to round-off
+
+
+def test_nonstandard_atmosphere_gives_scale_and_bias():
+    # warm day: the standard-law altimeter under-reads by dT/(T0+dT) ≈ 0.35 %/K
+    scale, _ = atm.baro_error_from_atmosphere(500.0, dT=1.0)
+    assert scale == pytest.approx(-1.0 / (atm.T0 + 1.0), rel=1e-3)
+    # sea-level pressure 1 hPa low: reads high by RT/(gp) per Pa ≈ 8.3 m/hPa at sea level
+    _, bias = atm.baro_error_from_atmosphere(0.0, dT=0.0, p0=atm.P0 - 100.0)
+    assert bias == pytest.approx(8.32, abs=0.02)
+
+
+def test_out_of_range_inputs_are_rejected():
+    with pytest.raises(ValueError):
+        atm.isa_pressure(25000.0)
+    with pytest.raises(ValueError):
+        atm.isa_altitude(-1.0)
+
+
+def test_normal_gravity_reference_values():
+    # TR8350.2: γ_e = 9.7803253359, γ_p = 9.8321849378; free-air gradient ≈ −3.086e-6 s^-2
+    assert earth.gravity(0.0, 0.0) == pytest.approx(9.7803253359, abs=1e-9)
+    assert earth.gravity(np.pi / 2, 0.0) == pytest.approx(9.8321849378, abs=1e-9)
+    grad = (earth.gravity(0.8, 1000.0) - earth.gravity(0.8, 0.0)) / 1000.0
+    assert grad == pytest.approx(-3.086e-6, rel=3e-3)
+
+
+def test_radii_and_scalar_twins():
+    rn, re = earth.radii(0.0)
+    assert rn == pytest.approx(6335439.327, abs=1e-3)  # a(1−e²) at the equator
+    assert re == pytest.approx(6378137.0, abs=1e-6)
+    for lat in (-1.2, 0.0, 0.3, 1.5):
+        assert earth.radii_scalar(lat) == pytest.approx(tuple(earth.radii(lat)), rel=1e-15)
+        assert earth.gravity_scalar(lat, 1234.0) == pytest.approx(
+            float(earth.gravity(lat, 1234.0)), rel=1e-15)
+
+
+def test_lla_ned_round_trip_and_pymap3d(rng):
+    origin = np.array([np.radians(47.2), np.radians(11.4), 580.0])
+    ned = rng.normal(0, 5000, (50, 3))
+    lla = ned_to_lla(ned, origin)
+    np.testing.assert_allclose(lla_to_ned(lla, origin), ned, atol=1e-6)
+    # cross-check one point through ECEF with pymap3d's independent path
+    x, y, z = pymap3d.geodetic2ecef(lla[0, 0], lla[0, 1], lla[0, 2], deg=False)
+    n, e, d = pymap3d.ecef2ned(x, y, z, *origin, deg=False)
+    np.testing.assert_allclose([n, e, d], ned[0], atol=1e-6)
+
+
+def test_euler_quaternion_round_trip(rng):
+    rph = np.column_stack([rng.uniform(-3, 3, 20), rng.uniform(-1.5, 1.5, 20),
+                           rng.uniform(-3, 3, 20)])
+    np.testing.assert_allclose(quat_to_rph(rph_to_quat(rph)), rph, atol=1e-12)

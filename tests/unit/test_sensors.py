@@ -1,0 +1,87 @@
+"""Sensor error models: noise statistics, stationary IMU, the baro model and its Jacobian."""
+
+import numpy as np
+import pytest
+
+from vnav_graph.config import IMU_PRESETS, BaroSpec
+from vnav_graph.geo.earth import OMEGA_IE, gravity
+from vnav_graph.sensors.baro import baro_jacobian, measure_baro, simulate_baro
+from vnav_graph.sensors.noise import gauss_markov, random_walk, white_sd
+from vnav_graph.simulation import simulate
+
+
+def test_gauss_markov_is_stationary_with_right_correlation(rng):
+    t = np.arange(0, 2000.0, 1.0)
+    x = gauss_markov(t, tau=50.0, sd=2.0, rng=rng, size=400)
+    # 400 x 2000 samples: the variance estimate has ~1-2 % sampling error (correlated samples)
+    assert np.var(x) == pytest.approx(4.0, rel=0.06)
+    # lag-50 autocorrelation of a GM process is exp(-1)
+    r = np.mean(x[50:] * x[:-50]) / np.var(x)
+    assert r == pytest.approx(np.exp(-1), abs=0.04)
+
+
+def test_random_walk_and_white_noise_scale(rng):
+    t = np.arange(0, 100.0, 0.01)
+    rw = random_walk(t, density=0.3, rng=rng, size=2000)
+    # var(RW(T)) = q²·T = 0.09·100 = 9 (2000 runs → ±6 % at 2σ... use 10 %)
+    assert np.var(rw[-1]) == pytest.approx(9.0, rel=0.1)
+    assert white_sd(0.01, 0.005) == pytest.approx(0.01 / np.sqrt(0.005))
+
+
+def test_stationary_imu_reads_earth_rate_and_minus_gravity():
+    d = simulate("seed003", 0, duration_s=8.0, imu=IMU_PRESETS["tactical"].noiseless())
+    # seed003 starts with 10 s static, level platform
+    lat, h = d.origin_lla[0], d.origin_lla[2]
+    np.testing.assert_allclose(d.imu.accel_b[0], [0.0, 0.0, -gravity(lat, h)], atol=1e-12)
+    np.testing.assert_allclose(
+        d.imu.gyro_b[0], [OMEGA_IE * np.cos(lat), 0.0, -OMEGA_IE * np.sin(lat)], atol=1e-15)
+
+
+def test_baro_simulation_follows_the_shared_model(rng):
+    t_truth = np.arange(0, 300.0, 0.01)
+    h = 500.0 + 100.0 * np.sin(2 * np.pi * t_truth / 120.0)
+    spec = BaroSpec(rate_hz=10.0, scale=0.02, latency_s=0.2, bias_sd=0.0, noise_sd=0.0)
+    t = np.arange(1.0, 299.0, 0.1)
+    stream, truth, bias = simulate_baro(t, t_truth, h, 500.0, spec, rng)
+    v_up = np.interp(t, t_truth, np.gradient(h, t_truth))
+    pred = measure_baro(np.interp(t, t_truth, h), v_up, truth.scale, truth.latency_s, bias, 500.0)
+    # model vs simulation differ only by the first-order latency expansion:
+    # |h''|·τ²/2 ≤ 100·(2π/120)²·0.04/2 ≈ 5.5 mm, times (1+s)
+    assert np.max(np.abs(pred - stream.alt)) < 6e-3
+
+
+def test_baro_physical_mode_reproduces_scale_and_bias(rng):
+    t_truth = np.arange(0, 600.0, 0.1)
+    h0 = 800.0
+    h = h0 + 300.0 * t_truth / 600.0
+    spec = BaroSpec(rate_hz=1.0, scale=-0.02, latency_s=0.0, bias_sd=5.0, bias_tau=600.0,
+                    noise_sd=0.0, physical=True)
+    t = np.arange(0, 600.0, 1.0)
+    stream, truth, bias = simulate_baro(t, t_truth, h, h0, spec, rng)
+    assert stream.pressure is not None
+    lin = h0 + (1 + truth.scale) * (np.interp(t, t_truth, h) - h0) + bias
+    # ISA nonlinearity over 300 m and the bias/scale interaction: a few decimetres at most
+    assert np.max(np.abs(stream.altitude - lin)) < 0.5
+
+
+def test_baro_jacobian_matches_finite_differences():
+    x = np.array([812.0, -7.5, 0.013, 0.12, -3.0])  # h, v_up, s, tau, b
+    h0 = 640.0
+    jac = baro_jacobian(x[0], x[1], x[2], x[3], h0)
+    eps = 1e-6
+    fd = []
+    for i in range(5):
+        xp, xm = x.copy(), x.copy()
+        xp[i] += eps
+        xm[i] -= eps
+        fd.append((measure_baro(*xp, h0=h0) - measure_baro(*xm, h0=h0)) / (2 * eps))
+    np.testing.assert_allclose(jac, fd, rtol=1e-7, atol=1e-7)  # model is bilinear: FD exact-ish
+
+
+def test_simulation_is_deterministic_per_seed():
+    a = simulate("hill-drive", 7, duration_s=60.0)
+    b = simulate("hill-drive", 7, duration_s=60.0)
+    c = simulate("hill-drive", 8, duration_s=60.0)
+    np.testing.assert_array_equal(a.imu.accel_b, b.imu.accel_b)
+    np.testing.assert_array_equal(a.baro.alt, b.baro.alt)
+    assert not np.array_equal(a.imu.accel_b, c.imu.accel_b)

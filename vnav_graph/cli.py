@@ -1,0 +1,178 @@
+"""Command-line front end: ``vnav-graph simulate | run | bench | holdout | calibrate-baro | list``.
+
+Thin: parses arguments and calls library functions. Any bad input ends with one line on
+stderr and exit code 2 (no traceback, nothing written half-way); ``VNAV_DEBUG=1`` shows
+tracebacks for debugging.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import os
+import sys
+import traceback
+from collections.abc import Sequence
+from pathlib import Path
+
+EXIT_BAD_INPUT = 2
+
+
+def _csv_list(s: str) -> list[str]:
+    return [x.strip() for x in s.split(",") if x.strip()]
+
+
+def _positive_float(s: str) -> float:
+    v = float(s)
+    if not v > 0:
+        raise argparse.ArgumentTypeError(f"must be > 0, got {s}")
+    return v
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> None:  # one line, exit 2 (argparse's own convention)
+        self.exit(EXIT_BAD_INPUT, f"vnav-graph: error: {message}\n")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="vnav-graph", description=__doc__.splitlines()[0])
+    from . import __version__
+
+    p.add_argument("--version", action="version", version=f"vnav-graph {__version__}")
+    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    s = sub.add_parser("simulate", help="simulate a drive and save it (.npz)")
+    s.add_argument("--scenario", default="hill-drive", help="scenario name or TOML path")
+    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--duration", type=_positive_float, default=None, help="override [s]")
+    s.add_argument("-o", "--output", required=True, help="output .npz path")
+
+    r = sub.add_parser("run", help="run estimators on a drive and compare them")
+    r.add_argument("drive", nargs="?", default=None,
+                   help="drive .npz or real log; default: simulated scenario")
+    r.add_argument("--scenario", default=None, help="scenario to simulate (default: default)")
+    r.add_argument("--seed", type=int, default=0)
+    r.add_argument("--duration", type=_positive_float, default=None, help="override [s]")
+    r.add_argument("--estimators", type=_csv_list, default=None, help="comma-separated names")
+    r.add_argument("--out", default="vnav-graph-out", help="output directory")
+    r.add_argument("--no-progress", action="store_true")
+
+    b = sub.add_parser("bench", help="Monte Carlo over scenarios x seeds x estimators")
+    b.add_argument("--quick", action="store_true")
+    b.add_argument("--scenarios", type=_csv_list, default=None)
+    b.add_argument("--estimators", type=_csv_list, default=None)
+    b.add_argument("--seeds", type=int, default=None)
+    b.add_argument("--dask", default=None, metavar="ADDRESS", help="Dask scheduler address")
+    b.add_argument("--workers", type=int, default=None, help="local process pool size")
+    b.add_argument("--out", required=True)
+
+    h = sub.add_parser("holdout", help="score estimators against withheld GNSS on a real log")
+    h.add_argument("log")
+    h.add_argument("--outage", type=_positive_float, default=60.0, help="window length [s]")
+    h.add_argument("--spacing", type=_positive_float, default=None, help="window spacing [s]")
+    h.add_argument("--estimators", type=_csv_list, default=None)
+    h.add_argument("--out", required=True)
+
+    c = sub.add_parser("calibrate-baro", help="least-squares baro scale/latency/bias vs GNSS")
+    c.add_argument("drive")
+
+    sub.add_parser("list", help="list available estimators and scenarios")
+    return p
+
+
+def _dispatch(target: str, args: argparse.Namespace) -> int:
+    mod, _, fn = target.partition(":")
+    try:
+        m = importlib.import_module(mod)
+    except ModuleNotFoundError as exc:
+        if exc.name == mod:
+            raise ValueError(f"'{args.command}' is not available in this build") from None
+        raise
+    return int(getattr(m, fn)(args))
+
+
+def cmd_simulate(args: argparse.Namespace) -> int:
+    from .io import save_npz
+    from .simulation import simulate
+
+    over = {} if args.duration is None else {"duration_s": args.duration}
+    out = Path(args.output)
+    if out.suffix != ".npz":
+        raise ValueError(f"output must end in .npz: {out}")
+    if not out.parent.exists():
+        raise ValueError(f"output directory does not exist: {out.parent}")
+    drive = simulate(args.scenario, args.seed, **over)
+    save_npz(drive, out)
+    print(f"wrote {out} ({drive.name}, {drive.duration_s:.0f} s, {len(drive.imu)} IMU samples)")
+    return 0
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    from .io import load_drive
+    from .pipeline import format_table, resolve_estimators, run_estimators, summarize
+    from .simulation import simulate
+
+    names = resolve_estimators(args.estimators)  # validate before any work
+    if args.drive is not None:
+        if args.scenario is not None:
+            raise ValueError("give either a DRIVE or --scenario, not both")
+        drive = load_drive(args.drive)
+    else:
+        over = {} if args.duration is None else {"duration_s": args.duration}
+        drive = simulate(args.scenario or "default", args.seed, **over)
+    progress = not args.no_progress and sys.stderr.isatty()
+    results = run_estimators(drive, names, progress=progress)
+    summary = summarize(drive, results)
+    from .pipeline import write_outputs
+
+    writers = []
+    try:
+        from .report import write_report  # plots + HTML (optional module)
+
+        writers.append(write_report)
+    except ModuleNotFoundError as exc:
+        if exc.name != "vnav_graph.report":
+            raise
+    out = Path(args.out)
+    write_outputs(out, summary, results, drive, writers)
+    print(format_table(summary))
+    print(f"\nwrote {out / 'summary.json'}")
+    return 0
+
+
+def cmd_list(args: argparse.Namespace) -> int:
+    from .estimators.base import available
+    from .simulation import list_scenarios
+
+    print("estimators:", ", ".join(available()))
+    print("scenarios: ", ", ".join(list_scenarios()))
+    return 0
+
+
+COMMANDS = {
+    "simulate": cmd_simulate,
+    "run": cmd_run,
+    "list": cmd_list,
+    "bench": lambda a: _dispatch("vnav_graph.evaluation.montecarlo:cli_bench", a),
+    "holdout": lambda a: _dispatch("vnav_graph.evaluation.holdout:cli_holdout", a),
+    "calibrate-baro": lambda a: _dispatch("vnav_graph.calibration:cli_calibrate_baro", a),
+}
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return COMMANDS[args.command](args)
+    except (ValueError, FileNotFoundError, IsADirectoryError, PermissionError) as exc:
+        if os.environ.get("VNAV_DEBUG"):
+            traceback.print_exc()
+        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        print(f"vnav-graph: error: {msg}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        print("vnav-graph: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

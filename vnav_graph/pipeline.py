@@ -1,0 +1,192 @@
+"""The main job: run estimators on one drive, evaluate, write ``summary.json`` and tables.
+
+``run_estimators`` never lets one estimator's failure stop the others: a failed estimator is
+reported with ``status: failed`` and its error (DESIGN.md).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import tempfile
+import time
+import traceback
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .estimators.base import available, create
+from .evaluation.metrics import evaluate
+from .types import Drive, Estimate
+
+SUMMARY_SCHEMA = "vnav_graph.summary/1"
+
+
+@dataclass(frozen=True)
+class RunResult:
+    """Outcome of one estimator on one drive: an Estimate, or the error that stopped it."""
+
+    name: str
+    estimate: Estimate | None
+    error: str | None
+    runtime_s: float
+
+
+def resolve_estimators(names: Sequence[str] | None) -> list[str]:
+    """Validate estimator names (ValueError on an unknown one); None means all available."""
+    avail = available()
+    if not names:
+        return avail
+    unknown = [n for n in names if n not in avail]
+    if unknown:
+        raise ValueError(f"unknown estimator(s) {', '.join(unknown)} "
+                         f"(available: {', '.join(avail)})")
+    return list(names)
+
+
+def run_estimators(drive: Drive, names: Sequence[str], progress: bool = True) -> list[RunResult]:
+    """Run each named estimator on ``drive``; failures are captured, not raised."""
+    from tqdm import tqdm
+
+    results = []
+    bar = tqdm(names, desc="estimators", unit="est", disable=not progress, leave=False)
+    for name in bar:
+        bar.set_postfix_str(name)
+        t0 = time.perf_counter()
+        try:
+            est = create(name).run(drive)
+            if est.runtime_s <= 0:
+                est = est.replace(runtime_s=time.perf_counter() - t0)
+            results.append(RunResult(name, est, None, est.runtime_s))
+        except Exception as exc:  # an estimator failure is data, not a crash
+            if os.environ.get("VNAV_DEBUG"):
+                traceback.print_exc()
+            results.append(RunResult(name, None, f"{type(exc).__name__}: {exc}",
+                                     time.perf_counter() - t0))
+    return results
+
+
+def failed_block(error: str, runtime_s: float) -> dict[str, Any]:
+    null_param = {"est": None, "sd": None, "truth": None}
+    return {
+        "status": "failed", "error": error, "alt_rmse_m": None, "alt_max_abs_m": None,
+        "vel_down_rmse_mps": None, "nees_mean": None, "nees_dof": None, "runtime_s": runtime_s,
+        "realtime_factor": None, "gnss_rejected": None,
+        "baro": {"scale": dict(null_param), "latency_s": dict(null_param),
+                 "bias_m": dict(null_param)},
+    }
+
+
+def summarize(drive: Drive, results: Sequence[RunResult]) -> dict[str, Any]:
+    """The ``summary.json`` document (DESIGN.md schema)."""
+    ests: dict[str, Any] = {}
+    for r in results:
+        if r.estimate is None:
+            ests[r.name] = failed_block(r.error or "unknown error", r.runtime_s)
+            continue
+        try:
+            ests[r.name] = evaluate(r.estimate, drive)
+        except Exception as exc:
+            ests[r.name] = failed_block(f"evaluation: {type(exc).__name__}: {exc}", r.runtime_s)
+    return {
+        "schema": SUMMARY_SCHEMA,
+        "drive": {"name": drive.name, "source": drive.source, "duration_s": drive.duration_s},
+        "estimators": ests,
+    }
+
+
+def _fmt(v: Any, spec: str) -> str:
+    return "—" if v is None else format(v, spec)
+
+
+def format_table(summary: dict[str, Any]) -> str:
+    """Plain-text comparison table of a summary."""
+    head = (f"{'estimator':<15}{'status':>7}{'alt RMSE':>10}{'alt max':>9}{'vD RMSE':>9}"
+            f"{'NEES':>8}{'scale %':>16}{'latency ms':>16}{'bias m':>15}{'run s':>8}{'x RT':>8}")
+    lines = [f"drive {summary['drive']['name']} ({summary['drive']['source']}, "
+             f"{summary['drive']['duration_s']:.0f} s)", head, "-" * len(head)]
+
+    def pe(p: dict[str, Any], scale: float, spec: str) -> str:
+        if p["est"] is None:
+            return "—"
+        s = format(p["est"] * scale, spec)
+        if p["sd"] is not None:
+            s += "±" + format(p["sd"] * scale, spec)
+        return s
+
+    for name, m in summary["estimators"].items():
+        b = m["baro"]
+        nees = m["nees_mean"] / m["nees_dof"] if m.get("nees_dof") else None
+        lines.append(
+            f"{name:<15}{m['status']:>7}{_fmt(m['alt_rmse_m'], '.2f'):>10}"
+            f"{_fmt(m['alt_max_abs_m'], '.2f'):>9}{_fmt(m['vel_down_rmse_mps'], '.3f'):>9}"
+            f"{_fmt(nees, '.2f'):>8}{pe(b['scale'], 100, '.3f'):>16}"
+            f"{pe(b['latency_s'], 1000, '.0f'):>16}{pe(b['bias_m'], 1, '.2f'):>15}"
+            f"{m['runtime_s']:>8.2f}{_fmt(m['realtime_factor'], '.0f'):>8}"
+        )
+    truth = next(iter(summary["estimators"].values()), {}).get("baro") if summary[
+        "estimators"] else None
+    if truth and truth["scale"]["truth"] is not None:
+        lines.append(
+            f"truth: scale {truth['scale']['truth'] * 100:.3f} %, latency "
+            f"{truth['latency_s']['truth'] * 1000:.0f} ms, "
+            f"mean bias {truth['bias_m']['truth']:.2f} m"
+        )
+    lines.append("NEES column: mean NEES per degree of freedom (1.0 = consistent)")
+    for name, m in summary["estimators"].items():
+        if m["status"] == "failed":
+            lines.append(f"{name} failed: {m['error']}")
+    return "\n".join(lines)
+
+
+def estimate_table(est: Estimate) -> dict[str, np.ndarray]:
+    """Columns of one estimate for Parquet/CSV export (SI units, documented names)."""
+    tr = est.trajectory
+    cols = {"t_s": tr.t, "lat_rad": tr.lla[:, 0], "lon_rad": tr.lla[:, 1], "alt_m": tr.alt,
+            "vel_n_mps": tr.vel_n[:, 0], "vel_e_mps": tr.vel_n[:, 1],
+            "vel_d_mps": tr.vel_n[:, 2]}
+    if tr.bias_baro is not None:
+        cols["baro_bias_m"] = tr.bias_baro
+    if est.cov is not None and est.t_cov is not None:
+        sd_d = np.sqrt(np.clip(est.cov[:, 2, 2], 0, None))
+        cols["alt_sd_m"] = np.interp(tr.t, est.t_cov, sd_d)
+    return cols
+
+
+def write_outputs(
+    out_dir: Path, summary: dict[str, Any], results: Sequence[RunResult], drive: Drive,
+    extra_writers: Sequence[Any] = (),
+) -> list[Path]:
+    """Write summary.json, the table and per-estimator Parquet files into ``out_dir``.
+
+    Everything is first written into a temporary directory next to ``out_dir`` and moved in
+    at the end, so an interrupted run leaves no half-written files under the final names.
+    """
+    import pandas as pd
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=".vnav-tmp-", dir=out_dir))
+    try:
+        (tmp / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+        (tmp / "summary.txt").write_text(format_table(summary) + "\n")
+        (tmp / "estimates").mkdir()
+        for r in results:
+            if r.estimate is not None:
+                pd.DataFrame(estimate_table(r.estimate)).to_parquet(
+                    tmp / "estimates" / f"{r.name}.parquet", index=False)
+        for w in extra_writers:
+            w(tmp, summary, results, drive)
+        written = []
+        for p in sorted(tmp.rglob("*")):
+            if p.is_file():
+                dst = out_dir / p.relative_to(tmp)
+                dst.parent.mkdir(parents=True, exist_ok=True)
+                os.replace(p, dst)
+                written.append(dst)
+        return written
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
