@@ -178,11 +178,16 @@ class BaroSpec:
     physical: bool = False
 
     def __post_init__(self) -> None:
-        _positive(self, "scale_sd", "latency_s", "bias_sd", "noise_sd")
+        _positive(self, "scale_sd", "bias_sd", "noise_sd")
         if not self.rate_hz > 0 or not self.bias_tau > 0:
             raise ValueError("BaroSpec.rate_hz / bias_tau: must be > 0")
         if self.latency_s > 2.0:
             raise ValueError("BaroSpec.latency_s: above 2 s (milliseconds passed as seconds?)")
+        # A negative latency (down to -0.5 s) simulates a baro stamped late / advanced relative
+        # to GNSS, as in seed 001 Table 1 (Td down to -0.035 s).
+        if not np.isfinite(self.latency_s) or self.latency_s < -0.5:
+            raise ValueError(f"BaroSpec.latency_s: must be finite and >= -0.5 s, "
+                             f"got {self.latency_s!r}")
 
 
 def replace_fields(obj: Any, **changes: Any) -> Any:
