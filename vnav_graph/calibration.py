@@ -1,0 +1,206 @@
+"""Least-squares barometer calibration against GNSS (seed 001, eqs. 1-4).
+
+Seed 001 models the baro altitude H_B against the GNSS (DGPS) height H_G as
+
+    H_B(t) = (1 + dSF)·H_G(t − Td) + B + w                                     (1)
+           ≈ H_G(t) + H_G(t)·dSF − V_G(t)·Td + B + w                           (2)
+    dH(t)  = H_B(t) − H_G(t) = H_G(t)·dSF − V_G(t)·Td + B + w                  (3)
+    [dSF, Td, B]ᵀ = pinv(M_G)·dH,  rows of M_G = [H_G(k), −V_G(k), 1]          (4)
+
+which is the package's one baro model (``vnav_graph.sensors.baro``) with the scale acting on
+the height above the drive origin: H_G = h_GNSS − h0, H_B = h_baro − h0, h0 =
+``Drive.origin_lla[2]``, and V_G the vertical speed (+up). The exact model has the latency
+multiplied by (1 + dSF) (``baro_jacobian``); the regression coefficient θ_Td is therefore
+(1 + dSF)·Td and ``calibrate_baro`` reports Td = θ_Td / (1 + dSF).
+
+Standard errors come from the residual variance, cov = (MᵀM)⁻¹·σ̂², σ̂² = RSS/(N − 3)
+(ordinary least squares with white residuals; the GNSS height noise enters both dH and the
+regressor H_G, which biases dSF by −σ_G²/var(H_G) — negligible for altitude changes of
+hundreds of metres, and flagged through the observability warnings otherwise).
+
+Observability warnings (``BaroCalibration.warnings``):
+
+- a parameter whose standard error exceeds ``WARN_FRACTION`` (0.5) of its typical magnitude
+  ``TYPICAL`` is "poorly observable". The typical magnitudes are of the order of seed 001
+  Table 1 and DESIGN.md: dSF 1 %, Td 0.1 s, B 5 m. Td needs vertical speed (climbs and
+  descents), dSF needs altitude change, B needs neither.
+- the design matrix with unit-RMS columns has a condition number above ``MAX_CONDITION`` (1e3):
+  the three effects cannot be separated (e.g. a constant-rate climb ties H_G to time).
+- V_G differentiated from GNSS heights (no GNSS velocity) is noisy and biases Td toward 0.
+
+Contents: ``BaroCalibration`` (frozen result), ``calibrate_baro(drive)``,
+``calibrate_arrays(...)`` (the bare regression), ``format_calibration`` and
+``cli_calibrate_baro(args)`` for ``vnav-graph calibrate-baro DRIVE``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .types import Drive, FloatArray
+
+# Typical magnitudes [dSF -, Td s, B m] (seed 001 Table 1: dSF 0.35-2.5 %, |Td| ≤ 0.08 s,
+# |B| 3-9 m; DESIGN.md: s up to 3 %, τd up to 0.5 s, b metres to tens of metres).
+TYPICAL = {"scale": 0.01, "latency_s": 0.1, "bias_m": 5.0}
+WARN_FRACTION = 0.5
+MAX_CONDITION = 1.0e3
+# Baro samples must bracket a GNSS epoch within this gap to be interpolated to it [s].
+MAX_BARO_GAP_S = 1.0
+
+
+@dataclass(frozen=True)
+class BaroCalibration:
+    """Result of the seed-001 least-squares baro calibration.
+
+    Attributes
+    ----------
+    scale, latency_s, bias_m : estimates of dSF [-], Td [s] and B [m]
+    scale_sd, latency_sd, bias_sd : their standard errors from the residual variance
+    cov : (3, 3) covariance of (dSF, Td, B) [-, s, m]
+    residual_sd : σ̂ of the regression residual [m]
+    n_epochs : number of GNSS epochs used
+    condition : condition number of the design with unit-RMS columns
+    velocity_source : "gnss_velocity" or "differentiated_height"
+    warnings : human-readable observability / conditioning warnings (empty if none)
+    """
+
+    scale: float
+    latency_s: float
+    bias_m: float
+    scale_sd: float
+    latency_sd: float
+    bias_sd: float
+    cov: FloatArray
+    residual_sd: float
+    n_epochs: int
+    condition: float
+    velocity_source: str
+    warnings: tuple[str, ...]
+
+
+def calibrate_arrays(
+    h_gnss_rel: FloatArray, v_up: FloatArray, h_baro_rel: FloatArray,
+    velocity_source: str = "gnss_velocity",
+) -> BaroCalibration:
+    """Solve seed 001 eq. 4 for (dSF, Td, B).
+
+    Parameters
+    ----------
+    h_gnss_rel : (N,) GNSS height above the drive origin, H_G [m]
+    v_up : (N,) vertical speed +up at the same epochs, V_G [m/s]
+    h_baro_rel : (N,) baro altitude above the drive origin at the same epochs, H_B [m]
+    velocity_source : recorded in the result (adds a warning if "differentiated_height")
+    """
+    hg = np.asarray(h_gnss_rel, dtype=float)
+    vg = np.asarray(v_up, dtype=float)
+    hb = np.asarray(h_baro_rel, dtype=float)
+    if not (hg.shape == vg.shape == hb.shape) or hg.ndim != 1:
+        raise ValueError("calibrate_baro: H_G, V_G and H_B must be 1-D arrays of equal length")
+    ok = np.isfinite(hg) & np.isfinite(vg) & np.isfinite(hb)
+    hg, vg, hb = hg[ok], vg[ok], hb[ok]
+    n = hg.size
+    if n < 10:
+        raise ValueError(f"calibrate_baro: only {n} usable GNSS/baro epochs (need >= 10)")
+    m = np.column_stack([hg, -vg, np.ones(n)])  # M_G, eq. 4
+    dh = hb - hg  # eq. 3
+    # unit-RMS column scaling: conditioning of the problem, not of its units
+    scl = np.sqrt(np.mean(m**2, axis=0))
+    scl[scl == 0] = 1.0
+    ms = m / scl
+    sv = np.linalg.svd(ms, compute_uv=False)
+    cond = float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf")
+    theta_s, *_ = np.linalg.lstsq(ms, dh, rcond=None)
+    theta = theta_s / scl
+    resid = dh - m @ theta
+    sigma2 = float(resid @ resid) / max(n - 3, 1)
+    # (MᵀM)⁻¹σ̂² via the scaled design (pinv tolerates a singular design: the flag says so)
+    cov = np.linalg.pinv(ms.T @ ms) / np.outer(scl, scl) * sigma2
+    s_hat, theta_td, b_hat = (float(x) for x in theta)
+    # θ_Td = (1 + dSF)·Td in the exact model (see module docstring); first-order propagation
+    td_hat = theta_td / (1.0 + s_hat)
+    j = np.array([[1.0, 0.0, 0.0], [-theta_td / (1 + s_hat) ** 2, 1.0 / (1 + s_hat), 0.0],
+                  [0.0, 0.0, 1.0]])
+    cov = j @ cov @ j.T
+    sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    warns: list[str] = []
+    names = (("scale", "dSF", "altitude change"), ("latency_s", "Td", "vertical speed"),
+             ("bias_m", "B", "data"))
+    for (key, label, needs), se in zip(names, sd, strict=True):
+        if se > WARN_FRACTION * TYPICAL[key]:
+            warns.append(f"{label} poorly observable: standard error {se:.3g} exceeds "
+                         f"{WARN_FRACTION:g} x typical {TYPICAL[key]:g} (needs more {needs})")
+    if cond > MAX_CONDITION:
+        warns.append(f"design ill-conditioned (condition number {cond:.3g} > {MAX_CONDITION:g}):"
+                     " dSF, Td and B cannot be separated by this data")
+    if velocity_source == "differentiated_height":
+        warns.append("V_G differentiated from GNSS heights (no GNSS velocity): Td is noisy and "
+                     "biased toward zero")
+    return BaroCalibration(
+        scale=s_hat, latency_s=td_hat, bias_m=b_hat, scale_sd=float(sd[0]),
+        latency_sd=float(sd[1]), bias_sd=float(sd[2]), cov=cov, residual_sd=float(np.sqrt(
+            sigma2)), n_epochs=int(n), condition=cond, velocity_source=velocity_source,
+        warnings=tuple(warns),
+    )
+
+
+def calibrate_baro(drive: Drive) -> BaroCalibration:
+    """Seed-001 least-squares calibration of the drive's baro against its GNSS.
+
+    The baro altitude (``BaroStream.altitude``; ISA altitude when only pressure is logged) is
+    linearly interpolated to the GNSS epochs inside the baro span (bracketing samples at most
+    ``MAX_BARO_GAP_S`` apart). V_G is the GNSS vertical velocity (−vel_n[:, 2]) when the
+    receiver gives velocity, else the central difference of GNSS heights.
+
+    Raises ValueError when the drive lacks GNSS or baro, or has fewer than 10 common epochs.
+    """
+    if drive.gnss is None or drive.baro is None:
+        raise ValueError("calibrate-baro: the drive needs both GNSS and baro data")
+    g, b = drive.gnss, drive.baro
+    h0 = float(drive.origin_lla[2])
+    tb, hb_all = b.t, b.altitude
+    tg = g.t
+    inside = (tg >= tb[0]) & (tg <= tb[-1])
+    idx = np.clip(np.searchsorted(tb, tg), 1, tb.size - 1)
+    gap = tb[idx] - tb[idx - 1] if tb.size > 1 else np.full(tg.shape, np.inf)
+    use = inside & (gap <= MAX_BARO_GAP_S)
+    hb = np.interp(tg, tb, hb_all)
+    hg = g.lla[:, 2] - h0
+    if g.vel_n is not None:
+        vg = -g.vel_n[:, 2]
+        src = "gnss_velocity"
+    else:
+        if tg.size < 3:
+            raise ValueError("calibrate-baro: too few GNSS fixes to differentiate heights")
+        vg = np.gradient(g.lla[:, 2], tg)
+        src = "differentiated_height"
+    return calibrate_arrays(hg[use], vg[use], hb[use] - h0, velocity_source=src)
+
+
+def format_calibration(cal: BaroCalibration) -> str:
+    """A small text table of the estimates ± standard errors, then the warnings."""
+    lines = [
+        f"baro calibration vs GNSS (seed 001 eq. 4), {cal.n_epochs} epochs, "
+        f"V_G from {cal.velocity_source.replace('_', ' ')}",
+        f"{'parameter':<12}{'estimate':>14}{'std. error':>14}",
+        f"{'dSF [%]':<12}{100 * cal.scale:>14.4f}{100 * cal.scale_sd:>14.4f}",
+        f"{'Td [s]':<12}{cal.latency_s:>14.4f}{cal.latency_sd:>14.4f}",
+        f"{'B [m]':<12}{cal.bias_m:>14.3f}{cal.bias_sd:>14.3f}",
+        f"residual sd {cal.residual_sd:.3f} m, condition number {cal.condition:.3g}",
+    ]
+    lines += [f"warning: {w}" for w in cal.warnings]
+    return "\n".join(lines)
+
+
+def cli_calibrate_baro(args: Any) -> int:
+    """``vnav-graph calibrate-baro DRIVE``: load ``args.drive``, print the table, return 0.
+
+    Bad input raises ValueError (the CLI turns it into one line on stderr and exit code 2).
+    """
+    from .io import load_drive
+
+    drive = load_drive(args.drive)
+    print(format_calibration(calibrate_baro(drive)))
+    return 0
