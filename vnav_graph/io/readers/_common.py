@@ -1,0 +1,137 @@
+"""Shared cleaning steps of the log readers: time-stamp repair, gap detection, baro datum,
+GNSS sigma floors and the report that every reader writes into ``Drive.meta``.
+
+Every repair is counted in a :class:`Report`; nothing is changed silently (types.py only
+validates, readers repair and report).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ...geo.atmosphere import isa_altitude
+
+FloatArray = NDArray[np.float64]
+
+# A gap is reported when consecutive samples are further apart than this many median steps.
+GAP_FACTOR = 5.0
+# Window after the first valid fix over which the baro datum is aligned to GNSS height [s].
+BARO_ALIGN_WINDOW_S = 10.0
+
+
+@dataclass
+class Report:
+    """What a reader dropped and repaired, per stream and reason (goes to ``Drive.meta``)."""
+
+    dropped: dict[str, dict[str, int]] = field(default_factory=dict)
+    repaired: dict[str, dict[str, int]] = field(default_factory=dict)
+    gaps: dict[str, list[list[float]]] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+    clock_rate: float | None = None  # receiver-vs-logger clock ratio where measured
+
+    def drop(self, stream: str, reason: str, count: int) -> None:
+        if count:
+            d = self.dropped.setdefault(stream, {})
+            d[reason] = d.get(reason, 0) + int(count)
+
+    def repair(self, stream: str, reason: str, count: int) -> None:
+        if count:
+            d = self.repaired.setdefault(stream, {})
+            d[reason] = d.get(reason, 0) + int(count)
+
+    def as_meta(self) -> dict[str, Any]:
+        return {"dropped": self.dropped, "repaired": self.repaired, "gaps": self.gaps,
+                "notes": list(self.notes)}
+
+
+def monotonic_mask(t: FloatArray, stream: str, report: Report) -> NDArray[np.bool_]:
+    """Mask keeping the samples whose stamp is strictly later than every earlier kept one.
+
+    Duplicated stamps (``t[k] == t_last``) and stamps that jump backwards are dropped and
+    counted separately; NaN stamps are dropped as well.
+    """
+    t = np.asarray(t, dtype=float)
+    keep = np.zeros(t.size, dtype=bool)
+    last = -np.inf
+    n_dup = n_back = n_nan = 0
+    for k in range(t.size):
+        tk = t[k]
+        if not np.isfinite(tk):
+            n_nan += 1
+        elif tk > last:
+            keep[k] = True
+            last = tk
+        elif tk == last:
+            n_dup += 1
+        else:
+            n_back += 1
+    report.drop(stream, "duplicated time stamp", n_dup)
+    report.drop(stream, "time stamp not increasing", n_back)
+    report.drop(stream, "time stamp not finite", n_nan)
+    return keep
+
+
+def find_gaps(t: FloatArray, stream: str, report: Report,
+              nominal_dt: float | None = None) -> None:
+    """Record logging gaps (dt > GAP_FACTOR x median dt) as ``[start_s, length_s]`` pairs."""
+    if t.size < 3:
+        return
+    dt = np.diff(t)
+    ref = float(np.median(dt)) if nominal_dt is None else nominal_dt
+    idx = np.flatnonzero(dt > GAP_FACTOR * ref)
+    if idx.size:
+        report.gaps[stream] = [[float(t[i]), float(dt[i])] for i in idx]
+
+
+def finite_rows(*arrays: FloatArray) -> NDArray[np.bool_]:
+    """True where every given array (1-D or 2-D) is finite in that row."""
+    m = np.ones(np.asarray(arrays[0]).shape[0], dtype=bool)
+    for a in arrays:
+        a = np.asarray(a, dtype=float)
+        m &= np.all(np.isfinite(a.reshape(a.shape[0], -1)), axis=1)
+    return m
+
+
+def baro_alt_aligned(t_baro: FloatArray, alt_raw: FloatArray, t_gnss: FloatArray,
+                     h_gnss: FloatArray) -> tuple[FloatArray, float]:
+    """Shift a relative barometric altitude into the GNSS height datum.
+
+    ``alt = alt_raw + c`` with ``c = median(h_gnss − interp(alt_raw))`` over the GNSS fixes in
+    the first ``BARO_ALIGN_WINDOW_S`` seconds after the first fix. This fixes only the constant
+    datum (so the baro bias b(t) of the DESIGN.md model starts near zero); scale, latency and
+    the drifting bias are left for the estimators.
+
+    Returns
+    -------
+    alt : (N,) [m, +up] in the GNSS height reference
+    offset : c [m]
+    """
+    m = t_gnss <= t_gnss[0] + BARO_ALIGN_WINDOW_S
+    m &= (t_gnss >= t_baro[0]) & (t_gnss <= t_baro[-1])
+    if not np.any(m):  # no overlap at the start: use every overlapping fix
+        m = (t_gnss >= t_baro[0]) & (t_gnss <= t_baro[-1])
+    if not np.any(m):
+        raise ValueError("baro and GNSS do not overlap in time; cannot align the baro datum")
+    c = float(np.median(h_gnss[m] - np.interp(t_gnss[m], t_baro, alt_raw)))
+    return alt_raw + c, c
+
+
+def pressure_altitude(pressure_pa: FloatArray) -> FloatArray:
+    """ISA pressure altitude [m] of static pressure [Pa] (vnav_graph.geo.atmosphere)."""
+    return isa_altitude(pressure_pa)
+
+
+def valid_pressure(p: FloatArray) -> NDArray[np.bool_]:
+    """Physically plausible static pressure [Pa] (same range as ``BaroStream``)."""
+    return np.isfinite(p) & (p >= 1.0e3) & (p <= 1.2e5)
+
+
+def onboard_block(t: FloatArray, alt: FloatArray, name: str, offset_m: float,
+                  reference: str) -> dict[str, Any]:
+    """The ``Drive.meta["onboard"]`` block: the autopilot's own altitude estimate."""
+    return {"t": [float(x) for x in t], "alt": [float(x) for x in alt], "name": name,
+            "offset_m": float(offset_m), "reference": reference}

@@ -1,0 +1,386 @@
+"""ArduPilot DataFlash binary logs (``.bin``) → :class:`~vnav_graph.types.Drive`.
+
+Read with ``pymavlink.DFReader.DFReader_binary`` (the log is self-describing through its FMT
+records, so old ``TimeMS`` and newer ``TimeUS`` layouts both work).
+
+Messages used
+-------------
+- ``IMU`` (instance 0 when an ``I`` field exists): ``GyrX/Y/Z`` [rad/s], ``AccX/Y/Z`` [m/s²,
+  gravity included]. ArduPilot logs the IMU in the vehicle body frame, forward-right-down,
+  after the board-orientation rotation, so no axis change is applied.
+- ``GPS`` (instance 0): ``Status`` (≥ 3 = 3-D fix; others are dropped), ``Lat``/``Lng``
+  [deg], ``Alt`` [m **above mean sea level**], ``Spd`` [m/s], ``GCrs`` [deg], ``VZ`` [m/s,
+  positive **down**], ``HDop``; GPS time ``Week``/``TimeMS`` (old) or ``GWk``/``GMS`` (new);
+  boot time ``T`` [ms] (old) or ``TimeUS`` (new). ``GPA`` ``HAcc``/``VAcc``/``SAcc`` give
+  per-fix sigmas when present.
+  Old logs carry the same receiver accuracies in ``UBX3`` ``hAcc``/``vAcc``/``sAcc``.
+- ``BARO`` (instance 0): ``Press`` [Pa] and ``Alt`` [m relative to the ground calibration].
+- Onboard estimate: ``CTUN.Alt`` (inertial-nav altitude) when ``AHRS_EKF_USE`` = 0, otherwise
+  the EKF's ``PD`` from ``XKF1``/``NKF1``/``EKF1`` (first core).
+
+Clock
+-----
+One clock: autopilot boot time in seconds (``TimeMS/1e3`` or ``TimeUS/1e6``). GNSS fixes are
+stamped with their GPS time of week mapped onto the boot clock by a robust linear fit of the
+receipt stamps ``T`` on GPS time (this removes the receipt jitter of ±20 ms and keeps the
+mean transport latency; the fit's residual sd is reported). The fit's slope is reported as
+``boot_clock_per_gps_second``: on the Erle PXF logs the boot clock advances only ≈ 0.92 s per
+GPS second (GPS time of week spans 363.0 s while boot time spans 335.0 s on ``218.BIN``). The
+streams are left on the boot clock, which keeps IMU, baro and GNSS mutually consistent; a
+warning note says so.
+
+Heights
+-------
+GNSS height is ``GPS.Alt`` (MSL, the geoid undulation of ~50 m is *not* added: the package
+uses one consistent height reference per drive and the baro bias absorbs datum offsets; the
+drive metadata says ``height_reference = "msl"``). Baro ``alt`` is the ISA pressure altitude
+of ``Press`` shifted by a constant so it matches the GNSS height over the first 10 s of fixes
+(see ``_common.baro_alt_aligned``); the offset is reported.
+
+Sigmas
+------
+With ``GPA``: σ_N = σ_E = HAcc, σ_D = VAcc, σ_v = SAcc. Without: σ_N = σ_E = 1.0 m · HDop and
+σ_D = 1.5 · σ_N (VDOP ≈ 1.5 HDOP for a typical constellation; 1.0 m user range error of a
+single-frequency u-blox), floored at 0.5 m / 1.0 m; velocity σ = (0.3, 0.3, 0.5) m/s.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+from collections.abc import Sequence
+from contextlib import redirect_stdout
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ...types import BaroStream, Drive, GnssStream, ImuStream
+from ._common import (
+    Report,
+    baro_alt_aligned,
+    find_gaps,
+    finite_rows,
+    monotonic_mask,
+    onboard_block,
+    pressure_altitude,
+    valid_pressure,
+)
+
+DEG = np.pi / 180.0
+HDOP_UERE_M = 1.0  # user-equivalent range error used with HDop [m]
+VDOP_OVER_HDOP = 1.5
+SD_FLOOR_H_M = 0.5
+SD_FLOOR_V_M = 1.0
+DEFAULT_VEL_SD = (0.3, 0.3, 0.5)  # m/s, when the log has no speed accuracy
+HEAD = b"\xa3\x95"
+
+_TYPES = ["IMU", "GPS", "GPA", "UBX3", "BARO", "CTUN", "EKF1", "NKF1", "XKF1", "PARM", "MSG"]
+
+
+def is_dataflash(head: bytes) -> bool:
+    """True when the first bytes look like a DataFlash binary log (FMT record first)."""
+    return len(head) >= 3 and head[:2] == HEAD and head[2] == 0x80
+
+
+def _time_s(msg: dict[str, Any]) -> float:
+    if "TimeUS" in msg:
+        return float(msg["TimeUS"]) * 1e-6
+    if "TimeMS" in msg:
+        return float(msg["TimeMS"]) * 1e-3
+    return float("nan")
+
+
+def _instance0(msg: dict[str, Any]) -> bool:
+    for key in ("I", "Instance", "C", "Core"):
+        if key in msg:
+            return int(msg[key]) == 0
+    return True
+
+
+def _collect(path: Path) -> tuple[dict[str, list[dict[str, Any]]], Any]:
+    from pymavlink import DFReader
+
+    try:
+        with redirect_stdout(io.StringIO()):  # pymavlink prints on odd records
+            reader = DFReader.DFReader_binary(str(path), zero_time_base=True)
+            out: dict[str, list[dict[str, Any]]] = {k: [] for k in _TYPES}
+            while True:
+                m = reader.recv_match(type=_TYPES)
+                if m is None:
+                    break
+                out[m.get_type()].append(m.to_dict())
+    except Exception as exc:  # pymavlink raises assorted errors on corrupt data
+        raise ValueError(f"{path.name}: cannot parse DataFlash log ({type(exc).__name__}: "
+                         f"{exc})") from None
+    return out, reader
+
+
+def _truncated_tail(path: Path, reader: Any) -> bool:
+    """True when the last record in the file is cut short (file truncated)."""
+    size = os.path.getsize(path)
+    with open(path, "rb") as fh:
+        fh.seek(max(0, size - 1024))
+        tail = fh.read()
+    pos = tail.rfind(HEAD)
+    if pos < 0 or pos + 2 >= len(tail):
+        return False
+    fmt = reader.formats.get(tail[pos + 2])
+    if fmt is None:
+        return False
+    return pos + fmt.len > len(tail)
+
+
+def _col(rows: Sequence[dict[str, Any]], *names: str) -> np.ndarray:
+    """Column of the first of ``names`` present in the records (NaN where missing)."""
+    for n in names:
+        if rows and n in rows[0]:
+            return np.array([float(r.get(n, np.nan)) for r in rows], dtype=float)
+    return np.full(len(rows), np.nan)
+
+
+def _gnss_boot_time(t_recv: np.ndarray, gps_time: np.ndarray, report: Report) -> np.ndarray:
+    """Map GPS time [s] to the boot clock by a robust linear fit of receipt stamps on it.
+
+    ``t_recv ≈ a + (1 + d)(gps_time − gps_time[0])``: offset from the median, then drift d
+    from least squares on the inliers (|residual| < 0.1 s); stamps = fitted line.
+    """
+    if not np.all(np.isfinite(gps_time)) or gps_time.size < 5:
+        report.notes.append("GNSS stamped with receipt time (no GPS time in the log)")
+        return t_recv
+    x = gps_time - gps_time[0]
+    inl = np.ones(x.size, dtype=bool)
+    for _ in range(3):  # least squares, then refit on the inliers (|residual| < 0.1 s)
+        A = np.column_stack([np.ones(int(inl.sum())), x[inl]])
+        coef, *_ = np.linalg.lstsq(A, t_recv[inl], rcond=None)
+        a, slope = float(coef[0]), float(coef[1])
+        res = t_recv - (a + slope * x)
+        inl = np.abs(res) < 0.1
+        if inl.sum() < 5:
+            raise ValueError("GNSS receipt stamps do not follow GPS time (corrupt GPS records?)")
+    fit = a + slope * x
+    sd = float(np.std(res[inl]))
+    report.clock_rate = slope
+    report.notes.append(
+        f"GNSS stamped by GPS time of week mapped onto the boot clock (receipt jitter sd "
+        f"{sd * 1e3:.1f} ms; {int((~inl).sum())} receipt stamps off the fit by > 0.1 s)")
+    if abs(slope - 1.0) > 1e-3:
+        report.notes.append(
+            f"WARNING: the boot clock advanced {slope:.4f} s per GPS second "
+            f"({(slope - 1) * 100:+.2f} %); all streams are kept on the boot clock (IMU, baro and "
+            "GNSS stay mutually consistent), but if the boot clock is the wrong one, IMU "
+            "intervals and GNSS velocities disagree by this factor")
+    return fit
+
+
+def read_dataflash(path: str | Path) -> Drive:
+    """Read an ArduPilot DataFlash binary log into a Drive (see the module docstring)."""
+    path = Path(path)
+    report = Report()
+    msgs, reader = _collect(path)
+    if _truncated_tail(path, reader):
+        report.drop("log", "incomplete last record (file truncated)", 1)
+    params = {r.get("Name"): r.get("Value") for r in msgs["PARM"]}
+    firmware = next((r.get("Message") for r in msgs["MSG"]
+                     if str(r.get("Message", "")).startswith(("Ardu", "APM"))), None)
+
+    # ---- IMU -------------------------------------------------------------------------
+    imu_rows = [r for r in msgs["IMU"] if _instance0(r)]
+    if len(imu_rows) < 10:
+        raise ValueError(f"{path.name}: DataFlash log has no IMU data "
+                         f"({len(imu_rows)} IMU records; truncated or not a flight log?)")
+    t_imu = np.array([_time_s(r) for r in imu_rows])
+    gyro = np.column_stack([_col(imu_rows, f"Gyr{a}") for a in "XYZ"])
+    acc = np.column_stack([_col(imu_rows, f"Acc{a}") for a in "XYZ"])
+    ok = finite_rows(gyro, acc)
+    report.drop("imu", "non-finite sample", int((~ok).sum()))
+    phys = (np.max(np.abs(gyro), axis=1) <= 50.0) & (np.max(np.abs(acc), axis=1) <= 2000.0)
+    report.drop("imu", "outside physical range", int((ok & ~phys).sum()))
+    ok &= phys
+    t_imu, gyro, acc = t_imu[ok], gyro[ok], acc[ok]
+    keep = monotonic_mask(t_imu, "imu", report)
+    t_imu, gyro, acc = t_imu[keep], gyro[keep], acc[keep]
+    find_gaps(t_imu, "imu", report)
+
+    # ---- GNSS ------------------------------------------------------------------------
+    gps_rows = [r for r in msgs["GPS"] if _instance0(r)]
+    if not gps_rows:
+        raise ValueError(f"{path.name}: DataFlash log has no GPS records")
+    status = _col(gps_rows, "Status")
+    lat = _col(gps_rows, "Lat")
+    lon = _col(gps_rows, "Lng")
+    alt = _col(gps_rows, "Alt")
+    spd = _col(gps_rows, "Spd")
+    crs = _col(gps_rows, "GCrs")
+    vz = _col(gps_rows, "VZ")
+    hdop = _col(gps_rows, "HDop")
+    if "T" in gps_rows[0]:
+        t_recv = _col(gps_rows, "T") * 1e-3
+    else:
+        t_recv = np.array([_time_s(r) for r in gps_rows])
+    week = _col(gps_rows, "Week", "GWk")
+    tow_ms = _col(gps_rows, "TimeMS", "GMS") if "T" in gps_rows[0] else _col(gps_rows, "GMS")
+    gps_time = week * 604800.0 + tow_ms * 1e-3
+
+    m = status >= 3
+    report.drop("gnss", "no 3-D fix (Status < 3)", int((~m).sum()))
+    bad_pos = ~finite_rows(np.column_stack([lat, lon, alt])) | ((lat == 0) & (lon == 0))
+    report.drop("gnss", "invalid position", int((m & bad_pos).sum()))
+    m &= ~bad_pos
+    if m.sum() < 2:
+        raise ValueError(f"{path.name}: no GNSS 3-D fixes in the log")
+    idx = np.flatnonzero(m)
+    gtime = gps_time[idx]
+    # the same fix logged twice (same GPS time) is a duplicate, whatever its receipt stamp
+    if np.all(np.isfinite(gtime)):
+        keep = monotonic_mask(gtime, "gnss", report)
+        idx, gtime = idx[keep], gtime[keep]
+        t_gnss = _gnss_boot_time(t_recv[idx], gtime, report)
+    else:
+        keep = monotonic_mask(t_recv[idx], "gnss", report)
+        idx = idx[keep]
+        t_gnss = t_recv[idx]
+        report.notes.append("GNSS stamped with receipt time (GPS time missing)")
+    find_gaps(t_gnss, "gnss", report)
+
+    lla = np.column_stack([lat[idx] * DEG, lon[idx] * DEG, alt[idx]])
+    vel_n = np.column_stack([spd[idx] * np.cos(crs[idx] * DEG), spd[idx] * np.sin(crs[idx] * DEG),
+                             vz[idx]])
+    pos_sd, vel_sd = _gnss_sigmas(msgs["GPA"] or msgs["UBX3"], t_recv[idx], hdop[idx], report)
+    if not np.all(np.isfinite(vel_n)):
+        report.notes.append("GNSS velocity incomplete in the log: velocity not used")
+        vel_n = vel_sd = None
+    gnss = GnssStream(t_gnss, lla, pos_sd, vel_n, vel_sd)
+
+    # ---- baro ------------------------------------------------------------------------
+    baro, baro_offset = _read_baro(msgs["BARO"], gnss, report)
+
+    # ---- onboard estimate -------------------------------------------------------------
+    onboard = _onboard(msgs, params, gnss, report)
+
+    origin = lla[0].copy()
+    meta: dict[str, Any] = {
+        "source": "log",
+        "name": path.stem,
+        "format": "ardupilot-dataflash",
+        "firmware": firmware,
+        "clock": "autopilot boot time [s]",
+        "imu_frame": "ArduPilot body frame (forward-right-down), used as logged",
+        "height_reference": "msl",
+        "height_note": "GPS.Alt is above mean sea level (not ellipsoidal); every height in this "
+                       "drive uses that reference",
+        "baro_alt_offset_m": baro_offset,
+        "averaged_1s": False,
+        "boot_clock_per_gps_second": report.clock_rate,
+        **report.as_meta(),
+    }
+    if onboard is not None:
+        meta["onboard"] = onboard
+    return Drive(ImuStream(t_imu, gyro, acc), gnss, baro, origin, meta=meta)
+
+
+def _gnss_sigmas(gpa_rows: list[dict[str, Any]], t_fix: np.ndarray, hdop: np.ndarray,
+                 report: Report) -> tuple[np.ndarray, np.ndarray]:
+    n = t_fix.size
+    gpa = [r for r in gpa_rows if _instance0(r)]
+    acc_name = "HAcc/VAcc" if gpa and "VAcc" in gpa[0] else "hAcc/vAcc"
+    if gpa and acc_name.split("/")[1] in gpa[0]:
+        t_gpa = np.array([_time_s(r) for r in gpa])
+        hacc, vacc, sacc = (_col(gpa, k, k[0].lower() + k[1:]) for k in ("HAcc", "VAcc", "SAcc"))
+        j = np.clip(np.searchsorted(t_gpa, t_fix), 0, len(gpa) - 1)
+        near = np.abs(t_gpa[j] - t_fix) < 0.1
+        sh = np.where(near, hacc[j], np.nan)
+        sv = np.where(near, vacc[j], np.nan)
+        ss = np.where(near, sacc[j], np.nan)
+    else:
+        sh = sv = ss = np.full(n, np.nan)
+    bad_hdop = ~np.isfinite(hdop) | (hdop <= 0) | (hdop > 50)
+    report.repair("gnss", "HDop invalid: default sigma 2.5 m used", int(bad_hdop.sum()))
+    sh_dop = np.where(bad_hdop, 2.5, HDOP_UERE_M * hdop)
+    use_dop = ~(np.isfinite(sh) & (sh > 0))
+    sh = np.maximum(np.where(use_dop, sh_dop, sh), SD_FLOOR_H_M)
+    sv = np.maximum(np.where(~np.isfinite(sv) | (sv <= 0), VDOP_OVER_HDOP * sh, sv),
+                    SD_FLOOR_V_M)
+    report.notes.append(
+        "GNSS sigmas from " + (f"receiver {acc_name} ({int((~use_dop).sum())} fixes)"
+                               if not use_dop.all() else
+                               f"HDop x {HDOP_UERE_M} m (vertical x {VDOP_OVER_HDOP})"))
+    ss_ok = np.isfinite(ss) & (ss > 0)
+    vel_sd = np.column_stack([
+        np.where(ss_ok, ss, DEFAULT_VEL_SD[0]), np.where(ss_ok, ss, DEFAULT_VEL_SD[1]),
+        np.where(ss_ok, 1.5 * ss, DEFAULT_VEL_SD[2])])
+    return np.column_stack([sh, sh, sv]), vel_sd
+
+
+def _read_baro(rows: list[dict[str, Any]], gnss: GnssStream,
+               report: Report) -> tuple[BaroStream | None, float | None]:
+    rows = [r for r in rows if _instance0(r)]
+    if not rows:
+        report.notes.append("no BARO records: drive has no barometer")
+        return None, None
+    t = np.array([_time_s(r) for r in rows])
+    press = _col(rows, "Press")
+    alt_rel = _col(rows, "Alt")
+    health = _col(rows, "Health")
+    ok = np.isfinite(t)
+    if np.isfinite(health).all():
+        report.drop("baro", "sensor reported unhealthy", int((ok & (health == 0)).sum()))
+        ok &= health != 0
+    have_p = valid_pressure(press)
+    if have_p[ok].mean() > 0.5:
+        report.drop("baro", "invalid pressure", int((ok & ~have_p).sum()))
+        ok &= have_p
+        t, press = t[ok], press[ok]
+        keep = monotonic_mask(t, "baro", report)
+        t, press = t[keep], press[keep]
+        raw = pressure_altitude(press)
+        desc = "ISA pressure altitude of BARO.Press"
+    else:
+        ok &= np.isfinite(alt_rel)
+        t, alt_rel = t[ok], alt_rel[ok]
+        keep = monotonic_mask(t, "baro", report)
+        t, raw, press = t[keep], alt_rel[keep], None
+        desc = "BARO.Alt (relative to the ground calibration)"
+    if t.size < 2:
+        report.notes.append("fewer than 2 valid baro samples: drive has no barometer")
+        return None, None
+    find_gaps(t, "baro", report)
+    alt, offset = baro_alt_aligned(t, raw, gnss.t, gnss.lla[:, 2])
+    report.notes.append(f"baro alt = {desc} + {offset:.2f} m (datum aligned to GNSS height "
+                        "over the first 10 s of fixes)")
+    return BaroStream(t, press, alt), offset
+
+
+def _onboard(msgs: dict[str, list[dict[str, Any]]], params: dict[str, Any], gnss: GnssStream,
+             report: Report) -> dict[str, Any] | None:
+    """Autopilot's own altitude in the drive's height reference (relative alt + offset)."""
+    ekf_used = params.get("AHRS_EKF_USE")
+    candidates: list[tuple[str, list[dict[str, Any]], str, float]] = []
+    ekf_rows = next(((n, msgs[n]) for n in ("XKF1", "NKF1", "EKF1") if msgs[n]), None)
+    ctun = msgs["CTUN"]
+    if ctun and "Alt" in ctun[0]:
+        candidates.append(("ctun.alt (inertial nav)", ctun, "Alt", 1.0))
+    if ekf_rows is not None and "PD" in ekf_rows[1][0]:
+        ekf = (f"{ekf_rows[0].lower()}.pd (EKF)", [r for r in ekf_rows[1] if _instance0(r)],
+               "PD", -1.0)
+        if ekf_used is None or float(ekf_used) != 0.0:
+            candidates.insert(0, ekf)
+        else:
+            candidates.append(ekf)
+    for name, rows, key, sign in candidates:
+        t = np.array([_time_s(r) for r in rows])
+        h = sign * _col(rows, key)
+        ok = np.isfinite(t) & np.isfinite(h)
+        t, h = t[ok], h[ok]
+        keep = monotonic_mask(t, "onboard", Report())
+        t, h = t[keep], h[keep]
+        if t.size < 2:
+            continue
+        try:
+            alt, off = baro_alt_aligned(t, h, gnss.t, gnss.lla[:, 2])
+        except ValueError:
+            continue
+        return onboard_block(t, alt, name, off,
+                             "relative altitude + offset matching the GNSS height over the "
+                             "first 10 s of fixes")
+    return None
