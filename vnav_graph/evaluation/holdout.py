@@ -1,0 +1,296 @@
+"""GNSS-outage holdout: a ground-truth-free accuracy measure for real logs.
+
+GNSS is withheld inside outage windows; every estimator runs on the drive without those
+fixes, and its altitude (and horizontal position, when it provides ``pos_h``) is scored
+against the withheld fixes. This is the usual way to evaluate an aided INS without a
+reference system (e.g. Groves, *Principles of GNSS, Inertial and Multisensor Integrated
+Navigation*, 2nd ed., §14.4 on outage bridging; seed 004 reports outage altitude errors).
+
+Scoring (stated in ``holdout.json["scoring"]``)
+----------------------------------------------
+For each estimator, with ĥ(t) its height interpolated to the GNSS fix times:
+
+- datum offset ``c = median(h_gnss − ĥ)`` over the fixes the estimator *was given* (outside
+  the windows). GNSS height and barometric height have different datums (MSL vs ellipsoid,
+  weather), and a baro-only estimator can sit a constant away from the GNSS; that constant is
+  not an outage error. ``c`` is reported per estimator (``alt_offset_m``).
+- altitude error at each withheld fix: ``e = ĥ + c − h_gnss`` [m];
+  ``alt_rmse_m = sqrt(mean e²)``, ``alt_max_abs_m = max |e|``.
+- horizontal error (``pos_h`` estimators only): tangent-plane north/east difference to the
+  withheld fix, no offset removed; ``horiz_rmse_m`` = RMS of its norm, else null.
+- The withheld fixes are noisy themselves: the median reported vertical GNSS sigma inside the
+  windows is given as ``gnss_sd_v_median_m``; an RMSE near it means "as good as GNSS".
+
+Windows: length ``outage_s`` (default 60 s). The first starts after a lead-in of
+``max(0.15·span, min(60 s, 0.25·span))`` of GNSS (estimators must initialise), the last ends
+at least 5 s before the last fix. Default spacing (start to start) is
+``max(2·outage, (span − lead − outage − 5 s)/4)``: up to five windows with at least one
+outage length of GNSS between them.
+
+``cli_holdout(args)`` is the ``vnav-graph holdout`` entry point; it writes ``holdout.json``,
+``holdout.md`` (also printed) and ``holdout.png`` (matplotlib, Agg backend, imported only
+there).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+import traceback
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..types import Drive, Estimate, FloatArray
+
+HOLDOUT_SCHEMA = "vnav_graph.holdout/1"
+TAIL_S = 5.0
+MAX_WINDOWS = 5
+
+
+@dataclass(frozen=True)
+class Scored:
+    """One estimator's holdout result (JSON block plus error series for the plot)."""
+
+    block: dict[str, Any]
+    t: FloatArray | None = None  # GNSS fix times [s]
+    alt_err: FloatArray | None = None  # ĥ + c − h_gnss at every fix [m]
+
+
+@dataclass(frozen=True)
+class HoldoutResult:
+    doc: dict[str, Any]
+    windows: list[tuple[float, float]]
+    series: dict[str, Scored] = field(default_factory=dict)
+
+
+def choose_windows(t_gnss: FloatArray, outage_s: float = 60.0,
+                   spacing_s: float | None = None) -> list[tuple[float, float]]:
+    """Outage windows ``[(t0, t1), ...]`` [s] over the GNSS span (see the module docstring).
+
+    Raises ValueError when not even one window fits or the spacing is shorter than the outage.
+    """
+    if not outage_s > 0:
+        raise ValueError(f"outage must be > 0 s, got {outage_s}")
+    t_start, t_end = float(t_gnss[0]), float(t_gnss[-1])
+    span = t_end - t_start
+    lead = max(0.15 * span, min(60.0, 0.25 * span))
+    last_end = t_end - TAIL_S
+    if t_start + lead + outage_s > last_end:
+        raise ValueError(f"GNSS span {span:.0f} s is too short for a {outage_s:g} s outage "
+                         f"after a {lead:.0f} s lead-in (use a shorter --outage)")
+    if spacing_s is None:
+        spacing_s = max(2.0 * outage_s, (span - lead - outage_s - TAIL_S) / (MAX_WINDOWS - 1))
+    elif spacing_s < outage_s:
+        raise ValueError(f"spacing {spacing_s:g} s is shorter than the outage {outage_s:g} s")
+    wins = []
+    t0 = t_start + lead
+    while t0 + outage_s <= last_end + 1e-9:
+        wins.append((t0, t0 + outage_s))
+        t0 += spacing_s
+    return wins
+
+
+def in_windows(t: FloatArray, windows: Sequence[tuple[float, float]]) -> np.ndarray:
+    m = np.zeros(np.shape(t), dtype=bool)
+    for a, b in windows:
+        m |= (t >= a) & (t <= b)
+    return m
+
+
+def score(est: Estimate, drive: Drive, withheld: np.ndarray) -> Scored:
+    """Score an estimate against the GNSS fixes flagged ``withheld`` (module docstring)."""
+    g = drive.gnss
+    assert g is not None
+    tr = est.trajectory
+    inside = (g.t >= tr.t[0]) & (g.t <= tr.t[-1])
+    t = g.t[inside]
+    h_g = g.lla[inside, 2]
+    h_e = np.interp(t, tr.t, tr.alt)
+    w = withheld[inside]
+    seen = ~w
+    if not w.any():
+        raise ValueError("estimate does not cover any withheld GNSS fix")
+    c = float(np.median(h_g[seen] - h_e[seen])) if seen.any() else 0.0
+    err = h_e + c - h_g
+    e_w = err[w]
+    horiz = None
+    if "pos_h" in est.provides and np.all(np.isfinite(tr.lla[:, :2])):
+        from ..geo.frames import lla_to_ned
+
+        lla_e = np.column_stack([np.interp(t[w], tr.t, tr.lla[:, j]) for j in range(3)])
+        d = lla_to_ned(lla_e, drive.origin_lla)[:, :2] - lla_to_ned(
+            g.lla[inside][w], drive.origin_lla)[:, :2]
+        horiz = float(np.sqrt(np.mean(np.sum(d**2, axis=1))))
+    rej = est.info.get("gnss_rejected") if est.info is not None else None
+    block = {
+        "status": "ok", "error": None,
+        "alt_rmse_m": float(np.sqrt(np.mean(e_w**2))),
+        "alt_max_abs_m": float(np.max(np.abs(e_w))),
+        "horiz_rmse_m": horiz,
+        "gnss_rejected": None if rej is None else int(rej),
+        "alt_offset_m": c,
+        "n_scored": int(w.sum()),
+        "runtime_s": float(est.runtime_s),
+    }
+    return Scored(block, t, err)
+
+
+def failed(error: str, runtime_s: float) -> dict[str, Any]:
+    return {"status": "failed", "error": error, "alt_rmse_m": None, "alt_max_abs_m": None,
+            "horiz_rmse_m": None, "gnss_rejected": None, "alt_offset_m": None, "n_scored": 0,
+            "runtime_s": runtime_s}
+
+
+def _onboard_score(drive: Drive, withheld: np.ndarray) -> dict[str, Any] | None:
+    ob = drive.meta.get("onboard")
+    if not ob or drive.gnss is None:
+        return None
+    t, alt = np.asarray(ob["t"], float), np.asarray(ob["alt"], float)
+    g = drive.gnss
+    inside = (g.t >= t[0]) & (g.t <= t[-1])
+    w, seen = withheld & inside, ~withheld & inside
+    if not w.any() or not seen.any():
+        return None
+    h_e = np.interp(g.t, t, alt)
+    c = float(np.median(g.lla[seen, 2] - h_e[seen]))
+    e = h_e[w] + c - g.lla[w, 2]
+    return {"name": ob.get("name"), "saw_gnss": True,
+            "note": "the autopilot had GNSS inside the windows: not an outage result",
+            "alt_rmse_m": float(np.sqrt(np.mean(e**2))), "alt_max_abs_m": float(np.max(abs(e)))}
+
+
+def run_holdout(drive: Drive, estimators: Sequence[str] | None = None, outage_s: float = 60.0,
+                spacing_s: float | None = None, progress: bool = False) -> HoldoutResult:
+    """Withhold GNSS in windows, run the estimators, score them (module docstring).
+
+    An estimator that raises is reported ``status: failed`` with its error; the others still run.
+    """
+    from ..estimators.base import available, create
+
+    if drive.gnss is None or len(drive.gnss) < 10:
+        raise ValueError("holdout needs a drive with GNSS (fewer than 10 fixes)")
+    avail = available()
+    names = list(estimators) if estimators else avail
+    unknown = [n for n in names if n not in avail]
+    if unknown:
+        raise ValueError(f"unknown estimator(s) {', '.join(unknown)} "
+                         f"(available: {', '.join(avail) or 'none'})")
+    if not names:
+        raise ValueError("no estimators available in this build")
+    windows = choose_windows(drive.gnss.t, outage_s, spacing_s)
+    withheld = in_windows(drive.gnss.t, windows)
+    held = drive.replace(gnss=drive.gnss.select(~withheld),
+                         meta={**drive.meta, "gnss_holdout_windows": [list(w) for w in windows]})
+    results: dict[str, dict[str, Any]] = {}
+    series: dict[str, Scored] = {}
+    for name in names:
+        t0 = time.perf_counter()
+        try:
+            est = create(name).run(held)
+            if est.runtime_s <= 0:
+                est = est.replace(runtime_s=time.perf_counter() - t0)
+            s = score(est, drive, withheld)
+            results[name], series[name] = s.block, s
+        except Exception as exc:  # one estimator's failure is data, not a crash
+            if os.environ.get("VNAV_DEBUG"):
+                traceback.print_exc()
+            msg = str(exc).splitlines()[0] if str(exc) else ""
+            results[name] = failed(f"{type(exc).__name__}: {msg}", time.perf_counter() - t0)
+        if progress:
+            print(f"  {name}: {results[name]['status']}", flush=True)
+    sd_v = drive.gnss.pos_sd[withheld, 2]
+    doc = {
+        "schema": HOLDOUT_SCHEMA,
+        "drive": {"name": drive.name, "source": drive.source,
+                  "format": drive.meta.get("format"), "duration_s": drive.duration_s,
+                  "height_reference": drive.meta.get("height_reference"),
+                  "averaged_1s": drive.meta.get("averaged_1s")},
+        "outage_s": float(outage_s),
+        "spacing_s": None if len(windows) < 2 else float(windows[1][0] - windows[0][0]),
+        "windows": [{"t0": a, "t1": b, "n_withheld": int(in_windows(drive.gnss.t, [(a, b)]).sum())}
+                    for a, b in windows],
+        "gnss_withheld": int(withheld.sum()),
+        "gnss_sd_v_median_m": float(np.median(sd_v)) if sd_v.size else None,
+        "scoring": ("alt error = estimate + c - withheld GNSS height at each withheld fix, "
+                    "c = median(GNSS height - estimate) over the fixes given to the estimator "
+                    "(datum offset, reported as alt_offset_m); horiz error = NE distance to the "
+                    "withheld fix, no offset removed"),
+        "estimators": results,
+        "onboard": _onboard_score(drive, withheld),
+    }
+    return HoldoutResult(doc, windows, series)
+
+
+def format_markdown(doc: dict[str, Any]) -> str:
+    """Markdown table of a holdout document."""
+    def f(v: Any, spec: str = ".2f") -> str:
+        return "—" if v is None else format(v, spec)
+
+    d = doc["drive"]
+    lines = [
+        f"# GNSS-outage holdout: {d['name']} ({d['format']}, {d['duration_s']:.0f} s)", "",
+        f"{len(doc['windows'])} window(s) of {doc['outage_s']:g} s, "
+        f"{doc['gnss_withheld']} GNSS fixes withheld; median GNSS vertical sigma in the "
+        f"windows {f(doc['gnss_sd_v_median_m'])} m. Scoring: {doc['scoring']}.", "",
+        "| estimator | status | alt RMSE m | alt max m | horiz RMSE m | GNSS rejected "
+        "| offset m | run s |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for name, b in doc["estimators"].items():
+        status = b["status"] if b["error"] is None else f"failed: {b['error'][:60]}"
+        lines.append(f"| {name} | {status} | {f(b['alt_rmse_m'])} | {f(b['alt_max_abs_m'])} | "
+                     f"{f(b['horiz_rmse_m'])} | {f(b['gnss_rejected'], 'd')} | "
+                     f"{f(b['alt_offset_m'])} | {f(b['runtime_s'])} |")
+    ob = doc.get("onboard")
+    if ob:
+        lines.append(f"| onboard: {ob['name']} (had GNSS) | ok | {f(ob['alt_rmse_m'])} | "
+                     f"{f(ob['alt_max_abs_m'])} | — | — | — | — |")
+    return "\n".join(lines) + "\n"
+
+
+def plot_holdout(res: HoldoutResult, path: Path) -> None:
+    """Altitude error per estimator over time, outage windows shaded (PNG)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(10, 4.5))
+    for a, b in res.windows:
+        ax.axvspan(a, b, color="0.85", zorder=0)
+    for name, s in res.series.items():
+        if s.t is not None and s.alt_err is not None:
+            ax.plot(s.t, s.alt_err, lw=0.9, label=f"{name} ({s.block['alt_rmse_m']:.2f} m)")
+    ax.axhline(0.0, color="k", lw=0.5)
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("estimate + offset − GNSS height [m]")
+    ax.set_title(f"GNSS-outage holdout: {res.doc['drive']['name']} (grey: GNSS withheld)")
+    if res.series:
+        ax.legend(fontsize=8, loc="best")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def cli_holdout(args: Any) -> int:
+    """``vnav-graph holdout LOG [--outage S] [--spacing S] [--estimators a,b] --out DIR``."""
+    from ..io import load_drive
+
+    drive = load_drive(args.log)
+    res = run_holdout(drive, getattr(args, "estimators", None),
+                      float(getattr(args, "outage", 60.0) or 60.0), getattr(args, "spacing", None))
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    md = format_markdown(res.doc)
+    tmp = out / "holdout.json.tmp"
+    tmp.write_text(json.dumps(res.doc, indent=2))
+    (out / "holdout.md").write_text(md)
+    plot_holdout(res, out / "holdout.png")
+    tmp.replace(out / "holdout.json")
+    print(md, end="")
+    return 0
