@@ -108,7 +108,10 @@ def test_ex_graph_real_log():
         pytest.skip("no Sensor Logger log in tests/data, $VNAV_DATA or ../shared/data")
     res = mod.main(duration_s=60.0, log=log)
     d = res["drive"]
-    assert d.duration_s <= 60.0 and d.duration_s > 60.0 - 0.05  # cut at one 100 Hz sample
+    from vnav_graph.io import load_drive
+
+    full = load_drive(log).duration_s  # the committed fixture may be shorter than 60 s
+    assert d.duration_s == pytest.approx(min(60.0, full), abs=0.05)  # cut within 5 samples
     m = res["summary"]["estimators"]["graph-batch"]
     assert m["status"] == "ok", m["error"]
     # phone GNSS heights scatter by several metres; a working smoother stays within 3× the
