@@ -1,0 +1,461 @@
+"""Reference INS/GNSS/baro error-state EKF (``ekf``) and its RTS smoother (``ekf-rts``).
+
+The filter equations, the covariance grid, the measurement timing and the heading handling
+are documented in ``vnav_graph.estimators.ekf_model`` (the numba kernels). This module turns
+a ``Drive`` into the kernel inputs (noise from the drive's specs, alignment, event list) and
+the kernel outputs into an ``Estimate``.
+
+Outputs
+-------
+- trajectory: at every ``D``-th IMU epoch (``D = round(imu_rate / traj_rate_hz)``, 50 Hz by
+  default) plus every covariance-grid epoch and the last epoch; the value at a grid epoch is
+  the state after that epoch's measurement update.
+- covariance: the 18-state ``ERROR_STATE`` block at ``cov_output_hz`` (5 Hz by default) —
+  a subset of the ``cov_rate_hz`` (10 Hz) propagation grid. Rows of the baro states are NaN
+  when the drive has no barometer.
+- ``baro``: scale and latency are random constants: the final filtered (``ekf``) / smoothed
+  (``ekf-rts``) value with its one-sigma. ``bias_m`` is the time average of b(t) over the
+  output epochs; its ``sd`` is the time average of σ_b(t), an upper bound of the σ of the
+  average (σ(mean e) ≤ mean σ(e) for any correlation between epochs).
+- innovations: normalised (z − h(x̃))/√S_ii of every accepted measurement component:
+  ``gnss_pos`` (N, 3), ``gnss_vel`` (N, 3), ``baro`` (N,).
+- info: ``gnss_rejected`` (position fixes refused by the χ² gate), ``gnss_vel_rejected``,
+  ``baro_rejected``, ``heading_time_s`` (time the heading became known), rates used.
+
+Noise
+-----
+From ``drive.imu.spec`` / ``drive.baro.spec`` / ``drive.gnss.spec`` when present, else the
+documented defaults of ``EkfConfig`` (real logs carry no spec): IMU ``consumer`` preset, GNSS
+per-fix sigmas of the stream, baro ``BaroSpec`` defaults with a 10 m bias sigma and the bias
+prior mean taken from the first baro sample minus the initial GNSS height (a relative baro
+altitude would otherwise be hundreds of metres off). Discrete variances come from
+``vnav_graph.sensors.noise`` only. Small floors keep P positive definite with ideal sensors.
+
+References: Groves, *Principles of GNSS, Inertial and Multisensor Integrated Navigation
+Systems*, 2nd ed., ch. 14; seed 004 (17/19-state INS/GNSS EKF, in-flight alignment §5.4);
+seed 001 (baro error model); Rauch, Tung & Striebel, AIAA J. 3(8), 1965.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+from scipy.stats import chi2
+
+from ..config import DEG, IMU_PRESETS, BaroSpec, ImuSpec
+from ..geo.earth import OMEGA_IE, gravity, radii
+from ..geo.frames import quat_to_mat, rph_to_quat
+from ..sensors.noise import gm_process_var, white_sd
+from ..types import (
+    ERROR_STATE_DIM,
+    BaroEstimate,
+    Drive,
+    Estimate,
+    FloatArray,
+    ParamEstimate,
+    Trajectory,
+)
+from . import ekf_model as km
+from .alignment import coarse_level, level_tilt_bias_jacobian, static_window_end, track_heading
+
+NDArrayInt = Any
+PROVIDES = frozenset({"alt", "vel_d", "pos_h", "vel_h", "att", "baro", "cov"})
+
+
+@dataclass(frozen=True)
+class EkfConfig:
+    """Settings of ``ekf`` / ``ekf-rts`` (SI units).
+
+    cov_rate_hz: covariance propagation grid; cov_output_hz: rate of ``Estimate.cov``;
+    traj_rate_hz: output trajectory rate (None = every IMU epoch); gate_prob: χ² gate
+    probability for GNSS position, GNSS velocity and baro innovations; max_consecutive_rejects:
+    after this many consecutive rejections of one sensor the next measurement is accepted
+    (recovers from a diverged filter instead of refusing GNSS forever); align_max_s: maximum
+    static levelling window; initial_heading / initial_heading_sd: given heading [rad] (None =
+    from the GNSS track once moving faster than heading_speed_min [m/s], σ from the velocity
+    noise and sideslip_sd); accel_scale: estimate accelerometer scale factors (None = when the
+    IMU spec has accel_scale_sd > 0 or there is no spec).
+    """
+
+    cov_rate_hz: float = 10.0
+    cov_output_hz: float = 5.0
+    traj_rate_hz: float | None = 50.0
+    gate_prob: float = 0.9995
+    max_consecutive_rejects: int = 50
+    align_max_s: float = 20.0
+    initial_heading: float | None = None
+    initial_heading_sd: float = 2.0 * DEG
+    heading_speed_min: float = 2.0
+    sideslip_sd: float = 2.0 * DEG
+    accel_scale: bool | None = None
+    default_imu: ImuSpec = field(default_factory=lambda: IMU_PRESETS["consumer"])
+    default_baro: BaroSpec = field(default_factory=lambda: BaroSpec(bias_sd=10.0,
+                                                                    noise_sd=0.5))
+    default_latency_sd: float = 0.1
+    min_latency_sd: float = 0.01
+    min_scale_sd: float = 1e-4
+    min_baro_noise_sd: float = 0.05
+    min_gyro_noise_density: float = 1e-5  # rad/s/√Hz
+    min_accel_noise_density: float = 1e-4  # m/s²/√Hz
+    min_gyro_bias_sd: float = 1e-5  # rad/s
+    min_accel_bias_sd: float = 1e-4  # m/s²
+    min_tilt_sd: float = 1e-4  # rad, levelling residual besides the accel-bias term
+
+    def __post_init__(self) -> None:
+        if not (self.cov_rate_hz > 0 and self.cov_output_hz > 0):
+            raise ValueError("EkfConfig.cov_rate_hz / cov_output_hz: must be > 0")
+        if not 0.5 < self.gate_prob < 1.0:
+            raise ValueError("EkfConfig.gate_prob: must be in (0.5, 1)")
+
+
+@dataclass(frozen=True)
+class _Run:
+    """Everything one forward pass produces (internal)."""
+
+    t_out: FloatArray
+    lla: FloatArray
+    vel: FloatArray
+    q: FloatArray
+    par: FloatArray
+    t_grid: FloatArray
+    grid_idx: NDArrayInt
+    out_idx: NDArrayInt
+    cov_grid: NDArrayInt  # grid numbers of the covariance-output epochs
+    cov_packed: FloatArray
+    rts: tuple[Any, ...] | None
+    innovations: dict[str, FloatArray]
+    info: dict[str, Any]
+    prior_sd: dict[str, float]
+    tau: tuple[float, float, float]
+    has_baro: bool
+
+
+def _white_var(density: float, dt: FloatArray) -> FloatArray:
+    """Variance density²·Δt of integrated white noise over Δt, via ``noise.white_sd``."""
+    out = np.zeros_like(dt)
+    for d in np.unique(dt):
+        if d > 0:
+            out[dt == d] = (white_sd(density, float(d)) * d) ** 2
+    return out
+
+
+def _baro_priors(spec: BaroSpec, cfg: EkfConfig) -> tuple[float, float, float, float]:
+    """(scale sd, latency mean, latency sd, noise sd) from a baro spec."""
+    s_sd = max(spec.scale_sd, abs(spec.scale or 0.0), cfg.min_scale_sd)
+    if spec.latency_range_s is not None:
+        lo, hi = spec.latency_range_s
+        tau_m, tau_sd = 0.5 * (lo + hi), (hi - lo) / np.sqrt(12.0)
+    else:
+        tau_m, tau_sd = spec.latency_s, cfg.min_latency_sd
+    return s_sd, tau_m, max(tau_sd, cfg.min_latency_sd), max(spec.noise_sd, cfg.min_baro_noise_sd)
+
+
+def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
+    """One forward EKF pass over ``drive`` (see module docstring)."""
+    imu = drive.imu
+    t = imu.t
+    n = t.size
+    if n < 3:
+        raise ValueError("ekf: the IMU stream needs at least 3 samples")
+    rate = imu.rate_hz
+    ispec: ImuSpec = imu.spec if isinstance(imu.spec, ImuSpec) else cfg.default_imu
+    est_scale = cfg.accel_scale if cfg.accel_scale is not None else (
+        not isinstance(imu.spec, ImuSpec) or ispec.accel_scale_sd > 0)
+    gnss, baro = drive.gnss, drive.baro
+    bspec_given = baro is not None and isinstance(baro.spec, BaroSpec)
+    bspec: BaroSpec = baro.spec if bspec_given else cfg.default_baro  # type: ignore[union-attr]
+    h0 = float(drive.origin_lla[2])
+
+    # --- grids -------------------------------------------------------------------------
+    m_grid = max(1, round(rate / cfg.cov_rate_hz))
+    grid_idx = np.arange(0, n, m_grid)
+    if grid_idx[-1] != n - 1:
+        grid_idx = np.append(grid_idx, n - 1)
+    kk = grid_idx.size
+    grid_of = np.full(n, -1, dtype=np.int64)
+    grid_of[grid_idx] = np.arange(kk)
+    e_cov = max(1, round(cfg.cov_rate_hz / cfg.cov_output_hz))
+    cov_grid = np.arange(0, kk, e_cov)
+    if cov_grid[-1] != kk - 1:
+        cov_grid = np.append(cov_grid, kk - 1)
+    cov_out_of = np.full(kk, -1, dtype=np.int64)
+    cov_out_of[cov_grid] = np.arange(cov_grid.size)
+    d_out = 1 if cfg.traj_rate_hz is None else max(1, round(rate / cfg.traj_rate_hz))
+    out_idx = np.union1d(np.union1d(np.arange(0, n, d_out), grid_idx), [n - 1])
+    out_of = np.full(n, -1, dtype=np.int64)
+    out_of[out_idx] = np.arange(out_idx.size)
+
+    # --- discrete process noise per grid interval (noise.py) ---------------------------
+    dtg = np.r_[0.0, np.diff(t[grid_idx])]
+    qd = np.zeros((kk, km.NX))
+    g_nd = max(ispec.gyro_noise_density, cfg.min_gyro_noise_density)
+    a_nd = max(ispec.accel_noise_density, cfg.min_accel_noise_density)
+    g_bsd = max(ispec.gyro_bias_sd, cfg.min_gyro_bias_sd)
+    a_bsd = max(ispec.accel_bias_sd, cfg.min_accel_bias_sd)
+    qd[:, km.IVEL:km.IVEL + 3] = _white_var(a_nd, dtg)[:, None]
+    qd[:, km.IATT:km.IATT + 3] = _white_var(g_nd, dtg)[:, None]
+    qd[:, km.IBG:km.IBG + 3] = (gm_process_var(dtg, ispec.gyro_bias_tau, g_bsd)
+                                + _white_var(ispec.gyro_bias_rw, dtg))[:, None]
+    qd[:, km.IBA:km.IBA + 3] = (gm_process_var(dtg, ispec.accel_bias_tau, a_bsd)
+                                + _white_var(ispec.accel_bias_rw, dtg))[:, None]
+    qd[:, km.IBB] = gm_process_var(dtg, bspec.bias_tau, bspec.bias_sd)
+
+    # --- alignment -----------------------------------------------------------------------
+    i_static = static_window_end(imu, cfg.align_max_s)
+    f_mean = imu.accel_b[:i_static].mean(axis=0)
+    roll, pitch = coarse_level(f_mean)
+    heading_known = cfg.initial_heading is not None
+    yaw0 = float(cfg.initial_heading) if heading_known else 0.0
+    q0 = rph_to_quat([roll, pitch, yaw0])[0]
+    c0 = quat_to_mat(q0)
+    lever = np.zeros(3) if gnss is None else np.asarray(gnss.lever_arm_b, dtype=float)
+    p0 = np.zeros((km.NX, km.NX))
+    v0 = np.zeros(3)
+    g_latency = 0.0
+    if gnss is not None and gnss.spec is not None:
+        g_latency = float(getattr(gnss.spec, "latency_s", 0.0))
+    if gnss is not None:
+        tg = gnss.t - g_latency
+        j0 = int(min(np.searchsorted(tg, t[0]), tg.size - 1))
+        lla0 = gnss.lla[j0].copy()
+        d_n = c0 @ lever
+        lla0[2] += d_n[2]  # antenna → IMU, vertical part (heading may be unknown)
+        pos_var = gnss.pos_sd[j0] ** 2 + (0.0 if heading_known else lever @ lever)
+        if gnss.vel_n is not None and gnss.vel_sd is not None:
+            v0 = gnss.vel_n[j0].copy()
+            vel_var = gnss.vel_sd[j0] ** 2
+        else:
+            vel_var = np.full(3, 1.0)
+        # motion between t0 and the first fix
+        pos_var = pos_var + (np.linalg.norm(v0) * abs(tg[j0] - t[0])) ** 2
+    else:
+        lla0 = drive.origin_lla.copy()
+        pos_var = np.array([100.0**2, 100.0**2, bspec.bias_sd**2])
+        vel_var = np.full(3, 1.0)
+    p0[0:3, 0:3] = np.diag(pos_var)
+    p0[3:6, 3:6] = np.diag(vel_var)
+    p_ba = a_bsd**2 * np.eye(3)
+    m_tilt = level_tilt_bias_jacobian(c0, float(gravity(lla0[0], lla0[2])))
+    p0[6:9, 6:9] = m_tilt @ p_ba @ m_tilt.T + cfg.min_tilt_sd**2 * np.diag([1.0, 1.0, 0.0])
+    yaw_unknown_var = np.pi**2 / 3.0
+    p0[8, 8] = cfg.initial_heading_sd**2 if heading_known else yaw_unknown_var
+    p0[6:9, 12:15] = m_tilt @ p_ba
+    p0[12:15, 6:9] = (m_tilt @ p_ba).T
+    p0[9:12, 9:12] = g_bsd**2 * np.eye(3)
+    p0[12:15, 12:15] = p_ba
+    ka_sd = max(ispec.accel_scale_sd, 1e-3 if not isinstance(imu.spec, ImuSpec) else 0.0)
+    p0[18:21, 18:21] = (ka_sd if est_scale else 1e-7) ** 2 * np.eye(3)
+    s_sd, tau_m, tau_sd, b_noise = _baro_priors(bspec, cfg)
+    par0 = np.zeros(12)
+    par0[km.PTD] = tau_m
+    if baro is not None and not bspec_given:
+        # real log: baro bias prior centred on the first sample (relative altimeters)
+        jb = int(np.searchsorted(baro.t, t[0]))
+        jb = min(jb, baro.t.size - 1)
+        par0[km.PBB] = float(baro.altitude[jb]) - lla0[2]
+    p0[15, 15] = s_sd**2
+    p0[16, 16] = tau_sd**2
+    p0[17, 17] = bspec.bias_sd**2
+
+    # --- measurement events ------------------------------------------------------------
+    ev_t_l, ev_type_l, ev_idx_l = [], [], []
+    if gnss is not None:
+        ev_t_l.append(gnss.t - g_latency)
+        ev_type_l.append(np.zeros(gnss.t.size, dtype=np.int64))
+        ev_idx_l.append(np.arange(gnss.t.size))
+        tr = track_heading(gnss, cfg.sideslip_sd)
+        g_lla, g_psd = gnss.lla, gnss.pos_sd
+        has_vel = gnss.vel_n is not None
+        g_vel = gnss.vel_n if has_vel else np.zeros((gnss.t.size, 3))
+        g_vsd = gnss.vel_sd if has_vel else np.ones((gnss.t.size, 3))
+        tr_yaw, tr_speed, tr_sd = tr.yaw, tr.speed, tr.yaw_sd
+    else:
+        g_lla = g_psd = g_vel = g_vsd = np.zeros((0, 3))
+        has_vel = False
+        tr_yaw = tr_speed = tr_sd = np.zeros(0)
+    if baro is not None:
+        ev_t_l.append(baro.t)
+        ev_type_l.append(np.ones(baro.t.size, dtype=np.int64))
+        ev_idx_l.append(np.arange(baro.t.size))
+        b_alt = np.asarray(baro.altitude, dtype=float)
+    else:
+        b_alt = np.zeros(0)
+    if ev_t_l:
+        ev_t = np.concatenate(ev_t_l)
+        order = np.argsort(ev_t, kind="stable")
+        ev_t = ev_t[order]
+        ev_type = np.concatenate(ev_type_l)[order]
+        ev_idx = np.concatenate(ev_idx_l)[order]
+    else:
+        ev_t, ev_type, ev_idx = np.zeros(0), np.zeros(0, np.int64), np.zeros(0, np.int64)
+    counts = np.diff(np.searchsorted(ev_t, t[grid_idx], side="right"))
+    max_pending = int(counts.max()) + 1 if counts.size else 1
+
+    gate = float(chi2.ppf(cfg.gate_prob, 3))
+    gate1 = float(chi2.ppf(cfg.gate_prob, 1))
+    tilt_rate_sd = np.sqrt(2.0) * OMEGA_IE * np.cos(lla0[0])
+    tau = (ispec.gyro_bias_tau, ispec.accel_bias_tau, bspec.bias_tau)
+
+    res = km.run_filter(
+        t, imu.gyro_b, imu.accel_b, grid_of, out_of, kk, out_idx.size, cov_out_of,
+        cov_grid.size, lla0, v0, q0, par0, p0, qd, *tau,
+        ev_t, ev_type, ev_idx, np.ascontiguousarray(g_lla), np.ascontiguousarray(g_psd),
+        np.ascontiguousarray(g_vel), np.ascontiguousarray(g_vsd), has_vel, lever,
+        tr_yaw, tr_speed, tr_sd, b_alt, b_noise, h0, gate, gate, gate1,
+        cfg.max_consecutive_rejects, heading_known, cfg.heading_speed_min, yaw_unknown_var,
+        tilt_rate_sd, max_pending, store_rts,
+    )
+    (o_lla, o_v, o_q, o_par, cov_p, rts_p, rts_ing, rts_q, corr, reset_at,
+     inn_pos, inn_vel, inn_baro, rej_pos, rej_vel, rej_baro, t_heading) = res
+    innov: dict[str, FloatArray] = {}
+    if gnss is not None:
+        innov["gnss_pos"] = inn_pos[np.isfinite(inn_pos[:, 0]) & ~rej_pos]
+        if has_vel:
+            innov["gnss_vel"] = inn_vel[np.isfinite(inn_vel[:, 0]) & ~rej_vel]
+    if baro is not None:
+        innov["baro"] = inn_baro[np.isfinite(inn_baro) & ~rej_baro]
+    info = {
+        "gnss_rejected": int(rej_pos.sum()),
+        "gnss_rejected_t": (gnss.t[rej_pos] if gnss is not None else np.zeros(0)),
+        "gnss_vel_rejected": int(rej_vel.sum()),
+        "baro_rejected": int(rej_baro.sum()),
+        "heading_time_s": None if np.isnan(t_heading) else float(t_heading),
+        "cov_rate_hz": float(rate / m_grid),
+        "cov_output_every": int(e_cov),
+        "traj_decimation": int(d_out),
+        "accel_scale_estimated": bool(est_scale),
+        "accel_scale": o_par[-1, km.PKA:km.PKA + 3].copy(),
+        "static_align_s": float(t[i_static - 1] - t[0]),
+    }
+    prior = {"scale": s_sd, "latency": tau_sd, "bias": bspec.bias_sd}
+    rts = (rts_p, rts_ing, rts_q, corr, reset_at) if store_rts else None
+    return _Run(t[out_idx], o_lla, o_v, o_q, o_par, t[grid_idx], grid_idx, out_idx, cov_grid,
+                cov_p, rts, innov, info, prior, tau, baro is not None)
+
+
+def _unpack_cov(packed: FloatArray, has_baro: bool) -> FloatArray:
+    """Packed (M, 231) 21-state covariances → (M, 18, 18) in the ERROR_STATE layout."""
+    iu, ju = np.triu_indices(km.NX)
+    full = np.empty((packed.shape[0], km.NX, km.NX))
+    full[:, iu, ju] = packed
+    full[:, ju, iu] = packed
+    cov = full[:, :ERROR_STATE_DIM, :ERROR_STATE_DIM].copy()
+    if not has_baro:
+        cov[:, 15:18, :] = np.nan
+        cov[:, :, 15:18] = np.nan
+    return cov
+
+
+def _estimate(name: str, run: _Run, traj: Trajectory, par: FloatArray, cov: FloatArray,
+              t0: float, online: Trajectory | None, cfg: EkfConfig) -> Estimate:
+    baro = None
+    if run.has_baro:
+        last = cov[-1]
+        sd_b = np.sqrt(np.clip(cov[:, 17, 17], 0, None))
+        baro = BaroEstimate(
+            scale=ParamEstimate(float(par[-1, km.PSC]), float(np.sqrt(last[15, 15])),
+                                run.prior_sd["scale"]),
+            latency_s=ParamEstimate(float(par[-1, km.PTD]), float(np.sqrt(last[16, 16])),
+                                    run.prior_sd["latency"]),
+            bias_m=ParamEstimate(float(np.mean(par[:, km.PBB])), float(np.mean(sd_b)),
+                                 run.prior_sd["bias"]),
+        )
+    return Estimate(
+        estimator=name, trajectory=traj, provides=PROVIDES, cov=cov,
+        t_cov=run.t_grid[run.cov_grid], baro=baro, runtime_s=time.perf_counter() - t0,
+        online=online, innovations=run.innovations, info=run.info, config=cfg,
+    )
+
+
+def _trajectory(run: _Run, lla: FloatArray, vel: FloatArray, q: FloatArray,
+                par: FloatArray) -> Trajectory:
+    q = np.where(q[:, :1] < 0, -q, q)
+    return Trajectory(run.t_out, lla, vel, q, par[:, km.PBG:km.PBG + 3].copy(),
+                      par[:, km.PBA:km.PBA + 3].copy(), par[:, km.PBB].copy())
+
+
+class EKF:
+    """Full INS/GNSS/baro error-state EKF (forward filter). ``run(drive) -> Estimate``."""
+
+    name = "ekf"
+
+    def __init__(self, config: EkfConfig | None = None) -> None:
+        self.config = config or EkfConfig()
+
+    def run(self, drive: Drive) -> Estimate:
+        t0 = time.perf_counter()
+        run = run_forward(drive, self.config, store_rts=False)
+        traj = _trajectory(run, run.lla, run.vel, run.q, run.par)
+        cov = _unpack_cov(run.cov_packed, run.has_baro)
+        return _estimate(self.name, run, traj, run.par, cov, t0, None, self.config)
+
+
+def smooth_corrections(run: _Run, es: FloatArray) -> FloatArray:
+    """Smoothed error estimate at every output epoch (N_out, 21), estimated minus true.
+
+    At a grid epoch it is ê^s_k; inside (t_k, t_{k+1}) it is interpolated linearly between
+    ê^s_k (after the update at t_k) and ê^s_{k+1} + c_{k+1} (the same error relative to the
+    un-updated nominal state that runs up to t_{k+1}); across a heading reset it is held.
+    """
+    assert run.rts is not None
+    corr, reset_at = run.rts[3], run.rts[4]
+    grid_t = run.t_grid
+    k = np.searchsorted(grid_t, run.t_out, side="right") - 1
+    k = np.clip(k, 0, grid_t.size - 1)
+    at_grid = np.isclose(run.t_out, grid_t[k], rtol=0, atol=1e-12)
+    kn = np.minimum(k + 1, grid_t.size - 1)
+    span = np.where(kn > k, grid_t[kn] - grid_t[k], 1.0)
+    al = np.where(at_grid, 0.0, (run.t_out - grid_t[k]) / span)[:, None]
+    right = es[kn] + corr[kn]
+    right = np.where(np.isnan(reset_at[kn])[:, None], right, es[k])
+    return (1.0 - al) * es[k] + al * right
+
+
+def apply_error(lla: FloatArray, vel: FloatArray, q: FloatArray, par: FloatArray,
+                e: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Remove estimated errors e (N, 21) (estimated minus true) from nominal states."""
+    rn, re = radii(lla[:, 0])
+    lla2 = lla.copy()
+    lla2[:, 0] -= e[:, 0] / (rn + lla[:, 2])
+    lla2[:, 1] -= e[:, 1] / ((re + lla[:, 2]) * np.cos(lla[:, 0]))
+    lla2[:, 2] += e[:, 2]
+    vel2 = vel - e[:, 3:6]
+    rot = Rotation.from_rotvec(-e[:, 6:9]) * Rotation.from_quat(q, scalar_first=True)
+    q2 = rot.as_quat(scalar_first=True)
+    par2 = par.copy()
+    par2[:, km.PBG:km.PBG + 3] -= e[:, km.IBG:km.IBG + 3]
+    par2[:, km.PBA:km.PBA + 3] -= e[:, km.IBA:km.IBA + 3]
+    par2[:, km.PKA:km.PKA + 3] -= e[:, km.IKA:km.IKA + 3]
+    par2[:, km.PSC] -= e[:, km.ISC]
+    par2[:, km.PTD] -= e[:, km.ITD]
+    par2[:, km.PBB] -= e[:, km.IBB]
+    return lla2, vel2, q2, par2
+
+
+class EKFRTS:
+    """``ekf`` followed by a Rauch-Tung-Striebel smoother on the covariance grid."""
+
+    name = "ekf-rts"
+
+    def __init__(self, config: EkfConfig | None = None) -> None:
+        self.config = config or EkfConfig()
+
+    def run(self, drive: Drive) -> Estimate:
+        t0 = time.perf_counter()
+        run = run_forward(drive, self.config, store_rts=True)
+        assert run.rts is not None
+        rts_p, rts_ing, rts_q, corr, reset_at = run.rts
+        cov_out_of = np.full(run.t_grid.size, -1, dtype=np.int64)
+        cov_out_of[run.cov_grid] = np.arange(run.cov_grid.size)
+        es, cov_s = km.rts_smooth(rts_p, rts_ing, rts_q, corr, reset_at, *run.tau,
+                                  cov_out_of, run.cov_grid.size)
+        e_out = smooth_corrections(run, es)
+        lla, vel, q, par = apply_error(run.lla, run.vel, run.q, run.par, e_out)
+        online = _trajectory(run, run.lla, run.vel, run.q, run.par)
+        traj = _trajectory(run, lla, vel, q, par)
+        cov = _unpack_cov(cov_s, run.has_baro)
+        return _estimate(self.name, run, traj, par, cov, t0, online, self.config)
