@@ -134,11 +134,35 @@ def _null_metrics(error: str, runtime_s: float) -> dict[str, Any]:
     return failed_block(error, runtime_s)
 
 
+# Estimators already run once in this process (see ``_warm_up``).
+_WARMED: set[str] = set()
+WARMUP_DURATION_S = 20.0
+
+
+def _warm_up(task: BenchTask) -> None:
+    """Run the estimator once, untimed, on a short drive of the same scenario the first time
+    this process meets it, so that ``runtime_s`` measures the estimator and not numba's JIT
+    compilation or first imports (which otherwise land on whichever seed comes first).
+    Errors are ignored here: the timed run reports them."""
+    if task.estimator in _WARMED:
+        return
+    _WARMED.add(task.estimator)
+    from ..estimators.base import create
+    from ..simulation import simulate
+
+    try:
+        create(task.estimator).run(simulate(shorten_scenario(task.scenario, WARMUP_DURATION_S),
+                                            task.seed))
+    except Exception:
+        pass
+
+
 def run_task(task: BenchTask) -> dict[str, Any]:
     """Simulate, estimate and evaluate one task (runs inside a worker; never raises).
 
     Returns the run row of ``bench.json``: task identity, then the metric fields of
-    ``summary.json`` (``evaluate``), ``status`` and ``error``.
+    ``summary.json`` (``evaluate``), ``status`` and ``error``. ``runtime_s`` excludes the
+    one-time warm-up of the estimator in this process (``_warm_up``).
     """
     from ..estimators.base import create, register
     from ..simulation import simulate
@@ -155,6 +179,7 @@ def run_task(task: BenchTask) -> dict[str, Any]:
         stage = "estimate"
         if task.factory is not None:
             register(task.estimator, task.factory)
+        _warm_up(task)
         t1 = time.perf_counter()
         est = create(task.estimator).run(drive)
         if est.runtime_s <= 0:

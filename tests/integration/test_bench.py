@@ -1,0 +1,119 @@
+"""``vnav-graph bench``: files and schema, bench rows == ``vnav-graph run`` metrics, exit codes.
+
+The full ``bench --quick`` (every estimator) runs in ``.ci/run``; here the CLI is driven on a
+single short scenario so the test stays within seconds.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from vnav_graph.cli import main
+from vnav_graph.estimators import base
+from vnav_graph.evaluation.montecarlo import BenchTask, run_task, shorten_scenario
+from vnav_graph.pipeline import run_estimators, summarize
+from vnav_graph.simulation import simulate
+from vnav_graph.types import Estimate, Trajectory
+
+FAST = ("vkf4", "vekf7", "loop3", "observer1d", "ekf")
+
+
+class TruthPlusOne:
+    """Truth raised by 1 m: altitude RMSE exactly 1 m."""
+
+    name = "truth-plus-one"
+
+    def run(self, drive):
+        tr = drive.truth
+        lla = tr.lla.copy()
+        lla[:, 2] += 1.0
+        return Estimate(self.name, Trajectory(tr.t, lla, tr.vel_n), frozenset({"alt", "vel_d"}),
+                        runtime_s=1e-3)
+
+
+class Broken:
+    name = "broken"
+
+    def run(self, drive):
+        raise ValueError("broken on purpose")
+
+
+@pytest.fixture
+def fake(monkeypatch):
+    monkeypatch.setitem(base._REGISTRY, "truth-plus-one", TruthPlusOne)
+    monkeypatch.setitem(base._REGISTRY, "broken", Broken)
+
+
+def test_bench_cli_writes_schema(tmp_path, fake, capsys):
+    out = tmp_path / "b"
+    rc = main(["bench", "--quick", "--scenarios", "hill-drive,sortie", "--seeds", "2",
+               "--estimators", "truth-plus-one", "--workers", "2", "--out", str(out)])
+    assert rc == 0
+    doc = json.loads((out / "bench.json").read_text())
+    assert doc["schema"] == "vnav_graph.bench/1" and set(doc) >= {"runs", "aggregate"}
+    assert len(doc["runs"]) == 4
+    for r in doc["runs"]:
+        assert set(r) >= {"scenario", "seed", "estimator", "status", "error", "alt_rmse_m",
+                          "alt_max_abs_m", "vel_down_rmse_mps", "nees_mean", "runtime_s",
+                          "realtime_factor", "baro"}
+        assert r["duration_s"] == pytest.approx(150.0)  # --quick drive length
+        assert r["alt_rmse_m"] == pytest.approx(1.0, abs=1e-9)  # +1 m offset, float round-off
+    for sc in ("hill-drive", "sortie"):
+        cell = doc["aggregate"][sc]["truth-plus-one"]
+        assert cell["alt_rmse_m"]["mean"] == pytest.approx(1.0, abs=1e-9)
+        lo, hi = cell["alt_rmse_m"]["ci95"]
+        assert hi - lo < 1e-8  # identical values over seeds: a zero-width interval
+        assert set(cell) >= {"alt_rmse_m", "nees_mean", "runtime_s", "vel_down_rmse_mps"}
+    md = (out / "bench.md").read_text()
+    assert "## hill-drive" in md and "## sortie" in md and "| truth-plus-one | 2/2 |" in md
+
+
+def test_bench_failed_run_exit_1_after_writing(tmp_path, fake, capsys):
+    out = tmp_path / "b"
+    rc = main(["bench", "--quick", "--scenarios", "hill-drive", "--seeds", "1",
+               "--estimators", "truth-plus-one,broken", "--workers", "1", "--out", str(out)])
+    assert rc == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "1 of 2 runs failed (broken)" in err[0]
+    doc = json.loads((out / "bench.json").read_text())
+    bad = [r for r in doc["runs"] if r["estimator"] == "broken"]
+    assert bad[0]["status"] == "failed" and "broken on purpose" in bad[0]["error"]
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["--seeds", "0"], "--seeds must be >= 1"),
+    (["--scenarios", "nope"], "unknown scenario"),
+    (["--estimators", "nope"], "unknown estimator"),
+    (["--workers", "0"], "--workers must be >= 1"),
+])
+def test_bench_bad_input_exit_2(tmp_path, argv, needle):
+    r = subprocess.run([sys.executable, "-m", "vnav_graph", "bench", *argv, "--out",
+                        str(tmp_path / "o")], capture_output=True, text=True)
+    assert r.returncode == 2 and needle in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "o").exists()  # nothing written
+
+
+def test_bench_row_equals_run_summary():
+    """A bench row holds exactly the metrics ``vnav-graph run`` reports for that drive."""
+    name = next((n for n in FAST if n in base.available()), None)
+    if name is None:
+        pytest.skip(f"none of {FAST} in this build yet")
+    row = run_task(BenchTask("sortie", 4, name, 60.0))
+    drive = simulate(shorten_scenario("sortie", 60.0), 4)
+    ref = summarize(drive, run_estimators(drive, [name], progress=False))["estimators"][name]
+    assert row["status"] == ref["status"] == "ok"
+    for k, v in ref.items():
+        if k in ("runtime_s", "realtime_factor"):
+            continue
+        if isinstance(v, float):
+            # deterministic estimator, same drive: identical up to summation order (none)
+            assert row[k] == pytest.approx(v, rel=1e-12, abs=0), k
+        else:
+            assert row[k] == v, k
+    assert np.isfinite(row["runtime_s"])
