@@ -1,0 +1,246 @@
+"""Classical baro-inertial damping loops of the INS vertical channel (``loop2``, ``loop3``).
+
+Seed 001 figs. 2-3; Widnall & Sinha (1980), "Optimizing the gains of the baro-inertial
+vertical channel", AIAA J. Guidance & Control 3(2). Up form: h altitude [m], v vertical speed
+[m/s, +up], c acceleration-error estimate [m/s²]; e = h − h_baro is the loop error.
+
+    3rd order:  ḣ = v − k1·e,   v̇ = a_up + ω_s²·(h − h0) − k2·e − c,   ċ = k3·e
+    2nd order:  the same without c,
+
+with a_up = −(f_D + g(lat, h0) + cor_D) from ``vertical_input.vertical_inputs`` and
+ω_s² = 2g/R the gravity-gradient positive feedback of the free-inertial channel (g decreases
+with height, so a height error feeds a growing acceleration error; time constant
+1/ω_s ≈ 570 s).
+
+Error dynamics (δh = h − h_true, δv, baro error-free, constant accel bias b along up):
+δḣ = δv − k1 δh, δv̇ = b + (ω_s² − k2) δh − c, ċ = k3 δh; characteristic polynomial
+s³ + k1 s² + (k2 − ω_s²) s + k3 (3rd order), s² + k1 s + (k2 − ω_s²) (2nd order).
+
+Gains (pole placement):
+- 3rd order, triple pole at −1/τ: k1 = 3/τ, k2 = 3/τ² + ω_s², k3 = 1/τ³ (default τ = 20 s);
+- 2nd order, natural frequency ω_n and damping ζ: k1 = 2ζω_n, k2 = ω_n² + ω_s²
+  (default ω_n = 0.05 rad/s, ζ = 1/√2).
+
+Steady state under a constant accelerometer bias b (final-value theorem on the error
+transfer function b/s → δh):
+- 2nd order: δH(s) = b / (s (s² + k1 s + k2 − ω_s²)) ⇒ δh(∞) = b / (k2 − ω_s²) = b / ω_n²
+  (b/k2 if the 2g/R compensation is left out of k2 and the feedback neglected);
+  δv(∞) = k1·δh(∞).
+- 3rd order: δH(s) = b·s / (s (s³ + k1 s² + (k2 − ω_s²) s + k3)) ⇒ δh(∞) = 0, c(∞) = b.
+A baro bias β passes to the altitude in both loops (δh(∞) = β): the loops damp the INS,
+they do not calibrate the barometer.
+
+The loops are baro-inertial: they use the IMU and the baro stream (``drive.baro.altitude``)
+only. GNSS enters only through the attitude reference that stands for "the INS attitude"
+(``vertical_input``), never the vertical channel.
+
+Discrete implementation at the IMU rate (step Δt): x_{k+1} = Φ x_k + Γ a_k − Δt·g·e_k with
+Φ = exp(A Δt), Γ = ∫₀^Δt exp(A s) ds·B the zero-order hold of the free channel
+(A = [[0, 1], [ω_s², 0]] plus the c column [0, −1, 0]ᵀ for the 3rd order), g = [k1, k2, −k3],
+and the baro altitude linearly interpolated to the IMU epochs. This is exactly the
+structure of a steady-state Kalman filter's predict step (x_{k+1} = Φ x⁺_k + Γ a_k with
+x⁺ = x − K e): with Δt·g = Φ K the loop *is* that filter (``Loop2.from_kalman`` and the
+equivalence test).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from numba import njit
+from scipy.linalg import expm, solve_discrete_are
+
+from ..geo.earth import gravity, radii
+from ..types import Drive, Estimate, FloatArray, Trajectory
+from .vertical_input import AhrsConfig, vertical_inputs
+
+
+def schuler_vertical(lat: float, h: float) -> float:
+    """ω_s² = 2g/R [1/s²] at (lat, h), R the Gaussian mean radius."""
+    rn, re = radii(lat)
+    return float(2.0 * gravity(lat, h) / (np.sqrt(rn * re) + h))
+
+
+def gains3(tau: float, ws2: float) -> tuple[float, float, float]:
+    """Triple pole at −1/τ: (k1, k2, k3) = (3/τ, 3/τ² + ω_s², 1/τ³)."""
+    return 3.0 / tau, 3.0 / tau**2 + ws2, 1.0 / tau**3
+
+
+def gains2(omega_n: float, zeta: float, ws2: float) -> tuple[float, float]:
+    """(k1, k2) = (2ζω_n, ω_n² + ω_s²)."""
+    return 2.0 * zeta * omega_n, omega_n**2 + ws2
+
+
+def discrete_model(dt: float, ws2: float, order: int) -> tuple[FloatArray, FloatArray]:
+    """ZOH (Φ, Γ) of the free channel; state [h − h0, v] or [h − h0, v, c]."""
+    if order == 2:
+        a = np.array([[0.0, 1.0], [ws2, 0.0]])
+        b = np.array([0.0, 1.0])
+    else:
+        a = np.array([[0.0, 1.0, 0.0], [ws2, 0.0, -1.0], [0.0, 0.0, 0.0]])
+        b = np.array([0.0, 1.0, 0.0])
+    n = a.shape[0]
+    m = np.zeros((n + 1, n + 1))
+    m[:n, :n] = a * dt
+    m[:n, n] = b * dt
+    em = expm(m)
+    return em[:n, :n], em[:n, n]
+
+
+@njit(cache=True)
+def loop_kernel(a_up, z_baro, phi, gam, gain_dt, x0, scale):
+    """x_{k+1} = Φ x_k + Γ a_k − s_k ⊙ gain_dt · e_k, e_k = x_k[0] − z_k.
+
+    a_up (N,), z_baro (N,) baro altitude − h0 at the IMU epochs, phi (n, n), gam (n,),
+    gain_dt (n,) = Δt·[k1, k2(, −k3)], x0 (n,), scale (N, n) per-step gain multipliers
+    (all ones for the fixed-gain loops). Returns states (N, n) and the loop error (N,).
+    """
+    n_s = phi.shape[0]
+    n = a_up.size
+    x = np.empty((n, n_s))
+    err = np.empty(n)
+    x[0] = x0
+    for k in range(n):
+        e = x[k, 0] - z_baro[k]
+        err[k] = e
+        if k == n - 1:
+            break
+        for i in range(n_s):
+            acc = gam[i] * a_up[k] - scale[k, i] * gain_dt[i] * e
+            for j in range(n_s):
+                acc += phi[i, j] * x[k, j]
+            x[k + 1, i] = acc
+    return x, err
+
+
+@dataclass(frozen=True)
+class LoopInputs:
+    """What a loop consumes, at the IMU epochs: t (N,), a_up (N,) [m/s²] with gravity at h0,
+    z_baro (N,) baro altitude − h0 [m], h0 [m], ω_s² [1/s²]."""
+
+    t: FloatArray
+    a_up: FloatArray
+    z_baro: FloatArray
+    h0: float
+    ws2: float
+
+
+def loop_inputs(drive: Drive, ahrs: AhrsConfig | None = None) -> LoopInputs:
+    """Vertical acceleration from the AHRS and the baro altitude interpolated to the IMU."""
+    if drive.baro is None or len(drive.baro) == 0:
+        raise ValueError("loops: the drive has no barometer stream")
+    vi = vertical_inputs(drive, ahrs)
+    h0 = float(drive.origin_lla[2])
+    a_up = -(vi.f_down + gravity(vi.lat, h0) + vi.coriolis_down)
+    z = np.interp(vi.t, drive.baro.t, drive.baro.altitude) - h0
+    return LoopInputs(vi.t, a_up, z, h0, schuler_vertical(drive.origin_lla[0], h0))
+
+
+def _estimate(name: str, t: FloatArray, h: FloatArray, v_up: FloatArray, runtime: float,
+              config, info) -> Estimate:
+    n = t.size
+    nan = np.full(n, np.nan)
+    traj = Trajectory(t, np.column_stack([nan, nan, h]), np.column_stack([nan, nan, -v_up]))
+    return Estimate(estimator=name, trajectory=traj, provides=frozenset({"alt", "vel_d"}),
+                    runtime_s=runtime, config=config, info=info)
+
+
+@dataclass(frozen=True)
+class Loop2Config:
+    """omega_n [rad/s], zeta [-]; or explicit (k1, k2) in ``gains`` (then used as given)."""
+
+    omega_n: float = 0.05
+    zeta: float = float(1 / np.sqrt(2))
+    gains: tuple[float, float] | None = None
+    ahrs: AhrsConfig = field(default_factory=AhrsConfig)
+
+
+@dataclass(frozen=True)
+class Loop3Config:
+    """tau [s] of the triple pole; or explicit (k1, k2, k3) in ``gains``."""
+
+    tau: float = 20.0
+    gains: tuple[float, float, float] | None = None
+    ahrs: AhrsConfig = field(default_factory=AhrsConfig)
+
+
+def run_loop(inp: LoopInputs, gains: tuple[float, ...], scale: FloatArray | None = None,
+             x0: FloatArray | None = None) -> tuple[FloatArray, FloatArray]:
+    """Run a 2nd (2 gains) or 3rd (3 gains) order loop on ``inp``; returns states (N, n) with
+    x[:, 0] = h − h0, x[:, 1] = v_up (, x[:, 2] = c) and the loop error e (N,)."""
+    order = len(gains)
+    dt = float(np.median(np.diff(inp.t)))
+    if np.max(np.abs(np.diff(inp.t) - dt)) > 1e-6 * dt + 1e-9:
+        raise ValueError("loops: the IMU stream must be uniformly sampled")
+    phi, gam = discrete_model(dt, inp.ws2, order)
+    g = np.array(gains, float) * dt
+    if order == 3:
+        g[2] = -g[2]
+    if x0 is None:
+        x0 = np.zeros(order)
+        x0[0] = inp.z_baro[0]
+    if scale is None:
+        scale = np.ones((inp.t.size, order))
+    return loop_kernel(inp.a_up, inp.z_baro, phi, gam, g, np.asarray(x0, float), scale)
+
+
+class Loop2:
+    """Fixed-gain 2nd-order baro-inertial loop (``loop2``)."""
+
+    name = "loop2"
+
+    def __init__(self, config: Loop2Config | None = None) -> None:
+        self.config = config or Loop2Config()
+
+    def gains(self, ws2: float) -> tuple[float, float]:
+        c = self.config
+        return c.gains if c.gains is not None else gains2(c.omega_n, c.zeta, ws2)
+
+    @staticmethod
+    def from_kalman(q_accel: float, r_baro: float, dt: float, ws2: float) -> Loop2Config:
+        """Gains equal to the steady-state Kalman gain of the 2-state filter
+        x = [h − h0, v], Φ, Γ = ZOH (above), Q = q_accel²·Δt·ΓΓᵀ/Δt² (white accel noise of
+        root PSD q_accel [m/s²/√Hz] held over the step), measurement h_baro with variance
+        r_baro [m²]. With K the steady-state (a posteriori) gain, Δt·[k1, k2] = Φ K."""
+        phi, gam = discrete_model(dt, ws2, 2)
+        q = np.outer(gam, gam) * q_accel**2 / dt
+        h = np.array([[1.0, 0.0]])
+        p = solve_discrete_are(phi.T, h.T, q, np.array([[r_baro]]))  # a priori P
+        k = p @ h.T / (h @ p @ h.T + r_baro)
+        g = phi @ k[:, 0] / dt
+        return Loop2Config(gains=(float(g[0]), float(g[1])))
+
+    def run(self, drive: Drive) -> Estimate:
+        t0 = time.perf_counter()
+        inp = loop_inputs(drive, self.config.ahrs)
+        g = self.gains(inp.ws2)
+        x, err = run_loop(inp, g)
+        return _estimate(self.name, inp.t, x[:, 0] + inp.h0, x[:, 1],
+                         time.perf_counter() - t0, self.config,
+                         {"gains": g, "uses": "imu+baro", "loop_error_rms_m":
+                          float(np.sqrt(np.mean(err**2)))})
+
+
+class Loop3:
+    """Fixed-gain 3rd-order baro-inertial loop (``loop3``)."""
+
+    name = "loop3"
+
+    def __init__(self, config: Loop3Config | None = None) -> None:
+        self.config = config or Loop3Config()
+
+    def gains(self, ws2: float) -> tuple[float, float, float]:
+        c = self.config
+        return c.gains if c.gains is not None else gains3(c.tau, ws2)
+
+    def run(self, drive: Drive) -> Estimate:
+        t0 = time.perf_counter()
+        inp = loop_inputs(drive, self.config.ahrs)
+        g = self.gains(inp.ws2)
+        x, err = run_loop(inp, g)
+        return _estimate(self.name, inp.t, x[:, 0] + inp.h0, x[:, 1],
+                         time.perf_counter() - t0, self.config,
+                         {"gains": g, "uses": "imu+baro", "accel_bias_up_final":
+                          float(x[-1, 2]), "loop_error_rms_m": float(np.sqrt(np.mean(err**2)))})
