@@ -1,0 +1,184 @@
+"""Finite-difference checks of the custom graph terms (graph_factors) and frame helpers."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from vnav_graph.estimators import graph_factors as gf
+from vnav_graph.geo.earth import gravity
+from vnav_graph.geo.frames import lla_to_ned, ned_to_lla
+
+ORIGIN = np.array([np.radians(47.0), np.radians(11.0), 500.0])
+
+
+def _so3(phi):
+    a = np.linalg.norm(phi)
+    k = gf.skew(phi)
+    if a < 1e-12:
+        return np.eye(3) + k
+    return np.eye(3) + np.sin(a) / a * k + (1 - np.cos(a)) / a**2 * k @ k
+
+
+def _setup(seed=0):
+    """Random IMU over 4 keyframes of 1 s at 100 Hz and a random linearisation point."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0, 3.0 + 1e-9, 0.01)
+    gyro = 0.2 * rng.normal(size=(t.size, 3))
+    accel = np.array([0.5, -0.3, -9.8]) + rng.normal(size=(t.size, 3))
+    kf = gf.keyframe_indices(t, 1.0)
+    dense = gf.dense_preintegration(t, gyro, accel, kf)
+    nk = kf.size
+    rot = np.array([_so3(rng.normal(size=3)) for _ in range(nk)])
+    pos = np.array([[100.0 * k, 50.0 * k, -20.0 * k] for k in range(nk)]) + rng.normal(
+        size=(nk, 3))
+    vel = rng.normal(size=(nk, 3))
+    st = gf.KeyframeStates(rot, pos, vel, 0.05 * rng.normal(size=(nk, 3)), rng.normal(size=nk),
+                           np.full(nk, 0.02), np.full(nk, 0.15),
+                           np.array([0.0, 0.0, 9.8]) + 0.01 * rng.normal(size=(nk, 3)))
+    return dense, st, rng
+
+
+def _perturb(st, col, eps, k):
+    """Apply a perturbation of column ``col`` of group k (Pose3 chart: R Exp(ω), p + R v)."""
+    rot, pos = st.rot.copy(), st.pos.copy()
+    bb, s, tau = st.baro_bias.copy(), st.scale.copy(), st.latency.copy()
+    if col < 12:
+        j = k + (col // 6)
+        c = col % 6
+        d = np.zeros(3)
+        d[c % 3] = eps
+        if c < 3:
+            rot[j] = rot[j] @ _so3(d)
+        else:
+            pos[j] = pos[j] + rot[j] @ d
+    elif col == gf.COL_B0:
+        bb[k] += eps
+    elif col == gf.COL_B1:
+        bb[k + 1] += eps
+    elif col == gf.COL_S:
+        s += eps
+    else:
+        tau += eps
+    return gf.KeyframeStates(rot, pos, st.vel, st.bias_accel, bb, s, tau, st.accel_t)
+
+
+def _fd_check(make_rows, st, tol):
+    rows = make_rows(st)
+    for col in range(gf.N_COLS):
+        for k in np.unique(rows.k):
+            m = rows.k == k
+            eps = 1e-4
+            rp = make_rows(_perturb(st, col, eps, k)).r[m]
+            rm = make_rows(_perturb(st, col, -eps, k)).r[m]
+            fd = (rp - rm) / (2 * eps)
+            an = rows.jac[m, col]
+            scale = max(1.0, np.max(np.abs(fd)))
+            np.testing.assert_allclose(an, fd, atol=tol * scale, err_msg=f"col {col} k {k}")
+
+
+def test_baro_rows_jacobian_matches_finite_differences():
+    dense, st, rng = _setup(1)
+    # samples away from keyframe boundaries (the interval assignment must not change under
+    # the ±1e-6 s latency perturbation)
+    t_s = np.array([0.43, 0.77, 1.31, 1.58, 2.22, 2.64])
+    z = 500.0 + rng.normal(size=t_s.size)
+
+    def rows(s):
+        return gf.baro_rows(dense, s, t_s, z, 0.5, 500.0, ORIGIN)
+
+    # 2e-3 relative: the latency column is the time derivative of an interpolant that is
+    # piecewise linear between 100 Hz samples (slope vs mid-interval velocity)
+    _fd_check(rows, st, 2e-3)
+    _fd_check_strict(rows, st, exclude=(gf.COL_TAU,), tol=1e-4)
+
+
+def _fd_check_strict(make_rows, st, exclude, tol):
+    rows = make_rows(st)
+    for col in set(range(gf.N_COLS)) - set(exclude):
+        for k in np.unique(rows.k):
+            m = rows.k == k
+            eps = 1e-4
+            fd = (make_rows(_perturb(st, col, eps, k)).r[m]
+                  - make_rows(_perturb(st, col, -eps, k)).r[m]) / (2 * eps)
+            # eps 1e-4: truncation O(eps²) ≈ 1e-8; the height conversion (pymap3d) has ≈ 1e-9 m
+            # round-off or worse (iterative geodetic conversion), up to ≈ 5e-5 relative at
+            # eps 1e-4 — hence tol 1e-4
+            np.testing.assert_allclose(rows.jac[m, col], fd, atol=tol * max(1, np.abs(fd).max()),
+                                       err_msg=f"col {col} k {k}")
+
+
+@pytest.mark.parametrize("lever", [np.zeros(3), np.array([0.8, -0.3, -1.2])])
+def test_gnss_rows_jacobian_matches_finite_differences(lever):
+    dense, st, rng = _setup(2)
+    t_g = np.array([0.3, 0.9, 1.45, 2.05, 2.7])
+    pos = rng.normal(size=(5, 3)) * 10
+    vel = rng.normal(size=(5, 3))
+    sd = np.full((5, 3), 1.5)
+
+    def rows(s):
+        return gf.gnss_rows(dense, s, t_g, pos, sd, vel, np.full((5, 3), 0.1), lever)
+
+    _fd_check_strict(rows, st, exclude=(), tol=1e-4)
+
+
+def test_interpolant_hits_keyframes_and_is_exact_for_constant_acceleration():
+    """With zero rotation rate and constant specific force the interpolant reproduces the
+    closed-form parabola p(t) = p_k + v_k τ + ½(a + R f) τ² at every sample time."""
+    t = np.arange(0, 2.0 + 1e-9, 0.005)
+    f = np.array([0.3, -0.2, -9.7])
+    dense = gf.dense_preintegration(t, np.zeros((t.size, 3)), np.tile(f, (t.size, 1)),
+                                    gf.keyframe_indices(t, 1.0))
+    rot = np.array([_so3(np.array([0.1, -0.2, 0.3]))] * 3)
+    a = np.array([0.0, 0.0, 9.81])
+    acc = a + rot[0] @ f
+    v0 = np.array([10.0, -3.0, 1.0])
+    p = np.array([v0 * tk + 0.5 * acc * tk**2 for tk in (0.0, 1.0, 2.0)])
+    st = gf.KeyframeStates(rot, p, np.tile(v0, (3, 1)), np.zeros((3, 3)), np.zeros(3),
+                           np.zeros(3), np.zeros(3), np.tile(a, (3, 1)))
+    tq = np.array([0.0, 0.125, 0.5, 0.995, 1.0, 1.77, 2.0])
+    k = np.clip(np.searchsorted(dense.t_kf, tq, side="right") - 1, 0, 1)
+    ip = gf.interpolate(dense, st, tq, k)
+    exact = v0 * tq[:, None] + 0.5 * acc * tq[:, None] ** 2
+    # on the IMU grid, trapezoidal integration of a constant input is exact up to round-off
+    np.testing.assert_allclose(ip["p"], exact, atol=1e-9)
+    np.testing.assert_allclose(ip["v"], v0 + acc * tq[:, None], atol=1e-9)
+    # off the grid Δp is interpolated linearly: error ≤ |a|·dt²/8 = 9.8·0.005²/8 ≈ 3.1e-5 m
+    tq = np.array([0.1234, 1.4567])
+    ip = gf.interpolate(dense, st, tq, np.array([0, 1]))
+    exact = v0 * tq[:, None] + 0.5 * acc * tq[:, None] ** 2
+    np.testing.assert_allclose(ip["p"], exact, atol=3.2e-5)
+
+
+def test_gravity_and_height_helpers():
+    """Closed forms: at the origin g_t = [0, 0, γ]; 10 km north the vertical tilts by
+    ≈ 10 km / R about the east axis; ∂h/∂p_t matches finite differences of ned_to_lla."""
+    g0 = gf.gravity_t(np.zeros((1, 3)), ORIGIN)[0]
+    np.testing.assert_allclose(g0, [0, 0, gravity(ORIGIN[0], ORIGIN[2])], atol=1e-12)
+    p = np.array([[10000.0, 0.0, 0.0]])
+    g = gf.gravity_t(p, ORIGIN)[0]
+    tilt = -g[0] / g[2]
+    # meridian radius at 47° ≈ 6.368e6 m: tilt = 10 km / (R_N + h), to 0.5 %
+    assert tilt == pytest.approx(10000.0 / 6.3685e6, rel=5e-3)
+    pts = np.array([[3000.0, -4000.0, -200.0], [12000.0, 9000.0, 100.0]])
+    h, up = gf.height_and_up(pts, ORIGIN)
+    for i in range(3):
+        d = np.zeros(3)
+        d[i] = 0.01
+        fd = (ned_to_lla(pts + d, ORIGIN)[:, 2] - ned_to_lla(pts - d, ORIGIN)[:, 2]) / 0.02
+        # the height is smooth on the scale of centimetres: FD error ≈ 1e-9
+        np.testing.assert_allclose(up[:, i], fd, atol=1e-7)
+    np.testing.assert_allclose(lla_to_ned(ned_to_lla(pts, ORIGIN), ORIGIN), pts, atol=1e-6)
+
+
+def test_group_information_equals_dense_normal_equations():
+    """Λ_k = Σ JᵀJ and η_k = −Σ Jᵀr per group, equal to the dense sums (closed form)."""
+    rng = np.random.default_rng(5)
+    k = rng.integers(0, 4, 40)
+    rows = gf.IntervalRows(k, rng.normal(size=40), rng.normal(size=(40, gf.N_COLS)))
+    groups, lam, eta, cost = gf.group_information(rows, 4)
+    for gi, g in enumerate(groups):
+        m = k == g
+        np.testing.assert_allclose(lam[gi], rows.jac[m].T @ rows.jac[m], atol=1e-12)
+        np.testing.assert_allclose(eta[gi], -rows.jac[m].T @ rows.r[m], atol=1e-12)
+    assert cost == pytest.approx(0.5 * np.sum(rows.r**2), rel=1e-14)

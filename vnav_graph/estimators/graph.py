@@ -1,0 +1,691 @@
+"""GTSAM factor-graph smoother: ``graph-batch`` (full batch) and ``graph-isam2`` (incremental).
+
+The only modules that import gtsam are ``graph*.py``. Design (details and measurements in
+``docs/graph.md``):
+
+- Frame: one Earth-fixed tangent-plane NED frame ``t`` at ``Drive.origin_lla``;
+  ``MakeSharedD(γ(origin))`` gravity, ``omegaCoriolis`` = Ω_ie resolved in t (exact for an
+  Earth-fixed frame; centrifugal is inside normal gravity). The tilt and magnitude change of
+  the true gravity over the drive, δg = C_tn(p)·[0, 0, γ(lat, h)] − [0, 0, γ0], is added to
+  the specific force fed to the preintegration, rotated with the keyframe attitude estimate.
+  Outputs are converted to geodetic lla (ellipsoidal heights) and local-level NED.
+- Variables per keyframe k: X(k) Pose3, V(k) velocity, B(k) IMU bias, C(k) baro
+  Gauss-Markov bias; K(j) = (s, τd) baro calibration (one for the batch, one per segment in
+  the incremental front end).
+- C++ factors: CombinedImuFactor (Forster et al. 2017), GPSFactorArm and velocity priors for
+  fixes at keyframe epochs, priors, and the exact Gauss-Markov chain
+  b_{k+1} = e^{−Δt/τ} b_k + w, var w = σ²(1 − e^{−2Δt/τ}) as linear factors.
+- Baro samples and GNSS fixes between keyframes: linearised in numpy, vectorised over all
+  samples (``graph_factors``), reduced to one information block per interval and added to the
+  linearised C++ graph inside our own Gauss-Newton loop (batch), or wrapped once as
+  ``LinearContainerFactor`` (incremental).
+
+References: Forster et al., "On-Manifold Preintegration", IEEE T-RO 2017; Kaess et al.,
+"iSAM2", IJRR 2012; Groves 2nd ed. §2.4, §5.4; seed 001 (baro error model).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import gtsam
+import numpy as np
+from gtsam.symbol_shorthand import B, C, K, V, X
+
+from ..config import IMU_PRESETS, BaroSpec, ImuSpec
+from ..geo.earth import gravity
+from ..geo.frames import mat_to_quat, ned_to_lla
+from ..sensors.noise import gm_process_var, gm_transition
+from ..types import (
+    ERROR_STATE,
+    BaroEstimate,
+    Drive,
+    Estimate,
+    FloatArray,
+    ParamEstimate,
+    Trajectory,
+)
+from . import graph_factors as gf
+
+
+@dataclass(frozen=True)
+class GraphConfig:
+    """Settings of the factor-graph smoothers (SI units).
+
+    keyframe_dt: keyframe spacing [s]; max_iterations / rel_tol: Gauss-Newton stopping;
+    output_rate_hz: rate of the output trajectory (interpolated between keyframes with the
+    IMU-shaped interpolant); cov_epochs: maximum number of keyframes with an 18×18 covariance;
+    gravity_correction / coriolis: tangent-frame corrections (off only for studies);
+    segment_s: length of a baro-calibration segment in the incremental front end;
+    calib_rw: random-walk root PSD of (s [1/√s], τd [s/√s]) between segments;
+    relinearize_threshold: iSAM2 relinearisation threshold; final_batch: run the batch
+    solver after the incremental pass to produce the smoothed trajectory.
+    """
+
+    keyframe_dt: float = 1.0
+    max_iterations: int = 12
+    rel_tol: float = 1e-7
+    output_rate_hz: float = 20.0
+    cov_epochs: int = 300
+    gravity_correction: bool = True
+    coriolis: bool = True
+    segment_s: float = 60.0
+    calib_rw: tuple[float, float] = (2e-5, 2e-4)
+    relinearize_threshold: float = 0.05
+    final_batch: bool = True
+    observable_ratio: float = 0.8
+    verbose: bool = False
+
+
+# ----------------------------------------------------------------------------------------
+# Problem set-up shared by both estimators
+
+
+@dataclass
+class _Problem:
+    drive: Drive
+    cfg: GraphConfig
+    origin: FloatArray
+    h0: float
+    g0: float
+    omega_t: FloatArray
+    kf_idx: np.ndarray
+    t_kf: FloatArray
+    dense: gf.DenseIncrements
+    params: Any
+    imu_spec: ImuSpec
+    baro_spec: BaroSpec | None
+    # GNSS in the tangent frame
+    g_t: FloatArray
+    g_pos: FloatArray
+    g_pos_sd: FloatArray
+    g_vel: FloatArray | None
+    g_vel_sd: FloatArray | None
+    lever: FloatArray
+    g_kf: np.ndarray  # keyframe index of fixes on a keyframe epoch, −1 otherwise
+
+    @property
+    def n_kf(self) -> int:
+        return int(self.t_kf.size)
+
+
+def _floor(x: float, lo: float) -> float:
+    return float(max(x, lo))
+
+
+def _setup(drive: Drive, cfg: GraphConfig) -> _Problem:
+    imu = drive.imu
+    origin = np.asarray(drive.origin_lla, float)
+    h0 = float(origin[2])
+    g0 = float(gravity(origin[0], origin[2]))
+    spec = imu.spec if isinstance(imu.spec, ImuSpec) else IMU_PRESETS["consumer"]
+    bspec = None
+    if drive.baro is not None:
+        bspec = drive.baro.spec if isinstance(drive.baro.spec, BaroSpec) else BaroSpec()
+    kf_idx = gf.keyframe_indices(imu.t, cfg.keyframe_dt)
+    dense = gf.dense_preintegration(imu.t, imu.gyro_b, imu.accel_b, kf_idx)
+    omega_t = gf.earth_rate_t(origin) if cfg.coriolis else np.zeros(3)
+    p = gtsam.PreintegrationCombinedParams.MakeSharedD(g0)
+    # continuous-time densities (STYLE.md pitfall 3); floors keep noiseless drives regular
+    p.setAccelerometerCovariance(np.eye(3) * _floor(spec.accel_noise_density, 1e-4) ** 2)
+    p.setGyroscopeCovariance(np.eye(3) * _floor(spec.gyro_noise_density, 1e-6) ** 2)
+    p.setIntegrationCovariance(np.eye(3) * 1e-10)
+    # Gauss-Markov bias approximated by a random walk of PSD 2σ²/τ + rw²
+    qa = 2 * spec.accel_bias_sd**2 / spec.accel_bias_tau + spec.accel_bias_rw**2
+    qg = 2 * spec.gyro_bias_sd**2 / spec.gyro_bias_tau + spec.gyro_bias_rw**2
+    p.setBiasAccCovariance(np.eye(3) * max(qa, 1e-12))
+    p.setBiasOmegaCovariance(np.eye(3) * max(qg, 1e-16))
+    p.setOmegaCoriolis(omega_t)
+    gn = drive.gnss
+    t_kf = imu.t[kf_idx]
+    if gn is None or len(gn) == 0:
+        raise ValueError("graph: the drive has no GNSS fixes (needed to anchor the graph)")
+    pos = gf.to_tangent(gn.lla, origin)
+    c_tn = gf.rot_t_n(gn.lla, origin)
+    vel = None if gn.vel_n is None else np.einsum("nij,nj->ni", c_tn, gn.vel_n)
+    j = np.clip(np.searchsorted(t_kf, gn.t), 0, t_kf.size - 1)
+    on_kf = np.abs(t_kf[j] - gn.t) < 1e-6
+    inside = (gn.t >= t_kf[0]) & (gn.t <= t_kf[-1])
+    g_kf = np.where(on_kf, j, -1)
+    g_kf[~inside] = -2
+    return _Problem(drive, cfg, origin, h0, g0, omega_t, kf_idx, t_kf, dense, p, spec, bspec,
+                    gn.t, pos, gn.pos_sd, vel, gn.vel_sd, np.asarray(gn.lever_arm_b, float),
+                    g_kf)
+
+
+def _baro_priors(bs: BaroSpec | None) -> dict[str, float]:
+    """Prior mean and sigma of s, τd and b_0 from the baro spec (uniform latency range →
+    its mean and width/√12)."""
+    if bs is None:
+        return {"s_sd": 0.01, "tau0": 0.1, "tau_sd": 0.1, "b_sd": 3.0, "b_tau": 1800.0,
+                "noise": 0.3}
+    if bs.latency_range_s is not None:
+        lo, hi = bs.latency_range_s
+        tau0, tau_sd = 0.5 * (lo + hi), max((hi - lo) / np.sqrt(12.0), 0.01)
+    else:
+        tau0, tau_sd = bs.latency_s, 0.05
+    s_sd = bs.scale_sd if bs.scale is None else max(bs.scale_sd, 1e-4)
+    return {"s_sd": max(s_sd, 1e-4), "tau0": tau0, "tau_sd": tau_sd,
+            "b_sd": max(bs.bias_sd, 1e-3), "b_tau": bs.bias_tau, "noise": max(bs.noise_sd, 1e-3)}
+
+
+def _so3_exp(phi: FloatArray) -> FloatArray:
+    return gtsam.Rot3.Expmap(phi).matrix()
+
+
+def _initial_states(P: _Problem) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Initial R_tb, p_t, v_t at keyframes from GNSS and the IMU (no filter involved).
+
+    Position/velocity: GNSS at keyframes (lever arm removed), else propagated with the
+    preintegrated increments. Attitude: TRIAD of (specific force, velocity direction) —
+    f_t = a_t − g_t (a_t from differenced GNSS velocity) against the mean measured f_b, and the
+    body x axis along the GNSS velocity when moving faster than 3 m/s; otherwise propagated
+    with the gyro increments (backwards before the first valid alignment)."""
+    imu = P.drive.imu
+    nk = P.n_kf
+    dr_t, dv_t, dp_t = P.dense.end()
+    gt, pos, vel = P.g_t, P.g_pos, P.g_vel
+    near = np.min(np.abs(gt[None, :] - P.t_kf[:, None]), axis=1) if nk * gt.size < 5e7 else \
+        np.abs(gt[np.clip(np.searchsorted(gt, P.t_kf), 0, gt.size - 1)] - P.t_kf)
+    rate = 1.0 / max(float(np.median(np.diff(gt))), 1e-3) if gt.size > 1 else 1.0
+    has = near <= max(0.6 / rate, 0.02)
+    pos_kf = np.column_stack([np.interp(P.t_kf, gt, pos[:, i]) for i in range(3)])
+    if vel is None:
+        dtw = 0.5
+        vel_src = (np.column_stack([np.interp(P.t_kf + dtw, gt, pos[:, i]) for i in range(3)])
+                   - np.column_stack([np.interp(P.t_kf - dtw, gt, pos[:, i])
+                                      for i in range(3)])) / (2 * dtw)
+        vel_kf = vel_src
+        acc_kf = np.zeros((nk, 3))
+        acc_ok = np.zeros(nk, bool)
+    else:
+        vel_kf = np.column_stack([np.interp(P.t_kf, gt, vel[:, i]) for i in range(3)])
+        w = 0.5
+        vp = np.column_stack([np.interp(P.t_kf + w, gt, vel[:, i]) for i in range(3)])
+        vm = np.column_stack([np.interp(P.t_kf - w, gt, vel[:, i]) for i in range(3)])
+        acc_kf = (vp - vm) / (2 * w)
+        acc_ok = has & (np.abs(P.t_kf + w - P.t_kf.clip(gt[0], gt[-1])) >= 0)
+    g_kf = gf.gravity_t(pos_kf, P.origin)
+    # mean measured specific force over ±0.25 s
+    cs = np.vstack([np.zeros((1, 3)), np.cumsum(imu.accel_b, axis=0)])
+    lo = np.searchsorted(imu.t, P.t_kf - 0.25)
+    hi = np.searchsorted(imu.t, P.t_kf + 0.25, side="right")
+    f_b = (cs[hi] - cs[lo]) / np.maximum(hi - lo, 1)[:, None]
+    f_t = acc_kf - g_kf + 2 * np.cross(P.omega_t, vel_kf)
+    speed = np.linalg.norm(vel_kf[:, :2], axis=1)
+    triad_ok = has & acc_ok & (speed > 3.0) & (vel is not None)
+    rot_triad = np.zeros((nk, 3, 3))
+    for k in np.flatnonzero(triad_ok):
+        rot_triad[k] = _triad(f_b[k], np.array([1.0, 0.0, 0.0]), f_t[k], vel_kf[k])
+    k0 = int(np.flatnonzero(triad_ok)[0]) if triad_ok.any() else -1
+    if k0 < 0:
+        r = _level(f_b[0])
+    else:
+        r = rot_triad[k0]
+        for k in range(k0 - 1, -1, -1):
+            r = _so3_exp(P.omega_t * (P.t_kf[k + 1] - P.t_kf[k])) @ r @ dr_t[k].T
+    rot = np.zeros((nk, 3, 3))
+    p_out = np.zeros((nk, 3))
+    v_out = np.zeros((nk, 3))
+    rot[0] = r
+    p_out[0] = pos_kf[0] - r @ P.lever if has[0] else pos_kf[0]
+    v_out[0] = vel_kf[0]
+    for k in range(nk - 1):
+        T = P.t_kf[k + 1] - P.t_kf[k]
+        a = g_kf[k] - 2 * np.cross(P.omega_t, v_out[k])
+        rr = rot[k]
+        p1 = p_out[k] + v_out[k] * T + 0.5 * a * T * T + rr @ dp_t[k]
+        v1 = v_out[k] + a * T + rr @ dv_t[k]
+        r1 = _so3_exp(-P.omega_t * T) @ rr @ dr_t[k]
+        if triad_ok[k + 1]:
+            r1 = rot_triad[k + 1]
+        if has[k + 1]:
+            p1 = pos_kf[k + 1] - r1 @ P.lever
+            v1 = vel_kf[k + 1]
+        rot[k + 1], p_out[k + 1], v_out[k + 1] = r1, p1, v1
+    return rot, p_out, v_out
+
+
+def _unit(x: FloatArray) -> FloatArray:
+    return x / np.linalg.norm(x)
+
+
+def _triad(f_b: FloatArray, x_b: FloatArray, f_t: FloatArray, v_t: FloatArray) -> FloatArray:
+    b1, n1 = _unit(f_b), _unit(f_t)
+    b2, n2 = _unit(np.cross(f_b, x_b)), _unit(np.cross(f_t, v_t))
+    mb = np.column_stack([b1, b2, np.cross(b1, b2)])
+    mn = np.column_stack([n1, n2, np.cross(n1, n2)])
+    return mn @ mb.T
+
+
+def _level(f_b: FloatArray) -> FloatArray:
+    """Roll/pitch from a static specific force, yaw 0."""
+    roll = np.arctan2(-f_b[1], -f_b[2])
+    pitch = np.arctan2(f_b[0], np.hypot(f_b[1], f_b[2]))
+    return gtsam.Rot3.Ypr(0.0, pitch, roll).matrix()
+
+
+def _gravity_delta(P: _Problem, pos: FloatArray) -> FloatArray:
+    """δg_k = g_t(p_k) − [0, 0, γ0] (K, 3) [m/s²] (zero when the correction is disabled)."""
+    if not P.cfg.gravity_correction:
+        return np.zeros_like(pos)
+    return gf.gravity_t(pos, P.origin) - np.array([0.0, 0.0, P.g0])
+
+
+def _preintegrate(P: _Problem, k: int, r_k: FloatArray, dg_k: FloatArray,
+                  bias: Any) -> Any:
+    """Preintegrate interval k with midpoint samples; δg folded into the specific force:
+    f' = f + (R_k ΔR_j)ᵀ δg_k."""
+    imu = P.drive.imu
+    j0, j1 = int(P.kf_idx[k]), int(P.kf_idx[k + 1])
+    fm = 0.5 * (imu.accel_b[j0:j1] + imu.accel_b[j0 + 1:j1 + 1])
+    wm = 0.5 * (imu.gyro_b[j0:j1] + imu.gyro_b[j0 + 1:j1 + 1])
+    if np.any(dg_k):
+        fm = fm + np.einsum("nji,j->ni", P.dense.dr[j0:j1], r_k.T @ dg_k)
+    dts = np.diff(imu.t[j0:j1 + 1])
+    pim = gtsam.PreintegratedCombinedMeasurements(P.params, bias)
+    integ = pim.integrateMeasurement
+    for a, w, dt in zip(fm, wm, dts, strict=True):
+        integ(a, w, dt)
+    return pim
+
+
+def _noise(sd: FloatArray) -> Any:
+    return gtsam.noiseModel.Diagonal.Sigmas(np.asarray(sd, dtype=float))
+
+
+def _prior_factors(P: _Problem, r0: FloatArray, p0: FloatArray, v0: FloatArray,
+                   pri: dict[str, float], calib_key: int) -> gtsam.NonlinearFactorGraph:
+    g = gtsam.NonlinearFactorGraph()
+    s = P.imu_spec
+    g.add(gtsam.PriorFactorPose3(X(0), gtsam.Pose3(gtsam.Rot3(r0), p0),
+                                 _noise([0.05, 0.05, 0.5, 10.0, 10.0, 10.0])))
+    g.add(gtsam.PriorFactorVector(V(0), v0, _noise([2.0, 2.0, 2.0])))
+    g.add(gtsam.PriorFactorConstantBias(
+        B(0), gtsam.imuBias.ConstantBias(),
+        _noise([_floor(s.accel_bias_sd, 1e-4)] * 3 + [_floor(s.gyro_bias_sd, 1e-6)] * 3)))
+    if P.drive.baro is not None:
+        g.add(gtsam.PriorFactorVector(C(0), np.zeros(1), _noise([pri["b_sd"]])))
+        g.add(gtsam.PriorFactorVector(calib_key, np.array([0.0, pri["tau0"]]),
+                                      _noise([pri["s_sd"], pri["tau_sd"]])))
+    return g
+
+
+def _keyframe_fix_factors(P: _Problem, k: int) -> list[Any]:
+    out = []
+    for i in np.flatnonzero(P.g_kf == k):
+        out.append(gtsam.GPSFactorArm(X(k), P.g_pos[i], P.lever, _noise(P.g_pos_sd[i])))
+        if P.g_vel is not None and P.g_vel_sd is not None and not np.any(P.lever):
+            out.append(gtsam.PriorFactorVector(V(k), P.g_vel[i], _noise(P.g_vel_sd[i])))
+    return out
+
+
+def _gm_factor(k: int, dt: float, pri: dict[str, float]) -> Any:
+    """Exact discrete Gauss-Markov link b_{k+1} − φ b_k = w as a (linear) C++ factor."""
+    phi = float(gm_transition(dt, pri["b_tau"]))
+    sd = float(np.sqrt(max(gm_process_var(dt, pri["b_tau"], pri["b_sd"]), 1e-12)))
+    jf = gtsam.JacobianFactor(C(k), np.array([[-phi]]), C(k + 1), np.array([[1.0]]),
+                              np.zeros(1), _noise([sd]))
+    lin = gtsam.Values()
+    lin.insert(C(k), np.zeros(1))
+    lin.insert(C(k + 1), np.zeros(1))
+    return gtsam.LinearContainerFactor(jf, lin)
+
+
+# ----------------------------------------------------------------------------------------
+# Interval terms → GTSAM Hessian blocks
+
+
+def _states_from_values(P: _Problem, vals: Any, calib_of_kf: np.ndarray) -> gf.KeyframeStates:
+    nk = P.n_kf
+    poses = gtsam.utilities.extractPose3(vals)
+    rot = poses[:, :9].reshape(nk, 3, 3)
+    pos = poses[:, 9:12]
+    vel = np.array([vals.atVector(V(k)) for k in range(nk)])
+    ba = np.array([vals.atConstantBias(B(k)).accelerometer() for k in range(nk)])
+    if P.drive.baro is not None:
+        cb = np.array([vals.atVector(C(k))[0] for k in range(nk)])
+        cal = {int(j): vals.atVector(K(int(j))) for j in np.unique(calib_of_kf)}
+        s = np.array([cal[int(j)][0] for j in calib_of_kf])
+        tau = np.array([cal[int(j)][1] for j in calib_of_kf])
+    else:
+        cb = np.zeros(nk)
+        s = np.zeros(nk)
+        tau = np.zeros(nk)
+    dg = _gravity_delta(P, pos)
+    acc = np.array([0.0, 0.0, P.g0]) + dg - 2 * np.cross(P.omega_t, vel)
+    return gf.KeyframeStates(rot, pos, vel, ba, cb, s, tau, acc)
+
+
+def _interval_rows(P: _Problem, st: gf.KeyframeStates, pri: dict[str, float]) -> gf.IntervalRows:
+    parts = []
+    if P.drive.baro is not None:
+        bt = P.drive.baro.t
+        m = (bt >= P.t_kf[0]) & (bt <= P.t_kf[-1])
+        parts.append(gf.baro_rows(P.dense, st, bt[m], P.drive.baro.altitude[m], pri["noise"],
+                                  P.h0, P.origin))
+    m = P.g_kf == -1
+    if np.any(m):
+        parts.append(gf.gnss_rows(
+            P.dense, st, P.g_t[m], P.g_pos[m], P.g_pos_sd[m],
+            None if P.g_vel is None else P.g_vel[m],
+            None if P.g_vel_sd is None else P.g_vel_sd[m], P.lever))
+    return gf.concat_rows(*parts)
+
+
+def _group_keys(P: _Problem, k: int, calib_key: int) -> list[int]:
+    return [X(k), X(k + 1), C(k), C(k + 1), calib_key]
+
+
+def _hessian_pieces(keys: list[int], lam: FloatArray, eta: FloatArray,
+                    active: tuple[int, ...]) -> list[Any]:
+    """Split one group's information (16×16, η) into ≤3-key HessianFactors (pair cover)."""
+    blocks = gf.BLOCKS
+    sl = [slice(a, a + n) for a, n in blocks]
+    if len(active) <= 3:
+        trip = [tuple(active)]
+    else:
+        trip = [tr for tr in gf.PAIR_COVER]
+    owned_pair: set[tuple[int, int]] = set()
+    owned_diag: set[int] = set()
+    out = []
+    for tr in trip:
+        tr = tuple(b for b in tr if b in active)
+        gmat = {}
+        gvec = {}
+        for a_i, a in enumerate(tr):
+            gvec[a] = (eta[sl[a]] if a not in owned_diag else np.zeros(blocks[a][1]))
+            for b in tr[a_i:]:
+                if a == b:
+                    gmat[a, a] = lam[sl[a], sl[a]] if a not in owned_diag else \
+                        np.zeros((blocks[a][1],) * 2)
+                elif (a, b) in owned_pair:
+                    gmat[a, b] = np.zeros((blocks[a][1], blocks[b][1]))
+                else:
+                    gmat[a, b] = lam[sl[a], sl[b]]
+                    owned_pair.add((a, b))
+        owned_diag.update(tr)
+        kk = [keys[a] for a in tr]
+        if len(tr) == 3:
+            a, b, c = tr
+            out.append(gtsam.HessianFactor(kk[0], kk[1], kk[2], gmat[a, a], gmat[a, b],
+                                           gmat[a, c], gvec[a], gmat[b, b], gmat[b, c], gvec[b],
+                                           gmat[c, c], gvec[c], 0.0))
+        elif len(tr) == 2:
+            a, b = tr
+            out.append(gtsam.HessianFactor(kk[0], kk[1], gmat[a, a], gmat[a, b], gvec[a],
+                                           gmat[b, b], gvec[b], 0.0))
+        else:
+            (a,) = tr
+            out.append(gtsam.HessianFactor(kk[0], gmat[a, a], gvec[a], 0.0))
+    return out
+
+
+# ----------------------------------------------------------------------------------------
+# Batch Gauss-Newton
+
+
+@dataclass
+class _BatchResult:
+    values: Any
+    graph: Any  # C++ NonlinearFactorGraph
+    gfg: Any  # final linear system (for marginals)
+    cost: float
+    iterations: int
+    calib_of_kf: np.ndarray
+
+
+def _linear_system(P: _Problem, graph: Any, vals: Any, calib_of_kf: np.ndarray,
+                   calib_keys: np.ndarray, pri: dict[str, float]) -> tuple[Any, float]:
+    gfg = graph.linearize(vals)
+    st = _states_from_values(P, vals, calib_of_kf)
+    rows = _interval_rows(P, st, pri)
+    groups, lam, eta, cost = gf.group_information(rows, P.n_kf - 1)
+    active = (0, 1, 2, 3, 4) if P.drive.baro is not None else (0, 1)
+    for gi, k in enumerate(groups):
+        keys = _group_keys(P, int(k), int(calib_keys[int(k)]))
+        for f in _hessian_pieces(keys, lam[gi], eta[gi], active):
+            gfg.push_back(f)
+    return gfg, cost + graph.error(vals)
+
+
+def _custom_cost(P: _Problem, vals: Any, calib_of_kf: np.ndarray,
+                 pri: dict[str, float]) -> float:
+    st = _states_from_values(P, vals, calib_of_kf)
+    rows = _interval_rows(P, st, pri)
+    return 0.5 * float(rows.r @ rows.r)
+
+
+def _gauss_newton(P: _Problem, graph: Any, vals: Any, calib_of_kf: np.ndarray,
+                  pri: dict[str, float]) -> _BatchResult:
+    """Gauss-Newton with step halving on the total cost (C++ factors + interval terms)."""
+    calib_keys = np.array([K(int(j)) for j in calib_of_kf])
+    it = 0
+    gfg, cost = _linear_system(P, graph, vals, calib_of_kf, calib_keys, pri)
+    for it in range(1, P.cfg.max_iterations + 1):
+        delta = gfg.optimize()
+        step = 1.0
+        while True:
+            cand = vals.retract(delta if step == 1.0 else _scaled(delta, step))
+            new_cost = graph.error(cand) + _custom_cost(P, cand, calib_of_kf, pri)
+            if new_cost <= cost * (1 + 1e-12) or step < 1e-3:
+                break
+            if step == 1.0 and abs(new_cost - cost) < P.cfg.rel_tol * cost:
+                break  # converged: the change is at round-off level
+            step *= 0.5
+        rel = (cost - new_cost) / max(cost, 1e-12)
+        if P.cfg.verbose:
+            print(f"GN it {it}: cost {cost:.6g} -> {new_cost:.6g} step {step}")
+        vals = cand
+        gfg, cost = _linear_system(P, graph, vals, calib_of_kf, calib_keys, pri)
+        if abs(rel) < P.cfg.rel_tol or step < 1e-3:
+            break
+    return _BatchResult(vals, graph, gfg, cost, it, calib_of_kf)
+
+
+def _scaled(delta: Any, s: float) -> Any:
+    return delta.scale(s)
+
+
+# ----------------------------------------------------------------------------------------
+# Outputs
+
+
+def _output_times(P: _Problem) -> FloatArray:
+    t = P.drive.imu.t
+    n = max(int(round(P.cfg.output_rate_hz and (1.0 / P.cfg.output_rate_hz) / np.median(
+        np.diff(t)))), 1)
+    idx = np.unique(np.r_[np.arange(0, t.size, n), P.kf_idx])
+    idx = idx[(idx >= P.kf_idx[0]) & (idx <= P.kf_idx[-1])]
+    return t[idx]
+
+
+def _trajectory(P: _Problem, st: gf.KeyframeStates, vals: Any, t_q: FloatArray) -> Trajectory:
+    k = np.clip(np.searchsorted(P.t_kf, t_q, side="right") - 1, 0, P.n_kf - 2)
+    ip = gf.interpolate(P.dense, st, t_q, k)
+    lla = ned_to_lla(ip["p"], P.origin)
+    c_tn = gf.rot_t_n(lla, P.origin)
+    vel_n = np.einsum("nji,nj->ni", c_tn, ip["v"])
+    # exact keyframe velocities at keyframe epochs
+    on = np.isin(t_q, P.t_kf)
+    kk = np.searchsorted(P.t_kf, t_q[on])
+    vel_n[on] = np.einsum("nji,nj->ni", c_tn[on], st.vel[kk])
+    q = mat_to_quat(np.swapaxes(c_tn, 1, 2) @ ip["rot"])
+    nk = P.n_kf
+    bias = np.array([vals.atConstantBias(B(j)).vector() for j in range(nk)])
+    alpha = ip["alpha"]
+    bg = bias[k, 3:6]
+    ba = bias[k, 0:3]
+    bb = (1 - alpha) * st.baro_bias[k] + alpha * st.baro_bias[k + 1]
+    return Trajectory(t_q, lla, vel_n, q, bg, ba, bb if P.drive.baro is not None else None)
+
+
+def _cov_18(P: _Problem, marg: Any, vals: Any, k: int, calib_key: int | None) -> FloatArray:
+    """18×18 ERROR_STATE covariance at keyframe k from GTSAM's joint marginal.
+
+    Pose3 tangent (ω_b, v_b): att_t = R ω_b, δp_t = R v_b; then t → local NED with C_nt.
+    ConstantBias (accel, gyro) → bias_gyro 9:12, bias_accel 12:15 (body frame)."""
+    keys = [X(k), V(k), B(k)]
+    if P.drive.baro is not None:
+        keys += [C(k), calib_key]
+    jm = marg.jointMarginalCovariance(gtsam.KeyVector(keys))
+    dims = [6, 3, 6] + ([1, 2] if P.drive.baro is not None else [])
+    n = sum(dims)
+    full = np.zeros((n, n))
+    off = np.cumsum([0] + dims)
+    for i, ki in enumerate(keys):
+        for j, kj in enumerate(keys):
+            full[off[i]:off[i + 1], off[j]:off[j + 1]] = jm.at(ki, kj)
+    r = vals.atPose3(X(k)).rotation().matrix()
+    lla = ned_to_lla(vals.atPose3(X(k)).translation()[None, :], P.origin)
+    c_nt = gf.rot_t_n(lla, P.origin)[0].T
+    tmat = np.zeros((18, n))
+    tmat[6:9, 0:3] = c_nt @ r
+    tmat[0:3, 3:6] = c_nt @ r
+    tmat[3:6, 6:9] = c_nt
+    tmat[12:15, 9:12] = np.eye(3)
+    tmat[9:12, 12:15] = np.eye(3)
+    if P.drive.baro is not None:
+        tmat[17, 15] = 1.0
+        tmat[15, 16] = 1.0
+        tmat[16, 17] = 1.0
+    cov = tmat @ full @ tmat.T
+    if P.drive.baro is None:
+        cov[15:18, :] = np.nan
+        cov[:, 15:18] = np.nan
+    return cov
+
+
+def _gm_mean_prior_sd(sd: float, tau: float, dur: float) -> float:
+    """Prior sigma of the time average of a stationary GM process over ``dur`` seconds:
+    var = σ²·(2τ/D)(1 − (τ/D)(1 − e^{−D/τ}))."""
+    if dur <= 0 or not np.isfinite(tau):
+        return sd
+    x = tau / dur
+    return float(sd * np.sqrt(max(2 * x * (1 - x * (1 - np.exp(-1 / x))), 0.0)))
+
+
+def _outputs(P: _Problem, res: _BatchResult, pri: dict[str, float],
+             calib_key: int | None) -> dict[str, Any]:
+    vals = res.values
+    st = _states_from_values(P, vals, res.calib_of_kf)
+    traj = _trajectory(P, st, vals, _output_times(P))
+    marg = gtsam.Marginals(res.gfg, vals)
+    nk = P.n_kf
+    sel = np.unique(np.linspace(0, nk - 1, min(P.cfg.cov_epochs, nk)).astype(int))
+    cov = np.array([_cov_18(P, marg, vals, int(k), calib_key) for k in sel])
+    out: dict[str, Any] = {"trajectory": traj, "cov": cov, "t_cov": P.t_kf[sel]}
+    if P.drive.baro is None or calib_key is None:
+        out["baro"] = None
+        out["observability"] = {}
+        return out
+    kc = vals.atVector(calib_key)
+    pk = marg.marginalCovariance(calib_key)
+    # sigma of the time-averaged bias from a subsample of the (highly correlated) b_k
+    sub = np.unique(np.linspace(0, nk - 1, min(40, nk)).astype(int))
+    jm = marg.jointMarginalCovariance(gtsam.KeyVector([C(int(k)) for k in sub]))
+    cb = np.array([[jm.at(C(int(a)), C(int(b)))[0, 0] for b in sub] for a in sub])
+    b_mean = float(np.mean(st.baro_bias))
+    b_sd = float(np.sqrt(max(cb.mean(), 0.0)))
+    dur = float(P.t_kf[-1] - P.t_kf[0])
+    b_prior = _gm_mean_prior_sd(pri["b_sd"], pri["b_tau"], dur)
+    baro = BaroEstimate(
+        scale=ParamEstimate(float(kc[0]), float(np.sqrt(pk[0, 0])), pri["s_sd"]),
+        latency_s=ParamEstimate(float(kc[1]), float(np.sqrt(pk[1, 1])), pri["tau_sd"]),
+        bias_m=ParamEstimate(b_mean, b_sd, b_prior),
+    )
+    obs = {}
+    for name, pe, why in (
+        ("scale", baro.scale, "needs altitude change"),
+        ("latency_s", baro.latency_s, "needs vertical speed"),
+        ("bias_m", baro.bias_m, "needs GNSS height"),
+    ):
+        assert pe is not None and pe.sd is not None and pe.prior_sd is not None
+        ratio = pe.sd / pe.prior_sd
+        obs[name] = {"prior_sd": pe.prior_sd, "posterior_sd": pe.sd, "ratio": ratio,
+                     "observable": bool(ratio < P.cfg.observable_ratio),
+                     "note": "" if ratio < P.cfg.observable_ratio else
+                     f"barely informed by the data ({why})"}
+    out["baro"] = baro
+    out["observability"] = obs
+    return out
+
+
+# ----------------------------------------------------------------------------------------
+# Estimators
+
+
+def _build_batch_graph(P: _Problem, rot: FloatArray, pos: FloatArray, vel: FloatArray,
+                       pims: list[Any], pri: dict[str, float],
+                       calib_of_kf: np.ndarray) -> tuple[Any, Any]:
+    graph = _prior_factors(P, rot[0], pos[0], vel[0], pri, K(0))
+    vals = gtsam.Values()
+    nk = P.n_kf
+    for k in range(nk):
+        vals.insert(X(k), gtsam.Pose3(gtsam.Rot3(rot[k]), pos[k]))
+        vals.insert(V(k), vel[k])
+        vals.insert(B(k), gtsam.imuBias.ConstantBias())
+        if P.drive.baro is not None:
+            vals.insert(C(k), np.zeros(1))
+        for f in _keyframe_fix_factors(P, k):
+            graph.add(f)
+        if k + 1 < nk:
+            graph.add(gtsam.CombinedImuFactor(X(k), V(k), X(k + 1), V(k + 1), B(k), B(k + 1),
+                                              pims[k]))
+            if P.drive.baro is not None:
+                graph.add(_gm_factor(k, float(P.t_kf[k + 1] - P.t_kf[k]), pri))
+    if P.drive.baro is not None:
+        for j in np.unique(calib_of_kf):
+            vals.insert(K(int(j)), np.array([0.0, pri["tau0"]]))
+    return graph, vals
+
+
+def _pims_for(P: _Problem, rot: FloatArray, pos: FloatArray) -> list[Any]:
+    dg = _gravity_delta(P, pos)
+    bias0 = gtsam.imuBias.ConstantBias()
+    return [_preintegrate(P, k, rot[k], dg[k], bias0) for k in range(P.n_kf - 1)]
+
+
+def _provides(drive: Drive) -> frozenset[str]:
+    q = {"alt", "vel_d", "pos_h", "vel_h", "att", "cov"}
+    if drive.baro is not None:
+        q.add("baro")
+    return frozenset(q)
+
+
+class GraphBatch:
+    """``graph-batch``: full-batch smoothing of the whole drive (offline)."""
+
+    name = "graph-batch"
+
+    def __init__(self, config: GraphConfig | None = None) -> None:
+        self.config = config or GraphConfig()
+
+    def run(self, drive: Drive) -> Estimate:
+        t0 = time.perf_counter()
+        P = _setup(drive, self.config)
+        pri = _baro_priors(P.baro_spec)
+        rot, pos, vel = _initial_states(P)
+        t1 = time.perf_counter()
+        pims = _pims_for(P, rot, pos)
+        t2 = time.perf_counter()
+        calib = np.zeros(P.n_kf, dtype=int)
+        graph, vals = _build_batch_graph(P, rot, pos, vel, pims, pri, calib)
+        res = _gauss_newton(P, graph, vals, calib, pri)
+        t3 = time.perf_counter()
+        out = _outputs(P, res, pri, K(0) if drive.baro is not None else None)
+        t4 = time.perf_counter()
+        info = {"keyframes": P.n_kf, "iterations": res.iterations, "final_cost": res.cost,
+                "observability": out["observability"],
+                "timing_s": {"init": t1 - t0, "preintegration": t2 - t1, "solve": t3 - t2,
+                             "outputs": t4 - t3},
+                "frame": "tangent-plane NED at origin; gravity-difference and Coriolis "
+                         "corrections" if self.config.gravity_correction else "tangent-plane"}
+        return Estimate(self.name, out["trajectory"], _provides(drive), out["cov"],
+                        out["t_cov"], out["baro"], time.perf_counter() - t0, info=info,
+                        config=self.config)
+
+
+ERROR_STATE_KEYS = tuple(ERROR_STATE)

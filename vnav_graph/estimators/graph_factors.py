@@ -1,0 +1,395 @@
+"""Custom measurement terms of the factor-graph smoother, linearised in vectorised numpy.
+
+Contents
+--------
+- Tangent-plane frame helpers: the graph runs in ONE Earth-fixed NED frame ``t`` (tangent plane
+  at ``Drive.origin_lla``); ``rot_t_n`` rotates local-level NED at any (lat, lon) into ``t``,
+  ``gravity_t`` gives the WGS-84 normal gravity vector resolved in ``t`` (its tilt and
+  magnitude change over the drive are folded into the preintegration, see ``docs/graph.md``).
+- ``dense_preintegration``: body-frame increments ΔR, Δv, Δp from each keyframe to every IMU
+  sample inside its interval (numba), used to interpolate the state at any sample time.
+- ``interval_terms``: residuals and Jacobians of baro samples and GNSS fixes that fall between
+  keyframes, through the interpolant
+
+      p(t) = (1−α) p_k + α p_{k+1} + ½ a_k (τ² − τT) + R_k (Δp(τ) − α ΔP(T)),   α = τ/T,
+
+  (τ = t − t_k, T = t_{k+1} − t_k, a_k = g + δg_k − 2Ω×v_k the nav-frame acceleration not
+  measured by the IMU). It matches both keyframes exactly and follows the IMU-measured motion
+  in between (Forster et al. 2017 preintegration, evaluated at intermediate samples).
+- The baro row is the shared model (``vnav_graph.sensors.baro``) evaluated at the delayed
+  time t_s − τd:  h_b = h0 + (1+s)(h(t_s−τd) − h0) + b(t_s−τd), with
+  ∂/∂τd = −(1+s) v_up(t_s−τd) (DESIGN.md; seed 001 eq. 2 is its first-order form).
+- ``group_information``: per-interval information (Λ, η) of all those rows, reduced in one
+  batched ``einsum``; ``PAIR_COVER`` splits a 5-key information matrix into ≤3-key blocks
+  (GTSAM's Python HessianFactor constructors take at most three keys).
+
+Variables of one interval group, in column order: pose X_k (rotation 3, translation 3, GTSAM
+Pose3 tangent: R ← R·Exp(ω), p ← p + R·v), pose X_{k+1}, baro bias b_k, b_{k+1} and the baro
+calibration (s, τd) — 16 columns.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from ..geo.earth import OMEGA_IE, gravity
+from ..geo.frames import lla_to_ned, ned_to_lla
+from ..sensors.baro import baro_jacobian, measure_baro
+from ..types import FloatArray
+
+N_COLS = 16
+COL_X0 = slice(0, 6)
+COL_X1 = slice(6, 12)
+COL_B0 = 12
+COL_B1 = 13
+COL_S = 14
+COL_TAU = 15
+# key blocks of a group: (first column, width)
+BLOCKS = ((0, 6), (6, 6), (12, 1), (13, 1), (14, 2))
+# Cover of all block pairs of 5 blocks by 3-block triples; each pair (and diagonal) is owned
+# by exactly one triple (first listed owner), so the pieces sum to the full information.
+PAIR_COVER = ((0, 1, 2), (0, 3, 4), (1, 3, 4), (2, 3, 4))
+
+
+def rot_n_e(lat: FloatArray, lon: FloatArray) -> FloatArray:
+    """C_ne (..., 3, 3): ECEF → local NED at (lat, lon) [rad] (Groves eq. 2.150)."""
+    sl, cl = np.sin(lat), np.cos(lat)
+    so, co = np.sin(lon), np.cos(lon)
+    return np.stack(
+        [
+            np.stack([-sl * co, -sl * so, cl], -1),
+            np.stack([-so, co, np.zeros_like(lat)], -1),
+            np.stack([-cl * co, -cl * so, -sl], -1),
+        ],
+        -2,
+    )
+
+
+def rot_t_n(lla: FloatArray, origin_lla: FloatArray) -> FloatArray:
+    """C_tn (N, 3, 3): local-level NED at ``lla`` (N, 3) → tangent NED at ``origin_lla``."""
+    lla = np.atleast_2d(lla)
+    c_te = rot_n_e(np.asarray(origin_lla[0]), np.asarray(origin_lla[1]))
+    c_ne = rot_n_e(lla[:, 0], lla[:, 1])
+    return np.einsum("ij,nkj->nik", c_te, c_ne)
+
+
+def earth_rate_t(origin_lla: FloatArray) -> FloatArray:
+    """Ω_ie resolved in the (Earth-fixed) tangent frame, (3,) [rad/s] — constant."""
+    lat = float(origin_lla[0])
+    return np.array([OMEGA_IE * np.cos(lat), 0.0, -OMEGA_IE * np.sin(lat)])
+
+
+def gravity_t(pos_t: FloatArray, origin_lla: FloatArray) -> FloatArray:
+    """Normal gravity vector at tangent positions ``pos_t`` (N, 3) [m], resolved in t [m/s²].
+
+    g_t = C_tn(p)·[0, 0, γ(lat, h)]: the local vertical tilts by ≈ distance/R against the
+    tangent-plane down axis and γ falls by ≈ 3.1e-6 /m with height."""
+    lla = ned_to_lla(pos_t, origin_lla)
+    c = rot_t_n(lla, origin_lla)
+    return c[:, :, 2] * gravity(lla[:, 0], lla[:, 2])[:, None]
+
+
+def height_and_up(pos_t: FloatArray, origin_lla: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Ellipsoidal height h (N,) [m] of tangent positions and ∂h/∂p_t = local up in t (N, 3)."""
+    lla = ned_to_lla(pos_t, origin_lla)
+    c = rot_t_n(lla, origin_lla)
+    return lla[:, 2], -c[:, :, 2]
+
+
+def skew(v: FloatArray) -> FloatArray:
+    z = np.zeros_like(v[..., 0])
+    return np.stack(
+        [np.stack([z, -v[..., 2], v[..., 1]], -1), np.stack([v[..., 2], z, -v[..., 0]], -1),
+         np.stack([-v[..., 1], v[..., 0], z], -1)], -2)
+
+
+@njit(cache=True)
+def _so3_exp(phi):
+    a = np.sqrt(phi[0] ** 2 + phi[1] ** 2 + phi[2] ** 2)
+    k = np.array([[0.0, -phi[2], phi[1]], [phi[2], 0.0, -phi[0]], [-phi[1], phi[0], 0.0]])
+    if a < 1e-9:
+        return np.eye(3) + k + 0.5 * k @ k
+    return np.eye(3) + np.sin(a) / a * k + (1.0 - np.cos(a)) / a**2 * (k @ k)
+
+
+@njit(cache=True)
+def _dense(t, gyro, accel, kf_idx):
+    n = t.size
+    dr = np.empty((n, 3, 3))
+    dv = np.empty((n, 3))
+    dp = np.empty((n, 3))
+    dr_n = np.empty((n, 3, 3))
+    dv_n = np.empty((n, 3))
+    dp_n = np.empty((n, 3))
+    for k in range(kf_idx.size - 1):
+        r = np.eye(3)
+        v = np.zeros(3)
+        p = np.zeros(3)
+        for j in range(kf_idx[k], kf_idx[k + 1]):
+            dr[j] = r
+            dv[j] = v
+            dp[j] = p
+            dt = t[j + 1] - t[j]
+            r_new = r @ _so3_exp(0.5 * (gyro[j] + gyro[j + 1]) * dt)
+            a0 = r @ accel[j]
+            a1 = r_new @ accel[j + 1]
+            p = p + v * dt + (a0 / 3.0 + a1 / 6.0) * dt * dt
+            v = v + 0.5 * (a0 + a1) * dt
+            r = r_new
+            dr_n[j] = r
+            dv_n[j] = v
+            dp_n[j] = p
+    last = kf_idx[-1]
+    for j in range(last, n):
+        dr[j] = np.eye(3)
+        dv[j] = 0.0
+        dp[j] = 0.0
+        dr_n[j] = np.eye(3)
+        dv_n[j] = 0.0
+        dp_n[j] = 0.0
+    return dr, dv, dp, dr_n, dv_n, dp_n
+
+
+@dataclass(frozen=True)
+class DenseIncrements:
+    """Body-frame increments from keyframe k(j) to IMU sample j (``dr, dv, dp``) and to
+    sample j+1 (``*_next``; the last sample of an interval thus holds ΔR, Δv, ΔP over T).
+    Shapes (N, 3, 3) / (N, 3); computed with the biases given to ``dense_preintegration``."""
+
+    t: FloatArray
+    kf_idx: np.ndarray
+    dr: FloatArray
+    dv: FloatArray
+    dp: FloatArray
+    dr_next: FloatArray
+    dv_next: FloatArray
+    dp_next: FloatArray
+
+    @property
+    def t_kf(self) -> FloatArray:
+        return self.t[self.kf_idx]
+
+    def end(self) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """ΔR_T, Δv_T, ΔP_T per interval, shapes (K−1, 3, 3), (K−1, 3), (K−1, 3)."""
+        j = self.kf_idx[1:] - 1
+        return self.dr_next[j], self.dv_next[j], self.dp_next[j]
+
+    def at(self, t_q: FloatArray, k: np.ndarray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Increments of interval ``k`` at times ``t_q`` (linear in time between IMU samples;
+        attitude from the nearest earlier sample)."""
+        j = np.searchsorted(self.t, t_q, side="right") - 1
+        j = np.clip(j, self.kf_idx[k], self.kf_idx[k + 1] - 1)
+        w = np.clip((t_q - self.t[j]) / (self.t[j + 1] - self.t[j]), 0.0, 1.0)[:, None]
+        dv = (1 - w) * self.dv[j] + w * self.dv_next[j]
+        dp = (1 - w) * self.dp[j] + w * self.dp_next[j]
+        return self.dr[j], dv, dp
+
+
+def dense_preintegration(
+    t: FloatArray, gyro_b: FloatArray, accel_b: FloatArray, kf_idx: np.ndarray,
+    bias_gyro: FloatArray | None = None, bias_accel: FloatArray | None = None,
+) -> DenseIncrements:
+    """Integrate ΔR, Δv, Δp from each keyframe (IMU sample index ``kf_idx``) to every sample
+    of its interval. Trapezoidal, resolved in the keyframe's body frame; Earth rate is
+    ignored inside an interval (≤ 7e-5 rad per second of interval — it only shapes the interpolant).
+
+    Parameters
+    ----------
+    t : (N,) [s]; gyro_b (N, 3) [rad/s]; accel_b (N, 3) [m/s²]
+    kf_idx : (K,) int, increasing IMU sample indices of the keyframes
+    bias_gyro, bias_accel : (3,) or (N, 3) biases removed before integration
+    """
+    g = gyro_b - (0.0 if bias_gyro is None else bias_gyro)
+    a = accel_b - (0.0 if bias_accel is None else bias_accel)
+    out = _dense(np.ascontiguousarray(t), np.ascontiguousarray(g), np.ascontiguousarray(a),
+                 np.ascontiguousarray(kf_idx.astype(np.int64)))
+    return DenseIncrements(t, kf_idx, *out)
+
+
+@dataclass(frozen=True)
+class KeyframeStates:
+    """Linearisation point of the interval terms at the K keyframes.
+
+    rot (K, 3, 3) R_tb; pos (K, 3) tangent NED [m]; vel (K, 3) [m/s]; bias_accel (K, 3)
+    [m/s²]; baro_bias (K,) [m]; scale, latency (K,) baro calibration per keyframe (constant
+    for the batch graph, per segment for the incremental front end); accel_t (K, 3): the
+    unmeasured nav-frame acceleration g + δg − 2Ω×v over each interval [m/s²]."""
+
+    rot: FloatArray
+    pos: FloatArray
+    vel: FloatArray
+    bias_accel: FloatArray
+    baro_bias: FloatArray
+    scale: FloatArray
+    latency: FloatArray
+    accel_t: FloatArray
+
+
+@dataclass(frozen=True)
+class IntervalRows:
+    """Whitened rows ``r + J δ`` of the interval terms: interval index ``k`` (M,), residual
+    ``r`` (M,) and Jacobian ``jac`` (M, 16) in the column order of this module."""
+
+    k: np.ndarray
+    r: FloatArray
+    jac: FloatArray
+
+
+def interpolate(
+    dense: DenseIncrements, st: KeyframeStates, t_q: FloatArray, k: np.ndarray
+) -> dict[str, FloatArray]:
+    """Interpolated position p(t) (M, 3), velocity v(t) (M, 3), attitude R(t) (M, 3, 3) at
+    times ``t_q`` inside intervals ``k``, plus the pieces the Jacobians need."""
+    t_kf = dense.t_kf
+    big_t = (t_kf[k + 1] - t_kf[k])[:, None]
+    tau = (t_q - t_kf[k])[:, None]
+    alpha = tau / big_t
+    dr, dv, dp = dense.at(t_q, k)
+    _, dv_end, dp_end = dense.end()
+    ba = st.bias_accel[k]
+    # first-order accel-bias correction relative to the biases of the dense integration
+    dp_c = dp - 0.5 * tau**2 * ba
+    dv_c = dv - tau * ba
+    dp_end_c = dp_end[k] - 0.5 * big_t**2 * ba
+    d = dp_c - alpha * dp_end_c
+    rk = st.rot[k]
+    a = st.accel_t[k]
+    p = ((1 - alpha) * st.pos[k] + alpha * st.pos[k + 1] + 0.5 * a * (tau**2 - tau * big_t)
+         + np.einsum("nij,nj->ni", rk, d))
+    dvel = dv_c - dp_end_c / big_t
+    v = ((st.pos[k + 1] - st.pos[k]) / big_t + a * (tau - 0.5 * big_t)
+         + np.einsum("nij,nj->ni", rk, dvel))
+    rot = rk @ dr
+    return {"p": p, "v": v, "rot": rot, "alpha": alpha[:, 0], "d": d, "dvel": dvel,
+            "T": big_t[:, 0]}
+
+
+def _pos_jacobian(st: KeyframeStates, k: np.ndarray, ip: dict[str, FloatArray],
+                  lever_b: FloatArray | None) -> FloatArray:
+    """∂(p(t) + R(t)·l)/∂(X_k, X_{k+1}) in Pose3 tangent coordinates, (M, 3, 12)."""
+    m = k.size
+    rk = st.rot[k]
+    alpha = ip["alpha"][:, None, None]
+    jac = np.zeros((m, 3, 12))
+    vec = ip["d"]
+    if lever_b is not None:
+        # R(t)·l = R_k ΔR(τ) l: the lever arm rotates with the perturbation of R_k
+        vec = vec + np.einsum("nji,nj->ni", rk, np.einsum("nij,j->ni", ip["rot"], lever_b))
+    # R_k Exp(ω) x ≈ R_k x − R_k [x×] ω
+    jac[:, :, 0:3] = -rk @ skew(vec)
+    jac[:, :, 3:6] = (1 - alpha) * rk
+    jac[:, :, 9:12] = alpha * st.rot[k + 1]
+    return jac
+
+
+def baro_rows(
+    dense: DenseIncrements, st: KeyframeStates, t_s: FloatArray, z: FloatArray, sd: float,
+    h0: float, origin_lla: FloatArray,
+) -> IntervalRows:
+    """Whitened baro rows for samples at ``t_s`` (M,) with altitudes ``z`` (M,) [m].
+
+    The sample is assigned to the interval containing its delayed time t_s − τd (τd of the
+    linearisation point); b(t) is interpolated linearly between b_k and b_{k+1} at that time
+    (b moves < 1e-3 m over a latency at τ_b ≥ minutes)."""
+    t_kf = dense.t_kf
+    k_s = np.clip(np.searchsorted(t_kf, t_s, side="right") - 1, 0, t_kf.size - 2)
+    lat_s = st.latency[k_s]
+    t_d = np.clip(t_s - lat_s, t_kf[0], t_kf[-1])
+    k = np.clip(np.searchsorted(t_kf, t_d, side="right") - 1, 0, t_kf.size - 2)
+    ip = interpolate(dense, st, t_d, k)
+    h, up = height_and_up(ip["p"], origin_lla)
+    v_up = np.einsum("ni,ni->n", up, ip["v"])
+    alpha = ip["alpha"]
+    s = st.scale[k_s]
+    b = (1 - alpha) * st.baro_bias[k] + alpha * st.baro_bias[k + 1]
+    pred = measure_baro(h, v_up, s, 0.0, b, h0)
+    jb = baro_jacobian(h, v_up, s, 0.0, h0)  # ∂/∂(h, v_up, s, τd, b) at zero residual delay
+    dh_dtau = -v_up  # h(t_s − τd): ∂h/∂τd = −v_up(t_s − τd)
+    jac = np.zeros((t_s.size, N_COLS))
+    jp = _pos_jacobian(st, k, ip, None)
+    jac[:, 0:12] = jb[:, 0:1] * np.einsum("ni,nij->nj", up, jp)
+    jac[:, COL_B0] = (1 - alpha) * jb[:, 4]
+    jac[:, COL_B1] = alpha * jb[:, 4]
+    jac[:, COL_S] = jb[:, 2]
+    # b is read at the delayed time too: ∂b/∂τd = −(b_{k+1} − b_k)/T
+    db_dtau = -(st.baro_bias[k + 1] - st.baro_bias[k]) / ip["T"]
+    jac[:, COL_TAU] = jb[:, 0] * dh_dtau + jb[:, 4] * db_dtau
+    return IntervalRows(k, (pred - z) / sd, jac / sd)
+
+
+def gnss_rows(
+    dense: DenseIncrements, st: KeyframeStates, t_g: FloatArray, pos_t: FloatArray,
+    pos_sd: FloatArray, vel_t: FloatArray | None, vel_sd: FloatArray | None,
+    lever_b: FloatArray,
+) -> IntervalRows:
+    """Whitened GNSS position (and velocity) rows for fixes at ``t_g`` (M,) strictly inside
+    intervals: antenna p(t) + R(t)·l against ``pos_t`` (M, 3) in t [m]; velocity v(t) (the
+    lever-arm rotation term is omitted) against ``vel_t`` (M, 3) [m/s]."""
+    t_kf = dense.t_kf
+    k = np.clip(np.searchsorted(t_kf, t_g, side="right") - 1, 0, t_kf.size - 2)
+    ip = interpolate(dense, st, t_g, k)
+    m = t_g.size
+    lever = None if not np.any(lever_b) else np.asarray(lever_b, float)
+    p_ant = ip["p"] + (0.0 if lever is None else np.einsum("nij,j->ni", ip["rot"], lever))
+    jp = _pos_jacobian(st, k, ip, lever)
+    rows_r = [((p_ant - pos_t) / pos_sd).reshape(-1)]
+    jac = np.zeros((m, 3, N_COLS))
+    jac[:, :, 0:12] = jp / pos_sd[:, :, None]
+    rows_j = [jac.reshape(-1, N_COLS)]
+    ks = [np.repeat(k, 3)]
+    if vel_t is not None and vel_sd is not None:
+        big_t = ip["T"][:, None, None]
+        rk = st.rot[k]
+        jv = np.zeros((m, 3, N_COLS))
+        jv[:, :, 0:3] = -rk @ skew(ip["dvel"])
+        jv[:, :, 3:6] = -rk / big_t
+        jv[:, :, 9:12] = st.rot[k + 1] / big_t
+        rows_r.append(((ip["v"] - vel_t) / vel_sd).reshape(-1))
+        rows_j.append((jv / vel_sd[:, :, None]).reshape(-1, N_COLS))
+        ks.append(np.repeat(k, 3))
+    return IntervalRows(np.concatenate(ks), np.concatenate(rows_r), np.vstack(rows_j))
+
+
+def concat_rows(*rows: IntervalRows) -> IntervalRows:
+    return IntervalRows(np.concatenate([r.k for r in rows]), np.concatenate([r.r for r in rows]),
+                        np.vstack([r.jac for r in rows]))
+
+
+def group_information(rows: IntervalRows, n_groups: int) -> tuple[np.ndarray, FloatArray,
+                                                                   FloatArray, FloatArray]:
+    """Per-interval information of the rows: Λ_k = Σ JᵀJ (G, 16, 16), η_k = −Σ Jᵀr (G, 16)
+    for the groups that have rows, and the cost ½Σr² (float). Returns (groups, Λ, η, cost)."""
+    order = np.argsort(rows.k, kind="stable")
+    k = rows.k[order]
+    jac = rows.jac[order]
+    r = rows.r[order]
+    groups, start, count = np.unique(k, return_index=True, return_counts=True)
+    pos = np.arange(k.size) - np.repeat(start, count)
+    gi = np.repeat(np.arange(groups.size), count)
+    pad_j = np.zeros((groups.size, int(count.max()), N_COLS))
+    pad_r = np.zeros((groups.size, int(count.max())))
+    pad_j[gi, pos] = jac
+    pad_r[gi, pos] = r
+    lam = np.einsum("gri,grj->gij", pad_j, pad_j)
+    eta = -np.einsum("gri,gr->gi", pad_j, pad_r)
+    return groups, lam, eta, 0.5 * float(r @ r)
+
+
+def keyframe_indices(t: FloatArray, dt_kf: float) -> np.ndarray:
+    """IMU sample indices of keyframes every ``dt_kf`` seconds (snapped to IMU samples; the
+    last sample is always a keyframe; a trailing interval shorter than dt_kf/2 is merged)."""
+    targets = np.arange(t[0], t[-1] + 1e-9, dt_kf)
+    idx = np.unique(np.clip(np.searchsorted(t, targets - 1e-9), 0, t.size - 1))
+    if idx[-1] != t.size - 1:
+        if t[-1] - t[idx[-1]] < 0.5 * dt_kf and idx.size > 1:
+            idx[-1] = t.size - 1
+        else:
+            idx = np.append(idx, t.size - 1)
+    return idx
+
+
+def to_tangent(lla: FloatArray, origin_lla: FloatArray) -> FloatArray:
+    return lla_to_ned(lla, origin_lla)
