@@ -1,0 +1,437 @@
+"""Seed 001: 7-state vertical-channel EKF with barometer scale, latency and bias.
+
+State (error state x = true − nominal, closed-loop: after every update the estimate is added
+to the nominal and x is reset to zero)::
+
+    x = [δh_i, δv_z, B_z^a, K_z^a, dSF, Td, δh_b]     (+ an auxiliary accumulator, below)
+
+δh_i [m] and δv_z [m/s] are the errors of the INS height and vertical speed (+up), B_z^a
+[m/s²] and K_z^a [-] the body-z accelerometer bias and scale factor, dSF [-] and Td [s] the
+baro scale-factor error and latency, δh_b [m] the baro Gauss-Markov bias b(t). Seed 001
+eq. 5 (z up)::
+
+    δḣ_i = δv_z
+    δv̇_z = (−ρ_E² − ρ_N² + 2g/(R0 + h_i))·δh_i + C33·B_z^a + C33·F_z·K_z^a + w
+
+with ρ the transport rate, C33 = C_nb[2, 2], F_z the measured body-z specific force (FRD: ≈ −g
+at rest). With x = true − nominal and the nominal specific force corrected as
+f_z − B̂_z − K̂_z·f_z, the signs of eq. 5 hold exactly as printed. B_z^a is a first-order
+Gauss-Markov process plus a random walk (absorbs the other-axis and attitude errors that also
+enter the vertical specific force), K_z^a, dSF and Td are random constants, and δh_b is the
+Gauss-Markov baro bias with the exact discrete transition of ``vnav_graph.sensors.noise``.
+
+Nominal INS vertical channel (the "INS" of the seed; inputs from
+``vertical_input.vertical_inputs``, a GNSS-aided attitude reference, never truth)::
+
+    dv_D/dt = f_D − C33·(B̂_z + K̂_z·F_z) + g(lat, h) + cor_D,    dh/dt = −v_D
+
+with WGS-84 normal gravity at the filter's own height (the 2g/R feedback of eq. 5).
+
+Measurements (seed 001 eq. 6, through the package's one baro model)::
+
+    baro:  h_b = measure_baro(h, v_up, dSF, Td, b, h0) + v,
+           H = [∂h_b/∂h, ∂h_b/∂v_up, 0, 0, ∂h_b/∂s, ∂h_b/∂τ, ∂h_b/∂b]  (``baro_jacobian``)
+    GNSS height:  h_G = h + v_G,             H = [1 0 0 0 0 0 0]
+    GNSS vertical velocity (if given):  −v_D,G = v_up + v_V,  H = [0 1 0 0 0 0 0]
+
+Seed 001's H = [1 0 0 0 −h v −1] is the same row for z = h_i − h_b with the opposite sign
+convention of the states. GNSS measurements are gated at ``gnss_gate_sigma`` (rejected fixes
+are counted in ``info["gnss_rejected"]``); during GNSS outages only the baro updates.
+
+Reported baro errors (``Estimate.baro``): the final dSF and Td with their posterior σ and
+prior σ (``ParamEstimate.observable`` judges observability), and the time average of b(t)
+over the drive. The latter uses an accumulator state I = ∫ b dt (İ = b; no effect on the seven
+states' estimates because it is never measured): its final filtered value is conditioned on
+all data, so Î(T)/T and √P_II/T are the smoothed time average and its σ.
+
+The covariance is returned in the shared ``ERROR_STATE`` layout (estimated − true): pos_n[2]
+(down), vel_n[2] (down), bias_accel[2] (B_z), baro_scale, baro_latency, baro_bias; every
+other row/column NaN (K_z has no slot there).
+
+References: seed 001 §3.2 (eqs. 5-6); Groves 2nd ed. §14.2 (closed-loop error-state KF).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from ..geo.earth import gravity_scalar, radii, radii_scalar
+from ..sensors.baro import baro_jacobian, measure_baro
+from ..sensors.noise import gm_process_var, gm_transition
+from ..types import (
+    ERROR_STATE_DIM,
+    BaroEstimate,
+    Drive,
+    Estimate,
+    FloatArray,
+    ParamEstimate,
+    Trajectory,
+)
+from .vertical_input import AhrsConfig, VerticalInputs, vertical_inputs
+
+NX = 8  # 7 filter states + the accumulator I = ∫ b dt
+IH, IV, IB, IK, IS, ITD, IBB, II = range(NX)
+
+
+@dataclass(frozen=True)
+class VEKF7Config:
+    """Tuning of the 7-state vertical EKF. ``None`` takes the value from the stream's spec
+    (``drive.imu.spec`` / ``drive.baro.spec``) or the stated fallback.
+
+    accel_psd : vertical specific-force white-noise PSD [(m/s²)²/Hz]; None: spec noise
+        density² + ``input_error_psd``
+    input_error_psd : floor PSD of the attitude-reference error in f_D [(m/s²)²/Hz]. Measured
+        on the sortie scenario (industrial IMU): with GNSS the AHRS makes f_D err by ≈ 2 mm/s²
+        rms with ≈ 10 s correlation, PSD ≈ 2σ²τ ≈ 1e-4; without it the vertical-velocity
+        NEES is ≈ 2.5× too large
+    tilt_sd, input_corr_s : AHRS tilt σ with GNSS [rad] and correlation time [s] of the
+        manoeuvre-dependent f_D error, see ``input_error_psd``
+    accel_bias_sd, accel_bias_tau : Gauss-Markov σ [m/s²] / τ [s] of B_z; spec or 0.02 / 3600
+    accel_bias_rw : extra random walk of B_z [m/s²/√s] for other-axis, attitude and Coriolis
+        errors of the vertical specific force (not in eq. 5's state)
+    accel_scale_sd : prior σ of K_z [-]; spec or 1e-3
+    scale_prior_sd : prior σ of dSF [-]; spec ``scale_sd`` or 0.02
+    latency_prior, latency_prior_sd : prior mean and σ of Td [s]
+    bias_prior_sd, bias_tau : σ [m] and τ [s] of the baro Gauss-Markov bias; spec or 10 / 3600
+    baro_noise_sd : white baro noise [m]; spec or 0.5
+    gnss_vertical_sd : GNSS height σ [m] when the stream gives none (it always does)
+    use_gnss_velocity : use the GNSS vertical velocity when the receiver gives it
+    gnss_gate_sigma : reject GNSS innovations beyond this many σ
+    cov_rate_hz : rate at which covariances are stored in the Estimate
+    ahrs : attitude-reference gains for ``vertical_inputs``
+    """
+
+    accel_psd: float | None = None
+    input_error_psd: float = 1e-4
+    tilt_sd: float = 5e-4
+    input_corr_s: float = 20.0
+    accel_bias_sd: float | None = None
+    accel_bias_tau: float | None = None
+    accel_bias_rw: float = 2e-4
+    accel_scale_sd: float | None = None
+    scale_prior_sd: float | None = None
+    latency_prior: float = 0.1
+    latency_prior_sd: float = 0.2
+    bias_prior_sd: float | None = None
+    bias_tau: float | None = None
+    baro_noise_sd: float | None = None
+    gnss_vertical_sd: float = 3.0
+    use_gnss_velocity: bool = True
+    gnss_gate_sigma: float = 5.0
+    cov_rate_hz: float = 1.0
+    ahrs: AhrsConfig | None = None
+
+
+def input_error_psd(
+    drive: Drive, vi: VerticalInputs, base_psd: float, tilt_sd: float, gyro_bias_sd: float,
+    corr_s: float,
+) -> FloatArray:
+    """PSD of the vertical specific-force input error at the IMU epochs [(m/s²)²/Hz], (N,).
+
+    The attitude reference (``vertical_input``) is GNSS-aided: with fixes its tilt error is
+    ≈ ``tilt_sd``; in a GNSS outage it grows with the gyro bias, σ_ψ = tilt_sd + σ_bg·t_gap,
+    and it has no Coriolis term there (no horizontal velocity). The f_D error is then
+    σ_f² = (σ_ψ·|f_h|)² + (2Ω_ie·|v_h|)²·[in outage], |f_h| the horizontal specific force, and
+    is treated as white with PSD base_psd + 2·corr_s·σ_f² (first-order Markov of correlation
+    time corr_s and variance σ_f², integrated over its correlation time).
+    """
+    from ..geo.earth import OMEGA_IE
+    from ..geo.frames import quat_to_mat
+
+    t = vi.t
+    f_n = np.einsum("nij,nj->ni", quat_to_mat(vi.q_nb), drive.imu.accel_b)
+    f_h = np.hypot(f_n[:, 0], f_n[:, 1])
+    gn = drive.gnss
+    if gn is None or gn.t.size < 2:
+        t_gap = t - t[0]
+        v_h = np.zeros(t.size)
+    else:
+        nominal = float(np.median(np.diff(gn.t)))
+        i = np.searchsorted(gn.t, t, side="right") - 1
+        t_last = np.where(i >= 0, gn.t[np.maximum(i, 0)], t[0])
+        t_gap = np.maximum(t - t_last - nominal, 0.0)
+        v_h = np.zeros(t.size) if gn.vel_n is None else np.hypot(
+            gn.vel_n[np.maximum(i, 0), 0], gn.vel_n[np.maximum(i, 0), 1])
+    sig_psi = tilt_sd + gyro_bias_sd * t_gap
+    var_f = (sig_psi * f_h) ** 2 + np.where(t_gap > 0, (2 * OMEGA_IE * v_h) ** 2, 0.0)
+    return base_psd + 2.0 * corr_s * var_f
+
+
+def _spec_value(spec: object, name: str, fallback: float, min_value: float = 0.0) -> float:
+    v = getattr(spec, name, None) if spec is not None else None
+    if v is None or not np.isfinite(v) or v <= min_value:
+        return fallback
+    return float(v)
+
+
+@njit(cache=True)
+def _propagate(k0, k1, t, f_down, g_lat, c33, f_z, cor, rho2, phi_b, q_b, phi_ab, q_ab,
+               q_acc, nom, p, h_out, v_out):
+    """Propagate nominal and covariance from IMU epoch k0 to k1 (trapezoid; Φ = I + F·dt)."""
+    for k in range(k0, k1):
+        dt = t[k + 1] - t[k]
+        h, v = nom[IH], nom[IV]
+        bz, kz = nom[IB], nom[IK]
+        a0 = -(f_down[k] - c33[k] * (bz + kz * f_z[k]) + gravity_scalar(g_lat[k], h) + cor[k])
+        h_p = h + v * dt
+        a1 = -(f_down[k + 1] - c33[k + 1] * (bz + kz * f_z[k + 1])
+               + gravity_scalar(g_lat[k + 1], h_p) + cor[k + 1])
+        v_new = v + 0.5 * (a0 + a1) * dt
+        h_new = h + 0.5 * (v + v_new) * dt
+        b_old = nom[IBB]
+        nom[IBB] = phi_b[k] * b_old
+        nom[II] += 0.5 * (b_old + nom[IBB]) * dt
+        nom[IB] = phi_ab[k] * bz
+        nom[IH], nom[IV] = h_new, v_new
+        # error dynamics, seed 001 eq. 5
+        g = gravity_scalar(g_lat[k], h)
+        rn, re = radii_scalar(g_lat[k])  # R0 = √(R_N·R_E), Gaussian mean radius
+        f = np.eye(NX)
+        f[IH, IV] = dt
+        f[IV, IH] = (-rho2[k] + 2.0 * g / (np.sqrt(rn * re) + h)) * dt
+        f[IV, IB] = c33[k] * dt
+        f[IV, IK] = c33[k] * f_z[k] * dt
+        f[IB, IB] = phi_ab[k]
+        f[IBB, IBB] = phi_b[k]
+        f[II, IBB] = dt
+        p[:, :] = f @ p @ f.T
+        p[IV, IV] += q_acc[k] * dt
+        p[IB, IB] += q_ab[k]
+        p[IBB, IBB] += q_b[k]
+        h_out[k + 1] = h_new
+        v_out[k + 1] = v_new
+
+
+@njit(cache=True)
+def _update(nom, p, hrow, r, var_r):
+    """Scalar closed-loop update (Joseph form). Returns the normalised innovation."""
+    ph = p @ hrow
+    s = hrow @ ph + var_r
+    k = ph / s
+    nom += k * r
+    a = np.eye(NX) - np.outer(k, hrow)
+    p[:, :] = a @ p @ a.T + var_r * np.outer(k, k)
+    return r / np.sqrt(s)
+
+
+def _innovation_var(p: FloatArray, hrow: FloatArray, var_r: float) -> float:
+    return float(hrow @ p @ hrow + var_r)
+
+
+class VEKF7:
+    """Seed-001 7-state vertical EKF (see module docstring)."""
+
+    name = "vekf7"
+
+    def __init__(self, config: VEKF7Config | None = None) -> None:
+        self.config = config or VEKF7Config()
+
+    def run(self, drive: Drive) -> Estimate:
+        """Run the filter over the drive. Needs IMU and baro; GNSS optional but expected."""
+        t_start = time.perf_counter()
+        cfg = self.config
+        if drive.baro is None:
+            raise ValueError("vekf7: the drive has no baro stream")
+        vi: VerticalInputs = vertical_inputs(drive, cfg.ahrs)
+        imu_spec = drive.imu.spec
+        baro_spec = drive.baro.spec
+        t = drive.imu.t
+        n = t.size
+        dt = np.diff(t)
+        h0 = float(drive.origin_lla[2])
+
+        # ---- noise and priors (discrete values only through sensors.noise)
+        if cfg.accel_psd is not None:
+            q_acc = np.full(n, cfg.accel_psd)
+        else:
+            q_acc = input_error_psd(
+                drive, vi, _spec_value(imu_spec, "accel_noise_density", 3e-3) ** 2
+                + cfg.input_error_psd, cfg.tilt_sd, _spec_value(imu_spec, "gyro_bias_sd", 1e-4),
+                cfg.input_corr_s)
+        ab_sd = cfg.accel_bias_sd if cfg.accel_bias_sd is not None else _spec_value(
+            imu_spec, "accel_bias_sd", 0.02)
+        ab_tau = cfg.accel_bias_tau if cfg.accel_bias_tau is not None else _spec_value(
+            imu_spec, "accel_bias_tau", 3600.0)
+        ab_rw = max(cfg.accel_bias_rw, _spec_value(imu_spec, "accel_bias_rw", 0.0))
+        k_sd = cfg.accel_scale_sd if cfg.accel_scale_sd is not None else _spec_value(
+            imu_spec, "accel_scale_sd", 1e-3)
+        s_sd = cfg.scale_prior_sd if cfg.scale_prior_sd is not None else _spec_value(
+            baro_spec, "scale_sd", 0.02)
+        b_sd = cfg.bias_prior_sd if cfg.bias_prior_sd is not None else _spec_value(
+            baro_spec, "bias_sd", 10.0)
+        b_tau = cfg.bias_tau if cfg.bias_tau is not None else _spec_value(
+            baro_spec, "bias_tau", 3600.0)
+        r_baro = (cfg.baro_noise_sd if cfg.baro_noise_sd is not None else _spec_value(
+            baro_spec, "noise_sd", 0.5)) ** 2
+        phi_b = gm_transition(dt, b_tau)
+        q_b = gm_process_var(dt, b_tau, b_sd)
+        phi_ab = gm_transition(dt, ab_tau)
+        q_ab = gm_process_var(dt, ab_tau, ab_sd) + ab_rw**2 * dt
+
+        # ---- transport-rate term ρ_E² + ρ_N² from GNSS horizontal velocity
+        gn = drive.gnss
+        rho2 = np.zeros(n)
+        if gn is not None and gn.vel_n is not None:
+            vn = np.interp(t, gn.t, gn.vel_n[:, 0])
+            ve = np.interp(t, gn.t, gn.vel_n[:, 1])
+            rn, re = radii(vi.lat)
+            rho2 = (ve / (re + h0)) ** 2 + (vn / (rn + h0)) ** 2
+
+        # ---- initial state
+        baro_alt = drive.baro.altitude
+        nom = np.zeros(NX)
+        p = np.zeros((NX, NX))
+        if gn is not None and gn.t[0] <= t[0] + 5.0:
+            nom[IH] = float(gn.lla[0, 2])
+            p[IH, IH] = float(gn.pos_sd[0, 2]) ** 2
+        else:
+            nom[IH] = float(np.interp(t[0], drive.baro.t, baro_alt))
+            p[IH, IH] = b_sd**2 + 1.0
+        if gn is not None and gn.vel_n is not None and gn.t[0] <= t[0] + 5.0:
+            nom[IV] = -float(gn.vel_n[0, 2])
+        p[IV, IV] = 0.5**2
+        nom[ITD] = cfg.latency_prior
+        np.fill_diagonal(p, np.diag(p) + np.array(
+            [0.0, 0.0, ab_sd**2 + 1e-12, k_sd**2 + 1e-12, s_sd**2 + 1e-12,
+             cfg.latency_prior_sd**2, b_sd**2, 0.0]))
+
+        # ---- measurement events, processed at the first IMU epoch at or after their stamp
+        ev_t = [drive.baro.t]
+        ev_kind = [np.zeros(drive.baro.t.size, dtype=np.int64)]
+        ev_idx = [np.arange(drive.baro.t.size)]
+        if gn is not None:
+            ev_t.append(gn.t)
+            ev_kind.append(np.ones(gn.t.size, dtype=np.int64))
+            ev_idx.append(np.arange(gn.t.size))
+        et = np.concatenate(ev_t)
+        ek = np.concatenate(ev_kind)
+        ei = np.concatenate(ev_idx)
+        order = np.lexsort((ek, et))
+        et, ek, ei = et[order], ek[order], ei[order]
+        keep = (et >= t[0]) & (et <= t[-1])
+        et, ek, ei = et[keep], ek[keep], ei[keep]
+        kk = np.searchsorted(t, et, side="left")
+
+        # antenna height offset −[C_nb l]_D from the attitude reference (zero lever arm: 0)
+        lever_dz = np.zeros(n)
+        if gn is not None and np.any(gn.lever_arm_b != 0):
+            from ..geo.frames import quat_to_mat
+
+            lever_dz = -(quat_to_mat(vi.q_nb) @ gn.lever_arm_b)[:, 2]
+
+        h_out = np.empty(n)
+        v_out = np.empty(n)
+        h_out[0], v_out[0] = nom[IH], nom[IV]
+        cov_dt = 1.0 / cfg.cov_rate_hz
+        t_cov: list[float] = []
+        p_cov: list[FloatArray] = []
+        b_hist: list[float] = []
+        innov: dict[str, list[float]] = {"baro": [], "gnss_alt": [], "gnss_vel": []}
+        rejected = 0
+        k_cur = 0
+        next_cov = t[0]
+        hz = np.zeros(NX)
+        args = (t, vi.f_down, vi.lat, vi.c33, vi.f_z_b, vi.coriolis_down, rho2, phi_b, q_b,
+                phi_ab, q_ab, q_acc)
+        for j in range(et.size):
+            k = int(kk[j])
+            if k > k_cur:
+                _propagate(k_cur, k, *args, nom, p, h_out, v_out)
+                k_cur = k
+            lag = t[k] - et[j]  # evaluate the model at the measurement stamp
+            h_m = nom[IH] - nom[IV] * lag
+            if ek[j] == 0:
+                i = int(ei[j])
+                z = float(baro_alt[i])
+                zhat = float(measure_baro(h_m, nom[IV], nom[IS], nom[ITD], nom[IBB], h0))
+                jac = baro_jacobian(h_m, nom[IV], nom[IS], nom[ITD], h0)
+                hz[:] = 0.0
+                hz[IH], hz[IV], hz[IS], hz[ITD], hz[IBB] = jac
+                innov["baro"].append(_update(nom, p, hz.copy(), z - zhat, r_baro))
+            else:
+                assert gn is not None
+                i = int(ei[j])
+                hz[:] = 0.0
+                hz[IH] = 1.0
+                var_r = float(gn.pos_sd[i, 2]) ** 2
+                r = float(gn.lla[i, 2]) - (h_m + lever_dz[k])
+                if r**2 > cfg.gnss_gate_sigma**2 * _innovation_var(p, hz, var_r):
+                    rejected += 1
+                else:
+                    innov["gnss_alt"].append(_update(nom, p, hz.copy(), r, var_r))
+                    if cfg.use_gnss_velocity and gn.vel_n is not None and gn.vel_sd is not None:
+                        hz[:] = 0.0
+                        hz[IV] = 1.0
+                        var_v = float(gn.vel_sd[i, 2]) ** 2
+                        rv = -float(gn.vel_n[i, 2]) - nom[IV]
+                        if rv**2 <= cfg.gnss_gate_sigma**2 * _innovation_var(p, hz, var_v):
+                            innov["gnss_vel"].append(_update(nom, p, hz.copy(), rv, var_v))
+            h_out[k], v_out[k] = nom[IH], nom[IV]
+            if t[k] >= next_cov:
+                t_cov.append(float(t[k]))
+                p_cov.append(p.copy())
+                b_hist.append(float(nom[IBB]))
+                next_cov = t[k] + cov_dt
+        if k_cur < n - 1:
+            _propagate(k_cur, n - 1, *args, nom, p, h_out, v_out)
+        if t_cov and t_cov[-1] >= t[-1]:  # the last epoch holds the final covariance
+            t_cov.pop()
+            p_cov.pop()
+        t_cov.append(float(t[-1]))
+        p_cov.append(p.copy())
+
+        # ---- outputs
+        dur = float(t[-1] - t[0])
+        lla = np.column_stack([np.full(n, np.nan), np.full(n, np.nan), h_out])
+        vel = np.column_stack([np.full(n, np.nan), np.full(n, np.nan), -v_out])
+        traj = Trajectory(t, lla, vel)
+        cov18 = _to_error_state(np.array(p_cov)) if p_cov else None
+        baro = BaroEstimate(
+            scale=ParamEstimate(float(nom[IS]), float(np.sqrt(p[IS, IS])), s_sd),
+            latency_s=ParamEstimate(float(nom[ITD]), float(np.sqrt(p[ITD, ITD])),
+                                    cfg.latency_prior_sd),
+            bias_m=ParamEstimate(float(nom[II] / dur), float(np.sqrt(p[II, II]) / dur), b_sd),
+        )
+        info = {
+            "gnss_rejected": rejected,
+            "accel_bias_z": float(nom[IB]),
+            "accel_bias_z_sd": float(np.sqrt(p[IB, IB])),
+            "accel_scale_z": float(nom[IK]),
+            "accel_scale_z_sd": float(np.sqrt(p[IK, IK])),
+            "baro_bias_final": float(nom[IBB]),
+        }
+        return Estimate(
+            estimator=self.name, trajectory=traj,
+            provides=frozenset({"alt", "vel_d", "baro", "cov"}),
+            cov=cov18, t_cov=np.array(t_cov) if p_cov else None, baro=baro,
+            runtime_s=time.perf_counter() - t_start,
+            innovations={k: np.asarray(v) for k, v in innov.items()},
+            info=info, config=cfg,
+        )
+
+
+# ERROR_STATE rows (estimated − true = −x): pos_n[2] down = −h → +δh_i; vel_n[2] = −v_up →
+# +δv_z; bias_accel[2] = −B_z; baro_scale, baro_latency, baro_bias = −(dSF, Td, δh_b).
+_MAP = ((2, IH, 1.0), (5, IV, 1.0), (14, IB, -1.0), (15, IS, -1.0), (16, ITD, -1.0),
+        (17, IBB, -1.0))
+
+
+def _to_error_state(p: FloatArray) -> FloatArray:
+    """(M, 8, 8) filter covariances -> (M, 18, 18) ERROR_STATE layout, NaN where absent."""
+    tmat = np.zeros((ERROR_STATE_DIM, NX))
+    for row, col, sign in _MAP:
+        tmat[row, col] = sign
+    out = np.einsum("ij,mjk,lk->mil", tmat, p, tmat)
+    rows = np.array([r for r, _, _ in _MAP])
+    mask = np.ones(ERROR_STATE_DIM, dtype=bool)
+    mask[rows] = False
+    out[:, mask, :] = np.nan
+    out[:, :, mask] = np.nan
+    return out
+
+
+__all__ = ["VEKF7", "VEKF7Config"]

@@ -1,0 +1,299 @@
+"""Seed 004: 4-state baro-inertial Kalman filter of the INS vertical channel.
+
+States (seed 004 §6.2, errors = indicated − true)::
+
+    x = [Δh_ins, Δv_d, Δh_baro, Δh_m]
+
+Δh_ins [m] is the INS height error (+up), Δv_d [m/s] the INS down-velocity error, Δh_baro [m]
+the slowly varying baro altitude error (bias plus the accumulated scale-factor error of the
+flight level) and Δh_m [m] the second, faster "Markov baro state" (lag- and
+manoeuvre-induced baro error). Both baro errors are first-order Gauss-Markov processes.
+Seed 004 prints the transition with a δt coupling of the first two states and process noise
+
+    Q = [[Aδt³/3, Aδt²/2, 0, 0], [Aδt²/2, Aδt, 0, 0], [0, 0, 2β₃σ₃²δt, 0], [0, 0, 0, 2β₄σ₄²δt]]
+
+(A the PSD of the vertical specific-force error, β = 1/τ). Here h is +up and v_d +down, so
+Δḣ_ins = −Δv_d and Φ[0, 1] = −δt with the matching sign in Q[0, 1]; the Markov states use the
+exact discrete transition exp(−βδt) and variance σ²(1 − exp(−2βδt)) of
+``vnav_graph.sensors.noise`` (= 2βσ²δt to first order). The seed's garbled text also carries
+a second-order-Markov parameter α = √(β² + ω²); we read the fourth state as an independent
+first-order Markov error (documented interpretation, not the paper's verbatim model).
+
+Measurements (closed loop; the INS height and velocity are corrected after every update and
+their error states reset to zero):
+
+- baro (seed 004): Z = h_ins − h_baro = Δh_ins − Δh_baro − Δh_m − v,  H = [1, 0, −1, −1];
+- GNSS height, when available (our addition, so the baro errors are calibrated in flight):
+  Z = h_ins − h_GNSS = Δh_ins − v_G, H = [1, 0, 0, 0], gated at ``gnss_gate_sigma``.
+
+In GNSS outages only the baro updates: the INS channel then follows the baro corrected by the
+last baro-error estimate, so the altitude error stays bounded (it grows only with the change of
+the true baro error, e.g. the scale error times the altitude change, over the outage).
+
+INS vertical channel (inputs from ``vertical_input.vertical_inputs``, never truth)::
+
+    dv_D/dt = f_D + g(lat, h) + cor_D,   dh/dt = −v_D     (WGS-84 gravity at the INS height)
+
+The accelerometer bias is not a state (4-state filter): it is absorbed by the process noise A,
+which by default is the accelerometer white-noise PSD plus σ_ba²·``bias_corr_s`` (a random
+walk that lets the velocity error follow the bias) plus the attitude-reference input error.
+
+Outputs: altitude and down velocity at the IMU epochs; covariance in the ``ERROR_STATE`` layout
+(pos_n[2] down, vel_n[2] down, baro_bias ← Δh_baro, rest NaN); ``Estimate.baro.bias_m`` is the
+time average of the Δh_baro estimate — it lumps the scale error in, so it is the "baro error"
+of the seed, not b(t) of the package model — with σ the time average of its σ (an upper bound
+of the σ of the average).
+
+Reference: seed 004 §6.2 (Reddy & Saraswat, four-state baro-inertial filter); Groves 2nd ed.
+§16.3.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from ..geo.earth import gravity_scalar
+from ..sensors.noise import gm_process_var, gm_transition
+from ..types import (
+    ERROR_STATE_DIM,
+    BaroEstimate,
+    Drive,
+    Estimate,
+    FloatArray,
+    ParamEstimate,
+    Trajectory,
+)
+from .vekf7 import input_error_psd
+from .vertical_input import AhrsConfig, vertical_inputs
+
+NX = 4
+
+
+@dataclass(frozen=True)
+class VKF4Config:
+    """Tuning of the 4-state baro-inertial filter (``None``: from the stream specs).
+
+    accel_psd : A, PSD of the vertical specific-force error [(m/s²)²/Hz]; None: spec noise
+        density² + spec accel_bias_sd²·``bias_corr_s`` + the attitude-reference input error
+        of ``vekf7.input_error_psd`` (time-varying: larger in manoeuvres and GNSS outages)
+    bias_corr_s : time over which an unmodelled accelerometer bias is treated as white [s]
+    input_error_psd, tilt_sd, input_corr_s : see ``vekf7.VEKF7Config``
+    baro_slow_sd, baro_slow_tau : σ₃ [m], τ₃ [s] of Δh_baro; None: √(bias_sd² +
+        (scale_sd·``alt_span_m``)²) and the spec bias_tau (fallbacks 10 m, 3600 s)
+    alt_span_m : altitude span over which the scale error accumulates into Δh_baro [m]
+    baro_fast_sd, baro_fast_tau : σ₄ [m], τ₄ [s] of the fast Markov state Δh_m
+    baro_noise_sd : white baro noise [m]; spec or 0.5
+    use_gnss : use GNSS heights when available (False: pure seed-004 baro-inertial loop)
+    gnss_gate_sigma : reject GNSS innovations beyond this many σ
+    cov_rate_hz : rate at which covariances are stored
+    ahrs : attitude-reference gains
+    """
+
+    accel_psd: float | None = None
+    bias_corr_s: float = 60.0
+    input_error_psd: float = 1e-4
+    tilt_sd: float = 5e-4
+    input_corr_s: float = 20.0
+    baro_slow_sd: float | None = None
+    baro_slow_tau: float | None = None
+    alt_span_m: float = 1000.0
+    baro_fast_sd: float = 1.5
+    baro_fast_tau: float = 20.0
+    baro_noise_sd: float | None = None
+    use_gnss: bool = True
+    gnss_gate_sigma: float = 5.0
+    cov_rate_hz: float = 1.0
+    ahrs: AhrsConfig | None = None
+
+
+def _spec(spec: object, name: str, fallback: float) -> float:
+    v = getattr(spec, name, None) if spec is not None else None
+    if v is None or not np.isfinite(v) or v <= 0:
+        return fallback
+    return float(v)
+
+
+@njit(cache=True)
+def _run(t, a_in, lat, h_init, v_init, p0, phi3, q3, phi4, q4, a_psd,
+         ev_k, ev_kind, ev_z, ev_var, ev_lag, gate2, cov_dt):
+    """Numba kernel: INS propagation at the IMU epochs, events processed at the first IMU
+    epoch at or after their stamp. a_in = f_D + cor_D (gravity added at the INS height).
+    ev_kind 0 = baro (ev_z = h_baro), 1 = GNSS (ev_z = h_GNSS)."""
+    n = t.size
+    h_out = np.empty(n)
+    v_out = np.empty(n)
+    x = np.zeros(NX)
+    p = p0.copy()
+    h, vd = h_init, v_init
+    h_out[0], v_out[0] = h, vd
+    m = ev_k.size
+    ncov = int((t[-1] - t[0]) / cov_dt) + 2
+    t_cov = np.empty(ncov)
+    p_cov = np.empty((ncov, NX, NX))
+    x3_cov = np.empty(ncov)
+    nc = 0
+    next_cov = t[0]
+    nu = np.full(m, np.nan)
+    rejected = 0
+    j = 0
+    for k in range(n):
+        if k > 0:
+            dt = t[k] - t[k - 1]
+            a0 = a_in[k - 1] + gravity_scalar(lat[k - 1], h)
+            h_p = h - vd * dt
+            a1 = a_in[k] + gravity_scalar(lat[k], h_p)
+            v_new = vd + 0.5 * (a0 + a1) * dt
+            h = h - 0.5 * (vd + v_new) * dt
+            vd = v_new
+            # Φ: Δh ← Δh − δt·Δv_d; baro states exact Gauss-Markov
+            f = np.eye(NX)
+            f[0, 1] = -dt
+            f[2, 2] = phi3[k - 1]
+            f[3, 3] = phi4[k - 1]
+            x = f @ x
+            p = f @ p @ f.T
+            a = a_psd[k - 1]
+            p[0, 0] += a * dt**3 / 3.0
+            p[0, 1] += -a * dt**2 / 2.0
+            p[1, 0] += -a * dt**2 / 2.0
+            p[1, 1] += a * dt
+            p[2, 2] += q3[k - 1]
+            p[3, 3] += q4[k - 1]
+        while j < m and ev_k[j] == k:
+            hrow = np.zeros(NX)
+            hrow[0] = 1.0
+            if ev_kind[j] == 0:
+                hrow[2] = -1.0
+                hrow[3] = -1.0
+            # INS height at the measurement stamp (ev_lag = t_k − t_meas ≥ 0)
+            z = (h + vd * ev_lag[j]) - ev_z[j]
+            r = z - hrow @ x
+            ph = p @ hrow
+            s = hrow @ ph + ev_var[j]
+            if ev_kind[j] == 1 and r * r > gate2 * s:
+                rejected += 1
+                j += 1
+                continue
+            kg = ph / s
+            x = x + kg * r
+            ikh = np.eye(NX) - np.outer(kg, hrow)
+            p = ikh @ p @ ikh.T + ev_var[j] * np.outer(kg, kg)
+            nu[j] = r / np.sqrt(s)
+            # closed loop: correct the INS and reset its error states
+            h -= x[0]
+            vd -= x[1]
+            x[0] = 0.0
+            x[1] = 0.0
+            j += 1
+        h_out[k], v_out[k] = h, vd
+        if t[k] >= next_cov and nc < ncov:
+            t_cov[nc] = t[k]
+            p_cov[nc] = p
+            x3_cov[nc] = x[2]
+            nc += 1
+            next_cov = t[k] + cov_dt
+    return h_out, v_out, t_cov[:nc], p_cov[:nc], x3_cov[:nc], nu, rejected
+
+
+class VKF4:
+    """Seed-004 4-state baro-inertial Kalman filter (see module docstring)."""
+
+    name = "vkf4"
+
+    def __init__(self, config: VKF4Config | None = None) -> None:
+        self.config = config or VKF4Config()
+
+    def run(self, drive: Drive) -> Estimate:
+        """Run the filter. Needs IMU and baro; GNSS heights are used when present."""
+        t_start = time.perf_counter()
+        cfg = self.config
+        if drive.baro is None:
+            raise ValueError("vkf4: the drive has no baro stream")
+        vi = vertical_inputs(drive, cfg.ahrs)
+        imu_spec, baro_spec = drive.imu.spec, drive.baro.spec
+        t = drive.imu.t
+        n = t.size
+        dt = np.diff(t)
+        if cfg.accel_psd is not None:
+            a_psd = np.full(n, cfg.accel_psd)
+        else:
+            a_psd = input_error_psd(
+                drive, vi, _spec(imu_spec, "accel_noise_density", 3e-3) ** 2
+                + _spec(imu_spec, "accel_bias_sd", 0.02) ** 2 * cfg.bias_corr_s
+                + cfg.input_error_psd, cfg.tilt_sd, _spec(imu_spec, "gyro_bias_sd", 1e-4),
+                cfg.input_corr_s)
+        s3 = cfg.baro_slow_sd if cfg.baro_slow_sd is not None else float(np.hypot(
+            _spec(baro_spec, "bias_sd", 10.0), _spec(baro_spec, "scale_sd", 0.02)
+            * cfg.alt_span_m))
+        tau3 = cfg.baro_slow_tau if cfg.baro_slow_tau is not None else _spec(
+            baro_spec, "bias_tau", 3600.0)
+        r_baro = (cfg.baro_noise_sd if cfg.baro_noise_sd is not None else _spec(
+            baro_spec, "noise_sd", 0.5)) ** 2
+        phi3, q3 = gm_transition(dt, tau3), gm_process_var(dt, tau3, s3)
+        phi4 = gm_transition(dt, cfg.baro_fast_tau)
+        q4 = gm_process_var(dt, cfg.baro_fast_tau, cfg.baro_fast_sd)
+
+        # events
+        gn = drive.gnss if cfg.use_gnss else None
+        tb = drive.baro.t
+        ev = [(tb, np.zeros(tb.size, np.int64), drive.baro.altitude, np.full(tb.size, r_baro))]
+        if gn is not None:
+            ev.append((gn.t, np.ones(gn.t.size, np.int64), gn.lla[:, 2], gn.pos_sd[:, 2] ** 2))
+        et = np.concatenate([e[0] for e in ev])
+        ek = np.concatenate([e[1] for e in ev])
+        ez = np.concatenate([e[2] for e in ev])
+        evar = np.concatenate([e[3] for e in ev])
+        order = np.lexsort((ek, et))
+        et, ek, ez, evar = et[order], ek[order], ez[order], evar[order]
+        keep = (et >= t[0]) & (et <= t[-1])
+        et, ek, ez, evar = et[keep], ek[keep], ez[keep], evar[keep]
+        kk = np.searchsorted(t, et, side="left").astype(np.int64)
+        lag = t[kk] - et
+
+        # initial state: first GNSS height (or baro), at rest
+        if gn is not None and gn.t[0] <= t[0] + 5.0:
+            h_init, var_h = float(gn.lla[0, 2]), float(gn.pos_sd[0, 2]) ** 2
+        else:
+            h_init, var_h = float(np.interp(t[0], tb, drive.baro.altitude)), s3**2
+        v_init = float(gn.vel_n[0, 2]) if gn is not None and gn.vel_n is not None else 0.0
+        p0 = np.diag([var_h, 0.5**2, s3**2, cfg.baro_fast_sd**2])
+        h_out, v_out, t_cov, p_cov, x3, nu, rejected = _run(
+            t, vi.f_down + vi.coriolis_down, vi.lat, h_init, v_init, p0, phi3, q3, phi4, q4,
+            a_psd, kk, ek, ez, evar, lag, cfg.gnss_gate_sigma**2, 1.0 / cfg.cov_rate_hz)
+
+        lla = np.column_stack([np.full(n, np.nan), np.full(n, np.nan), h_out])
+        vel = np.column_stack([np.full(n, np.nan), np.full(n, np.nan), v_out])
+        sd3 = np.sqrt(p_cov[:, 2, 2])
+        baro = BaroEstimate(bias_m=ParamEstimate(float(np.mean(x3)), float(np.mean(sd3)), s3))
+        return Estimate(
+            estimator=self.name, trajectory=Trajectory(t, lla, vel),
+            provides=frozenset({"alt", "vel_d", "baro", "cov"}),
+            cov=_to_error_state(p_cov), t_cov=t_cov, baro=baro,
+            runtime_s=time.perf_counter() - t_start,
+            innovations={"baro": nu[(ek == 0) & np.isfinite(nu)],
+                         "gnss_alt": nu[(ek == 1) & np.isfinite(nu)]},
+            info={"gnss_rejected": int(rejected), "accel_psd_mean": float(np.mean(a_psd)),
+                  "baro_slow_sd": s3},
+            config=cfg,
+        )
+
+
+def _to_error_state(p: FloatArray) -> FloatArray:
+    """(M, 4, 4) -> (M, 18, 18). ERROR_STATE is estimated − true: the corrected INS error is
+    (x − x̂): pos_n[2] down = −(Δh − Δĥ) → −1; vel_n[2] = +(Δv_d − Δv̂_d) → +1; the baro-error
+    estimate's error is −(x₃ − x̂₃) → −1."""
+    tmat = np.zeros((ERROR_STATE_DIM, NX))
+    tmat[2, 0], tmat[5, 1], tmat[17, 2] = -1.0, 1.0, -1.0
+    out = np.einsum("ij,mjk,lk->mil", tmat, p, tmat)
+    mask = np.ones(ERROR_STATE_DIM, dtype=bool)
+    mask[[2, 5, 17]] = False
+    out[:, mask, :] = np.nan
+    out[:, :, mask] = np.nan
+    return out
+
+
+__all__ = ["VKF4", "VKF4Config"]
