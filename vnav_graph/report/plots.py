@@ -43,12 +43,15 @@ BARO_PARAMS = (("scale", "scale error s [%]", 100.0), ("latency_s", "latency τd
                ("bias_m", "bias b [m]", 1.0))
 
 
-def _figure(w: float, h: float) -> Any:
+def _figure(w: float, h: float, left: float = 0.08, wspace: float = 0.12) -> Any:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(w, h), dpi=DPI, layout="constrained")
+    # fixed margins instead of constrained layout: the layout solver cost ~1 s per figure
+    fig = Figure(figsize=(w, h), dpi=DPI)
     FigureCanvasAgg(fig)
+    fig.subplots_adjust(left=left, right=0.98, bottom=0.55 / h, top=1.0 - 0.7 / h,
+                        hspace=0.45, wspace=wspace)
     return fig
 
 
@@ -96,10 +99,8 @@ def altitude_errors(est: Estimate, drive: Drive) -> tuple[FloatArray, FloatArray
     """
     tr = est.trajectory
     if drive.truth is not None:
-        from ..evaluation.metrics import errors_vs_truth
-
-        err = errors_vs_truth(est, drive)
-        return err.t, err.alt, _alt_sd(est, err.t), "truth"
+        t, e, _ = truth_errors(est, drive)
+        return t, e, _alt_sd(est, t), "truth"
     if drive.gnss is None:
         raise ValueError("no truth and no GNSS to compare with")
     g = drive.gnss
@@ -110,6 +111,23 @@ def altitude_errors(est: Estimate, drive: Drive) -> tuple[FloatArray, FloatArray
     if sd is not None:
         sd = np.sqrt(sd**2 + g.pos_sd[m, 2] ** 2)
     return t, e, sd, "GNSS"
+
+
+def truth_errors(est: Estimate, drive: Drive) -> tuple[FloatArray, FloatArray,
+                                                       FloatArray | None]:
+    """(t, altitude error, down-velocity error or None) against truth at the estimate epochs
+    inside the truth span: the quantities of ``metrics.errors_vs_truth`` (linear
+    interpolation of the truth), without interpolating the attitude, which plots do not use
+    and which costs a slerp of every epoch."""
+    tr, truth = est.trajectory, drive.truth
+    assert truth is not None
+    m = (tr.t >= truth.t[0]) & (tr.t <= truth.t[-1])
+    t = tr.t[m]
+    alt = tr.alt[m] - np.interp(t, truth.t, truth.alt)
+    vd = None
+    if "vel_d" in est.provides:
+        vd = tr.vel_down[m] - np.interp(t, truth.t, truth.vel_down)
+    return t, alt, vd
 
 
 def _ok(results: Sequence[Any]) -> list[Estimate]:
@@ -151,6 +169,7 @@ def plot_altitude_errors(drive: Drive, results: Sequence[Any]) -> bytes | None:
         ax.set_visible(False)
     for ax in axes[max(0, len(ests) - ncol):len(ests)]:
         ax.set_xlabel("time [s]", fontsize=8)
+        ax.xaxis.set_tick_params(labelbottom=True)  # sharex hides them above an empty slot
     fig.suptitle(f"Altitude error vs {ref} — {drive.name}", fontsize=10)
     return _png(fig)
 
@@ -168,10 +187,7 @@ def plot_vertical_velocity_errors(drive: Drive, results: Sequence[Any]) -> bytes
     for est in ests:
         tr = est.trajectory
         if drive.truth is not None:
-            from ..evaluation.metrics import errors_vs_truth
-
-            err = errors_vs_truth(est, drive)
-            t, e = err.t, err.vel_down
+            t, _, e = truth_errors(est, drive)
         else:
             assert g is not None and g.vel_n is not None
             m = (g.t >= tr.t[0]) & (g.t <= tr.t[-1])
@@ -186,7 +202,8 @@ def plot_vertical_velocity_errors(drive: Drive, results: Sequence[Any]) -> bytes
     ax.set_ylabel("v_D error [m/s]")
     ax.set_title(f"Vertical velocity error vs {ref} (legend: RMS m/s) — {drive.name}",
                  fontsize=10)
-    ax.legend(fontsize=7, ncol=4, loc="upper left")
+    fig.subplots_adjust(right=0.8)
+    ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5))
     return _png(fig)
 
 
@@ -213,7 +230,7 @@ def plot_baro_parameters(drive: Drive, results: Sequence[Any]) -> bytes | None:
     if not ests:
         return None
     truth = baro_truth(drive)
-    fig = _figure(11.0, 3.2)
+    fig = _figure(11.0, 3.2, left=0.1, wspace=0.45)
     axes = fig.subplots(1, 3)
     for ax, (key, label, sc) in zip(axes, BARO_PARAMS, strict=True):
         names, vals, sds = [], [], []
@@ -267,38 +284,64 @@ def baro_histories(est: Estimate) -> dict[str, tuple[FloatArray, FloatArray,
     return out
 
 
+def baro_sd_histories(est: Estimate) -> dict[str, tuple[FloatArray, FloatArray]]:
+    """(t_cov, 1σ) of the baro scale and latency from ``Estimate.cov`` where it is finite."""
+    out: dict[str, tuple[FloatArray, FloatArray]] = {}
+    if est.cov is None or est.t_cov is None:
+        return out
+    for key in ("scale", "latency_s"):
+        v = est.cov[:, _IDX[key], _IDX[key]]
+        ok = np.isfinite(v)
+        if ok.sum() >= 2:
+            out[key] = (est.t_cov[ok], np.sqrt(np.clip(v[ok], 0.0, None)))
+    return out
+
+
 def plot_baro_convergence(drive: Drive, results: Sequence[Any]) -> bytes | None:
-    """Baro parameter estimates vs time (±1σ where known) with the truth; None when no
-    estimator provides a history."""
-    hists = {e.estimator: baro_histories(e) for e in _ok(results)}
-    hists = {k: v for k, v in hists.items() if v}
-    if not hists:
+    """Baro parameter estimates vs time (±1σ where known) with the truth, and the σ of the
+    scale and latency from the covariance (log scale: how fast the data make them
+    observable). None when no estimator provides any of these."""
+    ests = _ok(results)
+    hists = {e.estimator: h for e in ests if (h := baro_histories(e))}
+    sds = {e.estimator: h for e in ests if (h := baro_sd_histories(e))}
+    if not hists and not sds:
         return None
-    keys = [k for k, _, _ in BARO_PARAMS if any(k in h for h in hists.values())]
-    fig = _figure(11.0, 0.6 + 2.3 * len(keys))
-    axes = fig.subplots(len(keys), 1, sharex=True, squeeze=False).ravel()
+    panels = [("value", k) for k, _, _ in BARO_PARAMS if any(k in h for h in hists.values())]
+    panels += [("sd", k) for k in ("scale", "latency_s") if any(k in h for h in sds.values())]
+    fig = _figure(11.0, 0.6 + 2.1 * len(panels))
+    axes = fig.subplots(len(panels), 1, sharex=True, squeeze=False).ravel()
     truth = baro_truth(drive)
     windows = outage_windows(drive)
-    for ax, key in zip(axes, keys, strict=True):
+    for ax, (kind, key) in zip(axes, panels, strict=True):
         label, sc = next((lb, s) for k, lb, s in BARO_PARAMS if k == key)
         _shade(ax, windows, label=False)
-        for name, h in hists.items():
-            if key not in h:
-                continue
-            t, v, sd = h[key]
-            s = decimate(t.size)
-            (line,) = ax.plot(t[s], v[s] * sc, lw=0.9, label=name)
-            if sd is not None:
-                ax.fill_between(t[s], (v[s] - sd[s]) * sc, (v[s] + sd[s]) * sc,
-                                color=line.get_color(), alpha=0.15, lw=0)
-        if key == "bias_m" and drive.truth is not None and drive.truth.bias_baro is not None:
-            s = decimate(drive.truth.t.size)
-            ax.plot(drive.truth.t[s], drive.truth.bias_baro[s], "k--", lw=1, label="truth")
-        elif truth[key] is not None:
-            ax.axhline(truth[key] * sc, color="k", ls="--", lw=1, label="truth")
-        ax.set_ylabel(label, fontsize=8)
-        ax.legend(fontsize=7, ncol=4, loc="upper right")
+        if kind == "sd":
+            for name, h in sds.items():
+                if key in h:
+                    t, sd = h[key]
+                    s = decimate(t.size)
+                    ax.plot(t[s], sd[s] * sc, lw=0.9, label=name)
+            ax.set_yscale("log")
+            ax.set_ylabel("σ of " + label, fontsize=8)
+        else:
+            for name, h in hists.items():
+                if key not in h:
+                    continue
+                t, v, sd = h[key]
+                s = decimate(t.size)
+                (line,) = ax.plot(t[s], v[s] * sc, lw=0.9, label=name)
+                if sd is not None:
+                    ax.fill_between(t[s], (v[s] - sd[s]) * sc, (v[s] + sd[s]) * sc,
+                                    color=line.get_color(), alpha=0.15, lw=0)
+            if key == "bias_m" and drive.truth is not None and drive.truth.bias_baro is not None:
+                s = decimate(drive.truth.t.size)
+                ax.plot(drive.truth.t[s], drive.truth.bias_baro[s], "k--", lw=1, label="truth")
+            elif truth[key] is not None:
+                ax.axhline(truth[key] * sc, color="k", ls="--", lw=1, label="truth")
+            ax.set_ylabel(label, fontsize=8)
+        ax.legend(fontsize=7, ncol=5, loc="upper right")
         ax.tick_params(labelsize=8)
     axes[-1].set_xlabel("time [s]")
-    fig.suptitle("Baro parameter convergence (band: ±1σ)", fontsize=10)
+    fig.suptitle("Baro parameter convergence (band: ±1σ; σ panels from the covariance)",
+                 fontsize=10)
     return _png(fig)
