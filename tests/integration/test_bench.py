@@ -15,7 +15,12 @@ import pytest
 
 from vnav_graph.cli import main
 from vnav_graph.estimators import base
-from vnav_graph.evaluation.montecarlo import BenchTask, run_task, shorten_scenario
+from vnav_graph.evaluation.montecarlo import (
+    QUICK_DURATION_S,
+    BenchTask,
+    run_task,
+    shorten_scenario,
+)
 from vnav_graph.pipeline import run_estimators, summarize
 from vnav_graph.simulation import simulate
 from vnav_graph.types import Estimate, Trajectory
@@ -61,7 +66,7 @@ def test_bench_cli_writes_schema(tmp_path, fake, capsys):
         assert set(r) >= {"scenario", "seed", "estimator", "status", "error", "alt_rmse_m",
                           "alt_max_abs_m", "vel_down_rmse_mps", "nees_mean", "runtime_s",
                           "realtime_factor", "baro"}
-        assert r["duration_s"] == pytest.approx(150.0)  # --quick drive length
+        assert r["duration_s"] == pytest.approx(QUICK_DURATION_S)  # --quick drive length
         assert r["alt_rmse_m"] == pytest.approx(1.0, abs=1e-9)  # +1 m offset, float round-off
     for sc in ("hill-drive", "sortie"):
         cell = doc["aggregate"][sc]["truth-plus-one"]
