@@ -1,0 +1,150 @@
+"""Performance of the GTSAM smoothers on a long hill-drive (DESIGN.md ``graph_perf.json``).
+
+    python benchmarks/bench_graph.py [--quick] --out DIR
+
+Writes ``DIR/graph_perf.json`` with exactly the keys
+``drive_duration_s, keyframes, batch_s, builtin_floor_s, batch_over_floor, isam2_s,
+isam2_realtime_factor, isam2_update_p99_ms, ekf_s, ekf_realtime_factor, peak_rss_mb``.
+
+- ``batch_s``: graph-batch graph construction + Gauss-Newton solve (all baro samples and
+  GNSS fixes, custom terms linearised in numpy each iteration). Shared set-up (initial
+  values, IMU preintegration) and the marginal covariances are not included in either
+  timing.
+- ``builtin_floor_s``: the same keyframes, the same preintegrated IMU factors, GPS factors
+  at keyframe epochs and GTSAM's ``BarometricFactor`` (pressure in kPa, +z up: the altitude
+  is fed mirrored because the graph is NED; bias only, one baro sample per keyframe, bias
+  random walk as ``BetweenFactorDouble``) — only C++ factors — solved with GTSAM's
+  Levenberg-Marquardt in the same run.
+- ``isam2_s``: the whole ``graph-isam2`` run (online pass + final smoothing + outputs);
+  ``isam2_update_p99_ms``: 99th percentile of the per-keyframe online update, including the
+  Python work of that keyframe (preintegration, interval linearisation).
+- ``ekf_*``: from ``benchmarks/bench_ekf.py:bench_ekf(duration_s, imu_rate_hz)`` when that
+  file exists, else null.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import json
+import resource
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+KEYS = ("drive_duration_s", "keyframes", "batch_s", "builtin_floor_s", "batch_over_floor",
+        "isam2_s", "isam2_realtime_factor", "isam2_update_p99_ms", "ekf_s",
+        "ekf_realtime_factor", "peak_rss_mb")
+
+
+def builtin_floor(drive: Any) -> float:
+    """Build and solve the C++-only graph; returns the wall time [s]."""
+    import gtsam
+    from gtsam.symbol_shorthand import B, C, V, X
+
+    from vnav_graph.estimators import graph as g
+    from vnav_graph.geo.atmosphere import isa_pressure
+
+    cfg = g.GraphConfig()
+    P = g._setup(drive, cfg)
+    pri = g._baro_priors(P.baro_spec)
+    rot, pos, vel = g._initial_states(P)
+    pims = g._pims_for(P, rot, pos)
+    bt = drive.baro.t
+    alt = drive.baro.altitude
+    j = np.clip(np.searchsorted(bt, P.t_kf), 0, bt.size - 1)
+    t0 = time.perf_counter()
+    graph = g._prior_factors(P, rot[0], pos[0], vel[0], pri, 0)
+    graph = gtsam.NonlinearFactorGraph()
+    s = P.imu_spec
+    graph.add(gtsam.PriorFactorPose3(X(0), gtsam.Pose3(gtsam.Rot3(rot[0]), pos[0]),
+                                     g._noise([0.05, 0.05, 0.5, 10.0, 10.0, 10.0])))
+    graph.add(gtsam.PriorFactorVector(V(0), vel[0], g._noise([2.0] * 3)))
+    graph.add(gtsam.PriorFactorConstantBias(
+        B(0), gtsam.imuBias.ConstantBias(),
+        g._noise([max(s.accel_bias_sd, 1e-4)] * 3 + [max(s.gyro_bias_sd, 1e-6)] * 3)))
+    graph.add(gtsam.PriorFactorDouble(C(0), 0.0, g._noise([pri["b_sd"]])))
+    vals = gtsam.Values()
+    baro_noise = g._noise([pri["noise"]])
+    # NED graph, +z-up factor: feed the pressure of the mirrored height −(h − h0)
+    p_kpa = isa_pressure(-(alt[j] - P.h0)) / 1000.0
+    for k in range(P.n_kf):
+        vals.insert(X(k), gtsam.Pose3(gtsam.Rot3(rot[k]), pos[k]))
+        vals.insert(V(k), vel[k])
+        vals.insert(B(k), gtsam.imuBias.ConstantBias())
+        vals.insert(C(k), 0.0)
+        for f in g._keyframe_fix_factors(P, k):
+            graph.add(f)
+        graph.add(gtsam.BarometricFactor(X(k), C(k), float(p_kpa[k]), baro_noise))
+        if k + 1 < P.n_kf:
+            graph.add(gtsam.CombinedImuFactor(X(k), V(k), X(k + 1), V(k + 1), B(k), B(k + 1),
+                                              pims[k]))
+            dt = float(P.t_kf[k + 1] - P.t_kf[k])
+            graph.add(gtsam.BetweenFactorDouble(
+                C(k), C(k + 1), 0.0, g._noise([pri["b_sd"] * np.sqrt(2 * dt / pri["b_tau"])])))
+    params = gtsam.LevenbergMarquardtParams()
+    params.setRelativeErrorTol(1e-9)
+    params.setMaxIterations(50)
+    gtsam.LevenbergMarquardtOptimizer(graph, vals, params).optimize()
+    return time.perf_counter() - t0
+
+
+def ekf_timing(duration_s: float, imu_rate_hz: float) -> tuple[float | None, float | None]:
+    path = Path(__file__).resolve().parent / "bench_ekf.py"
+    if not path.exists():
+        print("bench_ekf.py not found: ekf_s / ekf_realtime_factor are null", file=sys.stderr)
+        return None, None
+    spec = importlib.util.spec_from_file_location("bench_ekf", path)
+    assert spec is not None and spec.loader is not None
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    res = mod.bench_ekf(duration_s, imu_rate_hz)
+    ekf_s = float(res["ekf_s"]) if isinstance(res, dict) else float(res)
+    return ekf_s, duration_s / ekf_s if ekf_s > 0 else None
+
+
+def main(argv: list[str] | None = None) -> dict[str, Any]:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="10-minute drive instead of 1 hour")
+    ap.add_argument("--out", required=True, type=Path)
+    ap.add_argument("--seed", type=int, default=0)
+    a = ap.parse_args(argv)
+    from vnav_graph.estimators.graph import GraphBatch, GraphISAM2
+    from vnav_graph.simulation.scenario import simulate
+
+    duration = 600.0 if a.quick else 3600.0
+    drive = simulate("hill-drive", a.seed, duration_s=duration, imu_rate_hz=200.0)
+    eb = GraphBatch().run(drive)
+    batch_s = float(eb.info["timing_s"]["solve"])
+    floor_s = builtin_floor(drive)
+    ei = GraphISAM2().run(drive)
+    ekf_s, ekf_rf = ekf_timing(duration, 200.0)
+    out = {
+        "drive_duration_s": float(drive.duration_s),
+        "keyframes": int(eb.info["keyframes"]),
+        "batch_s": batch_s,
+        "builtin_floor_s": float(floor_s),
+        "batch_over_floor": batch_s / floor_s,
+        "isam2_s": float(ei.runtime_s),
+        "isam2_realtime_factor": float(drive.duration_s / ei.runtime_s),
+        "isam2_update_p99_ms": float(ei.info["update_p99_ms"]),
+        "ekf_s": ekf_s,
+        "ekf_realtime_factor": ekf_rf,
+        "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+    }
+    assert tuple(out) == KEYS
+    a.out.mkdir(parents=True, exist_ok=True)
+    (a.out / "graph_perf.json").write_text(json.dumps(out, indent=2) + "\n")
+    print(json.dumps(out, indent=2))
+    print(f"graph-batch full run {eb.runtime_s:.1f} s (timing {eb.info['timing_s']}), "
+          f"GN iterations {eb.info['iterations']}; isam2 online {ei.info['online_s']:.1f} s, "
+          f"final smoothing {ei.info['final_smoothing_s']:.1f} s, "
+          f"p50 {ei.info['update_p50_ms']:.1f} ms", file=sys.stderr)
+    return out
+
+
+if __name__ == "__main__":
+    main()
