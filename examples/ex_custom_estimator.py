@@ -10,7 +10,9 @@ setting the QNH before take-off):
 It ignores the scale error s and the latency τd of the baro model
 (h_b − h0 = (1+s)(h(t−τd) − h0) + b(t) + v, ``vnav_graph.sensors.baro``), so its altitude
 error grows with s·(h − h0) and with the drift of b(t): a useful floor that every inertial
-estimator should beat. It is registered under a new name with
+estimator should beat. A second addition, ``loop3-tau60``, is a variant of a built-in
+estimator (the 3rd-order loop with another time constant). Both are registered under new
+names with
 ``vnav_graph.estimators.base.register`` and then benchmarked beside any built-in estimator
 that this build provides (``loop3``, ``ekf``, ``graph-batch`` …), with
 ``vnav_graph.evaluation.montecarlo.bench`` — the function behind ``vnav-graph bench``.
@@ -81,11 +83,24 @@ class BaroOnly:
         )
 
 
+def loop3_tau60(config: Any = None) -> Any:
+    """A variant of a built-in: the 3rd-order loop with a 60 s triple pole instead of 20 s
+    (slower: trusts the inertial channel longer, filters more baro noise)."""
+    from vnav_graph.estimators.loops import Loop3, Loop3Config
+
+    return Loop3(config or Loop3Config(tau=60.0))
+
+
 def main(duration_s: float = 120.0, seeds: int = 2, workers: int = 1) -> dict[str, Any]:
-    """Register ``baro-only`` and bench it against the built-in ``loop3`` and ``ekf`` (those
-    present in this build) on the hill-drive; returns the ``bench.json`` document."""
+    """Register ``baro-only`` (and ``loop3-tau60`` when the loops are in this build) and bench
+    them against the built-in ``loop3`` and ``ekf`` (those present) on the hill-drive;
+    returns the ``bench.json`` document."""
     register(BaroOnly.name, BaroOnly)
-    names = [BaroOnly.name] + [n for n in ("loop3", "ekf") if n in available()]
+    names = [BaroOnly.name]
+    if "loop3" in available():
+        register("loop3-tau60", loop3_tau60)
+        names.append("loop3-tau60")
+    names += [n for n in ("loop3", "ekf") if n in available()]
     return bench(["hill-drive"], names, list(range(seeds)), duration_s=duration_s,
                  workers=workers)
 
