@@ -92,7 +92,7 @@ def test_isam2_final_equals_batch_and_online_is_causal():
     cfg = GraphConfig(cov_epochs=20)
     eb = GraphBatch(cfg).run(d)
     ei = GraphISAM2(cfg).run(d)
-    # both Gauss-Newton runs stop at rel. cost change 1e-9: heights agree to ≲ 1 cm
+    # both Gauss-Newton runs stop at rel. cost change 1e-7: heights agree to ≲ 1 cm
     # (measured 6 mm at the 1e-7 tolerance over 120 s; posterior height sd ≈ 0.1 m)
     np.testing.assert_allclose(ei.trajectory.alt, eb.trajectory.alt, atol=0.01)
     assert abs(ei.baro.scale.est - eb.baro.scale.est) < 0.1 * eb.baro.scale.sd

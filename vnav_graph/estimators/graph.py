@@ -66,9 +66,9 @@ class GraphConfig:
 
     keyframe_dt: float = 1.0
     max_iterations: int = 12
-    rel_tol: float = 1e-9
+    rel_tol: float = 1e-7
     output_rate_hz: float = 20.0
-    cov_epochs: int = 300
+    cov_epochs: int = 60
     gravity_correction: bool = True
     coriolis: bool = True
     segment_s: float = 60.0
