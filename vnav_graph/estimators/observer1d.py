@@ -50,6 +50,26 @@ decided by that undershoot and by Monte Carlo noise). The transient is linear in
 bias error, so the Monte Carlo uses a large one (2 m/s², peak ≈ 22 m) to keep the ensemble
 mean's noise (σ/√n ≈ 0.08 m for 200 runs) far below the 10 % level.
 
+GNSS gating (our addition; issue 6 item 5 — seed 003 assumes clean GPS). A fix whose
+innovation δy = z̃_gps − ẑ⁻ satisfies δy² > k²·S(τ) is rejected (not applied, counted in
+``Estimate.info["gnss_rejected"]``), with k² = χ²₁(1 − p_fa) (``gate_prob`` = p_fa, default
+10⁻³: k = 3.29) and S(τ) = [Φ(τ) P⁺ Φ(τ)ᵀ + Q(τ)]₀₀ + σ_gps² the innovation variance of the
+fixed-gain loop τ seconds after its last *accepted* fix, P⁺ the post-fix Lyapunov solution
+above (at the drive's median fix period, σ_gps the median vertical ``pos_sd``, consumer
+accelerometer noise by default). At τ = T this is the steady-state innovation variance
+S_ss = P⁻₀₀ + σ_gps² (seed 003: √S_ss = 2.31 m, gate ±7.6 m); it widens while fixes are
+rejected, as the INS-only prediction becomes uncertain. Two rules keep the gate from locking
+the GNSS out: (1) no gating during the first ``warmup_s`` (default the analytic settling time,
+49 s at 1 Hz) — S_ss holds only once the loop has settled; (2) when consecutive rejections
+span ``reinit_s`` (default 20 s; ≥ 2 fixes), the observer re-initialises as at the start
+(ẑ = the current fix, v̂ = 0, ĉ kept) and the warm-up restarts (``info["gnss_reinit"]``).
+On clean seed-003 data (bias error 0) the gate rejects 0.106 % of the fixes (p_fa = 0.1 %)
+and the steady σ moves by +0.3 %; ``seed003_monte_carlo`` (the reproduction) stays ungated
+by default. Limitation: the observer has no baro, so during a sustained GNSS failure it can
+only coast on the IMU; on ``erle_pxf_181_gps_glitch`` the in-flight vertical acceleration of
+the AHRS is several m/s² wrong, the coast diverges and the re-initialisation then follows the
+bad GNSS (gate and rejection count work; the altitude is not usable there).
+
 References: seed 003 (1-DOF INS + GPS altitude observer); Franklin, Powell, Workman,
 *Digital Control of Dynamic Systems*, 3rd ed., §6.3 (ZOH/bilinear equivalents).
 """
@@ -73,11 +93,32 @@ SEED003_GAIN = (0.4, 0.04, 0.002)
 
 @dataclass(frozen=True)
 class ObserverConfig:
-    """gain : L (3,) applied at each GPS fix [-, 1/s, 1/s²]; discretisation : "zoh" | "tustin";
-    ahrs : attitude reference for the vertical specific force."""
+    """Configuration of ``observer1d``.
+
+    gain : L (3,) applied at each GPS fix [-, 1/s, 1/s²]
+    discretisation : "zoh" | "tustin"
+    gate_prob : false-alarm probability of the GNSS innovation gate; the gate is
+        δy² > χ²₁(1 − gate_prob) · S(τ) (module docstring, "GNSS gating"); None: no gate
+    gnss_sd : σ of the GNSS altitude used in S [m]; None: median of the drive's vertical
+        ``pos_sd``
+    accel_noise_density : white accelerometer noise used in S [m/s²/√Hz] (default the
+        consumer preset, 300 µg/√Hz)
+    accel_bias_rw : accelerometer bias random walk used in S [m/s²/√s]
+    warmup_s : fixes before t_first_fix + warmup_s are never gated [s]; None: the analytic
+        settling time of the loop at the drive's fix period (``analytic_settling``)
+    reinit_s : consecutive rejections spanning at least this long [s] re-initialise the
+        observer at the current fix (so the gate cannot lock the GNSS out forever)
+    ahrs : attitude reference for the vertical specific force
+    """
 
     gain: tuple[float, float, float] = SEED003_GAIN
     discretisation: str = "zoh"
+    gate_prob: float | None = 1e-3
+    gnss_sd: float | None = None
+    accel_noise_density: float = 300e-6 * G0
+    accel_bias_rw: float = 0.0
+    warmup_s: float | None = None
+    reinit_s: float = 20.0
     ahrs: AhrsConfig = field(default_factory=AhrsConfig)
 
     def __post_init__(self) -> None:
@@ -85,18 +126,68 @@ class ObserverConfig:
             raise ValueError("ObserverConfig.discretisation: 'zoh' or 'tustin'")
         if len(self.gain) != 3:
             raise ValueError("ObserverConfig.gain: three gains")
+        if self.gate_prob is not None and not 0.0 < self.gate_prob < 1.0:
+            raise ValueError("ObserverConfig.gate_prob: in (0, 1) or None")
+
+
+def gate_threshold(gate_prob: float | None) -> float:
+    """k² = χ²₁ quantile at 1 − gate_prob (∞ for None): reject δy² > k²·S."""
+    if gate_prob is None:
+        return float(np.inf)
+    from scipy.stats import chi2
+
+    return float(chi2.ppf(1.0 - gate_prob, 1))
 
 
 @njit(cache=True)
-def observer_kernel(t, a_up, t_fix, z_fix, gain, tustin, x0, grav_grad, h_ref, stride):
-    """Propagate/correct the 1-DOF observer for R runs at once.
+def _gate_var(p, tau, qa, qb, r):
+    """Innovation variance of a fix τ seconds after the last accepted one, from the
+    post-fix covariance p (3, 3): [Φ(τ) p Φ(τ)ᵀ + Q(τ)]₀₀ + r (``_phi_q``, module docstring)."""
+    t2 = tau * tau
+    return (p[0, 0] + 2.0 * tau * p[0, 1] + t2 * (p[0, 2] + p[1, 1]) + t2 * tau * p[1, 2]
+            + 0.25 * t2 * t2 * p[2, 2] + qa * qa * t2 * tau / 3.0
+            + qb * qb * t2 * t2 * tau / 20.0 + r)
+
+
+@njit(cache=True)
+def _fix_update(zf, tf, z, v, c, gain, gate2, p_gate, qa, qb, r_gate, t_warm, reinit_s, st):
+    """One GNSS fix: gate, correct or re-initialise. st = [t_acc, t_gate_on, n_consec,
+    t_first_rej] (float64 (4,), updated in place). Returns z, v, c, innovation, code
+    (0 accepted, 1 rejected, 2 re-initialised)."""
+    innov = zf - z
+    if tf >= st[1] and innov * innov > gate2 * _gate_var(p_gate, tf - st[0], qa, qb, r_gate):
+        if st[2] == 0.0:
+            st[3] = tf
+        st[2] += 1.0
+        if st[2] >= 2.0 and tf - st[3] >= reinit_s:
+            # re-initialise as at the start: z at the fix, v = 0, c kept; gate off again for
+            # t_warm so the loop can settle
+            st[0] = tf
+            st[1] = tf + t_warm
+            st[2] = 0.0
+            return zf, 0.0, c, innov, 2
+        return z, v, c, innov, 1
+    st[0] = tf
+    st[2] = 0.0
+    return z + gain[0] * innov, v + gain[1] * innov, c + gain[2] * innov, innov, 0
+
+
+@njit(cache=True)
+def observer_kernel_gated(t, a_up, t_fix, z_fix, gain, tustin, x0, grav_grad, h_ref, stride,
+                          gate2, p_gate, qa, qb, r_gate, t_warm, reinit_s):
+    """Propagate/correct the 1-DOF observer for R runs at once, with the innovation gate.
 
     t (N,) IMU epochs [s]; a_up (R, N) measured up acceleration [m/s²] (gravity at h_ref
     removed); t_fix (M,), z_fix (R, M) GPS altitudes; gain (3,); tustin: bool; x0 (R, 3);
     grav_grad = 2g/R [1/s²]: the INS adds grav_grad·(ẑ − h_ref) to a_up (gravity decreases
     with height — the positive feedback of the vertical channel; 0 for the seed's model).
-    Returns z, v, c at every ``stride``-th IMU epoch, shape (R, K), plus the altitude
-    just after each fix (R, M) and just before it (R, M).
+    Gate (module docstring, "GNSS gating"): a fix with innovation δy is rejected when
+    δy² > gate2 · S(τ), S(τ) = ``_gate_var(p_gate, τ, qa, qb, r_gate)``, τ the time since the
+    last accepted fix; fixes earlier than t_fix[0] + t_warm are never gated (gate2 = inf: no
+    gate); rejections spanning ≥ reinit_s [s] re-initialise the state (``_fix_update``).
+    Returns z, v, c at every ``stride``-th IMU epoch, shape (R, K), the altitude just after
+    each fix (R, M) and just before it (R, M), the fix codes (R, M) int8 (0 accepted,
+    1 rejected, 2 re-initialised; −1 not reached) and the innovations (R, M) [m].
     """
     r_n, n = a_up.shape
     m = t_fix.size
@@ -106,8 +197,16 @@ def observer_kernel(t, a_up, t_fix, z_fix, gain, tustin, x0, grav_grad, h_ref, s
     c_out = np.empty((r_n, kk))
     z_post = np.full((r_n, m), np.nan)
     z_prior = np.full((r_n, m), np.nan)
+    code = np.full((r_n, m), -1, dtype=np.int8)
+    st = np.empty(4)
+    innov_out = np.full((r_n, m), np.nan)
+    t_gate_on = (t_fix[0] + t_warm) if m > 0 else 0.0
     for r in range(r_n):
         z, v, c = x0[r, 0], x0[r, 1], x0[r, 2]
+        st[0] = t_fix[0] if m > 0 else 0.0  # time of the last accepted fix
+        st[1] = t_gate_on
+        st[2] = 0.0  # consecutive rejections
+        st[3] = 0.0  # time of the first of them
         j = 0
         while j < m and t_fix[j] < t[0]:
             j += 1
@@ -115,11 +214,10 @@ def observer_kernel(t, a_up, t_fix, z_fix, gain, tustin, x0, grav_grad, h_ref, s
             # fixes at t_k are applied before stepping on
             while j < m and t_fix[j] <= t[k] + 1e-9 and (k == n - 1 or t_fix[j] < t[k + 1]):
                 if abs(t_fix[j] - t[k]) <= 1e-9:
-                    innov = z_fix[r, j] - z
                     z_prior[r, j] = z
-                    z += gain[0] * innov
-                    v += gain[1] * innov
-                    c += gain[2] * innov
+                    z, v, c, innov_out[r, j], code[r, j] = _fix_update(
+                        z_fix[r, j], t_fix[j], z, v, c, gain, gate2, p_gate, qa, qb, r_gate,
+                        t_warm, reinit_s, st)
                     z_post[r, j] = z
                     j += 1
                 else:
@@ -156,14 +254,26 @@ def observer_kernel(t, a_up, t_fix, z_fix, gain, tustin, x0, grav_grad, h_ref, s
                 ts = t_end
                 if not inside:
                     break
-                innov = z_fix[r, j] - z
                 z_prior[r, j] = z
-                z += gain[0] * innov
-                v += gain[1] * innov
-                c += gain[2] * innov
+                z, v, c, innov_out[r, j], code[r, j] = _fix_update(
+                    z_fix[r, j], t_fix[j], z, v, c, gain, gate2, p_gate, qa, qb, r_gate,
+                    t_warm, reinit_s, st)
                 z_post[r, j] = z
                 j += 1
-    return z_out, v_out, c_out, z_post, z_prior
+    return z_out, v_out, c_out, z_post, z_prior, code, innov_out
+
+
+@njit(cache=True)
+def observer_kernel(t, a_up, t_fix, z_fix, gain, tustin, x0, grav_grad, h_ref, stride):
+    """The ungated seed-003 observer (``observer_kernel_gated`` with gate2 = ∞).
+
+    Returns z, v, c at every ``stride``-th IMU epoch (R, K), the altitude just after each fix
+    (R, M) and just before it (R, M).
+    """
+    z, v, c, zp, zm, _, _ = observer_kernel_gated(
+        t, a_up, t_fix, z_fix, gain, tustin, x0, grav_grad, h_ref, stride, np.inf,
+        np.zeros((3, 3)), 0.0, 0.0, 0.0, 0.0, np.inf)
+    return z, v, c, zp, zm
 
 
 def _gps_up(drive: Drive) -> tuple[FloatArray, FloatArray]:
@@ -193,18 +303,36 @@ class Observer1D:
         k0 = int(np.searchsorted(t_fix, vi.t[0]))
         z_init = z_fix[min(k0, z_fix.size - 1)]
         x0 = np.array([[z_init, 0.0, 0.0]])
-        z, v, c, _, _ = observer_kernel(
+        period = float(np.median(np.diff(t_fix))) if t_fix.size > 1 else 1.0
+        sd_g = cfg.gnss_sd
+        if sd_g is None:
+            sd_g = (float(np.median(drive.gnss.pos_sd[:, 2]))
+                    if drive.gnss.pos_sd is not None else 2.0)
+        ss = steady_state(cfg.gain, period, sd_g, cfg.accel_noise_density, cfg.accel_bias_rw)
+        warm = (analytic_settling(cfg.gain, period) if cfg.warmup_s is None
+                else cfg.warmup_s)
+        gate2 = gate_threshold(cfg.gate_prob)
+        t_first = t_fix[min(k0, t_fix.size - 1)]
+        z, v, c, _, _, code, innov = observer_kernel_gated(
             vi.t, a_up[None, :], t_fix, z_fix[None, :], np.asarray(cfg.gain, float),
-            cfg.discretisation == "tustin", x0, grav_grad, h0, 1,
+            cfg.discretisation == "tustin", x0, grav_grad, h0, 1, gate2, ss.p_post,
+            cfg.accel_noise_density, cfg.accel_bias_rw, sd_g**2,
+            float(t_first - t_fix[0]) + warm, cfg.reinit_s,
         )
         n = vi.t.size
         lla = np.column_stack([np.full(n, np.nan), np.full(n, np.nan), z[0]])
         vel = np.column_stack([np.full(n, np.nan), np.full(n, np.nan), -v[0]])
         traj = Trajectory(vi.t, lla, vel)
+        s_ss = float(ss.p_prior[0, 0] + sd_g**2)
+        ok = np.isfinite(innov[0])
         return Estimate(
             estimator=self.name, trajectory=traj, provides=frozenset({"alt", "vel_d"}),
             runtime_s=time.perf_counter() - t0, config=cfg,
-            info={"accel_bias_up_final": float(-c[0, -1]), "uses": "imu+gnss"},
+            innovations={"gnss_alt": innov[0][ok] / np.sqrt(s_ss)},
+            info={"accel_bias_up_final": float(-c[0, -1]), "uses": "imu+gnss",
+                  "gnss_rejected": int(np.sum(code[0] == 1)),
+                  "gnss_reinit": int(np.sum(code[0] == 2)), "gnss_gate_sd_m": float(np.sqrt(s_ss)),
+                  "gnss_gate_k": float(np.sqrt(gate2)), "gnss_gate_warmup_s": float(warm)},
         )
 
 
@@ -293,6 +421,8 @@ class Seed003Result:
     settling_s : settling time (module docstring), from the ensemble-mean error
     analytic : the ``SteadyState`` for the same noise; analytic_settling_s
     mean_error_m : (M,) ensemble-mean altitude error just after each fix; t_fix : (M,)
+    rejected_fraction : fraction of the gated fixes (after the warm-up) that the GNSS gate
+        rejected (0 without gate); n_reinit : re-initialisations over all runs
     """
 
     steady_sd_m: float
@@ -306,6 +436,8 @@ class Seed003Result:
     discretisation: str
     mean_error_m: FloatArray
     t_fix: FloatArray
+    rejected_fraction: float = 0.0
+    n_reinit: int = 0
 
 
 def seed003_monte_carlo(
@@ -313,6 +445,7 @@ def seed003_monte_carlo(
     discretisation: str = "zoh", accel_noise_density: float | None = None,
     accel_bias_rw: float = 0.0, bias_error0: float = 2.0, gps_sd: float | None = None,
     t_steady: float = 150.0, settle_tol: float = 0.10, gain=SEED003_GAIN,
+    gate_prob: float | None = None, warmup_s: float | None = None, reinit_s: float = 20.0,
 ) -> Seed003Result:
     """Monte Carlo of the seed-003 observer on the seed003 scenario's trajectory.
 
@@ -328,6 +461,8 @@ def seed003_monte_carlo(
     Because the loop is linear, its error does not depend on the trajectory; using the real
     one also exercises the discretisation on a moving profile.
     Run count and seed: run r uses ``np.random.default_rng([seed0, r])``.
+    ``gate_prob`` (default None: the seed's ungated observer) switches on the GNSS gate of
+    ``Observer1D`` with the same noise model (``warmup_s`` None: the analytic settling time).
     """
     from ..simulation import load_scenario, simulate
 
@@ -355,10 +490,17 @@ def seed003_monte_carlo(
     # start at the first fix: drop the IMU epochs before it
     k0 = int(np.searchsorted(t, t_fix[0] - 1e-9))
     stride = 1
-    z, _, _, z_post, z_prior = observer_kernel(
+    period = float(np.median(np.diff(t_fix)))
+    ana = steady_state(gain, period, sd_g, qa, accel_bias_rw)
+    warm = analytic_settling(gain, period) if warmup_s is None else warmup_s
+    z, _, _, z_post, z_prior, code, _ = observer_kernel_gated(
         t[k0:], np.ascontiguousarray(a_meas[:, k0:]), t_fix, z_fix, np.asarray(gain, float),
-        discretisation == "tustin", x0, 0.0, 0.0, stride,
+        discretisation == "tustin", x0, 0.0, 0.0, stride, gate_threshold(gate_prob),
+        ana.p_post, qa, accel_bias_rw, sd_g**2, warm, reinit_s,
     )
+    gated = t_fix >= t_fix[0] + warm
+    n_gated = int(np.sum(code[:, gated] >= 0))
+    rej_frac = float(np.sum(code[:, gated] == 1) / max(n_gated, 1))
     err = z - z_true[k0:][None, :]
     mean_err = err.mean(axis=0)
     ss = t[k0:] >= t_steady
@@ -371,11 +513,10 @@ def seed003_monte_carlo(
     gps_only = float(np.sqrt(np.mean((z_fix - z_true_fix[None, :]) ** 2)))
     me = np.abs(e_post.mean(axis=0))
     settle = float(t_fix[np.flatnonzero(me > settle_tol * me.max())[-1]] - t_fix[0])
-    ana = steady_state(gain, float(np.median(np.diff(t_fix))), sd_g, qa, accel_bias_rw)
     return Seed003Result(
         steady_sd, sd_post, sd_prior, gps_only, settle, ana,
-        analytic_settling(gain, float(np.median(np.diff(t_fix))), settle_tol), n_runs,
-        discretisation, e_post.mean(axis=0), t_fix,
+        analytic_settling(gain, period, settle_tol), n_runs,
+        discretisation, e_post.mean(axis=0), t_fix, rej_frac, int(np.sum(code == 2)),
     )
 
 
