@@ -89,7 +89,7 @@ class EkfConfig:
     align_max_s: float = 20.0
     initial_heading: float | None = None
     initial_heading_sd: float = 2.0 * DEG
-    heading_speed_min: float = 2.0
+    heading_speed_min: float = 0.5
     sideslip_sd: float = 2.0 * DEG
     accel_scale: bool | None = None
     default_imu: ImuSpec = field(default_factory=lambda: IMU_PRESETS["consumer"])
@@ -99,6 +99,7 @@ class EkfConfig:
     min_latency_sd: float = 0.01
     min_scale_sd: float = 1e-4
     min_baro_noise_sd: float = 0.05
+    min_baro_bias_sd: float = 0.01
     min_gyro_noise_density: float = 1e-5  # rad/s/√Hz
     min_accel_noise_density: float = 1e-4  # m/s²/√Hz
     min_gyro_bias_sd: float = 1e-5  # rad/s
@@ -202,7 +203,8 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
                                 + _white_var(ispec.gyro_bias_rw, dtg))[:, None]
     qd[:, km.IBA:km.IBA + 3] = (gm_process_var(dtg, ispec.accel_bias_tau, a_bsd)
                                 + _white_var(ispec.accel_bias_rw, dtg))[:, None]
-    qd[:, km.IBB] = gm_process_var(dtg, bspec.bias_tau, bspec.bias_sd)
+    b_bsd = max(bspec.bias_sd, cfg.min_baro_bias_sd)
+    qd[:, km.IBB] = gm_process_var(dtg, bspec.bias_tau, b_bsd)
 
     # --- alignment -----------------------------------------------------------------------
     i_static = static_window_end(imu, cfg.align_max_s)
@@ -221,7 +223,11 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
     if gnss is not None:
         tg = gnss.t - g_latency
         j0 = int(min(np.searchsorted(tg, t[0]), tg.size - 1))
-        lla0 = gnss.lla[j0].copy()
+        # robust start: component-wise median of the first (up to) 9 fixes, so that one
+        # outlier cannot become the initial position (the vehicle may move meanwhile: the
+        # spread of these fixes is added to the variance below)
+        j9 = min(j0 + 9, tg.size)
+        lla0 = np.median(gnss.lla[j0:j9], axis=0)
         d_n = c0 @ lever
         lla0[2] += d_n[2]  # antenna → IMU, vertical part (heading may be unknown)
         pos_var = gnss.pos_sd[j0] ** 2 + (0.0 if heading_known else lever @ lever)
@@ -230,8 +236,8 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
             vel_var = gnss.vel_sd[j0] ** 2
         else:
             vel_var = np.full(3, 1.0)
-        # motion between t0 and the first fix
-        pos_var = pos_var + (np.linalg.norm(v0) * abs(tg[j0] - t[0])) ** 2
+        # motion between t0 and the fixes used
+        pos_var = pos_var + (np.linalg.norm(v0) * abs(tg[j9 - 1] - t[0])) ** 2
     else:
         lla0 = drive.origin_lla.copy()
         pos_var = np.array([100.0**2, 100.0**2, bspec.bias_sd**2])
@@ -259,7 +265,7 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
         par0[km.PBB] = float(baro.altitude[jb]) - lla0[2]
     p0[15, 15] = s_sd**2
     p0[16, 16] = tau_sd**2
-    p0[17, 17] = bspec.bias_sd**2
+    p0[17, 17] = b_bsd**2
 
     # --- measurement events ------------------------------------------------------------
     ev_t_l, ev_type_l, ev_idx_l = [], [], []
@@ -292,6 +298,12 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
         ev_idx = np.concatenate(ev_idx_l)[order]
     else:
         ev_t, ev_type, ev_idx = np.zeros(0), np.zeros(0, np.int64), np.zeros(0, np.int64)
+    # events stamped on an IMU sample up to float round-off are put exactly on it, so that a
+    # measurement at a grid epoch is processed there without back-propagation
+    if ev_t.size:
+        j = np.clip(np.searchsorted(t, ev_t), 1, n - 1)
+        j = np.where(np.abs(t[j - 1] - ev_t) < np.abs(t[j] - ev_t), j - 1, j)
+        ev_t = np.where(np.abs(t[j] - ev_t) < 1e-6, t[j], ev_t)
     counts = np.diff(np.searchsorted(ev_t, t[grid_idx], side="right"))
     max_pending = int(counts.max()) + 1 if counts.size else 1
 
@@ -331,7 +343,7 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
         "accel_scale": o_par[-1, km.PKA:km.PKA + 3].copy(),
         "static_align_s": float(t[i_static - 1] - t[0]),
     }
-    prior = {"scale": s_sd, "latency": tau_sd, "bias": bspec.bias_sd}
+    prior = {"scale": s_sd, "latency": tau_sd, "bias": b_bsd}
     rts = (rts_p, rts_ing, rts_q, corr, reset_at) if store_rts else None
     return _Run(t[out_idx], o_lla, o_v, o_q, o_par, t[grid_idx], grid_idx, out_idx, cov_grid,
                 cov_p, rts, innov, info, prior, tau, baro is not None)

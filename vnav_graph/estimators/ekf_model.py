@@ -421,8 +421,8 @@ def run_filter(
                 qd[IATT] += 2.0 * tilt_rate_sd**2 * el * dtg
                 qd[IATT + 1] += 2.0 * tilt_rate_sd**2 * el * dtg
                 fh2 = ing[9] ** 2 + ing[10] ** 2
-                qd[IVEL] += 2.0 * fh2 * dtg * dtg
-                qd[IVEL + 1] += 2.0 * fh2 * dtg * dtg
+                qd[IVEL] += 8.0 * fh2 * dtg * dtg
+                qd[IVEL + 1] += 8.0 * fh2 * dtg * dtg
             p = phi @ p @ phi.T
             for a in range(NX):
                 p[a, a] += qd[a]
@@ -447,15 +447,25 @@ def run_filter(
             for e in range(n_pend):
                 mm = pend_m[e]
                 idx = pend_idx[e]
-                back = np.eye(NX) - fmat * (t[i + 1] - pend_t[e])
+                lag = t[i + 1] - pend_t[e]
+                back = np.eye(NX) - fmat * lag
                 heff = pend_h[e, :mm] @ back
+                if lag > 0.0:
+                    # process noise between t_m and t_k enters the measurement:
+                    # R_eff = R + diag(H Q(t_m→t_k) Hᵀ), Q(t_m→t_k) ≈ Q_k · lag/Δt_k
+                    for a in range(mm):
+                        extra = 0.0
+                        for b in range(NX):
+                            extra += heff[a, b] ** 2 * qd[b]
+                        pend_r[e, a] += extra * lag / dtg
                 if pend_type[e] == 0:
                     ok, nis, nrm = _vector_update(
                         p, dx, heff[:3].copy(), pend_y[e, :3].copy(), pend_r[e, :3].copy(),
                         gate_pos, consec_pos >= max_consec)
                     inn_pos[idx] = nrm
                     rej_pos[idx] = not ok
-                    consec_pos = 0 if ok else consec_pos + 1
+                    # forced acceptance continues until a fix passes the gate again
+                    consec_pos = 0 if nis <= gate_pos else consec_pos + 1
                     if mm == 6:
                         ok, nis, nrm = _vector_update(
                             p, dx, heff[3:6].copy(), pend_y[e, 3:6].copy(),
@@ -468,7 +478,7 @@ def run_filter(
                         gate_baro, consec_baro >= max_consec)
                     inn_baro[idx] = nrm[0]
                     rej_baro[idx] = not ok
-                    consec_baro = 0 if ok else consec_baro + 1
+                    consec_baro = 0 if nis <= gate_baro else consec_baro + 1
             n_pend = 0
             _apply_correction(lla, v, q, par, dx)
             if store_rts:
