@@ -1,0 +1,104 @@
+"""Unit tests of the EKF kernels and the alignment helpers (closed forms, equivalences)."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.linalg import expm
+
+from vnav_graph.estimators import ekf_model as km
+from vnav_graph.estimators.alignment import coarse_level, level_tilt_bias_jacobian
+from vnav_graph.geo.earth import gravity
+from vnav_graph.geo.frames import attitude_error_n, quat_to_mat, rph_to_quat
+from vnav_graph.sensors.baro import baro_jacobian, measure_baro
+
+
+def test_baro_twins_equal_shared_model(rng):
+    # the njit twins must be exactly the shared model of sensors/baro.py
+    h0 = 500.0
+    for _ in range(50):
+        h, vup = rng.uniform(0, 3000), rng.normal(0, 10)
+        s, tau, b = rng.normal(0, 0.02), rng.uniform(0, 0.5), rng.normal(0, 5)
+        assert km.baro_predict(h, vup, s, tau, b, h0) == float(
+            measure_baro(h, vup, s, tau, b, h0))
+        np.testing.assert_allclose(km.baro_row(h, vup, s, tau, h0),
+                                   baro_jacobian(h, vup, s, tau, h0), rtol=0, atol=1e-12)
+
+
+def test_coarse_level_closed_form():
+    for rph in ([0.1, -0.05, 1.0], [-0.3, 0.2, -2.0]):
+        c = quat_to_mat(rph_to_quat(rph)[0])
+        f_b = c.T @ np.array([0.0, 0.0, -9.81])
+        roll, pitch = coarse_level(f_b)
+        # exact inversion (round-off only)
+        assert abs(roll - rph[0]) < 1e-12 and abs(pitch - rph[1]) < 1e-12
+
+
+def test_level_tilt_bias_jacobian_matches_finite_difference():
+    rph = np.array([0.05, -0.03, 0.7])
+    q = rph_to_quat(rph)[0]
+    c = quat_to_mat(q)
+    g = float(gravity(0.8, 500.0))
+    f_b = c.T @ np.array([0.0, 0.0, -g])
+    m = level_tilt_bias_jacobian(c, g)
+    dba = np.array([0.02, -0.03, 0.01])  # estimated minus true (bias left in f̃ = f − δb_a)
+    roll, pitch = coarse_level(f_b - dba)
+    q_lev = rph_to_quat([roll, pitch, rph[2]])[0]
+    psi = attitude_error_n(q_lev[None], q[None])[0]
+    # horizontal tilt error predicted to first order (error O(|δb_a|²/g²) ≈ 1e-5 rad);
+    # the yaw row of M is zero by construction (levelling holds the yaw fixed)
+    np.testing.assert_allclose(psi[:2], (m @ dba)[:2], atol=2e-5)
+
+
+def test_transition_second_order_matches_expm():
+    ing = np.zeros(km.NING)
+    ing[0:9] = quat_to_mat(rph_to_quat([0.1, 0.05, 0.4])[0]).ravel()
+    ing[9:12] = [1.0, -0.5, -9.8]
+    ing[12:15] = [0.5, 0.3, -9.8]
+    ing[15], ing[16], ing[17:20] = 0.8, 500.0, [20.0, 5.0, -1.0]
+    f = km.build_f(ing, 600.0, 600.0, 1800.0)
+    dt = 0.1
+    # Φ = I + FΔt + ½(FΔt)² has a truncation error of (‖F‖Δt)³/6 ≈ 1e-3 relative to the
+    # biggest entries (‖F‖ ≈ 10 from the specific force), here below 2e-3 absolute
+    np.testing.assert_allclose(km.transition(f, dt), expm(f * dt), atol=2e-3)
+
+
+def test_joseph_scalar_update_equals_standard_form(rng):
+    a = rng.normal(size=(km.NX, km.NX))
+    p = a @ a.T + np.eye(km.NX)
+    h = rng.normal(size=km.NX)
+    r = 0.7
+    y = 1.3
+    p1 = p.copy()
+    dx = np.zeros(km.NX)
+    km._scalar_update(p1, dx, h, y, r)
+    k = p @ h / (h @ p @ h + r)
+    # with the optimal gain the Joseph form equals (I − K h) P (round-off only)
+    np.testing.assert_allclose(p1, (np.eye(km.NX) - np.outer(k, h)) @ p, atol=1e-10)
+    np.testing.assert_allclose(dx, k * y, atol=1e-12)
+
+
+def test_pack_unpack_roundtrip(rng):
+    a = rng.normal(size=(km.NX, km.NX))
+    p = a + a.T
+    v = np.empty(km.NPACK)
+    km.pack(p, v)
+    np.testing.assert_array_equal(km.unpack(v), p)
+
+
+def test_heading_decoupling_and_reset_jacobian():
+    ing = np.zeros(km.NING)
+    ing[0:9] = np.eye(3).ravel()
+    ing[9:12] = [2.0, 1.0, -9.8]
+    ing[15], ing[16] = 0.8, 0.0
+    ing[20] = 1.0  # heading unknown
+    f = km.build_f(ing, np.inf, np.inf, np.inf)
+    # yaw error decoupled: exactly zero row and column
+    assert np.all(f[8] == 0.0) and np.all(f[:, 8] == 0.0)
+    j = km.reset_jacobian(0.3)
+    psi = np.array([0.01, -0.02, 0.5])
+    x = np.zeros(km.NX)
+    x[6:9] = psi
+    out = (j @ x)[6:9]
+    # tilt rotated by R_z(Δ) (closed form), yaw error replaced (zero)
+    c, s = np.cos(0.3), np.sin(0.3)
+    np.testing.assert_allclose(out, [c * psi[0] - s * psi[1], s * psi[0] + c * psi[1], 0.0])
