@@ -56,6 +56,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--estimators", type=_csv_list, default=None, help="comma-separated names")
     r.add_argument("--out", default="vnav-graph-out", help="output directory")
     r.add_argument("--no-progress", action="store_true")
+    r.add_argument("--no-holdout", action="store_true",
+                   help="real logs: skip the withheld-GNSS scoring run (metrics become null)")
 
     b = sub.add_parser("bench", help="Monte Carlo over scenarios x seeds x estimators")
     b.add_argument("--quick", action="store_true")
@@ -123,6 +125,14 @@ def cmd_run(args: argparse.Namespace) -> int:
     progress = not args.no_progress and sys.stderr.isatty()
     results = run_estimators(drive, names, progress=progress)
     summary = summarize(drive, results)
+    if drive.truth is None and drive.gnss is not None and not args.no_holdout:
+        from .evaluation.holdout import run_holdout
+        from .pipeline import apply_holdout
+
+        ok = [r.name for r in results if r.estimate is not None]
+        if ok:
+            print("scoring against withheld GNSS (holdout run)...", file=sys.stderr)
+            summary = apply_holdout(summary, run_holdout(drive, ok).doc)
     from .pipeline import write_outputs
 
     writers = []
