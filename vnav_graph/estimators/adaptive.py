@@ -21,10 +21,28 @@ vertical dynamics, where baro lag and INS errors grow). Adaptation functions φ:
   at x = 1)
 - ``"none"``: 0 (the loop is then exactly ``loop3``; tested)
 
-The seed also feeds the loop's corrections into an EKF as control signals (GNSS altitude
-as the measurement); that variant is not implemented (docs/adaptive_loop.md). Measured
-benefit (benchmarks/bench_adaptive.py): 1.7-3× faster settling after a baro step; no gain
-in fast climbs/descents or with baro latency.
+Measured benefit (benchmarks/bench_adaptive.py): 1.7-3× faster settling after a baro
+step; no gain in fast climbs/descents or with baro latency.
+
+EKF with control signals (``AdaptiveConfig(ekf_control=True)``; seed 000 abstract: "the
+integration is done with an EKF with control signals"; design ours, docs/adaptive_loop.md).
+State x = [h − h0, v_up, c, s, b] (baro scale and bias of ``sensors.baro``, latency not
+modelled). The baro stays inside the loop: the loop error is taken against the
+scale/bias-corrected baro, e = ĥ − (z_b − b̂)/(1 + ŝ), and the loop correction
+u = −Δt·[k1, k2, −k3]·e (adaptive gains as above) is the EKF's control input,
+
+    x_L,k+1 = Φ x_L,k + Γ a_k + u_k,   s_{k+1} = s_k,   b_{k+1} = e^(−Δt/τ_b) b_k,
+    F = [[Φ − Δt g [1,0,0],  −Δt g ∂e/∂s,  −Δt g ∂e/∂b], [0, 1, 0], [0, 0, e^(−Δt/τ_b)]],
+    ∂e/∂s = (z_b − b̂)/(1+ŝ)²,  ∂e/∂b = 1/(1+ŝ),
+    Q = q_a ΓΓᵀ/Δt + q_c Δt e_c e_cᵀ + σ_n² T_b Δt g gᵀ (∂e/∂b)² + σ_b²(1 − e^(−2Δt/τ_b)) e_b e_bᵀ
+
+(the baro noise enters through the control; T_b the baro sample interval over which one
+noise sample is held). GNSS altitude is the measurement, H = [1, δt, 0, 0, 0] at the fix
+time t_k + δt, gated by ν² > χ²₁(1 − p_fa)·S (``info["gnss_rejected"]``); consecutive
+rejections spanning ``reinit_s`` reset P to its prior (``info["gnss_cov_resets"]``). The
+adaptive gains are treated as known (frozen) in F. Covariance in the ERROR_STATE layout
+(pos_n[2], vel_n[2], bias_accel[2], baro_scale, baro_bias). The default stays the
+baro-inertial loop (``ekf_control=False``): see docs/adaptive_loop.md for the numbers.
 """
 
 from __future__ import annotations
@@ -35,8 +53,17 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
-from ..types import Drive, Estimate
+from ..types import (
+    ERROR_STATE_DIM,
+    BaroEstimate,
+    Drive,
+    Estimate,
+    FloatArray,
+    ParamEstimate,
+    Trajectory,
+)
 from .loops import LoopInputs, _estimate, discrete_model, loop_inputs
+from .observer1d import gate_threshold
 from .vertical_input import AhrsConfig
 
 _FUNCS = {"none": 0, "linear": 1, "exp": 2, "tanh": 3, "sigmoid": 4}
@@ -47,7 +74,21 @@ _SIGNALS = {"error": 0, "vz": 1}
 class AdaptiveConfig:
     """tau [s] nominal triple-pole time constant; s_max [-] largest speed-up; function (see
     module docstring); signal "error" | "vz"; e0 [m], v0 [m/s] normalisations; t_avg [s]
-    time constant T_a of the error-magnitude low-pass."""
+    time constant T_a of the error-magnitude low-pass.
+
+    EKF-with-control-signals variant (``ekf_control=True``, docs/adaptive_loop.md):
+    gains : explicit base gains (k1, k2, k3) [1/s, 1/s², 1/s³] instead of the triple pole
+        at −1/τ (the adaptation scales them as k1·s, (k2 − ω_s²)·s² + ω_s², k3·s³);
+        (0, 0, 0) removes the loop (the filter is then a plain GNSS-aided vertical KF)
+    gate_prob : false-alarm probability of the χ²₁ innovation gate on GNSS (None: no gate)
+    reinit_s : consecutive rejections spanning this long [s] reset the covariance to its
+        prior (so the gate cannot lock GNSS out forever)
+    accel_psd : vertical acceleration input noise PSD [m²/s³]; None: the IMU spec's
+        accel_noise_density² (fallback 3e-3²) + 1e-4 for the attitude-reference input error
+    accel_bias_rw : random walk of the acceleration correction c [m/s²/√s]
+    baro_noise_sd, baro_bias_sd [m], baro_bias_tau [s], baro_scale_sd [-]: baro model
+        (``sensors.baro``); None: the baro stream's spec, else 0.5 m, 10 m, 3600 s, 0.02
+    cov_rate_hz : rate of the stored covariances [Hz]"""
 
     tau: float = 20.0
     s_max: float = 4.0
@@ -57,6 +98,17 @@ class AdaptiveConfig:
     v0: float = 5.0
     t_avg: float = 2.0
     ahrs: AhrsConfig = field(default_factory=AhrsConfig)
+    ekf_control: bool = False
+    gains: tuple[float, float, float] | None = None
+    gate_prob: float | None = 1e-3
+    reinit_s: float = 30.0
+    accel_psd: float | None = None
+    accel_bias_rw: float = 1e-4
+    baro_noise_sd: float | None = None
+    baro_bias_sd: float | None = None
+    baro_bias_tau: float | None = None
+    baro_scale_sd: float | None = None
+    cov_rate_hz: float = 1.0
 
     def __post_init__(self) -> None:
         if self.function not in _FUNCS:
@@ -66,6 +118,10 @@ class AdaptiveConfig:
         if not (self.tau > 0 and self.s_max >= 1 and self.e0 > 0 and self.v0 > 0
                 and self.t_avg > 0):
             raise ValueError("AdaptiveConfig: tau, e0, v0, t_avg > 0 and s_max >= 1 required")
+        if self.gate_prob is not None and not 0.0 < self.gate_prob < 1.0:
+            raise ValueError("AdaptiveConfig.gate_prob: in (0, 1) or None")
+        if self.gains is not None and len(self.gains) != 3:
+            raise ValueError("AdaptiveConfig.gains: three gains (k1, k2, k3)")
 
 
 @njit(cache=True)
@@ -131,6 +187,200 @@ def run_adaptive(inp: LoopInputs, cfg: AdaptiveConfig, x0=None):
                            cfg.t_avg, np.asarray(x0, float))
 
 
+# State indices of the EKF-with-control variant: h − h0, v_up, c, baro scale s, baro bias b
+IH, IV, IC, IS, IB = 0, 1, 2, 3, 4
+NX = 5
+
+
+@njit(cache=True)
+def ekf_kernel(a_up, z_baro, phi, gam, dt, base_gains, ws2, s_max, func, signal, e0, v0,
+               t_avg, x0, p0, q_a, q_c, r_baro_dt, q_s, tau_b, sd_b, t, t_fix, z_fix, r_fix,
+               gate2, reinit_s, cov_dt):
+    """Adaptive loop-3 corrections as control signals of a 5-state EKF, GNSS as measurement.
+
+    a_up (N,) up acceleration with gravity at h0 [m/s²]; z_baro (N,) baro altitude − h0 at
+    the IMU epochs [m]; phi (3, 3), gam (3,) ZOH of the free channel; base_gains (3,)
+    (k1, k2 − ω_s², k3); x0 (5,), p0 (5, 5); q_a [m²/s³] input noise PSD; q_c [m²/s⁵] c random
+    walk PSD; r_baro_dt [m²·s] = σ_baro²·T_baro (baro noise entering through the control);
+    q_s [1/s] scale-state PSD; tau_b [s], sd_b [m] Markov baro bias; t (N,); t_fix, z_fix,
+    r_fix (M,) GNSS times, altitudes − h0, variances; gate2 = χ²₁ threshold (inf: off).
+    Returns h (N,), v (N,), s_adapt (N,), loop error (N,), cov times (K,), covs (K, 5, 5),
+    x at the cov times (K, 5), GNSS codes (M,) (0 used, 1 rejected, 2 used after a
+    covariance reset, −1 not reached), normalised innovations (M,).
+    """
+    n = a_up.size
+    m = t_fix.size
+    x = x0.copy()
+    p = p0.copy()
+    h_out = np.empty(n)
+    v_out = np.empty(n)
+    s_out = np.empty(n)
+    e_out = np.empty(n)
+    kmax = int((t[-1] - t[0]) / cov_dt) + 2
+    t_cov = np.empty(kmax)
+    p_cov = np.empty((kmax, NX, NX))
+    x_cov = np.empty((kmax, NX))
+    nc = 0
+    t_next = t[0]
+    code = np.full(m, -1, dtype=np.int8)
+    nu = np.full(m, np.nan)
+    alpha = dt / t_avg if dt < t_avg else 1.0
+    ebar = 0.0
+    fb = np.exp(-dt / tau_b)
+    qb = sd_b * sd_b * (1.0 - fb * fb)
+    j = 0
+    while j < m and t_fix[j] < t[0]:
+        j += 1
+    n_rej = 0
+    t_rej0 = 0.0
+    f = np.eye(NX)
+    q = np.zeros((NX, NX))
+    g = np.empty(3)
+    for k in range(n):
+        # GNSS fixes in [t_k, t_{k+1}): predicted height at the fix h + v·δt, H = [1, δt, 0..]
+        while j < m and (k == n - 1 or t_fix[j] < t[k + 1]):
+            if t_fix[j] > t[k] + 1.0:  # beyond the data (should not happen) — stop
+                break
+            d = t_fix[j] - t[k]
+            hrow = np.zeros(NX)
+            hrow[IH] = 1.0
+            hrow[IV] = d
+            ph = p @ hrow
+            sv = hrow @ ph + r_fix[j]
+            innov = z_fix[j] - (x[IH] + d * x[IV])
+            nu[j] = innov / np.sqrt(sv)
+            if innov * innov > gate2 * sv:
+                if n_rej == 0:
+                    t_rej0 = t_fix[j]
+                n_rej += 1
+                code[j] = 1
+                if n_rej >= 2 and t_fix[j] - t_rej0 >= reinit_s:
+                    # persistent disagreement: forget (covariance back to the prior) and let
+                    # the next fix in
+                    p = p0.copy()
+                    n_rej = 0
+                    code[j] = 2
+                j += 1
+                continue
+            n_rej = 0
+            code[j] = 0
+            kg = ph / sv
+            x += kg * innov
+            ikh = np.eye(NX) - np.outer(kg, hrow)
+            p = ikh @ p @ ikh.T + r_fix[j] * np.outer(kg, kg)  # Joseph form
+            j += 1
+        # loop error against the bias/scale-corrected baro, adaptation as adaptive_kernel
+        denom = 1.0 + x[IS]
+        zc = (z_baro[k] - x[IB]) / denom
+        e = x[IH] - zc
+        e_out[k] = e
+        ebar += alpha * (abs(e) - ebar)
+        xi = ebar / e0 if signal == 0 else abs(x[IV]) / v0
+        sa = 1.0 + (s_max - 1.0) * _phi(xi, func)
+        s_out[k] = sa
+        h_out[k] = x[IH]
+        v_out[k] = x[IV]
+        if t[k] >= t_next - 1e-9:
+            t_cov[nc] = t[k]
+            p_cov[nc] = p
+            x_cov[nc] = x
+            nc += 1
+            t_next += cov_dt
+        if k == n - 1:
+            break
+        g[0] = base_gains[0] * sa
+        g[1] = base_gains[1] * sa * sa + ws2
+        g[2] = -base_gains[2] * sa * sa * sa
+        # nominal: x_L ← Φ x_L + Γ a − Δt·g·e (the control signal), b Markov, s constant
+        xl = phi @ x[:3] + gam * a_up[k] - dt * g * e
+        x[0] = xl[0]
+        x[1] = xl[1]
+        x[2] = xl[2]
+        x[IB] *= fb
+        # error transition: δx_L ← (Φ − Δt g [1,0,0]) δx_L − Δt g (∂e/∂s δs + ∂e/∂b δb)
+        f[:] = 0.0
+        f[:3, :3] = phi
+        dedh = 1.0
+        deds = zc / denom
+        dedb = 1.0 / denom
+        for i in range(3):
+            f[i, IH] -= dt * g[i] * dedh
+            f[i, IS] = -dt * g[i] * deds
+            f[i, IB] = -dt * g[i] * dedb
+        f[IS, IS] = 1.0
+        f[IB, IB] = fb
+        q[:] = 0.0
+        # input noise through Γ (white, PSD q_a), c random walk, baro noise via the control
+        for i in range(3):
+            for ii in range(3):
+                q[i, ii] = (q_a * gam[i] * gam[ii] / dt
+                            + r_baro_dt * dt * g[i] * g[ii] * dedb * dedb)
+        q[IC, IC] += q_c * dt
+        q[IS, IS] = q_s * dt
+        q[IB, IB] = qb
+        p = f @ p @ f.T + q
+    return (h_out, v_out, s_out, e_out, t_cov[:nc], p_cov[:nc], x_cov[:nc], code, nu)
+
+
+def _spec(obj, name: str, default: float) -> float:
+    v = getattr(obj, name, None) if obj is not None else None
+    return float(v) if v is not None else default
+
+
+def run_adaptive_ekf(inp: LoopInputs, cfg: AdaptiveConfig, t_fix, z_fix, r_fix, *,
+                     imu_spec=None, baro_spec=None, baro_dt: float = 0.04):
+    """Run the EKF-with-control variant on prepared inputs. t_fix, z_fix (altitude − h0),
+    r_fix (variances) (M,) GNSS. Returns the tuple of ``ekf_kernel``."""
+    dt = float(np.median(np.diff(inp.t)))
+    if np.max(np.abs(np.diff(inp.t) - dt)) > 1e-6 * dt + 1e-9:
+        raise ValueError("loop3-adaptive: the IMU stream must be uniformly sampled")
+    phi, gam = discrete_model(dt, inp.ws2, 3)
+    phi, gam = np.ascontiguousarray(phi), np.ascontiguousarray(gam)
+    if cfg.gains is None:
+        base = np.array([3.0 / cfg.tau, 3.0 / cfg.tau**2, 1.0 / cfg.tau**3])
+    else:
+        base = np.array([cfg.gains[0], cfg.gains[1] - inp.ws2, cfg.gains[2]])
+    q_a = (cfg.accel_psd if cfg.accel_psd is not None
+           else _spec(imu_spec, "accel_noise_density", 3e-3) ** 2 + 1e-4)
+    sd_n = cfg.baro_noise_sd if cfg.baro_noise_sd is not None else _spec(
+        baro_spec, "noise_sd", 0.5)
+    sd_b = cfg.baro_bias_sd if cfg.baro_bias_sd is not None else _spec(
+        baro_spec, "bias_sd", 10.0)
+    tau_b = cfg.baro_bias_tau if cfg.baro_bias_tau is not None else _spec(
+        baro_spec, "bias_tau", 3600.0)
+    sd_s = cfg.baro_scale_sd if cfg.baro_scale_sd is not None else _spec(
+        baro_spec, "scale_sd", 0.02)
+    x0 = np.array([inp.z_baro[0], 0.0, 0.0, 0.0, 0.0])
+    # prior: height from the (biased) baro, v at rest ±1 m/s, c ±0.1 m/s², s, b from the spec
+    p0 = np.diag([sd_b**2 + sd_n**2, 1.0, 0.1**2, sd_s**2, sd_b**2])
+    p0[IH, IB] = p0[IB, IH] = -sd_b**2  # h0 = z_baro = h + b: δh = −δb initially
+    p0[IH, IH] = sd_b**2 + sd_n**2
+    return ekf_kernel(
+        inp.a_up, inp.z_baro, phi, gam, dt, base, inp.ws2, cfg.s_max, _FUNCS[cfg.function],
+        _SIGNALS[cfg.signal], cfg.e0, cfg.v0, cfg.t_avg, x0, p0, q_a, cfg.accel_bias_rw**2,
+        sd_n**2 * baro_dt, 0.0, tau_b, sd_b, inp.t, np.asarray(t_fix, float),
+        np.asarray(z_fix, float), np.asarray(r_fix, float), gate_threshold(cfg.gate_prob),
+        cfg.reinit_s, 1.0 / cfg.cov_rate_hz)
+
+
+# ERROR_STATE rows (estimated − true = +δx): pos_n[2] down = −δh, vel_n[2] down = −δv,
+# bias_accel[2] (body z ≈ down for a near-level IMU) = −δc, baro_scale = +δs, baro_bias = +δb
+_MAP = ((2, IH, -1.0), (5, IV, -1.0), (14, IC, -1.0), (15, IS, 1.0), (17, IB, 1.0))
+
+
+def _to_error_state(p: FloatArray) -> FloatArray:
+    """(M, 5, 5) filter covariances -> (M, 18, 18) ERROR_STATE layout, NaN where absent."""
+    tmat = np.zeros((ERROR_STATE_DIM, NX))
+    for row, col, sign in _MAP:
+        tmat[row, col] = sign
+    out = np.einsum("ij,mjk,lk->mil", tmat, p, tmat)
+    mask = np.ones(ERROR_STATE_DIM, dtype=bool)
+    mask[[r for r, _, _ in _MAP]] = False
+    out[:, mask, :] = np.nan
+    out[:, :, mask] = np.nan
+    return out
+
+
 class AdaptiveLoop3:
     """3rd-order baro-inertial loop with adaptive coefficients (``loop3-adaptive``)."""
 
@@ -141,10 +391,52 @@ class AdaptiveLoop3:
 
     def run(self, drive: Drive) -> Estimate:
         t0 = time.perf_counter()
-        inp = loop_inputs(drive, self.config.ahrs)
-        x, err, s = run_adaptive(inp, self.config)
+        cfg = self.config
+        inp = loop_inputs(drive, cfg.ahrs)
+        if cfg.ekf_control:
+            return self._run_ekf(drive, inp, t0)
+        x, err, s = run_adaptive(inp, cfg)
+        # baro-inertial: GNSS only reaches the attitude reference (vertical_input), never the
+        # height channel, so no GNSS is gated and no gnss_rejected is claimed
         return _estimate(self.name, inp.t, x[:, 0] + inp.h0, x[:, 1],
-                         time.perf_counter() - t0, self.config,
+                         time.perf_counter() - t0, cfg,
                          {"uses": "imu+baro", "speedup_mean": float(np.mean(s)),
                           "speedup_max": float(np.max(s)),
                           "accel_bias_up_final": float(x[-1, 2])})
+
+    def _run_ekf(self, drive: Drive, inp: LoopInputs, t0: float) -> Estimate:
+        cfg = self.config
+        gn = drive.gnss
+        if gn is None or len(gn) == 0:
+            t_fix, z_fix, r_fix = np.empty(0), np.empty(0), np.empty(0)
+        else:
+            t_fix, z_fix = gn.t, gn.lla[:, 2] - inp.h0
+            sd = gn.pos_sd[:, 2] if gn.pos_sd is not None else np.full(t_fix.size, 3.0)
+            r_fix = sd**2
+        bdt = float(np.median(np.diff(drive.baro.t))) if len(drive.baro) > 1 else 0.04
+        h, v, s, err, t_cov, p_cov, x_cov, code, nu = run_adaptive_ekf(
+            inp, cfg, t_fix, z_fix, r_fix, imu_spec=drive.imu.spec,
+            baro_spec=drive.baro.spec, baro_dt=bdt)
+        n = inp.t.size
+        nan = np.full(n, np.nan)
+        traj = Trajectory(inp.t, np.column_stack([nan, nan, h + inp.h0]),
+                          np.column_stack([nan, nan, -v]))
+        xs = x_cov[-1] if len(x_cov) else np.full(NX, np.nan)
+        ps = p_cov[-1] if len(p_cov) else np.full((NX, NX), np.nan)
+        p0 = p_cov[0] if len(p_cov) else ps
+        baro = BaroEstimate(
+            scale=ParamEstimate(float(xs[IS]), float(np.sqrt(ps[IS, IS])),
+                                float(np.sqrt(p0[IS, IS]))),
+            bias_m=ParamEstimate(float(xs[IB]), float(np.sqrt(ps[IB, IB])),
+                                 float(np.sqrt(p0[IB, IB]))))
+        return Estimate(
+            estimator=self.name, trajectory=traj,
+            provides=frozenset({"alt", "vel_d", "baro", "cov"}),
+            cov=_to_error_state(p_cov), t_cov=t_cov, baro=baro,
+            runtime_s=time.perf_counter() - t0, config=cfg,
+            innovations={"gnss_alt": nu[np.isfinite(nu)]},
+            info={"uses": "imu+baro+gnss", "variant": "ekf_control",
+                  "gnss_rejected": int(np.sum(code >= 1)),
+                  "gnss_cov_resets": int(np.sum(code == 2)),
+                  "speedup_mean": float(np.mean(s)), "speedup_max": float(np.max(s)),
+                  "accel_bias_up_final": float(xs[IC])})
