@@ -135,3 +135,73 @@ def onboard_block(t: FloatArray, alt: FloatArray, name: str, offset_m: float,
     """The ``Drive.meta["onboard"]`` block: the autopilot's own altitude estimate."""
     return {"t": [float(x) for x in t], "alt": [float(x) for x in alt], "name": name,
             "offset_m": float(offset_m), "reference": reference}
+
+
+# Clock ratios within this fraction of 1 are treated as "same clock" (a crystal is good to
+# ~1e-4; the Erle PXF boot clock is off by 7.7 %).
+CLOCK_RATIO_TOL = 1e-3
+
+
+@dataclass
+class ClockFit:
+    """Robust straight line ``t_local ≈ offset + ratio·(t_gps − t_gps0)``.
+
+    ``ratio`` is the local (logger) clock's advance per GPS second, ``sd`` the residual sd of
+    the inliers [s] (receipt jitter), ``n_outliers`` the stamps off the line by more than the
+    inlier threshold.
+    """
+
+    offset: float
+    ratio: float
+    t_gps0: float
+    sd: float
+    n_outliers: int
+
+    def local_of_gps(self, t_gps: FloatArray) -> FloatArray:
+        """Local-clock stamp of GPS times [s]."""
+        return self.offset + self.ratio * (np.asarray(t_gps, dtype=float) - self.t_gps0)
+
+
+def fit_clock(t_local: FloatArray, t_gps: FloatArray, inlier_s: float = 0.1) -> ClockFit:
+    """Fit the logger clock against GPS time from receipt stamps of GNSS fixes.
+
+    Least squares of ``t_local`` on ``x = t_gps − t_gps[0]`` with an intercept, refitted
+    twice on the stamps within ``inlier_s`` of the line (receipt delays of a busy logger are
+    one-sided outliers).
+
+    Parameters
+    ----------
+    t_local : (N,) receipt stamps on the logger clock [s]
+    t_gps : (N,) GPS time of the same fixes [s] (any origin), N ≥ 5
+
+    Raises
+    ------
+    ValueError
+        Fewer than 5 stamps on the line.
+    """
+    t_local = np.asarray(t_local, dtype=float)
+    x = np.asarray(t_gps, dtype=float) - float(t_gps[0])
+    inl = np.ones(x.size, dtype=bool)
+    for _ in range(3):
+        if inl.sum() < 5:
+            raise ValueError("GNSS receipt stamps do not follow GPS time (corrupt GPS records?)")
+        a_mat = np.column_stack([np.ones(int(inl.sum())), x[inl]])
+        coef, *_ = np.linalg.lstsq(a_mat, t_local[inl], rcond=None)
+        res = t_local - (coef[0] + coef[1] * x)
+        inl = np.abs(res) < inlier_s
+    if inl.sum() < 5:
+        raise ValueError("GNSS receipt stamps do not follow GPS time (corrupt GPS records?)")
+    return ClockFit(float(coef[0]), float(coef[1]), float(t_gps[0]), float(np.std(res[inl])),
+                    int((~inl).sum()))
+
+
+def local_to_gps_seconds(t_local: FloatArray, ratio: float, t_ref: float) -> FloatArray:
+    """Re-express logger-clock stamps in GPS seconds, keeping ``t_ref`` fixed.
+
+    ``t = t_ref + (t_local − t_ref) / ratio``, where ``ratio`` is the logger clock's advance
+    per GPS second (:func:`fit_clock`). Intervals become GPS-time intervals; the stamp
+    ``t_ref`` (the first IMU sample) keeps its value so the drive's time axis starts where
+    it did. A GNSS fix at GPS time g then sits at ``t_ref + (offset − t_ref)/ratio + (g − g0)``:
+    exactly GPS time up to one constant.
+    """
+    return t_ref + (np.asarray(t_local, dtype=float) - t_ref) / ratio

@@ -20,14 +20,16 @@ Messages used
 
 Clock
 -----
-One clock: autopilot boot time in seconds (``TimeMS/1e3`` or ``TimeUS/1e6``). GNSS fixes are
-stamped with their GPS time of week mapped onto the boot clock by a robust linear fit of the
-receipt stamps ``T`` on GPS time (this removes the receipt jitter of ±20 ms and keeps the
-mean transport latency; the fit's residual sd is reported). The fit's slope is reported as
-``boot_clock_per_gps_second``: on the Erle PXF logs the boot clock advances only ≈ 0.92 s per
-GPS second (GPS time of week spans 363.0 s while boot time spans 335.0 s on ``218.BIN``). The
-streams are left on the boot clock, which keeps IMU, baro and GNSS mutually consistent; a
-warning note says so.
+Boot time in seconds (``TimeMS/1e3`` or ``TimeUS/1e6``). GNSS fixes are stamped with their
+GPS time of week mapped onto the boot clock by a robust linear fit of the receipt stamps
+``T`` on GPS time (:func:`._common.fit_clock`: removes the ±20 ms receipt jitter, keeps the
+mean transport latency). The fit's slope r is the boot clock's advance per GPS second. On
+the Erle PXF logs r = 0.9232 (the boot clock runs 7.7 % slow: gyro yaw integrated on GPS
+time matches the magnetometer heading to 0.2 %, on boot time it is 7.9 % short; see
+docs/real_logs.md). With ``clock="auto"`` (default) and |r − 1| > 0.1 % every stream is
+re-stamped ``t = t_ref + (t_boot − t_ref)/r`` (:func:`._common.local_to_gps_seconds`,
+``t_ref`` = first IMU stamp), so IMU intervals are GPS-time intervals; ``meta["clock"]``
+records the basis, r, the fit and the evidence.
 
 Heights
 -------
@@ -57,10 +59,14 @@ import numpy as np
 
 from ...types import BaroStream, Drive, GnssStream, ImuStream
 from ._common import (
+    CLOCK_RATIO_TOL,
+    ClockFit,
     Report,
     baro_alt_aligned,
     find_gaps,
     finite_rows,
+    fit_clock,
+    local_to_gps_seconds,
     monotonic_mask,
     onboard_block,
     pressure_altitude,
@@ -139,42 +145,72 @@ def _col(rows: Sequence[dict[str, Any]], *names: str) -> np.ndarray:
     return np.full(len(rows), np.nan)
 
 
-def _gnss_boot_time(t_recv: np.ndarray, gps_time: np.ndarray, report: Report) -> np.ndarray:
+def _gnss_boot_time(t_recv: np.ndarray, gps_time: np.ndarray,
+                    report: Report) -> tuple[np.ndarray, ClockFit | None]:
     """Map GPS time [s] to the boot clock by a robust linear fit of receipt stamps on it.
 
-    ``t_recv ≈ a + (1 + d)(gps_time − gps_time[0])``: offset from the median, then drift d
-    from least squares on the inliers (|residual| < 0.1 s); stamps = fitted line.
+    ``t_recv ≈ a + r·(gps_time − gps_time[0])`` (:func:`._common.fit_clock`); stamps = the
+    fitted line, which removes the receipt jitter and keeps the mean transport latency.
     """
     if not np.all(np.isfinite(gps_time)) or gps_time.size < 5:
         report.notes.append("GNSS stamped with receipt time (no GPS time in the log)")
-        return t_recv
-    x = gps_time - gps_time[0]
-    inl = np.ones(x.size, dtype=bool)
-    for _ in range(3):  # least squares, then refit on the inliers (|residual| < 0.1 s)
-        A = np.column_stack([np.ones(int(inl.sum())), x[inl]])
-        coef, *_ = np.linalg.lstsq(A, t_recv[inl], rcond=None)
-        a, slope = float(coef[0]), float(coef[1])
-        res = t_recv - (a + slope * x)
-        inl = np.abs(res) < 0.1
-        if inl.sum() < 5:
-            raise ValueError("GNSS receipt stamps do not follow GPS time (corrupt GPS records?)")
-    fit = a + slope * x
-    sd = float(np.std(res[inl]))
-    report.clock_rate = slope
+        return t_recv, None
+    fit = fit_clock(t_recv, gps_time)
+    report.clock_rate = fit.ratio
     report.notes.append(
         f"GNSS stamped by GPS time of week mapped onto the boot clock (receipt jitter sd "
-        f"{sd * 1e3:.1f} ms; {int((~inl).sum())} receipt stamps off the fit by > 0.1 s)")
-    if abs(slope - 1.0) > 1e-3:
-        report.notes.append(
-            f"WARNING: the boot clock advanced {slope:.4f} s per GPS second "
-            f"({(slope - 1) * 100:+.2f} %); all streams are kept on the boot clock (IMU, baro and "
-            "GNSS stay mutually consistent), but if the boot clock is the wrong one, IMU "
-            "intervals and GNSS velocities disagree by this factor")
-    return fit
+        f"{fit.sd * 1e3:.1f} ms; {fit.n_outliers} receipt stamps off the fit by > 0.1 s)")
+    return fit.local_of_gps(gps_time), fit
 
 
-def read_dataflash(path: str | Path) -> Drive:
-    """Read an ArduPilot DataFlash binary log into a Drive (see the module docstring)."""
+def _speed_evidence(t_fix: np.ndarray, gps_time: np.ndarray, lla: np.ndarray,
+                    vel_n: np.ndarray, span: int = 5) -> dict[str, float] | None:
+    """Receiver speed vs position increments on both clocks (clock-choice evidence).
+
+    Median over windows of ``span`` fixes (moving faster than 1 m/s) of
+    ``|Δp| / |∫ v_NE dt|`` with dt from GPS time and from the boot-clock stamps. The clock
+    on which the receiver's velocity integrates to its own displacement gives ≈ 1.
+    """
+    if vel_n is None or t_fix.size <= span + 5:
+        return None
+    from ...geo.earth import radii
+
+    rn, re = radii(float(lla[0, 0]))
+    n = (lla[:, 0] - lla[0, 0]) * (rn + lla[:, 2])
+    e = (lla[:, 1] - lla[0, 1]) * (re + lla[:, 2]) * np.cos(lla[:, 0])
+    j = np.arange(t_fix.size - span)
+    disp = np.hypot(n[j + span] - n[j], e[j + span] - e[j])
+    speed = np.hypot(vel_n[:, 0], vel_n[:, 1])
+    out: dict[str, float] = {}
+    for name, t in (("gps_clock", gps_time - gps_time[0]), ("boot_clock", t_fix)):
+        dt = np.diff(t)
+        cn = np.concatenate([[0.0], np.cumsum(0.5 * (vel_n[1:, 0] + vel_n[:-1, 0]) * dt)])
+        ce = np.concatenate([[0.0], np.cumsum(0.5 * (vel_n[1:, 1] + vel_n[:-1, 1]) * dt)])
+        integ = np.hypot(cn[j + span] - cn[j], ce[j + span] - ce[j])
+        ok = (speed[j] > 1.0) & (integ > 0.5) & (disp < 300.0)
+        if ok.sum() < 10:
+            return None
+        out[f"displacement_over_speed_integral_{name}"] = float(np.median(disp[ok] / integ[ok]))
+    out["windows"] = int(ok.sum())
+    return out
+
+
+CLOCK_CHOICES = ("auto", "gps", "boot")
+
+
+def read_dataflash(path: str | Path, clock: str = "auto") -> Drive:
+    """Read an ArduPilot DataFlash binary log into a Drive (see the module docstring).
+
+    Parameters
+    ----------
+    path : the ``.bin`` log
+    clock : ``"auto"`` (default) puts every stream on GPS seconds when the boot clock's
+        advance per GPS second differs from 1 by more than ``CLOCK_RATIO_TOL`` (0.1 %), else
+        keeps the boot clock; ``"gps"`` always maps (when GPS time is logged); ``"boot"``
+        never maps (the reader's behaviour before the Erle clock repair).
+    """
+    if clock not in CLOCK_CHOICES:
+        raise ValueError(f"clock must be one of {CLOCK_CHOICES}, not {clock!r}")
     path = Path(path)
     report = Report()
     msgs, reader = _collect(path)
@@ -200,7 +236,6 @@ def read_dataflash(path: str | Path) -> Drive:
     t_imu, gyro, acc = t_imu[ok], gyro[ok], acc[ok]
     keep = monotonic_mask(t_imu, "imu", report)
     t_imu, gyro, acc = t_imu[keep], gyro[keep], acc[keep]
-    find_gaps(t_imu, "imu", report)
 
     # ---- GNSS ------------------------------------------------------------------------
     gps_rows = [r for r in msgs["GPS"] if _instance0(r)]
@@ -235,14 +270,13 @@ def read_dataflash(path: str | Path) -> Drive:
     if np.all(np.isfinite(gtime)):
         keep = monotonic_mask(gtime, "gnss", report)
         idx, gtime = idx[keep], gtime[keep]
-        t_gnss = _gnss_boot_time(t_recv[idx], gtime, report)
+        t_gnss, clock_fit = _gnss_boot_time(t_recv[idx], gtime, report)
     else:
+        clock_fit = None
         keep = monotonic_mask(t_recv[idx], "gnss", report)
         idx = idx[keep]
         t_gnss = t_recv[idx]
         report.notes.append("GNSS stamped with receipt time (GPS time missing)")
-    find_gaps(t_gnss, "gnss", report)
-
     lla = np.column_stack([lat[idx] * DEG, lon[idx] * DEG, alt[idx]])
     vel_n = np.column_stack([spd[idx] * np.cos(crs[idx] * DEG), spd[idx] * np.sin(crs[idx] * DEG),
                              vz[idx]])
@@ -250,13 +284,49 @@ def read_dataflash(path: str | Path) -> Drive:
     if not np.all(np.isfinite(vel_n)):
         report.notes.append("GNSS velocity incomplete in the log: velocity not used")
         vel_n = vel_sd = None
+
+    # ---- clock: boot time, or boot time re-expressed in GPS seconds -------------------
+    t_ref = float(t_imu[0])
+    clock_meta: dict[str, Any] = {"basis": "autopilot boot time [s]",
+                                  "boot_clock_per_gps_second": report.clock_rate}
+    if clock_fit is not None:
+        ev = _speed_evidence(t_gnss, gtime, lla, vel_n)
+        clock_meta["fit"] = {"offset_s": clock_fit.offset, "receipt_jitter_sd_s": clock_fit.sd,
+                             "receipts_off_fit": clock_fit.n_outliers}
+        clock_meta["evidence"] = ev or {}
+        r = clock_fit.ratio
+        off = abs(r - 1.0) > CLOCK_RATIO_TOL
+        if clock == "gps" or (clock == "auto" and off):
+            t_imu = local_to_gps_seconds(t_imu, r, t_ref)
+            t_gnss = local_to_gps_seconds(t_gnss, r, t_ref)
+            clock_meta["basis"] = "GPS time [s] (boot clock rescaled)"
+            clock_meta["t_ref_s"] = t_ref
+            report.repair("clock", "boot-clock stamps rescaled to GPS seconds "
+                          "(t = t_ref + (t_boot - t_ref)/r)", 1)
+            report.notes.append(
+                f"CLOCK REPAIRED: the boot clock advanced {r:.5f} s per GPS second "
+                f"({(r - 1) * 100:+.2f} %); IMU, baro, GNSS and onboard stamps are rescaled to "
+                f"GPS seconds keeping t = {t_ref:.3f} s fixed (read with clock='boot' to keep "
+                "the raw boot clock)")
+        elif off:
+            report.notes.append(
+                f"WARNING: the boot clock advanced {r:.5f} s per GPS second "
+                f"({(r - 1) * 100:+.2f} %); streams kept on the boot clock (clock='boot'): IMU "
+                "intervals are then off by this factor if GPS time is right")
+    basis_gps = clock_meta["basis"].startswith("GPS")
+
+    def tmap(t: np.ndarray) -> np.ndarray:
+        return local_to_gps_seconds(t, clock_fit.ratio, t_ref) if basis_gps else t
+
+    find_gaps(t_imu, "imu", report)
+    find_gaps(t_gnss, "gnss", report)
     gnss = GnssStream(t_gnss, lla, pos_sd, vel_n, vel_sd)
 
     # ---- baro ------------------------------------------------------------------------
-    baro, baro_offset = _read_baro(msgs["BARO"], gnss, report)
+    baro, baro_offset = _read_baro(msgs["BARO"], gnss, report, tmap)
 
     # ---- onboard estimate -------------------------------------------------------------
-    onboard = _onboard(msgs, params, gnss, report)
+    onboard = _onboard(msgs, params, gnss, report, tmap)
 
     origin = lla[0].copy()
     meta: dict[str, Any] = {
@@ -264,7 +334,7 @@ def read_dataflash(path: str | Path) -> Drive:
         "name": path.stem,
         "format": "ardupilot-dataflash",
         "firmware": firmware,
-        "clock": "autopilot boot time [s]",
+        "clock": clock_meta,
         "imu_frame": "ArduPilot body frame (forward-right-down), used as logged",
         "height_reference": "msl",
         "height_note": "GPS.Alt is above mean sea level (not ellipsoidal); every height in this "
@@ -312,13 +382,15 @@ def _gnss_sigmas(gpa_rows: list[dict[str, Any]], t_fix: np.ndarray, hdop: np.nda
     return np.column_stack([sh, sh, sv]), vel_sd
 
 
-def _read_baro(rows: list[dict[str, Any]], gnss: GnssStream,
-               report: Report) -> tuple[BaroStream | None, float | None]:
+def _read_baro(rows: list[dict[str, Any]], gnss: GnssStream, report: Report,
+               tmap: Any = None) -> tuple[BaroStream | None, float | None]:
     rows = [r for r in rows if _instance0(r)]
     if not rows:
         report.notes.append("no BARO records: drive has no barometer")
         return None, None
     t = np.array([_time_s(r) for r in rows])
+    if tmap is not None:
+        t = tmap(t)
     press = _col(rows, "Press")
     alt_rel = _col(rows, "Alt")
     health = _col(rows, "Health")
@@ -352,7 +424,7 @@ def _read_baro(rows: list[dict[str, Any]], gnss: GnssStream,
 
 
 def _onboard(msgs: dict[str, list[dict[str, Any]]], params: dict[str, Any], gnss: GnssStream,
-             report: Report) -> dict[str, Any] | None:
+             report: Report, tmap: Any = None) -> dict[str, Any] | None:
     """Autopilot's own altitude in the drive's height reference (relative alt + offset)."""
     ekf_used = params.get("AHRS_EKF_USE")
     candidates: list[tuple[str, list[dict[str, Any]], str, float]] = []
@@ -369,6 +441,8 @@ def _onboard(msgs: dict[str, list[dict[str, Any]]], params: dict[str, Any], gnss
             candidates.append(ekf)
     for name, rows, key, sign in candidates:
         t = np.array([_time_s(r) for r in rows])
+        if tmap is not None:
+            t = tmap(t)
         h = sign * _col(rows, key)
         ok = np.isfinite(t) & np.isfinite(h)
         t, h = t[ok], h[ok]
