@@ -1,0 +1,69 @@
+"""CI gate: the benchmark/job outputs exist and carry the DESIGN.md keys; no estimator failed.
+
+Usage: python benchmarks/check_outputs.py DIR
+Expects DIR/run/summary.json, DIR/bench/bench.json, DIR/reproductions.json and
+DIR/graph_perf.json. Exits 1 with one line per problem.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+GRAPH_PERF_KEYS = {"drive_duration_s", "keyframes", "batch_s", "builtin_floor_s",
+                   "batch_over_floor", "isam2_s", "isam2_realtime_factor",
+                   "isam2_update_p99_ms", "ekf_s", "ekf_realtime_factor", "peak_rss_mb"}
+REPRO_KEYS = {"seed003_steady_sd_m", "seed003_gps_only_sd_m", "seed003_settling_s",
+              "seed001_rmse_m", "seed001_calibration", "seed004_outage_alt_rmse_m"}
+METRIC_KEYS = {"status", "error", "alt_rmse_m", "alt_max_abs_m", "vel_down_rmse_mps",
+               "nees_mean", "runtime_s", "realtime_factor", "baro"}
+
+
+def check(root: Path) -> list[str]:
+    problems: list[str] = []
+
+    def load(rel: str) -> dict | None:
+        p = root / rel
+        if not p.exists():
+            problems.append(f"missing {rel}")
+            return None
+        return json.loads(p.read_text())
+
+    s = load("run/summary.json")
+    if s is not None:
+        if s.get("schema") != "vnav_graph.summary/1":
+            problems.append("summary.json: wrong schema")
+        for name, m in s.get("estimators", {}).items():
+            if not METRIC_KEYS <= set(m):
+                problems.append(f"summary.json: {name} lacks {sorted(METRIC_KEYS - set(m))}")
+            if m.get("status") != "ok":
+                problems.append(f"summary.json: {name} failed: {m.get('error')}")
+        if not s.get("estimators"):
+            problems.append("summary.json: no estimator ran")
+    b = load("bench/bench.json")
+    if b is not None:
+        if b.get("schema") != "vnav_graph.bench/1" or not b.get("runs"):
+            problems.append("bench.json: wrong schema or no runs")
+        for r in b.get("runs", []):
+            if r.get("status") != "ok":
+                problems.append(f"bench.json: {r.get('scenario')}/{r.get('seed')}/"
+                                f"{r.get('estimator')} failed: {r.get('error')}")
+    r = load("reproductions.json")
+    if r is not None and not REPRO_KEYS <= set(r):
+        problems.append(f"reproductions.json lacks {sorted(REPRO_KEYS - set(r))}")
+    g = load("graph_perf.json")
+    if g is not None and set(g) != GRAPH_PERF_KEYS:
+        problems.append(f"graph_perf.json keys differ: {sorted(set(g) ^ GRAPH_PERF_KEYS)}")
+    return problems
+
+
+if __name__ == "__main__":
+    if len(sys.argv) != 2:
+        sys.exit("usage: check_outputs.py DIR")
+    found = check(Path(sys.argv[1]))
+    for p in found:
+        print(f"check_outputs: {p}", file=sys.stderr)
+    if found:
+        sys.exit(1)
+    print("check_outputs: all outputs present, no estimator failed")
