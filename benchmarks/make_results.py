@@ -157,7 +157,7 @@ def comparison_section(doc: dict[str, Any], scenario: str) -> list[str]:
         if a not in agg or b not in agg:
             continue
         lines += [f"**{a} → {b} ({effect}).**", ""]
-        wins = []
+        wins, alt_ci = [], None
         for key, label, unit, scale, spec in METRICS:
             ci = paired(doc["runs"], scenario, a, b, key)
             if ci["mean"] is None:
@@ -166,14 +166,18 @@ def comparison_section(doc: dict[str, Any], scenario: str) -> list[str]:
             lines.append(f"- {text}")
             if key == "alt_rmse_m":
                 wins.append(winner)
+                alt_ci = ci
         w = wins[0] if wins else None
         if w == b:
             lines.append(f"- Why {b} wins on altitude: {why_b}.")
         elif w == a:
             lines.append(f"- Why {a} wins on altitude: {why_a}.")
-        else:
+        elif alt_ci is not None and alt_ci["ci95"] is not None:
+            bound = max(abs(alt_ci["ci95"][0]), abs(alt_ci["ci95"][1]))
             lines.append(f"- On altitude the {effect} effect is not resolved with "
-                         f"{len(doc['config']['seeds'])} seeds.")
+                         f"{alt_ci['n']} seeds: |a − b| ≤ {bound:.3f} m RMSE (95 %).")
+        else:
+            lines.append(f"- On altitude the {effect} effect is not resolved.")
         lines.append("")
     return lines
 
@@ -227,7 +231,7 @@ def reproductions_section(rep: dict[str, Any]) -> list[str]:
     lines = ["| quantity | vnav_graph | paper | source |", "| --- | --- | --- | --- |"]
     flat: dict[str, Any] = {}
     for k, v in rep.items():
-        if k in ("paper", "seed001_calibration", "config"):
+        if k in ("paper", "seed001_calibration", "config") or isinstance(v, bool | str):
             continue
         if isinstance(v, dict):
             for kk, vv in v.items():
