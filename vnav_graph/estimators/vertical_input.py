@@ -66,7 +66,7 @@ attitude filter).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numba import njit
@@ -78,7 +78,7 @@ from .strapdown import quat_exp, quat_mul, quat_to_dcm, strapdown_step
 
 @dataclass(frozen=True)
 class AhrsConfig:
-    """Gains of the GNSS-aided attitude reference.
+    """Gains and robustness rules of the GNSS-aided attitude reference.
 
     level_s : duration of the initial coarse-levelling average [s]
     tilt_omega : natural frequency ω_t of the tilt PI loop [rad/s]; k_p = 2ζω_t, k_i = ω_t²
@@ -86,8 +86,11 @@ class AhrsConfig:
     yaw_gain : proportional gain k_y of the course-over-ground heading correction [1/s]; the
         z-gyro bias integrator gain is k_y²/4 (critically damped heading loop)
     v_course_min : ground speed above which the GNSS course is trusted as heading [m/s]
-    max_correction : clamp on |ψ̂| per update [rad], only against gross GNSS errors (a tight
-        clamp would break the telescoping of the velocity noise, see step 3 above)
+        (raised per fix to 5σ of that fix's horizontal velocity)
+    max_correction : clamp on each raw tilt observation |ψ̂| per update [rad], only against
+        gross errors (a tight clamp would break the telescoping of the velocity noise)
+    max_tilt_feedback : clamp on the low-passed tilt error ψ fed back as a rate [rad]
+        (step 5, rule R4): the feedback rate never exceeds k_p·max_tilt_feedback
     gap_factor : a fix pair further apart than gap_factor × the nominal fix interval is an
         outage; no correction is made across it
     a_static : before the heading is initialised, tilt is corrected only over fix intervals
@@ -95,11 +98,40 @@ class AhrsConfig:
         differenced GNSS velocity noise, 3·√2·σ_v/``match_interval_s``)
     match_interval_s : minimum length of a velocity-matching interval [s]; faster fixes are
         thinned (at 10 Hz with σ_v = 0.1 m/s, matching every fix gave 3-5× larger tilt noise
-        on the simulated hill-drive than matching every 0.5 s, because the body-frame bias
-        integrator does not telescope the differenced noise while the vehicle turns)
+        on the simulated hill-drive than matching every 0.5 s)
     tilt_filter_s : time constant T_f of the first-order low-pass on the raw tilt
-        observation ψ̂ [s]; it turns the differenced GNSS velocity noise σ_v·√2/(Δt·g) per fix
-        into ≈ σ_v/(T_f·g) before it reaches the body-frame gyro-bias integrator
+        observation ψ̂ [s]
+    gate_prob : false-alarm probability p of the χ²₂ gate on the horizontal velocity-matching
+        residual (rule R2); threshold −2 ln p (13.8 at 10⁻³); None: no gate
+    tilt_sd0 : σ of the tilt error of an aligned reference [rad] used in the gate (covers the
+        consumer accelerometer-bias floor of ≈ 7 mrad with margin)
+    gyro_bias_sd : σ of the residual gyro bias [rad/s]; the gate's tilt σ grows by
+        gyro_bias_sd per second since the last accepted update
+    heading_sd : σ of the heading error once initialised [rad] (couples ψ_z × a_h into the
+        horizontal residual)
+    sd_v_default : σ of a receiver velocity without ``vel_sd`` [m/s]
+    sd_v_nominal : velocity σ at and below which a fix interval gets the full filter gain;
+        noisier intervals get the inverse-variance weight R_nom/R (rule R3) [m/s]
+    sd_v_max : a fix whose horizontal velocity σ exceeds this is unusable for levelling and
+        heading [m/s] (rule R1)
+    reinit_s : consecutive gate rejections spanning at least this long [s] let the next
+        usable interval through (the gate cannot lock the GNSS out after a real drift)
+    baro_check : compare the receiver's vertical velocity with the baro climb rate and drop the
+        vertical component of the levelling residual where they disagree (rule R5)
+    pos_vel_window_s, pos_vel_min_fixes : without receiver velocity, the reference velocity at
+        each fix is the slope of a σ-weighted quadratic least-squares fit of the GNSS
+        positions over a window of max(pos_vel_window_s, (pos_vel_min_fixes − 1) × nominal
+        fix interval) [s] (step 3b)
+    fallback_after_s : without an accepted GNSS levelling update for this long [s] the
+        accelerometer levelling fallback (step 6) runs
+    accel_level_window_s : averaging window of the fallback [s]
+    accel_level_tau_s : time constant of the fallback's tilt correction [s] (slow: it assumes
+        no sustained horizontal acceleration)
+    static_rate : the fallback runs only when |mean(ω̃ − b̂_g)| over its window is below this
+        [rad/s] (no turn: a turn carries a centripetal acceleration)
+    static_accel : ... and | |mean f̃_b| − g | is below this [m/s²]
+    imu_gap_factor : an IMU step longer than imu_gap_factor × the median step is a logging
+        gap: attitude held across it, no velocity matching over it (step 7)
     """
 
     level_s: float = 2.0
@@ -108,18 +140,43 @@ class AhrsConfig:
     yaw_gain: float = 0.1
     v_course_min: float = 5.0
     max_correction: float = 1.0
+    max_tilt_feedback: float = 0.2
     gap_factor: float = 2.5
     a_static: float = 0.3
     match_interval_s: float = 0.5
     tilt_filter_s: float = 2.0
+    gate_prob: float | None = 1e-3
+    tilt_sd0: float = 0.03
+    gyro_bias_sd: float = 0.002
+    heading_sd: float = 0.05
+    sd_v_default: float = 0.2
+    sd_v_nominal: float = 0.3
+    sd_v_max: float = 3.0
+    reinit_s: float = 20.0
+    baro_check: bool = True
+    pos_vel_window_s: float = 4.0
+    pos_vel_min_fixes: int = 7
+    fallback_after_s: float = 90.0
+    accel_level_window_s: float = 10.0
+    accel_level_tau_s: float = 30.0
+    static_rate: float = 0.03
+    static_accel: float = 0.3
+    imu_gap_factor: float = 5.0
 
     def __post_init__(self) -> None:
         for n in ("level_s", "tilt_omega", "tilt_zeta", "v_course_min", "max_correction",
-                  "gap_factor", "tilt_filter_s"):
+                  "max_tilt_feedback", "gap_factor", "tilt_filter_s", "tilt_sd0",
+                  "sd_v_default", "sd_v_nominal", "sd_v_max", "reinit_s", "pos_vel_window_s",
+                  "fallback_after_s", "accel_level_window_s", "accel_level_tau_s",
+                  "static_rate", "static_accel", "imu_gap_factor", "heading_sd"):
             if not getattr(self, n) > 0:
                 raise ValueError(f"AhrsConfig.{n}: must be > 0")
-        if self.yaw_gain < 0:
-            raise ValueError("AhrsConfig.yaw_gain: must be >= 0")
+        if self.yaw_gain < 0 or self.gyro_bias_sd < 0:
+            raise ValueError("AhrsConfig.yaw_gain, gyro_bias_sd: must be >= 0")
+        if self.gate_prob is not None and not 0.0 < self.gate_prob < 1.0:
+            raise ValueError("AhrsConfig.gate_prob: in (0, 1) or None")
+        if self.pos_vel_min_fixes < 3:
+            raise ValueError("AhrsConfig.pos_vel_min_fixes: at least 3 (quadratic fit)")
 
 
 @dataclass(frozen=True)
@@ -133,10 +190,14 @@ class VerticalInputs:
     gravity : (N,) normal gravity g(lat, h_ref) at the reference (GNSS) height [m/s²], +down
     c33 : (N,) C_nb[2, 2] of the AHRS attitude [-]
     f_z_b : (N,) measured specific force along body z (down) [m/s²]
-    coriolis_down : (N,) cor_D = −[(2ω_ie + ω_en) × v]_D from GNSS horizontal velocity [m/s²]
+    coriolis_down : (N,) cor_D = −[(2ω_ie + ω_en) × v]_D [m/s²] with v the horizontal
+        velocity propagated from the last usable GNSS velocity (step 8)
     lat : (N,) latitude used for gravity [rad] (GNSS, interpolated; origin without GNSS)
     q_nb : (N, 4) AHRS attitude (w, x, y, z), b → n
     bias_gyro : (N, 3) AHRS gyro-bias estimate [rad/s]
+    info : counters of the robustness rules (``velocity_source``, ``levelling_accepted``,
+        ``levelling_rejected``, ``levelling_reinit``, ``levelling_unusable``,
+        ``vertical_dropped``, ``accel_level_updates``, ``imu_gaps``)
     """
 
     t: FloatArray
@@ -149,6 +210,7 @@ class VerticalInputs:
     q_nb: FloatArray
     bias_gyro: FloatArray
     runtime_s: float = 0.0
+    info: dict = field(default_factory=dict)
 
     @property
     def accel_down(self) -> FloatArray:
@@ -162,17 +224,44 @@ def _wrap_nb(a):
 
 
 @njit(cache=True)
-def _ahrs(t, gyro, accel, q0, lla_i, vel_i, t_g, v_g, g_g, cor_g, ok_g,
-          kp, ki, k_yaw, ki_yaw, v_min, max_corr, a_static, t_filt, gap, yaw_init_done):
-    """Numba kernel. lla_i, vel_i: (N, 3) GNSS position/velocity at IMU epochs (for the
-    Earth/transport rates and the course); t_g (M,), v_g (M, 3) reference velocities at fixes,
-    g_g (M,) gravity at fixes, cor_g (M, 3) (2ω_ie+ω_en)×v at fixes, ok_g (M,) bool: the
-    interval [j-1, j] is usable."""
+def _rpy_quat(r, p, y):
+    """q_nb (w, x, y, z) of roll r, pitch p, yaw y (z-y-x Euler angles)."""
+    cr, sr = np.cos(0.5 * r), np.sin(0.5 * r)
+    cp, sp = np.cos(0.5 * p), np.sin(0.5 * p)
+    cy, sy = np.cos(0.5 * y), np.sin(0.5 * y)
+    return np.array([cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy,
+                     cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy])
+
+
+@njit(cache=True)
+def _clamp(x, m):
+    return m if x > m else (-m if x < -m else x)
+
+
+@njit(cache=True)
+def _ahrs(t, gyro, accel, q0, lla_i, vel_i, sdv_i, t_g, v_g, g_g, cor_g, ok_g, r_g, vert_g,
+          use_g, kp, ki, k_yaw, ki_yaw, v_min, max_corr, max_fb, a_static, t_filt, gap,
+          gate2, sd0, sd_bg, sd_yaw, r_nom, reinit_s, fb_after, lvl_win, lvl_tau, st_rate,
+          st_acc, g_nom, imu_gap, relevel):
+    """Numba kernel (module docstring steps 2-8).
+
+    lla_i, vel_i (N, 3): GNSS position/velocity interpolated to the IMU epochs (latitude,
+    height, course); sdv_i (N,) horizontal velocity σ there (inf in outages); t_g (M,),
+    v_g (M, 3) reference velocities at the (thinned) fixes, g_g (M,) gravity, cor_g (M, 3)
+    (2ω_ie+ω_en)×v, ok_g (M,) interval [j−1, j] not across an outage, r_g (M,) horizontal
+    residual variance per axis of that interval [(m/s²)²], vert_g (M,) its vertical component
+    is trusted, use_g (M,) the fix's velocity is usable (σ ≤ sd_v_max); relevel (N, 2)
+    roll/pitch from static samples after an IMU gap ending at that epoch (NaN elsewhere).
+    Returns q (N, 4), f_n (N, 3), b̂_g (N, 3), propagated horizontal velocity (N, 2) and the
+    counters [accepted, rejected, reinit, unusable, vertical dropped, accel-level, imu gaps].
+    """
     n = t.size
     m = t_g.size
     q = np.empty((n, 4))
     bg_out = np.empty((n, 3))
     f_n = np.empty((n, 3))
+    vp_out = np.empty((n, 2))
+    cnt = np.zeros(7, dtype=np.int64)
     q[0] = q0
     bg = np.zeros(3)
     psi = np.zeros(3)  # current attitude-error estimate (n frame), applied as a rate
@@ -180,16 +269,33 @@ def _ahrs(t, gyro, accel, q0, lla_i, vel_i, t_g, v_g, g_g, cor_g, ok_g,
     f_n[0] = c @ accel[0]
     cum = np.zeros(3)  # ∫ f_n dt from t[0]
     cum_prev = np.zeros(3)
+    cum_arr = np.zeros((n, 3))  # prefix integral of f_n (for the accelerometer fallback)
+    gyr_arr = np.zeros((n, 3))  # prefix integral of the raw gyro
+    acc_arr = np.zeros((n, 3))  # prefix integral of the raw specific force
+    # horizontal velocity propagated from the last usable GNSS velocity (Coriolis, ω_en)
+    vp = np.zeros(2)
+    vp_valid = False
     j = 0
     while j < m and t_g[j] <= t[0]:
+        if use_g[j]:
+            vp[0] = v_g[j, 0]
+            vp[1] = v_g[j, 1]
+            vp_valid = True
         j += 1
+    vp_out[0] = vp
     f_at_last = np.zeros(3)  # ∫ f_n up to the previous fix time
-    have_last = False
-    if j > 0:
-        have_last = True  # a fix at or before t[0]: integral there is 0
-    yaw_done = yaw_init_done
+    have_last = j > 0  # a fix at or before t[0]: integral there is 0
+    yaw_done = False
     skip = False
     psi_until = -np.inf
+    t_acc = t[0]  # last accepted levelling update (GNSS or fallback)
+    t_gnss_acc = -np.inf  # last accepted GNSS levelling update
+    t_vel_ok = -np.inf  # last fix whose velocity was usable and consistent
+    t_gap_end = -np.inf  # end of the last IMU logging gap
+    n_rej = 0
+    t_rej0 = 0.0
+    t_lvl = t[0]
+    ks = 0  # start index of the fallback window
     for k in range(n - 1):
         dt = t[k + 1] - t[k]
         c = quat_to_dcm(q[k])
@@ -199,20 +305,49 @@ def _ahrs(t, gyro, accel, q0, lla_i, vel_i, t_g, v_g, g_g, cor_g, ok_g,
         # PI feedback, tilt gains (kp, ki) on ψ_x, ψ_y and heading gains (k_yaw, ki_yaw) on ψ_z
         corr_p = c.T @ np.array([kp * psi[0], kp * psi[1], k_yaw * psi[2]])
         corr_i = c.T @ np.array([ki * psi[0], ki * psi[1], ki_yaw * psi[2]])
-        bg = bg + corr_i * dt
-        w0 = gyro[k] - bg - corr_p
-        w1 = gyro[k + 1] - bg - corr_p
-        _, _, qn = strapdown_step(lla_i[k], vel_i[k], q[k], w0, w1, accel[k], accel[k + 1], dt)
-        q[k + 1] = qn
+        vel_k = np.array([vp[0], vp[1], vel_i[k, 2]])
+        if dt > imu_gap:
+            # logging gap: no rate samples inside it (the vehicle may have been handled,
+            # e.g. a crash and restart on the loiter log). Re-level roll/pitch from the
+            # samples after the gap when they are static (relevel[k+1] finite), keep the yaw
+            # and the bias; otherwise hold the attitude. No velocity matching over any
+            # interval that touches the gap.
+            if np.isfinite(relevel[k + 1, 0]):
+                c0 = quat_to_dcm(q[k])
+                q[k + 1] = _rpy_quat(relevel[k + 1, 0], relevel[k + 1, 1],
+                                     np.arctan2(c0[1, 0], c0[0, 0]))
+            else:
+                q[k + 1] = q[k]
+            psi[0] = 0.0
+            psi[1] = 0.0
+            t_gap_end = t[k + 1]
+            cnt[6] += 1
+        else:
+            bg = bg + corr_i * dt
+            w0 = gyro[k] - bg - corr_p
+            w1 = gyro[k + 1] - bg - corr_p
+            _, _, qn = strapdown_step(lla_i[k], vel_k, q[k], w0, w1, accel[k], accel[k + 1],
+                                      dt)
+            q[k + 1] = qn
         bg_out[k] = bg
+        qn = q[k + 1]
         c1 = quat_to_dcm(qn)
         f_n[k + 1] = c1 @ accel[k + 1]
         cum_prev = cum.copy()
         cum = cum + 0.5 * (f_n[k] + f_n[k + 1]) * dt
-        # heading: one-time reset to the GNSS course, then proportional correction
+        cum_arr[k + 1] = cum
+        gyr_arr[k + 1] = gyr_arr[k] + 0.5 * (gyro[k] + gyro[k + 1]) * dt
+        acc_arr[k + 1] = acc_arr[k] + 0.5 * (accel[k] + accel[k + 1]) * dt
+        if dt <= imu_gap:
+            vp[0] += 0.5 * (f_n[k, 0] + f_n[k + 1, 0]) * dt
+            vp[1] += 0.5 * (f_n[k, 1] + f_n[k + 1, 1]) * dt
+        # heading: one-time reset to the GNSS course, then proportional correction; only from
+        # a velocity that is usable (σ) and recently consistent with the IMU (gate)
         vh = np.sqrt(vel_i[k + 1, 0] ** 2 + vel_i[k + 1, 1] ** 2)
         yaw = np.arctan2(c1[1, 0], c1[0, 0])
-        if vh > v_min:
+        v_thr = max(v_min, 5.0 * sdv_i[k + 1])
+        vel_trusted = t[k + 1] - t_vel_ok <= fb_after
+        if vh > v_thr and vel_trusted:
             course = np.arctan2(vel_i[k + 1, 1], vel_i[k + 1, 0])
             if not yaw_done:
                 dq = quat_exp(np.array([0.0, 0.0, _wrap_nb(course - yaw)]))
@@ -221,53 +356,143 @@ def _ahrs(t, gyro, accel, q0, lla_i, vel_i, t_g, v_g, g_g, cor_g, ok_g,
                 psi[2] = 0.0
                 skip = True  # the current fix interval mixes two headings
             else:
-                e = _wrap_nb(yaw - course)
-                if e > max_corr:
-                    e = max_corr
-                elif e < -max_corr:
-                    e = -max_corr
-                psi[2] = e
+                psi[2] = _clamp(_wrap_nb(yaw - course), max_corr)
         else:
             psi[2] = 0.0
         # tilt: velocity matching at each GNSS fix passed in (t[k], t[k+1]]
         while j < m and t_g[j] <= t[k + 1]:
             a = (t_g[j] - t[k]) / dt
             f_here = cum_prev + a * (cum - cum_prev)
-            if have_last and ok_g[j] and not skip:
+            usable = use_g[j] and use_g[j - 1] if j > 0 else False
+            if not usable:
+                cnt[3] += 1
+            elif have_last and ok_g[j] and not skip and t_g[j - 1] >= t_gap_end:
                 dtg = t_g[j] - t_g[j - 1]
                 f_meas = (f_here - f_at_last) / dtg
                 f_ref = (v_g[j] - v_g[j - 1]) / dtg + 0.5 * (cor_g[j] + cor_g[j - 1])
                 f_ref[2] -= 0.5 * (g_g[j] + g_g[j - 1])
+                if not vert_g[j]:
+                    # R5: vertical GNSS component not trusted: nominal vertical specific
+                    # force, residual from the horizontal components only
+                    f_ref[2] = -0.5 * (g_g[j] + g_g[j - 1])
+                    cnt[4] += 1
+                d = f_meas - f_ref
+                if not vert_g[j]:
+                    d[2] = 0.0
+                ah2 = f_ref[0] ** 2 + f_ref[1] ** 2
                 # before the heading is known a horizontal acceleration would be read as tilt
                 # (δf = ψ_z × a_h); then only quasi-static intervals level the platform
-                if not yaw_done and f_ref[0] ** 2 + f_ref[1] ** 2 > a_static**2:
+                if not yaw_done and ah2 > a_static**2:
                     psi[0] = 0.0
                     psi[1] = 0.0
-                    have_last = True
-                    skip = False
-                    f_at_last = f_here
-                    j += 1
-                    continue
-                d = f_meas - f_ref
-                cr = np.array([f_ref[1] * d[2] - f_ref[2] * d[1],
-                               f_ref[2] * d[0] - f_ref[0] * d[2]])
-                nf2 = f_ref[0] ** 2 + f_ref[1] ** 2 + f_ref[2] ** 2
-                # first-order low-pass (time constant t_filt) of the raw tilt observation
-                alpha = dtg / t_filt if dtg < t_filt else 1.0
-                for i in range(2):
-                    p = cr[i] / nf2
-                    if p > max_corr:
-                        p = max_corr
-                    elif p < -max_corr:
-                        p = -max_corr
-                    psi[i] += alpha * (p - psi[i])
-                psi_until = t_g[j] + gap * dtg
+                else:
+                    # R2: χ²₂ gate on the horizontal residual against its predicted spread
+                    sd_t = sd0 + sd_bg * (t_g[j] - t_acc)
+                    s_var = r_g[j] + (g_g[j] * sd_t) ** 2 + (sd_yaw**2) * ah2
+                    nu2 = (d[0] ** 2 + d[1] ** 2) / s_var
+                    accept = nu2 <= gate2
+                    if not accept:
+                        if n_rej == 0:
+                            t_rej0 = t_g[j]
+                        n_rej += 1
+                        if n_rej >= 2 and t_g[j] - t_rej0 >= reinit_s:
+                            accept = True
+                            cnt[2] += 1
+                        else:
+                            cnt[1] += 1
+                    if accept:
+                        n_rej = 0
+                        cnt[0] += 1
+                        cr = np.array([f_ref[1] * d[2] - f_ref[2] * d[1],
+                                       f_ref[2] * d[0] - f_ref[0] * d[2]])
+                        nf2 = f_ref[0] ** 2 + f_ref[1] ** 2 + f_ref[2] ** 2
+                        # R3: low-pass gain dtg/T_f, scaled by the inverse-variance weight
+                        w = r_nom / r_g[j] if r_g[j] > r_nom else 1.0
+                        alpha = (dtg / t_filt if dtg < t_filt else 1.0) * w
+                        for i in range(2):
+                            p = _clamp(cr[i] / nf2, max_corr)
+                            psi[i] = _clamp(psi[i] + alpha * (p - psi[i]), max_fb)
+                        psi_until = t_g[j] + gap * dtg
+                        t_acc = t_g[j]
+                        t_gnss_acc = t_g[j]
+                        t_vel_ok = t_g[j]
+            if use_g[j] and n_rej == 0:
+                # a usable velocity, not inside a run of gate rejections: trusted for the
+                # course and as the start of the propagated velocity (Coriolis, ω_en)
+                t_vel_ok = t_g[j]
+                vp[0] = v_g[j, 0]
+                vp[1] = v_g[j, 1]
+                vp_valid = True
             f_at_last = f_here
             have_last = True
             skip = False
             j += 1
+        # fallback (step 6): slow accelerometer levelling when GNSS gave nothing usable
+        tk = t[k + 1]
+        while ks < k + 1 and tk - t[ks + 1] >= lvl_win:
+            ks += 1
+        if (tk - t_gnss_acc > fb_after and tk - t_lvl >= 0.2 * lvl_win
+                and tk - t[ks] >= 0.8 * lvl_win and t[ks] >= t_gap_end):
+            t_lvl = tk
+            span = tk - t[ks]
+            w_m = (gyr_arr[k + 1] - gyr_arr[ks]) / span - bg
+            f_b = (acc_arr[k + 1] - acc_arr[ks]) / span
+            fbn = np.sqrt(f_b[0] ** 2 + f_b[1] ** 2 + f_b[2] ** 2)
+            wn = np.sqrt(w_m[0] ** 2 + w_m[1] ** 2 + w_m[2] ** 2)
+            if wn < st_rate and abs(fbn - g_nom) < st_acc:
+                fm = (cum_arr[k + 1] - cum_arr[ks]) / span
+                # reference (0, 0, −g): ψ_x = d_E/g, ψ_y = −d_N/g (horizontal residual only)
+                alpha = 0.2 * lvl_win / lvl_tau
+                if alpha > 1.0:
+                    alpha = 1.0
+                p0 = _clamp(fm[1] / g_nom, max_corr)
+                p1 = _clamp(-fm[0] / g_nom, max_corr)
+                psi[0] = _clamp(psi[0] + alpha * (p0 - psi[0]), max_fb)
+                psi[1] = _clamp(psi[1] + alpha * (p1 - psi[1]), max_fb)
+                psi_until = tk + 0.4 * lvl_win
+                t_acc = tk
+                cnt[5] += 1
+        vp_out[k + 1] = vp
     bg_out[n - 1] = bg
-    return q, f_n, bg_out
+    if not vp_valid:
+        vp_out[:] = 0.0
+    return q, f_n, bg_out, vp_out, cnt
+
+
+@njit(cache=True)
+def _poly_velocity(t, p, sd, half, seg):
+    """Slope at each fix of a 1/σ²-weighted quadratic fit of p (M, 3) over the fixes of the
+    same segment within ±half seconds; σ of the slope from (XᵀWX)⁻¹. NaN where < 3 fixes."""
+    m = t.size
+    v = np.full((m, 3), np.nan)
+    sv = np.full((m, 3), np.inf)
+    a = 0
+    b = 0
+    for j in range(m):
+        while t[a] < t[j] - half or seg[a] != seg[j]:
+            a += 1
+        if b < j:
+            b = j
+        while b + 1 < m and t[b + 1] <= t[j] + half and seg[b + 1] == seg[j]:
+            b += 1
+        if b - a + 1 < 3:
+            continue
+        for ax in range(3):
+            xtx = np.zeros((3, 3))
+            xty = np.zeros(3)
+            for i in range(a, b + 1):
+                w = 1.0 / (sd[i, ax] * sd[i, ax])
+                dtt = t[i] - t[j]
+                x = np.array([1.0, dtt, dtt * dtt])
+                xtx += w * np.outer(x, x)
+                xty += w * x * p[i, ax]
+            if abs(np.linalg.det(xtx)) < 1e-300:
+                continue
+            cov = np.linalg.inv(xtx)
+            beta = cov @ xty
+            v[j, ax] = beta[1]
+            sv[j, ax] = np.sqrt(cov[1, 1])
+    return v, sv
 
 
 def _thin(t: FloatArray, min_dt: float) -> FloatArray:
@@ -290,14 +515,131 @@ def _coarse_level(accel_b: FloatArray) -> FloatArray:
     return rph_to_quat(np.array([[roll, pitch, 0.0]]))[0]
 
 
+def _relevel_after_gaps(t, gyro, accel, gap_dt, level_s, g_nom, tol_acc, tol_rate):
+    """(N, 2) roll/pitch [rad] at the first epoch after each IMU gap longer than gap_dt,
+    from the mean specific force over the following level_s (Groves eq. 5.101), when that
+    window is static: | |f̄| − g | < 3·tol_acc and the RMS rate below 3·tol_rate (NaN else)."""
+    out = np.full((t.size, 2), np.nan)
+    for k in np.flatnonzero(np.diff(t) > gap_dt) + 1:
+        w = (t >= t[k]) & (t <= t[k] + level_s)
+        if np.sum(w) < 3:
+            continue
+        f = accel[w].mean(axis=0)
+        rate = float(np.sqrt(np.mean(np.sum(gyro[w] ** 2, axis=1))))
+        if abs(np.linalg.norm(f) - g_nom) < 3 * tol_acc and rate < 3 * tol_rate:
+            out[k] = np.arctan2(-f[1], -f[2]), np.arctan2(f[0], np.hypot(f[1], f[2]))
+    return out
+
+
+def _ned(lla: FloatArray) -> FloatArray:
+    """Local NED metres of (lat, lon, h) rows about the first row (radii at each row)."""
+    rn, re = radii(lla[:, 0])
+    return np.column_stack([
+        (lla[:, 0] - lla[0, 0]) * (rn + lla[:, 2]),
+        (lla[:, 1] - lla[0, 1]) * (re + lla[:, 2]) * np.cos(lla[:, 0]),
+        -(lla[:, 2] - lla[0, 2]),
+    ])
+
+
+def velocity_from_positions(t: FloatArray, lla: FloatArray, pos_sd: FloatArray,
+                            window_s: float, gap_s: float) -> tuple[FloatArray, FloatArray]:
+    """Reference velocity from GNSS positions alone (step 3b).
+
+    Parameters
+    ----------
+    t : (M,) fix times [s]; lla : (M, 3) (lat rad, lon rad, h m); pos_sd : (M, 3) NED σ [m]
+    window_s : fit window [s] (centred where the segment allows)
+    gap_s : a fix spacing above this starts a new segment (no fit across outages)
+
+    Returns
+    -------
+    v : (M, 3) NED velocity [m/s], the slope at t_j of p(τ) = a + b τ + c τ² fitted with
+        weights 1/σ² to the fixes of the same segment with |t_i − t_j| ≤ window_s/2 (NaN with
+        fewer than 3 fixes); unbiased for trajectories up to cubic in a symmetric window
+    sd : (M, 3) its σ [m/s], √[(XᵀWX)⁻¹]₁₁ (uncorrelated fix errors assumed); for N equally
+        spaced fixes spanning W, ≈ σ_p·√(12/N)/W
+    """
+    seg = np.concatenate([[0], np.cumsum(np.diff(t) > gap_s)]).astype(np.int64)
+    sd = np.where(np.isfinite(pos_sd) & (pos_sd > 0), pos_sd, 1e6)
+    return _poly_velocity(np.ascontiguousarray(t, dtype=float), _ned(lla),
+                          np.ascontiguousarray(sd, dtype=float), 0.5 * window_s, seg)
+
+
+def baro_rate(t_q: FloatArray, t_b: FloatArray, alt_b: FloatArray,
+              half_s: float = 1.0) -> tuple[FloatArray, FloatArray]:
+    """Climb rate of the baro altitude at times ``t_q`` (slope of a straight line fitted over
+    ±half_s, at least 3 samples) and its σ from the baro noise estimated robustly as
+    1.4826·MAD(second differences)/√6. Returns (rate (Q,) [m/s, +up], σ (Q,)); NaN/inf where
+    the window holds fewer than 3 samples."""
+    t_b = np.asarray(t_b, float)
+    z = np.asarray(alt_b, float)
+    tc = t_b - t_b[0]
+    d2 = np.diff(z, 2)
+    sd_b = max(1.4826 * float(np.median(np.abs(d2 - np.median(d2)))) / np.sqrt(6.0), 0.02) \
+        if d2.size > 4 else 0.5
+    c1 = np.concatenate([[0.0], np.cumsum(np.ones_like(tc))])
+    ct = np.concatenate([[0.0], np.cumsum(tc)])
+    ct2 = np.concatenate([[0.0], np.cumsum(tc * tc)])
+    cz = np.concatenate([[0.0], np.cumsum(z)])
+    ctz = np.concatenate([[0.0], np.cumsum(tc * z)])
+    a = np.searchsorted(t_b, t_q - half_s, side="left")
+    b = np.searchsorted(t_b, t_q + half_s, side="right")
+    n = c1[b] - c1[a]
+    st, st2 = ct[b] - ct[a], ct2[b] - ct2[a]
+    sz, stz = cz[b] - cz[a], ctz[b] - ctz[a]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        sxx = st2 - st * st / n
+        rate = (stz - st * sz / n) / sxx
+        sd = sd_b / np.sqrt(sxx)
+    bad = (n < 3) | ~(sxx > 0)
+    rate[bad] = np.nan
+    sd[bad] = np.inf
+    return rate, sd
+
+
+def _gnss_reference(drive: Drive, cfg: AhrsConfig):
+    """Reference velocities, their σ and the vertical-trust flags at the fixes."""
+    gn = drive.gnss
+    t_g, lla_g = gn.t, gn.lla
+    dt_nom = float(np.median(np.diff(t_g)))
+    if gn.vel_n is not None:
+        source = "receiver"
+        v_g = np.asarray(gn.vel_n, float)
+        if gn.vel_sd is not None:
+            sd_v = np.where(np.isfinite(gn.vel_sd), gn.vel_sd, np.inf)
+        else:
+            sd_v = np.full((t_g.size, 3), cfg.sd_v_default)
+        window = 0.0
+    else:
+        source = "positions"
+        window = max(cfg.pos_vel_window_s, (cfg.pos_vel_min_fixes - 1) * dt_nom)
+        v_g, sd_v = velocity_from_positions(t_g, lla_g, gn.pos_sd, window,
+                                            cfg.gap_factor * dt_nom)
+    sd_h = np.max(sd_v[:, :2], axis=1)
+    use = np.isfinite(v_g).all(axis=1) & (sd_h <= cfg.sd_v_max)
+    v_g = np.where(np.isfinite(v_g), v_g, 0.0)
+    # R5: vertical component of the reference trusted only from a receiver velocity that
+    # agrees with the baro climb rate (3σ + 0.3 m/s + 10 % for baro scale/latency)
+    if source == "positions":
+        vert = np.zeros(t_g.size, dtype=bool)
+    elif cfg.baro_check and drive.baro is not None and len(drive.baro) > 5:
+        rate, sd_r = baro_rate(t_g, drive.baro.t, drive.baro.altitude)
+        tol = 3.0 * np.sqrt(sd_v[:, 2] ** 2 + sd_r**2) + 0.3 + 0.1 * np.abs(rate)
+        vert = np.abs(-v_g[:, 2] - rate) <= tol  # NaN rate (no baro there) -> False
+    else:
+        vert = np.ones(t_g.size, dtype=bool)
+    return source, dt_nom, v_g, sd_v, sd_h, use, vert, window
+
+
 def vertical_inputs(drive: Drive, config: AhrsConfig | None = None) -> VerticalInputs:
     """Vertical specific force, gravity, C33 and F_z at the IMU epochs from a GNSS-aided AHRS.
 
     Parameters
     ----------
-    drive : the drive; uses ``imu`` and, when present, ``gnss`` (positions, and velocities if
-        given). Truth is never read.
-    config : AHRS gains (``AhrsConfig()`` by default: tilt loop ω_t = 0.05 rad/s, ζ = 1)
+    drive : the drive; uses ``imu``, ``gnss`` when present (positions, and velocities if
+        given) and ``baro`` (only to check the GNSS vertical velocity, rule R5). Truth is
+        never read.
+    config : AHRS gains and robustness rules (``AhrsConfig()`` by default)
 
     Returns
     -------
@@ -309,41 +651,42 @@ def vertical_inputs(drive: Drive, config: AhrsConfig | None = None) -> VerticalI
     imu = drive.imu
     t = imu.t
     n = t.size
+    dt_imu = float(np.median(np.diff(t))) if n > 1 else 0.01
     lev = t <= t[0] + cfg.level_s
     q0 = _coarse_level(imu.accel_b[lev])
     gn = drive.gnss
+    info: dict = {"velocity_source": "none"}
     if gn is not None and gn.t.size >= 3:
-        t_g = gn.t
-        lla_g = gn.lla
-        if gn.vel_n is not None:
-            v_g = gn.vel_n
-        else:
-            # central differences of the GNSS positions (NED metres via the radii)
-            rn, re = radii(lla_g[:, 0])
-            pn = np.column_stack([
-                (lla_g[:, 0] - lla_g[0, 0]) * (rn + lla_g[:, 2]),
-                (lla_g[:, 1] - lla_g[0, 1]) * (re + lla_g[:, 2]) * np.cos(lla_g[:, 0]),
-                -(lla_g[:, 2] - lla_g[0, 2]),
-            ])
-            v_g = np.column_stack([np.gradient(pn[:, i], t_g) for i in range(3)])
-        dt_nom = float(np.median(np.diff(t_g)))
-        if gn.vel_sd is not None:
-            sd_v = float(np.median(gn.vel_sd[:, :2]))
-        else:  # central difference: σ_v = √2·σ_p / (2Δt)
-            sd_v = float(np.median(gn.pos_sd[:, :2])) / (np.sqrt(2.0) * dt_nom)
+        source, dt_nom, v_g, sd_v, sd_h, use, vert, window = _gnss_reference(drive, cfg)
+        info["velocity_source"] = source
+        if window:
+            info["position_velocity_window_s"] = window
+        t_g, lla_g = gn.t, gn.lla
         ok = np.concatenate([[False], np.diff(t_g) <= cfg.gap_factor * dt_nom])
         lla_i = np.column_stack([np.interp(t, t_g, lla_g[:, i]) for i in range(3)])
         vel_i = np.column_stack([np.interp(t, t_g, v_g[:, i]) for i in range(3)])
+        sdv_i = np.interp(t, t_g, np.where(use, sd_h, 1e9))
         # inside outages the interpolated velocity is not a measurement: no course there
         in_gap = np.zeros(n, dtype=bool)
         for i in np.flatnonzero(~ok[1:]) + 1:
             in_gap |= (t > t_g[i - 1]) & (t < t_g[i])
         vel_i[in_gap, :2] = 0.0
-        # velocity matching over intervals of at least match_interval_s (fewer, longer Δv)
-        keep = _thin(t_g, cfg.match_interval_s)
+        sdv_i[in_gap] = np.inf
+        # velocity matching over intervals of at least match_interval_s (fewer, longer Δv);
+        # with position-derived velocities at least half the fit window
+        match = cfg.match_interval_s if source == "receiver" else max(
+            cfg.match_interval_s, 0.5 * window)
+        keep = _thin(t_g, match)
         t_g, lla_g, v_g = t_g[keep], lla_g[keep], v_g[keep]
+        sd_h, use, vert = sd_h[keep], use[keep], vert[keep]
         ok = np.concatenate(
-            [[False], np.diff(t_g) <= cfg.gap_factor * max(dt_nom, cfg.match_interval_s)])
+            [[False], np.diff(t_g) <= cfg.gap_factor * max(dt_nom, match)])
+        vert_iv = np.concatenate([[False], vert[1:] & vert[:-1]])
+        dtg = np.concatenate([[np.inf], np.diff(t_g)])
+        with np.errstate(invalid="ignore"):
+            r_g = (sd_h**2 + np.concatenate([[np.inf], sd_h[:-1] ** 2])) / dtg**2
+        r_g = np.where(np.isfinite(r_g), r_g, 1e12)
+        r_nom = 2.0 * cfg.sd_v_nominal**2 / match**2
         g_g = gravity(lla_g[:, 0], lla_g[:, 2])
         w_ie = np.column_stack([OMEGA_IE * np.cos(lla_g[:, 0]), np.zeros(t_g.size),
                                 -OMEGA_IE * np.sin(lla_g[:, 0])])
@@ -351,43 +694,62 @@ def vertical_inputs(drive: Drive, config: AhrsConfig | None = None) -> VerticalI
         w_en = np.column_stack([v_g[:, 1] / (re + lla_g[:, 2]), -v_g[:, 0] / (rn + lla_g[:, 2]),
                                 -v_g[:, 1] * np.tan(lla_g[:, 0]) / (re + lla_g[:, 2])])
         cor_g = np.cross(2 * w_ie + w_en, v_g)
+        sd_med = float(np.median(sd_h[use])) if np.any(use) else cfg.sd_v_default
     else:
         t_g = np.empty(0)
         v_g = np.zeros((0, 3))
         g_g = np.empty(0)
         cor_g = np.zeros((0, 3))
         ok = np.zeros(0, dtype=bool)
+        r_g = np.empty(0)
+        vert_iv = np.zeros(0, dtype=bool)
+        use = np.zeros(0, dtype=bool)
         lla_i = np.tile(drive.origin_lla, (n, 1))
         vel_i = np.zeros((n, 3))
-        sd_v = 0.0
-    # the course is trusted only when the speed is far above the velocity noise (5σ)
-    v_course = max(cfg.v_course_min, 5.0 * sd_v)
+        sdv_i = np.full(n, np.inf)
+        sd_med = 0.0
+        match = cfg.match_interval_s
+        r_nom = 1.0
     # "quasi-static" threshold raised by 3σ of the differenced velocity noise per interval
-    a_static_eff = cfg.a_static + 3.0 * np.sqrt(2.0) * sd_v / cfg.match_interval_s
+    a_static_eff = cfg.a_static + 3.0 * np.sqrt(2.0) * sd_med / match
     kp = 2.0 * cfg.tilt_zeta * cfg.tilt_omega
     ki = cfg.tilt_omega**2
-    q, f_n, bg = _ahrs(
+    gate2 = np.inf if cfg.gate_prob is None else -2.0 * np.log(cfg.gate_prob)  # χ²₂ quantile
+    g_nom = float(gravity(drive.origin_lla[0], drive.origin_lla[2]))
+    relevel = _relevel_after_gaps(t, imu.gyro_b, imu.accel_b, cfg.imu_gap_factor * dt_imu,
+                                  cfg.level_s, g_nom, cfg.static_accel, cfg.static_rate)
+    q, f_n, bg, vp, cnt = _ahrs(
         t, imu.gyro_b, imu.accel_b, q0, np.ascontiguousarray(lla_i),
-        np.ascontiguousarray(vel_i), np.ascontiguousarray(t_g, dtype=float),
-        np.ascontiguousarray(v_g, dtype=float), np.ascontiguousarray(g_g, dtype=float),
-        np.ascontiguousarray(cor_g, dtype=float), ok, kp, ki, cfg.yaw_gain, 0.25 * cfg.yaw_gain**2,
-        v_course, cfg.max_correction, a_static_eff, cfg.tilt_filter_s, cfg.gap_factor, False,
+        np.ascontiguousarray(vel_i), np.ascontiguousarray(sdv_i),
+        np.ascontiguousarray(t_g, dtype=float), np.ascontiguousarray(v_g, dtype=float),
+        np.ascontiguousarray(g_g, dtype=float), np.ascontiguousarray(cor_g, dtype=float), ok,
+        np.ascontiguousarray(r_g, dtype=float), vert_iv, use, kp, ki, cfg.yaw_gain,
+        0.25 * cfg.yaw_gain**2, cfg.v_course_min, cfg.max_correction, cfg.max_tilt_feedback,
+        a_static_eff, cfg.tilt_filter_s, cfg.gap_factor, gate2, cfg.tilt_sd0, cfg.gyro_bias_sd,
+        cfg.heading_sd, r_nom, cfg.reinit_s, cfg.fallback_after_s, cfg.accel_level_window_s,
+        cfg.accel_level_tau_s, cfg.static_rate, cfg.static_accel, g_nom,
+        cfg.imu_gap_factor * dt_imu, relevel,
     )
+    for key, val in zip(("levelling_accepted", "levelling_rejected", "levelling_reinit",
+                         "levelling_unusable", "vertical_dropped", "accel_level_updates",
+                         "imu_gaps"), cnt, strict=True):
+        info[key] = int(val)
     lat = lla_i[:, 0]
     h_ref = lla_i[:, 2]
     x, y = q[:, 1], q[:, 2]
     c33 = 1.0 - 2.0 * (x * x + y * y)
-    # cor_D = −[(2ω_ie + ω_en) × v]_D with v from GNSS (horizontal components only matter)
+    # cor_D = −[(2ω_ie + ω_en) × v]_D with the propagated horizontal velocity (step 8)
     rn_i, re_i = radii(lat)
-    wx = 2 * OMEGA_IE * np.cos(lat) + vel_i[:, 1] / (re_i + h_ref)
-    wy = -vel_i[:, 0] / (rn_i + h_ref)
-    cor_d = -(wx * vel_i[:, 1] - wy * vel_i[:, 0])
+    wx = 2 * OMEGA_IE * np.cos(lat) + vp[:, 1] / (re_i + h_ref)
+    wy = -vp[:, 0] / (rn_i + h_ref)
+    cor_d = -(wx * vp[:, 1] - wy * vp[:, 0])
     q = np.where(q[:, :1] < 0, -q, q)
     return VerticalInputs(
         t=t, f_down=f_n[:, 2].copy(), gravity=gravity(lat, h_ref), c33=c33,
         f_z_b=imu.accel_b[:, 2].copy(), coriolis_down=cor_d, lat=lat, q_nb=q, bias_gyro=bg,
-        runtime_s=time.perf_counter() - t0,
+        runtime_s=time.perf_counter() - t0, info=info,
     )
 
 
-__all__ = ["AhrsConfig", "VerticalInputs", "vertical_inputs"]
+__all__ = ["AhrsConfig", "VerticalInputs", "baro_rate", "velocity_from_positions",
+           "vertical_inputs"]
