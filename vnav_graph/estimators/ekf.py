@@ -19,14 +19,23 @@ Outputs
   average (σ(mean e) ≤ mean σ(e) for any correlation between epochs).
 - innovations: normalised (z − h(x̃))/√S_ii of every accepted measurement component:
   ``gnss_pos`` (N, 3), ``gnss_vel`` (N, 3), ``baro`` (N,).
-- info: ``gnss_rejected`` (position fixes refused by the χ² gate), ``gnss_vel_rejected``,
+- info: ``gnss_rejected`` (fixes whose horizontal pair or height was refused: χ² gate,
+  σ_v limit or probation, ``ekf_model`` docstring), ``gnss_alt_rejected`` (height refused),
+  ``imu_gaps`` ([start, length] of bridged IMU gaps [s]), ``gnss_vel_rejected``,
   ``baro_rejected``, ``heading_time_s`` (time the heading became known), rates used.
 
 Noise
 -----
 From ``drive.imu.spec`` / ``drive.baro.spec`` / ``drive.gnss.spec`` when present, else the
-documented defaults of ``EkfConfig`` (real logs carry no spec): IMU ``consumer`` preset, GNSS
-per-fix sigmas of the stream, baro ``BaroSpec`` defaults with a 10 m bias sigma and the bias
+documented defaults of ``EkfConfig`` (real logs carry no spec). IMU: ``real_log_imu_spec`` —
+the ``PHONE_IMU`` floors (an uncalibrated phone/autopilot MEMS: gyro bias 0.5 °/s, accel bias
+0.1 m/s², scale 1 %) with the white-noise densities raised to the level measured in the log
+itself: σ_white = 1.4826·median|Δx|/√2 per axis (first differences remove the motion below
+≈ f_s/4; the robust MAD ignores manoeuvre steps), density = max over axes of σ_white/√f_s. The
+filter cannot tell vibration from sensor noise without a reference, so the measured
+sample-to-sample scatter is taken as white noise (a phone on a skier: 0.036 m/s²/√Hz and
+0.31 °/s/√Hz, 100× the MPU-9250 datasheet). GNSS: per-fix sigmas of the stream, baro
+``BaroSpec`` defaults with a 10 m bias sigma and the bias
 prior mean taken from the first baro sample minus the initial GNSS height (a relative baro
 altitude would otherwise be hundreds of metres off). Discrete variances come from
 ``vnav_graph.sensors.noise`` only. Small floors keep P positive definite with ideal sensors.
@@ -39,7 +48,7 @@ seed 001 (baro error model); Rauch, Tung & Striebel, AIAA J. 3(8), 1965.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -66,15 +75,67 @@ NDArrayInt = Any
 PROVIDES = frozenset({"alt", "vel_d", "pos_h", "vel_h", "att", "baro", "cov"})
 
 
+# Floors for real logs without an IMU spec: an uncalibrated phone / hobby-autopilot MEMS
+# (iPhone/Android "uncalibrated" gyro turn-on bias is ≲ 0.5 °/s, accelerometer ≲ 0.1 m/s²,
+# scale ≲ 1 %); noise densities are the MPU-9250 datasheet values (``consumer`` preset) and
+# are raised to the measured level by ``real_log_imu_spec``.
+PHONE_IMU = ImuSpec(
+    name="phone",
+    gyro_noise_density=IMU_PRESETS["consumer"].gyro_noise_density,
+    gyro_bias_sd=0.5 * DEG,
+    gyro_bias_tau=600.0,
+    gyro_bias_rw=IMU_PRESETS["consumer"].gyro_bias_rw,
+    accel_noise_density=IMU_PRESETS["consumer"].accel_noise_density,
+    accel_bias_sd=0.1,
+    accel_bias_tau=600.0,
+    accel_bias_rw=IMU_PRESETS["consumer"].accel_bias_rw,
+    accel_scale_sd=0.01,
+)
+
+
+def measured_white_sd(x: FloatArray) -> FloatArray:
+    """Per-axis white-noise σ of samples x (N, 3): 1.4826·median|Δx|/√2 (robust, MAD of the
+    first differences; for white noise of σ, Δx has σ√2, for slow motion Δx ≈ 0)."""
+    if x.shape[0] < 3:
+        return np.zeros(x.shape[1])
+    return 1.4826 * np.median(np.abs(np.diff(x, axis=0)), axis=0) / np.sqrt(2.0)
+
+
+def real_log_imu_spec(imu: Any, base: ImuSpec, k_vre: float = 0.14) -> ImuSpec:
+    """``base`` with noise densities raised to the measured white level (module docstring).
+
+    density = max_axis σ_white / √f_s [unit/√Hz] with f_s = ``imu.rate_hz``; accelerometer
+    bias random walk ≥ k_vre·σ_white,accel [m/s²/√s] (vibration rectification: a vibrating
+    MEMS accelerometer — clipping, asymmetric response — shows bias shifts that grow with the
+    vibration; k_vre = 0.14 /√s is set on 181.BIN, whose |f| averages 7.3-8.9 m/s² for 8 s while
+    the baro climbs, σ_white = 0.75 m/s²; it gives 0.01 m/s²/√s on 218.BIN, 0.05 on the ski log).
+    """
+    rt = np.sqrt(imu.rate_hz)
+    g_nd = float(np.max(measured_white_sd(imu.gyro_b))) / rt
+    a_sd = float(np.max(measured_white_sd(imu.accel_b)))
+    return replace(base, name=f"{base.name}-measured",
+                   gyro_noise_density=max(base.gyro_noise_density, g_nd),
+                   accel_noise_density=max(base.accel_noise_density, a_sd / rt),
+                   accel_bias_rw=max(base.accel_bias_rw, k_vre * a_sd))
+
+
 @dataclass(frozen=True)
 class EkfConfig:
     """Settings of ``ekf`` / ``ekf-rts`` (SI units).
 
     cov_rate_hz: covariance propagation grid; cov_output_hz: rate of ``Estimate.cov``;
     traj_rate_hz: output trajectory rate (None = every IMU epoch); gate_prob: χ² gate
-    probability for GNSS position, GNSS velocity and baro innovations; max_consecutive_rejects:
-    after this many consecutive rejections of one sensor the next measurement is accepted
-    (recovers from a diverged filter instead of refusing GNSS forever); align_max_s: maximum
+    probability for GNSS position (horizontal pair χ²₂, height χ²₁), GNSS velocity and baro
+    innovations; max_consecutive_rejects: after this many consecutive rejections the next
+    horizontal GNSS pair / baro sample is accepted (recovers from a diverged filter instead of
+    refusing GNSS forever), and the GNSS-height probation gate is widened by the baro-bias
+    prior (with a baro) or the height accepted (without); max_gnss_sd_v: GNSS heights whose
+    own σ_v [m] exceeds this are not used; gnss_probation_s: a GNSS height, once rejected, is
+    used again after passing the gate this long without a break (``ekf_model`` docstring);
+    gap_factor, gap_min_s: an IMU interval longer than max(gap_factor·median Δt, gap_min_s) is
+    a logging gap, bridged at constant velocity with the unknown motion gap_accel_sd [m/s²/√s],
+    gap_yaw_rw [rad/√s] added to the covariance, roll/pitch re-levelled from the mean specific
+    force of the first gap_level_s after it with σ gap_level_sd [rad]; align_max_s: maximum
     static levelling window; initial_heading / initial_heading_sd: given heading [rad] (None =
     from the GNSS track once moving faster than heading_speed_min [m/s], σ from the velocity
     noise and sideslip_sd); accel_scale: estimate accelerometer scale factors (None = when the
@@ -92,7 +153,8 @@ class EkfConfig:
     heading_speed_min: float = 0.5
     sideslip_sd: float = 2.0 * DEG
     accel_scale: bool | None = None
-    default_imu: ImuSpec = field(default_factory=lambda: IMU_PRESETS["consumer"])
+    default_imu: ImuSpec = field(default_factory=lambda: PHONE_IMU)
+    measure_imu_noise: bool = True
     default_baro: BaroSpec = field(default_factory=lambda: BaroSpec(bias_sd=10.0,
                                                                     noise_sd=0.5))
     default_latency_sd: float = 0.1
@@ -105,6 +167,14 @@ class EkfConfig:
     min_gyro_bias_sd: float = 1e-5  # rad/s
     min_accel_bias_sd: float = 1e-4  # m/s²
     min_tilt_sd: float = 1e-4  # rad, levelling residual besides the accel-bias term
+    max_gnss_sd_v: float = 10.0
+    gnss_probation_s: float = 10.0
+    gap_factor: float = 5.0
+    gap_min_s: float = 0.25
+    gap_accel_sd: float = 1.0  # m/s²/√s
+    gap_level_sd: float = 0.05  # rad
+    gap_level_s: float = 1.0
+    gap_yaw_rw: float = 0.05  # rad/√s
 
     def __post_init__(self) -> None:
         if not (self.cov_rate_hz > 0 and self.cov_output_hz > 0):
@@ -163,7 +233,12 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
     if n < 3:
         raise ValueError("ekf: the IMU stream needs at least 3 samples")
     rate = imu.rate_hz
-    ispec: ImuSpec = imu.spec if isinstance(imu.spec, ImuSpec) else cfg.default_imu
+    if isinstance(imu.spec, ImuSpec):
+        ispec: ImuSpec = imu.spec
+    elif cfg.measure_imu_noise:
+        ispec = real_log_imu_spec(imu, cfg.default_imu)
+    else:
+        ispec = cfg.default_imu
     est_scale = cfg.accel_scale if cfg.accel_scale is not None else (
         not isinstance(imu.spec, ImuSpec) or ispec.accel_scale_sd > 0)
     gnss, baro = drive.gnss, drive.baro
@@ -173,9 +248,11 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
 
     # --- grids -------------------------------------------------------------------------
     m_grid = max(1, round(rate / cfg.cov_rate_hz))
-    grid_idx = np.arange(0, n, m_grid)
-    if grid_idx[-1] != n - 1:
-        grid_idx = np.append(grid_idx, n - 1)
+    dts = np.diff(t)
+    gap_step = dts > max(cfg.gap_factor * float(np.median(dts)), cfg.gap_min_s)
+    gaps = np.flatnonzero(gap_step)
+    grid_idx = np.union1d(np.union1d(np.arange(0, n, m_grid), [n - 1]),
+                          np.r_[gaps, gaps + 1]).astype(np.int64)
     kk = grid_idx.size
     grid_of = np.full(n, -1, dtype=np.int64)
     grid_of[grid_idx] = np.arange(kk)
@@ -205,6 +282,17 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
                                 + _white_var(ispec.accel_bias_rw, dtg))[:, None]
     b_bsd = max(bspec.bias_sd, cfg.min_baro_bias_sd)
     qd[:, km.IBB] = gm_process_var(dtg, bspec.bias_tau, b_bsd)
+    # IMU gaps: the grid interval ending at gap end i+1 is exactly the gap (ekf_model docstring)
+    kg = np.searchsorted(grid_idx, gaps + 1)
+    dg = dtg[kg]
+    qd[kg, km.IPOS:km.IPOS + 3] += (cfg.gap_accel_sd**2 * dg**3 / 3.0)[:, None]
+    qd[kg, km.IVEL:km.IVEL + 3] = (cfg.gap_accel_sd**2 * dg)[:, None]
+    qd[kg, km.IATT:km.IATT + 2] = cfg.gap_level_sd**2
+    qd[kg, km.IATT + 2] = cfg.gap_yaw_rw**2 * dg
+    gap_rp = np.full((n, 2), np.nan)
+    for i in gaps:
+        j1 = max(int(np.searchsorted(t, t[i + 1] + cfg.gap_level_s, side="right")), i + 2)
+        gap_rp[i + 1] = coarse_level(imu.accel_b[i + 1:j1].mean(axis=0))
 
     # --- alignment -----------------------------------------------------------------------
     i_static = static_window_end(imu, cfg.align_max_s)
@@ -307,7 +395,7 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
     counts = np.diff(np.searchsorted(ev_t, t[grid_idx], side="right"))
     max_pending = int(counts.max()) + 1 if counts.size else 1
 
-    gate = float(chi2.ppf(cfg.gate_prob, 3))
+    gate2 = float(chi2.ppf(cfg.gate_prob, 2))
     gate1 = float(chi2.ppf(cfg.gate_prob, 1))
     tilt_rate_sd = np.sqrt(2.0) * OMEGA_IE * np.cos(lla0[0])
     tau = (ispec.gyro_bias_tau, ispec.accel_bias_tau, bspec.bias_tau)
@@ -317,12 +405,14 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
         cov_grid.size, lla0, v0, q0, par0, p0, qd, *tau,
         ev_t, ev_type, ev_idx, np.ascontiguousarray(g_lla), np.ascontiguousarray(g_psd),
         np.ascontiguousarray(g_vel), np.ascontiguousarray(g_vsd), has_vel, lever,
-        tr_yaw, tr_speed, tr_sd, b_alt, b_noise, h0, gate, gate, gate1,
+        tr_yaw, tr_speed, tr_sd, b_alt, b_noise, h0, gate2, gate2, gate1,
         cfg.max_consecutive_rejects, heading_known, cfg.heading_speed_min, yaw_unknown_var,
         tilt_rate_sd, max_pending, store_rts,
+        gate1, cfg.max_gnss_sd_v, cfg.gnss_probation_s, baro is not None, b_bsd**2, gap_step,
+        gap_rp,
     )
     (o_lla, o_v, o_q, o_par, cov_p, rts_p, rts_ing, rts_q, corr, reset_at,
-     inn_pos, inn_vel, inn_baro, rej_pos, rej_vel, rej_baro, t_heading) = res
+     inn_pos, inn_vel, inn_baro, rej_pos, rej_vel, rej_baro, t_heading, rej_v) = res
     innov: dict[str, FloatArray] = {}
     if gnss is not None:
         innov["gnss_pos"] = inn_pos[np.isfinite(inn_pos[:, 0]) & ~rej_pos]
@@ -333,7 +423,9 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
     info = {
         "gnss_rejected": int(rej_pos.sum()),
         "gnss_rejected_t": (gnss.t[rej_pos] if gnss is not None else np.zeros(0)),
+        "gnss_alt_rejected": int(rej_v.sum()),
         "gnss_vel_rejected": int(rej_vel.sum()),
+        "imu_gaps": [[float(t[i]), float(t[i + 1] - t[i])] for i in gaps],
         "baro_rejected": int(rej_baro.sum()),
         "heading_time_s": None if np.isnan(t_heading) else float(t_heading),
         "cov_rate_hz": float(rate / m_grid),

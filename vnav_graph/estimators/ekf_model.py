@@ -46,6 +46,40 @@ feedback, e_k = x⁺_k − x_true has filtered mean 0, and with c_k the correcti
 G_k = P⁺_k Φ_kᵀ (P⁻_{k+1})⁻¹, ê^s_N = 0. P⁻_{k+1} is recomputed from the stored packed P⁺_k,
 Φ_k (from its stored ingredients) and Q_k, so only ≈ 300 numbers per grid epoch are kept.
 
+GNSS position gating (fault detection and exclusion). The horizontal pair and the height of a
+fix are gated separately: NIS_h = ν_hᵀ S_h⁻¹ ν_h against χ²₂, NIS_v = ν_v²/S_v against χ²₁.
+With a barometer the vertical is well determined without GNSS (baro + bias model), so a
+GNSS height inconsistent with it is a receiver fault, and such faults persist (multipath,
+the 181.BIN glitch: 300 m for a minute while the fix claims 3-D):
+- a height whose own σ_v exceeds ``max_sd_v`` is not used (the receiver says it is degraded;
+  relative to a baro-aided vertical it carries almost no information);
+- an isolated rejected height (a spike) is just refused; after two consecutive refusals the
+  GNSS height is on probation (a persistent fault): it is used again only once it has passed
+  the gate (and been usable) for ``probation_s`` without a break;
+- after ``max_consec`` consecutive vertical refusals the probation gate is widened by the
+  baro-bias prior variance (S_v + σ²_b,prior: "consistent with the baro if we forget what we
+  learned about its bias"), and the fix that completes probation is applied with σ²_b,prior
+  added to the baro-bias variance, so a genuinely moved baro datum is re-learned;
+- without a barometer the old rule applies: after ``max_consec`` refusals the height is
+  accepted (GNSS is the only height reference; a diverged filter must recover).
+The horizontal pair is accepted after ``max_consec`` refusals (nothing else observes it), as
+a re-initialisation: a position jump with the variance of the observed innovation is added
+to P (and to the stored Q, so the RTS smoother models the same jump) before the update.
+The GNSS vertical velocity is used only with an accepted GNSS height (same receiver
+solution); the horizontal velocity pair is gated on its own (χ²₂).
+
+IMU gaps (logging dropouts, ``gap_step``): an IMU interval longer than the gap threshold is
+not integrated as if the end samples held over it. The step is its own grid interval; the
+nominal state moves at constant velocity, F keeps only δṙ = δv and the Gauss-Markov decays,
+and Q adds the unknown motion: σ_a²Δt to velocity, σ_a²Δt³/3 to position (cross term
+omitted), σ_ψ²Δt to yaw. The attitude is not carried over a gap (the 22 s gap of
+Loiter_RTL.bin follows a crash: the vehicle lies upside down before it and stands upright
+after it): roll and pitch are re-levelled from the mean specific force of the first samples
+after the gap (``gap_rp``, coarse levelling as at the start) with the yaw kept; Φ's roll/pitch
+rows are zero there (``step_phi``) and Q gives them the levelling variance, so the RTS smoother
+sees the reset exactly. The next GNSS/baro updates then re-anchor position and velocity with
+the inflated covariance.
+
 The baro prediction/Jacobian ``baro_predict`` / ``baro_row`` are scalar njit twins of
 ``vnav_graph.sensors.baro.measure_baro`` / ``baro_jacobian`` (the shared model; tested equal in
 tests/unit/test_ekf_model.py).
@@ -61,7 +95,7 @@ from .strapdown import nav_rates, quat_exp, quat_mul, quat_to_dcm, strapdown_ste
 
 NX = 21  # internal error-state dimension
 NPACK = NX * (NX + 1) // 2
-NING = 22  # ingredients of F per grid interval
+NING = 23  # ingredients of F per grid interval (22: IMU-gap flag)
 IPOS, IVEL, IATT, IBG, IBA, ISC, ITD, IBB, IKA = 0, 3, 6, 9, 12, 15, 16, 17, 18
 # indices of the nominal parameter vector ``par`` (12,)
 PBG, PBA, PKA, PSC, PTD, PBB = 0, 3, 6, 9, 10, 11
@@ -143,6 +177,16 @@ def build_f(ing, tau_g, tau_a, tau_b):
             f[IBA + i, IBA + i] = -1.0 / tau_a
     if np.isfinite(tau_b):
         f[IBB, IBB] = -1.0 / tau_b
+    if ing[22] > 0.5:
+        # IMU gap (module docstring): no inertial data, constant-velocity nominal; only
+        # δṙ = δv and the Gauss-Markov decays remain
+        g2 = np.zeros((NX, NX))
+        for i in range(3):
+            g2[IPOS + i, IVEL + i] = 1.0
+            g2[IBG + i, IBG + i] = f[IBG + i, IBG + i]
+            g2[IBA + i, IBA + i] = f[IBA + i, IBA + i]
+        g2[IBB, IBB] = f[IBB, IBB]
+        f = g2
     if ing[20] > 0.5:  # heading unknown: decouple the yaw error
         for j in range(NX):
             f[IATT + 2, j] = 0.0
@@ -154,6 +198,28 @@ def build_f(ing, tau_g, tau_a, tau_b):
 def transition(f, dt):
     a = f * dt
     return np.eye(NX) + a + 0.5 * (a @ a)
+
+
+@njit(cache=True)
+def step_phi(ing, tau_g, tau_a, tau_b):
+    """Φ of one grid interval: ``transition(build_f(ing), Δt)``; across an IMU gap the
+    roll/pitch error rows are zero (the tilt is re-levelled after the gap, its new error is
+    independent of the old one and enters through Q)."""
+    phi = transition(build_f(ing, tau_g, tau_a, tau_b), ing[21])
+    if ing[22] > 0.5:
+        for j in range(NX):
+            phi[IATT, j] = 0.0
+            phi[IATT + 1, j] = 0.0
+    return phi
+
+
+@njit(cache=True)
+def rpy_quat(roll, pitch, yaw):
+    """q_nb (scalar first) of roll, pitch, yaw [rad]: q_z(ψ) ⊗ q_y(θ) ⊗ q_x(φ)."""
+    qx = np.array([np.cos(0.5 * roll), np.sin(0.5 * roll), 0.0, 0.0])
+    qy = np.array([np.cos(0.5 * pitch), 0.0, np.sin(0.5 * pitch), 0.0])
+    qz = np.array([np.cos(0.5 * yaw), 0.0, 0.0, np.sin(0.5 * yaw)])
+    return quat_mul(quat_mul(qz, qy), qx)
 
 
 @njit(cache=True)
@@ -244,12 +310,15 @@ def run_filter(
     gate_pos, gate_vel, gate_baro, max_consec,
     heading_known, heading_v_min, yaw_unknown_var, tilt_rate_sd,
     max_pending, store_rts,
+    gate_v, max_sd_v, probation_s, has_baro, b_prior_var, gap_step, gap_rp,
 ):
     """Forward error-state EKF over the whole drive (see module docstring).
 
     ``grid_of[i]`` / ``out_of[i]`` / ``cov_out_of[k]``: slot of IMU sample i in the grid / the
     output trajectory (−1 if none), of grid epoch k in the covariance output. ``ev_*``: merged
-    measurement events sorted by time (type 0 GNSS fix, 1 baro sample). Returns the output
+    measurement events sorted by time (type 0 GNSS fix, 1 baro sample). ``gate_pos`` /
+    ``gate_vel``: χ²₂ gates of the horizontal pairs, ``gate_v`` / ``gate_baro``: χ²₁ gates;
+    ``gap_step[i]``: IMU interval i → i+1 is a gap (a grid interval of its own). Returns the output
     trajectory, packed covariances and, when ``store_rts``, what the RTS smoother needs.
     """
     n = t.size
@@ -281,7 +350,11 @@ def run_filter(
     heading_ok = heading_known
     t_heading = t[0] if heading_known else np.nan
     consec_pos = 0
+    consec_v = 0
+    v_suspect = False
+    v_run_start = np.nan
     consec_baro = 0
+    rej_v = np.zeros(ng, dtype=np.bool_)
 
     # pending measurements of the current grid interval
     pend_type = np.zeros(max_pending, dtype=np.int64)
@@ -321,11 +394,22 @@ def run_filter(
         f0 = (accel[i] - par[PBA:PBA + 3]) * sc
         f1 = (accel[i + 1] - par[PBA:PBA + 3]) * sc
         lla_p, v_p, q_p = lla, v, q
-        lla, v, q = strapdown_step(lla_p, v_p, q_p, w0, w1, f0, f1, dt)
-        fm = 0.5 * (f0 + f1)
-        acc_fb += fm
-        acc_fn += quat_to_dcm(q) @ fm
-        acc_n += 1
+        if gap_step[i]:
+            # IMU gap: constant velocity and attitude (module docstring)
+            rn0, re0 = radii_scalar(lla_p[0])
+            lla = lla_p.copy()
+            lla[0] += v_p[0] * dt / (rn0 + lla_p[2])
+            lla[1] += v_p[1] * dt / ((re0 + lla_p[2]) * np.cos(lla_p[0]))
+            lla[2] -= v_p[2] * dt
+            v = v_p.copy()
+            # re-levelled from the first samples after the gap, yaw kept
+            q = rpy_quat(gap_rp[i + 1, 0], gap_rp[i + 1, 1], _yaw(q_p))
+        else:
+            lla, v, q = strapdown_step(lla_p, v_p, q_p, w0, w1, f0, f1, dt)
+            fm = 0.5 * (f0 + f1)
+            acc_fb += fm
+            acc_fn += quat_to_dcm(q) @ fm
+            acc_n += 1
 
         # measurements with time in (t_i, t_{i+1}]: predict from the interpolated nominal
         while je < ev_t.size and ev_t[je] <= t[i + 1]:
@@ -413,8 +497,9 @@ def run_filter(
             ing[17:20] = v
             ing[20] = 0.0 if heading_ok else 1.0
             ing[21] = dtg
+            ing[22] = 1.0 if gap_step[i] else 0.0
             fmat = build_f(ing, tau_g, tau_a, tau_b)
-            phi = transition(fmat, dtg)
+            phi = step_phi(ing, tau_g, tau_a, tau_b)
             qd = q_diag[k].copy()
             if not heading_ok:
                 el = t[i + 1] - t[0]
@@ -459,19 +544,74 @@ def run_filter(
                             extra += heff[a, b] ** 2 * qd[b]
                         pend_r[e, a] += extra * lag / dtg
                 if pend_type[e] == 0:
+                    # horizontal pair: after max_consec refusals a position jump of the
+                    # observed size is added to P and Q (horizontal re-initialisation, no leak
+                    # into tilt / vertical through stale correlations), until a fix passes
+                    force_h = consec_pos >= max_consec
+                    if force_h:
+                        for a in range(2):
+                            nu_a = pend_y[e, a] - heff[a] @ dx
+                            p[IPOS + a, IPOS + a] += nu_a * nu_a
+                            if store_rts:
+                                rts_q[k, IPOS + a] += nu_a * nu_a
                     ok, nis, nrm = _vector_update(
-                        p, dx, heff[:3].copy(), pend_y[e, :3].copy(), pend_r[e, :3].copy(),
-                        gate_pos, consec_pos >= max_consec)
-                    inn_pos[idx] = nrm
+                        p, dx, heff[:2].copy(), pend_y[e, :2].copy(), pend_r[e, :2].copy(),
+                        gate_pos, force_h)
+                    inn_pos[idx, :2] = nrm
                     rej_pos[idx] = not ok
-                    # forced acceptance continues until a fix passes the gate again
                     consec_pos = 0 if nis <= gate_pos else consec_pos + 1
+                    # height: fault detection and exclusion (module docstring)
+                    hv = heff[2].copy()
+                    rv = pend_r[e, 2]
+                    nu_v = pend_y[e, 2] - hv @ dx
+                    s_v = hv @ p @ hv + rv
+                    inn_pos[idx, 2] = -nu_v / np.sqrt(s_v)
+                    usable = g_pos_sd[idx, 2] <= max_sd_v
+                    long_run = consec_v >= max_consec
+                    use_v = False
+                    inflate = False
+                    if long_run and not has_baro:
+                        use_v = True
+                    elif not v_suspect:
+                        use_v = usable and nu_v * nu_v <= gate_v * s_v
+                    else:
+                        s_t = s_v + (b_prior_var if long_run else 0.0)
+                        if usable and nu_v * nu_v <= gate_v * s_t:
+                            if np.isnan(v_run_start):
+                                v_run_start = pend_t[e]
+                            if pend_t[e] - v_run_start >= probation_s:
+                                use_v = True
+                                inflate = long_run
+                        else:
+                            v_run_start = np.nan
+                    if use_v:
+                        if inflate:
+                            p[IBB, IBB] += b_prior_var
+                        _scalar_update(p, dx, hv, pend_y[e, 2], rv)
+                        consec_v = 0
+                        v_suspect = False
+                        v_run_start = np.nan
+                    else:
+                        consec_v += 1
+                        if not v_suspect and consec_v >= 2:
+                            v_suspect = True
+                            v_run_start = np.nan
+                        rej_v[idx] = True
+                        rej_pos[idx] = True
                     if mm == 6:
                         ok, nis, nrm = _vector_update(
-                            p, dx, heff[3:6].copy(), pend_y[e, 3:6].copy(),
-                            pend_r[e, 3:6].copy(), gate_vel, False)
-                        inn_vel[idx] = nrm
+                            p, dx, heff[3:5].copy(), pend_y[e, 3:5].copy(),
+                            pend_r[e, 3:5].copy(), gate_vel, False)
+                        inn_vel[idx, :2] = nrm
                         rej_vel[idx] = not ok
+                        if use_v:
+                            ok, nis, nrm = _vector_update(
+                                p, dx, heff[5:6].copy(), pend_y[e, 5:6].copy(),
+                                pend_r[e, 5:6].copy(), gate_v, False)
+                            inn_vel[idx, 2] = nrm[0]
+                            rej_vel[idx] = rej_vel[idx] or not ok
+                        else:
+                            rej_vel[idx] = True
                 else:
                     ok, nis, nrm = _vector_update(
                         p, dx, heff[:1].copy(), pend_y[e, :1].copy(), pend_r[e, :1].copy(),
@@ -496,7 +636,7 @@ def run_filter(
             out_lla[o], out_v[o], out_q[o], out_par[o] = lla, v, q, par
 
     return (out_lla, out_v, out_q, out_par, cov_out, rts_p, rts_ing, rts_q, corr, reset_at,
-            inn_pos, inn_vel, inn_baro, rej_pos, rej_vel, rej_baro, t_heading)
+            inn_pos, inn_vel, inn_baro, rej_pos, rej_vel, rej_baro, t_heading, rej_v)
 
 
 @njit(cache=True)
@@ -517,7 +657,7 @@ def rts_smooth(rts_p, rts_ing, rts_q, corr, reset_at, tau_g, tau_a, tau_b, cov_o
     for k in range(kk - 2, -1, -1):
         pk = unpack(rts_p[k])
         ing = rts_ing[k + 1]
-        phi = transition(build_f(ing, tau_g, tau_a, tau_b), ing[21])
+        phi = step_phi(ing, tau_g, tau_a, tau_b)
         if not np.isnan(reset_at[k + 1]):
             phi = reset_jacobian(reset_at[k + 1]) @ phi
         pm = phi @ pk @ phi.T
