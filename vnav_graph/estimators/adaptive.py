@@ -62,7 +62,7 @@ from ..types import (
     ParamEstimate,
     Trajectory,
 )
-from .loops import LoopInputs, _estimate, discrete_model, loop_inputs
+from .loops import LoopInputs, _estimate, bridge_gaps, loop_inputs, zoh_nb
 from .observer1d import gate_threshold
 from .vertical_input import AhrsConfig
 
@@ -140,22 +140,28 @@ def _phi(x, func):
 
 
 @njit(cache=True)
-def adaptive_kernel(a_up, z_baro, phi, gam, dt, tau, ws2, s_max, func, signal, e0, v0,
-                    t_avg, x0):
-    """Loop-3 recursion of ``loops.loop_kernel`` with per-step gains
-    dt·[3s/τ, 3s²/τ² + ω_s², −s³/τ³]. Returns states (N, 3), loop error (N,), s (N,)."""
+def adaptive_kernel(t, a_up, z_baro, tau, ws2, s_max, func, signal, e0, v0, t_avg, x0):
+    """Loop-3 recursion of ``loops.loop_kernel`` (per-step Φ(Δt_k), Γ(Δt_k); NaN a_up = bridged
+    gap, input c) with per-step gains Δt_k·[3s/τ, 3s²/τ² + ω_s², −s³/τ³]. Returns states
+    (N, 3), loop error (N,), s (N,)."""
     n = a_up.size
     x = np.empty((n, 3))
     err = np.empty(n)
     s_out = np.empty(n)
     x[0] = x0
     ebar = 0.0
-    alpha = dt / t_avg if dt < t_avg else 1.0
+    dt = t[1] - t[0] if n > 1 else 1.0
+    dt_prev = -1.0
+    phi = np.eye(3)
+    gam = np.zeros(3)
     gain_dt = np.empty(3)
     scale = 1.0  # kept for the same expression order as loop_kernel
     for k in range(n):
         e = x[k, 0] - z_baro[k]
         err[k] = e
+        if k < n - 1:
+            dt = t[k + 1] - t[k]
+        alpha = dt / t_avg if dt < t_avg else 1.0
         ebar += alpha * (abs(e) - ebar)
         if signal == 0:
             xi = ebar / e0
@@ -165,11 +171,17 @@ def adaptive_kernel(a_up, z_baro, phi, gam, dt, tau, ws2, s_max, func, signal, e
         s_out[k] = s
         if k == n - 1:
             break
+        if abs(dt - dt_prev) > 1e-12 * dt:
+            phi, gam = zoh_nb(dt, ws2, 3)
+            dt_prev = dt
+        a = a_up[k]
+        if np.isnan(a):
+            a = x[k, 2]
         gain_dt[0] = 3.0 * s / tau * dt
         gain_dt[1] = (3.0 * s**2 / tau**2 + ws2) * dt
         gain_dt[2] = -(s**3 / tau**3) * dt
         for i in range(3):
-            acc = gam[i] * a_up[k] - scale * gain_dt[i] * e
+            acc = gam[i] * a - scale * gain_dt[i] * e
             for j in range(3):
                 acc += phi[i, j] * x[k, j]
             x[k + 1, i] = acc
@@ -177,14 +189,15 @@ def adaptive_kernel(a_up, z_baro, phi, gam, dt, tau, ws2, s_max, func, signal, e
 
 
 def run_adaptive(inp: LoopInputs, cfg: AdaptiveConfig, x0=None):
-    """Run the adaptive loop on prepared inputs; returns (states (N, 3), error (N,), s (N,))."""
-    dt = float(np.median(np.diff(inp.t)))
-    phi, gam = discrete_model(dt, inp.ws2, 3)
+    """Run the adaptive loop on prepared inputs; returns (states (N, 3), error (N,), s (N,))
+    at the epochs of ``inp`` (any sampling; logging gaps bridged by ``loops.bridge_gaps``)."""
     if x0 is None:
         x0 = np.array([inp.z_baro[0], 0.0, 0.0])
-    return adaptive_kernel(inp.a_up, inp.z_baro, phi, gam, dt, cfg.tau, inp.ws2, cfg.s_max,
-                           _FUNCS[cfg.function], _SIGNALS[cfg.signal], cfg.e0, cfg.v0,
-                           cfg.t_avg, np.asarray(x0, float))
+    br, orig = bridge_gaps(inp)
+    x, err, s = adaptive_kernel(br.t, br.a_up, br.z_baro, cfg.tau, inp.ws2, cfg.s_max,
+                                _FUNCS[cfg.function], _SIGNALS[cfg.signal], cfg.e0, cfg.v0,
+                                cfg.t_avg, np.asarray(x0, float))
+    return x[orig], err[orig], s[orig]
 
 
 # State indices of the EKF-with-control variant: h − h0, v_up, c, baro scale s, baro bias b
@@ -193,13 +206,14 @@ NX = 5
 
 
 @njit(cache=True)
-def ekf_kernel(a_up, z_baro, phi, gam, dt, base_gains, ws2, s_max, func, signal, e0, v0,
+def ekf_kernel(a_up, z_baro, base_gains, ws2, s_max, func, signal, e0, v0,
                t_avg, x0, p0, q_a, q_c, r_baro_dt, q_s, tau_b, sd_b, t, t_fix, z_fix, r_fix,
                gate2, reinit_s, cov_dt):
     """Adaptive loop-3 corrections as control signals of a 5-state EKF, GNSS as measurement.
 
-    a_up (N,) up acceleration with gravity at h0 [m/s²]; z_baro (N,) baro altitude − h0 at
-    the IMU epochs [m]; phi (3, 3), gam (3,) ZOH of the free channel; base_gains (3,)
+    a_up (N,) up acceleration with gravity at h0 [m/s²] (NaN: bridged gap, input c);
+    z_baro (N,) baro altitude − h0 at the epochs t (N,) [m] (any spacing: the ZOH Φ(Δt_k),
+    Γ(Δt_k) of the free channel and the Markov/noise terms are per step); base_gains (3,)
     (k1, k2 − ω_s², k3); x0 (5,), p0 (5, 5); q_a [m²/s³] input noise PSD; q_c [m²/s⁵] c random
     walk PSD; r_baro_dt [m²·s] = σ_baro²·T_baro (baro noise entering through the control);
     q_s [1/s] scale-state PSD; tau_b [s], sd_b [m] Markov baro bias; t (N,); t_fix, z_fix,
@@ -224,10 +238,13 @@ def ekf_kernel(a_up, z_baro, phi, gam, dt, base_gains, ws2, s_max, func, signal,
     t_next = t[0]
     code = np.full(m, -1, dtype=np.int8)
     nu = np.full(m, np.nan)
-    alpha = dt / t_avg if dt < t_avg else 1.0
     ebar = 0.0
-    fb = np.exp(-dt / tau_b)
-    qb = sd_b * sd_b * (1.0 - fb * fb)
+    dt = t[1] - t[0] if n > 1 else 1.0
+    dt_prev = -1.0
+    phi = np.eye(3)
+    gam = np.zeros(3)
+    fb = 1.0
+    qb = 0.0
     j = 0
     while j < m and t_fix[j] < t[0]:
         j += 1
@@ -269,6 +286,14 @@ def ekf_kernel(a_up, z_baro, phi, gam, dt, base_gains, ws2, s_max, func, signal,
             ikh = np.eye(NX) - np.outer(kg, hrow)
             p = ikh @ p @ ikh.T + r_fix[j] * np.outer(kg, kg)  # Joseph form
             j += 1
+        if k < n - 1:
+            dt = t[k + 1] - t[k]
+        if abs(dt - dt_prev) > 1e-12 * dt:
+            phi, gam = zoh_nb(dt, ws2, 3)
+            fb = np.exp(-dt / tau_b)
+            qb = sd_b * sd_b * (1.0 - fb * fb)
+            dt_prev = dt
+        alpha = dt / t_avg if dt < t_avg else 1.0
         # loop error against the bias/scale-corrected baro, adaptation as adaptive_kernel
         denom = 1.0 + x[IS]
         zc = (z_baro[k] - x[IB]) / denom
@@ -292,7 +317,10 @@ def ekf_kernel(a_up, z_baro, phi, gam, dt, base_gains, ws2, s_max, func, signal,
         g[1] = base_gains[1] * sa * sa + ws2
         g[2] = -base_gains[2] * sa * sa * sa
         # nominal: x_L ← Φ x_L + Γ a − Δt·g·e (the control signal), b Markov, s constant
-        xl = phi @ x[:3] + gam * a_up[k] - dt * g * e
+        a_k = a_up[k]
+        if np.isnan(a_k):
+            a_k = x[IC]
+        xl = phi @ x[:3] + gam * a_k - dt * g * e
         x[0] = xl[0]
         x[1] = xl[1]
         x[2] = xl[2]
@@ -330,12 +358,9 @@ def _spec(obj, name: str, default: float) -> float:
 def run_adaptive_ekf(inp: LoopInputs, cfg: AdaptiveConfig, t_fix, z_fix, r_fix, *,
                      imu_spec=None, baro_spec=None, baro_dt: float = 0.04):
     """Run the EKF-with-control variant on prepared inputs. t_fix, z_fix (altitude − h0),
-    r_fix (variances) (M,) GNSS. Returns the tuple of ``ekf_kernel``."""
-    dt = float(np.median(np.diff(inp.t)))
-    if np.max(np.abs(np.diff(inp.t) - dt)) > 1e-6 * dt + 1e-9:
-        raise ValueError("loop3-adaptive: the IMU stream must be uniformly sampled")
-    phi, gam = discrete_model(dt, inp.ws2, 3)
-    phi, gam = np.ascontiguousarray(phi), np.ascontiguousarray(gam)
+    r_fix (variances) (M,) GNSS. Returns the tuple of ``ekf_kernel`` with the per-epoch
+    arrays at the epochs of ``inp`` (any sampling; gaps bridged by ``loops.bridge_gaps``)."""
+    br, orig = bridge_gaps(inp)
     if cfg.gains is None:
         base = np.array([3.0 / cfg.tau, 3.0 / cfg.tau**2, 1.0 / cfg.tau**3])
     else:
@@ -355,12 +380,14 @@ def run_adaptive_ekf(inp: LoopInputs, cfg: AdaptiveConfig, t_fix, z_fix, r_fix, 
     p0 = np.diag([sd_b**2 + sd_n**2, 1.0, 0.1**2, sd_s**2, sd_b**2])
     p0[IH, IB] = p0[IB, IH] = -sd_b**2  # h0 = z_baro = h + b: δh = −δb initially
     p0[IH, IH] = sd_b**2 + sd_n**2
-    return ekf_kernel(
-        inp.a_up, inp.z_baro, phi, gam, dt, base, inp.ws2, cfg.s_max, _FUNCS[cfg.function],
+    out = ekf_kernel(
+        br.a_up, br.z_baro, base, inp.ws2, cfg.s_max, _FUNCS[cfg.function],
         _SIGNALS[cfg.signal], cfg.e0, cfg.v0, cfg.t_avg, x0, p0, q_a, cfg.accel_bias_rw**2,
-        sd_n**2 * baro_dt, 0.0, tau_b, sd_b, inp.t, np.asarray(t_fix, float),
+        sd_n**2 * baro_dt, 0.0, tau_b, sd_b, br.t, np.asarray(t_fix, float),
         np.asarray(z_fix, float), np.asarray(r_fix, float), gate_threshold(cfg.gate_prob),
         cfg.reinit_s, 1.0 / cfg.cov_rate_hz)
+    h, v, s, e = (a[orig] for a in out[:4])
+    return (h, v, s, e) + tuple(out[4:])
 
 
 # ERROR_STATE rows (estimated − true = +δx): pos_n[2] down = −δh, vel_n[2] down = −δv,

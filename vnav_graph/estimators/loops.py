@@ -34,13 +34,15 @@ The loops are baro-inertial: they use the IMU and the baro stream (``drive.baro.
 only. GNSS enters only through the attitude reference that stands for "the INS attitude"
 (``vertical_input``), never the vertical channel.
 
-Discrete implementation at the IMU rate (step Δt): x_{k+1} = Φ x_k + Γ a_k − Δt·g·e_k with
+Discrete implementation at the IMU rate (step Δt_k, any spacing — real logs jitter by ±10 %):
+x_{k+1} = Φ(Δt_k) x_k + Γ(Δt_k) a_k − Δt_k·g·e_k with
 Φ = exp(A Δt), Γ = ∫₀^Δt exp(A s) ds·B the zero-order hold of the free channel
 (A = [[0, 1], [ω_s², 0]] plus the c column [0, −1, 0]ᵀ for the 3rd order), g = [k1, k2, −k3],
 and the baro altitude linearly interpolated to the IMU epochs. This is exactly the
 structure of a steady-state Kalman filter's predict step (x_{k+1} = Φ x⁺_k + Γ a_k with
 x⁺ = x − K e): with Δt·g = Φ K the loop *is* that filter (``Loop2.from_kalman`` and the
-equivalence test).
+equivalence test). Logging gaps (steps > 5 × the median) are bridged at the median step
+with zero vertical acceleration and the baro interpolated across the gap (``bridge_gaps``).
 """
 
 from __future__ import annotations
@@ -90,29 +92,96 @@ def discrete_model(dt: float, ws2: float, order: int) -> tuple[FloatArray, Float
 
 
 @njit(cache=True)
-def loop_kernel(a_up, z_baro, phi, gam, gain_dt, x0, scale):
-    """x_{k+1} = Φ x_k + Γ a_k − s_k ⊙ gain_dt · e_k, e_k = x_k[0] − z_k.
+def zoh_nb(dt, ws2, order):
+    """Numba twin of ``discrete_model``: (Φ, Γ) = blocks of exp([[A, B], [0, 0]]·Δt) by the
+    Taylor series (A's nilpotent part ends after 3 terms and ω_s²Δt² ≲ 1e-6 at IMU steps,
+    so 40 terms are exact to round-off for any Δt below a few minutes)."""
+    n = order
+    m = np.zeros((n + 1, n + 1))
+    m[0, 1] = dt
+    m[1, 0] = ws2 * dt
+    if order == 3:
+        m[1, 2] = -dt
+    m[1, n] = dt
+    e = np.eye(n + 1)
+    term = np.eye(n + 1)
+    for k in range(1, 40):
+        term = term @ m / k
+        e += term
+        if np.max(np.abs(term)) < 1e-18:
+            break
+    return e[:n, :n].copy(), e[:n, n].copy()
 
-    a_up (N,), z_baro (N,) baro altitude − h0 at the IMU epochs, phi (n, n), gam (n,),
-    gain_dt (n,) = Δt·[k1, k2(, −k3)], x0 (n,), scale (N, n) per-step gain multipliers
-    (all ones for the fixed-gain loops). Returns states (N, n) and the loop error (N,).
+
+@njit(cache=True)
+def loop_kernel(t, a_up, z_baro, ws2, gains, x0, scale):
+    """x_{k+1} = Φ(Δt_k) x_k + Γ(Δt_k) a_k − Δt_k · s_k ⊙ g · e_k, e_k = x_k[0] − z_k.
+
+    t (N,) epochs [s] (any spacing: Φ, Γ recomputed when Δt_k changes), a_up (N,) (NaN: no
+    IMU sample — a bridged logging gap, see ``bridge_gaps``: the input is then the loop's own
+    bias estimate c (3rd order) or 0, i.e. zero vertical acceleration), z_baro (N,) baro
+    altitude − h0 at the epochs, ws2 [1/s²], gains (n,) = [k1, k2(, −k3)], x0 (n,), scale
+    (N, n) per-step gain multipliers (all ones for the fixed-gain loops). Returns states
+    (N, n) and the loop error (N,).
     """
-    n_s = phi.shape[0]
+    n_s = x0.size
     n = a_up.size
     x = np.empty((n, n_s))
     err = np.empty(n)
     x[0] = x0
+    dt_prev = -1.0
+    phi = np.eye(n_s)
+    gam = np.zeros(n_s)
     for k in range(n):
         e = x[k, 0] - z_baro[k]
         err[k] = e
         if k == n - 1:
             break
+        dt = t[k + 1] - t[k]
+        if abs(dt - dt_prev) > 1e-12 * dt:
+            phi, gam = zoh_nb(dt, ws2, n_s)
+            dt_prev = dt
+        a = a_up[k]
+        if np.isnan(a):
+            a = x[k, 2] if n_s == 3 else 0.0
         for i in range(n_s):
-            acc = gam[i] * a_up[k] - scale[k, i] * gain_dt[i] * e
+            acc = gam[i] * a - scale[k, i] * (gains[i] * dt) * e
             for j in range(n_s):
                 acc += phi[i, j] * x[k, j]
             x[k + 1, i] = acc
     return x, err
+
+
+GAP_FACTOR = 5.0
+
+
+def bridge_gaps(inp: LoopInputs, gap_factor: float = GAP_FACTOR) -> tuple[LoopInputs, FloatArray]:
+    """Fill IMU logging gaps (steps longer than gap_factor × the median step) with epochs at
+    the median step: a_up = NaN there (the kernels then assume zero vertical acceleration:
+    input = the loop's accelerometer-bias estimate c, or 0 for the 2nd order — a held
+    acceleration sample would integrate one noisy value over the whole gap, ½aT²), z_baro
+    linearly interpolated between the gap ends (the baro has the same gap in real logs), so
+    the loop keeps its time constant instead of taking one Euler step of length T (k1·T > 1
+    for T > τ/3). Returns the bridged inputs and the (N_bridged,) mask of original epochs.
+    Jitter below the factor is handled by the per-step Φ(Δt), Γ(Δt)."""
+    t = inp.t
+    if t.size < 3:
+        return inp, np.ones(t.size, dtype=bool)
+    dt = np.diff(t)
+    dt_nom = float(np.median(dt))
+    big = np.flatnonzero(dt > gap_factor * dt_nom)
+    if big.size == 0:
+        return inp, np.ones(t.size, dtype=bool)
+    ins = [np.arange(t[i] + dt_nom, t[i + 1] - 0.5 * dt_nom, dt_nom) for i in big]
+    t_new = np.concatenate([t] + ins)
+    orig = np.concatenate([np.ones(t.size, dtype=bool)] + [np.zeros(a.size, dtype=bool)
+                                                           for a in ins])
+    order = np.argsort(t_new, kind="stable")
+    t_new, orig = t_new[order], orig[order]
+    a_new = np.full(t_new.size, np.nan)
+    a_new[orig] = inp.a_up
+    z_new = np.interp(t_new, t, inp.z_baro)
+    return LoopInputs(t_new, a_new, z_new, inp.h0, inp.ws2), orig
 
 
 @dataclass(frozen=True)
@@ -169,13 +238,11 @@ class Loop3Config:
 def run_loop(inp: LoopInputs, gains: tuple[float, ...], scale: FloatArray | None = None,
              x0: FloatArray | None = None) -> tuple[FloatArray, FloatArray]:
     """Run a 2nd (2 gains) or 3rd (3 gains) order loop on ``inp``; returns states (N, n) with
-    x[:, 0] = h − h0, x[:, 1] = v_up (, x[:, 2] = c) and the loop error e (N,)."""
+    x[:, 0] = h − h0, x[:, 1] = v_up (, x[:, 2] = c) and the loop error e (N,), at the epochs
+    of ``inp`` (any sampling: per-step discretisation; logging gaps bridged by
+    ``bridge_gaps``). ``scale`` (N, n) multiplies the gains per step."""
     order = len(gains)
-    dt = float(np.median(np.diff(inp.t)))
-    if np.max(np.abs(np.diff(inp.t) - dt)) > 1e-6 * dt + 1e-9:
-        raise ValueError("loops: the IMU stream must be uniformly sampled")
-    phi, gam = discrete_model(dt, inp.ws2, order)
-    g = np.array(gains, float) * dt
+    g = np.array(gains, float)
     if order == 3:
         g[2] = -g[2]
     if x0 is None:
@@ -183,7 +250,11 @@ def run_loop(inp: LoopInputs, gains: tuple[float, ...], scale: FloatArray | None
         x0[0] = inp.z_baro[0]
     if scale is None:
         scale = np.ones((inp.t.size, order))
-    return loop_kernel(inp.a_up, inp.z_baro, phi, gam, g, np.asarray(x0, float), scale)
+    br, orig = bridge_gaps(inp)
+    sc = np.ones((br.t.size, order))
+    sc[orig] = scale
+    x, err = loop_kernel(br.t, br.a_up, br.z_baro, inp.ws2, g, np.asarray(x0, float), sc)
+    return x[orig], err[orig]
 
 
 class Loop2:

@@ -174,7 +174,7 @@ def _fix_update(zf, tf, z, v, c, gain, gate2, p_gate, qa, qb, r_gate, t_warm, re
 
 @njit(cache=True)
 def observer_kernel_gated(t, a_up, t_fix, z_fix, gain, tustin, x0, grav_grad, h_ref, stride,
-                          gate2, p_gate, qa, qb, r_gate, t_warm, reinit_s):
+                          gate2, p_gate, qa, qb, r_gate, t_warm, reinit_s, gap_dt=np.inf):
     """Propagate/correct the 1-DOF observer for R runs at once, with the innovation gate.
 
     t (N,) IMU epochs [s]; a_up (R, N) measured up acceleration [m/s²] (gravity at h_ref
@@ -185,6 +185,9 @@ def observer_kernel_gated(t, a_up, t_fix, z_fix, gain, tustin, x0, grav_grad, h_
     δy² > gate2 · S(τ), S(τ) = ``_gate_var(p_gate, τ, qa, qb, r_gate)``, τ the time since the
     last accepted fix; fixes earlier than t_fix[0] + t_warm are never gated (gate2 = inf: no
     gate); rejections spanning ≥ reinit_s [s] re-initialise the state (``_fix_update``).
+    An IMU step longer than gap_dt [s] is a logging gap: the vertical acceleration is taken
+    as zero across it (a = −c, so u = only the 2g/R feedback) instead of interpolating two
+    samples over the whole gap. Any other step length is exact (ZOH/Tustin per step).
     Returns z, v, c at every ``stride``-th IMU epoch, shape (R, K), the altitude just after
     each fix (R, M) and just before it (R, M), the fix codes (R, M) int8 (0 accepted,
     1 rejected, 2 re-initialised; −1 not reached) and the innovations (R, M) [m].
@@ -232,6 +235,9 @@ def observer_kernel_gated(t, a_up, t_fix, z_fix, gain, tustin, x0, grav_grad, h_
             a0 = a_up[r, k]
             a1 = a_up[r, k + 1]
             te = t[k + 1]
+            if te - ts > gap_dt:
+                a0 = -c
+                a1 = -c
             # sub-steps at fixes strictly inside (t_k, t_{k+1})
             while True:
                 t_end = te
@@ -300,6 +306,8 @@ class Observer1D:
         rn, re = radii(drive.origin_lla[0])
         grav_grad = 2.0 * float(gravity(drive.origin_lla[0], h0)) / float(np.sqrt(rn * re))
         t_fix, z_fix = _gps_up(drive)
+        # IMU logging gaps: steps > 5 × the median (as ``loops.bridge_gaps``)
+        gap_dt = 5.0 * float(np.median(np.diff(vi.t))) if vi.t.size > 2 else np.inf
         k0 = int(np.searchsorted(t_fix, vi.t[0]))
         z_init = z_fix[min(k0, z_fix.size - 1)]
         x0 = np.array([[z_init, 0.0, 0.0]])
@@ -317,7 +325,7 @@ class Observer1D:
             vi.t, a_up[None, :], t_fix, z_fix[None, :], np.asarray(cfg.gain, float),
             cfg.discretisation == "tustin", x0, grav_grad, h0, 1, gate2, ss.p_post,
             cfg.accel_noise_density, cfg.accel_bias_rw, sd_g**2,
-            float(t_first - t_fix[0]) + warm, cfg.reinit_s,
+            float(t_first - t_fix[0]) + warm, cfg.reinit_s, gap_dt,
         )
         n = vi.t.size
         lla = np.column_stack([np.full(n, np.nan), np.full(n, np.nan), z[0]])
