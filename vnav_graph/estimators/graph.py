@@ -48,6 +48,7 @@ from ..types import (
     Trajectory,
 )
 from . import graph_factors as gf
+from . import graph_linalg as gla
 
 
 @dataclass(frozen=True)
@@ -62,6 +63,9 @@ class GraphConfig:
     calib_rw: random-walk root PSD of (s [1/√s], τd [s/√s]) between segments;
     relinearize_threshold: iSAM2 relinearisation threshold; final_batch: run the batch
     solver after the incremental pass to produce the smoothed trajectory.
+    gnss_gate_prob: probability of the χ² gates on GNSS fixes (0 switches gating off):
+    a causal pre-gate of the GNSS height against the barometer and a post-solve gate of
+    each fix's normalised position (+ velocity) residual, repeated ≤ ``gate_rounds`` times.
     """
 
     keyframe_dt: float = 1.0
@@ -76,6 +80,8 @@ class GraphConfig:
     relinearize_threshold: float = 0.05
     final_batch: bool = True
     observable_ratio: float = 0.8
+    gnss_gate_prob: float = 0.9999
+    gate_rounds: int = 3
     verbose: bool = False
 
 
@@ -105,6 +111,13 @@ class _Problem:
     g_vel_sd: FloatArray | None
     lever: FloatArray
     g_kf: np.ndarray  # keyframe index of fixes on a keyframe epoch, −1 otherwise
+    g_use: np.ndarray  # fixes not rejected by the gates (bool)
+    g_rej_pre: int = 0  # rejected by the baro-consistency pre-gate
+    g_rej_post: int = 0  # rejected by the post-solve residual gate
+
+    @property
+    def gnss_rejected(self) -> int:
+        return int(np.sum(~self.g_use & (self.g_kf >= -1)))
 
     @property
     def n_kf(self) -> int:
@@ -150,9 +163,83 @@ def _setup(drive: Drive, cfg: GraphConfig) -> _Problem:
     inside = (gn.t >= t_kf[0]) & (gn.t <= t_kf[-1])
     g_kf = np.where(on_kf, j, -1)
     g_kf[~inside] = -2
-    return _Problem(drive, cfg, origin, h0, g0, omega_t, kf_idx, t_kf, dense, p, spec, bspec,
-                    gn.t, pos, gn.pos_sd, vel, gn.vel_sd, np.asarray(gn.lever_arm_b, float),
-                    g_kf)
+    use = _pregate_gnss(drive, gn.t, gn.lla[:, 2], gn.pos_sd[:, 2], _baro_priors(bspec),
+                        cfg.gnss_gate_prob,
+                        None if gn.vel_n is None else gn.vel_n[:, 2],
+                        None if gn.vel_sd is None else gn.vel_sd[:, 2])
+    P = _Problem(drive, cfg, origin, h0, g0, omega_t, kf_idx, t_kf, dense, p, spec, bspec,
+                 gn.t, pos, gn.pos_sd, vel, gn.vel_sd, np.asarray(gn.lever_arm_b, float),
+                 g_kf, use)
+    P.g_rej_pre = P.gnss_rejected
+    if not np.any(use & inside):
+        raise ValueError("graph: every GNSS fix inside the IMU span was rejected by the "
+                         "baro-consistency gate")
+    return P
+
+
+def _pregate_gnss(drive: Drive, t: FloatArray, h: FloatArray, sd_h: FloatArray,
+                  pri: dict[str, float], prob: float, vel_d: FloatArray | None = None,
+                  vel_d_sd: FloatArray | None = None) -> np.ndarray:
+    """Causal χ² gate of GNSS heights against the barometer; returns the mask of kept fixes.
+
+    By the shared baro model, d = h_gnss(t) − h_baro(t + τ0) = −s·(h − h0) − b + noise: a
+    2-state Kalman filter on x = [c, s] with d = c + s·(h_baro − h0) + v, c a random walk of
+    PSD 2σ_b²/τ_b (the Gauss-Markov bias, Groves §14.2 / ``sensors.noise``), s ~ N(0, σ_s²),
+    var v = σ_h,gnss² + σ_baro² + (v_up·σ_τ)². A fix whose innovation ν has ν²/S above the
+    1-dof χ² quantile ``prob`` is rejected (not used to update), like the EKF's innovation
+    gate; the prediction variance grows while fixes are refused, so the gate re-opens.
+    When the log has GNSS velocity, a fix is also refused when −v_down disagrees with the
+    baro climb rate (central difference over ±1 s): variance σ_vd² + (σ_baro/√2 /1 s)²
+    + (σ_s·v)² + (0.5 m/s)² (vertical acceleration over the ±1 s difference window).
+    """
+    use = np.isfinite(h) & np.isfinite(sd_h)
+    baro = drive.baro
+    if baro is None or prob <= 0 or baro.t.size < 2:
+        return use
+    from scipy.stats import chi2
+
+    thr = float(chi2.ppf(prob, 1))
+    bt, bz = baro.t, baro.altitude
+    inside = use & (t + pri["tau0"] >= bt[0]) & (t + pri["tau0"] <= bt[-1])
+    idx = np.flatnonzero(inside)
+    if idx.size == 0:
+        return use
+    tt = t[idx] + pri["tau0"]
+    hb = np.interp(tt, bt, bz)
+    v_up = (np.interp(tt + 1.0, bt, bz) - np.interp(tt - 1.0, bt, bz)) / 2.0
+    d = h[idx] - hb
+    r = sd_h[idx] ** 2 + pri["noise"] ** 2 + (v_up * pri["tau_sd"]) ** 2
+    hrel = hb - drive.origin_lla[2]
+    q_rate = 2.0 * pri["b_sd"] ** 2 / pri["b_tau"]
+    n0 = min(10, idx.size)
+    c0 = float(np.median(d[:n0]))
+    mad = float(np.median(np.abs(d[:n0] - c0))) * 1.4826
+    x = np.array([c0, 0.0])
+    pm = np.diag([mad**2 + float(np.median(r[:n0])), pri["s_sd"] ** 2])
+    keep = np.ones(idx.size, bool)
+    if vel_d is not None and vel_d_sd is not None:
+        var_v = (vel_d_sd[idx] ** 2 + 0.5 * pri["noise"] ** 2 + (pri["s_sd"] * v_up) ** 2
+                 + 0.5**2)
+        nu_v = -vel_d[idx] - v_up
+        keep &= ~(nu_v**2 > thr * var_v) & np.isfinite(nu_v)
+    t_prev = tt[0]
+    for i in range(idx.size):
+        pm[0, 0] += q_rate * max(tt[i] - t_prev, 0.0)
+        t_prev = tt[i]
+        if not keep[i]:
+            continue
+        hv = np.array([1.0, hrel[i]])
+        nu = d[i] - hv @ x
+        ph = pm @ hv
+        s_inn = hv @ ph + r[i]
+        if nu * nu > thr * s_inn:
+            keep[i] = False
+            continue
+        kg = ph / s_inn
+        x = x + kg * nu
+        pm = pm - np.outer(kg, ph)
+    use[idx[~keep]] = False
+    return use
 
 
 def _baro_priors(bs: BaroSpec | None) -> dict[str, float]:
@@ -186,7 +273,9 @@ def _initial_states(P: _Problem) -> tuple[FloatArray, FloatArray, FloatArray]:
     imu = P.drive.imu
     nk = P.n_kf
     dr_t, dv_t, dp_t = P.dense.end()
-    gt, pos, vel = P.g_t, P.g_pos, P.g_vel
+    u = P.g_use
+    gt, pos = P.g_t[u], P.g_pos[u]
+    vel = None if P.g_vel is None else P.g_vel[u]
     near = np.min(np.abs(gt[None, :] - P.t_kf[:, None]), axis=1) if nk * gt.size < 5e7 else \
         np.abs(gt[np.clip(np.searchsorted(gt, P.t_kf), 0, gt.size - 1)] - P.t_kf)
     rate = 1.0 / max(float(np.median(np.diff(gt))), 1e-3) if gt.size > 1 else 1.0
@@ -207,6 +296,21 @@ def _initial_states(P: _Problem) -> tuple[FloatArray, FloatArray, FloatArray]:
         vm = np.column_stack([np.interp(P.t_kf - w, gt, vel[:, i]) for i in range(3)])
         acc_kf = (vp - vm) / (2 * w)
         acc_ok = has & (np.abs(P.t_kf + w - P.t_kf.clip(gt[0], gt[-1])) >= 0)
+    # inside gaps > 5 s between kept fixes: linear bridge horizontally, baro height
+    # (plus the median GNSS − baro offset) vertically when a barometer is present
+    gap_len = np.zeros(nk)
+    if gt.size > 1:
+        j = np.clip(np.searchsorted(gt, P.t_kf), 1, gt.size - 1)
+        gap_len = gt[j] - gt[j - 1]
+    in_gap = ~has & (gap_len > 5.0) & (P.t_kf > gt[0]) & (P.t_kf < gt[-1])
+    baro = P.drive.baro
+    if baro is not None and np.any(in_gap) and baro.t.size > 1:
+        hg = ned_to_lla(pos, P.origin)[:, 2]
+        off = float(np.median(hg - np.interp(gt, baro.t, baro.altitude)))
+        hb = np.interp(P.t_kf[in_gap], baro.t, baro.altitude) + off
+        pos_kf[in_gap, 2] = -(hb - P.h0)
+        vz = -np.gradient(np.interp(P.t_kf, baro.t, baro.altitude), P.t_kf)
+        vel_kf[in_gap, 2] = vz[in_gap]
     g_kf = gf.gravity_t(pos_kf, P.origin)
     # mean measured specific force over ±0.25 s
     cs = np.vstack([np.zeros((1, 3)), np.cumsum(imu.accel_b, axis=0)])
@@ -244,6 +348,10 @@ def _initial_states(P: _Problem) -> tuple[FloatArray, FloatArray, FloatArray]:
         if has[k + 1]:
             p1 = pos_kf[k + 1] - r1 @ P.lever
             v1 = vel_kf[k + 1]
+        elif in_gap[k + 1]:
+            # long gap between kept fixes (outage or rejected fixes): IMU propagation from
+            # unknown biases drifts far outside Gauss-Newton's basin; bridge it instead
+            p1, v1 = pos_kf[k + 1], vel_kf[k + 1]
         rot[k + 1], p_out[k + 1], v_out[k + 1] = r1, p1, v1
     return rot, p_out, v_out
 
@@ -315,7 +423,7 @@ def _prior_factors(P: _Problem, r0: FloatArray, p0: FloatArray, v0: FloatArray,
 
 def _keyframe_fix_factors(P: _Problem, k: int) -> list[Any]:
     out = []
-    for i in np.flatnonzero(P.g_kf == k):
+    for i in np.flatnonzero((P.g_kf == k) & P.g_use):
         out.append(gtsam.GPSFactorArm(X(k), P.g_pos[i], P.lever, _noise(P.g_pos_sd[i])))
         if P.g_vel is not None and P.g_vel_sd is not None and not np.any(P.lever):
             out.append(gtsam.PriorFactorVector(V(k), P.g_vel[i], _noise(P.g_vel_sd[i])))
@@ -343,10 +451,11 @@ def _states_from_values(P: _Problem, vals: Any, calib_of_kf: np.ndarray) -> gf.K
     poses = gtsam.utilities.extractPose3(vals)
     rot = poses[:, :9].reshape(nk, 3, 3)
     pos = poses[:, 9:12]
-    vel = np.array([vals.atVector(V(k)) for k in range(nk)])
-    ba = np.array([vals.atConstantBias(B(k)).accelerometer() for k in range(nk)])
+    vel = gtsam.utilities.extractVectors(vals, "v")
+    at_bias = vals.atConstantBias
+    ba = np.array([at_bias(B(k)).accelerometer() for k in range(nk)])
     if P.drive.baro is not None:
-        cb = np.array([vals.atVector(C(k))[0] for k in range(nk)])
+        cb = gtsam.utilities.extractVectors(vals, "c")[:, 0]
         cal = {int(j): vals.atVector(K(int(j))) for j in np.unique(calib_of_kf)}
         s = np.array([cal[int(j)][0] for j in calib_of_kf])
         tau = np.array([cal[int(j)][1] for j in calib_of_kf])
@@ -359,6 +468,19 @@ def _states_from_values(P: _Problem, vals: Any, calib_of_kf: np.ndarray) -> gf.K
     return gf.KeyframeStates(rot, pos, vel, ba, cb, s, tau, acc)
 
 
+def _gnss_batch_idx(P: _Problem) -> np.ndarray:
+    """Fixes used by the batch: every kept fix inside the keyframe span (on keyframe epochs
+    too — at τ = 0 the interpolant is exactly X_k, so the row equals GPSFactorArm's)."""
+    return np.flatnonzero(P.g_use & (P.g_kf >= -1))
+
+
+def _gnss_rows_of(P: _Problem, st: gf.KeyframeStates, idx: np.ndarray) -> gf.IntervalRows:
+    return gf.gnss_rows(
+        P.dense, st, P.g_t[idx], P.g_pos[idx], P.g_pos_sd[idx],
+        None if P.g_vel is None else P.g_vel[idx],
+        None if P.g_vel_sd is None else P.g_vel_sd[idx], P.lever)
+
+
 def _interval_rows(P: _Problem, st: gf.KeyframeStates, pri: dict[str, float]) -> gf.IntervalRows:
     parts = []
     if P.drive.baro is not None:
@@ -366,13 +488,19 @@ def _interval_rows(P: _Problem, st: gf.KeyframeStates, pri: dict[str, float]) ->
         m = (bt >= P.t_kf[0]) & (bt <= P.t_kf[-1])
         parts.append(gf.baro_rows(P.dense, st, bt[m], P.drive.baro.altitude[m], pri["noise"],
                                   P.h0, P.origin))
-    m = P.g_kf == -1
-    if np.any(m):
-        parts.append(gf.gnss_rows(
-            P.dense, st, P.g_t[m], P.g_pos[m], P.g_pos_sd[m],
-            None if P.g_vel is None else P.g_vel[m],
-            None if P.g_vel_sd is None else P.g_vel_sd[m], P.lever))
+    idx = _gnss_batch_idx(P)
+    if idx.size:
+        parts.append(_gnss_rows_of(P, st, idx))
     return gf.concat_rows(*parts)
+
+
+def _gnss_chi2(P: _Problem, st: gf.KeyframeStates, idx: np.ndarray) -> tuple[FloatArray, int]:
+    """χ² of each fix's whitened residual at the solution (position, + velocity when the log
+    has it) and its degrees of freedom."""
+    rows = _gnss_rows_of(P, st, idx)
+    m = idx.size
+    r = rows.r.reshape(-1, m, 3)  # (1 or 2, m, 3): position rows, then velocity rows
+    return np.sum(r**2, axis=(0, 2)), 3 * r.shape[0]
 
 
 def _group_keys(P: _Problem, k: int, calib_key: int) -> list[int]:
@@ -424,52 +552,146 @@ def _hessian_pieces(keys: list[int], lam: FloatArray, eta: FloatArray,
 
 
 # ----------------------------------------------------------------------------------------
-# Batch Gauss-Newton
+# Batch Gauss-Newton on our own banded-arrow normal equations (graph_linalg)
+
+
+@dataclass
+class _Layout:
+    """Column layout of the batch normal equations: keyframe k owns columns
+    k·bs + [X (6, Pose3 tangent: rotation, translation), V (3), B (6, accel then gyro), C (1)]
+    (bs = 16, or 15 without baro), then the global (s, τd) of K(0). ``g2m`` maps GTSAM's
+    sparse-Jacobian columns (keys in sorted order) to ours."""
+
+    nk: int
+    bs: int
+    has_baro: bool
+    n_band: int
+    n_cols: int
+    g2m: np.ndarray
+    keys: list[Any]
+
+    @property
+    def bandwidth(self) -> int:
+        return 2 * self.bs - 1
+
+    def block_cols(self, k: np.ndarray) -> np.ndarray:
+        """Our columns of the interval-term blocks (X_k, X_k+1, C_k, C_k+1, K) (G, 16|12)."""
+        k = np.asarray(k)[:, None]
+        six = np.arange(6)[None, :]
+        parts = [k * self.bs + six, (k + 1) * self.bs + six]
+        if self.has_baro:
+            parts += [k * self.bs + 15, (k + 1) * self.bs + 15,
+                      np.full_like(k, self.n_band), np.full_like(k, self.n_band + 1)]
+        return np.concatenate(parts, axis=1)
+
+    def vector_values(self, delta: FloatArray) -> Any:
+        vv = gtsam.VectorValues()
+        ins = vv.insert
+        bs = self.bs
+        d = delta[:self.n_band].reshape(self.nk, bs)
+        for k in range(self.nk):
+            row = d[k]
+            ins(X(k), row[0:6])
+            ins(V(k), row[6:9])
+            ins(B(k), row[9:15])
+            if self.has_baro:
+                ins(C(k), row[15:16])
+        if self.has_baro:
+            ins(K(0), delta[self.n_band:])
+        return vv
+
+
+def _layout(P: _Problem) -> _Layout:
+    nk = P.n_kf
+    has_baro = P.drive.baro is not None
+    bs = 16 if has_baro else 15
+    n_band = nk * bs
+    items = []
+    for k in range(nk):
+        o = k * bs
+        items += [(X(k), 6, o), (V(k), 3, o + 6), (B(k), 6, o + 9)]
+        if has_baro:
+            items.append((C(k), 1, o + 15))
+    if has_baro:
+        items.append((K(0), 2, n_band))
+    items.sort(key=lambda it: it[0])
+    g2m = np.concatenate([off + np.arange(dim) for _, dim, off in items])
+    n_cols = n_band + (2 if has_baro else 0)
+    return _Layout(nk, bs, has_baro, n_band, n_cols, g2m, [it[0] for it in items])
 
 
 @dataclass
 class _BatchResult:
     values: Any
     graph: Any  # C++ NonlinearFactorGraph
-    gfg: Any  # final linear system (for marginals)
     cost: float
     iterations: int
     calib_of_kf: np.ndarray
+    layout: _Layout
+    rows: gf.IntervalRows  # interval terms linearised at ``values``
 
 
-def _linear_system(P: _Problem, graph: Any, vals: Any, calib_of_kf: np.ndarray,
-                   calib_keys: np.ndarray, pri: dict[str, float]) -> tuple[Any, float]:
+def _normal_equations(P: _Problem, lay: _Layout, graph: Any, vals: Any,
+                      rows: gf.IntervalRows) -> tuple[Any, ...]:
+    """Arrow-form normal equations of the C++ factors (GTSAM linearisation, sparse Jacobian)
+    plus the interval terms (per-interval information blocks)."""
     gfg = graph.linearize(vals)
+    sj = gfg.sparseJacobian_()
+    i = sj[0].astype(np.int64) - 1
+    j = sj[1].astype(np.int64) - 1
+    v = sj[2]
+    if int(j.max()) != lay.n_cols:
+        raise RuntimeError("graph: linearised C++ graph does not cover the expected variables")
+    is_b = j == lay.n_cols
+    nrow = int(i.max()) + 1
+    b = np.zeros(nrow)
+    b[i[is_b]] = v[is_b]
+    a = ~is_b
+    ia, ja, va = i[a], lay.g2m[j[a]], v[a]
+    order = np.argsort(ia, kind="stable")
+    ptr_c = np.r_[0, np.cumsum(np.bincount(ia, minlength=nrow))]
+    # interval terms: reduced per interval to (Λ_k, η_k) (batched BLAS), added as blocks
+    groups, lam, eta, _ = gf.group_information(rows, P.n_kf - 1)
+    nc = 16 if lay.has_baro else 12
+    return gla.assemble(lay.n_cols, lay.n_band, lay.bandwidth, ptr_c, ja[order], va[order], b,
+                        lay.block_cols(groups), lam[:, :nc, :nc], eta[:, :nc])
+
+
+def _factorize(ab: FloatArray, bm: FloatArray, dm: FloatArray) -> gla.ArrowFactor:
+    """Cholesky of the normal equations; if H is numerically singular (e.g. 1 Hz averaged
+    IMU with an unobservable direction), retry with growing Marquardt damping μ·diag(H)."""
+    mu = 0.0
+    for _ in range(6):
+        try:
+            if mu == 0.0:
+                return gla.factorize(ab, bm, dm)
+            ab2 = ab.copy()
+            ab2[0] += mu * ab[0] + 1e-12
+            return gla.factorize(ab2, bm, dm + np.diag(mu * np.diag(dm) + 1e-12))
+        except gla.LinAlgError:
+            mu = 1e-9 if mu == 0.0 else mu * 100.0
+    raise RuntimeError(
+        "graph: the Gauss-Newton system stays singular even with Marquardt damping 1e-1·diag(H) "
+        "— the drive does not determine the states (check IMU rate/units and GNSS coverage)")
+
+
+def _gn_core(P: _Problem, lay: _Layout, graph: Any, vals: Any, calib_of_kf: np.ndarray,
+             pri: dict[str, float]) -> _BatchResult:
+    """Gauss-Newton with step halving on the total cost (C++ factors + interval terms).
+    The interval rows evaluated at an accepted candidate are reused as its linearisation."""
     st = _states_from_values(P, vals, calib_of_kf)
     rows = _interval_rows(P, st, pri)
-    groups, lam, eta, cost = gf.group_information(rows, P.n_kf - 1)
-    active = (0, 1, 2, 3, 4) if P.drive.baro is not None else (0, 1)
-    for gi, k in enumerate(groups):
-        keys = _group_keys(P, int(k), int(calib_keys[int(k)]))
-        for f in _hessian_pieces(keys, lam[gi], eta[gi], active):
-            gfg.push_back(f)
-    return gfg, cost + graph.error(vals)
-
-
-def _custom_cost(P: _Problem, vals: Any, calib_of_kf: np.ndarray,
-                 pri: dict[str, float]) -> float:
-    st = _states_from_values(P, vals, calib_of_kf)
-    rows = _interval_rows(P, st, pri)
-    return 0.5 * float(rows.r @ rows.r)
-
-
-def _gauss_newton(P: _Problem, graph: Any, vals: Any, calib_of_kf: np.ndarray,
-                  pri: dict[str, float]) -> _BatchResult:
-    """Gauss-Newton with step halving on the total cost (C++ factors + interval terms)."""
-    calib_keys = np.array([K(int(j)) for j in calib_of_kf])
+    cost = graph.error(vals) + 0.5 * float(rows.r @ rows.r)
     it = 0
-    gfg, cost = _linear_system(P, graph, vals, calib_of_kf, calib_keys, pri)
     for it in range(1, P.cfg.max_iterations + 1):
-        delta = gfg.optimize()
+        ab, bm, dm, g = _normal_equations(P, lay, graph, vals, rows)
+        delta = _factorize(ab, bm, dm).solve(g)
         step = 1.0
         while True:
-            cand = vals.retract(delta if step == 1.0 else _scaled(delta, step))
-            new_cost = graph.error(cand) + _custom_cost(P, cand, calib_of_kf, pri)
+            cand = vals.retract(lay.vector_values(delta * step))
+            st_c = _states_from_values(P, cand, calib_of_kf)
+            rows_c = _interval_rows(P, st_c, pri)
+            new_cost = graph.error(cand) + 0.5 * float(rows_c.r @ rows_c.r)
             if new_cost <= cost * (1 + 1e-12) or step < 1e-3:
                 break
             if step == 1.0 and abs(new_cost - cost) < P.cfg.rel_tol * cost:
@@ -478,15 +700,42 @@ def _gauss_newton(P: _Problem, graph: Any, vals: Any, calib_of_kf: np.ndarray,
         rel = (cost - new_cost) / max(cost, 1e-12)
         if P.cfg.verbose:
             print(f"GN it {it}: cost {cost:.6g} -> {new_cost:.6g} step {step}")
-        vals = cand
-        gfg, cost = _linear_system(P, graph, vals, calib_of_kf, calib_keys, pri)
+        vals, rows, cost = cand, rows_c, new_cost
         if abs(rel) < P.cfg.rel_tol or step < 1e-3:
             break
-    return _BatchResult(vals, graph, gfg, cost, it, calib_of_kf)
+    return _BatchResult(vals, graph, cost, it, calib_of_kf, lay, rows)
 
 
-def _scaled(delta: Any, s: float) -> Any:
-    return delta.scale(s)
+def _gauss_newton(P: _Problem, graph: Any, vals: Any, calib_of_kf: np.ndarray,
+                  pri: dict[str, float]) -> _BatchResult:
+    """Gauss-Newton solve, then the post-solve GNSS gate: fixes whose whitened residual χ²
+    (3 dof position, 6 with velocity) exceeds the ``gnss_gate_prob`` quantile are rejected
+    and the problem re-solved from the current solution (≤ ``gate_rounds`` rounds).
+    The residual of a fix that took part in the fit is smaller than its innovation, so the
+    gate is conservative (Groves §17.3)."""
+    lay = _layout(P)
+    res = _gn_core(P, lay, graph, vals, calib_of_kf, pri)
+    if P.cfg.gnss_gate_prob <= 0:
+        return res
+    from scipy.stats import chi2
+
+    iters = res.iterations
+    for _ in range(P.cfg.gate_rounds):
+        idx = _gnss_batch_idx(P)
+        if idx.size == 0:
+            break
+        st = _states_from_values(P, res.values, calib_of_kf)
+        c2, dof = _gnss_chi2(P, st, idx)
+        bad = c2 > chi2.ppf(P.cfg.gnss_gate_prob, dof)
+        if not np.any(bad) or np.all(bad):
+            break
+        P.g_use[idx[bad]] = False
+        P.g_rej_post += int(bad.sum())
+        res = _gn_core(P, lay, graph, res.values, calib_of_kf, pri)
+        iters += res.iterations
+    res.iterations = iters
+    return res
+
 
 
 # ----------------------------------------------------------------------------------------
@@ -522,22 +771,15 @@ def _trajectory(P: _Problem, st: gf.KeyframeStates, vals: Any, t_q: FloatArray) 
     return Trajectory(t_q, lla, vel_n, q, bg, ba, bb if P.drive.baro is not None else None)
 
 
-def _cov_18(P: _Problem, marg: Any, vals: Any, k: int, calib_key: int | None) -> FloatArray:
-    """18×18 ERROR_STATE covariance at keyframe k from GTSAM's joint marginal.
+def _cov_18(P: _Problem, fac: gla.ArrowFactor, sb: FloatArray, lay: _Layout, vals: Any,
+            k: int) -> FloatArray:
+    """18×18 ERROR_STATE covariance at keyframe k from the selected inverse of the final
+    normal equations (joint marginal of X_k, V_k, B_k, C_k and the global (s, τd)).
 
     Pose3 tangent (ω_b, v_b): att_t = R ω_b, δp_t = R v_b; then t → local NED with C_nt.
     ConstantBias (accel, gyro) → bias_gyro 9:12, bias_accel 12:15 (body frame)."""
-    keys = [X(k), V(k), B(k)]
-    if P.drive.baro is not None:
-        keys += [C(k), calib_key]
-    jm = marg.jointMarginalCovariance(gtsam.KeyVector(keys))
-    dims = [6, 3, 6] + ([1, 2] if P.drive.baro is not None else [])
-    n = sum(dims)
-    full = np.zeros((n, n))
-    off = np.cumsum([0] + dims)
-    for i, ki in enumerate(keys):
-        for j, kj in enumerate(keys):
-            full[off[i]:off[i + 1], off[j]:off[j + 1]] = jm.at(ki, kj)
+    full = fac.cov_block(sb, k * lay.bs + np.arange(lay.bs))
+    n = full.shape[0]
     r = vals.atPose3(X(k)).rotation().matrix()
     lla = ned_to_lla(vals.atPose3(X(k)).translation()[None, :], P.origin)
     c_nt = gf.rot_t_n(lla, P.origin)[0].T
@@ -570,25 +812,28 @@ def _gm_mean_prior_sd(sd: float, tau: float, dur: float) -> float:
 def _outputs(P: _Problem, res: _BatchResult, pri: dict[str, float],
              calib_key: int | None) -> dict[str, Any]:
     vals = res.values
+    lay = res.layout
     st = _states_from_values(P, vals, res.calib_of_kf)
     traj = _trajectory(P, st, vals, _output_times(P))
-    marg = gtsam.Marginals(res.gfg, vals)
+    # covariance of the final linear system: one banded factorisation + selected inversion
+    ab, bm, dm, _ = _normal_equations(P, lay, res.graph, vals, res.rows)
+    fac = _factorize(ab, bm, dm)
+    sb = fac.band_inverse()
     nk = P.n_kf
     sel = np.unique(np.linspace(0, nk - 1, min(P.cfg.cov_epochs, nk)).astype(int))
-    cov = np.array([_cov_18(P, marg, vals, int(k), calib_key) for k in sel])
+    cov = np.array([_cov_18(P, fac, sb, lay, vals, int(k)) for k in sel])
     out: dict[str, Any] = {"trajectory": traj, "cov": cov, "t_cov": P.t_kf[sel]}
     if P.drive.baro is None or calib_key is None:
         out["baro"] = None
         out["observability"] = {}
         return out
     kc = vals.atVector(calib_key)
-    pk = marg.marginalCovariance(calib_key)
-    # sigma of the time-averaged bias from a subsample of the (highly correlated) b_k
-    sub = np.unique(np.linspace(0, nk - 1, min(40, nk)).astype(int))
-    jm = marg.jointMarginalCovariance(gtsam.KeyVector([C(int(k)) for k in sub]))
-    cb = np.array([[jm.at(C(int(a)), C(int(b)))[0, 0] for b in sub] for a in sub])
+    pk = fac.s_inv
+    # sigma of the time-averaged bias b̄ = (1/K) Σ b_k: uᵀ H⁻¹ u with u = 1/K on every C(k)
+    u = np.zeros(lay.n_cols)
+    u[np.arange(nk) * lay.bs + 15] = 1.0 / nk
     b_mean = float(np.mean(st.baro_bias))
-    b_sd = float(np.sqrt(max(cb.mean(), 0.0)))
+    b_sd = float(np.sqrt(max(fac.quad_inverse(u), 0.0)))
     dur = float(P.t_kf[-1] - P.t_kf[0])
     b_prior = _gm_mean_prior_sd(pri["b_sd"], pri["b_tau"], dur)
     baro = BaroEstimate(
@@ -620,6 +865,9 @@ def _outputs(P: _Problem, res: _BatchResult, pri: dict[str, float],
 def _build_batch_graph(P: _Problem, rot: FloatArray, pos: FloatArray, vel: FloatArray,
                        pims: list[Any], pri: dict[str, float],
                        calib_of_kf: np.ndarray) -> tuple[Any, Any]:
+    """C++ part of the batch graph: priors, CombinedImuFactors and the Gauss-Markov links.
+    Every GNSS fix (on keyframe epochs too) enters as an interval term so that the gates can
+    drop it without rebuilding the graph."""
     graph = _prior_factors(P, rot[0], pos[0], vel[0], pri, K(0))
     vals = gtsam.Values()
     nk = P.n_kf
@@ -629,8 +877,6 @@ def _build_batch_graph(P: _Problem, rot: FloatArray, pos: FloatArray, vel: Float
         vals.insert(B(k), gtsam.imuBias.ConstantBias())
         if P.drive.baro is not None:
             vals.insert(C(k), np.zeros(1))
-        for f in _keyframe_fix_factors(P, k):
-            graph.add(f)
         if k + 1 < nk:
             graph.add(gtsam.CombinedImuFactor(X(k), V(k), X(k + 1), V(k + 1), B(k), B(k + 1),
                                               pims[k]))
@@ -678,6 +924,8 @@ class GraphBatch:
         out = _outputs(P, res, pri, K(0) if drive.baro is not None else None)
         t4 = time.perf_counter()
         info = {"keyframes": P.n_kf, "iterations": res.iterations, "final_cost": res.cost,
+                "gnss_rejected": P.gnss_rejected, "gnss_rejected_pregate": P.g_rej_pre,
+                "gnss_rejected_postsolve": P.g_rej_post,
                 "observability": out["observability"],
                 "timing_s": {"init": t1 - t0, "preintegration": t2 - t1, "solve": t3 - t2,
                              "outputs": t4 - t3},

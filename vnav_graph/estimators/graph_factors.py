@@ -373,8 +373,9 @@ def group_information(rows: IntervalRows, n_groups: int) -> tuple[np.ndarray, Fl
     pad_r = np.zeros((groups.size, int(count.max())))
     pad_j[gi, pos] = jac
     pad_r[gi, pos] = r
-    lam = np.einsum("gri,grj->gij", pad_j, pad_j)
-    eta = -np.einsum("gri,gr->gi", pad_j, pad_r)
+    pad_t = np.swapaxes(pad_j, 1, 2)
+    lam = pad_t @ pad_j  # batched BLAS (einsum without optimize is ~10× slower here)
+    eta = -(pad_t @ pad_r[:, :, None])[:, :, 0]
     return groups, lam, eta, 0.5 * float(r @ r)
 
 

@@ -85,7 +85,7 @@ class GraphISAM2:
         isam.update(graph0, vals0)
         bt = drive.baro.t if has_baro else np.zeros(0)
         bz = drive.baro.altitude if has_baro else np.zeros(0)
-        g_between = np.flatnonzero(P.g_kf == -1)
+        g_between = np.flatnonzero((P.g_kf == -1) & P.g_use)
         gk = np.clip(np.searchsorted(P.t_kf, P.g_t[g_between], side="right") - 1, 0, nk - 2)
         pims: list[Any] = []
         upd_ms = np.zeros(nk - 1)
@@ -170,6 +170,8 @@ class GraphISAM2:
             isam_k = est.atVector(K(j_last)).tolist()
         info = {
             "keyframes": nk, "iterations_final": res.iterations,
+            "gnss_rejected": P.gnss_rejected, "gnss_rejected_pregate": P.g_rej_pre,
+            "gnss_rejected_postsolve": P.g_rej_post,
             "observability": out["observability"],
             "update_ms": upd_ms,
             "update_p50_ms": float(np.percentile(upd_ms, 50)) if upd_ms.size else 0.0,
