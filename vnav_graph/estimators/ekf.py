@@ -128,7 +128,8 @@ class EkfConfig:
     probability for GNSS position (horizontal pair χ²₂, height χ²₁), GNSS velocity and baro
     innovations; max_consecutive_rejects: after this many consecutive rejections the next
     horizontal GNSS pair / baro sample is accepted (recovers from a diverged filter instead of
-    refusing GNSS forever), and the GNSS-height probation gate is widened by the baro-bias
+    refusing GNSS forever; the baro after baro_reaccept_s [s] of refusals, at least 3 samples),
+    and the GNSS-height probation gate is widened by the baro-bias
     prior (with a baro) or the height accepted (without); max_gnss_sd_v: GNSS heights whose
     own σ_v [m] exceeds this are not used; gnss_probation_s: a GNSS height, once rejected, is
     used again after passing the gate this long without a break (``ekf_model`` docstring);
@@ -168,6 +169,7 @@ class EkfConfig:
     min_accel_bias_sd: float = 1e-4  # m/s²
     min_tilt_sd: float = 1e-4  # rad, levelling residual besides the accel-bias term
     max_gnss_sd_v: float = 10.0
+    baro_reaccept_s: float = 1.0
     gnss_probation_s: float = 10.0
     gap_factor: float = 5.0
     gap_min_s: float = 0.25
@@ -395,6 +397,9 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
     counts = np.diff(np.searchsorted(ev_t, t[grid_idx], side="right"))
     max_pending = int(counts.max()) + 1 if counts.size else 1
 
+    max_consec_baro = 1
+    if baro is not None and baro.t.size > 1:
+        max_consec_baro = max(3, round(cfg.baro_reaccept_s / float(np.median(np.diff(baro.t)))))
     gate2 = float(chi2.ppf(cfg.gate_prob, 2))
     gate1 = float(chi2.ppf(cfg.gate_prob, 1))
     tilt_rate_sd = np.sqrt(2.0) * OMEGA_IE * np.cos(lla0[0])
@@ -409,7 +414,7 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
         cfg.max_consecutive_rejects, heading_known, cfg.heading_speed_min, yaw_unknown_var,
         tilt_rate_sd, max_pending, store_rts,
         gate1, cfg.max_gnss_sd_v, cfg.gnss_probation_s, baro is not None, b_bsd**2, gap_step,
-        gap_rp,
+        gap_rp, max_consec_baro,
     )
     (o_lla, o_v, o_q, o_par, cov_p, rts_p, rts_ing, rts_q, corr, reset_at,
      inn_pos, inn_vel, inn_baro, rej_pos, rej_vel, rej_baro, t_heading, rej_v) = res

@@ -66,7 +66,10 @@ The horizontal pair is accepted after ``max_consec`` refusals (nothing else obse
 a re-initialisation: a position jump with the variance of the observed innovation is added
 to P (and to the stored Q, so the RTS smoother models the same jump) before the update.
 The GNSS vertical velocity is used only with an accepted GNSS height (same receiver
-solution); the horizontal velocity pair is gated on its own (χ²₂).
+solution); the horizontal velocity pair is gated on its own (χ²₂). The baro is the
+vertical anchor: after ``max_consec_baro`` consecutive refusals (≈ 1 s) it is accepted (an
+inertial vertical that disagrees with the baro for that long has diverged — 181.BIN's
+vibrating accelerometer — or the baro stepped, and then the new level is the one to follow).
 
 IMU gaps (logging dropouts, ``gap_step``): an IMU interval longer than the gap threshold is
 not integrated as if the end samples held over it. The step is its own grid interval; the
@@ -310,7 +313,7 @@ def run_filter(
     gate_pos, gate_vel, gate_baro, max_consec,
     heading_known, heading_v_min, yaw_unknown_var, tilt_rate_sd,
     max_pending, store_rts,
-    gate_v, max_sd_v, probation_s, has_baro, b_prior_var, gap_step, gap_rp,
+    gate_v, max_sd_v, probation_s, has_baro, b_prior_var, gap_step, gap_rp, max_consec_baro,
 ):
     """Forward error-state EKF over the whole drive (see module docstring).
 
@@ -615,7 +618,7 @@ def run_filter(
                 else:
                     ok, nis, nrm = _vector_update(
                         p, dx, heff[:1].copy(), pend_y[e, :1].copy(), pend_r[e, :1].copy(),
-                        gate_baro, consec_baro >= max_consec)
+                        gate_baro, consec_baro >= max_consec_baro)
                     inn_baro[idx] = nrm[0]
                     rej_baro[idx] = not ok
                     consec_baro = 0 if nis <= gate_baro else consec_baro + 1
