@@ -150,12 +150,13 @@ class AhrsConfig:
     gyro_bias_sd: float = 0.002
     heading_sd: float = 0.05
     sd_v_default: float = 0.2
-    sd_v_nominal: float = 0.3
+    sd_v_nominal: float = 1.0
     sd_v_max: float = 3.0
     reinit_s: float = 20.0
     baro_check: bool = True
     pos_vel_window_s: float = 4.0
     pos_vel_min_fixes: int = 7
+    pos_vel_vertical: bool = False
     fallback_after_s: float = 90.0
     accel_level_window_s: float = 10.0
     accel_level_tau_s: float = 30.0
@@ -620,7 +621,7 @@ def _gnss_reference(drive: Drive, cfg: AhrsConfig):
     v_g = np.where(np.isfinite(v_g), v_g, 0.0)
     # R5: vertical component of the reference trusted only from a receiver velocity that
     # agrees with the baro climb rate (3σ + 0.3 m/s + 10 % for baro scale/latency)
-    if source == "positions":
+    if source == "positions" and not cfg.pos_vel_vertical:
         vert = np.zeros(t_g.size, dtype=bool)
     elif cfg.baro_check and drive.baro is not None and len(drive.baro) > 5:
         rate, sd_r = baro_rate(t_g, drive.baro.t, drive.baro.altitude)
@@ -714,7 +715,11 @@ def vertical_inputs(drive: Drive, config: AhrsConfig | None = None) -> VerticalI
     a_static_eff = cfg.a_static + 3.0 * np.sqrt(2.0) * sd_med / match
     kp = 2.0 * cfg.tilt_zeta * cfg.tilt_omega
     ki = cfg.tilt_omega**2
-    gate2 = np.inf if cfg.gate_prob is None else -2.0 * np.log(cfg.gate_prob)  # χ²₂ quantile
+    # χ²₂ quantile; no gate on position-derived velocities: their smoothing kernel differs
+    # from the IMU increment's, the residual carries the manoeuvre (a skier's turns), and
+    # only an ungated sequence of intervals telescopes that mismatch away (step 3b)
+    gate2 = np.inf if (cfg.gate_prob is None or info["velocity_source"] == "positions") \
+        else -2.0 * np.log(cfg.gate_prob)
     g_nom = float(gravity(drive.origin_lla[0], drive.origin_lla[2]))
     relevel = _relevel_after_gaps(t, imu.gyro_b, imu.accel_b, cfg.imu_gap_factor * dt_imu,
                                   cfg.level_s, g_nom, cfg.static_accel, cfg.static_rate)
