@@ -108,6 +108,14 @@ class VEKF7Config:
     gnss_vertical_sd : GNSS height σ [m] when the stream gives none (it always does)
     use_gnss_velocity : use the GNSS vertical velocity when the receiver gives it
     gnss_gate_sigma : reject GNSS innovations beyond this many σ
+    max_gnss_sd_v, gnss_probation_s : GNSS heights with σ_v above this [m] are not used; after
+        two consecutive refusals a height is used again only after ``gnss_probation_s`` [s] of
+        consistent fixes (``GnssHeightGate``)
+    k_vre : for an IMU without spec (real logs) the B_z random walk is at least k_vre·σ_white
+        [m/s²/√s], σ_white the measured accelerometer white scatter (``ekf.real_log_imu_spec``:
+        vibration rectification)
+    gap_factor, gap_accel_sd : an IMU step longer than gap_factor × the median step is bridged
+        at constant vertical velocity with unknown acceleration σ_a [m/s²/√s]
     cov_rate_hz : rate at which covariances are stored in the Estimate
     ahrs : attitude-reference gains for ``vertical_inputs``
     """
@@ -129,8 +137,51 @@ class VEKF7Config:
     gnss_vertical_sd: float = 3.0
     use_gnss_velocity: bool = True
     gnss_gate_sigma: float = 5.0
+    max_gnss_sd_v: float = 15.0
+    gnss_probation_s: float = 10.0
+    k_vre: float = 0.14
+    gap_factor: float = 5.0
+    gap_accel_sd: float = 1.0
     cov_rate_hz: float = 1.0
     ahrs: AhrsConfig | None = None
+
+
+class GnssHeightGate:
+    """GNSS-height fault detection and exclusion shared by ``vekf7`` and ``vkf4`` (the rule of
+    ``ekf_model``): a fix is used when its σ_v ≤ ``max_sd_v`` and r² ≤ gate·S; an isolated
+    refusal is only a refusal, after two consecutive refusals the GNSS height is on probation
+    and used again only after passing (and being usable) for ``probation_s`` without a break.
+    There is no forced acceptance: with a barometer the vertical is determined without GNSS.
+    """
+
+    def __init__(self, gate_sigma: float, max_sd_v: float, probation_s: float) -> None:
+        self.gate2 = gate_sigma**2
+        self.max_sd_v = max_sd_v
+        self.probation_s = probation_s
+        self.consec = 0
+        self.suspect = False
+        self.run_start = np.nan
+
+    def use(self, t: float, r: float, s: float, sd_v: float) -> bool:
+        """True if the fix at time t [s] with innovation r [m], innovation variance s [m²] and
+        reported σ_v [m] is to be used."""
+        ok = sd_v <= self.max_sd_v and r * r <= self.gate2 * s
+        if not self.suspect:
+            if ok:
+                self.consec = 0
+                return True
+        elif ok:
+            if np.isnan(self.run_start):
+                self.run_start = t
+            if t - self.run_start >= self.probation_s:
+                self.suspect, self.consec, self.run_start = False, 0, np.nan
+                return True
+        else:
+            self.run_start = np.nan
+        self.consec += 1
+        if self.consec >= 2 and not self.suspect:
+            self.suspect, self.run_start = True, np.nan
+        return False
 
 
 def input_error_psd(
@@ -177,12 +228,37 @@ def _spec_value(spec: object, name: str, fallback: float, min_value: float = 0.0
 
 @njit(cache=True)
 def _propagate(k0, k1, t, f_down, g_lat, c33, f_z, cor, rho2, phi_b, q_b, phi_ab, q_ab,
-               q_acc, nom, p, h_out, v_out):
-    """Propagate nominal and covariance from IMU epoch k0 to k1 (trapezoid; Φ = I + F·dt)."""
+               q_acc, gap_dt, gap_q, nom, p, h_out, v_out):
+    """Propagate nominal and covariance from IMU epoch k0 to k1 (trapezoid; Φ = I + F·dt).
+
+    An IMU step longer than ``gap_dt`` (logging gap) is bridged at constant vertical velocity
+    with the unknown vertical acceleration PSD ``gap_q`` [(m/s²)²/Hz] added (q·dt to v_z,
+    q·dt³/3 to h, q·dt²/2 cross), not integrated from its end samples."""
     for k in range(k0, k1):
         dt = t[k + 1] - t[k]
         h, v = nom[IH], nom[IV]
         bz, kz = nom[IB], nom[IK]
+        if dt > gap_dt:
+            nom[IH] = h + v * dt
+            b_old = nom[IBB]
+            nom[IBB] = phi_b[k] * b_old
+            nom[II] += 0.5 * (b_old + nom[IBB]) * dt
+            nom[IB] = phi_ab[k] * bz
+            f = np.eye(NX)
+            f[IH, IV] = dt
+            f[IB, IB] = phi_ab[k]
+            f[IBB, IBB] = phi_b[k]
+            f[II, IBB] = dt
+            p[:, :] = f @ p @ f.T
+            p[IH, IH] += gap_q * dt**3 / 3.0
+            p[IH, IV] += gap_q * dt**2 / 2.0
+            p[IV, IH] += gap_q * dt**2 / 2.0
+            p[IV, IV] += gap_q * dt
+            p[IB, IB] += q_ab[k]
+            p[IBB, IBB] += q_b[k]
+            h_out[k + 1] = nom[IH]
+            v_out[k + 1] = v
+            continue
         a0 = -(f_down[k] - c33[k] * (bz + kz * f_z[k]) + gravity_scalar(g_lat[k], h) + cor[k])
         h_p = h + v * dt
         a1 = -(f_down[k + 1] - c33[k + 1] * (bz + kz * f_z[k + 1])
@@ -264,6 +340,10 @@ class VEKF7:
         ab_tau = cfg.accel_bias_tau if cfg.accel_bias_tau is not None else _spec_value(
             imu_spec, "accel_bias_tau", 3600.0)
         ab_rw = max(cfg.accel_bias_rw, _spec_value(imu_spec, "accel_bias_rw", 0.0))
+        if imu_spec is None and drive.imu.rate_hz >= 10.0:  # see ekf.real_log_imu_spec
+            from .ekf import measured_white_sd
+
+            ab_rw = max(ab_rw, cfg.k_vre * float(np.max(measured_white_sd(drive.imu.accel_b))))
         k_sd = cfg.accel_scale_sd if cfg.accel_scale_sd is not None else _spec_value(
             imu_spec, "accel_scale_sd", 1e-3)
         s_sd = cfg.scale_prior_sd if cfg.scale_prior_sd is not None else _spec_value(
@@ -342,8 +422,10 @@ class VEKF7:
         k_cur = 0
         next_cov = t[0]
         hz = np.zeros(NX)
+        gap_dt = cfg.gap_factor * float(np.median(dt))
         args = (t, vi.f_down, vi.lat, vi.c33, vi.f_z_b, vi.coriolis_down, rho2, phi_b, q_b,
-                phi_ab, q_ab, q_acc)
+                phi_ab, q_ab, q_acc, gap_dt, cfg.gap_accel_sd**2)
+        gate = GnssHeightGate(cfg.gnss_gate_sigma, cfg.max_gnss_sd_v, cfg.gnss_probation_s)
         for j in range(et.size):
             k = int(kk[j])
             if k > k_cur:
@@ -366,7 +448,8 @@ class VEKF7:
                 hz[IH] = 1.0
                 var_r = float(gn.pos_sd[i, 2]) ** 2
                 r = float(gn.lla[i, 2]) - (h_m + lever_dz[k])
-                if r**2 > cfg.gnss_gate_sigma**2 * _innovation_var(p, hz, var_r):
+                if not gate.use(float(et[j]), r, _innovation_var(p, hz, var_r),
+                                float(gn.pos_sd[i, 2])):
                     rejected += 1
                 else:
                     innov["gnss_alt"].append(_update(nom, p, hz.copy(), r, var_r))
