@@ -69,7 +69,8 @@ def test_error_dynamics_match_nominal_perturbation() -> None:
         p = np.zeros((NX, NX))
         p[:, II] = delta
         h_out, v_out = np.empty(n), np.empty(n)
-        args = (t, f_down, lat, c33, f_z, cor, rho2, phi_b, zeros, ones, zeros, np.zeros(n))
+        args = (t, f_down, lat, c33, f_z, cor, rho2, phi_b, zeros, ones, zeros, np.zeros(n),
+                np.inf, 0.0)  # no IMU gap
         _propagate(0, n - 1, *args, ref, np.zeros((NX, NX)), h_out, v_out)
         _propagate(0, n - 1, *args, pert, p, h_out, v_out)
         diff = (pert - ref)[[IH, IV]]
