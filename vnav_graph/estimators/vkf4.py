@@ -94,6 +94,10 @@ class VKF4Config:
     baro_noise_sd : white baro noise [m]; spec or 0.5
     use_gnss : use GNSS heights when available (False: pure seed-004 baro-inertial loop)
     gnss_gate_sigma : reject GNSS innovations beyond this many σ
+    max_gnss_sd_v, gnss_probation_s, gap_factor, gap_accel_sd : as in ``VEKF7Config``
+    k_vre : IMU without spec sampled at ≥ 10 Hz: an accelerometer bias random walk
+        k_vre·σ_white [m/s²/√s] (``ekf.real_log_imu_spec``) is added to A as its white
+        equivalent over ``bias_corr_s``, (k_vre·σ_white)²·bias_corr_s²/3
     cov_rate_hz : rate at which covariances are stored
     ahrs : attitude-reference gains
     """
@@ -111,6 +115,11 @@ class VKF4Config:
     baro_noise_sd: float | None = None
     use_gnss: bool = True
     gnss_gate_sigma: float = 5.0
+    max_gnss_sd_v: float = 15.0
+    gnss_probation_s: float = 10.0
+    k_vre: float = 0.14
+    gap_factor: float = 5.0
+    gap_accel_sd: float = 1.0
     cov_rate_hz: float = 1.0
     ahrs: AhrsConfig | None = None
 
@@ -124,10 +133,14 @@ def _spec(spec: object, name: str, fallback: float) -> float:
 
 @njit(cache=True)
 def _run(t, a_in, lat, h_init, v_init, p0, phi3, q3, phi4, q4, a_psd,
-         ev_k, ev_kind, ev_z, ev_var, ev_lag, gate2, cov_dt):
+         ev_k, ev_kind, ev_z, ev_var, ev_lag, gate2, cov_dt, ev_t, ev_sd,
+         max_sd_v, probation_s, gap_dt, gap_q):
     """Numba kernel: INS propagation at the IMU epochs, events processed at the first IMU
     epoch at or after their stamp. a_in = f_D + cor_D (gravity added at the INS height).
-    ev_kind 0 = baro (ev_z = h_baro), 1 = GNSS (ev_z = h_GNSS)."""
+    ev_kind 0 = baro (ev_z = h_baro), 1 = GNSS (ev_z = h_GNSS, reported σ_v ev_sd). GNSS
+    heights pass ``vekf7.GnssHeightGate``'s rule (σ_v limit, probation after two consecutive
+    refusals); an IMU step longer than gap_dt is bridged at constant velocity with the
+    unknown-acceleration PSD gap_q."""
     n = t.size
     h_out = np.empty(n)
     v_out = np.empty(n)
@@ -144,16 +157,22 @@ def _run(t, a_in, lat, h_init, v_init, p0, phi3, q3, phi4, q4, a_psd,
     next_cov = t[0]
     nu = np.full(m, np.nan)
     rejected = 0
+    consec = 0
+    suspect = False
+    run_start = np.nan
     j = 0
     for k in range(n):
         if k > 0:
             dt = t[k] - t[k - 1]
-            a0 = a_in[k - 1] + gravity_scalar(lat[k - 1], h)
-            h_p = h - vd * dt
-            a1 = a_in[k] + gravity_scalar(lat[k], h_p)
-            v_new = vd + 0.5 * (a0 + a1) * dt
-            h = h - 0.5 * (vd + v_new) * dt
-            vd = v_new
+            if dt > gap_dt:
+                h = h - vd * dt
+            else:
+                a0 = a_in[k - 1] + gravity_scalar(lat[k - 1], h)
+                h_p = h - vd * dt
+                a1 = a_in[k] + gravity_scalar(lat[k], h_p)
+                v_new = vd + 0.5 * (a0 + a1) * dt
+                h = h - 0.5 * (vd + v_new) * dt
+                vd = v_new
             # Φ: Δh ← Δh − δt·Δv_d; baro states exact Gauss-Markov
             f = np.eye(NX)
             f[0, 1] = -dt
@@ -161,7 +180,7 @@ def _run(t, a_in, lat, h_init, v_init, p0, phi3, q3, phi4, q4, a_psd,
             f[3, 3] = phi4[k - 1]
             x = f @ x
             p = f @ p @ f.T
-            a = a_psd[k - 1]
+            a = a_psd[k - 1] if dt <= gap_dt else gap_q
             p[0, 0] += a * dt**3 / 3.0
             p[0, 1] += -a * dt**2 / 2.0
             p[1, 0] += -a * dt**2 / 2.0
@@ -179,10 +198,30 @@ def _run(t, a_in, lat, h_init, v_init, p0, phi3, q3, phi4, q4, a_psd,
             r = z - hrow @ x
             ph = p @ hrow
             s = hrow @ ph + ev_var[j]
-            if ev_kind[j] == 1 and r * r > gate2 * s:
-                rejected += 1
-                j += 1
-                continue
+            if ev_kind[j] == 1:
+                ok = ev_sd[j] <= max_sd_v and r * r <= gate2 * s
+                use = False
+                if not suspect:
+                    use = ok
+                elif ok:
+                    if np.isnan(run_start):
+                        run_start = ev_t[j]
+                    if ev_t[j] - run_start >= probation_s:
+                        use = True
+                        suspect = False
+                        run_start = np.nan
+                else:
+                    run_start = np.nan
+                if use:
+                    consec = 0
+                else:
+                    consec += 1
+                    if consec >= 2 and not suspect:
+                        suspect = True
+                        run_start = np.nan
+                    rejected += 1
+                    j += 1
+                    continue
             kg = ph / s
             x = x + kg * r
             ikh = np.eye(NX) - np.outer(kg, hrow)
@@ -231,6 +270,11 @@ class VKF4:
                 + _spec(imu_spec, "accel_bias_sd", 0.02) ** 2 * cfg.bias_corr_s
                 + cfg.input_error_psd, cfg.tilt_sd, _spec(imu_spec, "gyro_bias_sd", 1e-4),
                 cfg.input_corr_s)
+        if cfg.accel_psd is None and imu_spec is None and drive.imu.rate_hz >= 10.0:
+            from .ekf import measured_white_sd
+
+            rw = cfg.k_vre * float(np.max(measured_white_sd(drive.imu.accel_b)))
+            a_psd = a_psd + rw**2 * cfg.bias_corr_s**2 / 3.0
         s3 = cfg.baro_slow_sd if cfg.baro_slow_sd is not None else float(np.hypot(
             _spec(baro_spec, "bias_sd", 10.0), _spec(baro_spec, "scale_sd", 0.02)
             * cfg.alt_span_m))
@@ -256,6 +300,7 @@ class VKF4:
         et, ek, ez, evar = et[order], ek[order], ez[order], evar[order]
         keep = (et >= t[0]) & (et <= t[-1])
         et, ek, ez, evar = et[keep], ek[keep], ez[keep], evar[keep]
+        esd = np.sqrt(evar)
         kk = np.searchsorted(t, et, side="left").astype(np.int64)
         lag = t[kk] - et
 
@@ -268,7 +313,9 @@ class VKF4:
         p0 = np.diag([var_h, 0.5**2, s3**2, cfg.baro_fast_sd**2])
         h_out, v_out, t_cov, p_cov, x3, nu, rejected = _run(
             t, vi.f_down + vi.coriolis_down, vi.lat, h_init, v_init, p0, phi3, q3, phi4, q4,
-            a_psd, kk, ek, ez, evar, lag, cfg.gnss_gate_sigma**2, 1.0 / cfg.cov_rate_hz)
+            a_psd, kk, ek, ez, evar, lag, cfg.gnss_gate_sigma**2, 1.0 / cfg.cov_rate_hz,
+            et, esd, cfg.max_gnss_sd_v, cfg.gnss_probation_s,
+            cfg.gap_factor * float(np.median(dt)), cfg.gap_accel_sd**2)
 
         lla = np.column_stack([np.full(n, np.nan), np.full(n, np.nan), h_out])
         vel = np.column_stack([np.full(n, np.nan), np.full(n, np.nan), v_out])
