@@ -556,7 +556,8 @@ def velocity_from_positions(t: FloatArray, lla: FloatArray, pos_sd: FloatArray,
     -------
     v : (M, 3) NED velocity [m/s], the slope at t_j of p(τ) = a + b τ + c τ² fitted with
         weights 1/σ² to the fixes of the same segment with |t_i − t_j| ≤ window_s/2 (NaN with
-        fewer than 3 fixes); unbiased for trajectories up to cubic in a symmetric window
+        fewer than 3 fixes); exact for a quadratic trajectory; a cubic term c3·τ³ biases it by
+        c3·Στ⁴/Στ² (≈ 3c3W²/20 in a symmetric window of length W)
     sd : (M, 3) its σ [m/s], √[(XᵀWX)⁻¹]₁₁ (uncorrelated fix errors assumed); for N equally
         spaced fixes spanning W, ≈ σ_p·√(12/N)/W
     """
