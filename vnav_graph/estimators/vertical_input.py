@@ -30,13 +30,63 @@ stands for "the INS attitude" of the papers:
    feedback rate until the next fix (zeroed in GNSS outages). Because successive Δv
    telescope, GNSS velocity noise σ_v enters the tilt only as ≈ k_p·σ_v/g (no
    differentiation noise build-up).
-   Without GNSS velocity (seed003 scenario) the reference velocity is the central difference
-   of the GNSS positions.
+3b. **Without receiver velocity** (phones; GnssStream.vel_n None) the reference velocity at
+   each fix is the slope of a 1/σ²-weighted quadratic least-squares fit of the GNSS positions
+   over a window W = max(``pos_vel_window_s``, (``pos_vel_min_fixes`` − 1)·T_fix), never
+   across an outage (``velocity_from_positions``; σ_v = σ_p/√Στ², e.g. 0.135 m/s for 41 fixes
+   of σ_p = 1 m over 4 s, against σ_p/(√2·T) ≈ 7 m/s for the former central difference at
+   10 Hz). Matching intervals are then ≥ W/2, only the horizontal components level (the
+   vertical position is noisier and is the quantity the vertical estimators want), and
+   there is no gate: the smoothed velocity and the IMU increment see the manoeuvres with
+   different kernels, and only an unbroken sequence of intervals telescopes that mismatch
+   away (a skier's turns; gating them biased the tilt).
 4. **Heading** ψ̂_z = wrap(ψ_est − χ_gnss), the yaw minus the GNSS course over ground, when the
    ground speed exceeds ``v_course_min`` (assumes no sideslip/crab: true for the simulated car
    and aircraft; the threshold is raised to 5σ of the GNSS velocity noise so noise never
    fakes a course; the vertical specific force does not depend on heading, heading only keeps
    the velocity matching of step 3 consistent in turns).
+
+5. **Robustness rules for GNSS velocity** (the 181 glitch log: heights 318-826 m, vertical
+   speed −55 m/s and ground speed 72 m/s with a 3-D fix; the receiver's own σ_v rises to
+   8-15 m/s there):
+
+   - R1 a fix whose horizontal velocity σ exceeds ``sd_v_max`` (3 m/s) is unusable for
+     levelling, heading and the Coriolis velocity (``info["levelling_unusable"]``);
+   - R2 χ²₂ gate on the horizontal residual d_h = (ΔF/Δt − f̄_ref)_h against its predicted
+     spread S = R_j + g²σ_ψ(τ)² + σ_yaw²|a_h|², R_j = (σ²_v,j + σ²_v,j−1)/Δt² per axis,
+     σ_ψ(τ) = ``tilt_sd0`` + ``gyro_bias_sd``·τ growing since the last accepted update;
+     reject when |d_h|²/S > −2 ln p (13.8 at p = 10⁻³; ``info["levelling_rejected"]``);
+     rejections spanning ``reinit_s`` let the next interval through (a real drift cannot
+     lock the GNSS out). Receiver velocities only (3b);
+   - R3 inverse-variance weighting: the low-pass gain Δt/T_f is multiplied by
+     min(1, R_nom/R_j), R_nom the residual variance at σ_v = ``sd_v_nominal`` (1 m/s):
+     noisy fixes (σ_v = 10 m/s → weight 0.01) barely move the tilt;
+   - R4 the low-passed tilt error fed back is clamped to ``max_tilt_feedback`` (0.2 rad);
+   - R5 the receiver's vertical velocity is compared with the baro climb rate (line fit over
+     ±1 s, ``baro_rate``); where |v_D + ḣ_baro| > 3√(σ²_vD + σ²_ḣ) + 0.3 m/s + 0.1|ḣ| the
+     vertical component is dropped (nominal f_ref,D = −g, residual d_D = 0:
+     horizontal-only levelling; ``info["vertical_dropped"]``).
+
+6. **Accelerometer-levelling fallback.** After ``fallback_after_s`` (90 s) without an
+   accepted GNSS levelling update, every 0.2·``accel_level_window_s`` the mean specific force
+   over that window (10 s), resolved in n, is compared with (0, 0, −g): ψ_x = f̄_E/g,
+   ψ_y = −f̄_N/g, gain 0.2·window/``accel_level_tau_s``, applied only when the window is
+   unaccelerated by the body-frame test |mean(ω̃ − b̂_g)| < ``static_rate`` and
+   | |f̄_b| − g | < ``static_accel``. It assumes no sustained horizontal acceleration; on the
+   simulated hill-drive a 5 s trigger made a 1 m/s² straight-line acceleration in the 60 s
+   outage tilt the platform by 0.1 rad, hence the long trigger: within a minute the
+   bias-corrected gyros are better.
+
+7. **IMU logging gaps** (a step > ``imu_gap_factor`` × the median, e.g. 22 s on
+   erle_pxf_loiter_rtl): no rates inside, so no propagation across it; roll and pitch are
+   re-levelled from the first ``level_s`` after the gap when those samples are static (the
+   loiter quad flipped over at 51.5 s and was set upright during the gap), the yaw and the
+   gyro bias are kept, and no velocity-matching interval may touch the gap.
+
+8. **Coriolis/transport velocity.** The horizontal velocity used for cor_D and ω_en is the
+   last usable, non-rejected GNSS velocity propagated with the resolved specific force
+   (v_h ← v_h + ∫f_n,h dt), reset at each such fix; so cor_D stays right in outages (it was
+   zero there before: up to ≈ 0.01 m/s² for a fast aircraft).
 
 Outputs at the IMU epochs (``VerticalInputs``): the AHRS attitude q_nb, the vertical specific
 force f_D = [C_nb f̃_b]_3 (NED down, m/s², ≈ −g at rest), C33 = C_nb[2, 2], the body-z specific
