@@ -434,14 +434,12 @@ def test_graph_batch_and_ekf_rts_agree_on_the_vertical_problem(problem):
     del k
 
 
-@pytest.mark.xfail(raises=RuntimeError, strict=False,
-                   reason="bug at f1679ea: 'Indeterminate linear system' with an ideal gyro")
 def test_graph_batch_runs_on_the_ideal_gyro_of_seed003():
     """The shipped seed003 scenario has an ideal gyro (noise density 0, bias σ 0). The floors
-    in graph._setup then give a gyro-bias random walk of 1e-8 rad/s per keyframe and GTSAM's
-    elimination throws 'Indeterminate linear system' (seen at commit f1679ea; the solver
-    rework in progress alongside this test passes it). Once running, heights must be within
-    1 m rms of truth — GNSS σ 2 m averaged over 30 fixes plus the baro."""
+    in graph._setup then give a gyro-bias random walk of 1e-8 rad/s per keyframe; GTSAM's
+    elimination threw 'Indeterminate linear system' at commit f1679ea (regression test: the
+    own banded solver with Marquardt fallback solves it). Heights must be within 1 m rms of
+    truth — GNSS σ 2 m averaged over 30 fixes plus the baro."""
     drive = simulate(load_scenario("seed003", duration_s=30.0), SEED)
     est = g.GraphBatch().run(drive)
     assert np.sqrt(np.mean(errors_vs_truth(est, drive).alt ** 2)) < 1.0

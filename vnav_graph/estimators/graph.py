@@ -61,8 +61,15 @@ class GraphConfig:
     gravity_correction / coriolis: tangent-frame corrections (off only for studies);
     segment_s: length of a baro-calibration segment in the incremental front end;
     calib_rw: random-walk root PSD of (s [1/√s], τd [s/√s]) between segments;
-    relinearize_threshold: iSAM2 relinearisation threshold; final_batch: run the batch
-    solver after the incremental pass to produce the smoothed trajectory.
+    relinearize_threshold: iSAM2 relinearisation threshold (one value for every component;
+    used only when ``relinearize_typed`` is None; 0 switches relinearisation off);
+    relinearize_typed: per-type thresholds (rotation [rad], translation [m], velocity [m/s],
+    accel bias [m/s²], gyro bias [rad/s]) — the baro bias C and calibration K only appear in
+    linear factors and are never relinearised; relinearize_skip: iSAM2 relinearizeSkip;
+    partial_relinearization_check: iSAM2 option of that name; wildfire_threshold: iSAM2
+    back-substitution threshold (None: GTSAM's 1e-3); see ``docs/graph.md`` for the measured
+    per-update latencies; final_batch: run the batch solver after the incremental pass to
+    produce the smoothed trajectory.
     gnss_gate_prob: probability of the χ² gates on GNSS fixes (0 switches gating off):
     a causal pre-gate of the GNSS height against the barometer and a post-solve gate of
     each fix's normalised position (+ velocity) residual, repeated ≤ ``gate_rounds`` times.
@@ -78,6 +85,11 @@ class GraphConfig:
     segment_s: float = 60.0
     calib_rw: tuple[float, float] = (2e-5, 2e-4)
     relinearize_threshold: float = 0.05
+    relinearize_skip: int = 10
+    partial_relinearization_check: bool = False
+    relinearize_typed: tuple[float, float, float, float, float] | None = (
+        0.02, 1.0, 0.5, 0.1, 0.005)
+    wildfire_threshold: float | None = 0.01
     final_batch: bool = True
     observable_ratio: float = 0.8
     gnss_gate_prob: float = 0.9999

@@ -12,6 +12,17 @@ at the current estimate when their interval is complete (one keyframe later, so 
 delayed sample t_s − τd of the interval has arrived) and inserted as one
 ``LinearContainerFactor`` per interval — no Python callback ever runs inside iSAM2.
 
+Per-update latency: the tail was iSAM2 relinearising ~1000 old variables at once (every
+``relinearizeSkip`` = 10 updates, a scalar threshold of 0.05 in every unit) and the lazy
+back-substitution (wildfire) descending into the whole tree after GNSS corrections. The
+thresholds are therefore per variable type (``GraphConfig.relinearize_typed``): only the
+rotation carries real nonlinearity into the IMU and lever-arm terms (0.02 rad); translation,
+velocity and the biases enter the IMU factor (first-order bias correction) almost linearly,
+and C/K only linear factors, so their thresholds are large. The wildfire threshold is 0.01:
+only deltas of *old* variables are left stale by it (the newest keyframes sit in the root
+clique and are always exact), and old variables are relinearised by the final batch pass
+anyway. Measurements in ``docs/graph.md``.
+
 Outputs: ``Estimate.online`` holds what was known at each keyframe (the iSAM2 estimate of the
 newest keyframe right after its update); ``Estimate.trajectory`` is the final smoothed
 solution — the batch Gauss-Newton of ``graph.py`` (global s, τd, all terms relinearised)
@@ -40,6 +51,20 @@ def _segments(P: Any) -> np.ndarray:
     return np.floor((P.t_kf - P.t_kf[0]) / seg + 1e-9).astype(int)
 
 
+def _threshold_map(cfg: g.GraphConfig) -> Any:
+    """Per-variable-type relinearisation thresholds (tangent-space components)."""
+    if cfg.relinearize_typed is None:
+        return cfg.relinearize_threshold
+    rot, trans, vel, ba, bg = cfg.relinearize_typed
+    m = gtsam.ISAM2ThresholdMap()
+    m.insert(("x", np.array([rot] * 3 + [trans] * 3)))
+    m.insert(("v", np.full(3, vel)))
+    m.insert(("b", np.array([ba] * 3 + [bg] * 3)))
+    m.insert(("c", np.full(1, 1e9)))
+    m.insert(("k", np.full(2, 1e9)))
+    return m
+
+
 class GraphISAM2:
     """``graph-isam2``: incremental iSAM2 front end + final batch smoothing pass."""
 
@@ -57,8 +82,13 @@ class GraphISAM2:
         nk = P.n_kf
         seg = _segments(P)
         params = gtsam.ISAM2Params()
-        params.setRelinearizeThreshold(self.config.relinearize_threshold)
-        params.relinearizeSkip = 10
+        params.setRelinearizeThreshold(_threshold_map(self.config))
+        params.relinearizeSkip = self.config.relinearize_skip
+        params.enableRelinearization = self.config.relinearize_threshold > 0
+        params.enablePartialRelinearizationCheck = self.config.partial_relinearization_check
+        if self.config.wildfire_threshold is not None:
+            params.setOptimizationParams(gtsam.ISAM2GaussNewtonParams(
+                self.config.wildfire_threshold))
         # QR: Cholesky of the squared information failed ("indeterminate system") on
         # hill-drives with the consumer IMU (whitened gyro-bias rows ~1e4 next to metre-level
         # position rows); QR keeps the conditioning of the Jacobian.
@@ -89,6 +119,9 @@ class GraphISAM2:
         gk = np.clip(np.searchsorted(P.t_kf, P.g_t[g_between], side="right") - 1, 0, nk - 2)
         pims: list[Any] = []
         upd_ms = np.zeros(nk - 1)
+        # per update: preintegration, interval term, isam.update, estimate read-back [ms];
+        # variables relinearised, variables re-eliminated
+        brk = np.zeros((nk - 1, 6))
         online = np.zeros((nk, 10))  # p(3), v(3), quat(4) in t frame
         online[0] = np.r_[pos[0], vel[0], mat_to_quat(rot[0])]
         baro_next = 0
@@ -113,6 +146,7 @@ class GraphISAM2:
             b_k = gtsam.imuBias.ConstantBias(bias[k, 0:3], bias[k, 3:6])
             pim = g._preintegrate(P, k, rot[k], dg, b_k)
             pims.append(pim)
+            t_pre = time.perf_counter()
             nav = pim.predict(gtsam.NavState(gtsam.Rot3(rot[k]), pos[k], vel[k]), b_k)
             nf = gtsam.NonlinearFactorGraph()
             nv = gtsam.Values()
@@ -139,13 +173,19 @@ class GraphISAM2:
                     g_between[gk == k - 1], pri)
                 if lcf is not None:
                     nf.add(lcf)
-            isam.update(nf, nv)
+            t_lcf = time.perf_counter()
+            ures = isam.update(nf, nv)
+            t_upd = time.perf_counter()
             refresh([k + 1] if k < 1 else [k - 1, k, k + 1])
             if has_baro:
                 j = int(seg[k + 1])
                 cal[j] = isam.calculateEstimateVector(K(j))
             online[k + 1] = np.r_[pos[k + 1], vel[k + 1], mat_to_quat(rot[k + 1])]
-            upd_ms[k] = 1e3 * (time.perf_counter() - tu)
+            t_end = time.perf_counter()
+            upd_ms[k] = 1e3 * (t_end - tu)
+            brk[k] = (1e3 * (t_pre - tu), 1e3 * (t_lcf - t_pre), 1e3 * (t_upd - t_lcf),
+                      1e3 * (t_end - t_upd), ures.getVariablesRelinearized(),
+                      ures.getVariablesReeliminated())
         # last interval's terms
         if nk >= 2:
             lcf, baro_next = self._interval_factor(
@@ -174,6 +214,7 @@ class GraphISAM2:
             "gnss_rejected_postsolve": P.g_rej_post,
             "observability": out["observability"],
             "update_ms": upd_ms,
+            "update_breakdown": brk,
             "update_p50_ms": float(np.percentile(upd_ms, 50)) if upd_ms.size else 0.0,
             "update_p99_ms": float(np.percentile(upd_ms, 99)) if upd_ms.size else 0.0,
             "online_s": t_online - t_start,
