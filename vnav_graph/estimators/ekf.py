@@ -183,6 +183,11 @@ class EkfConfig:
     gap_level_sd: float = 0.05  # rad
     gap_level_s: float = 1.0
     gap_yaw_rw: float = 0.05  # rad/√s
+    heading_source: str = "auto"
+    align_chunk_s: float = 1.0
+    align_forget_s: float = 30.0
+    align_sd_max: float = 15.0 * DEG
+    gap_heading_forget_s: float = 5.0
 
     def __post_init__(self) -> None:
         if not (self.cov_rate_hz > 0 and self.cov_output_hz > 0):
@@ -410,6 +415,9 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
     gate1 = float(chi2.ppf(cfg.gate_prob, 1))
     tilt_rate_sd = np.sqrt(2.0) * OMEGA_IE * np.cos(lla0[0])
     tau = (ispec.gyro_bias_tau, ispec.accel_bias_tau, bspec.bias_tau)
+    if cfg.heading_source not in ("auto", "track", "accel"):
+        raise ValueError("EkfConfig.heading_source: 'auto', 'track' or 'accel'")
+    heading_accel = bool(has_vel) and cfg.heading_source in ("auto", "accel")
 
     res = km.run_filter(
         t, imu.gyro_b, imu.accel_b, grid_of, out_of, kk, out_idx.size, cov_out_of,
@@ -421,6 +429,8 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
         tilt_rate_sd, max_pending, store_rts,
         gate1, cfg.max_gnss_sd_v, cfg.gnss_probation_s, baro is not None, b_bsd**2, gap_step,
         gap_rp, max_consec_baro,
+        heading_accel, cfg.align_chunk_s, cfg.align_forget_s, cfg.align_sd_max,
+        float(np.sqrt(2.0) * a_bsd), cfg.gap_heading_forget_s,
     )
     (o_lla, o_v, o_q, o_par, cov_p, rts_p, rts_ing, rts_q, corr, reset_at,
      inn_pos, inn_vel, inn_baro, rej_pos, rej_vel, rej_baro, t_heading, rej_v) = res
@@ -445,6 +455,8 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
         "accel_scale_estimated": bool(est_scale),
         "accel_scale": o_par[-1, km.PKA:km.PKA + 3].copy(),
         "static_align_s": float(t[i_static - 1] - t[0]),
+        "heading_source": ("given" if heading_known else
+                           "accel-matching" if heading_accel else "gnss-track"),
     }
     prior = {"scale": s_sd, "latency": tau_sd, "bias": b_bsd}
     rts = (rts_p, rts_ing, rts_q, corr, reset_at) if store_rts else None

@@ -207,12 +207,16 @@ def transition(f, dt):
 def step_phi(ing, tau_g, tau_a, tau_b):
     """Φ of one grid interval: ``transition(build_f(ing), Δt)``; across an IMU gap the
     roll/pitch error rows are zero (the tilt is re-levelled after the gap, its new error is
-    independent of the old one and enters through Q)."""
+    independent of the old one and enters through Q), and so is the yaw row when the heading
+    is forgotten over the gap (ing[20] set: the yaw error restarts with the uniform variance
+    in Q)."""
     phi = transition(build_f(ing, tau_g, tau_a, tau_b), ing[21])
     if ing[22] > 0.5:
         for j in range(NX):
             phi[IATT, j] = 0.0
             phi[IATT + 1, j] = 0.0
+            if ing[20] > 0.5:  # heading forgotten over a long gap: yaw error restarts
+                phi[IATT + 2, j] = 0.0
     return phi
 
 
@@ -314,6 +318,8 @@ def run_filter(
     heading_known, heading_v_min, yaw_unknown_var, tilt_rate_sd,
     max_pending, store_rts,
     gate_v, max_sd_v, probation_s, has_baro, b_prior_var, gap_step, gap_rp, max_consec_baro,
+    heading_accel, align_chunk_s, align_forget_s, align_sd_max, align_acc_sd,
+    gap_forget_s,
 ):
     """Forward error-state EKF over the whole drive (see module docstring).
 
@@ -370,6 +376,19 @@ def run_filter(
     n_pend = 0
     reset_delta = np.nan
     reset_sd = 0.0
+    # heading from acceleration matching (module docstring): specific-force integral in the
+    # nominal frame since the last GNSS velocity fix, current chunk, weighted sums
+    sf_acc = np.zeros(2)
+    s_i = np.zeros(2)
+    ch_u = np.zeros(2)
+    ch_w = np.zeros(2)
+    ch_t = 0.0
+    al_dot = 0.0
+    al_cross = 0.0
+    al_uu = 0.0
+    al_n = 0
+    prev_vfix = -1
+    pend_tv = 0.0
 
     # interval accumulators
     acc_fn = np.zeros(3)
@@ -407,12 +426,28 @@ def run_filter(
             v = v_p.copy()
             # re-levelled from the first samples after the gap, yaw kept
             q = rpy_quat(gap_rp[i + 1, 0], gap_rp[i + 1, 1], _yaw(q_p))
+            if dt >= gap_forget_s:
+                # long gap: the vehicle may have turned (Loiter_RTL: a crash); the heading is
+                # re-acquired afterwards (module docstring)
+                heading_ok = False
+                reset_delta = np.nan
+            # acceleration matching restarts after a gap (no specific force over it)
+            s_i[:] = 0.0
+            sf_acc[:] = 0.0
+            ch_u[:] = 0.0
+            ch_w[:] = 0.0
+            ch_t = 0.0
+            prev_vfix = -1
         else:
             lla, v, q = strapdown_step(lla_p, v_p, q_p, w0, w1, f0, f1, dt)
             fm = 0.5 * (f0 + f1)
             acc_fb += fm
-            acc_fn += quat_to_dcm(q) @ fm
+            fnm = quat_to_dcm(q) @ fm
+            acc_fn += fnm
             acc_n += 1
+            s_i[0] = fnm[0] * dt
+            s_i[1] = fnm[1] * dt
+            sf_acc += s_i
 
         # measurements with time in (t_i, t_{i+1}]: predict from the interpolated nominal
         while je < ev_t.size and ev_t[je] <= t[i + 1]:
@@ -458,6 +493,43 @@ def run_filter(
                 if not heading_ok:
                     for a in range(6):
                         hm[a, IATT + 2] = 0.0
+                if not heading_ok and heading_accel and has_vel:
+                    # acceleration matching: W = R_z(δ) U per chunk of ≥ align_chunk_s
+                    u_part = sf_acc - (1.0 - al) * s_i
+                    sf_acc = (1.0 - al) * s_i
+                    if prev_vfix >= 0:
+                        dtf = tm - pend_tv
+                        ch_u += u_part
+                        for a in range(2):
+                            ch_w[a] += g_vel[idx, a] - g_vel[prev_vfix, a]
+                        ch_t += dtf
+                        if ch_t >= align_chunk_s:
+                            sv2 = 0.5 * (g_vel_sd[idx, 0] ** 2 + g_vel_sd[idx, 1] ** 2
+                                         + g_vel_sd[prev_vfix, 0] ** 2
+                                         + g_vel_sd[prev_vfix, 1] ** 2)
+                            var = sv2 + (align_acc_sd * ch_t) ** 2
+                            uu = ch_u[0] ** 2 + ch_u[1] ** 2
+                            ww = ch_w[0] ** 2 + ch_w[1] ** 2
+                            # rotation keeps the norm: a chunk whose |W| and |U| disagree
+                            # by > 4σ is a GNSS velocity fault, not information
+                            if abs(np.sqrt(ww) - np.sqrt(uu)) <= 4.0 * np.sqrt(var):
+                                fg = np.exp(-ch_t / align_forget_s)
+                                al_dot = fg * al_dot + (ch_u[0] * ch_w[0]
+                                                        + ch_u[1] * ch_w[1]) / var
+                                al_cross = fg * al_cross + (ch_u[0] * ch_w[1]
+                                                            - ch_u[1] * ch_w[0]) / var
+                                al_uu = fg * al_uu + uu / var
+                                al_n += 1
+                            ch_u[:] = 0.0
+                            ch_w[:] = 0.0
+                            ch_t = 0.0
+                            sd_al = 1.0 / np.sqrt(max(al_uu, 1e-12))
+                            if al_n >= 3 and sd_al <= align_sd_max and np.isnan(reset_delta):
+                                reset_delta = np.arctan2(al_cross, al_dot)
+                                reset_sd = 2.0 * sd_al
+                    prev_vfix = idx
+                    pend_tv = tm
+                elif not heading_ok:
                     if tr_speed[idx] > heading_v_min and np.isnan(reset_delta):
                         dlt = tr_yaw[idx] - _yaw(qm)
                         reset_delta = np.arctan2(np.sin(dlt), np.cos(dlt))
@@ -504,6 +576,8 @@ def run_filter(
             fmat = build_f(ing, tau_g, tau_a, tau_b)
             phi = step_phi(ing, tau_g, tau_a, tau_b)
             qd = q_diag[k].copy()
+            if gap_step[i] and not heading_ok:
+                qd[IATT + 2] = yaw_unknown_var
             if not heading_ok:
                 el = t[i + 1] - t[0]
                 qd[IATT] += 2.0 * tilt_rate_sd**2 * el * dtg
