@@ -22,7 +22,8 @@ Outputs
 - info: ``gnss_rejected`` (fixes whose horizontal pair or height was refused: χ² gate,
   σ_v limit or probation, ``ekf_model`` docstring), ``gnss_alt_rejected`` (height refused),
   ``imu_gaps`` ([start, length] of bridged IMU gaps [s]), ``gnss_vel_rejected``,
-  ``baro_rejected``, ``heading_time_s`` (time the heading became known), rates used.
+  ``baro_rejected``, ``heading_time_s`` (time the heading last became known),
+  ``heading_source`` (given / accel-matching / gnss-track), rates used.
 
 Noise
 -----
@@ -146,7 +147,12 @@ class EkfConfig:
     static levelling window; initial_heading / initial_heading_sd: given heading [rad] (None =
     from the GNSS track once moving faster than heading_speed_min [m/s], σ from the velocity
     noise and sideslip_sd); accel_scale: estimate accelerometer scale factors (None = when the
-    IMU spec has accel_scale_sd > 0 or there is no spec).
+    IMU spec has accel_scale_sd > 0 or there is no spec); heading_source: "auto" (acceleration
+    matching when the GNSS stream has velocity, else the track), "accel" or "track";
+    align_chunk_s, align_forget_s, align_sd_max: acceleration-matching chunk length [s],
+    forgetting time [s] and the σ [rad] below which the heading is accepted;
+    gap_heading_forget_s: IMU gaps at least this long [s] make the heading unknown again
+    (``ekf_model`` docstring).
     """
 
     cov_rate_hz: float = 10.0

@@ -30,7 +30,7 @@ any gain K). Each GNSS position / velocity vector is chi-square gated first on i
 NIS = νᵀ S⁻¹ ν. After the updates the estimate is fed back into the nominal state (closed
 loop) and δx is reset to zero.
 
-Heading before it is known (no given heading, vehicle not yet moving): the yaw error ψ_D is
+Heading before it is known (no given heading, not yet acquired): the yaw error ψ_D is
 decoupled — its row and column of Φ and of H are zero and its variance stays at
 ``yaw_unknown_var`` (uniform heading, π²/3) — so the linear filter is never fed a large
 heading error. Two effects of the unknown heading are added as process noise: the horizontal
@@ -39,6 +39,24 @@ of unknown sign) and the rotation of the horizontal specific force (velocity, rm
 The first GNSS fix with track speed above the threshold resets the nominal yaw to the track
 (q ← q_z(Δ) ⊗ q), rotates the tilt covariance with it (ψ' = R_z(Δ) ψ) and sets the yaw
 variance to the track's σ²; the RTS smoother sees this step as Φ_eff = J Φ with Q_eff[8] = σ².
+
+Heading by acceleration matching (``heading_accel``: the default when GNSS gives velocity).
+Course over ground is the heading only without sideslip; a multicopter moves in any direction
+(218.BIN: the track reset left the heading 166° off the compass attitude and the z-gyro bias
+absorbed ±1.3 °/s). Instead the horizontal specific-force integral in the nominal frame, U = ∫
+(C̃ f̃)_h dt (yaw still arbitrary), is compared with the GNSS velocity increment W = Δv_h over
+the same interval: W = R_z(δ) U + n (gravity and Coriolis have no horizontal part at this
+accuracy), δ = true − nominal yaw. Per chunk of ≥ ``align_chunk_s`` between velocity fixes,
+with σ² = Σ_both fixes (σ²_vN + σ²_vE)/2 + (σ_a T)² (σ_a = √2 × the accelerometer-bias prior:
+tilt and bias per axis), the weighted sums S_c = Σ (U×W)/σ², S_d = Σ U·W/σ², S_uu = Σ |U|²/σ²
+are kept with forgetting exp(−T/``align_forget_s``) (the nominal yaw drifts with the unknown
+z-gyro bias); δ̂ = atan2(S_c, S_d) is the maximum-likelihood rotation, its Fisher information
+is S_uu, σ_δ = 1/√S_uu. After ≥ 3 chunks and σ_δ ≤ ``align_sd_max`` the heading is reset by δ̂
+with σ 2σ_δ (factor 2: bias drift and tilt in U). A chunk whose |W| and |U| differ by > 4σ
+(rotation keeps the norm) is a GNSS velocity fault and is skipped. Without GNSS velocity the
+track heading below is used. An IMU gap longer than ``gap_forget_s`` makes the heading unknown
+again (the vehicle may have turned: Loiter_RTL's crash); the gap's Φ has a zero yaw row and Q
+gives the uniform variance, and the heading is re-acquired after it.
 
 The RTS smoother (Rauch, Tung & Striebel 1965) runs on the same grid. With closed-loop
 feedback, e_k = x⁺_k − x_true has filtered mean 0, and with c_k the correction applied at k:
