@@ -54,9 +54,9 @@ z-gyro bias); δ̂ = atan2(S_c, S_d) is the maximum-likelihood rotation, its Fis
 is S_uu, σ_δ = 1/√S_uu. After ≥ 3 chunks and σ_δ ≤ ``align_sd_max`` the heading is reset by δ̂
 with σ 2σ_δ (factor 2: bias drift and tilt in U). A chunk whose |W| and |U| differ by > 4σ
 (rotation keeps the norm) is a GNSS velocity fault and is skipped. Without GNSS velocity the
-track heading below is used. An IMU gap longer than ``gap_forget_s`` makes the heading unknown
-again (the vehicle may have turned: Loiter_RTL's crash); the gap's Φ has a zero yaw row and Q
-gives the uniform variance, and the heading is re-acquired after it.
+track heading (previous paragraph) is used. An IMU gap longer than ``gap_forget_s`` makes the
+heading unknown again (the vehicle may have turned: Loiter_RTL's crash); the gap's Φ has a
+zero yaw row and Q gives the uniform variance, and the heading is re-acquired after it.
 
 The RTS smoother (Rauch, Tung & Striebel 1965) runs on the same grid. With closed-loop
 feedback, e_k = x⁺_k − x_true has filtered mean 0, and with c_k the correction applied at k:
