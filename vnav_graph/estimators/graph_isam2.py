@@ -31,6 +31,7 @@ started from the iSAM2 estimate, so it equals ``graph-batch`` to solver toleranc
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from typing import Any
 
@@ -42,6 +43,67 @@ from ..geo.frames import mat_to_quat, ned_to_lla
 from ..types import Drive, Estimate, Trajectory
 from . import graph as g
 from . import graph_factors as gf
+
+# logging gaps: an interval whose largest IMU sample spacing exceeds
+# max(GAP_MIN_S, GAP_FACTOR × median spacing) gets random-walk factors instead of an IMU factor
+GAP_MIN_S = 2.0
+GAP_FACTOR = 20.0
+GAP_VEL_SD = 5.0  # m/s, unknown velocity change folded into the position random walk
+GAP_ACCEL_SD = 2.0  # m/s², white acceleration level over the gap
+GAP_TILT_SD = 0.2  # rad, roll/pitch of the re-levelling prior after a gap
+GAP_YAW_SD = 0.5  # rad, yaw after a gap: kept from before it, loosely
+
+
+def imu_gaps(t: np.ndarray, kf_idx: np.ndarray) -> np.ndarray:
+    """Boolean (n_kf − 1,): interval k contains an IMU logging gap.
+
+    A gap is a sample spacing above max(``GAP_MIN_S``, ``GAP_FACTOR`` × median spacing).
+    """
+    dt = np.diff(t)
+    if dt.size == 0:
+        return np.zeros(max(kf_idx.size - 1, 0), bool)
+    thr = max(GAP_MIN_S, GAP_FACTOR * float(np.median(dt)))
+    big = np.flatnonzero(dt > thr)  # sample j → j+1
+    k = np.searchsorted(kf_idx, big, side="right") - 1
+    out = np.zeros(max(kf_idx.size - 1, 0), bool)
+    k = k[(k >= 0) & (k < out.size)]
+    out[k] = True
+    return out
+
+
+# settings of the retry after a failed/diverged incremental pass (GraphISAM2.run)
+ROBUST_SETTINGS = {"relinearize_skip": 1, "relinearize_typed": None,
+                   "relinearize_threshold": 0.01}
+DIVERGED_SPEED = 1e4  # m/s: an online velocity above this means the solution diverged
+
+
+def _update_error(P: Any, k: int, exc: BaseException | None, gap: bool) -> RuntimeError:
+    """A RuntimeError naming the keyframe, its time and the likely cause of a failed update.
+
+    GTSAM's IndeterminantLinearSystemException reaches Python with an empty or generic
+    message; this replaces it (and a diverged, non-finite estimate) with one that says where.
+    """
+    t0, t1 = float(P.t_kf[k]), float(P.t_kf[k + 1])
+    imu_t = P.drive.imu.t
+    j0, j1 = int(P.kf_idx[k]), int(P.kf_idx[k + 1])
+    max_dt = float(np.max(np.diff(imu_t[j0:j1 + 1]))) if j1 > j0 else float("nan")
+    n_fix = int(np.sum(P.g_use & (P.g_t >= t0 - 5.0) & (P.g_t <= t1)))
+    causes = []
+    if gap:
+        causes.append(f"an IMU logging gap of {max_dt:.1f} s in this interval")
+    if n_fix == 0:
+        causes.append("no usable GNSS fix in the last 5 s (position/velocity unconstrained)")
+    if P.g_vel is None:
+        causes.append("GNSS without velocity (attitude/velocity weakly observable)")
+    if not causes:
+        causes.append("a linearisation point far from the solution (diverged prediction)")
+    what = ("iSAM2 update raised " + (str(exc).strip().splitlines()[0] if str(exc).strip()
+                                      else type(exc).__name__ + " with an empty message")
+            if exc is not None else "the online estimate became non-finite or diverged")
+    return RuntimeError(
+        f"graph-isam2: {what} at keyframe {k + 1} (t = {t1:.2f} s, interval "
+        f"[{t0:.2f}, {t1:.2f}] s, largest IMU spacing {max_dt:.3g} s); likely cause: "
+        + "; ".join(causes) + ". graph-batch (damped batch solver) may still work.")
 
 
 def _segments(P: Any) -> np.ndarray:
@@ -74,21 +136,43 @@ class GraphISAM2:
         self.config = config or g.GraphConfig()
 
     def run(self, drive: Drive) -> Estimate:
+        """Incremental pass with the configured (fast) settings; if it fails or diverges,
+        one retry with the robust settings ``ROBUST_SETTINGS`` (Powell's dogleg trust region
+        in iSAM2, relinearisation check at every update with a 0.01 scalar threshold). On
+        real logs the undamped single Gauss-Newton step per update overshoots when GNSS
+        returns after a long outage with a km-level innovation (phone IMU, 60 s holdout
+        windows) or after a logging gap; the dogleg step is bounded by its trust region.
+        ``Estimate.info["isam2_fallback"]`` holds the first error when the retry was used."""
         t_start = time.perf_counter()
-        P = g._setup(drive, self.config)
+        try:
+            return self._run(drive, self.config, False, t_start, None)
+        except RuntimeError as exc:
+            if "graph-isam2:" not in str(exc):
+                raise
+            cfg = dataclasses.replace(self.config, **ROBUST_SETTINGS)
+            return self._run(drive, cfg, True, t_start, str(exc))
+
+    def _run(self, drive: Drive, cfg: g.GraphConfig, robust: bool, t_start: float,
+             fallback: str | None) -> Estimate:
+        P = g._setup(drive, cfg)
         pri = g._baro_priors(P.baro_spec)
         has_baro = drive.baro is not None
         rot_i, pos_i, vel_i = g._initial_states(P)
         nk = P.n_kf
         seg = _segments(P)
         params = gtsam.ISAM2Params()
-        params.setRelinearizeThreshold(_threshold_map(self.config))
-        params.relinearizeSkip = self.config.relinearize_skip
-        params.enableRelinearization = self.config.relinearize_threshold > 0
-        params.enablePartialRelinearizationCheck = self.config.partial_relinearization_check
-        if self.config.wildfire_threshold is not None:
+        params.setRelinearizeThreshold(_threshold_map(cfg))
+        params.relinearizeSkip = cfg.relinearize_skip
+        params.enableRelinearization = cfg.relinearize_threshold > 0
+        params.enablePartialRelinearizationCheck = cfg.partial_relinearization_check
+        if robust:
+            dl = gtsam.ISAM2DoglegParams()
+            if cfg.wildfire_threshold is not None:
+                dl.setWildfireThreshold(cfg.wildfire_threshold)
+            params.setOptimizationParams(dl)
+        elif cfg.wildfire_threshold is not None:
             params.setOptimizationParams(gtsam.ISAM2GaussNewtonParams(
-                self.config.wildfire_threshold))
+                cfg.wildfire_threshold))
         # QR: Cholesky of the squared information failed ("indeterminate system") on
         # hill-drives with the consumer IMU (whitened gyro-bias rows ~1e4 next to metre-level
         # position rows); QR keeps the conditioning of the Jacobian.
@@ -118,6 +202,8 @@ class GraphISAM2:
         g_between = np.flatnonzero((P.g_kf == -1) & P.g_use)
         gk = np.clip(np.searchsorted(P.t_kf, P.g_t[g_between], side="right") - 1, 0, nk - 2)
         pims: list[Any] = []
+        imu_t = drive.imu.t
+        gap = imu_gaps(imu_t, P.kf_idx)
         upd_ms = np.zeros(nk - 1)
         # per update: preintegration, interval term, isam.update, estimate read-back [ms];
         # variables relinearised, variables re-eliminated
@@ -125,7 +211,7 @@ class GraphISAM2:
         online = np.zeros((nk, 10))  # p(3), v(3), quat(4) in t frame
         online[0] = np.r_[pos[0], vel[0], mat_to_quat(rot[0])]
         baro_next = 0
-        calib_rw = np.asarray(self.config.calib_rw, float)
+        calib_rw = np.asarray(cfg.calib_rw, float)
 
         def refresh(keys_k: list[int]) -> None:
             est = isam.calculateEstimate(
@@ -147,13 +233,33 @@ class GraphISAM2:
             pim = g._preintegrate(P, k, rot[k], dg, b_k)
             pims.append(pim)
             t_pre = time.perf_counter()
-            nav = pim.predict(gtsam.NavState(gtsam.Rot3(rot[k]), pos[k], vel[k]), b_k)
             nf = gtsam.NonlinearFactorGraph()
             nv = gtsam.Values()
-            nv.insert(X(k + 1), nav.pose())
-            nv.insert(V(k + 1), nav.velocity())
+            if gap[k]:
+                x1, v1, gap_sd_p, gap_f = self._gap_factors(P, k, rot, pos, vel)
+                # attitude after the gap: re-levelled from the mean specific force of the
+                # first 0.5 s after it (yaw 0) — the vehicle may have been flipped (Erle
+                # crash log: f_z +9.8 before, −9.8 after) and the weak factors cannot pull a
+                # 180° error back inside Gauss-Newton's basin
+                j0 = int(P.kf_idx[k + 1])
+                j1 = max(int(np.searchsorted(imu_t, imu_t[j0] + 0.5)), j0 + 1)
+                lev = gtsam.Rot3(g._level(drive.imu.accel_b[j0:j1].mean(axis=0))).ypr()
+                yaw = gtsam.Rot3(rot[k]).ypr()[0]
+                x1 = gtsam.Pose3(gtsam.Rot3.Ypr(yaw, lev[1], lev[2]), x1.translation())
+                nf.add(gtsam.PriorFactorPose3(
+                    X(k + 1), x1, g._noise([GAP_TILT_SD, GAP_TILT_SD, GAP_YAW_SD]
+                                           + [gap_sd_p] * 3)))
+                nv.insert(X(k + 1), x1)
+                nv.insert(V(k + 1), v1)
+                for f in gap_f:
+                    nf.add(f)
+            else:
+                nav = pim.predict(gtsam.NavState(gtsam.Rot3(rot[k]), pos[k], vel[k]), b_k)
+                nv.insert(X(k + 1), nav.pose())
+                nv.insert(V(k + 1), nav.velocity())
+                nf.add(gtsam.CombinedImuFactor(X(k), V(k), X(k + 1), V(k + 1), B(k), B(k + 1),
+                                               pim))
             nv.insert(B(k + 1), b_k)
-            nf.add(gtsam.CombinedImuFactor(X(k), V(k), X(k + 1), V(k + 1), B(k), B(k + 1), pim))
             for f in g._keyframe_fix_factors(P, k + 1):
                 nf.add(f)
             if has_baro:
@@ -164,7 +270,7 @@ class GraphISAM2:
                     j = int(seg[k + 1])
                     cal[j] = cal[j - 1].copy()
                     nv.insert(K(j), cal[j])
-                    span = float(self.config.segment_s)
+                    span = float(cfg.segment_s)
                     nf.add(gtsam.BetweenFactorVector(K(j - 1), K(j), np.zeros(2),
                                                      g._noise(calib_rw * np.sqrt(span))))
             if k >= 1:
@@ -174,9 +280,15 @@ class GraphISAM2:
                 if lcf is not None:
                     nf.add(lcf)
             t_lcf = time.perf_counter()
-            ures = isam.update(nf, nv)
-            t_upd = time.perf_counter()
-            refresh([k + 1] if k < 1 else [k - 1, k, k + 1])
+            try:
+                ures = isam.update(nf, nv)
+                t_upd = time.perf_counter()
+                refresh([k + 1] if k < 1 else [k - 1, k, k + 1])
+            except RuntimeError as exc:
+                raise _update_error(P, k, exc, bool(gap[k])) from exc
+            if not (np.all(np.isfinite(rot[k + 1])) and np.all(np.isfinite(pos[k + 1]))
+                    and np.linalg.norm(vel[k + 1]) < DIVERGED_SPEED):
+                raise _update_error(P, k, None, bool(gap[k]))
             if has_baro:
                 j = int(seg[k + 1])
                 cal[j] = isam.calculateEstimateVector(K(j))
@@ -221,6 +333,7 @@ class GraphISAM2:
             "final_smoothing_s": t_final - t_online,
             "isam2_last_segment_calibration": isam_k,
             "segments": int(seg[-1]) + 1,
+            "isam2_fallback": fallback,
         }
         return Estimate(self.name, out["trajectory"], g._provides(drive), out["cov"],
                         out["t_cov"], out["baro"], time.perf_counter() - t_start,
@@ -281,6 +394,49 @@ class GraphISAM2:
             lin.insert(K(j), np.asarray(cal[j], float))
         jf = gtsam.JacobianFactor(gtsam.HessianFactor(gfg))
         return gtsam.LinearContainerFactor(jf, lin), baro_next
+
+    @staticmethod
+    def _gap_factors(P: Any, k: int, rot: Any, pos: Any, vel: Any
+                     ) -> tuple[Any, Any, float, list[Any]]:
+        """Weak random-walk factors replacing the IMU factor over a logging gap.
+
+        A gap of T seconds with no IMU samples carries no inertial information (one
+        "sample" spanning it is usually a transient — on the Erle log the crash spike — and
+        a CombinedImuFactor built from it asserts a 200 m/s velocity change with a σ of
+        0.6 m/s). Instead, with a_rw = ``GAP_ACCEL_SD``: v_{k+1} − v_k ~ N(0, (a_rw T)²),
+        b_{k+1} − b_k ~ N(0, q_b T) with the bias PSD q_b of the preintegration (Forster et
+        al. 2017, Eq. 48), and a re-alignment prior on X(k+1) (added by the caller): roll and
+        pitch levelled from the mean specific force of the first 0.5 s after the gap (σ
+        ``GAP_TILT_SD``; the Erle crash log is upside down before the gap and level after
+        it), yaw kept from before the gap (σ ``GAP_YAW_SD``), position at the last GNSS fix at
+        or before t_{k+1} (within 1.5 s; else constant velocity) with
+        σ_p = v_sd T + ½ a_rw T². Every new variable stays constrained, so the iSAM2 system
+        stays positive definite.
+
+        Returns (Pose3 initial value of X(k+1), velocity initial value (3,), σ_p [m],
+        factors).
+        """
+        T = float(P.t_kf[k + 1] - P.t_kf[k])
+        p1 = pos[k] + vel[k] * T
+        v1 = vel[k].copy()
+        sel = np.flatnonzero(P.g_use & (P.g_t <= P.t_kf[k + 1] + 1e-9)
+                             & (P.g_t > P.t_kf[k + 1] - 1.5))
+        if sel.size:
+            i = sel[-1]
+            p1 = P.g_pos[i] - rot[k] @ P.lever
+            if P.g_vel is not None:
+                v1 = P.g_vel[i].copy()
+        x1 = gtsam.Pose3(gtsam.Rot3(rot[k]), p1)
+        sd_p = GAP_VEL_SD * T + 0.5 * GAP_ACCEL_SD * T * T
+        bp = P.params
+        q_b = np.r_[np.diag(bp.getBiasAccCovariance()), np.diag(bp.getBiasOmegaCovariance())]
+        fs = [
+            gtsam.BetweenFactorVector(V(k), V(k + 1), np.zeros(3),
+                                      g._noise([GAP_ACCEL_SD * T] * 3)),
+            gtsam.BetweenFactorConstantBias(B(k), B(k + 1), gtsam.imuBias.ConstantBias(),
+                                            g._noise(np.sqrt(q_b * T))),
+        ]
+        return x1, v1, sd_p, fs
 
     @staticmethod
     def _online_trajectory(P: Any, online: Any) -> Trajectory:

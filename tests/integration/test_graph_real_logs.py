@@ -1,0 +1,56 @@
+"""graph-isam2 on real logs that used to make iSAM2 fail: the Erle crash log with a 24 s IMU
+logging gap (gap detection, gap factors) and the 60 s GNSS holdout windows (robust retry),
+compared with graph-batch on the same withheld fixes; the error message of a failed update."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from vnav_graph.estimators import graph as g
+from vnav_graph.estimators import graph_isam2 as gi
+from vnav_graph.evaluation.holdout import run_holdout
+
+LOITER = "erle_pxf_loiter_rtl/Loiter_RTL.bin"
+
+
+def _load(data_dir: Path, rel: str):  # noqa: ANN202
+    from vnav_graph.io import load_drive
+
+    p = data_dir / rel
+    if not p.exists():
+        pytest.skip(f"{rel} not present (real logs are not shipped with the repository)")
+    return load_drive(p)
+
+
+def test_loiter_gap_detected(data_dir: Path) -> None:
+    d = _load(data_dir, LOITER)
+    P = g._setup(d, g.GraphConfig())
+    gap = gi.imu_gaps(d.imu.t, P.kf_idx)
+    # the log has exactly one IMU logging gap (after the crash), 24.09 s long
+    k = np.flatnonzero(gap)
+    assert k.size == 1
+    j0, j1 = P.kf_idx[k[0]], P.kf_idx[k[0] + 1]
+    assert np.max(np.diff(d.imu.t[j0:j1 + 1])) == pytest.approx(24.094, abs=1e-3)
+    msg = str(gi._update_error(P, int(k[0]), RuntimeError(""), True))
+    # the message names keyframe, time and cause instead of GTSAM's empty text
+    assert f"keyframe {k[0] + 1}" in msg
+    assert f"t = {P.t_kf[k[0] + 1]:.2f} s" in msg
+    assert "IMU logging gap of 24.1 s" in msg
+    assert "empty message" in msg
+
+
+def test_loiter_holdout_isam2_matches_batch(data_dir: Path) -> None:
+    d = _load(data_dir, LOITER)
+    r = run_holdout(d, ["graph-isam2", "graph-batch"])
+    e = r.doc["estimators"]
+    assert e["graph-isam2"]["status"] == "ok", e["graph-isam2"]["error"]
+    assert e["graph-batch"]["status"] == "ok"
+    # the final smoothing pass of graph-isam2 is graph-batch's solver started elsewhere; on
+    # this log both reach ~1.2–1.4 m withheld-fix height RMSE — 0.5 m allows for the
+    # different starting point (iteration cap 12) but not for a diverged front end (km)
+    assert abs(e["graph-isam2"]["alt_rmse_m"] - e["graph-batch"]["alt_rmse_m"]) < 0.5
+    # runtime budget of the holdout (< 2 min per log for all estimators): 30 s for these two
+    assert e["graph-isam2"]["runtime_s"] + e["graph-batch"]["runtime_s"] < 30.0
