@@ -51,22 +51,12 @@ REPO = Path(__file__).resolve().parent.parent
 if str(REPO) not in sys.path:  # run from a checkout without installing
     sys.path.insert(0, str(REPO))
 
-from vnav_graph.calibration import calibrate_baro  # noqa: E402
+from vnav_graph.calibration import SEED001_TABLE1, calibrate_baro  # noqa: E402
 from vnav_graph.estimators.base import available, create  # noqa: E402
 from vnav_graph.evaluation.metrics import errors_vs_truth  # noqa: E402
 from vnav_graph.simulation import load_scenario, simulate  # noqa: E402
 
 FT = 0.3048
-# Seed 001 Table 1: dSF [%], Td [s], B [ft]
-SEED001_TABLE1 = (
-    (-1.2676, 0.0803, -10.81),
-    (-1.6575, 0.0286, -18.80),
-    (-0.3539, -0.0079, -13.23),
-    (-0.6471, -0.0196, -11.99),
-    (-2.5172, 0.0009, -25.63),
-    (-1.0882, 0.0091, -24.99),
-    (-2.3189, -0.0348, -27.98),
-)
 PAPER = {
     "seed003_steady_sd_m": (1.2, "seed 003: steady altitude deviation 'near 1.2 m'"),
     "seed003_gps_only_sd_m": (2.0, "seed 003: GPS-only deviation (variance 4 m²)"),

@@ -42,6 +42,18 @@ import numpy as np
 
 from .types import Drive, FloatArray
 
+# Seed 001 Table 1: (dSF [%], Td [s], B [ft]) estimated on the paper's seven flight test sets;
+# the reference values the calibration is reproduced against (tests, benchmarks/reproduce_seeds).
+SEED001_TABLE1: tuple[tuple[float, float, float], ...] = (
+    (-1.2676, 0.0803, -10.81),
+    (-1.6575, 0.0286, -18.80),
+    (-0.3539, -0.0079, -13.23),
+    (-0.6471, -0.0196, -11.99),
+    (-2.5172, 0.0009, -25.63),
+    (-1.0882, 0.0091, -24.99),
+    (-2.3189, -0.0348, -27.98),
+)
+
 # Typical magnitudes [dSF -, Td s, B m] (seed 001 Table 1: dSF 0.35-2.5 %, |Td| ≤ 0.08 s,
 # |B| 3-9 m; DESIGN.md: s up to 3 %, τd up to 0.5 s, b metres to tens of metres).
 TYPICAL = {"scale": 0.01, "latency_s": 0.1, "bias_m": 5.0}

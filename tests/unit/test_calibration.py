@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from vnav_graph.calibration import (
+    SEED001_TABLE1,
     calibrate_arrays,
     calibrate_baro,
     cli_calibrate_baro,
@@ -17,16 +18,6 @@ from vnav_graph.sensors.baro import measure_baro
 from vnav_graph.simulation import load_scenario, simulate
 
 FT = 0.3048
-# Seed 001 Table 1: dSF [%], Td [s], B [ft] of the seven test data sets.
-TABLE1 = [
-    (-1.2676, 0.0803, -10.81),
-    (-1.6575, 0.0286, -18.80),
-    (-0.3539, -0.0079, -13.23),
-    (-0.6471, -0.0196, -11.99),
-    (-2.5172, 0.0009, -25.63),
-    (-1.0882, 0.0091, -24.99),
-    (-2.3189, -0.0348, -27.98),
-]
 
 
 def test_noiseless_model_is_recovered_exactly() -> None:
@@ -93,7 +84,7 @@ def test_seed001_table1_sets_recovered_within_3_sigma() -> None:
     # still fails for standard errors too small by a factor ~2 or a biased estimator.
     cfg = load_scenario("sortie")
     inside = []
-    for i, (s_pct, td, b_ft) in enumerate(TABLE1):
+    for i, (s_pct, td, b_ft) in enumerate(SEED001_TABLE1):
         baro = replace(cfg.baro, scale=s_pct / 100, latency_s=td, latency_range_s=None,
                        bias_init=b_ft * FT, bias_tau=float("inf"))
         # the IMU is not used by the calibration: 20 Hz keeps the simulation cheap
