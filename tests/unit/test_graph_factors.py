@@ -43,7 +43,10 @@ def _perturb(st, col, eps, k):
     """Apply a perturbation of column ``col`` of group k (Pose3 chart: R Exp(ω), p + R v)."""
     rot, pos = st.rot.copy(), st.pos.copy()
     bb, s, tau = st.baro_bias.copy(), st.scale.copy(), st.latency.copy()
-    if col < 12:
+    ba = st.bias_accel.copy()
+    if col >= gf.N_CORE:
+        ba[k, col - gf.N_CORE] += eps
+    elif col < 12:
         j = k + (col // 6)
         c = col % 6
         d = np.zeros(3)
@@ -60,7 +63,7 @@ def _perturb(st, col, eps, k):
         s += eps
     else:
         tau += eps
-    return gf.KeyframeStates(rot, pos, st.vel, st.bias_accel, bb, s, tau, st.accel_t)
+    return gf.KeyframeStates(rot, pos, st.vel, ba, bb, s, tau, st.accel_t)
 
 
 def _fd_check(make_rows, st, tol):

@@ -56,10 +56,12 @@ class GraphConfig:
     """Settings of the factor-graph smoothers (SI units).
 
     keyframe_dt: keyframe spacing [s]; max_iterations / rel_tol / abs_tol: Gauss-Newton
-    stops when an iteration lowers the cost ½χ² by less than rel_tol·cost or abs_tol (0.05:
-    a χ² change of 0.1, a tenth of the change that moves one parameter by 1σ; below it the
-    iterations stall on the omitted accel-bias column of the interval rows, see
-    ``docs/graph.md``);
+    stops when an iteration lowers the cost ½χ² by less than rel_tol·cost or abs_tol, or
+    when the decrease predicted for the next step is below abs_tol (0.05: a χ² change of
+    0.1, a tenth of the change that moves one parameter by 1σ; that step is not taken and
+    its factorisation gives the covariance); bias_lag_tol [s]: the baro bias is read at
+    t_s − λ, λ the latency at the start of the solve, re-set when τd moves further than this
+    (``graph_factors.baro_rows``);
     output_rate_hz: rate of the output trajectory (interpolated between keyframes with the
     IMU-shaped interpolant); cov_epochs: maximum number of keyframes with an 18×18 covariance;
     gravity_correction / coriolis: tangent-frame corrections (off only for studies);
@@ -80,6 +82,7 @@ class GraphConfig:
     """
 
     keyframe_dt: float = 1.0
+    bias_lag_tol: float = 0.02
     max_iterations: int = 12
     rel_tol: float = 1e-7
     abs_tol: float = 0.05
@@ -131,6 +134,7 @@ class _Problem:
     g_use: np.ndarray  # fixes not rejected by the gates (bool)
     g_rej_pre: int = 0  # rejected by the baro-consistency pre-gate
     g_rej_post: int = 0  # rejected by the post-solve residual gate
+    g_incr: Any = None  # (fix indices, dense increments at them), see _gnss_rows_of
 
     @property
     def gnss_rejected(self) -> int:
@@ -515,19 +519,26 @@ def _gnss_batch_idx(P: _Problem) -> np.ndarray:
 
 
 def _gnss_rows_of(P: _Problem, st: gf.KeyframeStates, idx: np.ndarray) -> gf.IntervalRows:
+    t_g = P.g_t[idx]
+    # the IMU increments at the fixes depend on the fix times only: cached per fix set
+    if P.g_incr is None or not np.array_equal(P.g_incr[0], idx):
+        k = np.clip(np.searchsorted(P.t_kf, t_g, side="right") - 1, 0, P.n_kf - 2)
+        P.g_incr = (idx, P.dense.at(t_g, k))
     return gf.gnss_rows(
-        P.dense, st, P.g_t[idx], P.g_pos[idx], P.g_pos_sd[idx],
+        P.dense, st, t_g, P.g_pos[idx], P.g_pos_sd[idx],
         None if P.g_vel is None else P.g_vel[idx],
-        None if P.g_vel_sd is None else P.g_vel_sd[idx], P.lever)
+        None if P.g_vel_sd is None else P.g_vel_sd[idx], P.lever, incr=P.g_incr[1])
 
 
-def _interval_rows(P: _Problem, st: gf.KeyframeStates, pri: dict[str, float]) -> gf.IntervalRows:
+def _interval_rows(P: _Problem, st: gf.KeyframeStates, pri: dict[str, float],
+                   bias_lag: float | None) -> gf.IntervalRows:
+    """Baro and GNSS interval rows; ``bias_lag``: see ``graph_factors.baro_rows``."""
     parts = []
     if P.drive.baro is not None:
         bt = P.drive.baro.t
         m = (bt >= P.t_kf[0]) & (bt <= P.t_kf[-1])
         parts.append(gf.baro_rows(P.dense, st, bt[m], P.drive.baro.altitude[m], pri["noise"],
-                                  P.h0, P.origin))
+                                  P.h0, P.origin, bias_lag=bias_lag))
     idx = _gnss_batch_idx(P)
     if idx.size:
         parts.append(_gnss_rows_of(P, st, idx))
@@ -609,19 +620,28 @@ class _Layout:
     n_cols: int
     g2m: np.ndarray
     keys: list[Any]
+    pattern: Any = None  # _SparsePattern of the graph last linearised with this layout
 
     @property
     def bandwidth(self) -> int:
         return 2 * self.bs - 1
 
+    @property
+    def term_cols(self) -> np.ndarray:
+        """Interval-term columns (graph_factors order) present in this layout."""
+        core = np.arange(gf.N_CORE if self.has_baro else 12)
+        return np.r_[core, np.arange(gf.N_CORE, gf.N_COLS)]
+
     def block_cols(self, k: np.ndarray) -> np.ndarray:
-        """Our columns of the interval-term blocks (X_k, X_k+1, C_k, C_k+1, K) (G, 16|12)."""
+        """Our columns of the interval-term blocks (X_k, X_k+1, [C_k, C_k+1, K,] accel bias
+        of B_k), in the order of ``term_cols`` (G, 19|15)."""
         k = np.asarray(k)[:, None]
         six = np.arange(6)[None, :]
         parts = [k * self.bs + six, (k + 1) * self.bs + six]
         if self.has_baro:
             parts += [k * self.bs + 15, (k + 1) * self.bs + 15,
                       np.full_like(k, self.n_band), np.full_like(k, self.n_band + 1)]
+        parts.append(k * self.bs + 9 + np.arange(3)[None, :])
         return np.concatenate(parts, axis=1)
 
     def vector_values(self, delta: FloatArray) -> Any:
@@ -669,6 +689,40 @@ class _BatchResult:
     calib_of_kf: np.ndarray
     layout: _Layout
     rows: gf.IntervalRows  # interval terms linearised at ``values``
+    fac: gla.ArrowFactor | None = None  # factorised normal equations at ``values``, if kept
+    bias_lag: float = 0.0  # baro-bias read time offset of the last solve (baro_rows)
+
+
+@dataclass
+class _SparsePattern:
+    """Row/column bookkeeping of GTSAM's sparse Jacobian of one graph: the pattern (entry
+    order included) is the same at every linearisation point, so it is computed once."""
+
+    i: np.ndarray
+    j: np.ndarray
+    rhs_entries: np.ndarray  # entries of the right-hand-side column
+    rhs_rows: np.ndarray
+    a_sorted: np.ndarray  # matrix entries, ordered by row
+    cols_sorted: np.ndarray  # their columns in our layout
+    indptr: np.ndarray
+    n_rows: int
+
+
+def _sparse_pattern(lay: _Layout, i: np.ndarray, j: np.ndarray) -> _SparsePattern:
+    pat = lay.pattern
+    if pat is not None and np.array_equal(pat.i, i) and np.array_equal(pat.j, j):
+        return pat
+    if int(j.max()) != lay.n_cols:
+        raise RuntimeError("graph: linearised C++ graph does not cover the expected variables")
+    is_b = j == lay.n_cols
+    nrow = int(i.max()) + 1
+    a = np.flatnonzero(~is_b)
+    order = np.argsort(i[a], kind="stable")
+    pat = _SparsePattern(i, j, np.flatnonzero(is_b), i[is_b], a[order],
+                         lay.g2m[j[a[order]]],
+                         np.r_[0, np.cumsum(np.bincount(i[a], minlength=nrow))], nrow)
+    lay.pattern = pat
+    return pat
 
 
 def _normal_equations(P: _Problem, lay: _Layout, graph: Any, vals: Any,
@@ -677,24 +731,16 @@ def _normal_equations(P: _Problem, lay: _Layout, graph: Any, vals: Any,
     plus the interval terms (per-interval information blocks)."""
     gfg = graph.linearize(vals)
     sj = gfg.sparseJacobian_()
-    i = sj[0].astype(np.int64) - 1
-    j = sj[1].astype(np.int64) - 1
+    pat = _sparse_pattern(lay, sj[0].astype(np.int64) - 1, sj[1].astype(np.int64) - 1)
     v = sj[2]
-    if int(j.max()) != lay.n_cols:
-        raise RuntimeError("graph: linearised C++ graph does not cover the expected variables")
-    is_b = j == lay.n_cols
-    nrow = int(i.max()) + 1
-    b = np.zeros(nrow)
-    b[i[is_b]] = v[is_b]
-    a = ~is_b
-    ia, ja, va = i[a], lay.g2m[j[a]], v[a]
-    order = np.argsort(ia, kind="stable")
-    ptr_c = np.r_[0, np.cumsum(np.bincount(ia, minlength=nrow))]
+    b = np.zeros(pat.n_rows)
+    b[pat.rhs_rows] = v[pat.rhs_entries]
     # interval terms: reduced per interval to (Λ_k, η_k) (batched BLAS), added as blocks
     groups, lam, eta, _ = gf.group_information(rows, P.n_kf - 1)
-    nc = 16 if lay.has_baro else 12
-    return gla.assemble(lay.n_cols, lay.n_band, lay.bandwidth, ptr_c, ja[order], va[order], b,
-                        lay.block_cols(groups), lam[:, :nc, :nc], eta[:, :nc])
+    tc = lay.term_cols
+    return gla.assemble(lay.n_cols, lay.n_band, lay.bandwidth, pat.indptr, pat.cols_sorted,
+                        v[pat.a_sorted], b,
+                        lay.block_cols(groups), lam[:, tc[:, None], tc[None, :]], eta[:, tc])
 
 
 def _factorize(ab: FloatArray, bm: FloatArray, dm: FloatArray) -> gla.ArrowFactor:
@@ -720,34 +766,57 @@ def _gn_core(P: _Problem, lay: _Layout, graph: Any, vals: Any, calib_of_kf: np.n
     """Gauss-Newton with step halving on the total cost (C++ factors + interval terms).
     The interval rows evaluated at an accepted candidate are reused as its linearisation."""
     st = _states_from_values(P, vals, calib_of_kf)
-    rows = _interval_rows(P, st, pri)
+    # the baro bias is read at t_s − λ with λ fixed while τd moves, so that the cost is smooth
+    # along τd (graph_factors.baro_rows); λ follows τd when they drift > bias_lag_tol apart
+    lag = float(np.median(st.latency))
+    rows = _interval_rows(P, st, pri, lag)
     cost = graph.error(vals) + 0.5 * float(rows.r @ rows.r)
     it = 0
+    fac = None
     for it in range(1, P.cfg.max_iterations + 1):
         ab, bm, dm, g = _normal_equations(P, lay, graph, vals, rows)
-        delta = _factorize(ab, bm, dm).solve(g)
+        fac = _factorize(ab, bm, dm)
+        delta = fac.solve(g)
         dec = 0.5 * float(delta @ g)  # decrease predicted by the quadratic model
         if P.cfg.verbose:
             print(f"GN it {it}: predicted decrease {dec:.3g}")
+        if dec < P.cfg.abs_tol:
+            # converged at ``vals``: the step is not taken, and this factorisation — of the
+            # normal equations at the solution — is kept for the covariance
+            break
+        fac = None
         step = 1.0
         while True:
             cand = vals.retract(lay.vector_values(delta * step))
             st_c = _states_from_values(P, cand, calib_of_kf)
-            rows_c = _interval_rows(P, st_c, pri)
+            lat = float(np.median(st_c.latency))
+            lag_c = lat if abs(lat - lag) > P.cfg.bias_lag_tol else lag
+            rows_c = _interval_rows(P, st_c, pri, lag_c)
             new_cost = graph.error(cand) + 0.5 * float(rows_c.r @ rows_c.r)
-            if new_cost <= cost * (1 + 1e-12) or step < 1e-3:
+            ref = cost
+            if lag_c != lag and new_cost > cost:
+                # λ moved with τd: a slightly different cost function — compare the
+                # candidate with the current point under the new λ (rare: early iterations
+                # gain far more than the ≈ 10 that moving λ by tens of ms changes)
+                r_ref = _interval_rows(P, st, pri, lag_c).r
+                ref = graph.error(vals) + 0.5 * float(r_ref @ r_ref)
+            if new_cost <= ref * (1 + 1e-12) or step < 1e-3:
                 break
-            if step == 1.0 and abs(new_cost - cost) < P.cfg.rel_tol * cost:
+            if step == 1.0 and abs(new_cost - ref) < P.cfg.rel_tol * ref:
                 break  # converged: the change is at round-off level
             step *= 0.5
         rel = (cost - new_cost) / max(cost, 1e-12)
         if P.cfg.verbose:
-            print(f"GN it {it}: cost {cost:.10g} -> {new_cost:.10g} step {step}")
+            print(f"GN it {it}: cost {cost:.10g} -> {new_cost:.10g} step {step}"
+                  + (f" (bias lag {lag:.4f} -> {lag_c:.4f} s)" if lag_c != lag else ""))
         cost_prev = cost
-        vals, rows, cost = cand, rows_c, new_cost
+        vals, st, rows, cost = cand, st_c, rows_c, new_cost
+        if lag_c != lag:
+            lag = lag_c  # a new cost function: no convergence test on this step
+            continue
         if abs(rel) < P.cfg.rel_tol or abs(cost_prev - cost) < P.cfg.abs_tol or step < 1e-3:
             break
-    return _BatchResult(vals, graph, cost, it, calib_of_kf, lay, rows)
+    return _BatchResult(vals, graph, cost, it, calib_of_kf, lay, rows, fac, lag)
 
 
 def _gauss_newton(P: _Problem, graph: Any, vals: Any, calib_of_kf: np.ndarray,
@@ -862,8 +931,10 @@ def _outputs(P: _Problem, res: _BatchResult, pri: dict[str, float],
     st = _states_from_values(P, vals, res.calib_of_kf)
     traj = _trajectory(P, st, vals, _output_times(P))
     # covariance of the final linear system: one banded factorisation + selected inversion
-    ab, bm, dm, _ = _normal_equations(P, lay, res.graph, vals, res.rows)
-    fac = _factorize(ab, bm, dm)
+    fac = res.fac
+    if fac is None:
+        ab, bm, dm, _ = _normal_equations(P, lay, res.graph, vals, res.rows)
+        fac = _factorize(ab, bm, dm)
     sb = fac.band_inverse()
     nk = P.n_kf
     sel = np.unique(np.linspace(0, nk - 1, min(P.cfg.cov_epochs, nk)).astype(int))
@@ -970,6 +1041,7 @@ class GraphBatch:
         out = _outputs(P, res, pri, K(0) if drive.baro is not None else None)
         t4 = time.perf_counter()
         info = {"keyframes": P.n_kf, "iterations": res.iterations, "final_cost": res.cost,
+                "baro_bias_lag_s": res.bias_lag,
                 "gnss_rejected": P.gnss_rejected, "gnss_rejected_pregate": P.g_rej_pre,
                 "gnss_rejected_postsolve": P.g_rej_post,
                 "observability": out["observability"],

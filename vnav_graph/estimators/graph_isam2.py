@@ -391,7 +391,9 @@ class GraphISAM2:
                - 2 * np.cross(P.omega_t, vel[k]))
         st.accel_t[k] = acc
         if has_baro and sel.size:
-            rows = gf.baro_rows(P.dense, st, bt[sel], bz[sel], pri["noise"], P.h0, P.origin)
+            # bias read at t_s − τd of this linearisation, as in the batch solve
+            rows = gf.baro_rows(P.dense, st, bt[sel], bz[sel], pri["noise"], P.h0, P.origin,
+                                bias_lag=float(tau_k))
             # samples whose delayed time is outside [t_k, t_k+1) are clipped into interval k
             parts.append(gf.IntervalRows(np.full(rows.k.size, k), rows.r, rows.jac))
         if g_idx.size:
@@ -403,9 +405,13 @@ class GraphISAM2:
             return None, baro_next
         rows = gf.concat_rows(*parts)
         _, lam, eta, _ = gf.group_information(rows, 1)
+        # the five core key blocks only: the accel-bias columns would add a sixth key to the
+        # pair cover; their effect (≤ ½τ(T−τ)·b_a, mm over a 1 s interval) is left to the
+        # relinearisation and the final batch pass
+        lam, eta = lam[:, :gf.N_CORE, :gf.N_CORE], eta[:, :gf.N_CORE]
         # 1e-9 information (σ ≈ 3e4 in any unit) makes the block positive definite so it can
         # be turned into a Jacobian for QR; it is far below any real information.
-        lam[0] += 1e-9 * np.eye(gf.N_COLS)
+        lam[0] += 1e-9 * np.eye(gf.N_CORE)
         keys = [X(k), X(k + 1), C(k), C(k + 1), K(j)]
         active = (0, 1, 2, 3, 4) if has_baro else (0, 1)
         gfg = gtsam.GaussianFactorGraph()
