@@ -761,10 +761,21 @@ def _factorize(ab: FloatArray, bm: FloatArray, dm: FloatArray) -> gla.ArrowFacto
         "— the drive does not determine the states (check IMU rate/units and GNSS coverage)")
 
 
+def _damped(ab: FloatArray, bm: FloatArray, dm: FloatArray, mu: float) -> gla.ArrowFactor:
+    """Factorisation of H + μ·diag(H) (Levenberg-Marquardt damping)."""
+    ab2 = ab.copy()
+    ab2[0] *= 1.0 + mu
+    return _factorize(ab2, bm, dm + mu * np.diag(np.diag(dm)))
+
+
 def _gn_core(P: _Problem, lay: _Layout, graph: Any, vals: Any, calib_of_kf: np.ndarray,
              pri: dict[str, float]) -> _BatchResult:
-    """Gauss-Newton with step halving on the total cost (C++ factors + interval terms).
-    The interval rows evaluated at an accepted candidate are reused as its linearisation."""
+    """Gauss-Newton on the total cost (C++ factors + interval terms); a step that raises the
+    cost is retried with Levenberg-Marquardt damping μ·diag(H) (μ from 1e-5, ×10 per
+    retry, ÷10 after a success, back to plain Gauss-Newton below 1e-6). On the simulated
+    drives every full step is accepted; on hovering-multirotor logs the weakly determined
+    heading makes the full step overshoot (docs/graph.md). The interval rows evaluated at an
+    accepted candidate are reused as its linearisation."""
     st = _states_from_values(P, vals, calib_of_kf)
     # the baro bias is read at t_s − λ with λ fixed while τd moves, so that the cost is smooth
     # along τd (graph_factors.baro_rows); λ follows τd when they drift > bias_lag_tol apart
@@ -773,6 +784,7 @@ def _gn_core(P: _Problem, lay: _Layout, graph: Any, vals: Any, calib_of_kf: np.n
     cost = graph.error(vals) + 0.5 * float(rows.r @ rows.r)
     it = 0
     fac = None
+    mu = 0.0
     for it in range(1, P.cfg.max_iterations + 1):
         ab, bm, dm, g = _normal_equations(P, lay, graph, vals, rows)
         fac = _factorize(ab, bm, dm)
@@ -785,9 +797,11 @@ def _gn_core(P: _Problem, lay: _Layout, graph: Any, vals: Any, calib_of_kf: np.n
             # normal equations at the solution — is kept for the covariance
             break
         fac = None
-        step = 1.0
+        if mu > 0.0:
+            delta = _damped(ab, bm, dm, mu).solve(g)
+        failed = False
         while True:
-            cand = vals.retract(lay.vector_values(delta * step))
+            cand = vals.retract(lay.vector_values(delta))
             st_c = _states_from_values(P, cand, calib_of_kf)
             lat = float(np.median(st_c.latency))
             lag_c = lat if abs(lat - lag) > P.cfg.bias_lag_tol else lag
@@ -800,21 +814,30 @@ def _gn_core(P: _Problem, lay: _Layout, graph: Any, vals: Any, calib_of_kf: np.n
                 # gain far more than the ≈ 10 that moving λ by tens of ms changes)
                 r_ref = _interval_rows(P, st, pri, lag_c).r
                 ref = graph.error(vals) + 0.5 * float(r_ref @ r_ref)
-            if new_cost <= ref * (1 + 1e-12) or step < 1e-3:
+            if new_cost <= ref * (1 + 1e-12):
+                mu = 0.0 if mu <= 1e-6 else mu / 10.0
                 break
-            if step == 1.0 and abs(new_cost - ref) < P.cfg.rel_tol * ref:
+            if mu == 0.0 and abs(new_cost - ref) < P.cfg.rel_tol * ref:
                 break  # converged: the change is at round-off level
-            step *= 0.5
+            mu = 1e-5 if mu == 0.0 else mu * 10.0
+            if mu > 1e3:
+                failed = True  # no descent even as a tiny gradient step: stop here
+                break
+            delta = _damped(ab, bm, dm, mu).solve(g)
+        if failed:
+            if P.cfg.verbose:
+                print(f"GN it {it}: no step lowers the cost (μ > 1e3); stopping")
+            break
         rel = (cost - new_cost) / max(cost, 1e-12)
         if P.cfg.verbose:
-            print(f"GN it {it}: cost {cost:.10g} -> {new_cost:.10g} step {step}"
+            print(f"GN it {it}: cost {cost:.10g} -> {new_cost:.10g} μ {mu:.0e}"
                   + (f" (bias lag {lag:.4f} -> {lag_c:.4f} s)" if lag_c != lag else ""))
         cost_prev = cost
         vals, st, rows, cost = cand, st_c, rows_c, new_cost
         if lag_c != lag:
             lag = lag_c  # a new cost function: no convergence test on this step
             continue
-        if abs(rel) < P.cfg.rel_tol or abs(cost_prev - cost) < P.cfg.abs_tol or step < 1e-3:
+        if mu == 0.0 and (abs(rel) < P.cfg.rel_tol or abs(cost_prev - cost) < P.cfg.abs_tol):
             break
     return _BatchResult(vals, graph, cost, it, calib_of_kf, lay, rows, fac, lag)
 
@@ -950,7 +973,15 @@ def _outputs(P: _Problem, res: _BatchResult, pri: dict[str, float],
     u = np.zeros(lay.n_cols)
     u[np.arange(nk) * lay.bs + 15] = 1.0 / nk
     b_mean = float(np.mean(st.baro_bias))
-    b_sd = float(np.sqrt(max(fac.quad_inverse(u), 0.0)))
+    hu = fac.solve(u)
+    b_var = max(float(u @ hu), 0.0)
+    b_sd = float(np.sqrt(b_var))
+    # b is referenced to h0 (DESIGN.md): at a height Δh above h0 an error δs moves it by
+    # −δs·Δh, so a flight far above h0 ties b̄ to s (sortie: corr −0.995)
+    cov_sb = float(hu[lay.n_band])
+    corr_sb = cov_sb / np.sqrt(b_var * pk[0, 0]) if b_var > 0 and pk[0, 0] > 0 else 0.0
+    b_sd_given_s = float(np.sqrt(max(b_var - cov_sb**2 / pk[0, 0], 0.0))) if pk[0, 0] > 0 \
+        else b_sd
     dur = float(P.t_kf[-1] - P.t_kf[0])
     b_prior = _gm_mean_prior_sd(pri["b_sd"], pri["b_tau"], dur)
     baro = BaroEstimate(
@@ -970,6 +1001,8 @@ def _outputs(P: _Problem, res: _BatchResult, pri: dict[str, float],
                      "observable": bool(ratio < P.cfg.observable_ratio),
                      "note": "" if ratio < P.cfg.observable_ratio else
                      f"barely informed by the data ({why})"}
+    obs["bias_m"]["corr_with_scale"] = float(corr_sb)
+    obs["bias_m"]["sd_given_scale"] = b_sd_given_s
     out["baro"] = baro
     out["observability"] = obs
     return out
