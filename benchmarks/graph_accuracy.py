@@ -91,6 +91,13 @@ def run_seed(seed: int, duration_s: float, gnss_sd_v: float | None = None) -> di
             r = {k: m[k] for k in ("status", "alt_rmse_m", "alt_max_abs_m", "vel_down_rmse_mps",
                                    "nees_mean", "nees_dof", "runtime_s")}
             r["baro"] = _baro_errors(m["baro"])
+            obs_b = (est.info or {}).get("observability", {}).get("bias_m", {})
+            if "corr_with_scale" in obs_b:
+                # why |Δb| tracks |Δs|: b is referenced to h0 (DESIGN.md)
+                r["bias_corr_with_scale"] = obs_b["corr_with_scale"]
+                r["bias_sd_given_scale_m"] = obs_b["sd_given_scale"]
+                r["mean_height_above_h0_m"] = float(np.mean(est.trajectory.alt)
+                                                    - drive.origin_lla[2])
             if name == "graph-isam2" and est.online is not None:
                 # online (filter-like) altitude RMSE at the keyframes
                 truth = drive.truth.at(est.online.t)
@@ -122,7 +129,8 @@ def aggregate(runs: list[dict[str, Any]]) -> dict[str, Any]:
         ok = [r["estimators"][name] for r in runs if r["estimators"][name]["status"] == "ok"]
         a: dict[str, Any] = {"n_ok": len(ok), "n_failed": len(runs) - len(ok)}
         for key in ("alt_rmse_m", "alt_max_abs_m", "vel_down_rmse_mps", "runtime_s",
-                    "online_alt_rmse_m"):
+                    "online_alt_rmse_m", "bias_corr_with_scale", "bias_sd_given_scale_m",
+                    "mean_height_above_h0_m"):
             vals = [o.get(key) for o in ok]
             if any(v is not None for v in vals):
                 a[key] = _ci95(vals)
@@ -260,6 +268,18 @@ def to_markdown(res: dict[str, Any]) -> str:
         g = goals[p]
         lines.append(f"| {label} | mean {_f(g['mean_abs_err'])} | "
                      f"{_f(g['frac_seeds_within_goal'], 2)} | {'yes' if g['met'] else '**no**'} |")
+    gb = agg["graph-batch"]
+    if gb.get("bias_corr_with_scale") and gb["bias_corr_with_scale"].get("mean") is not None:
+        sd_s = gb.get("scale_pct", {}).get("sd_mean")
+        lines += ["", "Why \\|Δb\\| follows \\|Δs\\|: b is referenced to the origin height h0 "
+                  "(DESIGN.md), so at Δh above h0 a scale error δs shifts it by −δs·Δh. "
+                  f"graph-batch posterior corr(s, b̄) = "
+                  f"{_f(gb['bias_corr_with_scale']['mean'])}, mean height above h0 "
+                  f"{_f(gb['mean_height_above_h0_m']['mean'], 0)} m"
+                  + (f" (σ_s·Δh = {_f(sd_s / 100 * gb['mean_height_above_h0_m']['mean'])} m)"
+                     if sd_s is not None else "")
+                  + "; with s known, σ(b̄|s) = "
+                  f"{_f(gb['bias_sd_given_scale_m']['mean'])} m."]
     lines += ["", "## Per seed (altitude RMSE [m])", "",
               "| seed | " + " | ".join(f"`{n}`" for n in ESTIMATORS) + " |",
               "| --- |" + " --- |" * len(ESTIMATORS)]
