@@ -1,0 +1,133 @@
+"""Initial keyframe states of the graph smoothers from GNSS and the IMU (no filter involved):
+GNSS positions/velocities, TRIAD attitude, IMU propagation and baro-bridged gaps."""
+
+from __future__ import annotations
+
+import gtsam
+import numpy as np
+
+from ..geo.frames import ned_to_lla
+from ..types import (
+    FloatArray,
+)
+from . import graph_factors as gf
+from .graph_problem import _Problem
+
+
+def _so3_exp(phi: FloatArray) -> FloatArray:
+    return gtsam.Rot3.Expmap(phi).matrix()
+
+
+def _initial_states(P: _Problem) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Initial R_tb, p_t, v_t at keyframes from GNSS and the IMU (no filter involved).
+
+    Position/velocity: GNSS at keyframes (lever arm removed), else propagated with the
+    preintegrated increments. Attitude: TRIAD of (specific force, velocity direction) —
+    f_t = a_t − g_t (a_t from differenced GNSS velocity) against the mean measured f_b, and the
+    body x axis along the GNSS velocity when moving faster than 3 m/s; otherwise propagated
+    with the gyro increments (backwards before the first valid alignment)."""
+    imu = P.drive.imu
+    nk = P.n_kf
+    dr_t, dv_t, dp_t = P.dense.end()
+    u = P.g_use
+    gt, pos = P.g_t[u], P.g_pos[u]
+    vel = None if P.g_vel is None else P.g_vel[u]
+    near = np.min(np.abs(gt[None, :] - P.t_kf[:, None]), axis=1) if nk * gt.size < 5e7 else \
+        np.abs(gt[np.clip(np.searchsorted(gt, P.t_kf), 0, gt.size - 1)] - P.t_kf)
+    rate = 1.0 / max(float(np.median(np.diff(gt))), 1e-3) if gt.size > 1 else 1.0
+    has = near <= max(0.6 / rate, 0.02)
+    pos_kf = np.column_stack([np.interp(P.t_kf, gt, pos[:, i]) for i in range(3)])
+    if vel is None:
+        dtw = 0.5
+        vel_src = (np.column_stack([np.interp(P.t_kf + dtw, gt, pos[:, i]) for i in range(3)])
+                   - np.column_stack([np.interp(P.t_kf - dtw, gt, pos[:, i])
+                                      for i in range(3)])) / (2 * dtw)
+        vel_kf = vel_src
+        acc_kf = np.zeros((nk, 3))
+        acc_ok = np.zeros(nk, bool)
+    else:
+        vel_kf = np.column_stack([np.interp(P.t_kf, gt, vel[:, i]) for i in range(3)])
+        w = 0.5
+        vp = np.column_stack([np.interp(P.t_kf + w, gt, vel[:, i]) for i in range(3)])
+        vm = np.column_stack([np.interp(P.t_kf - w, gt, vel[:, i]) for i in range(3)])
+        acc_kf = (vp - vm) / (2 * w)
+        acc_ok = has & (np.abs(P.t_kf + w - P.t_kf.clip(gt[0], gt[-1])) >= 0)
+    # inside gaps > 5 s between kept fixes: linear bridge horizontally, baro height
+    # (plus the median GNSS − baro offset) vertically when a barometer is present
+    gap_len = np.zeros(nk)
+    if gt.size > 1:
+        j = np.clip(np.searchsorted(gt, P.t_kf), 1, gt.size - 1)
+        gap_len = gt[j] - gt[j - 1]
+    in_gap = ~has & (gap_len > 5.0) & (P.t_kf > gt[0]) & (P.t_kf < gt[-1])
+    baro = P.drive.baro
+    if baro is not None and np.any(in_gap) and baro.t.size > 1:
+        hg = ned_to_lla(pos, P.origin)[:, 2]
+        off = float(np.median(hg - np.interp(gt, baro.t, baro.altitude)))
+        hb = np.interp(P.t_kf[in_gap], baro.t, baro.altitude) + off
+        pos_kf[in_gap, 2] = -(hb - P.h0)
+        vz = -np.gradient(np.interp(P.t_kf, baro.t, baro.altitude), P.t_kf)
+        vel_kf[in_gap, 2] = vz[in_gap]
+    g_kf = gf.gravity_t(pos_kf, P.origin)
+    # mean measured specific force over ±0.25 s
+    cs = np.vstack([np.zeros((1, 3)), np.cumsum(imu.accel_b, axis=0)])
+    lo = np.searchsorted(imu.t, P.t_kf - 0.25)
+    hi = np.searchsorted(imu.t, P.t_kf + 0.25, side="right")
+    f_b = (cs[hi] - cs[lo]) / np.maximum(hi - lo, 1)[:, None]
+    f_t = acc_kf - g_kf + 2 * np.cross(P.omega_t, vel_kf)
+    speed = np.linalg.norm(vel_kf[:, :2], axis=1)
+    triad_ok = has & acc_ok & (speed > 3.0) & (vel is not None)
+    rot_triad = np.zeros((nk, 3, 3))
+    for k in np.flatnonzero(triad_ok):
+        rot_triad[k] = _triad(f_b[k], np.array([1.0, 0.0, 0.0]), f_t[k], vel_kf[k])
+    k0 = int(np.flatnonzero(triad_ok)[0]) if triad_ok.any() else -1
+    if k0 < 0:
+        r = _level(f_b[0])
+    else:
+        r = rot_triad[k0]
+        for k in range(k0 - 1, -1, -1):
+            r = _so3_exp(P.omega_t * (P.t_kf[k + 1] - P.t_kf[k])) @ r @ dr_t[k].T
+    rot = np.zeros((nk, 3, 3))
+    p_out = np.zeros((nk, 3))
+    v_out = np.zeros((nk, 3))
+    rot[0] = r
+    p_out[0] = pos_kf[0] - r @ P.lever if has[0] else pos_kf[0]
+    v_out[0] = vel_kf[0]
+    for k in range(nk - 1):
+        T = P.t_kf[k + 1] - P.t_kf[k]
+        a = g_kf[k] - 2 * np.cross(P.omega_t, v_out[k])
+        rr = rot[k]
+        p1 = p_out[k] + v_out[k] * T + 0.5 * a * T * T + rr @ dp_t[k]
+        v1 = v_out[k] + a * T + rr @ dv_t[k]
+        r1 = _so3_exp(-P.omega_t * T) @ rr @ dr_t[k]
+        if triad_ok[k + 1]:
+            r1 = rot_triad[k + 1]
+        if has[k + 1]:
+            p1 = pos_kf[k + 1] - r1 @ P.lever
+            v1 = vel_kf[k + 1]
+        elif in_gap[k + 1]:
+            # long gap between kept fixes (outage or rejected fixes): IMU propagation from
+            # unknown biases drifts far outside Gauss-Newton's basin; bridge it instead
+            p1, v1 = pos_kf[k + 1], vel_kf[k + 1]
+        rot[k + 1], p_out[k + 1], v_out[k + 1] = r1, p1, v1
+    return rot, p_out, v_out
+
+
+def _unit(x: FloatArray) -> FloatArray:
+    return x / np.linalg.norm(x)
+
+
+def _triad(f_b: FloatArray, x_b: FloatArray, f_t: FloatArray, v_t: FloatArray) -> FloatArray:
+    b1, n1 = _unit(f_b), _unit(f_t)
+    b2, n2 = _unit(np.cross(f_b, x_b)), _unit(np.cross(f_t, v_t))
+    mb = np.column_stack([b1, b2, np.cross(b1, b2)])
+    mn = np.column_stack([n1, n2, np.cross(n1, n2)])
+    return mn @ mb.T
+
+
+def _level(f_b: FloatArray) -> FloatArray:
+    """Roll/pitch from a static specific force, yaw 0."""
+    roll = np.arctan2(-f_b[1], -f_b[2])
+    pitch = np.arctan2(f_b[0], np.hypot(f_b[1], f_b[2]))
+    return gtsam.Rot3.Ypr(0.0, pitch, roll).matrix()
+
+

@@ -1,0 +1,490 @@
+"""Problem set-up of the factor-graph smoothers: configuration, GNSS pre-gate, priors, the
+C++ factors (IMU preintegration, Gauss-Markov baro-bias chain) and the interval rows of the
+custom baro/GNSS terms at a linearisation point. Used by ``graph`` (batch) and ``graph_isam2``."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import gtsam
+import numpy as np
+from gtsam.symbol_shorthand import B, C, K, V, X
+
+from ..config import IMU_PRESETS, BaroSpec, ImuSpec
+from ..geo.earth import gravity
+from ..sensors.noise import gm_process_var, gm_transition
+from ..types import (
+    Drive,
+    FloatArray,
+)
+from . import graph_factors as gf
+
+
+@dataclass(frozen=True)
+class GraphConfig:
+    """Settings of the factor-graph smoothers (SI units).
+
+    keyframe_dt: keyframe spacing [s]; max_iterations / rel_tol / abs_tol: Gauss-Newton
+    stops when an iteration lowers the cost ½χ² by less than rel_tol·cost or abs_tol, or
+    when the decrease predicted for the next step is below abs_tol (0.05: a χ² change of
+    0.1, a tenth of the change that moves one parameter by 1σ; that step is not taken and
+    its factorisation gives the covariance); bias_lag_tol [s]: the baro bias is read at
+    t_s − λ, λ the latency at the start of the solve, re-set when τd moves further than this
+    (``graph_factors.baro_rows``);
+    output_rate_hz: rate of the output trajectory (interpolated between keyframes with the
+    IMU-shaped interpolant); cov_epochs: maximum number of keyframes with an 18×18 covariance;
+    gravity_correction / coriolis: tangent-frame corrections (off only for studies);
+    segment_s: length of a baro-calibration segment in the incremental front end;
+    calib_rw: random-walk root PSD of (s [1/√s], τd [s/√s]) between segments;
+    relinearize_threshold: iSAM2 relinearisation threshold (one value for every component;
+    used only when ``relinearize_typed`` is None; 0 switches relinearisation off);
+    relinearize_typed: per-type thresholds (rotation [rad], translation [m], velocity [m/s],
+    accel bias [m/s²], gyro bias [rad/s]) — the baro bias C and calibration K only appear in
+    linear factors and are never relinearised; relinearize_skip: iSAM2 relinearizeSkip;
+    partial_relinearization_check: iSAM2 option of that name; wildfire_threshold: iSAM2
+    back-substitution threshold (None: GTSAM's 1e-3); see ``docs/graph.md`` for the measured
+    per-update latencies; final_batch: run the batch solver after the incremental pass to
+    produce the smoothed trajectory.
+    gnss_gate_prob: probability of the χ² gates on GNSS fixes (0 switches gating off):
+    a causal pre-gate of the GNSS height against the barometer and a post-solve gate of
+    each fix's normalised position (+ velocity) residual, repeated ≤ ``gate_rounds`` times.
+    """
+
+    keyframe_dt: float = 1.0
+    bias_lag_tol: float = 0.02
+    max_iterations: int = 12
+    rel_tol: float = 1e-7
+    abs_tol: float = 0.05
+    output_rate_hz: float = 20.0
+    cov_epochs: int = 60
+    gravity_correction: bool = True
+    coriolis: bool = True
+    segment_s: float = 60.0
+    calib_rw: tuple[float, float] = (2e-5, 2e-4)
+    relinearize_threshold: float = 0.05
+    relinearize_skip: int = 10
+    partial_relinearization_check: bool = False
+    relinearize_typed: tuple[float, float, float, float, float] | None = (
+        0.02, 1.0, 0.5, 0.1, 0.005)
+    wildfire_threshold: float | None = 0.01
+    final_batch: bool = True
+    observable_ratio: float = 0.8
+    gnss_gate_prob: float = 0.9999
+    gate_rounds: int = 3
+    verbose: bool = False
+
+
+# ----------------------------------------------------------------------------------------
+# Problem set-up shared by both estimators
+
+
+@dataclass
+class _Problem:
+    drive: Drive
+    cfg: GraphConfig
+    origin: FloatArray
+    h0: float
+    g0: float
+    omega_t: FloatArray
+    kf_idx: np.ndarray
+    t_kf: FloatArray
+    dense: gf.DenseIncrements
+    params: Any
+    imu_spec: ImuSpec
+    baro_spec: BaroSpec | None
+    # GNSS in the tangent frame
+    g_t: FloatArray
+    g_pos: FloatArray
+    g_pos_sd: FloatArray
+    g_vel: FloatArray | None
+    g_vel_sd: FloatArray | None
+    lever: FloatArray
+    g_kf: np.ndarray  # keyframe index of fixes on a keyframe epoch, −1 otherwise
+    g_use: np.ndarray  # fixes not rejected by the gates (bool)
+    g_rej_pre: int = 0  # rejected by the baro-consistency pre-gate
+    g_rej_post: int = 0  # rejected by the post-solve residual gate
+    g_incr: Any = None  # (fix indices, dense increments at them), see _gnss_rows_of
+
+    @property
+    def gnss_rejected(self) -> int:
+        return int(np.sum(~self.g_use & (self.g_kf >= -1)))
+
+    @property
+    def n_kf(self) -> int:
+        return int(self.t_kf.size)
+
+
+def _floor(x: float, lo: float) -> float:
+    return float(max(x, lo))
+
+
+def _setup(drive: Drive, cfg: GraphConfig) -> _Problem:
+    imu = drive.imu
+    origin = np.asarray(drive.origin_lla, float)
+    h0 = float(origin[2])
+    g0 = float(gravity(origin[0], origin[2]))
+    spec = imu.spec if isinstance(imu.spec, ImuSpec) else _spec_from_data(imu, origin)
+    bspec = None
+    if drive.baro is not None:
+        bspec = drive.baro.spec if isinstance(drive.baro.spec, BaroSpec) else BaroSpec()
+    kf_idx = gf.keyframe_indices(imu.t, cfg.keyframe_dt)
+    dense = gf.dense_preintegration(imu.t, imu.gyro_b, imu.accel_b, kf_idx)
+    omega_t = gf.earth_rate_t(origin) if cfg.coriolis else np.zeros(3)
+    p = gtsam.PreintegrationCombinedParams.MakeSharedD(g0)
+    # continuous-time densities (STYLE.md pitfall 3); floors keep noiseless drives regular
+    p.setAccelerometerCovariance(np.eye(3) * _floor(spec.accel_noise_density, 1e-4) ** 2)
+    p.setGyroscopeCovariance(np.eye(3) * _floor(spec.gyro_noise_density, 1e-6) ** 2)
+    p.setIntegrationCovariance(np.eye(3) * 1e-8)
+    # Gauss-Markov bias approximated by a random walk of PSD 2σ²/τ + rw²
+    qa = 2 * spec.accel_bias_sd**2 / spec.accel_bias_tau + spec.accel_bias_rw**2
+    qg = 2 * spec.gyro_bias_sd**2 / spec.gyro_bias_tau + spec.gyro_bias_rw**2
+    p.setBiasAccCovariance(np.eye(3) * max(qa, 1e-12))
+    p.setBiasOmegaCovariance(np.eye(3) * max(qg, 1e-16))
+    p.setOmegaCoriolis(omega_t)
+    gn = drive.gnss
+    t_kf = imu.t[kf_idx]
+    if gn is None or len(gn) == 0:
+        raise ValueError("graph: the drive has no GNSS fixes (needed to anchor the graph)")
+    pos = gf.to_tangent(gn.lla, origin)
+    c_tn = gf.rot_t_n(gn.lla, origin)
+    vel = None if gn.vel_n is None else np.einsum("nij,nj->ni", c_tn, gn.vel_n)
+    j = np.clip(np.searchsorted(t_kf, gn.t), 0, t_kf.size - 1)
+    on_kf = np.abs(t_kf[j] - gn.t) < 1e-6
+    inside = (gn.t >= t_kf[0]) & (gn.t <= t_kf[-1])
+    g_kf = np.where(on_kf, j, -1)
+    g_kf[~inside] = -2
+    use = _pregate_gnss(drive, gn.t, gn.lla[:, 2], gn.pos_sd[:, 2], _baro_priors(bspec),
+                        cfg.gnss_gate_prob,
+                        None if gn.vel_n is None else gn.vel_n[:, 2],
+                        None if gn.vel_sd is None else gn.vel_sd[:, 2])
+    P = _Problem(drive, cfg, origin, h0, g0, omega_t, kf_idx, t_kf, dense, p, spec, bspec,
+                 gn.t, pos, gn.pos_sd, vel, gn.vel_sd, np.asarray(gn.lever_arm_b, float),
+                 g_kf, use)
+    P.g_rej_pre = P.gnss_rejected
+    if not np.any(use & inside):
+        raise ValueError("graph: every GNSS fix inside the IMU span was rejected by the "
+                         "baro-consistency gate")
+    return P
+
+
+def _spec_from_data(imu: Any, origin: FloatArray) -> ImuSpec:
+    """IMU noise model for a log without a spec: the consumer preset with data-driven floors.
+
+    White-noise density from first differences, σ_w = std(Δf)/√2 per sample → density
+    σ_w·√dt (vibration of a multirotor shows up here and must be treated as noise at the
+    keyframe scale), and an accelerometer bias sigma of at least |median|f| − γ|, the
+    specific-force magnitude error at rest-like epochs. The preset alone (3 mg/√Hz, 50 mg)
+    made the IMU factors outweigh baro and GNSS by orders of magnitude on the Erle logs."""
+    base = IMU_PRESETS["consumer"]
+    dt = float(np.median(np.diff(imu.t))) if imu.t.size > 1 else 0.01
+    if imu.t.size < 10:
+        return base
+    sa = float(np.median(np.std(np.diff(imu.accel_b, axis=0), axis=0))) / np.sqrt(2.0)
+    sg = float(np.median(np.std(np.diff(imu.gyro_b, axis=0), axis=0))) / np.sqrt(2.0)
+    fmag = float(np.median(np.linalg.norm(imu.accel_b, axis=1)))
+    ba = abs(fmag - float(gravity(origin[0], origin[2])))
+    from dataclasses import replace as _replace
+
+    return _replace(base, accel_noise_density=max(base.accel_noise_density, sa * np.sqrt(dt)),
+                    gyro_noise_density=max(base.gyro_noise_density, sg * np.sqrt(dt)),
+                    accel_bias_sd=max(base.accel_bias_sd, 2.0 * ba))
+
+
+def _pregate_gnss(drive: Drive, t: FloatArray, h: FloatArray, sd_h: FloatArray,
+                  pri: dict[str, float], prob: float, vel_d: FloatArray | None = None,
+                  vel_d_sd: FloatArray | None = None) -> np.ndarray:
+    """Causal χ² gate of GNSS heights against the barometer; returns the mask of kept fixes.
+
+    By the shared baro model, d = h_gnss(t) − h_baro(t + τ0) = −s·(h − h0) − b + noise: a
+    2-state Kalman filter on x = [c, s] with d = c + s·(h_baro − h0) + v, c a random walk of
+    PSD 2σ_b²/τ_b (the Gauss-Markov bias, Groves §14.2 / ``sensors.noise``), s ~ N(0, σ_s²),
+    var v = σ_h,gnss² + σ_baro² + (v_up·σ_τ)². A fix whose innovation ν has ν²/S above the
+    1-dof χ² quantile ``prob`` is rejected (not used to update), like the EKF's innovation
+    gate; the prediction variance grows while fixes are refused, so the gate re-opens.
+    When the log has GNSS velocity, a fix is also refused when −v_down disagrees with the
+    baro climb rate (central difference over ±1 s): variance σ_vd² + (σ_baro/√2 /1 s)²
+    + (σ_s·v)² + (0.5 m/s)² (vertical acceleration over the ±1 s difference window).
+    """
+    use = np.isfinite(h) & np.isfinite(sd_h)
+    baro = drive.baro
+    if baro is None or prob <= 0 or baro.t.size < 2:
+        return use
+    from scipy.stats import chi2
+
+    thr = float(chi2.ppf(prob, 1))
+    bt, bz = baro.t, baro.altitude
+    inside = use & (t + pri["tau0"] >= bt[0]) & (t + pri["tau0"] <= bt[-1])
+    idx = np.flatnonzero(inside)
+    if idx.size == 0:
+        return use
+    tt = t[idx] + pri["tau0"]
+    hb = np.interp(tt, bt, bz)
+    v_up = (np.interp(tt + 1.0, bt, bz) - np.interp(tt - 1.0, bt, bz)) / 2.0
+    d = h[idx] - hb
+    r = sd_h[idx] ** 2 + pri["noise"] ** 2 + (v_up * pri["tau_sd"]) ** 2
+    hrel = hb - drive.origin_lla[2]
+    q_rate = 2.0 * pri["b_sd"] ** 2 / pri["b_tau"]
+    n0 = min(10, idx.size)
+    c0 = float(np.median(d[:n0]))
+    mad = float(np.median(np.abs(d[:n0] - c0))) * 1.4826
+    x = np.array([c0, 0.0])
+    pm = np.diag([mad**2 + float(np.median(r[:n0])), pri["s_sd"] ** 2])
+    keep = np.ones(idx.size, bool)
+    if vel_d is not None and vel_d_sd is not None:
+        var_v = (vel_d_sd[idx] ** 2 + 0.5 * pri["noise"] ** 2 + (pri["s_sd"] * v_up) ** 2
+                 + 0.5**2)
+        nu_v = -vel_d[idx] - v_up
+        keep &= ~(nu_v**2 > thr * var_v) & np.isfinite(nu_v)
+    t_prev = tt[0]
+    for i in range(idx.size):
+        pm[0, 0] += q_rate * max(tt[i] - t_prev, 0.0)
+        t_prev = tt[i]
+        if not keep[i]:
+            continue
+        hv = np.array([1.0, hrel[i]])
+        nu = d[i] - hv @ x
+        ph = pm @ hv
+        s_inn = hv @ ph + r[i]
+        if nu * nu > thr * s_inn:
+            keep[i] = False
+            continue
+        kg = ph / s_inn
+        x = x + kg * nu
+        pm = pm - np.outer(kg, ph)
+    use[idx[~keep]] = False
+    return use
+
+
+def _baro_priors(bs: BaroSpec | None) -> dict[str, float]:
+    """Prior mean and sigma of s, τd and b_0 from the baro spec (uniform latency range →
+    its mean and width/√12)."""
+    if bs is None:
+        return {"s_sd": 0.01, "tau0": 0.1, "tau_sd": 0.1, "b_sd": 3.0, "b_tau": 1800.0,
+                "noise": 0.3}
+    if bs.latency_range_s is not None:
+        lo, hi = bs.latency_range_s
+        tau0, tau_sd = 0.5 * (lo + hi), max((hi - lo) / np.sqrt(12.0), 0.01)
+    else:
+        tau0, tau_sd = bs.latency_s, 0.05
+    s_sd = bs.scale_sd if bs.scale is None else max(bs.scale_sd, 1e-4)
+    return {"s_sd": max(s_sd, 1e-4), "tau0": tau0, "tau_sd": tau_sd,
+            "b_sd": max(bs.bias_sd, 1e-3), "b_tau": bs.bias_tau, "noise": max(bs.noise_sd, 1e-3)}
+
+
+def _gravity_delta(P: _Problem, pos: FloatArray) -> FloatArray:
+    """δg_k = g_t(p_k) − [0, 0, γ0] (K, 3) [m/s²] (zero when the correction is disabled)."""
+    if not P.cfg.gravity_correction:
+        return np.zeros_like(pos)
+    return gf.gravity_t(pos, P.origin) - np.array([0.0, 0.0, P.g0])
+
+
+def _preintegrate(P: _Problem, k: int, r_k: FloatArray, dg_k: FloatArray,
+                  bias: Any) -> Any:
+    """Preintegrate interval k with midpoint samples; δg folded into the specific force:
+    f' = f + (R_k ΔR_j)ᵀ δg_k."""
+    imu = P.drive.imu
+    j0, j1 = int(P.kf_idx[k]), int(P.kf_idx[k + 1])
+    fm = 0.5 * (imu.accel_b[j0:j1] + imu.accel_b[j0 + 1:j1 + 1])
+    wm = 0.5 * (imu.gyro_b[j0:j1] + imu.gyro_b[j0 + 1:j1 + 1])
+    if np.any(dg_k):
+        fm = fm + np.einsum("nji,j->ni", P.dense.dr[j0:j1], r_k.T @ dg_k)
+    dts = np.diff(imu.t[j0:j1 + 1])
+    pim = gtsam.PreintegratedCombinedMeasurements(P.params, bias)
+    integ = pim.integrateMeasurement
+    for a, w, dt in zip(fm, wm, dts, strict=True):
+        integ(a, w, dt)
+    return pim
+
+
+def _noise(sd: FloatArray) -> Any:
+    return gtsam.noiseModel.Diagonal.Sigmas(np.asarray(sd, dtype=float))
+
+
+def _prior_factors(P: _Problem, r0: FloatArray, p0: FloatArray, v0: FloatArray,
+                   pri: dict[str, float], calib_key: int) -> gtsam.NonlinearFactorGraph:
+    g = gtsam.NonlinearFactorGraph()
+    s = P.imu_spec
+    g.add(gtsam.PriorFactorPose3(X(0), gtsam.Pose3(gtsam.Rot3(r0), p0),
+                                 _noise([0.05, 0.05, 0.5, 10.0, 10.0, 10.0])))
+    g.add(gtsam.PriorFactorVector(V(0), v0, _noise([2.0, 2.0, 2.0])))
+    g.add(gtsam.PriorFactorConstantBias(
+        B(0), gtsam.imuBias.ConstantBias(),
+        _noise([_floor(s.accel_bias_sd, 1e-4)] * 3 + [_floor(s.gyro_bias_sd, 1e-6)] * 3)))
+    if P.drive.baro is not None:
+        g.add(gtsam.PriorFactorVector(C(0), np.zeros(1), _noise([pri["b_sd"]])))
+        g.add(gtsam.PriorFactorVector(calib_key, np.array([0.0, pri["tau0"]]),
+                                      _noise([pri["s_sd"], pri["tau_sd"]])))
+    return g
+
+
+def _keyframe_fix_factors(P: _Problem, k: int) -> list[Any]:
+    out = []
+    for i in np.flatnonzero((P.g_kf == k) & P.g_use):
+        out.append(gtsam.GPSFactorArm(X(k), P.g_pos[i], P.lever, _noise(P.g_pos_sd[i])))
+        if P.g_vel is not None and P.g_vel_sd is not None and not np.any(P.lever):
+            out.append(gtsam.PriorFactorVector(V(k), P.g_vel[i], _noise(P.g_vel_sd[i])))
+    return out
+
+
+def _gm_factor(k: int, dt: float, pri: dict[str, float]) -> Any:
+    """Exact discrete Gauss-Markov link b_{k+1} − φ b_k = w as a (linear) C++ factor."""
+    phi = float(gm_transition(dt, pri["b_tau"]))
+    sd = float(np.sqrt(max(gm_process_var(dt, pri["b_tau"], pri["b_sd"]), 1e-12)))
+    jf = gtsam.JacobianFactor(C(k), np.array([[-phi]]), C(k + 1), np.array([[1.0]]),
+                              np.zeros(1), _noise([sd]))
+    lin = gtsam.Values()
+    lin.insert(C(k), np.zeros(1))
+    lin.insert(C(k + 1), np.zeros(1))
+    return gtsam.LinearContainerFactor(jf, lin)
+
+
+# ----------------------------------------------------------------------------------------
+# Interval terms → GTSAM Hessian blocks
+
+
+def _states_from_values(P: _Problem, vals: Any, calib_of_kf: np.ndarray) -> gf.KeyframeStates:
+    nk = P.n_kf
+    poses = gtsam.utilities.extractPose3(vals)
+    rot = poses[:, :9].reshape(nk, 3, 3)
+    pos = poses[:, 9:12]
+    vel = gtsam.utilities.extractVectors(vals, "v")
+    at_bias = vals.atConstantBias
+    ba = np.array([at_bias(B(k)).accelerometer() for k in range(nk)])
+    if P.drive.baro is not None:
+        cb = gtsam.utilities.extractVectors(vals, "c")[:, 0]
+        cal = {int(j): vals.atVector(K(int(j))) for j in np.unique(calib_of_kf)}
+        s = np.array([cal[int(j)][0] for j in calib_of_kf])
+        tau = np.array([cal[int(j)][1] for j in calib_of_kf])
+    else:
+        cb = np.zeros(nk)
+        s = np.zeros(nk)
+        tau = np.zeros(nk)
+    dg = _gravity_delta(P, pos)
+    acc = np.array([0.0, 0.0, P.g0]) + dg - 2 * np.cross(P.omega_t, vel)
+    return gf.KeyframeStates(rot, pos, vel, ba, cb, s, tau, acc)
+
+
+def _gnss_batch_idx(P: _Problem) -> np.ndarray:
+    """Fixes used by the batch: every kept fix inside the keyframe span (on keyframe epochs
+    too — at τ = 0 the interpolant is exactly X_k, so the row equals GPSFactorArm's)."""
+    return np.flatnonzero(P.g_use & (P.g_kf >= -1))
+
+
+def _gnss_rows_of(P: _Problem, st: gf.KeyframeStates, idx: np.ndarray) -> gf.IntervalRows:
+    t_g = P.g_t[idx]
+    # the IMU increments at the fixes depend on the fix times only: cached per fix set
+    if P.g_incr is None or not np.array_equal(P.g_incr[0], idx):
+        k = np.clip(np.searchsorted(P.t_kf, t_g, side="right") - 1, 0, P.n_kf - 2)
+        P.g_incr = (idx, P.dense.at(t_g, k))
+    return gf.gnss_rows(
+        P.dense, st, t_g, P.g_pos[idx], P.g_pos_sd[idx],
+        None if P.g_vel is None else P.g_vel[idx],
+        None if P.g_vel_sd is None else P.g_vel_sd[idx], P.lever, incr=P.g_incr[1])
+
+
+def _interval_rows(P: _Problem, st: gf.KeyframeStates, pri: dict[str, float],
+                   bias_lag: float | None) -> gf.IntervalRows:
+    """Baro and GNSS interval rows; ``bias_lag``: see ``graph_factors.baro_rows``."""
+    parts = []
+    if P.drive.baro is not None:
+        bt = P.drive.baro.t
+        m = (bt >= P.t_kf[0]) & (bt <= P.t_kf[-1])
+        parts.append(gf.baro_rows(P.dense, st, bt[m], P.drive.baro.altitude[m], pri["noise"],
+                                  P.h0, P.origin, bias_lag=bias_lag))
+    idx = _gnss_batch_idx(P)
+    if idx.size:
+        parts.append(_gnss_rows_of(P, st, idx))
+    return gf.concat_rows(*parts)
+
+
+def _gnss_chi2(P: _Problem, st: gf.KeyframeStates, idx: np.ndarray) -> tuple[FloatArray, int]:
+    """χ² of each fix's whitened residual at the solution (position, + velocity when the log
+    has it) and its degrees of freedom."""
+    rows = _gnss_rows_of(P, st, idx)
+    m = idx.size
+    r = rows.r.reshape(-1, m, 3)  # (1 or 2, m, 3): position rows, then velocity rows
+    return np.sum(r**2, axis=(0, 2)), 3 * r.shape[0]
+
+
+def _group_keys(P: _Problem, k: int, calib_key: int) -> list[int]:
+    return [X(k), X(k + 1), C(k), C(k + 1), calib_key]
+
+
+def _hessian_pieces(keys: list[int], lam: FloatArray, eta: FloatArray,
+                    active: tuple[int, ...]) -> list[Any]:
+    """Split one group's information (16×16, η) into ≤3-key HessianFactors (pair cover)."""
+    blocks = gf.BLOCKS
+    sl = [slice(a, a + n) for a, n in blocks]
+    if len(active) <= 3:
+        trip = [tuple(active)]
+    else:
+        trip = [tr for tr in gf.PAIR_COVER]
+    owned_pair: set[tuple[int, int]] = set()
+    owned_diag: set[int] = set()
+    out = []
+    for tr in trip:
+        tr = tuple(b for b in tr if b in active)
+        gmat = {}
+        gvec = {}
+        for a_i, a in enumerate(tr):
+            gvec[a] = (eta[sl[a]] if a not in owned_diag else np.zeros(blocks[a][1]))
+            for b in tr[a_i:]:
+                if a == b:
+                    gmat[a, a] = lam[sl[a], sl[a]] if a not in owned_diag else \
+                        np.zeros((blocks[a][1],) * 2)
+                elif (a, b) in owned_pair:
+                    gmat[a, b] = np.zeros((blocks[a][1], blocks[b][1]))
+                else:
+                    gmat[a, b] = lam[sl[a], sl[b]]
+                    owned_pair.add((a, b))
+        owned_diag.update(tr)
+        kk = [keys[a] for a in tr]
+        if len(tr) == 3:
+            a, b, c = tr
+            out.append(gtsam.HessianFactor(kk[0], kk[1], kk[2], gmat[a, a], gmat[a, b],
+                                           gmat[a, c], gvec[a], gmat[b, b], gmat[b, c], gvec[b],
+                                           gmat[c, c], gvec[c], 0.0))
+        elif len(tr) == 2:
+            a, b = tr
+            out.append(gtsam.HessianFactor(kk[0], kk[1], gmat[a, a], gmat[a, b], gvec[a],
+                                           gmat[b, b], gvec[b], 0.0))
+        else:
+            (a,) = tr
+            out.append(gtsam.HessianFactor(kk[0], gmat[a, a], gvec[a], 0.0))
+    return out
+
+
+
+def _build_batch_graph(P: _Problem, rot: FloatArray, pos: FloatArray, vel: FloatArray,
+                       pims: list[Any], pri: dict[str, float],
+                       calib_of_kf: np.ndarray) -> tuple[Any, Any]:
+    """C++ part of the batch graph: priors, CombinedImuFactors and the Gauss-Markov links.
+    Every GNSS fix (on keyframe epochs too) enters as an interval term so that the gates can
+    drop it without rebuilding the graph."""
+    graph = _prior_factors(P, rot[0], pos[0], vel[0], pri, K(0))
+    vals = gtsam.Values()
+    nk = P.n_kf
+    for k in range(nk):
+        vals.insert(X(k), gtsam.Pose3(gtsam.Rot3(rot[k]), pos[k]))
+        vals.insert(V(k), vel[k])
+        vals.insert(B(k), gtsam.imuBias.ConstantBias())
+        if P.drive.baro is not None:
+            vals.insert(C(k), np.zeros(1))
+        if k + 1 < nk:
+            graph.add(gtsam.CombinedImuFactor(X(k), V(k), X(k + 1), V(k + 1), B(k), B(k + 1),
+                                              pims[k]))
+            if P.drive.baro is not None:
+                graph.add(_gm_factor(k, float(P.t_kf[k + 1] - P.t_kf[k]), pri))
+    if P.drive.baro is not None:
+        for j in np.unique(calib_of_kf):
+            vals.insert(K(int(j)), np.array([0.0, pri["tau0"]]))
+    return graph, vals
+
+
+def _pims_for(P: _Problem, rot: FloatArray, pos: FloatArray) -> list[Any]:
+    dg = _gravity_delta(P, pos)
+    bias0 = gtsam.imuBias.ConstantBias()
+    return [_preintegrate(P, k, rot[k], dg[k], bias0) for k in range(P.n_kf - 1)]
+
+
