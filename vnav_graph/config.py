@@ -190,6 +190,21 @@ class BaroSpec:
                              f"got {self.latency_s!r}")
 
 
+# Prior baro model of a real log that carries no spec — ONE definition, used by every
+# estimator (the comparison must run on the same sensor models). Wide on purpose: MEMS and
+# phone barometers are aligned to GNSS only at the start, drift with weather over tens of
+# minutes (b: σ 10 m, τ 1 h), have ±2 % scale errors (temperature; seed 001), 0.5 m of
+# noise, and an unknown latency N(0.1 s, 0.1 s) — expressed as a uniform range of that mean
+# and σ (σ = width/√12), which is how every estimator reads a latency prior.
+REAL_LOG_LATENCY_S = 0.1
+REAL_LOG_LATENCY_SD = 0.1
+REAL_LOG_BARO = BaroSpec(
+    scale_sd=0.02, latency_s=REAL_LOG_LATENCY_S,
+    latency_range_s=(REAL_LOG_LATENCY_S - np.sqrt(3.0) * REAL_LOG_LATENCY_SD,
+                     REAL_LOG_LATENCY_S + np.sqrt(3.0) * REAL_LOG_LATENCY_SD),
+    bias_sd=10.0, bias_tau=3600.0, noise_sd=0.5)
+
+
 def replace_fields(obj: Any, **changes: Any) -> Any:
     """``dataclasses.replace`` that ignores keys which are not fields (for TOML overlays)."""
     from dataclasses import replace

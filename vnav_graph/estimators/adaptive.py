@@ -53,6 +53,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
+from ..config import REAL_LOG_BARO
 from ..types import (
     ERROR_STATE_DIM,
     BaroEstimate,
@@ -368,13 +369,13 @@ def run_adaptive_ekf(inp: LoopInputs, cfg: AdaptiveConfig, t_fix, z_fix, r_fix, 
     q_a = (cfg.accel_psd if cfg.accel_psd is not None
            else _spec(imu_spec, "accel_noise_density", 3e-3) ** 2 + 1e-4)
     sd_n = cfg.baro_noise_sd if cfg.baro_noise_sd is not None else _spec(
-        baro_spec, "noise_sd", 0.5)
+        baro_spec, "noise_sd", REAL_LOG_BARO.noise_sd)
     sd_b = cfg.baro_bias_sd if cfg.baro_bias_sd is not None else _spec(
-        baro_spec, "bias_sd", 10.0)
+        baro_spec, "bias_sd", REAL_LOG_BARO.bias_sd)
     tau_b = cfg.baro_bias_tau if cfg.baro_bias_tau is not None else _spec(
-        baro_spec, "bias_tau", 3600.0)
+        baro_spec, "bias_tau", REAL_LOG_BARO.bias_tau)
     sd_s = cfg.baro_scale_sd if cfg.baro_scale_sd is not None else _spec(
-        baro_spec, "scale_sd", 0.02)
+        baro_spec, "scale_sd", REAL_LOG_BARO.scale_sd)
     x0 = np.array([inp.z_baro[0], 0.0, 0.0, 0.0, 0.0])
     # prior: height from the (biased) baro, v at rest ±1 m/s, c ±0.1 m/s², s, b from the spec
     p0 = np.diag([sd_b**2 + sd_n**2, 1.0, 0.1**2, sd_s**2, sd_b**2])

@@ -56,7 +56,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 
-from ..config import DEG, IMU_PRESETS, BaroSpec, ImuSpec
+from ..config import DEG, IMU_PRESETS, REAL_LOG_BARO, BaroSpec, ImuSpec
 from ..geo.earth import OMEGA_IE, gravity, radii
 from ..geo.frames import quat_to_mat, rph_to_quat
 from ..sensors.noise import gm_process_var, white_sd
@@ -168,9 +168,11 @@ class EkfConfig:
     accel_scale: bool | None = None
     default_imu: ImuSpec = field(default_factory=lambda: PHONE_IMU)
     measure_imu_noise: bool = True
-    default_baro: BaroSpec = field(default_factory=lambda: BaroSpec(bias_sd=10.0,
-                                                                    noise_sd=0.5))
-    default_latency_sd: float = 0.1
+    # baro model of a log without a spec: the package-wide REAL_LOG_BARO (every estimator
+    # uses it; its latency prior N(0.1, 0.1) s comes as a uniform range). Until session 4
+    # this was BaroSpec(bias_sd=10, noise_sd=0.5) with a fixed latency, so the latency prior
+    # was the 0.01 s floor below and τd was in effect not estimated on real logs.
+    default_baro: BaroSpec = field(default_factory=lambda: REAL_LOG_BARO)
     min_latency_sd: float = 0.01
     min_scale_sd: float = 1e-4
     min_baro_noise_sd: float = 0.05

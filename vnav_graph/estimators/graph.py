@@ -238,6 +238,7 @@ class GraphBatch:
         out = _outputs(P, res, pri, K(0) if drive.baro is not None else None)
         t4 = time.perf_counter()
         info = {"keyframes": P.n_kf, "iterations": res.iterations, "final_cost": res.cost,
+                "converged": res.converged,
                 "baro_bias_lag_s": res.bias_lag,
                 "gnss_rejected": P.gnss_rejected, "gnss_rejected_pregate": P.g_rej_pre,
                 "gnss_rejected_postsolve": P.g_rej_post,

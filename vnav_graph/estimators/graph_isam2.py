@@ -343,7 +343,7 @@ class GraphISAM2:
             j_last = int(seg[-1])
             isam_k = est.atVector(K(j_last)).tolist()
         info = {
-            "keyframes": nk, "iterations_final": res.iterations,
+            "keyframes": nk, "iterations_final": res.iterations, "converged_final": res.converged,
             "gnss_rejected": P.gnss_rejected, "gnss_rejected_pregate": P.g_rej_pre,
             "gnss_rejected_postsolve": P.g_rej_post,
             "observability": out["observability"],

@@ -113,6 +113,7 @@ class _BatchResult:
     rows: gf.IntervalRows  # interval terms linearised at ``values``
     fac: gla.ArrowFactor | None = None  # factorised normal equations at ``values``, if kept
     bias_lag: float = 0.0  # baro-bias read time offset of the last solve (baro_rows)
+    converged: bool = True  # False: stopped by max_iterations (or no descent found)
 
 
 @dataclass
@@ -207,7 +208,9 @@ def _gn_core(P: _Problem, lay: _Layout, graph: Any, vals: Any, calib_of_kf: np.n
     it = 0
     fac = None
     mu = 0.0
+    converged = False
     for it in range(1, P.cfg.max_iterations + 1):
+        converged = False
         ab, bm, dm, g = _normal_equations(P, lay, graph, vals, rows)
         fac = _factorize(ab, bm, dm)
         delta = fac.solve(g)
@@ -217,6 +220,7 @@ def _gn_core(P: _Problem, lay: _Layout, graph: Any, vals: Any, calib_of_kf: np.n
         if dec < P.cfg.abs_tol:
             # converged at ``vals``: the step is not taken, and this factorisation — of the
             # normal equations at the solution — is kept for the covariance
+            converged = True
             break
         fac = None
         if mu > 0.0:
@@ -240,6 +244,7 @@ def _gn_core(P: _Problem, lay: _Layout, graph: Any, vals: Any, calib_of_kf: np.n
                 mu = 0.0 if mu <= 1e-6 else mu / 10.0
                 break
             if mu == 0.0 and abs(new_cost - ref) < P.cfg.rel_tol * ref:
+                converged = True
                 break  # converged: the change is at round-off level
             mu = 1e-5 if mu == 0.0 else mu * 10.0
             if mu > 1e3:
@@ -260,8 +265,9 @@ def _gn_core(P: _Problem, lay: _Layout, graph: Any, vals: Any, calib_of_kf: np.n
             lag = lag_c  # a new cost function: no convergence test on this step
             continue
         if mu == 0.0 and (abs(rel) < P.cfg.rel_tol or abs(cost_prev - cost) < P.cfg.abs_tol):
+            converged = True
             break
-    return _BatchResult(vals, graph, cost, it, calib_of_kf, lay, rows, fac, lag)
+    return _BatchResult(vals, graph, cost, it, calib_of_kf, lay, rows, fac, lag, converged)
 
 
 def _gauss_newton(P: _Problem, graph: Any, vals: Any, calib_of_kf: np.ndarray,

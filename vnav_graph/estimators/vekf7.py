@@ -66,6 +66,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from ..config import REAL_LOG_BARO
 from ..geo.earth import gravity_scalar, radii, radii_scalar
 from ..sensors.baro import baro_jacobian, measure_baro
 from ..sensors.noise import gm_process_var, gm_transition
@@ -347,13 +348,13 @@ class VEKF7:
         k_sd = cfg.accel_scale_sd if cfg.accel_scale_sd is not None else _spec_value(
             imu_spec, "accel_scale_sd", 1e-3)
         s_sd = cfg.scale_prior_sd if cfg.scale_prior_sd is not None else _spec_value(
-            baro_spec, "scale_sd", 0.02)
+            baro_spec, "scale_sd", REAL_LOG_BARO.scale_sd)
         b_sd = cfg.bias_prior_sd if cfg.bias_prior_sd is not None else _spec_value(
-            baro_spec, "bias_sd", 10.0)
+            baro_spec, "bias_sd", REAL_LOG_BARO.bias_sd)
         b_tau = cfg.bias_tau if cfg.bias_tau is not None else _spec_value(
-            baro_spec, "bias_tau", 3600.0)
+            baro_spec, "bias_tau", REAL_LOG_BARO.bias_tau)
         r_baro = (cfg.baro_noise_sd if cfg.baro_noise_sd is not None else _spec_value(
-            baro_spec, "noise_sd", 0.5)) ** 2
+            baro_spec, "noise_sd", REAL_LOG_BARO.noise_sd)) ** 2
         phi_b = gm_transition(dt, b_tau)
         q_b = gm_process_var(dt, b_tau, b_sd)
         phi_ab = gm_transition(dt, ab_tau)

@@ -61,6 +61,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from ..config import REAL_LOG_BARO
 from ..geo.earth import gravity_scalar
 from ..sensors.noise import gm_process_var, gm_transition
 from ..types import (
@@ -276,12 +277,13 @@ class VKF4:
             rw = cfg.k_vre * float(np.max(measured_white_sd(drive.imu.accel_b)))
             a_psd = a_psd + rw**2 * cfg.bias_corr_s**2 / 3.0
         s3 = cfg.baro_slow_sd if cfg.baro_slow_sd is not None else float(np.hypot(
-            _spec(baro_spec, "bias_sd", 10.0), _spec(baro_spec, "scale_sd", 0.02)
+            _spec(baro_spec, "bias_sd", REAL_LOG_BARO.bias_sd),
+            _spec(baro_spec, "scale_sd", REAL_LOG_BARO.scale_sd)
             * cfg.alt_span_m))
         tau3 = cfg.baro_slow_tau if cfg.baro_slow_tau is not None else _spec(
-            baro_spec, "bias_tau", 3600.0)
+            baro_spec, "bias_tau", REAL_LOG_BARO.bias_tau)
         r_baro = (cfg.baro_noise_sd if cfg.baro_noise_sd is not None else _spec(
-            baro_spec, "noise_sd", 0.5)) ** 2
+            baro_spec, "noise_sd", REAL_LOG_BARO.noise_sd)) ** 2
         phi3, q3 = gm_transition(dt, tau3), gm_process_var(dt, tau3, s3)
         phi4 = gm_transition(dt, cfg.baro_fast_tau)
         q4 = gm_process_var(dt, cfg.baro_fast_tau, cfg.baro_fast_sd)
