@@ -75,7 +75,7 @@ def failed_block(error: str, runtime_s: float) -> dict[str, Any]:
     return {
         "status": "failed", "error": error, "alt_rmse_m": None, "alt_max_abs_m": None,
         "vel_down_rmse_mps": None, "nees_mean": None, "nees_dof": None, "runtime_s": runtime_s,
-        "realtime_factor": None, "gnss_rejected": None,
+        "realtime_factor": None, "gnss_rejected": None, "warnings": [],
         "baro": {"scale": dict(null_param), "latency_s": dict(null_param),
                  "bias_m": dict(null_param)},
     }
@@ -180,6 +180,8 @@ def format_table(summary: dict[str, Any]) -> str:
     for name, m in summary["estimators"].items():
         if m["status"] == "failed":
             lines.append(f"{name} failed: {m['error']}")
+        for w in m.get("warnings") or []:
+            lines.append(f"{name} warning: {w}")
     return "\n".join(lines)
 
 

@@ -98,3 +98,20 @@ def test_isam2_final_equals_batch_and_online_is_causal():
     assert abs(ei.baro.scale.est - eb.baro.scale.est) < 0.1 * eb.baro.scale.sd
     assert ei.online is not None and ei.online.t.size == eb.info["keyframes"]
     assert ei.info["update_p99_ms"] > 0
+
+
+def test_iteration_cap_is_reported_as_a_warning():
+    """A solve stopped by max_iterations says so: info['converged'] is False and a warning
+    reaches the summary block and the printed table; a converged solve has none."""
+    from vnav_graph.pipeline import RunResult, format_table, summarize
+
+    d = simulate("hill-drive", 1, duration_s=60.0)
+    capped = GraphBatch(GraphConfig(max_iterations=1)).run(d)
+    full = GraphBatch().run(d)
+    assert capped.info["converged"] is False and full.info["converged"] is True
+    assert full.info["iterations"] < GraphConfig().max_iterations
+    s = summarize(d, [RunResult("graph-batch", capped, None, capped.runtime_s)])
+    w = s["estimators"]["graph-batch"]["warnings"]
+    assert len(w) == 1 and "max_iterations=1" in w[0]
+    assert "graph-batch warning: Gauss-Newton stopped" in format_table(s)
+    assert evaluate(full, d)["warnings"] == []

@@ -239,6 +239,10 @@ class GraphBatch:
         t4 = time.perf_counter()
         info = {"keyframes": P.n_kf, "iterations": res.iterations, "final_cost": res.cost,
                 "converged": res.converged,
+                "warnings": [] if res.converged else [
+                    f"Gauss-Newton stopped at max_iterations={self.config.max_iterations} "
+                    f"per solve without converging (final ½χ² {res.cost:.6g}); the estimate "
+                    "may be off — raise GraphConfig.max_iterations"],
                 "baro_bias_lag_s": res.bias_lag,
                 "gnss_rejected": P.gnss_rejected, "gnss_rejected_pregate": P.g_rej_pre,
                 "gnss_rejected_postsolve": P.g_rej_post,

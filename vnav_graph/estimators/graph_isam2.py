@@ -356,6 +356,11 @@ class GraphISAM2:
             "isam2_last_segment_calibration": isam_k,
             "segments": int(seg[-1]) + 1,
             "isam2_fallback": fallback,
+            "warnings": ([] if res.converged else [
+                f"final smoothing pass stopped at max_iterations={cfg.max_iterations} per "
+                f"solve without converging (final ½χ² {res.cost:.6g})"])
+            + ([] if fallback is None else [
+                f"iSAM2 update failed and was retried with dogleg ({fallback})"]),
             "isam2_settings": {"keyframe_dt": cfg.keyframe_dt, "dogleg": robust,
                                "relinearize_skip": cfg.relinearize_skip,
                                "relinearize_typed": cfg.relinearize_typed,

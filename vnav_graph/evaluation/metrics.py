@@ -91,6 +91,9 @@ def evaluate(est: Estimate, drive: Drive) -> dict[str, Any]:
         "runtime_s": float(est.runtime_s),
         "realtime_factor": (drive.duration_s / est.runtime_s) if est.runtime_s > 0 else None,
         "gnss_rejected": est.info.get("gnss_rejected"),
+        # things the user should know about this result (e.g. a solver that stopped at its
+        # iteration cap); an addition to the DESIGN.md block, always a list
+        "warnings": [str(w) for w in est.info.get("warnings", [])],
     }
     if drive.truth is not None:
         err = errors_vs_truth(est, drive)

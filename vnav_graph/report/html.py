@@ -108,6 +108,8 @@ def render_html(summary: dict[str, Any], drive: Drive,
                 "withheld-GNSS scores)")
     failed = [(n, m["error"]) for n, m in summary["estimators"].items() if m["status"] != "ok"]
     fail_html = "".join(f"<li><b>{_e(n)}</b>: {_e(err)}</li>" for n, err in failed)
+    warned = [(n, w) for n, m in summary["estimators"].items() for w in m.get("warnings") or []]
+    warn_html = "".join(f"<li><b>{_e(n)}</b>: {_e(w)}</li>" for n, w in warned)
     figs = "".join(
         f"<figure><img alt=\"{_e(cap)}\" src=\"data:image/png;base64,"
         f"{base64.b64encode(png).decode('ascii')}\"><figcaption>{_e(cap)}</figcaption></figure>"
@@ -125,6 +127,7 @@ def render_html(summary: dict[str, Any], drive: Drive,
 <p class="note">NEES/dof: mean normalised estimation error squared per degree of freedom over
 position/velocity (1 = consistent covariance). × real time: drive duration / runtime.</p>
 {f'<h3>Failed estimators</h3><ul>{fail_html}</ul>' if failed else ''}
+{f'<h3>Warnings</h3><ul>{warn_html}</ul>' if warned else ''}
 <h2>Barometer parameters (estimate ± 1σ)</h2>
 {baro_table(summary)}
 <h2>Plots</h2>
