@@ -49,6 +49,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numba import njit
@@ -257,7 +258,30 @@ def run_loop(inp: LoopInputs, gains: tuple[float, ...], scale: FloatArray | None
     return x[orig], err[orig]
 
 
-class Loop2:
+class _FixedGainLoop:
+    """``run`` shared by the fixed-gain loops: inputs, gains, ``run_loop``, Estimate."""
+
+    name: str
+    config: Any
+
+    def gains(self, ws2: float) -> tuple[float, ...]:
+        raise NotImplementedError
+
+    def _extra_info(self, x: FloatArray) -> dict[str, Any]:
+        return {}
+
+    def run(self, drive: Drive) -> Estimate:
+        t0 = time.perf_counter()
+        inp = loop_inputs(drive, self.config.ahrs)
+        g = self.gains(inp.ws2)
+        x, err = run_loop(inp, g)
+        info = {"gains": g, "uses": "imu+baro", **self._extra_info(x),
+                "loop_error_rms_m": float(np.sqrt(np.mean(err**2)))}
+        return _estimate(self.name, inp.t, x[:, 0] + inp.h0, x[:, 1],
+                         time.perf_counter() - t0, self.config, info)
+
+
+class Loop2(_FixedGainLoop):
     """Fixed-gain 2nd-order baro-inertial loop (``loop2``)."""
 
     name = "loop2"
@@ -283,18 +307,9 @@ class Loop2:
         g = phi @ k[:, 0] / dt
         return Loop2Config(gains=(float(g[0]), float(g[1])))
 
-    def run(self, drive: Drive) -> Estimate:
-        t0 = time.perf_counter()
-        inp = loop_inputs(drive, self.config.ahrs)
-        g = self.gains(inp.ws2)
-        x, err = run_loop(inp, g)
-        return _estimate(self.name, inp.t, x[:, 0] + inp.h0, x[:, 1],
-                         time.perf_counter() - t0, self.config,
-                         {"gains": g, "uses": "imu+baro", "loop_error_rms_m":
-                          float(np.sqrt(np.mean(err**2)))})
 
 
-class Loop3:
+class Loop3(_FixedGainLoop):
     """Fixed-gain 3rd-order baro-inertial loop (``loop3``)."""
 
     name = "loop3"
@@ -306,12 +321,5 @@ class Loop3:
         c = self.config
         return c.gains if c.gains is not None else gains3(c.tau, ws2)
 
-    def run(self, drive: Drive) -> Estimate:
-        t0 = time.perf_counter()
-        inp = loop_inputs(drive, self.config.ahrs)
-        g = self.gains(inp.ws2)
-        x, err = run_loop(inp, g)
-        return _estimate(self.name, inp.t, x[:, 0] + inp.h0, x[:, 1],
-                         time.perf_counter() - t0, self.config,
-                         {"gains": g, "uses": "imu+baro", "accel_bias_up_final":
-                          float(x[-1, 2]), "loop_error_rms_m": float(np.sqrt(np.mean(err**2)))})
+    def _extra_info(self, x: FloatArray) -> dict[str, Any]:
+        return {"accel_bias_up_final": float(x[-1, 2])}
