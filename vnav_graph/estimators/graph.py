@@ -72,6 +72,18 @@ from .graph_solve import (  # noqa: F401 (re-exported)
     _normal_equations,
 )
 
+
+def single_thread_blas() -> Any:
+    """Context limiting BLAS to one thread. The solver's BLAS work is many small batched
+    products and one banded Cholesky; with OpenBLAS's default two threads on this 2-core
+    machine, one busy core made the 10-minute batch solve 0.27 → 0.34 s (ratio to the
+    single-threaded C++ floor 2.0 → 2.5), single-threaded it stayed at 0.28 s; idle, both
+    take the same time (``docs/graph.md``)."""
+    from threadpoolctl import threadpool_limits
+
+    return threadpool_limits(limits=1, user_api="blas")
+
+
 # ----------------------------------------------------------------------------------------
 # Outputs
 
@@ -224,6 +236,10 @@ class GraphBatch:
         self.config = config or GraphConfig()
 
     def run(self, drive: Drive) -> Estimate:
+        with single_thread_blas():
+            return self._run(drive)
+
+    def _run(self, drive: Drive) -> Estimate:
         t0 = time.perf_counter()
         P = _setup(drive, self.config)
         pri = _baro_priors(P.baro_spec)

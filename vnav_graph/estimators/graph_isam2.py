@@ -169,6 +169,11 @@ class GraphISAM2:
 
     def _run(self, drive: Drive, cfg: g.GraphConfig, robust: bool, t_start: float,
              fallback: str | None) -> Estimate:
+        with g.single_thread_blas():
+            return self._run_pass(drive, cfg, robust, t_start, fallback)
+
+    def _run_pass(self, drive: Drive, cfg: g.GraphConfig, robust: bool, t_start: float,
+                  fallback: str | None) -> Estimate:
         P = g._setup(drive, cfg)
         pri = g._baro_priors(P.baro_spec)
         has_baro = drive.baro is not None
