@@ -28,7 +28,7 @@ def _load(data_dir: Path, rel: str):  # noqa: ANN202
 def test_loiter_gap_detected(data_dir: Path) -> None:
     d = _load(data_dir, LOITER)
     P = g._setup(d, g.GraphConfig())
-    gap = gi.imu_gaps(d.imu.t, P.kf_idx)
+    gap = g.imu_gaps(d.imu.t, P.kf_idx)
     # the log has exactly one IMU logging gap (after the crash), 24.09 s long
     k = np.flatnonzero(gap)
     assert k.size == 1

@@ -44,7 +44,7 @@ from ..types import (
 )
 from . import graph_factors as gf
 from . import graph_linalg as gla
-from .graph_init import _initial_states, _level  # noqa: F401 (re-exported)
+from .graph_init import _initial_states  # noqa: F401 (re-exported)
 
 # the problem and solver pieces live in graph_problem / graph_solve (size); graph_isam2,
 # benchmarks and tests reach them through this module
@@ -56,6 +56,7 @@ from .graph_problem import (  # noqa: F401 (re-exported)
     _gravity_delta,
     _hessian_pieces,
     _keyframe_fix_factors,
+    _level,
     _noise,
     _pims_for,
     _preintegrate,
@@ -63,6 +64,8 @@ from .graph_problem import (  # noqa: F401 (re-exported)
     _Problem,
     _setup,
     _states_from_values,
+    gap_factors,
+    imu_gaps,
 )
 from .graph_solve import (  # noqa: F401 (re-exported)
     _BatchResult,
@@ -71,6 +74,21 @@ from .graph_solve import (  # noqa: F401 (re-exported)
     _Layout,
     _normal_equations,
 )
+
+
+def _solver_warnings(res: _BatchResult, cfg: GraphConfig, what: str = "Gauss-Newton"
+                     ) -> list[str]:
+    """User-facing warning for a solve that did not converge (``info["warnings"]``)."""
+    if res.stop == "max_iterations":
+        return [f"{what} stopped at max_iterations={cfg.max_iterations} per solve without "
+                f"converging (final ½χ² {res.cost:.6g}); the estimate may be off — raise "
+                "GraphConfig.max_iterations"]
+    if res.stop == "no_descent":
+        return [f"{what} found no step that lowers the cost (Levenberg-Marquardt damping up "
+                f"to 1e3, final ½χ² {res.cost:.6g}): a flat or strongly nonlinear direction "
+                "(e.g. heading without motion); the estimate is a stationary point of "
+                "uncertain quality"]
+    return []
 
 
 def single_thread_blas() -> Any:
@@ -254,11 +272,8 @@ class GraphBatch:
         out = _outputs(P, res, pri, K(0) if drive.baro is not None else None)
         t4 = time.perf_counter()
         info = {"keyframes": P.n_kf, "iterations": res.iterations, "final_cost": res.cost,
-                "converged": res.converged,
-                "warnings": [] if res.converged else [
-                    f"Gauss-Newton stopped at max_iterations={self.config.max_iterations} "
-                    f"per solve without converging (final ½χ² {res.cost:.6g}); the estimate "
-                    "may be off — raise GraphConfig.max_iterations"],
+                "converged": res.converged, "stop": res.stop,
+                "warnings": _solver_warnings(res, self.config),
                 "baro_bias_lag_s": res.bias_lag,
                 "gnss_rejected": P.gnss_rejected, "gnss_rejected_pregate": P.g_rej_pre,
                 "gnss_rejected_postsolve": P.g_rej_post,

@@ -11,7 +11,7 @@ from ..types import (
     FloatArray,
 )
 from . import graph_factors as gf
-from .graph_problem import _Problem
+from .graph_problem import _level, _Problem
 
 
 def _so3_exp(phi: FloatArray) -> FloatArray:
@@ -122,12 +122,5 @@ def _triad(f_b: FloatArray, x_b: FloatArray, f_t: FloatArray, v_t: FloatArray) -
     mb = np.column_stack([b1, b2, np.cross(b1, b2)])
     mn = np.column_stack([n1, n2, np.cross(n1, n2)])
     return mn @ mb.T
-
-
-def _level(f_b: FloatArray) -> FloatArray:
-    """Roll/pitch from a static specific force, yaw 0."""
-    roll = np.arctan2(-f_b[1], -f_b[2])
-    pitch = np.arctan2(f_b[0], np.hypot(f_b[1], f_b[2]))
-    return gtsam.Rot3.Ypr(0.0, pitch, roll).matrix()
 
 

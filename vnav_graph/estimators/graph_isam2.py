@@ -44,33 +44,6 @@ from ..types import Drive, Estimate, Trajectory
 from . import graph as g
 from . import graph_factors as gf
 
-# logging gaps: an interval whose largest IMU sample spacing exceeds
-# max(GAP_MIN_S, GAP_FACTOR × median spacing) gets random-walk factors instead of an IMU factor
-GAP_MIN_S = 2.0
-GAP_FACTOR = 20.0
-GAP_VEL_SD = 5.0  # m/s, unknown velocity change folded into the position random walk
-GAP_ACCEL_SD = 2.0  # m/s², white acceleration level over the gap
-GAP_TILT_SD = 0.2  # rad, roll/pitch of the re-levelling prior after a gap
-GAP_YAW_SD = 0.5  # rad, yaw after a gap: kept from before it, loosely
-
-
-def imu_gaps(t: np.ndarray, kf_idx: np.ndarray) -> np.ndarray:
-    """Boolean (n_kf − 1,): interval k contains an IMU logging gap.
-
-    A gap is a sample spacing above max(``GAP_MIN_S``, ``GAP_FACTOR`` × median spacing).
-    """
-    dt = np.diff(t)
-    if dt.size == 0:
-        return np.zeros(max(kf_idx.size - 1, 0), bool)
-    thr = max(GAP_MIN_S, GAP_FACTOR * float(np.median(dt)))
-    big = np.flatnonzero(dt > thr)  # sample j → j+1
-    k = np.searchsorted(kf_idx, big, side="right") - 1
-    out = np.zeros(max(kf_idx.size - 1, 0), bool)
-    k = k[(k >= 0) & (k < out.size)]
-    out[k] = True
-    return out
-
-
 # averaged low-rate IMU logs (median spacing ≥ LOW_RATE_DT, e.g. the 1 Hz phone logs): a
 # keyframe every sample made a 93-min log take 5563 updates (213 s online), and after its 37 s
 # GNSS gap the typed thresholds relinearised ~140 variables per update; 5 s keyframes and
@@ -223,7 +196,7 @@ class GraphISAM2:
         gk = np.clip(np.searchsorted(P.t_kf, P.g_t[g_between], side="right") - 1, 0, nk - 2)
         pims: list[Any] = []
         imu_t = drive.imu.t
-        gap = imu_gaps(imu_t, P.kf_idx)
+        gap = g.imu_gaps(imu_t, P.kf_idx)
         upd_ms = np.zeros(nk - 1)
         # per update: preintegration, interval term, isam.update, estimate read-back [ms];
         # variables relinearised, variables re-eliminated
@@ -256,19 +229,7 @@ class GraphISAM2:
             nf = gtsam.NonlinearFactorGraph()
             nv = gtsam.Values()
             if gap[k]:
-                x1, v1, gap_sd_p, gap_f = self._gap_factors(P, k, rot, pos, vel)
-                # attitude after the gap: re-levelled from the mean specific force of the
-                # first 0.5 s after it (yaw 0) — the vehicle may have been flipped (Erle
-                # crash log: f_z +9.8 before, −9.8 after) and the weak factors cannot pull a
-                # 180° error back inside Gauss-Newton's basin
-                j0 = int(P.kf_idx[k + 1])
-                j1 = max(int(np.searchsorted(imu_t, imu_t[j0] + 0.5)), j0 + 1)
-                lev = gtsam.Rot3(g._level(drive.imu.accel_b[j0:j1].mean(axis=0))).ypr()
-                yaw = gtsam.Rot3(rot[k]).ypr()[0]
-                x1 = gtsam.Pose3(gtsam.Rot3.Ypr(yaw, lev[1], lev[2]), x1.translation())
-                nf.add(gtsam.PriorFactorPose3(
-                    X(k + 1), x1, g._noise([GAP_TILT_SD, GAP_TILT_SD, GAP_YAW_SD]
-                                           + [gap_sd_p] * 3)))
+                x1, v1, gap_f = g.gap_factors(P, k, rot, pos, vel)
                 nv.insert(X(k + 1), x1)
                 nv.insert(V(k + 1), v1)
                 for f in gap_f:
@@ -349,6 +310,7 @@ class GraphISAM2:
             isam_k = est.atVector(K(j_last)).tolist()
         info = {
             "keyframes": nk, "iterations_final": res.iterations, "converged_final": res.converged,
+            "stop_final": res.stop,
             "gnss_rejected": P.gnss_rejected, "gnss_rejected_pregate": P.g_rej_pre,
             "gnss_rejected_postsolve": P.g_rej_post,
             "observability": out["observability"],
@@ -361,9 +323,7 @@ class GraphISAM2:
             "isam2_last_segment_calibration": isam_k,
             "segments": int(seg[-1]) + 1,
             "isam2_fallback": fallback,
-            "warnings": ([] if res.converged else [
-                f"final smoothing pass stopped at max_iterations={cfg.max_iterations} per "
-                f"solve without converging (final ½χ² {res.cost:.6g})"])
+            "warnings": g._solver_warnings(res, cfg, "final smoothing pass")
             + ([] if fallback is None else [
                 f"iSAM2 update failed and was retried with dogleg ({fallback})"]),
             "isam2_settings": {"keyframe_dt": cfg.keyframe_dt, "dogleg": robust,
@@ -436,49 +396,6 @@ class GraphISAM2:
             lin.insert(K(j), np.asarray(cal[j], float))
         jf = gtsam.JacobianFactor(gtsam.HessianFactor(gfg))
         return gtsam.LinearContainerFactor(jf, lin), baro_next
-
-    @staticmethod
-    def _gap_factors(P: Any, k: int, rot: Any, pos: Any, vel: Any
-                     ) -> tuple[Any, Any, float, list[Any]]:
-        """Weak random-walk factors replacing the IMU factor over a logging gap.
-
-        A gap of T seconds with no IMU samples carries no inertial information (one
-        "sample" spanning it is usually a transient — on the Erle log the crash spike — and
-        a CombinedImuFactor built from it asserts a 200 m/s velocity change with a σ of
-        0.6 m/s). Instead, with a_rw = ``GAP_ACCEL_SD``: v_{k+1} − v_k ~ N(0, (a_rw T)²),
-        b_{k+1} − b_k ~ N(0, q_b T) with the bias PSD q_b of the preintegration (Forster et
-        al. 2017, Eq. 48), and a re-alignment prior on X(k+1) (added by the caller): roll and
-        pitch levelled from the mean specific force of the first 0.5 s after the gap (σ
-        ``GAP_TILT_SD``; the Erle crash log is upside down before the gap and level after
-        it), yaw kept from before the gap (σ ``GAP_YAW_SD``), position at the last GNSS fix at
-        or before t_{k+1} (within 1.5 s; else constant velocity) with
-        σ_p = v_sd T + ½ a_rw T². Every new variable stays constrained, so the iSAM2 system
-        stays positive definite.
-
-        Returns (Pose3 initial value of X(k+1), velocity initial value (3,), σ_p [m],
-        factors).
-        """
-        T = float(P.t_kf[k + 1] - P.t_kf[k])
-        p1 = pos[k] + vel[k] * T
-        v1 = vel[k].copy()
-        sel = np.flatnonzero(P.g_use & (P.g_t <= P.t_kf[k + 1] + 1e-9)
-                             & (P.g_t > P.t_kf[k + 1] - 1.5))
-        if sel.size:
-            i = sel[-1]
-            p1 = P.g_pos[i] - rot[k] @ P.lever
-            if P.g_vel is not None:
-                v1 = P.g_vel[i].copy()
-        x1 = gtsam.Pose3(gtsam.Rot3(rot[k]), p1)
-        sd_p = GAP_VEL_SD * T + 0.5 * GAP_ACCEL_SD * T * T
-        bp = P.params
-        q_b = np.r_[np.diag(bp.getBiasAccCovariance()), np.diag(bp.getBiasOmegaCovariance())]
-        fs = [
-            gtsam.BetweenFactorVector(V(k), V(k + 1), np.zeros(3),
-                                      g._noise([GAP_ACCEL_SD * T] * 3)),
-            gtsam.BetweenFactorConstantBias(B(k), B(k + 1), gtsam.imuBias.ConstantBias(),
-                                            g._noise(np.sqrt(q_b * T))),
-        ]
-        return x1, v1, sd_p, fs
 
     @staticmethod
     def _online_trajectory(P: Any, online: Any) -> Trajectory:

@@ -20,6 +20,33 @@ from ..types import (
 )
 from . import graph_factors as gf
 
+# logging gaps: an interval whose largest IMU sample spacing exceeds
+# max(GAP_MIN_S, GAP_FACTOR × median spacing) gets random-walk factors instead of an IMU factor
+GAP_MIN_S = 2.0
+GAP_FACTOR = 20.0
+GAP_VEL_SD = 5.0  # m/s, unknown velocity change folded into the position random walk
+GAP_ACCEL_SD = 2.0  # m/s², white acceleration level over the gap
+GAP_TILT_SD = 0.2  # rad, roll/pitch of the re-levelling prior after a gap
+GAP_YAW_SD = 0.5  # rad, yaw after a gap: kept from before it, loosely
+
+
+def imu_gaps(t: np.ndarray, kf_idx: np.ndarray) -> np.ndarray:
+    """Boolean (n_kf − 1,): interval k contains an IMU logging gap.
+
+    A gap is a sample spacing above max(``GAP_MIN_S``, ``GAP_FACTOR`` × median spacing).
+    """
+    dt = np.diff(t)
+    if dt.size == 0:
+        return np.zeros(max(kf_idx.size - 1, 0), bool)
+    thr = max(GAP_MIN_S, GAP_FACTOR * float(np.median(dt)))
+    big = np.flatnonzero(dt > thr)  # sample j → j+1
+    k = np.searchsorted(kf_idx, big, side="right") - 1
+    out = np.zeros(max(kf_idx.size - 1, 0), bool)
+    k = k[(k >= 0) & (k < out.size)]
+    out[k] = True
+    return out
+
+
 
 @dataclass(frozen=True)
 class GraphConfig:
@@ -343,6 +370,62 @@ def _gm_factor(k: int, dt: float, pri: dict[str, float]) -> Any:
     return gtsam.LinearContainerFactor(jf, lin)
 
 
+
+def _level(f_b: FloatArray) -> FloatArray:
+    """Roll/pitch from a static specific force, yaw 0."""
+    roll = np.arctan2(-f_b[1], -f_b[2])
+    pitch = np.arctan2(f_b[0], np.hypot(f_b[1], f_b[2]))
+    return gtsam.Rot3.Ypr(0.0, pitch, roll).matrix()
+
+
+def gap_factors(P: _Problem, k: int, rot: FloatArray, pos: FloatArray, vel: FloatArray
+                ) -> tuple[Any, FloatArray, list[Any]]:
+    """Weak factors replacing the IMU factor over a logging gap in interval k (both smoothers).
+
+    A gap of T seconds with no IMU samples carries no inertial information (one "sample"
+    spanning it is usually a transient — on the Erle log the crash spike — and a
+    CombinedImuFactor built from it asserts a 200 m/s velocity change with a σ of 0.6 m/s;
+    in the batch graph, Loiter_RTL's 24 s gap then pulled the baro scale to −28 %). Instead,
+    with a_rw = ``GAP_ACCEL_SD``: v_{k+1} − v_k ~ N(0, (a_rw T)²), b_{k+1} − b_k ~ N(0, q_b T)
+    with the bias PSD q_b of the preintegration (Forster et al. 2017, Eq. 48), and a
+    re-alignment prior on X(k+1): roll and pitch levelled from the mean specific force of the
+    first 0.5 s after the gap (σ ``GAP_TILT_SD``; the vehicle may have been flipped — Erle
+    crash log: f_z +9.8 before, −9.8 after — and the weak factors cannot pull a 180° error
+    back inside Gauss-Newton's basin), yaw kept from before the gap (σ ``GAP_YAW_SD``),
+    position at the last GNSS fix at or before t_{k+1} (within 1.5 s; else constant
+    velocity) with σ_p = v_sd T + ½ a_rw T². Every new variable stays constrained.
+
+    ``rot, pos, vel``: current keyframe states (only index k is read). Returns (Pose3 value of
+    X(k+1), velocity value (3,), factors).
+    """
+    T = float(P.t_kf[k + 1] - P.t_kf[k])
+    p1 = pos[k] + vel[k] * T
+    v1 = np.array(vel[k], dtype=float)
+    sel = np.flatnonzero(P.g_use & (P.g_t <= P.t_kf[k + 1] + 1e-9)
+                         & (P.g_t > P.t_kf[k + 1] - 1.5))
+    if sel.size:
+        i = sel[-1]
+        p1 = P.g_pos[i] - rot[k] @ P.lever
+        if P.g_vel is not None:
+            v1 = P.g_vel[i].copy()
+    imu_t = P.drive.imu.t
+    j0 = int(P.kf_idx[k + 1])
+    j1 = max(int(np.searchsorted(imu_t, imu_t[j0] + 0.5)), j0 + 1)
+    lev = gtsam.Rot3(_level(P.drive.imu.accel_b[j0:j1].mean(axis=0))).ypr()
+    yaw = gtsam.Rot3(rot[k]).ypr()[0]
+    x1 = gtsam.Pose3(gtsam.Rot3.Ypr(yaw, lev[1], lev[2]), p1)
+    sd_p = GAP_VEL_SD * T + 0.5 * GAP_ACCEL_SD * T * T
+    bp = P.params
+    q_b = np.r_[np.diag(bp.getBiasAccCovariance()), np.diag(bp.getBiasOmegaCovariance())]
+    fs = [
+        gtsam.PriorFactorPose3(X(k + 1), x1,
+                               _noise([GAP_TILT_SD, GAP_TILT_SD, GAP_YAW_SD] + [sd_p] * 3)),
+        gtsam.BetweenFactorVector(V(k), V(k + 1), np.zeros(3), _noise([GAP_ACCEL_SD * T] * 3)),
+        gtsam.BetweenFactorConstantBias(B(k), B(k + 1), gtsam.imuBias.ConstantBias(),
+                                        _noise(np.sqrt(q_b * T))),
+    ]
+    return x1, v1, fs
+
 # ----------------------------------------------------------------------------------------
 # Interval terms → GTSAM Hessian blocks
 
@@ -463,12 +546,15 @@ def _hessian_pieces(keys: list[int], lam: FloatArray, eta: FloatArray,
 def _build_batch_graph(P: _Problem, rot: FloatArray, pos: FloatArray, vel: FloatArray,
                        pims: list[Any], pri: dict[str, float],
                        calib_of_kf: np.ndarray) -> tuple[Any, Any]:
-    """C++ part of the batch graph: priors, CombinedImuFactors and the Gauss-Markov links.
-    Every GNSS fix (on keyframe epochs too) enters as an interval term so that the gates can
-    drop it without rebuilding the graph."""
+    """C++ part of the batch graph: priors, CombinedImuFactors (``gap_factors`` over IMU
+    logging gaps) and the Gauss-Markov links. Every GNSS fix (on keyframe epochs too) enters
+    as an interval term so that the gates can drop it without rebuilding the graph."""
     graph = _prior_factors(P, rot[0], pos[0], vel[0], pri, K(0))
     vals = gtsam.Values()
     nk = P.n_kf
+    gap = imu_gaps(P.drive.imu.t, P.kf_idx)
+    if gap.any():
+        rot, pos, vel = rot.copy(), pos.copy(), vel.copy()
     for k in range(nk):
         vals.insert(X(k), gtsam.Pose3(gtsam.Rot3(rot[k]), pos[k]))
         vals.insert(V(k), vel[k])
@@ -476,8 +562,14 @@ def _build_batch_graph(P: _Problem, rot: FloatArray, pos: FloatArray, vel: Float
         if P.drive.baro is not None:
             vals.insert(C(k), np.zeros(1))
         if k + 1 < nk:
-            graph.add(gtsam.CombinedImuFactor(X(k), V(k), X(k + 1), V(k + 1), B(k), B(k + 1),
-                                              pims[k]))
+            if gap[k]:
+                x1, v1, fs = gap_factors(P, k, rot, pos, vel)
+                for f in fs:
+                    graph.add(f)
+                rot[k + 1], pos[k + 1], vel[k + 1] = x1.rotation().matrix(), x1.translation(), v1
+            else:
+                graph.add(gtsam.CombinedImuFactor(X(k), V(k), X(k + 1), V(k + 1), B(k),
+                                                  B(k + 1), pims[k]))
             if P.drive.baro is not None:
                 graph.add(_gm_factor(k, float(P.t_kf[k + 1] - P.t_kf[k]), pri))
     if P.drive.baro is not None:

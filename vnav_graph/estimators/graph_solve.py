@@ -113,7 +113,8 @@ class _BatchResult:
     rows: gf.IntervalRows  # interval terms linearised at ``values``
     fac: gla.ArrowFactor | None = None  # factorised normal equations at ``values``, if kept
     bias_lag: float = 0.0  # baro-bias read time offset of the last solve (baro_rows)
-    converged: bool = True  # False: stopped by max_iterations (or no descent found)
+    converged: bool = True  # False: stopped by max_iterations, or no step lowered the cost
+    stop: str = "converged"  # "converged" | "max_iterations" | "no_descent"
 
 
 @dataclass
@@ -209,6 +210,7 @@ def _gn_core(P: _Problem, lay: _Layout, graph: Any, vals: Any, calib_of_kf: np.n
     fac = None
     mu = 0.0
     converged = False
+    failed = False
     for it in range(1, P.cfg.max_iterations + 1):
         converged = False
         ab, bm, dm, g = _normal_equations(P, lay, graph, vals, rows)
@@ -267,7 +269,8 @@ def _gn_core(P: _Problem, lay: _Layout, graph: Any, vals: Any, calib_of_kf: np.n
         if mu == 0.0 and (abs(rel) < P.cfg.rel_tol or abs(cost_prev - cost) < P.cfg.abs_tol):
             converged = True
             break
-    return _BatchResult(vals, graph, cost, it, calib_of_kf, lay, rows, fac, lag, converged)
+    stop = "converged" if converged else ("no_descent" if failed else "max_iterations")
+    return _BatchResult(vals, graph, cost, it, calib_of_kf, lay, rows, fac, lag, converged, stop)
 
 
 def _gauss_newton(P: _Problem, graph: Any, vals: Any, calib_of_kf: np.ndarray,
