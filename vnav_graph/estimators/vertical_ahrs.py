@@ -1,0 +1,290 @@
+"""Numba kernels of the GNSS-aided AHRS that feeds the classical vertical estimators.
+
+The method, its parameters and its tested accuracy are described in ``vertical_input`` (which
+assembles the kernel inputs and owns ``AhrsConfig``); this module holds only the compiled
+loops: ``_ahrs`` (levelling, gyro integration with the shared strapdown step, velocity-matching
+tilt feedback, gap handling) and ``_poly_velocity`` (GNSS velocity from positions)."""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from .strapdown import quat_exp, quat_mul, quat_to_dcm, strapdown_step
+
+
+@njit(cache=True)
+def _wrap_nb(a):
+    return (a + np.pi) % (2.0 * np.pi) - np.pi
+
+
+@njit(cache=True)
+def _rpy_quat(r, p, y):
+    """q_nb (w, x, y, z) of roll r, pitch p, yaw y (z-y-x Euler angles)."""
+    cr, sr = np.cos(0.5 * r), np.sin(0.5 * r)
+    cp, sp = np.cos(0.5 * p), np.sin(0.5 * p)
+    cy, sy = np.cos(0.5 * y), np.sin(0.5 * y)
+    return np.array([cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy,
+                     cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy])
+
+
+@njit(cache=True)
+def _clamp(x, m):
+    return m if x > m else (-m if x < -m else x)
+
+
+@njit(cache=True)
+def _ahrs(t, gyro, accel, q0, lla_i, vel_i, sdv_i, t_g, v_g, g_g, cor_g, ok_g, r_g, vert_g,
+          use_g, kp, ki, k_yaw, ki_yaw, v_min, max_corr, max_fb, a_static, t_filt, gap,
+          gate2, sd0, sd_bg, sd_yaw, r_nom, reinit_s, fb_after, lvl_win, lvl_tau, st_rate,
+          st_acc, g_nom, imu_gap, relevel):
+    """Numba kernel (module docstring steps 2-8).
+
+    lla_i, vel_i (N, 3): GNSS position/velocity interpolated to the IMU epochs (latitude,
+    height, course); sdv_i (N,) horizontal velocity σ there (inf in outages); t_g (M,),
+    v_g (M, 3) reference velocities at the (thinned) fixes, g_g (M,) gravity, cor_g (M, 3)
+    (2ω_ie+ω_en)×v, ok_g (M,) interval [j−1, j] not across an outage, r_g (M,) horizontal
+    residual variance per axis of that interval [(m/s²)²], vert_g (M,) its vertical component
+    is trusted, use_g (M,) the fix's velocity is usable (σ ≤ sd_v_max); relevel (N, 2)
+    roll/pitch from static samples after an IMU gap ending at that epoch (NaN elsewhere).
+    Returns q (N, 4), f_n (N, 3), b̂_g (N, 3), propagated horizontal velocity (N, 2) and the
+    counters [accepted, rejected, reinit, unusable, vertical dropped, accel-level, imu gaps].
+    """
+    n = t.size
+    m = t_g.size
+    q = np.empty((n, 4))
+    bg_out = np.empty((n, 3))
+    f_n = np.empty((n, 3))
+    vp_out = np.empty((n, 2))
+    cnt = np.zeros(7, dtype=np.int64)
+    q[0] = q0
+    bg = np.zeros(3)
+    psi = np.zeros(3)  # current attitude-error estimate (n frame), applied as a rate
+    c = quat_to_dcm(q0)
+    f_n[0] = c @ accel[0]
+    cum = np.zeros(3)  # ∫ f_n dt from t[0]
+    cum_prev = np.zeros(3)
+    cum_arr = np.zeros((n, 3))  # prefix integral of f_n (for the accelerometer fallback)
+    gyr_arr = np.zeros((n, 3))  # prefix integral of the raw gyro
+    acc_arr = np.zeros((n, 3))  # prefix integral of the raw specific force
+    # horizontal velocity propagated from the last usable GNSS velocity (Coriolis, ω_en)
+    vp = np.zeros(2)
+    vp_valid = False
+    j = 0
+    while j < m and t_g[j] <= t[0]:
+        if use_g[j]:
+            vp[0] = v_g[j, 0]
+            vp[1] = v_g[j, 1]
+            vp_valid = True
+        j += 1
+    vp_out[0] = vp
+    f_at_last = np.zeros(3)  # ∫ f_n up to the previous fix time
+    have_last = j > 0  # a fix at or before t[0]: integral there is 0
+    yaw_done = False
+    skip = False
+    psi_until = -np.inf
+    t_acc = t[0]  # last accepted levelling update (GNSS or fallback)
+    t_gnss_acc = -np.inf  # last accepted GNSS levelling update
+    t_vel_ok = -np.inf  # last fix whose velocity was usable and consistent
+    t_gap_end = -np.inf  # end of the last IMU logging gap
+    n_rej = 0
+    t_rej0 = 0.0
+    t_lvl = t[0]
+    ks = 0  # start index of the fallback window
+    for k in range(n - 1):
+        dt = t[k + 1] - t[k]
+        c = quat_to_dcm(q[k])
+        if t[k] > psi_until:  # no fix for a while (outage): no tilt correction
+            psi[0] = 0.0
+            psi[1] = 0.0
+        # PI feedback, tilt gains (kp, ki) on ψ_x, ψ_y and heading gains (k_yaw, ki_yaw) on ψ_z
+        corr_p = c.T @ np.array([kp * psi[0], kp * psi[1], k_yaw * psi[2]])
+        corr_i = c.T @ np.array([ki * psi[0], ki * psi[1], ki_yaw * psi[2]])
+        vel_k = np.array([vp[0], vp[1], vel_i[k, 2]])
+        if dt > imu_gap:
+            # logging gap: no rate samples inside it (the vehicle may have been handled,
+            # e.g. a crash and restart on the loiter log). Re-level roll/pitch from the
+            # samples after the gap when they are static (relevel[k+1] finite), keep the yaw
+            # and the bias; otherwise hold the attitude. No velocity matching over any
+            # interval that touches the gap.
+            if np.isfinite(relevel[k + 1, 0]):
+                c0 = quat_to_dcm(q[k])
+                q[k + 1] = _rpy_quat(relevel[k + 1, 0], relevel[k + 1, 1],
+                                     np.arctan2(c0[1, 0], c0[0, 0]))
+            else:
+                q[k + 1] = q[k]
+            psi[0] = 0.0
+            psi[1] = 0.0
+            t_gap_end = t[k + 1]
+            cnt[6] += 1
+        else:
+            bg = bg + corr_i * dt
+            w0 = gyro[k] - bg - corr_p
+            w1 = gyro[k + 1] - bg - corr_p
+            _, _, qn = strapdown_step(lla_i[k], vel_k, q[k], w0, w1, accel[k], accel[k + 1],
+                                      dt)
+            q[k + 1] = qn
+        bg_out[k] = bg
+        qn = q[k + 1]
+        c1 = quat_to_dcm(qn)
+        f_n[k + 1] = c1 @ accel[k + 1]
+        cum_prev = cum.copy()
+        cum = cum + 0.5 * (f_n[k] + f_n[k + 1]) * dt
+        cum_arr[k + 1] = cum
+        gyr_arr[k + 1] = gyr_arr[k] + 0.5 * (gyro[k] + gyro[k + 1]) * dt
+        acc_arr[k + 1] = acc_arr[k] + 0.5 * (accel[k] + accel[k + 1]) * dt
+        if dt <= imu_gap:
+            vp[0] += 0.5 * (f_n[k, 0] + f_n[k + 1, 0]) * dt
+            vp[1] += 0.5 * (f_n[k, 1] + f_n[k + 1, 1]) * dt
+        # heading: one-time reset to the GNSS course, then proportional correction; only from
+        # a velocity that is usable (σ) and recently consistent with the IMU (gate)
+        vh = np.sqrt(vel_i[k + 1, 0] ** 2 + vel_i[k + 1, 1] ** 2)
+        yaw = np.arctan2(c1[1, 0], c1[0, 0])
+        v_thr = max(v_min, 5.0 * sdv_i[k + 1])
+        vel_trusted = t[k + 1] - t_vel_ok <= fb_after
+        if vh > v_thr and vel_trusted:
+            course = np.arctan2(vel_i[k + 1, 1], vel_i[k + 1, 0])
+            if not yaw_done:
+                dq = quat_exp(np.array([0.0, 0.0, _wrap_nb(course - yaw)]))
+                q[k + 1] = quat_mul(dq, qn)
+                yaw_done = True
+                psi[2] = 0.0
+                skip = True  # the current fix interval mixes two headings
+            else:
+                psi[2] = _clamp(_wrap_nb(yaw - course), max_corr)
+        else:
+            psi[2] = 0.0
+        # tilt: velocity matching at each GNSS fix passed in (t[k], t[k+1]]
+        while j < m and t_g[j] <= t[k + 1]:
+            a = (t_g[j] - t[k]) / dt
+            f_here = cum_prev + a * (cum - cum_prev)
+            usable = use_g[j] and use_g[j - 1] if j > 0 else False
+            if not usable:
+                cnt[3] += 1
+            elif have_last and ok_g[j] and not skip and t_g[j - 1] >= t_gap_end:
+                dtg = t_g[j] - t_g[j - 1]
+                f_meas = (f_here - f_at_last) / dtg
+                f_ref = (v_g[j] - v_g[j - 1]) / dtg + 0.5 * (cor_g[j] + cor_g[j - 1])
+                f_ref[2] -= 0.5 * (g_g[j] + g_g[j - 1])
+                if not vert_g[j]:
+                    # R5: vertical GNSS component not trusted: nominal vertical specific
+                    # force, residual from the horizontal components only
+                    f_ref[2] = -0.5 * (g_g[j] + g_g[j - 1])
+                    cnt[4] += 1
+                d = f_meas - f_ref
+                if not vert_g[j]:
+                    d[2] = 0.0
+                ah2 = f_ref[0] ** 2 + f_ref[1] ** 2
+                # before the heading is known a horizontal acceleration would be read as tilt
+                # (δf = ψ_z × a_h); then only quasi-static intervals level the platform
+                if not yaw_done and ah2 > a_static**2:
+                    psi[0] = 0.0
+                    psi[1] = 0.0
+                else:
+                    # R2: χ²₂ gate on the horizontal residual against its predicted spread
+                    sd_t = sd0 + sd_bg * (t_g[j] - t_acc)
+                    s_var = r_g[j] + (g_g[j] * sd_t) ** 2 + (sd_yaw**2) * ah2
+                    nu2 = (d[0] ** 2 + d[1] ** 2) / s_var
+                    accept = nu2 <= gate2
+                    if not accept:
+                        if n_rej == 0:
+                            t_rej0 = t_g[j]
+                        n_rej += 1
+                        if n_rej >= 2 and t_g[j] - t_rej0 >= reinit_s:
+                            accept = True
+                            cnt[2] += 1
+                        else:
+                            cnt[1] += 1
+                    if accept:
+                        n_rej = 0
+                        cnt[0] += 1
+                        cr = np.array([f_ref[1] * d[2] - f_ref[2] * d[1],
+                                       f_ref[2] * d[0] - f_ref[0] * d[2]])
+                        nf2 = f_ref[0] ** 2 + f_ref[1] ** 2 + f_ref[2] ** 2
+                        # R3: low-pass gain dtg/T_f, scaled by the inverse-variance weight
+                        w = r_nom / r_g[j] if r_g[j] > r_nom else 1.0
+                        alpha = (dtg / t_filt if dtg < t_filt else 1.0) * w
+                        for i in range(2):
+                            p = _clamp(cr[i] / nf2, max_corr)
+                            psi[i] = _clamp(psi[i] + alpha * (p - psi[i]), max_fb)
+                        psi_until = t_g[j] + gap * dtg
+                        t_acc = t_g[j]
+                        t_gnss_acc = t_g[j]
+                        t_vel_ok = t_g[j]
+            if use_g[j] and n_rej == 0:
+                # a usable velocity, not inside a run of gate rejections: trusted for the
+                # course and as the start of the propagated velocity (Coriolis, ω_en)
+                t_vel_ok = t_g[j]
+                vp[0] = v_g[j, 0]
+                vp[1] = v_g[j, 1]
+                vp_valid = True
+            f_at_last = f_here
+            have_last = True
+            skip = False
+            j += 1
+        # fallback (step 6): slow accelerometer levelling when GNSS gave nothing usable
+        tk = t[k + 1]
+        while ks < k + 1 and tk - t[ks + 1] >= lvl_win:
+            ks += 1
+        if (tk - t_gnss_acc > fb_after and tk - t_lvl >= 0.2 * lvl_win
+                and tk - t[ks] >= 0.8 * lvl_win and t[ks] >= t_gap_end):
+            t_lvl = tk
+            span = tk - t[ks]
+            w_m = (gyr_arr[k + 1] - gyr_arr[ks]) / span - bg
+            f_b = (acc_arr[k + 1] - acc_arr[ks]) / span
+            fbn = np.sqrt(f_b[0] ** 2 + f_b[1] ** 2 + f_b[2] ** 2)
+            wn = np.sqrt(w_m[0] ** 2 + w_m[1] ** 2 + w_m[2] ** 2)
+            if wn < st_rate and abs(fbn - g_nom) < st_acc:
+                fm = (cum_arr[k + 1] - cum_arr[ks]) / span
+                # reference (0, 0, −g): ψ_x = d_E/g, ψ_y = −d_N/g (horizontal residual only)
+                alpha = 0.2 * lvl_win / lvl_tau
+                if alpha > 1.0:
+                    alpha = 1.0
+                p0 = _clamp(fm[1] / g_nom, max_corr)
+                p1 = _clamp(-fm[0] / g_nom, max_corr)
+                psi[0] = _clamp(psi[0] + alpha * (p0 - psi[0]), max_fb)
+                psi[1] = _clamp(psi[1] + alpha * (p1 - psi[1]), max_fb)
+                psi_until = tk + 0.4 * lvl_win
+                t_acc = tk
+                cnt[5] += 1
+        vp_out[k + 1] = vp
+    bg_out[n - 1] = bg
+    if not vp_valid:
+        vp_out[:] = 0.0
+    return q, f_n, bg_out, vp_out, cnt
+
+
+@njit(cache=True)
+def _poly_velocity(t, p, sd, half, seg):
+    """Slope at each fix of a 1/σ²-weighted quadratic fit of p (M, 3) over the fixes of the
+    same segment within ±half seconds; σ of the slope from (XᵀWX)⁻¹. NaN where < 3 fixes."""
+    m = t.size
+    v = np.full((m, 3), np.nan)
+    sv = np.full((m, 3), np.inf)
+    a = 0
+    b = 0
+    for j in range(m):
+        while t[a] < t[j] - half or seg[a] != seg[j]:
+            a += 1
+        if b < j:
+            b = j
+        while b + 1 < m and t[b + 1] <= t[j] + half and seg[b + 1] == seg[j]:
+            b += 1
+        if b - a + 1 < 3:
+            continue
+        for ax in range(3):
+            xtx = np.zeros((3, 3))
+            xty = np.zeros(3)
+            for i in range(a, b + 1):
+                w = 1.0 / (sd[i, ax] * sd[i, ax])
+                dtt = t[i] - t[j]
+                x = np.array([1.0, dtt, dtt * dtt])
+                xtx += w * np.outer(x, x)
+                xty += w * x * p[i, ax]
+            if abs(np.linalg.det(xtx)) < 1e-300:
+                continue
+            cov = np.linalg.inv(xtx)
+            beta = cov @ xty
+            v[j, ax] = beta[1]
+            sv[j, ax] = np.sqrt(cov[1, 1])
+    return v, sv
