@@ -59,7 +59,6 @@ def builtin_floor(drive: Any) -> float:
     alt = drive.baro.altitude
     j = np.clip(np.searchsorted(bt, P.t_kf), 0, bt.size - 1)
     t0 = time.perf_counter()
-    graph = g._prior_factors(P, rot[0], pos[0], vel[0], pri, 0)
     graph = gtsam.NonlinearFactorGraph()
     s = P.imu_spec
     graph.add(gtsam.PriorFactorPose3(X(0), gtsam.Pose3(gtsam.Rot3(rot[0]), pos[0]),

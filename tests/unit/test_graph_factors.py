@@ -88,7 +88,8 @@ def test_baro_rows_jacobian_matches_finite_differences():
     z = 500.0 + rng.normal(size=t_s.size)
 
     def rows(s):
-        return gf.baro_rows(dense, s, t_s, z, 0.5, 500.0, ORIGIN)
+        # bias read at t_s − 0.15 s, the latency of the linearisation point (as in the solver)
+        return gf.baro_rows(dense, s, t_s, z, 0.5, 500.0, ORIGIN, bias_lag=0.15)
 
     # 2e-3 relative: the latency column is the time derivative of an interpolant that is
     # piecewise linear between 100 Hz samples (slope vs mid-interval velocity)

@@ -116,7 +116,7 @@ def _output_times(P: _Problem) -> FloatArray:
 
 
 def _trajectory(P: _Problem, st: gf.KeyframeStates, vals: Any, t_q: FloatArray) -> Trajectory:
-    k = np.clip(np.searchsorted(P.t_kf, t_q, side="right") - 1, 0, P.n_kf - 2)
+    k = gf.interval_of(P.t_kf, t_q)
     ip = gf.interpolate(P.dense, st, t_q, k)
     lla = ned_to_lla(ip["p"], P.origin)
     c_tn = gf.rot_t_n(lla, P.origin)

@@ -253,6 +253,12 @@ class IntervalRows:
     jac: FloatArray
 
 
+def interval_of(t_kf: FloatArray, t: FloatArray) -> np.ndarray:
+    """Index k of the keyframe interval [t_k, t_{k+1}) holding each time (clipped to the first
+    and last interval)."""
+    return np.clip(np.searchsorted(t_kf, t, side="right") - 1, 0, t_kf.size - 2)
+
+
 def interpolate(
     dense: DenseIncrements, st: KeyframeStates, t_q: FloatArray, k: np.ndarray,
     incr: tuple[FloatArray, FloatArray, FloatArray] | None = None, with_rot: bool = True,
@@ -305,7 +311,7 @@ def _pos_jacobian(st: KeyframeStates, k: np.ndarray, ip: dict[str, FloatArray],
 
 def baro_rows(
     dense: DenseIncrements, st: KeyframeStates, t_s: FloatArray, z: FloatArray, sd: float,
-    h0: float, origin_lla: FloatArray, bias_lag: float | None = None,
+    h0: float, origin_lla: FloatArray, bias_lag: float,
 ) -> IntervalRows:
     """Whitened baro rows for samples at ``t_s`` (M,) with altitudes ``z`` (M,) [m].
 
@@ -315,21 +321,21 @@ def baro_rows(
     The bias is read at t_b = t_s − ``bias_lag``, a time that does NOT move with τd:
     b = (1−α_b)·b_k + α_b·b_{k+1}, α_b = clip((t_b − t_k)/T, 0, 1). ``bias_lag`` should be
     the latency of the linearisation point, fixed for one Gauss-Newton solve. Reading b at
-    the moving t_d instead (``bias_lag=None``) adds −(b_{k+1} − b_k)/T to ∂/∂τd, a slope that
-    jumps at every keyframe (the estimated Gauss-Markov chain has ≈ σ_b·√(2T/τ_b) steps), so
-    the cost is kinked along τd and Gauss-Newton crawls along the τd–bias valley (measured:
-    11 instead of 4 iterations on a 1-hour drive). The shared model reads b at t_s; the chain
-    estimated with a lag is that b shifted by ``bias_lag`` (< 1 cm for τ_b ≥ minutes)."""
+    the moving t_d instead (the form before session 4) adds −(b_{k+1} − b_k)/T to ∂/∂τd, a
+    slope that jumps at every keyframe (the estimated Gauss-Markov chain has ≈ σ_b·√(2T/τ_b)
+    steps), so the cost is kinked along τd and Gauss-Newton crawls along the τd–bias valley
+    (measured: 11 instead of 4 iterations on a 1-hour drive). The shared model reads b at
+    t_s; the chain estimated with a lag is that b shifted by ``bias_lag`` (< 1 cm for τ_b ≥
+    minutes)."""
     t_kf = dense.t_kf
-    k_s = np.clip(np.searchsorted(t_kf, t_s, side="right") - 1, 0, t_kf.size - 2)
+    k_s = interval_of(t_kf, t_s)
     lat_s = st.latency[k_s]
     t_d = np.clip(t_s - lat_s, t_kf[0], t_kf[-1])
-    k = np.clip(np.searchsorted(t_kf, t_d, side="right") - 1, 0, t_kf.size - 2)
+    k = interval_of(t_kf, t_d)
     ip = interpolate(dense, st, t_d, k, with_rot=False)
     h, up = height_and_up(ip["p"], origin_lla)
     v_up = np.einsum("ni,ni->n", up, ip["v"])
-    alpha = ip["alpha"] if bias_lag is None else np.clip(
-        (t_s - bias_lag - t_kf[k]) / ip["T"], 0.0, 1.0)
+    alpha = np.clip((t_s - bias_lag - t_kf[k]) / ip["T"], 0.0, 1.0)
     s = st.scale[k_s]
     b = (1 - alpha) * st.baro_bias[k] + alpha * st.baro_bias[k + 1]
     pred = measure_baro(h, v_up, s, 0.0, b, h0)
@@ -347,9 +353,7 @@ def baro_rows(
     jac[:, COL_B0] = (1 - alpha) * jb[:, 4]
     jac[:, COL_B1] = alpha * jb[:, 4]
     jac[:, COL_S] = jb[:, 2]
-    # b read at the moving delayed time: ∂b/∂τd = −(b_{k+1} − b_k)/T; at t_s − bias_lag: 0
-    db_dtau = 0.0 if bias_lag is not None else -(st.baro_bias[k + 1] - st.baro_bias[k]) / ip["T"]
-    jac[:, COL_TAU] = jb[:, 0] * dh_dtau + jb[:, 4] * db_dtau
+    jac[:, COL_TAU] = jb[:, 0] * dh_dtau  # b is read at t_s − bias_lag: no τd dependence
     jac[:, COL_BA] = (jb[:, 0] * 0.5 * ip["tau"] * (ip["T"] - ip["tau"]))[:, None] * u_k
     return IntervalRows(k, (pred - z) / sd, jac / sd)
 
@@ -364,7 +368,7 @@ def gnss_rows(
     lever-arm rotation term is omitted) against ``vel_t`` (M, 3) [m/s]. ``incr``: the
     increments ``dense.at`` at the fixes (cached by the caller; they do not change)."""
     t_kf = dense.t_kf
-    k = np.clip(np.searchsorted(t_kf, t_g, side="right") - 1, 0, t_kf.size - 2)
+    k = interval_of(t_kf, t_g)
     lever = None if not np.any(lever_b) else np.asarray(lever_b, float)
     ip = interpolate(dense, st, t_g, k, incr, with_rot=lever is not None)
     m = t_g.size

@@ -193,7 +193,7 @@ class GraphISAM2:
         bt = drive.baro.t if has_baro else np.zeros(0)
         bz = drive.baro.altitude if has_baro else np.zeros(0)
         g_between = np.flatnonzero((P.g_kf == -1) & P.g_use)
-        gk = np.clip(np.searchsorted(P.t_kf, P.g_t[g_between], side="right") - 1, 0, nk - 2)
+        gk = gf.interval_of(P.t_kf, P.g_t[g_between])
         pims: list[Any] = []
         imu_t = drive.imu.t
         gap = g.imu_gaps(imu_t, P.kf_idx)

@@ -462,7 +462,7 @@ def _gnss_rows_of(P: _Problem, st: gf.KeyframeStates, idx: np.ndarray) -> gf.Int
     t_g = P.g_t[idx]
     # the IMU increments at the fixes depend on the fix times only: cached per fix set
     if P.g_incr is None or not np.array_equal(P.g_incr[0], idx):
-        k = np.clip(np.searchsorted(P.t_kf, t_g, side="right") - 1, 0, P.n_kf - 2)
+        k = gf.interval_of(P.t_kf, t_g)
         P.g_incr = (idx, P.dense.at(t_g, k))
     return gf.gnss_rows(
         P.dense, st, t_g, P.g_pos[idx], P.g_pos_sd[idx],
@@ -471,7 +471,7 @@ def _gnss_rows_of(P: _Problem, st: gf.KeyframeStates, idx: np.ndarray) -> gf.Int
 
 
 def _interval_rows(P: _Problem, st: gf.KeyframeStates, pri: dict[str, float],
-                   bias_lag: float | None) -> gf.IntervalRows:
+                   bias_lag: float) -> gf.IntervalRows:
     """Baro and GNSS interval rows; ``bias_lag``: see ``graph_factors.baro_rows``."""
     parts = []
     if P.drive.baro is not None:

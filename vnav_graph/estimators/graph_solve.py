@@ -113,8 +113,11 @@ class _BatchResult:
     rows: gf.IntervalRows  # interval terms linearised at ``values``
     fac: gla.ArrowFactor | None = None  # factorised normal equations at ``values``, if kept
     bias_lag: float = 0.0  # baro-bias read time offset of the last solve (baro_rows)
-    converged: bool = True  # False: stopped by max_iterations, or no step lowered the cost
     stop: str = "converged"  # "converged" | "max_iterations" | "no_descent"
+
+    @property
+    def converged(self) -> bool:
+        return self.stop == "converged"
 
 
 @dataclass
@@ -270,7 +273,7 @@ def _gn_core(P: _Problem, lay: _Layout, graph: Any, vals: Any, calib_of_kf: np.n
             converged = True
             break
     stop = "converged" if converged else ("no_descent" if failed else "max_iterations")
-    return _BatchResult(vals, graph, cost, it, calib_of_kf, lay, rows, fac, lag, converged, stop)
+    return _BatchResult(vals, graph, cost, it, calib_of_kf, lay, rows, fac, lag, stop)
 
 
 def _gauss_newton(P: _Problem, graph: Any, vals: Any, calib_of_kf: np.ndarray,
