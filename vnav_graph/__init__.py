@@ -17,19 +17,37 @@ Conventions
   h0 = drive-origin height.
 """
 
-from .simulation import simulate
-from .types import (
-    ERROR_STATE,
-    BaroStream,
-    Drive,
-    Estimate,
-    GnssStream,
-    ImuStream,
-    Trajectory,
-)
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+from .jit import configure_cache
 
 __version__ = "0.1.0"
-__all__ = [
-    "ERROR_STATE", "BaroStream", "Drive", "Estimate", "GnssStream", "ImuStream", "Trajectory",
-    "simulate", "__version__",
-]
+
+configure_cache()  # numba's cache in the user cache dir, never inside the package
+
+# Public names, imported on first use so that ``import vnav_graph`` (and ``vnav-graph --help``)
+# does not pull in scipy, numba or gtsam.
+_LAZY = {
+    "ERROR_STATE": "vnav_graph.types", "BaroStream": "vnav_graph.types",
+    "Drive": "vnav_graph.types", "Estimate": "vnav_graph.types",
+    "GnssStream": "vnav_graph.types", "ImuStream": "vnav_graph.types",
+    "Trajectory": "vnav_graph.types",
+    "simulate": "vnav_graph.simulation",
+}
+__all__ = [*_LAZY, "__version__"]
+
+
+def __getattr__(name: str) -> Any:
+    mod = _LAZY.get(name)
+    if mod is None:
+        raise AttributeError(f"module 'vnav_graph' has no attribute {name!r}")
+    value = getattr(importlib.import_module(mod), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_LAZY))

@@ -55,7 +55,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--duration", type=_positive_float, default=None, help="override [s]")
     r.add_argument("--estimators", type=_csv_list, default=None, help="comma-separated names")
     r.add_argument("--out", default="vnav-graph-out", help="output directory")
-    r.add_argument("--no-progress", action="store_true")
+    r.add_argument("--no-progress", action="store_true",
+                   help="no progress on stderr (default: a bar on a terminal, else a line per "
+                        "step)")
     r.add_argument("--no-holdout", action="store_true",
                    help="real logs: skip the withheld-GNSS scoring run (metrics become null)")
 
@@ -67,6 +69,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--dask", default=None, metavar="ADDRESS", help="Dask scheduler address")
     b.add_argument("--workers", type=int, default=None, help="local process pool size")
     b.add_argument("--out", required=True)
+    b.add_argument("--no-progress", action="store_true")
 
     h = sub.add_parser("holdout", help="score estimators against withheld GNSS on a real log")
     h.add_argument("log")
@@ -74,6 +77,7 @@ def build_parser() -> argparse.ArgumentParser:
     h.add_argument("--spacing", type=_positive_float, default=None, help="window spacing [s]")
     h.add_argument("--estimators", type=_csv_list, default=None)
     h.add_argument("--out", required=True)
+    h.add_argument("--no-progress", action="store_true")
 
     c = sub.add_parser("calibrate-baro", help="least-squares baro scale/latency/bias vs GNSS")
     c.add_argument("drive")
@@ -111,19 +115,25 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
 def cmd_run(args: argparse.Namespace) -> int:
     from .io import load_drive
+    from .outputs import check_out_dir
     from .pipeline import format_table, resolve_estimators, run_estimators, summarize
+    from .progress import mode_for, stage
     from .simulation import simulate
 
     names = resolve_estimators(args.estimators)  # validate before any work
+    out = check_out_dir(args.out)
+    mode = mode_for(not args.no_progress)
     if args.drive is not None:
         if args.scenario is not None:
             raise ValueError("give either a DRIVE or --scenario, not both")
-        drive = load_drive(args.drive)
+        with stage(f"reading {Path(args.drive).name}", mode):
+            drive = load_drive(args.drive)
     else:
         over = {} if args.duration is None else {"duration_s": args.duration}
-        drive = simulate(args.scenario or "default", args.seed, **over)
-    progress = not args.no_progress and sys.stderr.isatty()
-    results = run_estimators(drive, names, progress=progress)
+        scenario = args.scenario or "default"
+        with stage(f"simulating scenario {scenario} (seed {args.seed})", mode):
+            drive = simulate(scenario, args.seed, **over)
+    results = run_estimators(drive, names, progress=mode)
     summary = summarize(drive, results)
     if drive.truth is None and drive.gnss is not None and not args.no_holdout:
         from .evaluation.holdout import run_holdout
@@ -131,8 +141,8 @@ def cmd_run(args: argparse.Namespace) -> int:
 
         ok = [r.name for r in results if r.estimate is not None]
         if ok:
-            print("scoring against withheld GNSS (holdout run)...", file=sys.stderr)
-            summary = apply_holdout(summary, run_holdout(drive, ok).doc)
+            with stage("scoring against withheld GNSS (holdout run of every estimator)", mode):
+                summary = apply_holdout(summary, run_holdout(drive, ok, progress=mode).doc)
     from .pipeline import write_outputs
 
     writers = []
@@ -143,8 +153,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     except ModuleNotFoundError as exc:
         if exc.name != "vnav_graph.report":
             raise
-    out = Path(args.out)
-    write_outputs(out, summary, results, drive, writers)
+    with stage(f"writing results, plots and report to {out}", mode):
+        write_outputs(out, summary, results, drive, writers)
     print(format_table(summary))
     print(f"\nwrote {out / 'summary.json'}")
     return 0

@@ -8,11 +8,12 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
-import tempfile
+import signal
+import threading
 import time
 import traceback
-from collections.abc import Sequence
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -21,6 +22,8 @@ import numpy as np
 
 from .estimators.base import available, create
 from .evaluation.metrics import evaluate
+from .jit import CompileTimer, Prewarm, mark_warm
+from .progress import Mode, mode_for, say, steps
 from .types import Drive, Estimate
 
 SUMMARY_SCHEMA = "vnav_graph.summary/1"
@@ -28,12 +31,17 @@ SUMMARY_SCHEMA = "vnav_graph.summary/1"
 
 @dataclass(frozen=True)
 class RunResult:
-    """Outcome of one estimator on one drive: an Estimate, or the error that stopped it."""
+    """Outcome of one estimator on one drive: an Estimate, or the error that stopped it.
+
+    ``runtime_s`` excludes ``jit_s``, the time numba spent compiling kernels during this run
+    (non-zero only the first time a kernel meets this machine: the compiled code is cached).
+    """
 
     name: str
     estimate: Estimate | None
     error: str | None
     runtime_s: float
+    jit_s: float = 0.0
 
 
 def resolve_estimators(names: Sequence[str] | None) -> list[str]:
@@ -48,25 +56,82 @@ def resolve_estimators(names: Sequence[str] | None) -> list[str]:
     return list(names)
 
 
-def run_estimators(drive: Drive, names: Sequence[str], progress: bool = True) -> list[RunResult]:
-    """Run each named estimator on ``drive``; failures are captured, not raised."""
-    from tqdm import tqdm
+@contextmanager
+def interrupt_flag() -> Iterator[list[int]]:
+    """Record SIGINT while estimators run, so that an interrupt cannot pass for a failure.
 
-    results = []
-    bar = tqdm(names, desc="estimators", unit="est", disable=not progress, leave=False)
-    for name in bar:
-        bar.set_postfix_str(name)
-        t0 = time.perf_counter()
+    A Ctrl-C that lands inside a numba kernel surfaces as a ``SystemError`` (or any other
+    exception) from the estimator; the flag lets the caller re-raise it as the
+    ``KeyboardInterrupt`` it was. Outside the main thread the flag stays empty (no handler).
+    """
+    flag: list[int] = []
+    if threading.current_thread() is not threading.main_thread():
+        yield flag
+        return
+
+    def handler(signum: int, frame: Any) -> None:
+        flag.append(signum)
+        raise KeyboardInterrupt
+
+    old = signal.signal(signal.SIGINT, handler)
+    try:
+        yield flag
+    finally:
+        signal.signal(signal.SIGINT, old)
+
+
+def run_one(name: str, drive: Drive, config: Any = None, waited_s: float = 0.0) -> RunResult:
+    """Run one estimator; its failure is returned as data, never raised (except interrupts).
+
+    ``waited_s``: time already spent waiting for this estimator's kernels to be compiled by
+    another process (counted in ``jit_s``).
+    """
+    t0 = time.perf_counter()
+    with interrupt_flag() as interrupted, CompileTimer() as jit:
         try:
-            est = create(name).run(drive)
-            if est.runtime_s <= 0:
-                est = est.replace(runtime_s=time.perf_counter() - t0)
-            results.append(RunResult(name, est, None, est.runtime_s))
+            est = create(name, config).run(drive)
+            err = None
         except Exception as exc:  # an estimator failure is data, not a crash
+            if interrupted:
+                raise KeyboardInterrupt from exc
             if os.environ.get("VNAV_DEBUG"):
                 traceback.print_exc()
-            results.append(RunResult(name, None, f"{type(exc).__name__}: {exc}",
-                                     time.perf_counter() - t0))
+            msg = str(exc).splitlines()[0] if str(exc) else ""
+            est, err = None, f"{type(exc).__name__}: {msg}"
+    wall = time.perf_counter() - t0
+    jit_s = jit.seconds + waited_s
+    if est is None:
+        return RunResult(name, None, err, max(wall - jit.seconds, 0.0), jit_s)
+    runtime = est.runtime_s if est.runtime_s > 0 else wall
+    est = est.replace(runtime_s=max(runtime - jit.seconds, 0.0))
+    return RunResult(name, est, None, est.runtime_s, jit_s)
+
+
+def run_estimators(drive: Drive, names: Sequence[str], progress: bool | Mode = True,
+                   configs: Mapping[str, Any] | None = None,
+                   desc: str = "estimators") -> list[RunResult]:
+    """Run each named estimator on ``drive``; failures are captured, not raised.
+
+    ``progress``: a ``vnav_graph.progress`` mode, or a bool (True: bar on a terminal, a line
+    per estimator otherwise). ``configs`` maps estimator names to their config objects.
+    On a machine where the kernels are not compiled yet, a second process compiles the later
+    estimator families meanwhile (``vnav_graph.jit.Prewarm``).
+    """
+    mode = progress if isinstance(progress, str) else mode_for(bool(progress))
+    configs = configs or {}
+    pre = Prewarm.start(list(names))
+    if pre is not None:
+        say(f"first run on this machine: compiling kernels (cached for later runs; "
+            f"{', '.join(pre.families)} in a second process)", mode)
+    results = []
+    try:
+        for name in steps(names, desc, mode):
+            waited = pre.wait(name) if pre is not None else 0.0
+            results.append(run_one(name, drive, configs.get(name), waited))
+    finally:
+        if pre is not None:
+            pre.close()
+    mark_warm([r.name for r in results if r.estimate is not None])
     return results
 
 
@@ -92,6 +157,8 @@ def summarize(drive: Drive, results: Sequence[RunResult]) -> dict[str, Any]:
             ests[r.name] = evaluate(r.estimate, drive)
         except Exception as exc:
             ests[r.name] = failed_block(f"evaluation: {type(exc).__name__}: {exc}", r.runtime_s)
+    for r in results:  # compile time, apart from runtime_s (first run on a machine only)
+        ests[r.name]["jit_s"] = round(r.jit_s, 3)
     return {
         "schema": SUMMARY_SCHEMA,
         "drive": {"name": drive.name, "source": drive.source, "duration_s": drive.duration_s},
@@ -177,6 +244,10 @@ def format_table(summary: dict[str, Any]) -> str:
                          f"max {ob['alt_max_abs_m']:.2f} m ({ob['note']})")
     else:
         lines.append("NEES column: mean NEES per degree of freedom (1.0 = consistent)")
+    jit = sum(m.get("jit_s") or 0.0 for m in summary["estimators"].values())
+    if jit > 0.05:
+        lines.append(f"numba compiled kernels for {jit:.1f} s (first run on this machine; "
+                     "not in 'run s', and cached for later runs)")
     for name, m in summary["estimators"].items():
         if m["status"] == "failed":
             lines.append(f"{name} failed: {m['error']}")
@@ -199,20 +270,26 @@ def estimate_table(est: Estimate) -> dict[str, np.ndarray]:
     return cols
 
 
+# files a run owns in its output directory (removed when a later run does not write them again)
+RUN_OUTPUTS = ("summary.json", "summary.txt", "report.html", "estimates/*.parquet",
+               "plots/*.png")
+
+
 def write_outputs(
     out_dir: Path, summary: dict[str, Any], results: Sequence[RunResult], drive: Drive,
     extra_writers: Sequence[Any] = (),
 ) -> list[Path]:
     """Write summary.json, the table and per-estimator Parquet files into ``out_dir``.
 
-    Everything is first written into a temporary directory next to ``out_dir`` and moved in
-    at the end, so an interrupted run leaves no half-written files under the final names.
+    Written through ``vnav_graph.outputs.publish``: an interrupted run leaves no half-written
+    file under a final name, and results of an earlier run in the same directory that this run
+    did not produce again (e.g. another estimator's Parquet) are removed.
     """
     import pandas as pd
 
-    out_dir.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=".vnav-tmp-", dir=out_dir))
-    try:
+    from .outputs import publish
+
+    def fill(tmp: Path) -> None:
         (tmp / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
         (tmp / "summary.txt").write_text(format_table(summary) + "\n")
         (tmp / "estimates").mkdir()
@@ -222,13 +299,5 @@ def write_outputs(
                     tmp / "estimates" / f"{r.name}.parquet", index=False)
         for w in extra_writers:
             w(tmp, summary, results, drive)
-        written = []
-        for p in sorted(tmp.rglob("*")):
-            if p.is_file():
-                dst = out_dir / p.relative_to(tmp)
-                dst.parent.mkdir(parents=True, exist_ok=True)
-                os.replace(p, dst)
-                written.append(dst)
-        return written
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+
+    return publish(out_dir, fill, RUN_OUTPUTS)

@@ -57,15 +57,18 @@ def test_outputs_follow_shared_conventions(noiseless_hill):
     # symmetric positive definite in the ERROR_STATE layout (all 18 states estimated)
     np.testing.assert_allclose(p, p.T, atol=1e-12 * np.abs(p).max())
     assert np.all(np.linalg.eigvalsh(p) > 0)
-    for name in ("baro_scale", "baro_latency", "baro_bias"):
+    # the covariance holds the baro constants in the ERROR_STATE slots the report reads
+    for name, par in (("baro_scale", e.baro.scale), ("baro_latency", e.baro.latency_s)):
         i = ERROR_STATE[name].start
-        assert np.isfinite(p[i, i])
-    # scale variance in slot 15 must equal the reported scale sd²
-    assert p[15, 15] == pytest.approx(e.baro.scale.sd**2, rel=1e-6)
+        assert np.sqrt(p[i, i]) == pytest.approx(par.sd, rel=1e-6)
+    # observability on a hill drive with noise-free baro: the data shrink the scale and
+    # latency σ by far more than 10× (measured 140× and 90×) and never increase any σ
     obs = e.info["observability"]
     assert set(obs) == {"scale", "latency_s", "bias_m"}
+    assert obs["scale"]["posterior_sd"] < 0.1 * obs["scale"]["prior_sd"]
+    assert obs["latency_s"]["posterior_sd"] < 0.1 * obs["latency_s"]["prior_sd"]
     for v in obs.values():
-        assert v["ratio"] == pytest.approx(v["posterior_sd"] / v["prior_sd"])
+        assert v["observable"] and v["posterior_sd"] <= v["prior_sd"]
 
 
 def test_nees_consistent_over_seeds():
@@ -97,7 +100,16 @@ def test_isam2_final_equals_batch_and_online_is_causal():
     np.testing.assert_allclose(ei.trajectory.alt, eb.trajectory.alt, atol=0.01)
     assert abs(ei.baro.scale.est - eb.baro.scale.est) < 0.1 * eb.baro.scale.sd
     assert ei.online is not None and ei.online.t.size == eb.info["keyframes"]
-    assert ei.info["update_p99_ms"] > 0
+    # causal: the online estimate at a keyframe uses no later data, so a run on the first
+    # half of the drive gives the same online states over that half
+    t0, t1 = d.imu.t[0], d.imu.t[0] + 45.0
+    cut = d.replace(imu=d.imu.slice(t0, t1), gnss=d.gnss.select(d.gnss.t <= t1),
+                    baro=d.baro.select(d.baro.t <= t1), truth=d.truth.slice(t0, t1))
+    half = GraphISAM2(cfg).run(cut)
+    n = half.online.t.size - 1  # the last keyframe of the cut drive sees its own end only
+    assert n > 5
+    np.testing.assert_allclose(half.online.t[:n], ei.online.t[:n])
+    np.testing.assert_allclose(half.online.alt[:n], ei.online.alt[:n], atol=1e-6)
 
 
 def test_iteration_cap_is_reported_as_a_warning():

@@ -52,21 +52,19 @@ def test_loiter_holdout_isam2_matches_batch(data_dir: Path) -> None:
     # this log both reach ~1.2–1.4 m withheld-fix height RMSE — 0.5 m allows for the
     # different starting point (iteration cap 12) but not for a diverged front end (km)
     assert abs(e["graph-isam2"]["alt_rmse_m"] - e["graph-batch"]["alt_rmse_m"]) < 0.5
-    # runtime budget of the holdout (< 2 min per log for all estimators): 30 s for these two
-    assert e["graph-isam2"]["runtime_s"] + e["graph-batch"]["runtime_s"] < 30.0
+    # (runtime is measured by benchmarks/bench_real_logs.py, not asserted here)
 
 
 CAR = "car_phone_1hz_2025-07-18/2025-07-18_23-13-43.csv"
 
 
-def test_car_1hz_holdout_runtime(data_dir: Path) -> None:
+def test_car_1hz_holdout_isam2(data_dir: Path) -> None:
     d = _load(data_dir, CAR)
     r = run_holdout(d, ["graph-isam2"])
     e = r.doc["estimators"]["graph-isam2"]
     assert e["status"] == "ok", e["error"]
     # 93-min log, 1 Hz averaged IMU: low-rate settings (5 s keyframes) → ~1100 updates,
-    # measured 7.4 s; 40 s leaves room for a loaded 2-core machine, 213 s before the fix
-    assert e["runtime_s"] < 40.0
+    # measured 7.4 s, 213 s before the fix (runtime: benchmarks/bench_real_logs.py)
     # withheld-fix height RMSE measured 4.5 m (graph-batch 1.5 m); 10 m flags a diverged
     # online pass that the final batch pass could not repair
     assert e["alt_rmse_m"] < 10.0

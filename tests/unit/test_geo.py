@@ -1,7 +1,6 @@
 """Earth model and standard atmosphere against published values and pymap3d."""
 
 import numpy as np
-import pymap3d
 import pytest
 
 from vnav_graph.geo import atmosphere as atm
@@ -61,15 +60,23 @@ def test_radii_and_scalar_twins():
             float(earth.gravity(lat, 1234.0)), rel=1e-15)
 
 
-def test_lla_ned_round_trip_and_pymap3d(rng):
+def test_lla_ned_round_trip_and_closed_forms(rng):
     origin = np.array([np.radians(47.2), np.radians(11.4), 580.0])
     ned = rng.normal(0, 5000, (50, 3))
     lla = ned_to_lla(ned, origin)
     np.testing.assert_allclose(lla_to_ned(lla, origin), ned, atol=1e-6)
-    # cross-check one point through ECEF with pymap3d's independent path
-    x, y, z = pymap3d.geodetic2ecef(lla[0, 0], lla[0, 1], lla[0, 2], deg=False)
-    n, e, d = pymap3d.ecef2ned(x, y, z, *origin, deg=False)
-    np.testing.assert_allclose([n, e, d], ned[0], atol=1e-6)
+    # closed forms from the radii of curvature (independent of pymap3d, which the module
+    # wraps): 1 km north → Δlat = n/(R_N + h) and the tangent plane lies n²/(2(R_N + h))
+    # above the ellipsoid; 1 km east → Δlon = e/((R_E + h) cos lat); straight up → height.
+    rn, re = earth.radii(origin[0])
+    north = ned_to_lla([[1000.0, 0.0, 0.0]], origin)[0]
+    assert north[0] - origin[0] == pytest.approx(1000.0 / (rn + origin[2]), rel=1e-5)
+    assert north[2] - origin[2] == pytest.approx(1000.0**2 / (2 * (rn + origin[2])), rel=1e-3)
+    east = ned_to_lla([[0.0, 1000.0, 0.0]], origin)[0]
+    assert east[1] - origin[1] == pytest.approx(
+        1000.0 / ((re + origin[2]) * np.cos(origin[0])), rel=1e-5)
+    up = ned_to_lla([[0.0, 0.0, -100.0]], origin)[0]
+    np.testing.assert_allclose(up, origin + [0.0, 0.0, 100.0], atol=1e-9)
 
 
 def test_euler_quaternion_round_trip(rng):

@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from vnav_graph.estimators.base import create
 from vnav_graph.estimators.vekf7 import (
     IB,
     IBB,
@@ -36,10 +35,6 @@ def runs():
         d = simulate(c, 20 + seed)
         out.append((d, VEKF7().run(d)))
     return out
-
-
-def test_registered() -> None:
-    assert isinstance(create("vekf7"), VEKF7)
 
 
 def test_error_dynamics_match_nominal_perturbation() -> None:

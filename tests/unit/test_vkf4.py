@@ -9,7 +9,6 @@ import pytest
 from scipy.stats import chi2
 
 from vnav_graph.config import IMU_PRESETS
-from vnav_graph.estimators.base import create
 from vnav_graph.estimators.vkf4 import VKF4, VKF4Config
 from vnav_graph.evaluation.metrics import errors_vs_truth, nees
 from vnav_graph.simulation import load_scenario, simulate
@@ -26,10 +25,6 @@ def outage_runs():
         d = simulate(c, seed)
         runs.append((d, VKF4().run(d)))
     return runs
-
-
-def test_registered() -> None:
-    assert isinstance(create("vkf4"), VKF4)
 
 
 def test_altitude_bounded_in_120s_outage(outage_runs) -> None:

@@ -36,15 +36,15 @@ from __future__ import annotations
 
 import json
 import os
-import time
 import traceback
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from ..progress import Mode, mode_for
 from ..types import Drive, Estimate, FloatArray
 
 HOLDOUT_SCHEMA = "vnav_graph.holdout/1"
@@ -165,12 +165,15 @@ def _onboard_score(drive: Drive, withheld: np.ndarray) -> dict[str, Any] | None:
 
 
 def run_holdout(drive: Drive, estimators: Sequence[str] | None = None, outage_s: float = 60.0,
-                spacing_s: float | None = None, progress: bool = False) -> HoldoutResult:
+                spacing_s: float | None = None, progress: bool | Mode = False,
+                configs: Mapping[str, Any] | None = None) -> HoldoutResult:
     """Withhold GNSS in windows, run the estimators, score them (module docstring).
 
     An estimator that raises is reported ``status: failed`` with its error; the others still run.
+    ``progress``: a ``vnav_graph.progress`` mode or a bool; ``configs``: estimator configs by name.
     """
-    from ..estimators.base import available, create
+    from ..estimators.base import available
+    from ..pipeline import run_estimators
 
     if drive.gnss is None or len(drive.gnss) < 10:
         raise ValueError("holdout needs a drive with GNSS (fewer than 10 fixes)")
@@ -188,21 +191,18 @@ def run_holdout(drive: Drive, estimators: Sequence[str] | None = None, outage_s:
                          meta={**drive.meta, "gnss_holdout_windows": [list(w) for w in windows]})
     results: dict[str, dict[str, Any]] = {}
     series: dict[str, Scored] = {}
-    for name in names:
-        t0 = time.perf_counter()
+    for r in run_estimators(held, names, progress, configs, desc="holdout run"):
+        if r.estimate is None:
+            results[r.name] = failed(r.error or "unknown error", r.runtime_s)
+            continue
         try:
-            est = create(name).run(held)
-            if est.runtime_s <= 0:
-                est = est.replace(runtime_s=time.perf_counter() - t0)
-            s = score(est, drive, withheld)
-            results[name], series[name] = s.block, s
+            s = score(r.estimate, drive, withheld)
+            results[r.name], series[r.name] = s.block, s
         except Exception as exc:  # one estimator's failure is data, not a crash
             if os.environ.get("VNAV_DEBUG"):
                 traceback.print_exc()
             msg = str(exc).splitlines()[0] if str(exc) else ""
-            results[name] = failed(f"{type(exc).__name__}: {msg}", time.perf_counter() - t0)
-        if progress:
-            print(f"  {name}: {results[name]['status']}", flush=True)
+            results[r.name] = failed(f"{type(exc).__name__}: {msg}", r.runtime_s)
     sd_v = drive.gnss.pos_sd[withheld, 2]
     doc = {
         "schema": HOLDOUT_SCHEMA,
@@ -280,17 +280,23 @@ def plot_holdout(res: HoldoutResult, path: Path) -> None:
 def cli_holdout(args: Any) -> int:
     """``vnav-graph holdout LOG [--outage S] [--spacing S] [--estimators a,b] --out DIR``."""
     from ..io import load_drive
+    from ..outputs import check_out_dir, publish
+    from ..progress import stage
 
-    drive = load_drive(args.log)
+    out = check_out_dir(args.out)
+    mode = mode_for(not getattr(args, "no_progress", False))
+    with stage(f"reading {Path(args.log).name}", mode):
+        drive = load_drive(args.log)
     res = run_holdout(drive, getattr(args, "estimators", None),
-                      float(getattr(args, "outage", 60.0) or 60.0), getattr(args, "spacing", None))
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+                      float(getattr(args, "outage", 60.0) or 60.0), getattr(args, "spacing", None),
+                      progress=mode)
     md = format_markdown(res.doc)
-    tmp = out / "holdout.json.tmp"
-    tmp.write_text(json.dumps(res.doc, indent=2))
-    (out / "holdout.md").write_text(md)
-    plot_holdout(res, out / "holdout.png")
-    tmp.replace(out / "holdout.json")
+
+    def fill(tmp: Path) -> None:
+        (tmp / "holdout.json").write_text(json.dumps(res.doc, indent=2))
+        (tmp / "holdout.md").write_text(md)
+        plot_holdout(res, tmp / "holdout.png")
+
+    publish(out, fill)
     print(md, end="")
     return 0

@@ -48,6 +48,8 @@ from typing import Any
 
 import numpy as np
 
+from ..progress import Counter, Mode, mode_for
+
 BENCH_SCHEMA = "vnav_graph.bench/1"
 
 # Metrics aggregated over seeds (mean and 95 % CI). The first four are the DESIGN.md ones;
@@ -228,15 +230,13 @@ def _failed_row(task: BenchTask, error: str) -> dict[str, Any]:
     return row
 
 
-def _progress(total: int, enabled: bool) -> Any:
-    from tqdm import tqdm
-
-    return tqdm(total=total, desc="bench", unit="run", disable=not enabled, leave=False)
+def _label(task: BenchTask) -> str:
+    return f"{task.scenario} seed {task.seed} {task.estimator}"
 
 
 def run_tasks(
     tasks: Sequence[BenchTask], workers: int = DEFAULT_WORKERS, dask: Any = None,
-    progress: bool = False,
+    progress: bool | Mode = False,
 ) -> list[dict[str, Any]]:
     """Run ``tasks`` and return their rows in task order.
 
@@ -247,20 +247,22 @@ def run_tasks(
     dask : None for the local pool, else a ``dask.distributed.Client``, a scheduler
         address (``"tcp://host:8786"``) or ``"local[:N]"`` (a LocalCluster of N worker
         processes) — the same ``run_task`` is submitted to the cluster
-    progress : show a tqdm bar over tasks (on stderr)
+    progress : a ``vnav_graph.progress`` mode, or a bool (True: a bar on a terminal, a line
+        per finished run otherwise), on stderr
 
     A task whose worker dies (``BrokenProcessPool``, a lost Dask worker) is recorded as a
     failed row with that error.
     """
     rows: list[dict[str, Any] | None] = [None] * len(tasks)
-    bar = _progress(len(tasks), progress)
+    mode = progress if isinstance(progress, str) else mode_for(bool(progress))
+    bar = Counter(len(tasks), "bench", mode)
     try:
         if dask is not None:
             _run_dask(tasks, dask, rows, bar)
         elif workers <= 1:
             for i, task in enumerate(tasks):
                 rows[i] = run_task(task)
-                bar.update(1)
+                bar.update(_label(task))
         else:
             with ProcessPoolExecutor(max_workers=workers) as pool:
                 futs = {pool.submit(run_task, t): i for i, t in enumerate(tasks)}
@@ -270,7 +272,7 @@ def run_tasks(
                         rows[i] = fut.result()
                     except Exception as exc:  # the worker process died
                         rows[i] = _failed_row(tasks[i], f"worker: {type(exc).__name__}: {exc}")
-                    bar.update(1)
+                    bar.update(_label(tasks[i]))
     finally:
         bar.close()
     return [r if r is not None else _failed_row(t, "worker: no result")
@@ -319,7 +321,7 @@ def _run_dask(tasks: Sequence[BenchTask], dask: Any, rows: list[Any], bar: Any) 
                 rows[i] = fut.result()
             except Exception as exc:  # a lost worker or a serialisation error
                 rows[i] = _failed_row(tasks[i], f"dask: {type(exc).__name__}: {exc}")
-            bar.update(1)
+            bar.update(_label(tasks[i]))
     finally:
         release()
 
@@ -382,7 +384,7 @@ def aggregate(runs: Sequence[dict[str, Any]]) -> dict[str, dict[str, dict[str, A
 def bench(
     scenarios: Sequence[str], estimators: Sequence[str], seeds: Sequence[int],
     duration_s: float | None = None, workers: int = DEFAULT_WORKERS, dask: Any = None,
-    progress: bool = False,
+    progress: bool | Mode = False,
 ) -> dict[str, Any]:
     """Run the Monte Carlo and return the ``bench.json`` document (DESIGN.md schema)."""
     tasks = make_tasks(scenarios, seeds, estimators, duration_s)
@@ -483,6 +485,7 @@ def cli_bench(args: Any) -> int:
     Bad arguments raise ValueError (exit 2 through the CLI). Returns 1 when any run failed
     (after writing the files, with a one-line summary on stderr), else 0.
     """
+    from ..outputs import check_out_dir
     from ..pipeline import resolve_estimators
     from ..simulation import list_scenarios
 
@@ -503,10 +506,8 @@ def cli_bench(args: Any) -> int:
         raise ValueError(f"--workers must be >= 1, got {workers}")
     for sc in scenarios:  # parse every scenario before any work
         shorten_scenario(sc, QUICK_DURATION_S if args.quick else None)
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise ValueError(f"--out is not a directory: {out}")
-    progress = sys.stderr.isatty()
+    out = check_out_dir(args.out)
+    progress = mode_for(not getattr(args, "no_progress", False))
     doc = bench(scenarios, estimators, list(range(n_seeds)),
                 duration_s=QUICK_DURATION_S if args.quick else None, workers=workers,
                 dask=args.dask, progress=progress)

@@ -28,18 +28,13 @@ from ..sensors.baro import simulate_baro
 from ..sensors.gnss import simulate_gnss
 from ..sensors.imu import apply_imu_errors
 from ..types import Drive, Trajectory
+from . import SCENARIO_DIR, list_scenarios  # noqa: F401  (re-exported)
 from .trajectories import (
     hill_drive_profiles,
     kinematics,
     sortie_profiles,
     vertical_kinematics,
 )
-
-SCENARIO_DIR = Path(__file__).resolve().parent.parent / "scenarios"
-
-
-def list_scenarios() -> list[str]:
-    return sorted(p.stem for p in SCENARIO_DIR.glob("*.toml"))
 
 
 def scenario_from_dict(d: dict[str, Any]) -> ScenarioConfig:

@@ -1,0 +1,43 @@
+"""The estimator registry: every DESIGN name maps to the estimator of that name, lazily."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+
+from vnav_graph.estimators.base import available, create, register
+
+DESIGN_NAMES = ["observer1d", "loop2", "loop3", "loop3-adaptive", "vkf4", "vekf7", "ekf",
+                "ekf-rts", "graph-isam2", "graph-batch"]
+
+
+def test_every_design_name_creates_the_estimator_of_that_name() -> None:
+    assert available()[:len(DESIGN_NAMES)] == DESIGN_NAMES
+    for name in DESIGN_NAMES:
+        # a registry entry pointing at the wrong class (e.g. ekf -> EKFRTS) fails here
+        assert create(name).name == name
+
+
+def test_unknown_and_missing_modules() -> None:
+    with pytest.raises(ValueError, match="unknown estimator 'nope'"):
+        create("nope")
+    register("not-built", "vnav_graph.estimators.no_such_module:X")
+    try:
+        assert "not-built" not in available()
+    finally:
+        from vnav_graph.estimators import base
+
+        base._REGISTRY.pop("not-built")
+
+
+def test_listing_imports_no_estimator_module() -> None:
+    """``available()`` (``vnav-graph list``) must not import gtsam, numba or the estimators."""
+    code = ("import sys\nfrom vnav_graph.estimators.base import available\nnames = available()\n"
+            "heavy = [m for m in ('gtsam', 'numba', 'scipy', 'vnav_graph.estimators.ekf')"
+            " if m in sys.modules]\nprint(len(names), heavy)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout.split(maxsplit=1)
+    assert int(out[0]) >= len(DESIGN_NAMES)
+    assert out[1].strip() == "[]"

@@ -1,0 +1,214 @@
+"""Numba's on-disk cache and compile-time accounting.
+
+Every numba kernel of vnav_graph is compiled with ``cache=True``. By default numba writes its
+cache beside the source (``__pycache__`` inside the installed package). That breaks a later
+``pip install -e`` over a ``pip install .``: pip removes the files it installed, the cache
+folders stay behind, and Python then resolves ``vnav_graph`` to that leftover folder. So the
+cache goes to the user's cache directory instead:
+
+- ``$NUMBA_CACHE_DIR`` when the user set it (numba's own setting, honoured as is);
+- otherwise ``<user cache dir>/vnav_graph/numba`` (``platformdirs.user_cache_dir``: e.g.
+  ``~/.cache/vnav_graph/numba`` on Linux); ``$VNAV_CACHE_DIR`` replaces the
+  ``<user cache dir>/vnav_graph`` part.
+
+``configure_cache()`` is called by ``vnav_graph/__init__.py`` before any module imports numba;
+it is cheap (no numba import). ``CompileTimer`` measures the time numba spends compiling (not
+loading from the cache) inside a block, so that a run can report ``jit_s`` apart from
+``runtime_s``.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+from types import TracebackType
+from typing import Any
+
+
+def cache_root() -> Path:
+    """The package's cache directory (``$VNAV_CACHE_DIR`` or the platform user cache)."""
+    env = os.environ.get("VNAV_CACHE_DIR")
+    if env:
+        return Path(env)
+    from platformdirs import user_cache_dir
+
+    return Path(user_cache_dir("vnav_graph", appauthor=False))
+
+
+def configure_cache() -> str:
+    """Point numba's cache at the user cache directory unless ``NUMBA_CACHE_DIR`` is set.
+
+    Returns the directory in use. Works also when numba was imported first (its config
+    module is then updated directly).
+    """
+    path = os.environ.get("NUMBA_CACHE_DIR") or str(cache_root() / "numba")
+    os.environ["NUMBA_CACHE_DIR"] = path
+    cfg = sys.modules.get("numba.core.config")
+    if cfg is not None and not getattr(cfg, "CACHE_DIR", ""):
+        cfg.CACHE_DIR = path
+    return path
+
+
+class CompileTimer:
+    """Context manager: seconds numba spent compiling inside the block (``.seconds``).
+
+    Cache loads are not compilation and are not counted. Without numba installed the count is
+    0.0.
+    """
+
+    def __init__(self) -> None:
+        self.seconds = 0.0
+        self._ctx: Any = None
+        self._listener: Any = None
+
+    def __enter__(self) -> CompileTimer:
+        try:
+            from numba.core import event
+        except ImportError:  # pragma: no cover - numba is a dependency
+            return self
+        self._listener = event.TimingListener()
+        self._ctx = event.install_listener("numba:compile", self._listener)
+        self._ctx.__enter__()
+        return self
+
+    def __exit__(self, et: type[BaseException] | None, ev: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        if self._ctx is None:
+            return
+        self._ctx.__exit__(et, ev, tb)
+        if self._listener.done:
+            self.seconds = float(self._listener.duration)
+
+
+# --- compiling in a second process -------------------------------------------------------------
+# The first run on a machine compiles every kernel (about 70 s of CPU for all estimators, most
+# of it in the EKF and the vertical filters' AHRS). Compilation holds the GIL and numba's
+# compiler lock, so threads do not help; a second process does. ``Prewarm`` starts
+# ``python -m vnav_graph.jit NAME ...``, which runs each named estimator on a short simulated
+# drive (compiling its kernels into the shared on-disk cache) and leaves a stamp per estimator.
+# The main process runs the other estimators meanwhile and, before an estimator the child is
+# compiling, waits for its stamp (``wait``), then loads the kernels from the cache.
+
+FAMILIES = {  # estimators that share kernels: compiled together, by one process
+    "vertical": ("observer1d", "loop2", "loop3", "loop3-adaptive", "vkf4", "vekf7"),
+    "ekf": ("ekf-rts", "ekf"),
+    "graph": ("graph-isam2", "graph-batch"),
+}
+PREWARM_DRIVE = ("default", 0, 30.0)  # scenario, seed, duration [s] of the compile drive
+
+
+def family_of(name: str) -> str | None:
+    return next((f for f, names in FAMILIES.items() if name in names), None)
+
+
+def _source_key() -> str:
+    """Changes whenever a kernel's source may have changed (numba then recompiles)."""
+    import hashlib
+
+    from . import __version__
+
+    h = hashlib.sha1(__version__.encode())
+    root = Path(__file__).resolve().parent
+    for p in sorted(root.rglob("*.py")):
+        st = p.stat()
+        h.update(f"{p.relative_to(root)}:{st.st_mtime_ns}:{st.st_size}".encode())
+    return h.hexdigest()[:16]
+
+
+def stamp(family: str, key: str | None = None) -> Path:
+    d = Path(configure_cache()) / "vnav-stamps"
+    return d / f"{family}-{key or _source_key()}"
+
+
+def is_warm(family: str, key: str | None = None) -> bool:
+    return stamp(family, key).exists()
+
+
+class Prewarm:
+    """Compile the kernels of some estimator families in a child process (see above)."""
+
+    def __init__(self, families: list[str], key: str) -> None:
+        import subprocess
+
+        self.families, self.key = families, key
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "vnav_graph.jit", key, *families],
+            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+    @classmethod
+    def start(cls, names: list[str]) -> Prewarm | None:
+        """A child compiling every cold family of ``names`` but the first one met (which this
+        process compiles meanwhile); None when at most one family is cold. ``VNAV_PREWARM=0``
+        turns it off."""
+        if os.environ.get("VNAV_PREWARM", "1") == "0":
+            return None
+        key = _source_key()
+        cold: list[str] = []
+        for n in names:
+            f = family_of(n)
+            if f is not None and f not in cold and not is_warm(f, key):
+                cold.append(f)
+        if len(cold) < 2:
+            return None
+        try:
+            return cls(cold[1:], key)
+        except OSError:
+            return None
+
+    def wait(self, name: str, timeout_s: float = 600.0) -> float:
+        """Before running ``name``: wait until the child has compiled its family (or died).
+        Returns the seconds waited."""
+        import time
+
+        f = family_of(name)
+        if f not in self.families:
+            return 0.0
+        t0 = time.perf_counter()
+        while (not is_warm(f, self.key) and self.proc.poll() is None
+               and time.perf_counter() - t0 < timeout_s):
+            time.sleep(0.05)
+        return time.perf_counter() - t0
+
+    def close(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.terminate()
+        self.proc.wait()
+
+
+def _compile_families(key: str, families: list[str]) -> None:
+    """Child process: run each family's estimators on a short drive, stamp each family."""
+    import warnings
+
+    from .estimators.base import create
+    from .simulation import simulate
+
+    warnings.simplefilter("ignore")
+    scenario, seed, duration = PREWARM_DRIVE
+    drive = simulate(scenario, seed, duration_s=duration)
+    for fam in families:
+        for name in FAMILIES[fam]:
+            try:
+                create(name).run(drive)
+            except Exception:  # the real run reports errors; here only the kernels matter
+                pass
+        p = stamp(fam, key)
+        p.parent.mkdir(parents=True, exist_ok=True)
+        p.touch()
+
+
+def mark_warm(names: list[str]) -> None:
+    """After a run in this process: the families all of whose estimators ran are compiled."""
+    key = _source_key()
+    for fam, members in FAMILIES.items():
+        if set(members) <= set(names):
+            try:
+                p = stamp(fam, key)
+                p.parent.mkdir(parents=True, exist_ok=True)
+                p.touch()
+            except OSError:
+                pass
+
+
+if __name__ == "__main__":  # pragma: no cover - exercised through Prewarm
+    _compile_families(sys.argv[1], sys.argv[2:])
