@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import os
 import signal
+import sys
 import threading
 import time
 import traceback
@@ -58,11 +59,12 @@ def resolve_estimators(names: Sequence[str] | None) -> list[str]:
 
 @contextmanager
 def interrupt_flag() -> Iterator[list[int]]:
-    """Record SIGINT while estimators run, so that an interrupt cannot pass for a failure.
+    """Record SIGINT while an estimator runs; the caller stops after it (``run_one``).
 
-    A Ctrl-C that lands inside a numba kernel surfaces as a ``SystemError`` (or any other
-    exception) from the estimator; the flag lets the caller re-raise it as the
-    ``KeyboardInterrupt`` it was. Outside the main thread the flag stays empty (no handler).
+    Raising ``KeyboardInterrupt`` from the handler while a numba kernel runs is not safe: it
+    surfaced as a ``SystemError`` that passed for an estimator failure (the run then exited 0),
+    and sometimes as a segmentation fault. So the first Ctrl-C only sets the flag and says
+    so; a second one raises at once. Outside the main thread there is no handler.
     """
     flag: list[int] = []
     if threading.current_thread() is not threading.main_thread():
@@ -70,8 +72,11 @@ def interrupt_flag() -> Iterator[list[int]]:
         return
 
     def handler(signum: int, frame: Any) -> None:
+        if flag:
+            raise KeyboardInterrupt
         flag.append(signum)
-        raise KeyboardInterrupt
+        print("vnav-graph: interrupt: stopping after the current estimator "
+              "(Ctrl-C again to stop at once)", file=sys.stderr, flush=True)
 
     old = signal.signal(signal.SIGINT, handler)
     try:
@@ -98,6 +103,8 @@ def run_one(name: str, drive: Drive, config: Any = None, waited_s: float = 0.0) 
                 traceback.print_exc()
             msg = str(exc).splitlines()[0] if str(exc) else ""
             est, err = None, f"{type(exc).__name__}: {msg}"
+        if interrupted:
+            raise KeyboardInterrupt
     wall = time.perf_counter() - t0
     jit_s = jit.seconds + waited_s
     if est is None:

@@ -39,6 +39,7 @@ def _horiz_alt_err(traj, drive):
     return np.hypot(e[:, 0], e[:, 1]), traj.alt - tr.alt
 
 
+@pytest.mark.slow
 def test_nees_inside_chi2_band(monte_carlo):
     vals, dof = [], None
     for d, est, _ in monte_carlo:
@@ -65,6 +66,7 @@ def test_normalised_innovations_standard_normal(monte_carlo):
         assert np.mean(np.abs(z) > 3.0) < 0.0054, key
 
 
+@pytest.mark.slow
 def test_rts_not_worse_than_filter_on_every_seed(monte_carlo):
     for d, est, sm in monte_carlo:
         hf, af = _horiz_alt_err(sm.online, d)

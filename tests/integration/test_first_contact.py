@@ -94,6 +94,7 @@ def test_publish_failure_names_the_output_not_the_temp_folder(tmp_path: Path) ->
     assert not list((tmp_path / "out").glob(TMP_PREFIX + "*"))
 
 
+@pytest.mark.slow
 def test_progress_lines_without_a_terminal(tmp_path: Path) -> None:
     r = _cli("run", "--estimators", "loop3,vkf4", "--duration", "40", "--out",
              str(tmp_path / "o"))
@@ -162,6 +163,7 @@ def test_package_tree_holds_no_numba_cache() -> None:
     assert not [p for p in root.rglob("*.nb[ic]")]
 
 
+@pytest.mark.slow
 def test_run_reports_jit_apart_from_runtime(tmp_path: Path) -> None:
     """With an empty cache the compile time lands in ``jit_s``, not in ``runtime_s``: the
     cold runtime stays close to the warm one."""

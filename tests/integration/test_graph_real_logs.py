@@ -42,6 +42,7 @@ def test_loiter_gap_detected(data_dir: Path) -> None:
     assert "empty message" in msg
 
 
+@pytest.mark.slow
 def test_loiter_holdout_isam2_matches_batch(data_dir: Path) -> None:
     d = _load(data_dir, LOITER)
     r = run_holdout(d, ["graph-isam2", "graph-batch"])
@@ -58,6 +59,7 @@ def test_loiter_holdout_isam2_matches_batch(data_dir: Path) -> None:
 CAR = "car_phone_1hz_2025-07-18/2025-07-18_23-13-43.csv"
 
 
+@pytest.mark.slow
 def test_car_1hz_holdout_isam2(data_dir: Path) -> None:
     d = _load(data_dir, CAR)
     r = run_holdout(d, ["graph-isam2"])
@@ -70,6 +72,7 @@ def test_car_1hz_holdout_isam2(data_dir: Path) -> None:
     assert e["alt_rmse_m"] < 10.0
 
 
+@pytest.mark.slow
 def test_ski_holdout_fallback_equals_batch(data_dir: Path) -> None:
     d = _load(data_dir, "ski_iphone_100hz")
     r = run_holdout(d, ["graph-isam2", "graph-batch"])

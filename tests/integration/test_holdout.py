@@ -125,6 +125,7 @@ def test_cli_holdout_on_real_log(data_dir: Path, tmp_path: Path,
     assert main(["holdout", str(log), "--estimators", "nope", "--out", str(out)]) == 2
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", GNSS_USERS)
 def test_glitch_log_gnss_is_gated(name: str, data_dir: Path) -> None:
     """181.BIN: GNSS height swings 318–826 m with a 3-D fix while baro spans 48 m. An estimator

@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 REPO = Path(__file__).resolve().parent.parent.parent
 
@@ -20,6 +21,7 @@ def _load():
     return mod
 
 
+@pytest.mark.slow
 def test_quick_writes_all_keys(tmp_path) -> None:
     mod = _load()
     md = tmp_path / "results_seeds.md"

@@ -19,6 +19,7 @@ def _free_inertial_error(scenario, seed, duration):
     return np.linalg.norm(pos, axis=1), np.abs(est.vel_n - tr.vel_n), np.linalg.norm(att, axis=1)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", [0, 1])
 def test_hill_drive_roundtrip(seed):
     pos, vel, att = _free_inertial_error("hill-drive", seed, 600.0)

@@ -29,6 +29,7 @@ def _fd_err(drive, vi):
 # ---------------------------------------------------------------- position-derived velocity
 
 
+@pytest.mark.slow
 def test_position_velocity_closed_forms():
     """Slope of a quadratic LSQ fit in a symmetric window: exact for a quadratic; a cubic term
     c3·τ³ biases it by c3·Στ⁴/Στ² (τ³ is odd and projects on the slope column only); its σ

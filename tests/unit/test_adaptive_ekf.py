@@ -95,6 +95,7 @@ def _plain_kf(inp, t_fix, z_fix, r_fix, p0, q_a, q_c, k_rec):
     return hs, vs, p_rec
 
 
+@pytest.mark.slow
 def test_no_loop_reduces_to_plain_vertical_kf():
     inp, t_fix, z_fix, r_fix, cfgd, *_ = _synthetic(1, duration=120.0)
     cfg = AdaptiveConfig(function="none", gains=(0.0, 0.0, 0.0), gate_prob=None, **cfgd)

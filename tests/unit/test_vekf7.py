@@ -82,6 +82,7 @@ def test_gravity_gradient_term() -> None:
     assert 2 * gravity(lat, h) / (np.sqrt(rn * re) + h) == pytest.approx(dg, rel=5e-3)
 
 
+@pytest.mark.slow
 def test_nees_consistent(runs) -> None:
     # 2-dof NEES (height, down velocity) averaged over 3 seeds inside the two-sided 99 % χ²
     # band chi2(0.005/0.995, 3·2)/3 on ≥ 90 % of the 1 Hz epochs (STYLE.md §2.6).
