@@ -17,8 +17,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from .estimators.base import available, create
 from .evaluation.metrics import evaluate
 from .types import Drive, Estimate
@@ -185,18 +183,10 @@ def format_table(summary: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def estimate_table(est: Estimate) -> dict[str, np.ndarray]:
-    """Columns of one estimate for Parquet/CSV export (SI units, documented names)."""
-    tr = est.trajectory
-    cols = {"t_s": tr.t, "lat_rad": tr.lla[:, 0], "lon_rad": tr.lla[:, 1], "alt_m": tr.alt,
-            "vel_n_mps": tr.vel_n[:, 0], "vel_e_mps": tr.vel_n[:, 1],
-            "vel_d_mps": tr.vel_n[:, 2]}
-    if tr.bias_baro is not None:
-        cols["baro_bias_m"] = tr.bias_baro
-    if est.cov is not None and est.t_cov is not None:
-        sd_d = np.sqrt(np.clip(est.cov[:, 2, 2], 0, None))
-        cols["alt_sd_m"] = np.interp(tr.t, est.t_cov, sd_d)
-    return cols
+def estimate_table(est: Estimate, origin_lla: Any = None) -> Any:
+    """The Parquet/CSV table of one estimate: ``Estimate.to_dataframe`` (its docstring lists
+    the columns and units); ``origin_lla`` adds the tangent-plane position columns."""
+    return est.to_dataframe(origin_lla)
 
 
 def write_outputs(
@@ -208,7 +198,6 @@ def write_outputs(
     Everything is first written into a temporary directory next to ``out_dir`` and moved in
     at the end, so an interrupted run leaves no half-written files under the final names.
     """
-    import pandas as pd
 
     out_dir.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=".vnav-tmp-", dir=out_dir))
@@ -218,7 +207,7 @@ def write_outputs(
         (tmp / "estimates").mkdir()
         for r in results:
             if r.estimate is not None:
-                pd.DataFrame(estimate_table(r.estimate)).to_parquet(
+                estimate_table(r.estimate, drive.origin_lla).to_parquet(
                     tmp / "estimates" / f"{r.name}.parquet", index=False)
         for w in extra_writers:
             w(tmp, summary, results, drive)
