@@ -12,7 +12,7 @@ import shutil
 import tempfile
 import time
 import traceback
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -46,8 +46,10 @@ def resolve_estimators(names: Sequence[str] | None) -> list[str]:
     return list(names)
 
 
-def run_estimators(drive: Drive, names: Sequence[str], progress: bool = True) -> list[RunResult]:
-    """Run each named estimator on ``drive``; failures are captured, not raised."""
+def run_estimators(drive: Drive, names: Sequence[str], progress: bool = True,
+                   configs: Mapping[str, Any] | None = None) -> list[RunResult]:
+    """Run each named estimator on ``drive``; failures are captured, not raised.
+    ``configs`` maps a name to its config object (default: the estimator's own)."""
     from tqdm import tqdm
 
     results = []
@@ -56,7 +58,7 @@ def run_estimators(drive: Drive, names: Sequence[str], progress: bool = True) ->
         bar.set_postfix_str(name)
         t0 = time.perf_counter()
         try:
-            est = create(name).run(drive)
+            est = create(name, (configs or {}).get(name)).run(drive)
             if est.runtime_s <= 0:
                 est = est.replace(runtime_s=time.perf_counter() - t0)
             results.append(RunResult(name, est, None, est.runtime_s))

@@ -38,7 +38,7 @@ import json
 import os
 import time
 import traceback
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -165,8 +165,10 @@ def _onboard_score(drive: Drive, withheld: np.ndarray) -> dict[str, Any] | None:
 
 
 def run_holdout(drive: Drive, estimators: Sequence[str] | None = None, outage_s: float = 60.0,
-                spacing_s: float | None = None, progress: bool = False) -> HoldoutResult:
+                spacing_s: float | None = None, progress: bool = False,
+                configs: Mapping[str, Any] | None = None) -> HoldoutResult:
     """Withhold GNSS in windows, run the estimators, score them (module docstring).
+    ``configs`` maps an estimator name to its config object (default: its own).
 
     An estimator that raises is reported ``status: failed`` with its error; the others still run.
     """
@@ -191,7 +193,7 @@ def run_holdout(drive: Drive, estimators: Sequence[str] | None = None, outage_s:
     for name in names:
         t0 = time.perf_counter()
         try:
-            est = create(name).run(held)
+            est = create(name, (configs or {}).get(name)).run(held)
             if est.runtime_s <= 0:
                 est = est.replace(runtime_s=time.perf_counter() - t0)
             s = score(est, drive, withheld)
@@ -283,7 +285,8 @@ def cli_holdout(args: Any) -> int:
 
     drive = load_drive(args.log)
     res = run_holdout(drive, getattr(args, "estimators", None),
-                      float(getattr(args, "outage", 60.0) or 60.0), getattr(args, "spacing", None))
+                      float(getattr(args, "outage", 60.0) or 60.0), getattr(args, "spacing", None),
+                      configs=getattr(args, "configs", None))
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     md = format_markdown(res.doc)

@@ -40,9 +40,9 @@ import sys
 import tempfile
 import time
 import traceback
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import dataclass, replace
+from dataclasses import asdict, dataclass, is_dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -85,6 +85,7 @@ class BenchTask:
     factory : for estimators registered at run time (``base.register``), the factory
         (``"module:attr"`` string or picklable callable) re-registered inside the worker;
         None for the built-in estimators
+    config : the estimator's config object (picklable), None for its default
     """
 
     scenario: str
@@ -92,6 +93,7 @@ class BenchTask:
     estimator: str
     duration_s: float | None = None
     factory: Any = None
+    config: Any = None
 
 
 def shorten_scenario(scenario: str, duration_s: float | None) -> Any:
@@ -153,8 +155,8 @@ def _warm_up(task: BenchTask) -> None:
     from ..simulation import simulate
 
     try:
-        create(task.estimator).run(simulate(shorten_scenario(task.scenario, WARMUP_DURATION_S),
-                                            task.seed))
+        drive = simulate(shorten_scenario(task.scenario, WARMUP_DURATION_S), task.seed)
+        create(task.estimator, task.config).run(drive)
     except Exception:
         pass
 
@@ -183,7 +185,7 @@ def run_task(task: BenchTask) -> dict[str, Any]:
             register(task.estimator, task.factory)
         _warm_up(task)
         t1 = time.perf_counter()
-        est = create(task.estimator).run(drive)
+        est = create(task.estimator, task.config).run(drive)
         if est.runtime_s <= 0:
             est = est.replace(runtime_s=time.perf_counter() - t1)
         stage = "evaluate"
@@ -207,17 +209,19 @@ def run_task(task: BenchTask) -> dict[str, Any]:
 
 def make_tasks(
     scenarios: Sequence[str], seeds: Sequence[int], estimators: Sequence[str],
-    duration_s: float | None = None,
+    duration_s: float | None = None, configs: Mapping[str, Any] | None = None,
 ) -> list[BenchTask]:
     """All (scenario, seed, estimator) combinations, in report order.
 
     Estimators registered at run time (not part of the built-in registry) carry their factory
-    so that a worker process that did not inherit the registration can rebuild it.
+    so that a worker process that did not inherit the registration can rebuild it; ``configs``
+    maps an estimator name to its config object (default: the estimator's own).
     """
     from ..estimators import base
 
     extra = dict(base._REGISTRY)
-    return [BenchTask(sc, int(sd), est, duration_s, extra.get(est))
+    cfg = dict(configs or {})
+    return [BenchTask(sc, int(sd), est, duration_s, extra.get(est), cfg.get(est))
             for sc in scenarios for sd in seeds for est in estimators]
 
 
@@ -382,10 +386,11 @@ def aggregate(runs: Sequence[dict[str, Any]]) -> dict[str, dict[str, dict[str, A
 def bench(
     scenarios: Sequence[str], estimators: Sequence[str], seeds: Sequence[int],
     duration_s: float | None = None, workers: int = DEFAULT_WORKERS, dask: Any = None,
-    progress: bool = False,
+    progress: bool = False, configs: Mapping[str, Any] | None = None,
 ) -> dict[str, Any]:
-    """Run the Monte Carlo and return the ``bench.json`` document (DESIGN.md schema)."""
-    tasks = make_tasks(scenarios, seeds, estimators, duration_s)
+    """Run the Monte Carlo and return the ``bench.json`` document (DESIGN.md schema).
+    ``configs``: estimator name → config object (``--config``), echoed in ``config``."""
+    tasks = make_tasks(scenarios, seeds, estimators, duration_s, configs)
     t0 = time.perf_counter()
     runs = run_tasks(tasks, workers=workers, dask=dask, progress=progress)
     wall = time.perf_counter() - t0
@@ -397,7 +402,9 @@ def bench(
                    "seeds": [int(s) for s in seeds], "duration_s": duration_s,
                    "executor": "dask" if dask is not None else
                    ("local" if workers <= 1 else f"process-pool({workers})"),
-                   "wall_s": wall, "vnav_graph_version": __version__},
+                   "wall_s": wall, "vnav_graph_version": __version__,
+                   "estimator_configs": {n: _finite(asdict(c)) for n, c in
+                                         (configs or {}).items() if is_dataclass(c)}},
         "runs": runs,
         "aggregate": aggregate(runs),
     }
@@ -509,7 +516,7 @@ def cli_bench(args: Any) -> int:
     progress = sys.stderr.isatty()
     doc = bench(scenarios, estimators, list(range(n_seeds)),
                 duration_s=QUICK_DURATION_S if args.quick else None, workers=workers,
-                dask=args.dask, progress=progress)
+                dask=args.dask, progress=progress, configs=getattr(args, "configs", None))
     write_bench(doc, out)
     n_ok = sum(r["status"] == "ok" for r in doc["runs"])
     print(format_bench_md(doc))
