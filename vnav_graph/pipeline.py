@@ -1,7 +1,7 @@
 """The main job: run estimators on one drive, evaluate, write ``summary.json`` and tables.
 
 ``run_estimators`` never lets one estimator's failure stop the others: a failed estimator is
-reported with ``status: failed`` and its error (DESIGN.md).
+reported with ``status: failed`` and its error (docs/design.md).
 """
 
 from __future__ import annotations
@@ -82,7 +82,7 @@ def failed_block(error: str, runtime_s: float) -> dict[str, Any]:
 
 
 def summarize(drive: Drive, results: Sequence[RunResult]) -> dict[str, Any]:
-    """The ``summary.json`` document (DESIGN.md schema)."""
+    """The ``summary.json`` document (docs/design.md schema)."""
     ests: dict[str, Any] = {}
     for r in results:
         if r.estimate is None:
@@ -102,7 +102,7 @@ def summarize(drive: Drive, results: Sequence[RunResult]) -> dict[str, Any]:
 def apply_holdout(summary: dict[str, Any], holdout_doc: dict[str, Any]) -> dict[str, Any]:
     """For a real log (no truth): fill the error metrics from a GNSS-outage holdout run.
 
-    DESIGN.md: "With a real log the error metrics are against withheld GNSS". The trajectories
+    docs/design.md: "With a real log the error metrics are against withheld GNSS". The trajectories
     written by ``run`` use all GNSS; ``alt_rmse_m``/``alt_max_abs_m`` come from a second run of
     each estimator with GNSS withheld in windows (``vnav_graph.evaluation.holdout``), and the
     summary says so in ``evaluation``. ``vel_down_rmse_mps`` and NEES stay null (no reference).

@@ -391,7 +391,7 @@ class Trajectory:
 
 @dataclass(frozen=True)
 class BaroTruth:
-    """True barometer error parameters of a simulated drive (model of DESIGN.md).
+    """True barometer error parameters of a simulated drive (model of docs/design.md).
 
     ``h_baro(t) - h0 = (1 + scale) * (h(t - latency_s) - h0) + b(t) + v`` with
     ``h0 = Drive.origin_lla[2]``; b(t) is stored in ``Drive.truth.bias_baro``.

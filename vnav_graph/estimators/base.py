@@ -1,7 +1,7 @@
 """The estimator interface and the registry.
 
 Every estimator is constructed from its config and has one call, ``run(drive) -> Estimate``.
-The registry maps DESIGN.md names to ``"module:factory"`` strings and imports lazily, so
+The registry maps docs/design.md names to ``"module:factory"`` strings and imports lazily, so
 a heavy dependency (gtsam) is only loaded when its estimator runs, and a research extension
 can register its own estimator with ``register`` (from Python) or ``load_plugin`` (the CLI's
 ``--plugin module:Class``).

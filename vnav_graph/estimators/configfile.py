@@ -1,6 +1,6 @@
 """Estimator configs from a TOML file: ``vnav-graph run|bench|holdout --config FILE.toml``.
 
-One table per estimator, named as in the registry (DESIGN.md); its keys are fields of
+One table per estimator, named as in the registry (docs/design.md); its keys are fields of
 that estimator's config dataclass (``GraphConfig``, ``EkfConfig``, ``Loop3Config`` …), and
 every key not given keeps the estimator's own default::
 

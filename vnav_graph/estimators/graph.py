@@ -203,7 +203,7 @@ def _outputs(P: _Problem, res: _BatchResult, pri: dict[str, float],
     hu = fac.solve(u)
     b_var = max(float(u @ hu), 0.0)
     b_sd = float(np.sqrt(b_var))
-    # b is referenced to h0 (DESIGN.md): at a height Δh above h0 an error δs moves it by
+    # b is referenced to h0 (docs/design.md): at a height Δh above h0 an error δs moves it by
     # −δs·Δh, so a flight far above h0 ties b̄ to s (sortie: corr −0.995)
     cov_sb = float(hu[lay.n_band])
     corr_sb = cov_sb / np.sqrt(b_var * pk[0, 0]) if b_var > 0 and pk[0, 0] > 0 else 0.0

@@ -21,7 +21,7 @@ that keeps the GNSS outages inside the shortened drive), ``run_task`` (executed 
 ``aggregate``, ``bench`` (the whole thing → the ``bench.json`` document), ``format_bench_md``,
 ``write_bench`` and ``cli_bench`` (``vnav-graph bench``).
 
-The ``bench.json`` document (DESIGN.md)::
+The ``bench.json`` document (docs/design.md)::
 
     {"schema": "vnav_graph.bench/1",
      "config": {...},
@@ -50,7 +50,7 @@ import numpy as np
 
 BENCH_SCHEMA = "vnav_graph.bench/1"
 
-# Metrics aggregated over seeds (mean and 95 % CI). The first four are the DESIGN.md ones;
+# Metrics aggregated over seeds (mean and 95 % CI). The first four are the docs/design.md ones;
 # the baro parameter errors |est − truth| show the modelling gain of the baro-aware estimators.
 AGG_METRICS = (
     "alt_rmse_m", "nees_mean", "runtime_s", "vel_down_rmse_mps", "alt_max_abs_m",
@@ -119,7 +119,7 @@ def shorten_scenario(scenario: str, duration_s: float | None) -> Any:
 
 
 def _finite(x: Any) -> Any:
-    """Replace NaN/inf floats by None, recursively (JSON has no NaN; DESIGN.md: metrics that
+    """Replace NaN/inf floats by None, recursively (JSON has no NaN; docs/design.md: metrics that
     do not exist are null)."""
     if isinstance(x, dict):
         return {k: _finite(v) for k, v in x.items()}
@@ -388,7 +388,7 @@ def bench(
     duration_s: float | None = None, workers: int = DEFAULT_WORKERS, dask: Any = None,
     progress: bool = False, configs: Mapping[str, Any] | None = None,
 ) -> dict[str, Any]:
-    """Run the Monte Carlo and return the ``bench.json`` document (DESIGN.md schema).
+    """Run the Monte Carlo and return the ``bench.json`` document (docs/design.md schema).
     ``configs``: estimator name → config object (``--config``), echoed in ``config``."""
     tasks = make_tasks(scenarios, seeds, estimators, duration_s, configs)
     t0 = time.perf_counter()
