@@ -132,6 +132,12 @@ def _finite(x: Any) -> Any:
     return x
 
 
+def _json_config(config: Any) -> Any:
+    """A config object as JSON data (dataclass fields; anything JSON lacks as its str)."""
+    data = asdict(config) if is_dataclass(config) and not isinstance(config, type) else config
+    return json.loads(json.dumps(_finite(data), default=str))
+
+
 def _null_metrics(error: str, runtime_s: float) -> dict[str, Any]:
     from ..pipeline import failed_block
 
@@ -403,8 +409,8 @@ def bench(
                    "executor": "dask" if dask is not None else
                    ("local" if workers <= 1 else f"process-pool({workers})"),
                    "wall_s": wall, "vnav_graph_version": __version__,
-                   "estimator_configs": {n: _finite(asdict(c)) for n, c in
-                                         (configs or {}).items() if is_dataclass(c)}},
+                   "estimator_configs": {n: _json_config(c) for n, c in
+                                         (configs or {}).items() if n in estimators}},
         "runs": runs,
         "aggregate": aggregate(runs),
     }
