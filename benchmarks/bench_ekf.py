@@ -1,4 +1,4 @@
-"""Speed of the reference EKF (the speed baseline of DESIGN.md).
+"""Speed of the reference EKF (the speed baseline of docs/design.md).
 
 ``bench_ekf(duration_s, imu_rate_hz) -> dict`` simulates a hill-drive of that length and rate
 and times ``ekf`` (and ``ekf-rts``) on it after a warm-up run (numba compilation excluded).

@@ -1,4 +1,4 @@
-"""Performance of the GTSAM smoothers on a long hill-drive (DESIGN.md ``graph_perf.json``).
+"""Performance of the GTSAM smoothers on a long hill-drive (docs/design.md ``graph_perf.json``).
 
     python benchmarks/bench_graph.py [--quick] --out DIR
 

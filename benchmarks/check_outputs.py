@@ -1,4 +1,4 @@
-"""CI gate: the benchmark/job outputs exist and carry the DESIGN.md keys; no estimator failed.
+"""CI gate: the benchmark/job outputs exist and carry the docs/design.md keys; no estimator failed.
 
 Usage: python benchmarks/check_outputs.py DIR
 Expects DIR/run/summary.json, DIR/bench/bench.json, DIR/reproductions.json and

@@ -93,7 +93,7 @@ def run_seed(seed: int, duration_s: float, gnss_sd_v: float | None = None) -> di
             r["baro"] = _baro_errors(m["baro"])
             obs_b = (est.info or {}).get("observability", {}).get("bias_m", {})
             if "corr_with_scale" in obs_b:
-                # why |Δb| tracks |Δs|: b is referenced to h0 (DESIGN.md)
+                # why |Δb| tracks |Δs|: b is referenced to h0 (docs/design.md)
                 r["bias_corr_with_scale"] = obs_b["corr_with_scale"]
                 r["bias_sd_given_scale_m"] = obs_b["sd_given_scale"]
                 r["mean_height_above_h0_m"] = float(np.mean(est.trajectory.alt)
@@ -272,7 +272,7 @@ def to_markdown(res: dict[str, Any]) -> str:
     if gb.get("bias_corr_with_scale") and gb["bias_corr_with_scale"].get("mean") is not None:
         sd_s = gb.get("scale_pct", {}).get("sd_mean")
         lines += ["", "Why \\|Δb\\| follows \\|Δs\\|: b is referenced to the origin height h0 "
-                  "(DESIGN.md), so at Δh above h0 a scale error δs shifts it by −δs·Δh. "
+                  "(docs/design.md), so at Δh above h0 a scale error δs shifts it by −δs·Δh. "
                   f"graph-batch posterior corr(s, b̄) = "
                   f"{_f(gb['bias_corr_with_scale']['mean'])}, mean height above h0 "
                   f"{_f(gb['mean_height_above_h0_m']['mean'], 0)} m"

@@ -4,7 +4,7 @@ Usage::
 
     python benchmarks/reproduce_seeds.py [--quick] --out DIR [--md [PATH]]
 
-writes ``DIR/reproductions.json`` with exactly the DESIGN.md keys plus ``"quick"``::
+writes ``DIR/reproductions.json`` with exactly the docs/design.md keys plus ``"quick"``::
 
     {"seed003_steady_sd_m", "seed003_gps_only_sd_m", "seed003_settling_s",
      "seed001_rmse_m": {"vekf7": x, "loop3": y},

@@ -15,39 +15,60 @@ Conventions
 - Barometer model (``vnav_graph.sensors.baro``):
   h_b − h0 = (1 + s)·(h(t − τd) − h0) + b(t) + v, b first-order Gauss-Markov,
   h0 = drive-origin height.
+
+Python API
+----------
+``load_drive(path)`` (npz or real log) and ``simulate(scenario, seed)`` give a ``Drive``;
+``create(name, config)`` builds an estimator (``available()`` lists the names, ``register``
+adds one); ``estimator.run(drive)`` returns an ``Estimate`` (``Estimate.to_dataframe()``);
+``evaluate(estimate, drive)`` scores it (the metric block of ``summary.json``). The names
+are imported on first use, so ``import vnav_graph`` stays light (no scipy, numba or gtsam).
 """
 
-from __future__ import annotations
-
-import importlib
-from typing import Any
-
-from .jit import configure_cache
+import importlib as _importlib
+from typing import Any as _Any
 
 __version__ = "0.1.0"
 
-configure_cache()  # numba's cache in the user cache dir, never inside the package
+from .jit import configure_cache as _configure_cache  # noqa: E402
 
-# Public names, imported on first use so that ``import vnav_graph`` (and ``vnav-graph --help``)
-# does not pull in scipy, numba or gtsam.
-_LAZY = {
-    "ERROR_STATE": "vnav_graph.types", "BaroStream": "vnav_graph.types",
-    "Drive": "vnav_graph.types", "Estimate": "vnav_graph.types",
-    "GnssStream": "vnav_graph.types", "ImuStream": "vnav_graph.types",
-    "Trajectory": "vnav_graph.types",
-    "simulate": "vnav_graph.simulation",
+_configure_cache()  # numba's cache in the user cache dir, never inside the installed package
+
+# The public API, imported on first access (PEP 562) so that ``import vnav_graph`` (and with it
+# ``vnav-graph --help``) does not load numpy's heavy friends: scipy, numba, gtsam.
+# name -> "module:attribute".
+_LAZY: dict[str, str] = {
+    # data in
+    "load_drive": "vnav_graph.io:load_drive",
+    "simulate": "vnav_graph.simulation:simulate",
+    # estimators (the registry of docs/design.md names)
+    "create": "vnav_graph.estimators.base:create",
+    "available": "vnav_graph.estimators.base:available",
+    "register": "vnav_graph.estimators.base:register",
+    # scoring: the per-estimator metric block of summary.json
+    "evaluate": "vnav_graph.evaluation.metrics:evaluate",
+    # core types
+    "ERROR_STATE": "vnav_graph.types:ERROR_STATE",
+    "BaroStream": "vnav_graph.types:BaroStream",
+    "Drive": "vnav_graph.types:Drive",
+    "Estimate": "vnav_graph.types:Estimate",
+    "GnssStream": "vnav_graph.types:GnssStream",
+    "ImuStream": "vnav_graph.types:ImuStream",
+    "Trajectory": "vnav_graph.types:Trajectory",
 }
+
 __all__ = [*_LAZY, "__version__"]
 
 
-def __getattr__(name: str) -> Any:
-    mod = _LAZY.get(name)
-    if mod is None:
-        raise AttributeError(f"module 'vnav_graph' has no attribute {name!r}")
-    value = getattr(importlib.import_module(mod), name)
-    globals()[name] = value
+def __getattr__(name: str) -> _Any:
+    target = _LAZY.get(name)
+    if target is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    mod, _, attr = target.partition(":")
+    value = getattr(_importlib.import_module(mod), attr)
+    globals()[name] = value  # cache: later accesses skip __getattr__
     return value
 
 
 def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_LAZY))
+    return sorted({*(n for n in globals() if not n.startswith("_")), *_LAZY, "__version__"})

@@ -22,7 +22,7 @@ Observability warnings (``BaroCalibration.warnings``):
 
 - a parameter whose standard error exceeds ``WARN_FRACTION`` (0.5) of its typical magnitude
   ``TYPICAL`` is "poorly observable". The typical magnitudes are of the order of seed 001
-  Table 1 and DESIGN.md: dSF 1 %, Td 0.1 s, B 5 m. Td needs vertical speed (climbs and
+  Table 1 and docs/design.md: dSF 1 %, Td 0.1 s, B 5 m. Td needs vertical speed (climbs and
   descents), dSF needs altitude change, B needs neither.
 - the design matrix with unit-RMS columns has a condition number above ``MAX_CONDITION`` (1e3):
   the three effects cannot be separated (e.g. a constant-rate climb ties H_G to time).
@@ -55,7 +55,7 @@ SEED001_TABLE1: tuple[tuple[float, float, float], ...] = (
 )
 
 # Typical magnitudes [dSF -, Td s, B m] (seed 001 Table 1: dSF 0.35-2.5 %, |Td| ≤ 0.08 s,
-# |B| 3-9 m; DESIGN.md: s up to 3 %, τd up to 0.5 s, b metres to tens of metres).
+# |B| 3-9 m; docs/design.md: s up to 3 %, τd up to 0.5 s, b metres to tens of metres).
 TYPICAL = {"scale": 0.01, "latency_s": 0.1, "bias_m": 5.0}
 WARN_FRACTION = 0.5
 MAX_CONDITION = 1.0e3

@@ -29,6 +29,30 @@ def _positive_float(s: str) -> float:
     return v
 
 
+def _extension_args(p: argparse.ArgumentParser, config: bool = True) -> None:
+    """``--plugin`` (and ``--config``): extension estimators and estimator settings."""
+    p.add_argument("--plugin", action="append", default=[], metavar="[NAME=]MODULE:CLASS",
+                   help="register an extension estimator (repeatable; MODULE may be a .py file)")
+    if config:
+        p.add_argument("--config", default=None, metavar="FILE.toml",
+                       help="estimator settings, one [estimator] table each "
+                            "(e.g. [graph-batch] max_iterations = 300)")
+
+
+def _load_extensions(args: argparse.Namespace) -> None:
+    """Register ``--plugin`` estimators, then read ``--config`` into ``args.configs``."""
+    if getattr(args, "plugin", None):
+        from .estimators.base import load_plugin
+
+        for spec in args.plugin:
+            load_plugin(spec)
+    args.configs = None
+    if getattr(args, "config", None):
+        from .estimators.configfile import load_configs
+
+        args.configs = load_configs(args.config)
+
+
 class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> None:  # one line, exit 2 (argparse's own convention)
         self.exit(EXIT_BAD_INPUT, f"vnav-graph: error: {message}\n")
@@ -60,6 +84,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "step)")
     r.add_argument("--no-holdout", action="store_true",
                    help="real logs: skip the withheld-GNSS scoring run (metrics become null)")
+    _extension_args(r)
 
     b = sub.add_parser("bench", help="Monte Carlo over scenarios x seeds x estimators")
     b.add_argument("--quick", action="store_true")
@@ -70,6 +95,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--workers", type=int, default=None, help="local process pool size")
     b.add_argument("--out", required=True)
     b.add_argument("--no-progress", action="store_true")
+    _extension_args(b)
 
     h = sub.add_parser("holdout", help="score estimators against withheld GNSS on a real log")
     h.add_argument("log")
@@ -78,11 +104,13 @@ def build_parser() -> argparse.ArgumentParser:
     h.add_argument("--estimators", type=_csv_list, default=None)
     h.add_argument("--out", required=True)
     h.add_argument("--no-progress", action="store_true")
+    _extension_args(h)
 
     c = sub.add_parser("calibrate-baro", help="least-squares baro scale/latency/bias vs GNSS")
     c.add_argument("drive")
 
-    sub.add_parser("list", help="list available estimators and scenarios")
+    _extension_args(sub.add_parser("list", help="list available estimators and scenarios"),
+                    config=False)
     return p
 
 
@@ -133,7 +161,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         scenario = args.scenario or "default"
         with stage(f"simulating scenario {scenario} (seed {args.seed})", mode):
             drive = simulate(scenario, args.seed, **over)
-    results = run_estimators(drive, names, progress=mode)
+    configs = getattr(args, "configs", None)  # --config, read by _load_extensions
+    results = run_estimators(drive, names, progress=mode, configs=configs)
     summary = summarize(drive, results)
     if drive.truth is None and drive.gnss is not None and not args.no_holdout:
         from .evaluation.holdout import run_holdout
@@ -142,7 +171,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         ok = [r.name for r in results if r.estimate is not None]
         if ok:
             with stage("scoring against withheld GNSS (holdout run of every estimator)", mode):
-                summary = apply_holdout(summary, run_holdout(drive, ok, progress=mode).doc)
+                summary = apply_holdout(summary, run_holdout(drive, ok, progress=mode,
+                                                             configs=configs).doc)
     from .pipeline import write_outputs
 
     writers = []
@@ -182,6 +212,7 @@ COMMANDS = {
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
+        _load_extensions(args)
         return COMMANDS[args.command](args)
     except (ValueError, FileNotFoundError, IsADirectoryError, PermissionError) as exc:
         if os.environ.get("VNAV_DEBUG"):

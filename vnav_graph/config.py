@@ -152,7 +152,7 @@ class GnssSpec:
 
 @dataclass(frozen=True)
 class BaroSpec:
-    """Barometric altimeter error model (DESIGN.md "One barometer model").
+    """Barometric altimeter error model (docs/design.md "One barometer model").
 
     h_baro(t) = (1 + s)·h(t − τd) + b(t) + v,  ḃ = −b/τb + w.
 

@@ -1,7 +1,7 @@
 """The main job: run estimators on one drive, evaluate, write ``summary.json`` and tables.
 
 ``run_estimators`` never lets one estimator's failure stop the others: a failed estimator is
-reported with ``status: failed`` and its error (DESIGN.md).
+reported with ``status: failed`` and its error (docs/design.md).
 """
 
 from __future__ import annotations
@@ -18,8 +18,6 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
-
-import numpy as np
 
 from .estimators.base import available, create
 from .evaluation.metrics import evaluate
@@ -154,7 +152,7 @@ def failed_block(error: str, runtime_s: float) -> dict[str, Any]:
 
 
 def summarize(drive: Drive, results: Sequence[RunResult]) -> dict[str, Any]:
-    """The ``summary.json`` document (DESIGN.md schema)."""
+    """The ``summary.json`` document (docs/design.md schema)."""
     ests: dict[str, Any] = {}
     for r in results:
         if r.estimate is None:
@@ -176,7 +174,7 @@ def summarize(drive: Drive, results: Sequence[RunResult]) -> dict[str, Any]:
 def apply_holdout(summary: dict[str, Any], holdout_doc: dict[str, Any]) -> dict[str, Any]:
     """For a real log (no truth): fill the error metrics from a GNSS-outage holdout run.
 
-    DESIGN.md: "With a real log the error metrics are against withheld GNSS". The trajectories
+    docs/design.md: "With a real log the error metrics are against withheld GNSS". The trajectories
     written by ``run`` use all GNSS; ``alt_rmse_m``/``alt_max_abs_m`` come from a second run of
     each estimator with GNSS withheld in windows (``vnav_graph.evaluation.holdout``), and the
     summary says so in ``evaluation``. ``vel_down_rmse_mps`` and NEES stay null (no reference).
@@ -263,18 +261,10 @@ def format_table(summary: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def estimate_table(est: Estimate) -> dict[str, np.ndarray]:
-    """Columns of one estimate for Parquet/CSV export (SI units, documented names)."""
-    tr = est.trajectory
-    cols = {"t_s": tr.t, "lat_rad": tr.lla[:, 0], "lon_rad": tr.lla[:, 1], "alt_m": tr.alt,
-            "vel_n_mps": tr.vel_n[:, 0], "vel_e_mps": tr.vel_n[:, 1],
-            "vel_d_mps": tr.vel_n[:, 2]}
-    if tr.bias_baro is not None:
-        cols["baro_bias_m"] = tr.bias_baro
-    if est.cov is not None and est.t_cov is not None:
-        sd_d = np.sqrt(np.clip(est.cov[:, 2, 2], 0, None))
-        cols["alt_sd_m"] = np.interp(tr.t, est.t_cov, sd_d)
-    return cols
+def estimate_table(est: Estimate, origin_lla: Any = None) -> Any:
+    """The Parquet/CSV table of one estimate: ``Estimate.to_dataframe`` (its docstring lists
+    the columns and units); ``origin_lla`` adds the tangent-plane position columns."""
+    return est.to_dataframe(origin_lla)
 
 
 # files a run owns in its output directory (removed when a later run does not write them again)
@@ -292,7 +282,6 @@ def write_outputs(
     file under a final name, and results of an earlier run in the same directory that this run
     did not produce again (e.g. another estimator's Parquet) are removed.
     """
-    import pandas as pd
 
     from .outputs import publish
 
@@ -302,7 +291,7 @@ def write_outputs(
         (tmp / "estimates").mkdir()
         for r in results:
             if r.estimate is not None:
-                pd.DataFrame(estimate_table(r.estimate)).to_parquet(
+                estimate_table(r.estimate, drive.origin_lla).to_parquet(
                     tmp / "estimates" / f"{r.name}.parquet", index=False)
         for w in extra_writers:
             w(tmp, summary, results, drive)

@@ -45,6 +45,17 @@ ERROR_STATE: MappingProxyType[str, slice] = MappingProxyType(
 )
 ERROR_STATE_DIM = 18
 
+# Column of ``Estimate.to_dataframe()`` holding the one-sigma of each ERROR_STATE component.
+# The down-position sigma is the altitude sigma and keeps the first Parquet layout's name.
+SD_COLUMNS: tuple[str, ...] = (
+    "pos_n_sd_m", "pos_e_sd_m", "alt_sd_m",
+    "vel_n_sd_mps", "vel_e_sd_mps", "vel_d_sd_mps",
+    "att_n_sd_rad", "att_e_sd_rad", "att_d_sd_rad",
+    "bias_gyro_x_sd_radps", "bias_gyro_y_sd_radps", "bias_gyro_z_sd_radps",
+    "bias_accel_x_sd_mps2", "bias_accel_y_sd_mps2", "bias_accel_z_sd_mps2",
+    "baro_scale_sd", "baro_latency_sd_s", "baro_bias_sd_m",
+)
+
 # Quantities an Estimate may provide (``Estimate.provides``).
 QUANTITIES = frozenset({"alt", "vel_d", "pos_h", "vel_h", "att", "baro", "cov"})
 
@@ -380,7 +391,7 @@ class Trajectory:
 
 @dataclass(frozen=True)
 class BaroTruth:
-    """True barometer error parameters of a simulated drive (model of DESIGN.md).
+    """True barometer error parameters of a simulated drive (model of docs/design.md).
 
     ``h_baro(t) - h0 = (1 + scale) * (h(t - latency_s) - h0) + b(t) + v`` with
     ``h0 = Drive.origin_lla[2]``; b(t) is stored in ``Drive.truth.bias_baro``.
@@ -504,6 +515,82 @@ class Estimate:
             v = getattr(self, f)
             if not isinstance(v, MappingProxyType):
                 object.__setattr__(self, f, MappingProxyType(dict(v)))
+
+    def to_dataframe(self, origin_lla: Any = None) -> Any:
+        """The estimate as a table: one row per trajectory epoch, every state and its sigma.
+
+        This is also the layout of ``estimates/<name>.parquet`` written by ``vnav-graph run``.
+
+        Parameters
+        ----------
+        origin_lla : (3,) or None, tangent-plane origin (lat [rad], lon [rad], height [m]) for
+            the ``pos_*_m`` columns, normally ``Drive.origin_lla``; None leaves them out.
+
+        Returns
+        -------
+        pandas.DataFrame with these columns (SI units, the unit in the name):
+
+        - always: ``t_s``; ``lat_rad``, ``lon_rad``, ``alt_m`` (ellipsoidal height, +up);
+          ``vel_n_mps``, ``vel_e_mps``, ``vel_d_mps``. Components an estimator does not
+          estimate are NaN (the vertical-only estimators: latitude, longitude, north and
+          east velocity; ``provides`` says which).
+        - when estimated, else absent: ``pos_n_m``, ``pos_e_m``, ``pos_d_m`` (tangent-plane
+          NED from ``origin_lla``, needs ``"pos_h"`` in ``provides``); ``roll_rad``,
+          ``pitch_rad``, ``yaw_rad`` (from ``q_nb``); ``bias_gyro_{x,y,z}_radps`` and
+          ``bias_accel_{x,y,z}_mps2`` (body axes); ``baro_bias_m`` (b(t)); ``baro_scale``
+          [-] and ``baro_latency_s`` (``Estimate.baro``: constants of the baro model, so
+          the same value on every row).
+        - sigmas, from the covariance (absent when ``cov`` is None): ``SD_COLUMNS``, one per
+          ``ERROR_STATE`` component (``alt_sd_m`` is the down-position sigma; ``att_*`` are
+          the tilt-error sigmas about n's axes), present when that component's variance is
+          finite at some covariance epoch; plus ``horiz_sd_m`` = √(σ_N² + σ_E²) when both
+          are. σ = √diag(cov) at the epochs ``t_cov``, interpolated linearly in time between
+          them, held for one epoch spacing beyond the first and last epoch and NaN further
+          out (never extrapolated over a span with no covariance).
+        """
+        import pandas as pd
+
+        tr = self.trajectory
+        cols: dict[str, FloatArray] = {
+            "t_s": tr.t, "lat_rad": tr.lla[:, 0], "lon_rad": tr.lla[:, 1], "alt_m": tr.alt,
+        }
+        if origin_lla is not None and "pos_h" in self.provides:
+            pos = tr.pos_n(np.asarray(origin_lla, dtype=float))
+            cols.update(pos_n_m=pos[:, 0], pos_e_m=pos[:, 1], pos_d_m=pos[:, 2])
+        cols.update(vel_n_mps=tr.vel_n[:, 0], vel_e_mps=tr.vel_n[:, 1],
+                    vel_d_mps=tr.vel_n[:, 2])
+        if tr.q_nb is not None:
+            rph = tr.to_rph()
+            cols.update(roll_rad=rph[:, 0], pitch_rad=rph[:, 1], yaw_rad=rph[:, 2])
+        for name, unit, a in (("bias_gyro", "radps", tr.bias_gyro),
+                              ("bias_accel", "mps2", tr.bias_accel)):
+            if a is not None:
+                cols.update({f"{name}_{ax}_{unit}": a[:, j] for j, ax in enumerate("xyz")})
+        if tr.bias_baro is not None:
+            cols["baro_bias_m"] = tr.bias_baro
+        n = tr.t.size
+        if self.baro is not None and self.baro.scale is not None:
+            cols["baro_scale"] = np.full(n, float(self.baro.scale.est))
+        if self.baro is not None and self.baro.latency_s is not None:
+            cols["baro_latency_s"] = np.full(n, float(self.baro.latency_s.est))
+        if self.cov is not None and self.t_cov is not None:
+            var = np.diagonal(self.cov, axis1=1, axis2=2)  # (M, 18)
+            have = np.any(np.isfinite(var), axis=0)
+            for j in np.flatnonzero(have):
+                cols[SD_COLUMNS[j]] = self._sd_at(tr.t, var[:, j])
+            if have[0] and have[1]:
+                cols["horiz_sd_m"] = self._sd_at(tr.t, var[:, 0] + var[:, 1])
+        return pd.DataFrame(cols)
+
+    def _sd_at(self, t: FloatArray, var: FloatArray) -> FloatArray:
+        """√var at the covariance epochs, interpolated to ``t`` (see ``to_dataframe``)."""
+        assert self.t_cov is not None
+        tc = self.t_cov
+        sd = np.sqrt(np.clip(var, 0.0, None))
+        out = np.interp(t, tc, sd)
+        hold = float(np.median(np.diff(tc))) if tc.size > 1 else 0.0
+        out[(t < tc[0] - hold) | (t > tc[-1] + hold)] = np.nan
+        return out
 
     def replace(self, **changes: Any) -> Estimate:
         from dataclasses import replace

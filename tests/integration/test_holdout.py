@@ -15,7 +15,7 @@ from vnav_graph.geo.earth import radii
 from vnav_graph.types import Drive, Estimate, GnssStream, ImuStream, Trajectory
 
 GLITCH = "erle_pxf_181_gps_glitch/181.BIN"
-# estimators that take GNSS (DESIGN.md); the baro-inertial loops and vkf4 do not
+# estimators that take GNSS (docs/design.md); the baro-inertial loops and vkf4 do not
 GNSS_USERS = ["observer1d", "vkf4", "vekf7", "ekf", "ekf-rts", "graph-isam2", "graph-batch"]
 # observer1d is seed 003's GPS-only observer: it has no barometer, so on this log it can only
 # refuse the bad heights and coast on the IMU; "follow the baro" does not apply to it.

@@ -1,4 +1,4 @@
-"""benchmarks/reproduce_seeds.py --quick writes every DESIGN.md key (short integration run)."""
+"""benchmarks/reproduce_seeds.py --quick writes every docs/design.md key (short integration run)."""
 
 from __future__ import annotations
 

@@ -1,16 +1,19 @@
 """The estimator interface and the registry.
 
 Every estimator is constructed from its config and has one call, ``run(drive) -> Estimate``.
-The registry maps DESIGN.md names to ``"module:factory"`` strings and imports lazily, so a
-heavy dependency (gtsam) is only loaded when its estimator runs, and a research extension
-can register its own estimator with ``register``.
+The registry maps docs/design.md names to ``"module:factory"`` strings and imports lazily, so
+a heavy dependency (gtsam) is only loaded when its estimator runs, and a research extension
+can register its own estimator with ``register`` (from Python) or ``load_plugin`` (the CLI's
+``--plugin module:Class``).
 """
 
 from __future__ import annotations
 
 import importlib
 import importlib.util
+import sys
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any, Protocol
 
 from ..types import Drive, Estimate
@@ -80,3 +83,49 @@ def create(name: str, config: Any = None) -> Estimator:
     if factory is None:
         raise ValueError(f"unknown estimator {name!r} (available: {', '.join(available())})")
     return factory(config) if config is not None else factory()
+
+
+def load_plugin(spec: str) -> str:
+    """Import an extension estimator and register it; returns the name it is registered under.
+
+    ``spec`` is ``[NAME=]MODULE:ATTR``: ``MODULE`` an importable module or a ``.py`` file
+    (its folder is put on ``sys.path`` and it is imported under its file name), ``ATTR`` a
+    class or factory taking an optional config, as for ``register``. Without ``NAME=`` the
+    name is ``ATTR.name``. The factory is registered as the ``"module:attr"`` string, so the
+    bench's worker processes can import it again. A malformed spec, a module or attribute
+    that does not import, or a name that is a built-in estimator is a one-line ValueError.
+    """
+    name, sep, target = spec.rpartition("=")
+    mod, _, attr = target.rpartition(":")
+    if (sep and not name) or not mod or not attr or not attr.isidentifier():
+        raise ValueError(f"--plugin {spec!r}: expected [NAME=]MODULE:CLASS "
+                         "(e.g. mypkg.estimators:MyEstimator)")
+    path = Path(mod).resolve() if mod.endswith(".py") else None
+    if path is not None:
+        if not path.is_file():
+            raise ValueError(f"--plugin {spec!r}: no such file: {mod}")
+        if str(path.parent) not in sys.path:
+            sys.path.append(str(path.parent))
+        mod = path.stem
+    try:
+        module = importlib.import_module(mod)
+    except Exception as exc:  # whatever the plugin raises on import: one line, exit 2
+        msg = str(exc).splitlines()[0] if str(exc) else ""
+        raise ValueError(f"--plugin {spec!r}: cannot import {mod}: "
+                         f"{type(exc).__name__}: {msg}".rstrip(": ")) from None
+    if path is not None and Path(getattr(module, "__file__", "") or "").resolve() != path:
+        raise ValueError(f"--plugin {spec!r}: module name {mod!r} is taken by "
+                         f"{module.__file__}; rename the file")
+    factory = getattr(module, attr, None)
+    if not callable(factory):
+        raise ValueError(f"--plugin {spec!r}: {mod} has no class or factory {attr!r}")
+    if not name:
+        name = getattr(factory, "name", None)
+        if not isinstance(name, str) or not name:
+            raise ValueError(f"--plugin {spec!r}: {attr} has no string 'name' attribute; "
+                             f"give one as NAME={target}")
+    if name in _CORE:
+        raise ValueError(f"--plugin {spec!r}: {name!r} is a built-in estimator; "
+                         f"register it under another name (NAME={target})")
+    register(name, f"{mod}:{attr}")
+    return name

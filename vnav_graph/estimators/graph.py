@@ -76,13 +76,14 @@ from .graph_solve import (  # noqa: F401 (re-exported)
 )
 
 
-def _solver_warnings(res: _BatchResult, cfg: GraphConfig, what: str = "Gauss-Newton"
-                     ) -> list[str]:
+def _solver_warnings(res: _BatchResult, cfg: GraphConfig, what: str = "Gauss-Newton",
+                     estimator: str = "graph-batch") -> list[str]:
     """User-facing warning for a solve that did not converge (``info["warnings"]``)."""
     if res.stop == "max_iterations":
         return [f"{what} stopped at max_iterations={cfg.max_iterations} per solve without "
-                f"converging (final ½χ² {res.cost:.6g}); the estimate may be off — raise "
-                "GraphConfig.max_iterations"]
+                f"converging (final ½χ² {res.cost:.6g}); the estimate may be off — raise it: "
+                f"--config FILE.toml with [{estimator}] max_iterations = "
+                f"{max(2 * cfg.max_iterations, 100)} (Python: GraphConfig(max_iterations=...))"]
     if res.stop == "no_descent":
         return [f"{what} found no step that lowers the cost (Levenberg-Marquardt damping up "
                 f"to 1e3, final ½χ² {res.cost:.6g}): a flat or strongly nonlinear direction "
@@ -202,7 +203,7 @@ def _outputs(P: _Problem, res: _BatchResult, pri: dict[str, float],
     hu = fac.solve(u)
     b_var = max(float(u @ hu), 0.0)
     b_sd = float(np.sqrt(b_var))
-    # b is referenced to h0 (DESIGN.md): at a height Δh above h0 an error δs moves it by
+    # b is referenced to h0 (docs/design.md): at a height Δh above h0 an error δs moves it by
     # −δs·Δh, so a flight far above h0 ties b̄ to s (sortie: corr −0.995)
     cov_sb = float(hu[lay.n_band])
     corr_sb = cov_sb / np.sqrt(b_var * pk[0, 0]) if b_var > 0 and pk[0, 0] > 0 else 0.0

@@ -18,7 +18,7 @@ Contents
   in between (Forster et al. 2017 preintegration, evaluated at intermediate samples).
 - The baro row is the shared model (``vnav_graph.sensors.baro``) evaluated at the delayed
   time t_s − τd:  h_b = h0 + (1+s)(h(t_s−τd) − h0) + b(t_s−τd), with
-  ∂/∂τd = −(1+s) v_up(t_s−τd) (DESIGN.md; seed 001 eq. 2 is its first-order form).
+  ∂/∂τd = −(1+s) v_up(t_s−τd) (docs/design.md; seed 001 eq. 2 is its first-order form).
 - ``group_information``: per-interval information (Λ, η) of all those rows, reduced in one
   batched ``einsum``; ``PAIR_COVER`` splits a 5-key information matrix into ≤3-key blocks
   (GTSAM's Python HessianFactor constructors take at most three keys).

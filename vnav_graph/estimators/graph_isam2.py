@@ -323,7 +323,7 @@ class GraphISAM2:
             "isam2_last_segment_calibration": isam_k,
             "segments": int(seg[-1]) + 1,
             "isam2_fallback": fallback,
-            "warnings": g._solver_warnings(res, cfg, "final smoothing pass")
+            "warnings": g._solver_warnings(res, cfg, "final smoothing pass", self.name)
             + ([] if fallback is None else [
                 f"iSAM2 update failed and was retried with dogleg ({fallback})"]),
             "isam2_settings": {"keyframe_dt": cfg.keyframe_dt, "dogleg": robust,

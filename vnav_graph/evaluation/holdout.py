@@ -289,7 +289,7 @@ def cli_holdout(args: Any) -> int:
         drive = load_drive(args.log)
     res = run_holdout(drive, getattr(args, "estimators", None),
                       float(getattr(args, "outage", 60.0) or 60.0), getattr(args, "spacing", None),
-                      progress=mode)
+                      progress=mode, configs=getattr(args, "configs", None))
     md = format_markdown(res.doc)
 
     def fill(tmp: Path) -> None:

@@ -1,7 +1,7 @@
 """Errors of an Estimate against truth: altitude, vertical velocity, NEES, baro parameters.
 
 Truth is interpolated to the estimate's stamps, never the other way round (STYLE.md §2.4).
-``evaluate`` returns the per-estimator metric block of ``summary.json`` (DESIGN.md); metrics
+``evaluate`` returns the per-estimator metric block of ``summary.json`` (docs/design.md); metrics
 that do not apply are ``None``.
 """
 
@@ -84,7 +84,7 @@ def baro_block(baro: BaroEstimate | None, drive: Drive) -> dict[str, Any]:
 
 
 def evaluate(est: Estimate, drive: Drive) -> dict[str, Any]:
-    """Metric block for summary.json / bench.json (DESIGN.md schema)."""
+    """Metric block for summary.json / bench.json (docs/design.md schema)."""
     out: dict[str, Any] = {
         "status": "ok", "error": None, "alt_rmse_m": None, "alt_max_abs_m": None,
         "vel_down_rmse_mps": None, "nees_mean": None, "nees_dof": None,
@@ -92,7 +92,7 @@ def evaluate(est: Estimate, drive: Drive) -> dict[str, Any]:
         "realtime_factor": (drive.duration_s / est.runtime_s) if est.runtime_s > 0 else None,
         "gnss_rejected": est.info.get("gnss_rejected"),
         # things the user should know about this result (e.g. a solver that stopped at its
-        # iteration cap); an addition to the DESIGN.md block, always a list
+        # iteration cap); an addition to the docs/design.md block, always a list
         "warnings": [str(w) for w in est.info.get("warnings", [])],
     }
     if drive.truth is not None:

@@ -21,7 +21,7 @@ that keeps the GNSS outages inside the shortened drive), ``run_task`` (executed 
 ``aggregate``, ``bench`` (the whole thing → the ``bench.json`` document), ``format_bench_md``,
 ``write_bench`` and ``cli_bench`` (``vnav-graph bench``).
 
-The ``bench.json`` document (DESIGN.md)::
+The ``bench.json`` document (docs/design.md)::
 
     {"schema": "vnav_graph.bench/1",
      "config": {...},
@@ -40,9 +40,9 @@ import sys
 import tempfile
 import time
 import traceback
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import dataclass, replace
+from dataclasses import asdict, dataclass, is_dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -52,7 +52,7 @@ from ..progress import Counter, Mode, mode_for
 
 BENCH_SCHEMA = "vnav_graph.bench/1"
 
-# Metrics aggregated over seeds (mean and 95 % CI). The first four are the DESIGN.md ones;
+# Metrics aggregated over seeds (mean and 95 % CI). The first four are the docs/design.md ones;
 # the baro parameter errors |est − truth| show the modelling gain of the baro-aware estimators.
 AGG_METRICS = (
     "alt_rmse_m", "nees_mean", "runtime_s", "vel_down_rmse_mps", "alt_max_abs_m",
@@ -87,6 +87,7 @@ class BenchTask:
     factory : for estimators registered at run time (``base.register``), the factory
         (``"module:attr"`` string or picklable callable) re-registered inside the worker;
         None for the built-in estimators
+    config : the estimator's config object (picklable), None for its default
     """
 
     scenario: str
@@ -94,6 +95,7 @@ class BenchTask:
     estimator: str
     duration_s: float | None = None
     factory: Any = None
+    config: Any = None
 
 
 def shorten_scenario(scenario: str, duration_s: float | None) -> Any:
@@ -119,7 +121,7 @@ def shorten_scenario(scenario: str, duration_s: float | None) -> Any:
 
 
 def _finite(x: Any) -> Any:
-    """Replace NaN/inf floats by None, recursively (JSON has no NaN; DESIGN.md: metrics that
+    """Replace NaN/inf floats by None, recursively (JSON has no NaN; docs/design.md: metrics that
     do not exist are null)."""
     if isinstance(x, dict):
         return {k: _finite(v) for k, v in x.items()}
@@ -130,6 +132,12 @@ def _finite(x: Any) -> Any:
     if isinstance(x, np.integer):
         return int(x)
     return x
+
+
+def _json_config(config: Any) -> Any:
+    """A config object as JSON data (dataclass fields; anything JSON lacks as its str)."""
+    data = asdict(config) if is_dataclass(config) and not isinstance(config, type) else config
+    return json.loads(json.dumps(_finite(data), default=str))
 
 
 def _null_metrics(error: str, runtime_s: float) -> dict[str, Any]:
@@ -155,8 +163,8 @@ def _warm_up(task: BenchTask) -> None:
     from ..simulation import simulate
 
     try:
-        create(task.estimator).run(simulate(shorten_scenario(task.scenario, WARMUP_DURATION_S),
-                                            task.seed))
+        drive = simulate(shorten_scenario(task.scenario, WARMUP_DURATION_S), task.seed)
+        create(task.estimator, task.config).run(drive)
     except Exception:
         pass
 
@@ -185,7 +193,7 @@ def run_task(task: BenchTask) -> dict[str, Any]:
             register(task.estimator, task.factory)
         _warm_up(task)
         t1 = time.perf_counter()
-        est = create(task.estimator).run(drive)
+        est = create(task.estimator, task.config).run(drive)
         if est.runtime_s <= 0:
             est = est.replace(runtime_s=time.perf_counter() - t1)
         stage = "evaluate"
@@ -209,17 +217,19 @@ def run_task(task: BenchTask) -> dict[str, Any]:
 
 def make_tasks(
     scenarios: Sequence[str], seeds: Sequence[int], estimators: Sequence[str],
-    duration_s: float | None = None,
+    duration_s: float | None = None, configs: Mapping[str, Any] | None = None,
 ) -> list[BenchTask]:
     """All (scenario, seed, estimator) combinations, in report order.
 
     Estimators registered at run time (not part of the built-in registry) carry their factory
-    so that a worker process that did not inherit the registration can rebuild it.
+    so that a worker process that did not inherit the registration can rebuild it; ``configs``
+    maps an estimator name to its config object (default: the estimator's own).
     """
     from ..estimators import base
 
     extra = dict(base._REGISTRY)
-    return [BenchTask(sc, int(sd), est, duration_s, extra.get(est))
+    cfg = dict(configs or {})
+    return [BenchTask(sc, int(sd), est, duration_s, extra.get(est), cfg.get(est))
             for sc in scenarios for sd in seeds for est in estimators]
 
 
@@ -384,10 +394,11 @@ def aggregate(runs: Sequence[dict[str, Any]]) -> dict[str, dict[str, dict[str, A
 def bench(
     scenarios: Sequence[str], estimators: Sequence[str], seeds: Sequence[int],
     duration_s: float | None = None, workers: int = DEFAULT_WORKERS, dask: Any = None,
-    progress: bool | Mode = False,
+    progress: bool | Mode = False, configs: Mapping[str, Any] | None = None,
 ) -> dict[str, Any]:
-    """Run the Monte Carlo and return the ``bench.json`` document (DESIGN.md schema)."""
-    tasks = make_tasks(scenarios, seeds, estimators, duration_s)
+    """Run the Monte Carlo and return the ``bench.json`` document (docs/design.md schema).
+    ``configs``: estimator name → config object (``--config``), echoed in ``config``."""
+    tasks = make_tasks(scenarios, seeds, estimators, duration_s, configs)
     t0 = time.perf_counter()
     runs = run_tasks(tasks, workers=workers, dask=dask, progress=progress)
     wall = time.perf_counter() - t0
@@ -399,7 +410,9 @@ def bench(
                    "seeds": [int(s) for s in seeds], "duration_s": duration_s,
                    "executor": "dask" if dask is not None else
                    ("local" if workers <= 1 else f"process-pool({workers})"),
-                   "wall_s": wall, "vnav_graph_version": __version__},
+                   "wall_s": wall, "vnav_graph_version": __version__,
+                   "estimator_configs": {n: _json_config(c) for n, c in
+                                         (configs or {}).items() if n in estimators}},
         "runs": runs,
         "aggregate": aggregate(runs),
     }
@@ -510,7 +523,7 @@ def cli_bench(args: Any) -> int:
     progress = mode_for(not getattr(args, "no_progress", False))
     doc = bench(scenarios, estimators, list(range(n_seeds)),
                 duration_s=QUICK_DURATION_S if args.quick else None, workers=workers,
-                dask=args.dask, progress=progress)
+                dask=args.dask, progress=progress, configs=getattr(args, "configs", None))
     write_bench(doc, out)
     n_ok = sum(r["status"] == "ok" for r in doc["runs"])
     print(format_bench_md(doc))

@@ -1,4 +1,4 @@
-"""Barometric altimeter error model — the one model of DESIGN.md, used everywhere.
+"""Barometric altimeter error model — the one model of docs/design.md, used everywhere.
 
     h_b(t) − h0 = (1 + s)·(h(t − τd) − h0) + b(t) + v,   ḃ = −b/τb + w
 

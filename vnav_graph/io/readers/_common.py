@@ -102,7 +102,7 @@ def baro_alt_aligned(t_baro: FloatArray, alt_raw: FloatArray, t_gnss: FloatArray
 
     ``alt = alt_raw + c`` with ``c = median(h_gnss − interp(alt_raw))`` over the GNSS fixes in
     the first ``BARO_ALIGN_WINDOW_S`` seconds after the first fix. This fixes only the constant
-    datum (so the baro bias b(t) of the DESIGN.md model starts near zero); scale, latency and
+    datum (so the baro bias b(t) of the docs/design.md model starts near zero); scale, latency and
     the drifting bias are left for the estimators.
 
     Returns
