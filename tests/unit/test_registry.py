@@ -1,4 +1,4 @@
-"""The estimator registry: every DESIGN name maps to the estimator of that name, lazily."""
+"""The estimator registry: every docs/design.md name maps to the estimator of that name, lazily."""
 
 from __future__ import annotations
 
