@@ -6,9 +6,10 @@ import numpy as np
 from scipy.linalg import expm
 
 from vnav_graph.estimators import ekf_model as km
-from vnav_graph.estimators.alignment import coarse_level, level_tilt_bias_jacobian
+from vnav_graph.estimators.alignment import level_tilt_bias_jacobian
 from vnav_graph.geo.earth import gravity
 from vnav_graph.geo.frames import attitude_error_n, quat_to_mat, rph_to_quat
+from vnav_graph.nav.levelling import coarse_level
 from vnav_graph.sensors.baro import baro_jacobian, measure_baro
 
 

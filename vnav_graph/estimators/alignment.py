@@ -2,9 +2,8 @@
 
 Contents
 --------
-- ``coarse_level`` — roll and pitch from the mean specific force of a static window
-  (Groves, 2nd ed., §5.6.2, eq. 5.101): a level IMU at rest reads f_b = C_bn (0, 0, −g), so
-  φ = atan2(−f_y, −f_z), θ = atan2(f_x, √(f_y² + f_z²)).
+- coarse levelling (roll and pitch from the mean specific force of a static window) is
+  ``vnav_graph.nav.levelling.coarse_level``, shared with the AHRS and the graph.
 - ``level_tilt_bias_jacobian`` — the linear relation between the residual tilt of that
   levelling and the accelerometer-bias error, used to correlate the initial covariance
   (the classic tilt/horizontal-accel-bias ambiguity: levelling nulls the *sum* of both).
@@ -45,12 +44,6 @@ def static_window_end(imu: ImuStream, max_s: float, min_s: float = 0.5,
         np.abs(np.linalg.norm(imu.accel_b[:n_max], axis=1) - g_ref) > accel_thresh)
     idx = np.flatnonzero(moving[n_min:])
     return int(n_min + idx[0]) if idx.size else n_max
-
-
-def coarse_level(accel_mean_b: FloatArray) -> tuple[float, float]:
-    """Roll and pitch [rad] from the mean specific force (3,) of a static window [m/s²]."""
-    fx, fy, fz = (float(v) for v in accel_mean_b)
-    return float(np.arctan2(-fy, -fz)), float(np.arctan2(fx, np.hypot(fy, fz)))
 
 
 def level_tilt_bias_jacobian(mat_nb: FloatArray, g: float) -> FloatArray:

@@ -59,6 +59,7 @@ from scipy.stats import chi2
 from ..config import DEG, IMU_PRESETS, REAL_LOG_BARO, BaroSpec, ImuSpec
 from ..geo.earth import OMEGA_IE, gravity, radii
 from ..geo.frames import quat_to_mat, rph_to_quat
+from ..nav.levelling import coarse_level
 from ..sensors.noise import gm_process_var, white_sd
 from ..types import (
     ERROR_STATE_DIM,
@@ -70,7 +71,7 @@ from ..types import (
     Trajectory,
 )
 from . import ekf_model as km
-from .alignment import coarse_level, level_tilt_bias_jacobian, static_window_end, track_heading
+from .alignment import level_tilt_bias_jacobian, static_window_end, track_heading
 
 NDArrayInt = Any
 PROVIDES = frozenset({"alt", "vel_d", "pos_h", "vel_h", "att", "baro", "cov"})

@@ -112,7 +112,9 @@ import numpy as np
 from numba import njit
 
 from ..geo.earth import OMEGA_IE, gravity_scalar, radii_scalar
-from .strapdown import nav_rates, quat_exp, quat_mul, quat_to_dcm, strapdown_step
+from ..nav.rotations import quat_exp, quat_mul, quat_to_dcm, rpy_quat, skew3
+from ..nav.rotations import yaw_of as _yaw
+from .strapdown import nav_rates, strapdown_step
 
 NX = 21  # internal error-state dimension
 NPACK = NX * (NX + 1) // 2
@@ -120,11 +122,6 @@ NING = 23  # ingredients of F per grid interval (22: IMU-gap flag)
 IPOS, IVEL, IATT, IBG, IBA, ISC, ITD, IBB, IKA = 0, 3, 6, 9, 12, 15, 16, 17, 18
 # indices of the nominal parameter vector ``par`` (12,)
 PBG, PBA, PKA, PSC, PTD, PBB = 0, 3, 6, 9, 10, 11
-
-
-@njit(cache=True)
-def skew3(v):
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 
 @njit(cache=True)
@@ -239,15 +236,6 @@ def step_phi(ing, tau_g, tau_a, tau_b):
 
 
 @njit(cache=True)
-def rpy_quat(roll, pitch, yaw):
-    """q_nb (scalar first) of roll, pitch, yaw [rad]: q_z(ψ) ⊗ q_y(θ) ⊗ q_x(φ)."""
-    qx = np.array([np.cos(0.5 * roll), np.sin(0.5 * roll), 0.0, 0.0])
-    qy = np.array([np.cos(0.5 * pitch), 0.0, np.sin(0.5 * pitch), 0.0])
-    qz = np.array([np.cos(0.5 * yaw), 0.0, 0.0, np.sin(0.5 * yaw)])
-    return quat_mul(quat_mul(qz, qy), qx)
-
-
-@njit(cache=True)
 def reset_jacobian(delta):
     """J of the heading reset: tilt rotated by R_z(Δ), yaw error replaced (row zeroed)."""
     j = np.eye(NX)
@@ -258,11 +246,6 @@ def reset_jacobian(delta):
     j[IATT + 1, IATT + 1] = cd
     j[IATT + 2, IATT + 2] = 0.0
     return j
-
-
-@njit(cache=True)
-def _yaw(q):
-    return np.arctan2(2.0 * (q[0] * q[3] + q[1] * q[2]), 1.0 - 2.0 * (q[2] ** 2 + q[3] ** 2))
 
 
 @njit(cache=True)

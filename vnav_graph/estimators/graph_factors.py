@@ -40,7 +40,8 @@ import numpy as np
 from numba import njit
 
 from ..geo.earth import OMEGA_IE, gravity
-from ..geo.frames import lla_to_ned, ned_to_lla
+from ..geo.frames import lla_to_ned, ned_to_lla, skew
+from ..nav.rotations import so3_exp
 from ..sensors.baro import baro_jacobian, measure_baro
 from ..types import FloatArray
 
@@ -105,22 +106,6 @@ def height_and_up(pos_t: FloatArray, origin_lla: FloatArray) -> tuple[FloatArray
     return lla[:, 2], -c[:, :, 2]
 
 
-def skew(v: FloatArray) -> FloatArray:
-    z = np.zeros_like(v[..., 0])
-    return np.stack(
-        [np.stack([z, -v[..., 2], v[..., 1]], -1), np.stack([v[..., 2], z, -v[..., 0]], -1),
-         np.stack([-v[..., 1], v[..., 0], z], -1)], -2)
-
-
-@njit(cache=True)
-def _so3_exp(phi):
-    a = np.sqrt(phi[0] ** 2 + phi[1] ** 2 + phi[2] ** 2)
-    k = np.array([[0.0, -phi[2], phi[1]], [phi[2], 0.0, -phi[0]], [-phi[1], phi[0], 0.0]])
-    if a < 1e-9:
-        return np.eye(3) + k + 0.5 * k @ k
-    return np.eye(3) + np.sin(a) / a * k + (1.0 - np.cos(a)) / a**2 * (k @ k)
-
-
 @njit(cache=True)
 def _dense(t, gyro, accel, kf_idx):
     n = t.size
@@ -139,7 +124,7 @@ def _dense(t, gyro, accel, kf_idx):
             dv[j] = v
             dp[j] = p
             dt = t[j + 1] - t[j]
-            r_new = r @ _so3_exp(0.5 * (gyro[j] + gyro[j + 1]) * dt)
+            r_new = r @ so3_exp(0.5 * (gyro[j] + gyro[j + 1]) * dt)
             a0 = r @ accel[j]
             a1 = r_new @ accel[j + 1]
             p = p + v * dt + (a0 / 3.0 + a1 / 6.0) * dt * dt

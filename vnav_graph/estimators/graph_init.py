@@ -3,19 +3,15 @@ GNSS positions/velocities, TRIAD attitude, IMU propagation and baro-bridged gaps
 
 from __future__ import annotations
 
-import gtsam
 import numpy as np
 
 from ..geo.frames import ned_to_lla
+from ..nav.rotations import so3_exp
 from ..types import (
     FloatArray,
 )
 from . import graph_factors as gf
 from .graph_problem import _level, _Problem
-
-
-def _so3_exp(phi: FloatArray) -> FloatArray:
-    return gtsam.Rot3.Expmap(phi).matrix()
 
 
 def _initial_states(P: _Problem) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -85,7 +81,7 @@ def _initial_states(P: _Problem) -> tuple[FloatArray, FloatArray, FloatArray]:
     else:
         r = rot_triad[k0]
         for k in range(k0 - 1, -1, -1):
-            r = _so3_exp(P.omega_t * (P.t_kf[k + 1] - P.t_kf[k])) @ r @ dr_t[k].T
+            r = so3_exp(P.omega_t * (P.t_kf[k + 1] - P.t_kf[k])) @ r @ dr_t[k].T
     rot = np.zeros((nk, 3, 3))
     p_out = np.zeros((nk, 3))
     v_out = np.zeros((nk, 3))
@@ -98,7 +94,7 @@ def _initial_states(P: _Problem) -> tuple[FloatArray, FloatArray, FloatArray]:
         rr = rot[k]
         p1 = p_out[k] + v_out[k] * T + 0.5 * a * T * T + rr @ dp_t[k]
         v1 = v_out[k] + a * T + rr @ dv_t[k]
-        r1 = _so3_exp(-P.omega_t * T) @ rr @ dr_t[k]
+        r1 = so3_exp(-P.omega_t * T) @ rr @ dr_t[k]
         if triad_ok[k + 1]:
             r1 = rot_triad[k + 1]
         if has[k + 1]:

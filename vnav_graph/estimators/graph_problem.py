@@ -13,6 +13,7 @@ from gtsam.symbol_shorthand import B, C, K, V, X
 
 from ..config import IMU_PRESETS, REAL_LOG_BARO, BaroSpec, ImuSpec
 from ..geo.earth import gravity
+from ..nav.levelling import coarse_level
 from ..sensors.noise import gm_process_var, gm_transition
 from ..types import (
     Drive,
@@ -372,9 +373,8 @@ def _gm_factor(k: int, dt: float, pri: dict[str, float]) -> Any:
 
 
 def _level(f_b: FloatArray) -> FloatArray:
-    """Roll/pitch from a static specific force, yaw 0."""
-    roll = np.arctan2(-f_b[1], -f_b[2])
-    pitch = np.arctan2(f_b[0], np.hypot(f_b[1], f_b[2]))
+    """Rotation matrix of the roll/pitch from a static specific force (coarse_level), yaw 0."""
+    roll, pitch = coarse_level(f_b)
     return gtsam.Rot3.Ypr(0.0, pitch, roll).matrix()
 
 

@@ -25,46 +25,9 @@ import numpy as np
 from numba import njit
 
 from ..geo.earth import OMEGA_IE, gravity_scalar, radii_scalar
+from ..nav.rotations import cross3 as _cross
+from ..nav.rotations import quat_exp, quat_mul, quat_to_dcm
 from ..types import FloatArray, ImuStream, Trajectory
-
-
-@njit(cache=True)
-def _cross(a, b):
-    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2],
-                     a[0] * b[1] - a[1] * b[0]])
-
-
-@njit(cache=True)
-def quat_mul(p, q):
-    return np.array([
-        p[0] * q[0] - p[1] * q[1] - p[2] * q[2] - p[3] * q[3],
-        p[0] * q[1] + p[1] * q[0] + p[2] * q[3] - p[3] * q[2],
-        p[0] * q[2] - p[1] * q[3] + p[2] * q[0] + p[3] * q[1],
-        p[0] * q[3] + p[1] * q[2] - p[2] * q[1] + p[3] * q[0],
-    ])
-
-
-@njit(cache=True)
-def quat_exp(phi):
-    """Quaternion of the rotation vector φ."""
-    a = np.sqrt(phi[0] ** 2 + phi[1] ** 2 + phi[2] ** 2)
-    if a < 1e-8:
-        s = 0.5 - a * a / 48.0
-        c = 1.0 - a * a / 8.0
-    else:
-        s = np.sin(0.5 * a) / a
-        c = np.cos(0.5 * a)
-    return np.array([c, s * phi[0], s * phi[1], s * phi[2]])
-
-
-@njit(cache=True)
-def quat_to_dcm(q):
-    w, x, y, z = q[0], q[1], q[2], q[3]
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
 
 
 @njit(cache=True)

@@ -10,22 +10,14 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .strapdown import quat_exp, quat_mul, quat_to_dcm, strapdown_step
+from ..nav.rotations import quat_exp, quat_mul, quat_to_dcm
+from ..nav.rotations import rpy_quat as _rpy_quat
+from .strapdown import strapdown_step
 
 
 @njit(cache=True)
 def _wrap_nb(a):
     return (a + np.pi) % (2.0 * np.pi) - np.pi
-
-
-@njit(cache=True)
-def _rpy_quat(r, p, y):
-    """q_nb (w, x, y, z) of roll r, pitch p, yaw y (z-y-x Euler angles)."""
-    cr, sr = np.cos(0.5 * r), np.sin(0.5 * r)
-    cp, sp = np.cos(0.5 * p), np.sin(0.5 * p)
-    cy, sy = np.cos(0.5 * y), np.sin(0.5 * y)
-    return np.array([cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy,
-                     cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy])
 
 
 @njit(cache=True)

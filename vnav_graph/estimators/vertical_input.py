@@ -281,10 +281,9 @@ def _thin(t: FloatArray, min_dt: float) -> FloatArray:
 def _coarse_level(accel_b: FloatArray) -> FloatArray:
     """Roll/pitch from a mean specific force at rest (Groves eq. 5.101), yaw 0; returns q_nb."""
     from ..geo.frames import rph_to_quat
+    from ..nav.levelling import coarse_level
 
-    f = np.mean(accel_b, axis=0)
-    roll = np.arctan2(-f[1], -f[2])
-    pitch = np.arctan2(f[0], np.hypot(f[1], f[2]))
+    roll, pitch = coarse_level(np.mean(accel_b, axis=0))
     return rph_to_quat(np.array([[roll, pitch, 0.0]]))[0]
 
 

@@ -1,0 +1,87 @@
+"""SO(3) and quaternion kernels shared by the strapdown, the EKF, the AHRS and the graph.
+
+All are numba ``njit`` functions on single vectors (callable from other kernels and from
+Python); ``vnav_graph.geo.frames`` holds the vectorised numpy versions for whole trajectories
+(``skew``, ``rph_to_quat``), tested equal to these. Conventions (docs/design.md): quaternions
+scalar first (w, x, y, z); ``q_nb`` maps body vectors into n; roll-pitch-yaw are z-y-x Euler
+angles, q = q_z(ψ) ⊗ q_y(θ) ⊗ q_x(φ).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True)
+def cross3(a, b):
+    """a × b for 3-vectors."""
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2],
+                     a[0] * b[1] - a[1] * b[0]])
+
+
+@njit(cache=True)
+def skew3(v):
+    """Cross-product matrix [v×] (3, 3)."""
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+@njit(cache=True)
+def quat_mul(p, q):
+    """Hamilton product p ⊗ q."""
+    return np.array([
+        p[0] * q[0] - p[1] * q[1] - p[2] * q[2] - p[3] * q[3],
+        p[0] * q[1] + p[1] * q[0] + p[2] * q[3] - p[3] * q[2],
+        p[0] * q[2] - p[1] * q[3] + p[2] * q[0] + p[3] * q[1],
+        p[0] * q[3] + p[1] * q[2] - p[2] * q[1] + p[3] * q[0],
+    ])
+
+
+@njit(cache=True)
+def quat_exp(phi):
+    """Quaternion of the rotation vector φ (series below 1e-8 rad)."""
+    a = np.sqrt(phi[0] ** 2 + phi[1] ** 2 + phi[2] ** 2)
+    if a < 1e-8:
+        s = 0.5 - a * a / 48.0
+        c = 1.0 - a * a / 8.0
+    else:
+        s = np.sin(0.5 * a) / a
+        c = np.cos(0.5 * a)
+    return np.array([c, s * phi[0], s * phi[1], s * phi[2]])
+
+
+@njit(cache=True)
+def quat_to_dcm(q):
+    """Rotation matrix of a unit quaternion (C_nb of q_nb)."""
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+@njit(cache=True)
+def so3_exp(phi):
+    """Rotation matrix exp([φ×]) (Rodrigues; second-order series below 1e-9 rad)."""
+    a = np.sqrt(phi[0] ** 2 + phi[1] ** 2 + phi[2] ** 2)
+    k = skew3(phi)
+    if a < 1e-9:
+        return np.eye(3) + k + 0.5 * k @ k
+    return np.eye(3) + np.sin(a) / a * k + (1.0 - np.cos(a)) / a**2 * (k @ k)
+
+
+@njit(cache=True)
+def rpy_quat(roll, pitch, yaw):
+    """q_nb of roll, pitch, yaw [rad]: q_z(ψ) ⊗ q_y(θ) ⊗ q_x(φ), closed form."""
+    cr, sr = np.cos(0.5 * roll), np.sin(0.5 * roll)
+    cp, sp = np.cos(0.5 * pitch), np.sin(0.5 * pitch)
+    cy, sy = np.cos(0.5 * yaw), np.sin(0.5 * yaw)
+    return np.array([cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy,
+                     cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy])
+
+
+@njit(cache=True)
+def yaw_of(q):
+    """Yaw ψ [rad] of q_nb (z-y-x Euler angles)."""
+    return np.arctan2(2.0 * (q[0] * q[3] + q[1] * q[2]), 1.0 - 2.0 * (q[2] ** 2 + q[3] ** 2))
