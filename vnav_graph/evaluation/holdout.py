@@ -34,7 +34,6 @@ there).
 
 from __future__ import annotations
 
-import json
 import os
 import time
 import traceback
@@ -288,7 +287,9 @@ def cli_holdout(args: Any) -> int:
     out.mkdir(parents=True, exist_ok=True)
     md = format_markdown(res.doc)
     tmp = out / "holdout.json.tmp"
-    tmp.write_text(json.dumps(res.doc, indent=2))
+    from ..io.jsonout import dumps_strict
+
+    tmp.write_text(dumps_strict(res.doc))
     (out / "holdout.md").write_text(md)
     plot_holdout(res, out / "holdout.png")
     tmp.replace(out / "holdout.json")
