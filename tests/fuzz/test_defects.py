@@ -213,7 +213,9 @@ def test_clipping_is_removed_as_a_gap_and_counted():
     clip = d.meta["clipping"]["imu"]
     assert clip["accel_samples"] == int(np.sum(np.abs(acc[:, 2]) >= 16 * G0 * 0.998))
     assert clip["accel_limit_m_s2"] == pytest.approx(16 * G0)
-    assert len(d.imu) == len(SIM.imu) - clip["accel_samples"]
+    assert clip["episodes"] == 1  # one 2 s event, removed whole: one gap
+    gap = np.diff(d.imu.t).max()
+    assert 1.9 < gap < 2.2 and len(d.imu) == len(SIM.imu) - clip["samples_removed"]
     assert np.max(np.abs(d.imu.accel_b)) < 16 * G0 * 0.998
 
 

@@ -12,7 +12,9 @@ Checks, with the evidence each uses
 -----------------------------------
 - reader drops: per stream, the fraction of records a reader dropped (``meta["dropped"]``).
   Above ``WARN_DROP_FRACTION`` a warning names the reasons; above ``REFUSE_DROP_FRACTION``
-  the drive is refused (shuffled IMU stamps once kept 11 of 6,223 samples and ran).
+  the drive is refused (shuffled IMU stamps once kept 11 of 6,223 samples and ran). Reasons
+  that mean a damaged file (``CORRUPTION_WORDS``: malformed rows, non-finite values, stamps
+  going backwards, truncation) are reported at any count.
 - time-stamp units: the IMU's median sample interval. Beyond ``MAX_IMU_DT_S`` the stamps are
   almost surely milliseconds read as seconds; below ``MIN_IMU_DT_S`` (over 20 kHz),
   microseconds read as nanoseconds. Both are refused: the scale cannot be told from the
@@ -21,24 +23,35 @@ Checks, with the evidence each uses
 - specific-force magnitude: the median |f| over the drive is g for any vehicle that does not
   stay in free fall. ``≈ 1`` → g units (× g0); ``≈ g0²`` → scaled by g0 twice (÷ g0); any
   other value outside [6, 14] m/s² is refused.
-- gyro units and axes (rotation consistency): a body rotating at ω sees a fixed specific
-  force turn as ``ḟ_b = −ω × f_b``. Over 1 s block means, the regression gain of the observed
-  change of the unit specific force on ``−ω × u Δt`` is 1 in rad/s and 1/57.3 when the gyro is
-  in deg/s (→ × π/180). With enough rotation and a correlation below ``MIN_ROTATION_CORR``
-  the accelerometer and gyro axes disagree (swapped columns): refused, naming the column
-  permutation that fits best. Too little rotation: no decision (a car at rest).
+- gyro units: over 1 s block means of |ω|, a busiest second above ``DEG_BUSY`` rad/s (458°/s
+  held for a second) or a quietest second above ``DEG_QUIET`` rad/s (never below 29°/s) is a
+  gyro in deg/s (→ × π/180). Measured on the shared logs in rad/s: busiest ≤ 3.2, quietest
+  ≤ 0.043; in deg/s: busiest ≥ 28 for every log that moves.
+- axes against each other, ground vehicles (one dominant rotation axis, E[ω̄ω̄ᵀ] eigenvalue
+  ratio ≥ ``GROUND_AXIS_RATIO``): a car turns about the vertical, so its principal rotation
+  axis more than 45° from the mean specific force means accelerometer and gyro columns are
+  swapped against each other (refused; cars measure 0.4-3°, swapped 87-90°). A mirror (two
+  accelerometer columns swapped, gravity unmoved) is caught by :func:`handedness`
+  (centripetal force on the right in right turns).
 - gravity axis: the mean specific force should point along −z_b (FRD, level mounting); more
-  than ``MAX_TILT_DEG`` away is reported (side mounting or swapped axes).
+  than ``MAX_TILT_DEG`` away is refused (swapped axes, or an IMU mounted on its side).
+- held samples: runs of bit-identical IMU samples for ``HELD_MIN_S`` are removed (a stuck
+  sensor or a forward-filled gap), so the estimators bridge them as a gap.
+- a 1 s mean specific force more than 3 g from g is reported (impact, corrupt values, or
+  clipping averaged away in 1 Hz data).
 - IMU clipping: ≥ ``CLIP_MIN_SAMPLES`` samples on one axis pinned within
   ``CLIP_REL_TOL`` of that axis's extreme |value| (≥ 2 g for the accelerometer, the smallest
   full-scale range in use) are clipped. Handled as PX4 EKF2 handles a clipped delta velocity
-  it cannot trust: the clipped samples are removed, so every estimator bridges them as an IMU
-  gap (inflated process noise, re-levelling). Counted in ``meta["clipping"]``.
+  it cannot trust: each clipping episode (clipped samples closer than ``CLIP_MERGE_S``,
+  padded by ``CLIP_PAD_S``) is removed, so every estimator bridges it as an IMU gap (inflated
+  process noise, re-levelling). Counted in ``meta["clipping"]``.
 - baro: constant for the whole drive → barometer dropped; altitude in feet (slope ≈ 3.28
   against GNSS height) → ÷ 3.28084 and re-aligned; single-sample jumps larger than
   ``BARO_STEP_M`` + 30 m/s·Δt → spikes removed, persistent ones → level shift removed.
 - GNSS: height identical in every fix (not logged) → vertical σ set to ``UNUSED_SD_M``;
   isolated fixes jumping faster than ``GNSS_JUMP_SPEED`` → dropped.
+- coverage: a missing GNSS or baro stream, logging gaps (``GAP_WARN_S``) and a stream that
+  ends well before the others (a truncated file) are reported.
 """
 
 from __future__ import annotations
@@ -72,6 +85,8 @@ MAX_TILT_DEG = 60.0
 CLIP_MIN_SAMPLES = 3
 CLIP_REL_TOL = 0.002
 CLIP_MIN_ACCEL = 2.0 * G0  # smallest accelerometer full-scale range [m/s²]
+CLIP_MERGE_S = 0.5  # clipped samples closer than this belong to one episode [s]
+CLIP_PAD_S = 0.05  # removed on each side of an episode [s]
 CLIP_MIN_GYRO = 4.0  # rad/s (≈ 250 deg/s, the smallest common gyro range)
 HELD_MIN_SAMPLES = 5
 HELD_MIN_S = 1.0
@@ -419,10 +434,6 @@ def _clipped(x: FloatArray, floor: float) -> tuple[NDArray[np.bool_], float]:
     return clip, lim
 
 
-def _episodes(m: NDArray[np.bool_]) -> int:
-    return int(np.sum(m[1:] & ~m[:-1]) + int(m[0])) if m.size else 0
-
-
 def _check_clipping(drive: Drive, f: _Findings) -> Drive:
     i = drive.imu
     ca, lim_a = _clipped(i.accel_b, CLIP_MIN_ACCEL)
@@ -431,19 +442,29 @@ def _check_clipping(drive: Drive, f: _Findings) -> Drive:
     n = int(clip.sum())
     if not n:
         return drive
+    # a clipping episode is one event: the samples between clipped ones (below the limit only
+    # while the signal swings through) are no more trustworthy, so the whole episode, padded
+    # by CLIP_PAD_S, is removed and bridged as one gap
+    k = np.flatnonzero(clip)
+    t = i.t
+    starts = np.r_[0, np.flatnonzero(np.diff(t[k]) > CLIP_MERGE_S) + 1]
+    ends = np.r_[starts[1:] - 1, k.size - 1]
+    for a, b in zip(starts, ends, strict=True):
+        clip |= (t >= t[k[a]] - CLIP_PAD_S) & (t <= t[k[b]] + CLIP_PAD_S)
+    removed = int(clip.sum())
     if n > 0.5 * len(i):
         raise _reject("imu", f"{n} of {len(i)} samples at the sensor's range limit: the "
                       "log is mostly clipped (wrong unit or range setting?)")
     f.meta["clipping"] = {"imu": {"accel_samples": int(ca.sum()), "gyro_samples": int(cg.sum()),
-                                  "episodes": _episodes(clip),
+                                  "episodes": int(starts.size), "samples_removed": removed,
                                   "accel_limit_m_s2": lim_a or None,
                                   "gyro_limit_rad_s": lim_g or None,
                                   "handling": "samples removed: bridged as an IMU gap"}}
     lims = [f"{lim_a / G0:.1f} g" if lim_a else "", f"{lim_g:.2f} rad/s" if lim_g else ""]
-    f.repair("imu", "clipped samples removed (bridged as an IMU gap)", n,
-             f"imu: {n} clipped samples in {_episodes(clip)} episode(s) at the sensor's range "
-             f"({', '.join(x for x in lims if x)}): removed, so the estimators bridge them as "
-             "a gap")
+    f.repair("imu", "clipping episodes removed (bridged as an IMU gap)", removed,
+             f"imu: {n} clipped samples in {starts.size} episode(s) at the sensor's range "
+             f"({', '.join(x for x in lims if x)}): the episodes ({removed} samples) removed, "
+             "so the estimators bridge them as a gap")
     return drive.replace(imu=_imu(drive, i.gyro_b, i.accel_b, ~clip))
 
 
