@@ -37,8 +37,8 @@ Checks, with the evidence each uses
   than ``MAX_TILT_DEG`` away is refused (swapped axes, or an IMU mounted on its side).
 - held samples: runs of bit-identical IMU samples for ``HELD_MIN_S`` are removed (a stuck
   sensor or a forward-filled gap), so the estimators bridge them as a gap.
-- a 1 s mean specific force more than 3 g from g is reported (impact, corrupt values, or
-  clipping averaged away in 1 Hz data).
+- a 1 s mean specific force more than 3 g from g (impact, corrupt values, or clipping
+  averaged away in 1 Hz data): those seconds are removed and bridged as a gap.
 - IMU clipping: ≥ ``CLIP_MIN_SAMPLES`` samples on one axis pinned within
   ``CLIP_REL_TOL`` of that axis's extreme |value| (≥ 2 g for the accelerometer, the smallest
   full-scale range in use) are clipped. Handled as PX4 EKF2 handles a clipped delta velocity
@@ -391,17 +391,28 @@ def _check_held_samples(drive: Drive, f: _Findings) -> Drive:
     return drive.replace(imu=_imu(drive, i.gyro_b, i.accel_b, ~drop))
 
 
-def _check_mean_force(drive: Drive, f: _Findings) -> None:
-    """A 1 s mean specific force more than 3 g away from g: no vehicle of this package
-    sustains that; a hard impact, clipping averaged away, or corrupt values."""
+def _check_mean_force(drive: Drive, f: _Findings) -> Drive:
+    """Seconds whose mean specific force is more than 3 g away from g: no vehicle of this
+    package sustains that for a second; a hard impact, corrupt values, or clipping averaged
+    away (1 Hz means). Their samples are removed and bridged as a gap, like clipping."""
     i = drive.imu
-    _, am = _block_means(i.t, i.accel_b, 1.0)
-    dev = np.abs(np.linalg.norm(am, axis=1) - G0)
-    bad = dev > MAX_MEAN_SPECIFIC_FORCE
-    if bad.any():
-        f.warn(f"imu: {int(bad.sum())} second(s) whose mean specific force is "
-               f"{float(dev.max()) / G0:.1f} g away from 1 g (impact, clipping averaged away "
-               "or corrupt values?)")
+    _, k = np.unique(np.floor(i.t - i.t[0]), return_inverse=True)
+    n = np.bincount(k)
+    mean = np.column_stack([np.bincount(k, weights=i.accel_b[:, j]) / n for j in range(3)])
+    dev = np.abs(np.linalg.norm(mean, axis=1) - G0)
+    bad_s = dev > MAX_MEAN_SPECIFIC_FORCE
+    if not bad_s.any():
+        return drive
+    drop = bad_s[k]
+    if drop.mean() > 0.5:
+        raise _reject("imu", f"{int(bad_s.sum())} of {bad_s.size} seconds have a mean specific "
+                      "force over 3 g away from 1 g: not an accelerometer in m/s^2 with gravity")
+    f.repair("imu", "seconds with a mean specific force > 3 g from 1 g removed (bridged as a "
+             "gap)", int(drop.sum()),
+             f"imu: {int(bad_s.sum())} second(s) whose mean specific force is up to "
+             f"{float(dev.max()) / G0:.1f} g away from 1 g (impact, clipping averaged away or "
+             f"corrupt values): their {int(drop.sum())} samples removed, bridged as a gap")
+    return drive.replace(imu=_imu(drive, i.gyro_b, i.accel_b, ~drop))
 
 
 def _check_gravity_axis(drive: Drive, f: _Findings) -> None:
