@@ -482,12 +482,11 @@ def _check_clipping(drive: Drive, f: _Findings) -> Drive:
 # ---------------------------------------------------------------------------- baro
 def _baro_from_alt(b: BaroStream, alt: FloatArray, keep: NDArray[np.bool_] | None = None
                    ) -> BaroStream:
+    """The baro stream with a repaired altitude; the raw pressure is dropped so that no
+    stream carries a pressure that disagrees with its altitude (estimators use altitude)."""
     if keep is None:
         keep = np.ones(len(b), dtype=bool)
-    p = None if b.pressure is None or b.alt is None else b.pressure[keep]
-    if b.alt is None:  # pressure only: the repaired altitude becomes the stream's altitude
-        p = None
-    return BaroStream(b.t[keep], p, alt[keep], b.spec)
+    return BaroStream(b.t[keep], None, alt[keep], b.spec)
 
 
 def _check_baro(drive: Drive, f: _Findings) -> Drive:
