@@ -165,14 +165,12 @@ def cmd_run(args: argparse.Namespace) -> int:
     results = run_estimators(drive, names, progress=mode, configs=configs)
     summary = summarize(drive, results)
     if drive.truth is None and drive.gnss is not None and not args.no_holdout:
-        from .evaluation.holdout import run_holdout
-        from .pipeline import apply_holdout
+        from .pipeline import score_holdout
 
         ok = [r.name for r in results if r.estimate is not None]
         if ok:
             with stage("scoring against withheld GNSS (holdout run of every estimator)", mode):
-                summary = apply_holdout(summary, run_holdout(drive, ok, progress=mode,
-                                                             configs=configs).doc)
+                summary = score_holdout(summary, drive, ok, progress=mode, configs=configs)
     from .pipeline import write_outputs
 
     writers = []
@@ -187,7 +185,12 @@ def cmd_run(args: argparse.Namespace) -> int:
         write_outputs(out, summary, results, drive, writers)
     print(format_table(summary))
     print(f"\nwrote {out / 'summary.json'}")
-    return 0
+    from .pipeline import run_status
+
+    code, line = run_status(summary)
+    if line:
+        print(f"vnav-graph: {line}", file=sys.stderr)
+    return code
 
 
 def cmd_list(args: argparse.Namespace) -> int:

@@ -13,6 +13,7 @@ import sys
 import threading
 import time
 import traceback
+import warnings
 from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -21,6 +22,7 @@ from typing import Any
 
 from .estimators.base import available, create
 from .evaluation.metrics import evaluate
+from .io.jsonout import dumps_strict
 from .jit import CompileTimer, Prewarm, mark_warm
 from .progress import Mode, mode_for, say, steps
 from .types import Drive, Estimate
@@ -92,7 +94,7 @@ def run_one(name: str, drive: Drive, config: Any = None, waited_s: float = 0.0) 
     t0 = time.perf_counter()
     with interrupt_flag() as interrupted, CompileTimer() as jit:
         try:
-            est = create(name, config).run(drive)
+            est = run_captured(name, drive, config)
             err = None
         except Exception as exc:  # an estimator failure is data, not a crash
             if interrupted:
@@ -140,6 +142,26 @@ def run_estimators(drive: Drive, names: Sequence[str], progress: bool | Mode = T
     return results
 
 
+def run_captured(name: str, drive: Drive, config: Any = None) -> Estimate:
+    """``create(name).run(drive)`` with Python warnings (numpy RuntimeWarnings: overflow,
+    invalid value, ...) captured and appended to the estimate's ``info["warnings"]`` as one
+    line per distinct message with its count, instead of reaching the terminal unexplained."""
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        est = create(name, config).run(drive)
+    if not rec:
+        return est
+    counts: dict[str, int] = {}
+    for w in rec:
+        where = f" ({Path(w.filename).name}:{w.lineno})" if w.filename else ""
+        key = f"{w.category.__name__}: {w.message}{where}"
+        counts[key] = counts.get(key, 0) + 1
+    lines = [f"{k} x{n}" if n > 1 else k for k, n in counts.items()]
+    info = dict(est.info)
+    info["warnings"] = [*list(info.get("warnings") or []), *lines]
+    return est.replace(info=info)
+
+
 def failed_block(error: str, runtime_s: float) -> dict[str, Any]:
     null_param = {"est": None, "sd": None, "truth": None}
     return {
@@ -164,11 +186,11 @@ def summarize(drive: Drive, results: Sequence[RunResult]) -> dict[str, Any]:
             ests[r.name] = failed_block(f"evaluation: {type(exc).__name__}: {exc}", r.runtime_s)
     for r in results:  # compile time, apart from runtime_s (first run on a machine only)
         ests[r.name]["jit_s"] = round(r.jit_s, 3)
-    return {
-        "schema": SUMMARY_SCHEMA,
-        "drive": {"name": drive.name, "source": drive.source, "duration_s": drive.duration_s},
-        "estimators": ests,
-    }
+    head: dict[str, Any] = {"name": drive.name, "source": drive.source,
+                            "duration_s": drive.duration_s}
+    if drive.meta.get("warnings"):  # additive: what the input checks found (io.sanity)
+        head["warnings"] = [str(w) for w in drive.meta["warnings"]]
+    return {"schema": SUMMARY_SCHEMA, "drive": head, "estimators": ests}
 
 
 def apply_holdout(summary: dict[str, Any], holdout_doc: dict[str, Any]) -> dict[str, Any]:
@@ -200,6 +222,45 @@ def apply_holdout(summary: dict[str, Any], holdout_doc: dict[str, Any]) -> dict[
         "onboard": holdout_doc.get("onboard"),
     }
     return out
+
+
+def score_holdout(summary: dict[str, Any], drive: Drive, names: Sequence[str],
+                  progress: bool | Mode = False, configs: Mapping[str, Any] | None = None
+                  ) -> dict[str, Any]:
+    """The optional holdout scoring of ``run`` (:func:`apply_holdout`), which never sinks the
+    run: when the log cannot be scored (GNSS span too short for one outage window, too few
+    fixes) the summary keeps its results and says why in ``evaluation.skipped``."""
+    from .evaluation.holdout import run_holdout
+
+    try:
+        doc = run_holdout(drive, list(names), progress=progress, configs=configs).doc
+    except ValueError as exc:
+        out = dict(summary)
+        out["evaluation"] = {"basis": None, "skipped": str(exc).splitlines()[0]}
+        return out
+    return apply_holdout(summary, doc)
+
+
+EXIT_SOME_FAILED = 3
+EXIT_ALL_FAILED = 4
+
+
+def run_status(summary: dict[str, Any]) -> tuple[int, str | None]:
+    """Exit code of ``run`` from its summary, and the one line to print on stderr.
+
+    0: every estimator ok; 3 (``EXIT_SOME_FAILED``): some failed, results written;
+    4 (``EXIT_ALL_FAILED``): none produced a scored result (every estimator failed in its
+    run or in evaluation), summary written for diagnosis.
+    """
+    ests = summary["estimators"]
+    failed = [n for n, b in ests.items() if b["status"] != "ok"]
+    if not failed:
+        return 0, None
+    first = str(ests[failed[0]].get("error") or "").splitlines()
+    detail = f"{failed[0]}: {first[0] if first else 'unknown error'}"
+    if len(failed) == len(ests):
+        return EXIT_ALL_FAILED, f"every estimator failed ({detail})"
+    return EXIT_SOME_FAILED, f"{len(failed)} of {len(ests)} estimators failed ({detail})"
 
 
 def _fmt(v: Any, spec: str) -> str:
@@ -240,7 +301,9 @@ def format_table(summary: dict[str, Any]) -> str:
             f"mean bias {truth['bias_m']['truth']:.2f} m"
         )
     ev = summary.get("evaluation")
-    if ev:
+    if ev and ev.get("skipped"):
+        lines.append(f"holdout scoring skipped: {ev['skipped']} (errors are null)")
+    elif ev:
         lines.append(f"errors against {ev['basis']}: {len(ev['windows'])} windows of "
                      f"{ev['outage_s']:.0f} s")
         ob = ev.get("onboard")
@@ -253,6 +316,8 @@ def format_table(summary: dict[str, Any]) -> str:
     if jit > 0.05:
         lines.append(f"numba compiled kernels for {jit:.1f} s (first run on this machine; "
                      "not in 'run s', and cached for later runs)")
+    for w in summary["drive"].get("warnings") or []:
+        lines.append(f"input warning: {w}")
     for name, m in summary["estimators"].items():
         if m["status"] == "failed":
             lines.append(f"{name} failed: {m['error']}")
@@ -286,7 +351,7 @@ def write_outputs(
     from .outputs import publish
 
     def fill(tmp: Path) -> None:
-        (tmp / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+        (tmp / "summary.json").write_text(dumps_strict(summary) + "\n")
         (tmp / "summary.txt").write_text(format_table(summary) + "\n")
         (tmp / "estimates").mkdir()
         for r in results:

@@ -422,7 +422,8 @@ class Drive:
         t0, t1 = self.imu.t[0], self.imu.t[-1]
         for name, s in (("gnss", self.gnss), ("baro", self.baro)):
             if s is not None and (s.t[-1] < t0 or s.t[0] > t1):
-                raise ValueError(f"drive.{name}: stream does not overlap the IMU time span")
+                raise ValueError(f"drive.{name}: stream does not overlap the IMU time span "
+                                 "(time stamps in different units or clocks?)")
 
     @property
     def name(self) -> str:

@@ -88,10 +88,26 @@ def _update_error(P: Any, k: int, exc: BaseException | None, gap: bool) -> Runti
 
 
 def _segments(P: Any) -> np.ndarray:
+    """Calibration segment index of every keyframe, numbered densely (0, 1, 2, ...).
+
+    Segments are ``segment_s`` long in time; one with no keyframe (a logging gap longer than
+    a segment) gets no index, so consecutive keyframes differ by at most one segment and the
+    random walk between K(j-1) and K(j) spans the real time between them
+    (:func:`_segment_span`).
+    """
     seg = P.cfg.segment_s
     if not np.isfinite(seg):
         return np.zeros(P.n_kf, dtype=int)
-    return np.floor((P.t_kf - P.t_kf[0]) / seg + 1e-9).astype(int)
+    raw = np.floor((P.t_kf - P.t_kf[0]) / seg + 1e-9).astype(int)
+    return np.unique(raw, return_inverse=True)[1].astype(int)
+
+
+def _segment_span(P: Any, seg: np.ndarray, j: int) -> float:
+    """Time [s] from the start of segment j-1 to the start of segment j (≥ segment_s when a
+    gap swallowed whole segments): the length of the K(j-1) → K(j) random walk."""
+    t0 = float(P.t_kf[np.argmax(seg == j - 1)])
+    t1 = float(P.t_kf[np.argmax(seg == j)])
+    return max(float(P.cfg.segment_s), t1 - t0)
 
 
 def _threshold_map(cfg: g.GraphConfig) -> Any:
@@ -251,7 +267,7 @@ class GraphISAM2:
                     j = int(seg[k + 1])
                     cal[j] = cal[j - 1].copy()
                     nv.insert(K(j), cal[j])
-                    span = float(cfg.segment_s)
+                    span = _segment_span(P, seg, j)
                     nf.add(gtsam.BetweenFactorVector(K(j - 1), K(j), np.zeros(2),
                                                      g._noise(calib_rw * np.sqrt(span))))
             if k >= 1:

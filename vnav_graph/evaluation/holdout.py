@@ -34,7 +34,6 @@ there).
 
 from __future__ import annotations
 
-import json
 import os
 import traceback
 from collections.abc import Mapping, Sequence
@@ -280,6 +279,7 @@ def plot_holdout(res: HoldoutResult, path: Path) -> None:
 def cli_holdout(args: Any) -> int:
     """``vnav-graph holdout LOG [--outage S] [--spacing S] [--estimators a,b] --out DIR``."""
     from ..io import load_drive
+    from ..io.jsonout import dumps_strict
     from ..outputs import check_out_dir, publish
     from ..progress import stage
 
@@ -293,7 +293,7 @@ def cli_holdout(args: Any) -> int:
     md = format_markdown(res.doc)
 
     def fill(tmp: Path) -> None:
-        (tmp / "holdout.json").write_text(json.dumps(res.doc, indent=2))
+        (tmp / "holdout.json").write_text(dumps_strict(res.doc))
         (tmp / "holdout.md").write_text(md)
         plot_holdout(res, tmp / "holdout.png")
 

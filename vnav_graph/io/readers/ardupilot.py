@@ -137,6 +137,27 @@ def _truncated_tail(path: Path, reader: Any) -> bool:
     return pos + fmt.len > len(tail)
 
 
+def _unparsed_records(path: Path, reader: Any, parsed: dict[str, int]) -> dict[str, int]:
+    """Records of IMU/GPS/BARO whose 3-byte header occurs in the file more often than the
+    parser returned them (beyond 2 % + 5: a header byte pattern can occur inside data).
+
+    pymavlink skips ahead to the next valid header after damage; when it lands on a false
+    one it can lose minutes of records without an error.
+    """
+    ids = {getattr(f, "name", None): t for t, f in getattr(reader, "formats", {}).items()}
+    data = path.read_bytes()
+    out = {}
+    for name in ("IMU", "GPS", "BARO"):
+        t = ids.get(name)
+        if t is None or not isinstance(t, int) or not 0 <= t < 256:
+            continue
+        n_file = data.count(HEAD + bytes([t]))
+        n_lost = n_file - parsed.get(name, 0)
+        if n_lost > 0.02 * n_file + 5:
+            out[name] = int(n_lost)
+    return out
+
+
 def _col(rows: Sequence[dict[str, Any]], *names: str) -> np.ndarray:
     """Column of the first of ``names`` present in the records (NaN where missing)."""
     for n in names:
@@ -216,6 +237,11 @@ def read_dataflash(path: str | Path, clock: str = "auto") -> Drive:
     msgs, reader = _collect(path)
     if _truncated_tail(path, reader):
         report.drop("log", "incomplete last record (file truncated)", 1)
+    lost = _unparsed_records(path, reader, {k: len(v) for k, v in msgs.items()})
+    for name, n in lost.items():
+        report.drop(name.lower() if name in ("IMU", "GPS", "BARO") else "log",
+                    f"{name} records in the file but not parsed (corrupt bytes: parser lost "
+                    "sync)", n)
     params = {r.get("Name"): r.get("Value") for r in msgs["PARM"]}
     firmware = next((r.get("Message") for r in msgs["MSG"]
                      if str(r.get("Message", "")).startswith(("Ardu", "APM"))), None)
@@ -236,6 +262,11 @@ def read_dataflash(path: str | Path, clock: str = "auto") -> Drive:
     t_imu, gyro, acc = t_imu[ok], gyro[ok], acc[ok]
     keep = monotonic_mask(t_imu, "imu", report)
     t_imu, gyro, acc = t_imu[keep], gyro[keep], acc[keep]
+    if t_imu.size < 10:
+        why = "; ".join(f"{c} {r}" for r, c in report.dropped.get("imu", {}).items())
+        raise ValueError(f"{path.name}: only {t_imu.size} of {len(imu_rows)} IMU records are "
+                         f"usable ({why or 'fields missing'}; corrupt FMT records or NaN "
+                         "samples?)")
 
     # ---- GNSS ------------------------------------------------------------------------
     gps_rows = [r for r in msgs["GPS"] if _instance0(r)]

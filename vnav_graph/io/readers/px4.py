@@ -85,6 +85,7 @@ def read_ulog(path: str | Path) -> Drive:
         raise ValueError(f"{path.name}: cannot parse ULog ({type(exc).__name__}: {exc})") from None
     if getattr(ulog, "file_corruption", False):
         report.notes.append("pyulog reported file corruption: damaged records skipped")
+        report.drop("log", "corrupt records skipped (pyulog reported file corruption)", 1)
 
     sc = _topic(ulog, "sensor_combined")
     if sc is None or len(sc.get("timestamp", [])) < 10:
@@ -97,6 +98,9 @@ def read_ulog(path: str | Path) -> Drive:
     t_imu, gyro, acc = t_imu[ok], gyro[ok], acc[ok]
     keep = monotonic_mask(t_imu, "imu", report)
     t_imu, gyro, acc = t_imu[keep], gyro[keep], acc[keep]
+    if t_imu.size < 10:
+        raise ValueError(f"{path.name}: only {t_imu.size} usable sensor_combined samples "
+                         "(NaN values or time stamps not increasing)")
     find_gaps(t_imu, "imu", report)
 
     gnss, href = _read_gps(ulog, path, report)

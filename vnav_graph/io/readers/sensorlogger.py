@@ -101,8 +101,8 @@ def is_sensorlogger_folder(path: Path) -> bool:
 
 def is_merged_csv(head: bytes) -> bool:
     """True when the bytes start with a CSV header holding time, position and IMU columns."""
-    try:
-        first = head.decode("utf-8").splitlines()[0]
+    try:  # utf-8-sig: spreadsheet programs write a byte-order mark before the header
+        first = head.decode("utf-8-sig").splitlines()[0]
     except (UnicodeDecodeError, IndexError):
         return False
     cols = set(_header(first))
@@ -189,9 +189,45 @@ def _baro(t: np.ndarray, p_hpa: np.ndarray, gnss: GnssStream,
     return BaroStream(t, p, alt), off
 
 
-def _read_csv(path: Path, what: str) -> pd.DataFrame:
+def well_formed_rows(text: str) -> tuple[str, int]:
+    """The CSV text with only the rows whose field count equals the header's, and the number
+    of rows dropped.
+
+    pandas' ``on_bad_lines="skip"`` drops rows with too many fields but pads a row with too
+    few with NaN, so one missing comma shifts every later field of that row into the wrong
+    column (a GNSS fix 8,500 km away). Blank lines are ignored, not counted.
+    """
+    lines = text.splitlines()
+    if not lines:
+        return text, 0
+    rows = csv.reader(lines)
     try:
-        df = pd.read_csv(path, on_bad_lines="skip")
+        n_head = len(next(rows))
+    except (StopIteration, csv.Error):
+        return text, 0
+    keep = [lines[0]]
+    bad = 0
+    for k, line in enumerate(lines[1:], start=1):
+        if not line.strip():
+            continue
+        try:
+            n = len(next(csv.reader([line])))
+        except csv.Error:
+            n = -1
+        if n == n_head:
+            keep.append(lines[k])
+        else:
+            bad += 1
+    return "\n".join(keep) + "\n", bad
+
+
+def _read_csv(path: Path, what: str, report: Report | None = None) -> pd.DataFrame:
+    text = path.read_bytes().decode("utf-8-sig", errors="replace")
+    text, bad = well_formed_rows(text)
+    if report is not None:
+        report.drop(what, "malformed CSV line (wrong field count)", bad)
+    try:
+        df = pd.read_csv(io.StringIO(text), on_bad_lines="skip")
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
         msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise ValueError(f"{path.name}: cannot parse {what} CSV ({msg})") from None
@@ -238,7 +274,7 @@ def read_sensorlogger_folder(path: str | Path) -> Drive:
 
     def load(name: str) -> pd.DataFrame | None:
         f = folder / f"{name}.csv"
-        return _read_csv(f, name) if f.exists() else None
+        return _read_csv(f, name, report) if f.exists() else None
 
     def stamped(df: pd.DataFrame) -> np.ndarray:
         return _num(df, "seconds_elapsed")
@@ -335,7 +371,9 @@ def read_merged_csv(path: str | Path) -> Drive:
     """Read a merged, 1 s averaged Sensor Logger CSV (see the module docstring)."""
     path = Path(path)
     report = Report()
-    text = path.read_bytes().decode("utf-8", errors="replace")
+    text = path.read_bytes().decode("utf-8-sig", errors="replace")
+    text, bad = well_formed_rows(text)
+    report.drop("rows", "malformed CSV line (wrong field count)", bad)
     n_lines = text.count("\n")
     df = _read_csv_text(text, path)
     need = ["acc_x", "acc_y", "acc_z", "gyro_x", "gyro_y", "gyro_z"]
@@ -385,14 +423,30 @@ def _read_csv_text(text: str, path: Path) -> pd.DataFrame:
     return df
 
 
+# Unix epochs of 1973..2286 in each unit span [1e8, 1e10) s; the decade tells the unit (a
+# single "> 1e14 means ns" rule read µs as ns and ms as s). Below 1e8: plain seconds (a
+# relative clock); the sanity checks refuse it when its row interval is implausible.
+_EPOCH_UNITS = ((0.0, 1e8, 1.0), (1e8, 1e10, 1.0), (1e11, 1e13, 1e-3), (1e14, 1e16, 1e-6),
+                (1e17, 1e19, 1e-9))
+
+
+def _epoch_scale(median: float, path: Path) -> float:
+    """Seconds per unit of a numeric epoch column, told from its magnitude."""
+    for lo, hi, scale in _EPOCH_UNITS:
+        if lo <= abs(median) < hi:
+            return scale
+    raise ValueError(f"{path.name}: numeric time column (median {median:.6g}) is not a Unix "
+                     "epoch in s, ms, µs or ns")
+
+
 def _merged_time(df: pd.DataFrame, path: Path) -> np.ndarray:
     if "seconds_elapsed" in df.columns:
         return _num(df, "seconds_elapsed")
     col = df["time"]
     num = pd.to_numeric(col, errors="coerce")
-    if num.notna().mean() > 0.9:  # epoch: ns (Sensor Logger) or s
+    if num.notna().mean() > 0.9:  # a Unix epoch in s, ms, µs or ns (Sensor Logger: ns)
         v = num.to_numpy(dtype=float)
-        return v * 1e-9 if np.nanmedian(v) > 1e14 else v
+        return v * _epoch_scale(float(np.nanmedian(v)), path)
     ts = pd.to_datetime(col, errors="coerce", utc=True)
     if ts.isna().mean() > 0.5:
         raise ValueError(f"{path.name}: cannot parse the time column")

@@ -1,0 +1,907 @@
+"""Seeded corpus of corrupted and hostile inputs for every supported format (issue 16).
+
+Nothing here is committed as data: every case is written at test time from
+
+- a **simulated drive** (``hill-drive``, seed 1, 120 s), written by the small writers below in
+  all five formats: ``.npz`` (``save_npz``), ArduPilot DataFlash ``.bin``, PX4 ``.ulg``, a
+  Sensor Logger CSV folder and a merged 1 Hz CSV;
+- the **small real cuts in tests/data** (always present);
+- the **shared real logs** (``$VNAV_DATA`` or ``../shared/data``; those cases are left out when
+  the folder is absent).
+
+Case families
+-------------
+- ``control``: the base itself (undamaged).
+- ``bytes``: truncations, byte flips, swapped / duplicated / zeroed blocks, header damage,
+  applied to the file bytes (for a folder: to one of its CSVs).
+- ``semantic``: the streams are changed before writing: units (g, deg/s, feet, ms, hPa), axis
+  swaps, NaN / inf, constant or zero streams, shuffled stamps, a long IMU gap.
+- ``hostile``: well-formed but physically hostile streams: accelerometer or gyro clipping,
+  baro steps and spikes, GNSS jumps.
+- ``structure``: format-specific damage: ``.npz`` keys, dtypes and JSON header; CSV columns,
+  field counts, time encodings; DataFlash FMT records; missing Sensor Logger files.
+
+Every case has a stable id ``format/base/family/mutation``; the same seed always gives the
+same bytes.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import shutil
+import struct
+import zipfile
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+SEED = 20261128
+G0 = 9.80665
+REPO = Path(__file__).resolve().parents[2]
+TEST_DATA = REPO / "tests" / "data"
+
+
+def shared_data_dir() -> Path | None:
+    env = os.environ.get("VNAV_DATA")
+    for cand in ([Path(env)] if env else []) + [REPO.parent / "shared" / "data"]:
+        if cand.is_dir():
+            return cand
+    return None
+
+
+# ------------------------------------------------------------------------ raw streams
+@dataclass
+class Raw:
+    """Plain arrays of one drive in logger units (what a writer puts into a file)."""
+
+    t_imu: np.ndarray  # s
+    gyro: np.ndarray  # (N, 3) rad/s, FRD body
+    acc: np.ndarray  # (N, 3) m/s², FRD body, gravity included
+    t_gnss: np.ndarray
+    lat_deg: np.ndarray
+    lon_deg: np.ndarray
+    h: np.ndarray  # m
+    vel_n: np.ndarray  # (M, 3) m/s NED
+    sd_h: np.ndarray
+    sd_v: np.ndarray
+    t_baro: np.ndarray
+    press: np.ndarray  # Pa
+    baro_alt: np.ndarray  # m (ISA altitude of press)
+    epoch_s: float = 1.75e9  # wall-clock start for formats that carry one
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def copy(self) -> Raw:
+        return Raw(**{k: (v.copy() if isinstance(v, np.ndarray) else v)
+                      for k, v in self.__dict__.items() if k != "extra"},
+                   extra=dict(self.extra))
+
+
+def sim_raw() -> tuple[Raw, Any]:
+    """The simulated base: hill-drive seed 1, 120 s, IMU decimated to 100 Hz."""
+    from vnav_graph.geo.atmosphere import isa_pressure
+    from vnav_graph.simulation import simulate
+
+    d = simulate("hill-drive", 1, duration_s=120.0)
+    i = d.imu
+    k = slice(None, None, 2)
+    g, b = d.gnss, d.baro
+    press = np.asarray(isa_pressure(b.altitude), dtype=float)
+    raw = Raw(i.t[k] + 1.0, i.gyro_b[k], i.accel_b[k], g.t + 1.0, np.degrees(g.lla[:, 0]),
+              np.degrees(g.lla[:, 1]), g.lla[:, 2].copy(), g.vel_n.copy(), g.pos_sd[:, 0].copy(),
+              g.pos_sd[:, 2].copy(), b.t + 1.0, press, np.asarray(b.altitude, dtype=float))
+    return raw, d
+
+
+# ---------------------------------------------------------------------------- writers
+def write_npz(raw: Raw, path: Path, drive: Any = None) -> Path:
+    """The ``save_npz`` layout: the simulated Drive's truth, streams from ``raw``."""
+    arrays, header = npz_arrays(raw, drive)
+    return write_npz_arrays(arrays, header, path)
+
+
+def npz_arrays(raw: Raw, drive: Any = None) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    """The arrays and JSON header ``save_npz`` would write, from raw streams (no validation,
+    so hostile values reach the file)."""
+    deg = np.pi / 180.0
+    n = raw.t_gnss.size
+    arrays = {
+        "imu_t": raw.t_imu, "imu_gyro_b": raw.gyro, "imu_accel_b": raw.acc,
+        "origin_lla": np.array([raw.lat_deg[0] * deg, raw.lon_deg[0] * deg, raw.h[0]]),
+        "gnss_t": raw.t_gnss,
+        "gnss_lla": np.column_stack([raw.lat_deg * deg, raw.lon_deg * deg, raw.h]),
+        "gnss_pos_sd": np.column_stack([raw.sd_h, raw.sd_h, raw.sd_v]),
+        "gnss_lever_arm_b": np.zeros(3), "gnss_vel_n": raw.vel_n,
+        "gnss_vel_sd": np.full((n, 3), 0.1), "baro_t": raw.t_baro, "baro_alt": raw.baro_alt,
+    }
+    header: dict[str, Any] = {"format": "vnav_graph.drive/1",
+                              "meta": {"name": "fuzz", "source": "log"},
+                              "imu_spec": None, "gnss_spec": None, "baro_spec": None}
+    if drive is not None and raw.extra.get("truth", True):
+        tr = drive.truth
+        keep = (tr.t + 1.0 >= raw.t_imu[0]) & (tr.t + 1.0 <= raw.t_imu[-1])
+        arrays.update(truth_t=tr.t[keep] + 1.0, truth_lla=tr.lla[keep],
+                      truth_vel_n=tr.vel_n[keep], truth_q_nb=tr.q_nb[keep])
+        if tr.bias_baro is not None:
+            arrays["truth_bias_baro"] = tr.bias_baro[keep]
+        header["meta"]["source"] = "simulated"
+        from dataclasses import asdict
+
+        header["baro_truth"] = asdict(drive.baro_truth)
+        from vnav_graph.io.drive_io import _spec_to_json
+
+        header["imu_spec"] = _spec_to_json(drive.imu.spec)
+        header["gnss_spec"] = _spec_to_json(drive.gnss.spec)
+        header["baro_spec"] = _spec_to_json(drive.baro.spec)
+    return arrays, header
+
+
+def write_npz_arrays(arrays: dict[str, np.ndarray], header: Any, path: Path,
+                     header_bytes: bytes | None = None) -> Path:
+    out = dict(arrays)
+    hb = header_bytes if header_bytes is not None else json.dumps(header).encode()
+    out["header"] = np.frombuffer(hb, dtype=np.uint8)
+    with open(path, "wb") as fh:
+        np.savez_compressed(fh, **out)
+    return path
+
+
+def write_merged_csv(raw: Raw, path: Path, time_style: str = "iso",
+                     columns: dict[str, str] | None = None) -> Path:
+    """1 s means of every stream, one row per second (the merged Sensor Logger layout).
+    Phone axes: x_d = y_b, y_d = x_b, z_d = −z_b (flat phone, screen up)."""
+    t0 = raw.t_imu[0]
+    sec = np.floor(raw.t_imu - t0).astype(int)
+    nrow = int(sec.max())
+    rows = []
+
+    def mean_at(t: np.ndarray, v: np.ndarray, a: float) -> np.ndarray:
+        m = (t >= a) & (t < a + 1.0)
+        if not m.any():
+            j = int(np.clip(np.searchsorted(t, a), 0, t.size - 1))
+            return v[j]
+        return v[m].mean(axis=0)
+
+    for k in range(nrow):
+        a = t0 + k
+        acc = mean_at(raw.t_imu, raw.acc, a)
+        gyr = mean_at(raw.t_imu, raw.gyro, a)
+        ad = (acc[1], acc[0], -acc[2])
+        gd = (gyr[1], gyr[0], -gyr[2])
+        j = int(np.clip(np.searchsorted(raw.t_gnss, a), 0, raw.t_gnss.size - 1))
+        p = float(mean_at(raw.t_baro, raw.press, a))
+        epoch = raw.epoch_s + k
+        if time_style == "iso":
+            import datetime as dt
+
+            ts = dt.datetime.fromtimestamp(epoch, dt.UTC).strftime("%Y-%m-%d %H:%M:%S+00:00")
+        elif time_style == "s":
+            ts = f"{epoch:.0f}"
+        elif time_style == "ms":
+            ts = f"{epoch * 1e3:.0f}"
+        elif time_style == "us":
+            ts = f"{epoch * 1e6:.0f}"
+        else:  # ns
+            ts = f"{int(epoch) * 10**9}"
+        rows.append([ts, raw.sd_v[j], raw.sd_h[j] * 1.5, raw.h[j], raw.lon_deg[j],
+                     raw.lat_deg[j], ad[2], ad[1], ad[0], gd[2], gd[1], gd[0], p / 100.0])
+    names = ["time", "verticalAccuracy", "horizontalAccuracy", "altitude", "longitude",
+             "latitude", "acc_z", "acc_y", "acc_x", "gyro_z", "gyro_y", "gyro_x", "pressure"]
+    if columns:
+        names = [columns.get(n, n) for n in names]
+    lines = [",".join(names)]
+    for r in rows:
+        lines.append(",".join([r[0]] + [repr(float(x)) for x in r[1:]]))
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def write_sl_folder(raw: Raw, path: Path, skip: tuple[str, ...] = ()) -> Path:
+    """Sensor Logger per-sensor CSV export (Android, standardised units)."""
+    path.mkdir(parents=True, exist_ok=True)
+    t0 = raw.t_imu[0]
+    ns0 = int(raw.epoch_s) * 10**9
+
+    def dump(name: str, t: np.ndarray, cols: dict[str, np.ndarray]) -> None:
+        if name in skip:
+            return
+        out = io.StringIO()
+        out.write("time,seconds_elapsed," + ",".join(cols) + "\n")
+        mat = np.column_stack(list(cols.values()))
+        for k in range(t.size):
+            se = float(t[k] - t0)
+            out.write(f"{ns0 + int(se * 1e9) if np.isfinite(se) else 0},{se!r},"
+                      + ",".join(repr(float(x)) for x in mat[k]) + "\n")
+        (path / f"{name}.csv").write_text(out.getvalue())
+
+    acc, gyr = raw.acc, raw.gyro
+    dump("AccelerometerUncalibrated", raw.t_imu,
+         {"z": -acc[:, 2], "y": acc[:, 0], "x": acc[:, 1]})
+    dump("GyroscopeUncalibrated", raw.t_imu, {"z": -gyr[:, 2], "y": gyr[:, 0], "x": gyr[:, 1]})
+    dump("Location", raw.t_gnss, {"altitude": raw.h, "latitude": raw.lat_deg,
+                                  "longitude": raw.lon_deg,
+                                  "horizontalAccuracy": raw.sd_h * 1.5,
+                                  "verticalAccuracy": raw.sd_v})
+    dump("Barometer", raw.t_baro, {"relativeAltitude": raw.baro_alt - raw.baro_alt[0],
+                                   "pressure": raw.press / 100.0})
+    if "Metadata" not in skip:
+        (path / "Metadata.csv").write_text(
+            "version,device name,platform,standardisation\n3,fuzz phone,android,true\n")
+    return path
+
+
+# DataFlash: FMT(128) defines every other message; header 0xA3 0x95 <type>
+_DF_STRUCT = {"B": "B", "H": "H", "I": "I", "f": "f", "L": "i", "Q": "Q", "n": "4s",
+              "N": "16s", "Z": "64s", "b": "b", "h": "h", "i": "i", "d": "d", "q": "q"}
+DF_MSGS = {
+    "IMU": (130, "QffffffB", "TimeUS,GyrX,GyrY,GyrZ,AccX,AccY,AccZ,I"),
+    "GPS": (131, "QBIHBfLLffffB", "TimeUS,Status,GMS,GWk,NSats,HDop,Lat,Lng,Alt,Spd,GCrs,VZ,I"),
+    "BARO": (132, "QffffB", "TimeUS,Alt,Press,Temp,CRt,I"),
+}
+
+
+def _df_fmt(type_id: int, name: str, fmt: str, cols: str) -> bytes:
+    length = 3 + struct.calcsize("<" + "".join(_DF_STRUCT[c] for c in fmt))
+    return b"\xa3\x95\x80" + struct.pack("<BB4s16s64s", type_id, length, name.encode(),
+                                         fmt.encode(), cols.encode())
+
+
+def write_dataflash(raw: Raw, path: Path, names: dict[str, str] | None = None) -> Path:
+    """Minimal ArduPilot DataFlash log: FMT records, then IMU/GPS/BARO in time order.
+    ``names`` renames messages in the FMT records only (the FMT-swap damage)."""
+    names = names or {}
+    out = [_df_fmt(128, "FMT", "BBnNZ", "Type,Length,Name,Format,Columns")]
+    for name, (tid, fmt, cols) in DF_MSGS.items():
+        out.append(_df_fmt(tid, names.get(name, name), fmt, cols))
+    recs: list[tuple[float, bytes]] = []
+
+    def pack(name: str, *vals: Any) -> bytes:
+        tid, fmt, _ = DF_MSGS[name]
+        return b"\xa3\x95" + bytes([tid]) + struct.pack(
+            "<" + "".join(_DF_STRUCT[c] for c in fmt), *vals)
+
+    def us(t: float) -> int:
+        return int(round(t * 1e6)) if np.isfinite(t) and t >= 0 else 0
+
+    for k in range(raw.t_imu.size):
+        recs.append((raw.t_imu[k], pack("IMU", us(raw.t_imu[k]), *raw.gyro[k], *raw.acc[k], 0)))
+    gps_week, tow0 = 2360, 300_000.0
+    for k in range(raw.t_gnss.size):
+        v = raw.vel_n[k]
+        spd = float(np.hypot(v[0], v[1]))
+        crs = float(np.degrees(np.arctan2(v[1], v[0])) % 360.0)
+        t = raw.t_gnss[k]
+        recs.append((t, pack("GPS", us(t), 3, int((tow0 + (t if np.isfinite(t) else 0)) * 1e3)
+                             % 2**32, gps_week, 10, raw.sd_h[k], _i32(raw.lat_deg[k] * 1e7),
+                             _i32(raw.lon_deg[k] * 1e7), raw.h[k], spd, crs, v[2], 0)))
+    for k in range(raw.t_baro.size):
+        t = raw.t_baro[k]
+        recs.append((t, pack("BARO", us(t), raw.baro_alt[k] - raw.baro_alt[0], raw.press[k],
+                             20.0, 0.0, 0)))
+    order = sorted(range(len(recs)), key=lambda j: (recs[j][0] if np.isfinite(recs[j][0])
+                                                   else 0.0, j))
+    if raw.extra.get("shuffle_records"):
+        order = list(range(len(recs)))
+    path.write_bytes(b"".join(out) + b"".join(recs[j][1] for j in order))
+    return path
+
+
+def _i32(x: float) -> int:
+    return int(np.clip(np.nan_to_num(x, nan=0.0), -2**31, 2**31 - 1))
+
+
+def write_ulog(raw: Raw, path: Path, omit: tuple[str, ...] = ()) -> Path:
+    """Minimal ULog v1 (header, flags, formats, subscriptions, data) in the layout PX4 uses."""
+    codes = {"uint64_t": "Q", "float": "f", "int32_t": "i", "uint8_t": "B"}
+
+    def msg(kind: bytes, payload: bytes) -> bytes:
+        return struct.pack("<HB", len(payload), kind[0]) + payload
+
+    def us(t: float) -> int:
+        return int(round(t * 1e6)) if np.isfinite(t) and t >= 0 else 0
+
+    topics: dict[str, tuple[str, list[tuple]]] = {
+        "sensor_combined": ("uint64_t timestamp;float[3] gyro_rad;float[3] accelerometer_m_s2;",
+                            [(us(raw.t_imu[k]), *raw.gyro[k], *raw.acc[k])
+                             for k in range(raw.t_imu.size)]),
+        "vehicle_gps_position": (
+            "uint64_t timestamp;int32_t lat;int32_t lon;int32_t alt;int32_t alt_ellipsoid;"
+            "float eph;float epv;float s_variance_m_s;float vel_n_m_s;float vel_e_m_s;"
+            "float vel_d_m_s;uint8_t vel_ned_valid;uint8_t fix_type;",
+            [(us(raw.t_gnss[k]), _i32(raw.lat_deg[k] * 1e7), _i32(raw.lon_deg[k] * 1e7),
+              _i32(raw.h[k] * 1e3), _i32(raw.h[k] * 1e3), raw.sd_h[k], raw.sd_v[k], 0.2,
+              *raw.vel_n[k], 1, 3) for k in range(raw.t_gnss.size)]),
+        "vehicle_air_data": ("uint64_t timestamp;float baro_pressure_pa;",
+                             [(us(raw.t_baro[k]), raw.press[k]) for k in range(raw.t_baro.size)]),
+    }
+    topics = {k: v for k, v in topics.items() if k not in omit}
+    out = b"ULog\x01\x12\x35\x01" + struct.pack("<Q", 0)
+    out += msg(b"B", bytes(16) + struct.pack("<3Q", 0, 0, 0))
+    for name, (fmt, _) in topics.items():
+        out += msg(b"F", f"{name}:{fmt}".encode())
+    for i, name in enumerate(topics):
+        out += msg(b"A", struct.pack("<BH", 0, i) + name.encode())
+    rows = []
+    for i, (_, (fmt, data)) in enumerate(topics.items()):
+        pk = "<"
+        for fld in fmt.strip(";").split(";"):
+            typ = fld.split(" ")[0]
+            base, _, n = typ.partition("[")
+            pk += (n.rstrip("]") if n else "") + codes[base]
+        rows += [(r[0], i, struct.pack(pk, *r)) for r in data]
+    if not raw.extra.get("shuffle_records"):
+        rows = sorted(rows, key=lambda x: x[0])
+    for _, i, payload in rows:
+        out += msg(b"D", struct.pack("<H", i) + payload)
+    path.write_bytes(out)
+    return path
+
+
+WRITERS: dict[str, Callable[..., Path]] = {
+    "npz": write_npz, "dataflash": write_dataflash, "ulog": write_ulog,
+    "sl-folder": write_sl_folder, "merged-csv": write_merged_csv,
+}
+SUFFIX = {"npz": ".npz", "dataflash": ".bin", "ulog": ".ulg", "sl-folder": "",
+          "merged-csv": ".csv"}
+
+
+# --------------------------------------------------------------- semantic / hostile
+def _m(fn: Callable[[Raw, np.random.Generator], None]) -> Callable[[Raw, np.random.Generator],
+                                                                    Raw]:
+    def wrap(raw: Raw, rng: np.random.Generator) -> Raw:
+        r = raw.copy()
+        fn(r, rng)
+        return r
+    return wrap
+
+
+def _clip(r: Raw, col: str, axis: int, limit: float, t0: float, dur: float) -> None:
+    """Drive the axis hard past ``limit`` for ``dur`` seconds, then pin it at ±limit
+    (what a saturated sensor logs)."""
+    x = getattr(r, col)
+    m = (r.t_imu >= r.t_imu[0] + t0) & (r.t_imu < r.t_imu[0] + t0 + dur)
+    ph = np.linspace(0, 6 * np.pi, int(m.sum()))
+    x[m, axis] = np.clip(x[m, axis] + 3 * limit * np.sin(ph), -limit, limit)
+
+
+def _baro_step(r: Raw, dz: float, t0: float, t1: float | None) -> None:
+    from vnav_graph.geo.atmosphere import isa_pressure
+
+    m = r.t_baro >= r.t_baro[0] + t0
+    if t1 is not None:
+        m &= r.t_baro < r.t_baro[0] + t1
+    r.baro_alt[m] += dz
+    r.press = np.asarray(isa_pressure(r.baro_alt), dtype=float)
+
+
+def _gnss_jump(r: Raw, k: int, dn_m: float, dh_m: float) -> None:
+    r.lat_deg[k] += dn_m / 111_320.0
+    r.h[k] += dh_m
+
+
+def _imu_gap(r: Raw, t0: float, t1: float) -> None:
+    keep = ~((r.t_imu > r.t_imu[0] + t0) & (r.t_imu < r.t_imu[0] + t1))
+    r.t_imu, r.gyro, r.acc = r.t_imu[keep], r.gyro[keep], r.acc[keep]
+
+
+def _shuffle_imu_t(r: Raw, rng: np.random.Generator) -> None:
+    r.t_imu = rng.permutation(r.t_imu)
+    r.extra["shuffle_records"] = True  # written in this order, not sorted by stamp
+
+
+def _nan_rows(r: Raw, rng: np.random.Generator, frac: float) -> None:
+    k = rng.choice(r.t_imu.size, int(frac * r.t_imu.size), replace=False)
+    r.acc[k, rng.integers(0, 3)] = np.nan
+
+
+def _constant_gnss(r: Raw) -> None:
+    r.lat_deg[:] = r.lat_deg[0]
+    r.lon_deg[:] = r.lon_deg[0]
+    r.h[:] = r.h[0]
+    r.vel_n[:] = 0.0
+
+
+# name → (mutation, family, formats it applies to (None: all))
+SEMANTIC: dict[str, tuple[Callable[[Raw, np.random.Generator], Raw], str, tuple[str, ...] |
+                          None]] = {
+    "accel-in-g": (_m(lambda r, g: setattr(r, "acc", r.acc / G0)), "semantic", None),
+    "accel-times-g": (_m(lambda r, g: setattr(r, "acc", r.acc * G0)), "semantic", None),
+    "gyro-deg-s": (_m(lambda r, g: setattr(r, "gyro", np.degrees(r.gyro))), "semantic", None),
+    "swap-acc-xz": (_m(lambda r, g: setattr(r, "acc", r.acc[:, [2, 1, 0]])), "semantic", None),
+    "swap-gyro-xz": (_m(lambda r, g: setattr(r, "gyro", r.gyro[:, [2, 1, 0]])), "semantic",
+                     None),
+    "acc-sign-flipped": (_m(lambda r, g: setattr(r, "acc", -r.acc)), "semantic",
+                         ("npz", "dataflash", "ulog")),
+    "accz-all-nan": (_m(lambda r, g: r.acc.__setitem__((slice(None), 2), np.nan)), "semantic",
+                     None),
+    "acc-nan-10pct": (_m(lambda r, g: _nan_rows(r, g, 0.10)), "semantic", None),
+    "acc-nan-95pct": (_m(lambda r, g: _nan_rows(r, g, 0.95)), "semantic", None),
+    "gyro-inf": (_m(lambda r, g: r.gyro.__setitem__((slice(100, 110), 0), np.inf)),
+                 "semantic", None),
+    "imu-time-ms": (_m(lambda r, g: setattr(r, "t_imu", r.t_imu * 1e3)), "semantic",
+                    ("npz", "ulog", "sl-folder")),
+    "imu-time-us-as-s": (_m(lambda r, g: setattr(r, "t_imu", r.t_imu * 1e-3)), "semantic",
+                         ("npz", "dataflash", "ulog", "sl-folder")),
+    "imu-time-shuffled": (_m(_shuffle_imu_t), "semantic", ("npz", "ulog", "sl-folder")),
+    "imu-gap-70s": (_m(lambda r, g: _imu_gap(r, 20.0, 90.0)), "semantic", None),
+    "baro-alt-feet": (_m(lambda r, g: setattr(r, "baro_alt", r.baro_alt / 0.3048)),
+                      "semantic", ("npz",)),
+    "baro-alt-negated": (_m(lambda r, g: setattr(r, "baro_alt", -r.baro_alt + 2 * r.h[0])),
+                         "semantic", ("npz",)),
+    "pressure-hpa": (_m(lambda r, g: setattr(r, "press", r.press / 100.0)), "semantic",
+                     ("dataflash", "ulog")),
+    "pressure-constant": (_m(lambda r, g: (r.press.__setitem__(slice(None), r.press[0]),
+                                           r.baro_alt.__setitem__(slice(None), r.baro_alt[0]))),
+                          "semantic", None),
+    "gnss-alt-zero": (_m(lambda r, g: r.h.__setitem__(slice(None), 0.0)), "semantic", None),
+    "gnss-constant": (_m(lambda r, g: _constant_gnss(r)), "semantic", None),
+    "clip-accel-16g": (_m(lambda r, g: _clip(r, "acc", 2, 16 * G0, 40.0, 2.0)), "hostile",
+                       None),
+    "clip-accel-4g-x": (_m(lambda r, g: _clip(r, "acc", 0, 4 * G0, 60.0, 1.0)), "hostile",
+                        None),
+    "clip-gyro-250dps": (_m(lambda r, g: _clip(r, "gyro", 2, np.radians(250), 50.0, 1.5)),
+                         "hostile", None),
+    "baro-step-100m": (_m(lambda r, g: _baro_step(r, 100.0, 60.0, None)), "hostile", None),
+    "baro-spike-300m": (_m(lambda r, g: _baro_step(r, 300.0, 70.0, 70.5)), "hostile", None),
+    "gnss-jump-500m": (_m(lambda r, g: _gnss_jump(r, 500, 500.0, 300.0)), "hostile", None),
+    "gnss-far-fix": (_m(lambda r, g: _gnss_jump(r, 700, 8.5e6, 0.0)), "hostile", None),
+}
+
+
+# ---------------------------------------------------------------------- byte mutations
+def _flip(b: bytearray, rng: np.random.Generator, n: int, lo: int) -> None:
+    for p in rng.integers(lo, len(b), n):
+        b[int(p)] ^= 1 << int(rng.integers(0, 8))
+
+
+def byte_mutations(header_len: int) -> dict[str, Callable[[bytes, np.random.Generator], bytes]]:
+    """Byte-level damage; ``header_len`` bytes at the start count as the file header."""
+    def trunc(f: float) -> Callable[[bytes, np.random.Generator], bytes]:
+        return lambda b, g: b[:max(1, int(len(b) * f))]
+
+    def flips(n: int) -> Callable[[bytes, np.random.Generator], bytes]:
+        def fn(b: bytes, g: np.random.Generator) -> bytes:
+            x = bytearray(b)
+            _flip(x, g, n, min(header_len, len(x) - 1))
+            return bytes(x)
+        return fn
+
+    def swap(b: bytes, g: np.random.Generator) -> bytes:
+        n = max(64, len(b) // 20)
+        i, j = sorted(int(v) for v in g.integers(header_len, max(header_len + 1, len(b) - n), 2))
+        if j - i < n:
+            return b
+        return b[:i] + b[j:j + n] + b[i + n:j] + b[i:i + n] + b[j + n:]
+
+    def dup(b: bytes, g: np.random.Generator) -> bytes:
+        n = max(64, len(b) // 30)
+        i = int(g.integers(header_len, max(header_len + 1, len(b) - n)))
+        return b[:i + n] + b[i:i + n] + b[i + n:]
+
+    def zero(b: bytes, g: np.random.Generator) -> bytes:
+        n = max(64, len(b) // 25)
+        i = int(g.integers(header_len, max(header_len + 1, len(b) - n)))
+        return b[:i] + bytes(n) + b[i + n:]
+
+    def head_zero(b: bytes, g: np.random.Generator) -> bytes:
+        n = max(8, header_len)
+        return bytes(n) + b[n:]
+
+    def head_noise(b: bytes, g: np.random.Generator) -> bytes:
+        n = max(8, header_len)
+        return g.integers(0, 256, n, dtype=np.uint8).tobytes() + b[n:]
+
+    def head_flip(b: bytes, g: np.random.Generator) -> bytes:
+        x = bytearray(b)
+        for p in g.integers(0, max(8, header_len), 3):
+            x[int(p)] ^= 0xFF
+        return bytes(x)
+
+    return {
+        "truncate-2pct": trunc(0.02), "truncate-30pct": trunc(0.30),
+        "truncate-50pct": trunc(0.50), "truncate-77pct": trunc(0.77),
+        "truncate-last-byte": lambda b, g: b[:-1],
+        "flip-1": flips(1), "flip-10": flips(10), "flip-100": flips(100),
+        "flip-1000": flips(1000),
+        "swap-blocks": swap, "dup-block": dup, "zero-block": zero,
+        "header-zeroed": head_zero, "header-noise": head_noise, "header-flip": head_flip,
+    }
+
+
+HEADER_LEN = {"npz": 64, "dataflash": 89 * 4, "ulog": 16, "csv": 0}
+
+
+# --------------------------------------------------------------- format-specific damage
+def npz_structure(arrays: dict[str, np.ndarray], header: dict[str, Any]
+                  ) -> dict[str, tuple[dict[str, np.ndarray], Any, bytes | None]]:
+    """name → (arrays, header, raw header bytes or None) for .npz damage."""
+    def without(*keys: str) -> dict[str, np.ndarray]:
+        return {k: v for k, v in arrays.items() if k not in keys}
+
+    def with_(**kw: Any) -> dict[str, np.ndarray]:
+        return {**arrays, **kw}
+
+    def hdr(**kw: Any) -> dict[str, Any]:
+        h = json.loads(json.dumps(header))
+        for k, v in kw.items():
+            if v is _DEL:
+                h.pop(k, None)
+            else:
+                h[k] = v
+        return h
+
+    spec_bad = json.loads(json.dumps(header))
+    spec_str = None
+    if isinstance(spec_bad.get("imu_spec"), dict):
+        spec_bad["imu_spec"]["fields"]["gyro_noise_density"] = "lots"
+        spec_str = spec_bad
+    truth_keys = [k for k in arrays if k.startswith("truth_")]
+    t = arrays["imu_t"]
+    q_nan = arrays.get("truth_q_nb")
+    cases: dict[str, tuple[dict[str, np.ndarray], Any, bytes | None]] = {
+        "missing-imu_t": (without("imu_t"), header, None),
+        "missing-imu_accel_b": (without("imu_accel_b"), header, None),
+        "missing-gnss_lla": (without("gnss_lla"), header, None),
+        "missing-baro": (without("baro_t", "baro_alt"), header, None),
+        "missing-gnss": (without("gnss_t", "gnss_lla", "gnss_pos_sd", "gnss_vel_n",
+                                 "gnss_vel_sd", "gnss_lever_arm_b"), header, None),
+        "missing-header": (arrays, header, b""),
+        "header-not-json": (arrays, header, b"{not json"),
+        "header-list": (arrays, header, b"[1, 2, 3]"),
+        "header-no-format": (arrays, hdr(format=_DEL), None),
+        "header-meta-list": (arrays, hdr(meta=[1, 2]), None),
+        "header-meta-null": (arrays, hdr(meta=None), None),
+        "header-spec-list": (arrays, hdr(imu_spec=[1, 2]), None),
+        "header-spec-string": (arrays, hdr(baro_spec="BaroSpec"), None),
+        "header-spec-unknown-type": (arrays, hdr(gnss_spec={"type": "Foo", "fields": {}}),
+                                     None),
+        "header-baro-truth-missing-key": (arrays, hdr(baro_truth={"scale": 0.01}), None),
+        "header-baro-truth-string": (arrays, hdr(baro_truth={"scale": "x",
+                                                             "latency_s": 0.1}), None),
+        "imu_t-int64-ms": (with_(imu_t=np.round(t * 1e3).astype(np.int64)), header, None),
+        "imu_t-float-ms": (with_(imu_t=np.round(t * 1e3)), header, None),
+        "baro_alt-bool": (with_(baro_alt=arrays["baro_alt"] > np.median(arrays["baro_alt"])),
+                          header, None),
+        "imu_accel-float32": (with_(imu_accel_b=arrays["imu_accel_b"].astype(np.float32)),
+                              header, None),
+        "imu_accel-strings": (with_(imu_accel_b=arrays["imu_accel_b"].astype(str)), header,
+                              None),
+        "gnss_lla-2d-wrong-shape": (with_(gnss_lla=arrays["gnss_lla"][:, :2]), header, None),
+        "imu_t-scalar": (with_(imu_t=np.array(1.0)), header, None),
+        "imu-lengths-differ": (with_(imu_gyro_b=arrays["imu_gyro_b"][:-5]), header, None),
+    }
+    if spec_str is not None:
+        cases["header-spec-field-string"] = (arrays, spec_str, None)
+    if truth_keys:
+        cases["truth-all-removed"] = (without(*truth_keys), header, None)
+        cases["truth-lla-removed"] = (without("truth_lla"), header, None)
+        tl = arrays["truth_lla"].copy()
+        tl[10:20, 2] = np.nan
+        cases["truth-height-nan"] = (with_(truth_lla=tl), header, None)
+        if q_nan is not None:
+            q = q_nan.copy()
+            q[:] = np.nan
+            cases["truth-quat-nan"] = (with_(truth_q_nb=q), header, None)
+    return cases
+
+
+class _Del:
+    pass
+
+
+_DEL = _Del()
+
+
+def csv_text_mutations(text: str, rng: np.random.Generator) -> dict[str, str]:
+    """Merged-CSV damage on the text: fields, columns, encodings."""
+    lines = text.splitlines()
+    head, body = lines[0], lines[1:]
+    cols = head.split(",")
+
+    def drop_col(name: str) -> str:
+        j = cols.index(name)
+        return "\n".join(",".join(c for i, c in enumerate(ln.split(",")) if i != j)
+                         for ln in lines) + "\n"
+
+    def rename_col(name: str, new: str) -> str:
+        return "\n".join([head.replace(name, new, 1)] + body) + "\n"
+
+    def missing_comma(k: int) -> str:
+        out = list(lines)
+        for i in rng.choice(np.arange(1, len(lines)), k, replace=False):
+            parts = out[int(i)].split(",")
+            j = int(rng.integers(1, len(parts) - 1))
+            parts[j] = parts[j] + parts.pop(j + 1)  # two fields glued: one field short
+            out[int(i)] = ",".join(parts)
+        return "\n".join(out) + "\n"
+
+    def extra_field(k: int) -> str:
+        out = list(lines)
+        for i in rng.choice(np.arange(1, len(lines)), k, replace=False):
+            out[int(i)] = out[int(i)] + ",1.0"
+        return "\n".join(out) + "\n"
+
+    def garbage_values(k: int) -> str:
+        out = list(lines)
+        for i in rng.choice(np.arange(1, len(lines)), k, replace=False):
+            parts = out[int(i)].split(",")
+            parts[int(rng.integers(1, len(parts)))] = "n/a"
+            out[int(i)] = ",".join(parts)
+        return "\n".join(out) + "\n"
+
+    muts = {
+        "missing-comma-1-row": missing_comma(1),
+        "missing-comma-10-rows": missing_comma(10),
+        "extra-field-5-rows": extra_field(5),
+        "garbage-values-20-rows": garbage_values(20),
+        "header-only": head + "\n",
+        "empty": "",
+        "crlf-line-ends": "\r\n".join(lines) + "\r\n",
+        "bom": "\ufeff" + text,
+        "semicolons": text.replace(",", ";"),
+        "header-repeated-mid": "\n".join(lines[:len(lines) // 2] + [head]
+                                         + lines[len(lines) // 2:]) + "\n",
+        "rows-reversed": "\n".join([head] + body[::-1]) + "\n",
+        "rows-shuffled": "\n".join([head] + [body[int(i)] for i in
+                                             rng.permutation(len(body))]) + "\n",
+    }
+    for c in ("acc_z", "gyro_x", "pressure", "latitude", "altitude", "time"):
+        if c in cols:
+            muts[f"missing-column-{c}"] = drop_col(c)
+    if "acc_x" in cols and "acc_z" in cols:
+        h2 = head.replace("acc_x", "TMPX").replace("acc_z", "acc_x").replace("TMPX", "acc_z")
+        muts["acc-xz-header-swapped"] = "\n".join([h2] + body) + "\n"
+    if "pressure" in cols:
+        muts["pressure-renamed"] = rename_col("pressure", "press")
+    return muts
+
+
+# ----------------------------------------------------------------------------- cases
+@dataclass(frozen=True)
+class Case:
+    """One corpus entry. ``build(dir)`` writes it into an empty directory and returns the
+    path to load; ``control`` names the undamaged case it is compared with."""
+
+    id: str
+    fmt: str
+    family: str
+    damaged: bool
+    build: Callable[[Path], Path]
+    control: str | None = None
+
+
+def _bytes_case(cid: str, fmt: str, src: Callable[[Path], Path], mut: Callable[..., bytes],
+                seed: int, control: str, member: str | None = None) -> Case:
+    def build(d: Path) -> Path:
+        p = src(d / "src")
+        if p.is_dir():
+            files = sorted(p.glob("*.csv"))
+            f = next((x for x in files if member and x.stem == member), files[seed % len(files)])
+            f.write_bytes(mut(f.read_bytes(), np.random.default_rng(seed)))
+            return p
+        out = d / ("case" + p.suffix)
+        out.write_bytes(mut(p.read_bytes(), np.random.default_rng(seed)))
+        return out
+    return Case(cid, fmt, "bytes", True, build, control)
+
+
+def _copy_src(src: Path) -> Callable[[Path], Path]:
+    def build(d: Path) -> Path:
+        d.mkdir(parents=True, exist_ok=True)
+        if src.is_dir():
+            dst = d / src.name
+            shutil.copytree(src, dst)
+            return dst
+        dst = d / src.name
+        shutil.copyfile(src, dst)
+        return dst
+    return build
+
+
+def df_patch_fmt_names(b: bytes, a: str, c: str) -> bytes:
+    """Swap the names of messages ``a`` and ``c`` in a DataFlash log's FMT records."""
+    out = bytearray(b)
+    i = 0
+    while True:
+        i = out.find(b"\xa3\x95\x80", i)
+        if i < 0 or i + 89 > len(out):
+            break
+        name = bytes(out[i + 5:i + 9]).rstrip(b"\x00").decode("ascii", "replace")
+        if name == a:
+            out[i + 5:i + 9] = c.encode().ljust(4, b"\x00")
+        elif name == c:
+            out[i + 5:i + 9] = a.encode().ljust(4, b"\x00")
+        i += 89
+    return bytes(out)
+
+
+def df_patch_field(b: bytes, msg: str, col: str, value: float) -> bytes:
+    """Set one float field of every ``msg`` record (walks the records by their FMT lengths)."""
+    fmts: dict[int, tuple[str, str, list[str], int]] = {}
+    out = bytearray(b)
+    i = 0
+    n = len(out)
+    while i + 3 <= n:
+        if out[i] != 0xA3 or out[i + 1] != 0x95:
+            i += 1
+            continue
+        tid = out[i + 2]
+        if tid == 0x80 and i + 89 <= n:
+            t, ln, name, fmt, cols = struct.unpack("<BB4s16s64s", bytes(out[i + 3:i + 89]))
+            fmts[t] = (name.rstrip(b"\0").decode("ascii", "replace"),
+                       fmt.rstrip(b"\0").decode("ascii", "replace"),
+                       cols.rstrip(b"\0").decode("ascii", "replace").split(","), ln)
+            i += 89
+            continue
+        if tid not in fmts:
+            i += 1
+            continue
+        name, fmt, cols, ln = fmts[tid]
+        if name == msg and col in cols and i + ln <= n:
+            off = i + 3
+            for c, ch in zip(cols, fmt, strict=False):
+                size = struct.calcsize("<" + _PYMAV.get(ch, "B"))
+                if c == col and ch == "f":
+                    out[off:off + 4] = struct.pack("<f", value)
+                elif c == col and ch in "eiL" and np.isfinite(value):
+                    scale = {"e": 100.0, "i": 1.0, "L": 1e7}[ch]
+                    out[off:off + 4] = struct.pack("<i", int(value * scale))
+                off += size
+        i += ln
+    return bytes(out)
+
+
+_PYMAV = {"a": "64s", "b": "b", "B": "B", "g": "e", "h": "h", "H": "H", "i": "i", "I": "I",
+          "f": "f", "n": "4s", "N": "16s", "Z": "64s", "c": "h", "C": "H", "e": "i", "E": "I",
+          "L": "i", "d": "d", "M": "b", "q": "q", "Q": "Q"}
+
+
+def build_cases(include_shared: bool = True) -> list[Case]:
+    """Every case of the corpus (deterministic order and content)."""
+    raw, sim = sim_raw()
+    cases: list[Case] = []
+    rng = np.random.default_rng(SEED)
+
+    def sim_writer(fmt: str, r: Raw, **kw: Any) -> Callable[[Path], Path]:
+        def build(d: Path) -> Path:
+            d.mkdir(parents=True, exist_ok=True)
+            p = d / ("sim" + SUFFIX[fmt])
+            if fmt == "npz":
+                return write_npz(r, p, sim)
+            return WRITERS[fmt](r, p, **kw)
+        return build
+
+    # ---- simulated base in every format: control, semantic, hostile, bytes
+    for fmt in WRITERS:
+        ctrl = f"{fmt}/sim/control/none"
+        cases.append(Case(ctrl, fmt, "control", False, sim_writer(fmt, raw), ctrl))
+        for name, (mut, fam, only) in SEMANTIC.items():
+            if only is not None and fmt not in only:
+                continue
+            r = mut(raw, np.random.default_rng(int(rng.integers(2**31))))
+            cases.append(Case(f"{fmt}/sim/{fam}/{name}", fmt, fam, True, sim_writer(fmt, r),
+                              ctrl))
+        hl = HEADER_LEN.get(fmt, 0)
+        for name, mut in byte_mutations(hl).items():
+            cases.append(_bytes_case(f"{fmt}/sim/bytes/{name}", fmt, sim_writer(fmt, raw), mut,
+                                     int(rng.integers(2**31)), ctrl))
+
+    # ---- format-specific structure damage on the simulated base
+    arrays, header = npz_arrays(raw, sim)
+    for name, (arr, hdr, hb) in npz_structure(arrays, header).items():
+        def build(d: Path, arr: Any = arr, hdr: Any = hdr, hb: Any = hb) -> Path:
+            d.mkdir(parents=True, exist_ok=True)
+            return write_npz_arrays(arr, hdr, d / "case.npz", hb)
+        cases.append(Case(f"npz/sim/structure/{name}", "npz", "structure", True, build,
+                          "npz/sim/control/none"))
+
+    def zip_bomb(d: Path) -> Path:  # a small file declaring 300 MB of zeros
+        d.mkdir(parents=True, exist_ok=True)
+        p = write_npz_arrays(arrays, header, d / "bomb.npz")
+        with zipfile.ZipFile(p, "a", compression=zipfile.ZIP_DEFLATED) as zf, \
+                zf.open("pad.npy", "w", force_zip64=True) as fh:
+            hdr = io.BytesIO()
+            np.lib.format.write_array_header_1_0(
+                hdr, {"descr": "<f8", "fortran_order": False, "shape": (300 * 2**17,)})
+            fh.write(hdr.getvalue())
+            chunk = bytes(2**20)
+            for _ in range(300):
+                fh.write(chunk)
+        return p
+    cases.append(Case("npz/sim/structure/zip-bomb-300MB", "npz", "structure", True, zip_bomb,
+                      "npz/sim/control/none"))
+
+    for style in ("s", "ms", "us", "ns"):
+        def build_t(d: Path, style: str = style) -> Path:
+            d.mkdir(parents=True, exist_ok=True)
+            return write_merged_csv(raw, d / "sim.csv", time_style=style)
+        # an epoch in s, ms, µs or ns is a valid encoding: read right, these are controls
+        cases.append(Case(f"merged-csv/sim/structure/epoch-{style}", "merged-csv", "structure",
+                          False, build_t, "merged-csv/sim/control/none"))
+    for fname in ("Location", "Barometer", "GyroscopeUncalibrated", "AccelerometerUncalibrated",
+                  "Metadata"):
+        def build_f(d: Path, fname: str = fname) -> Path:
+            d.mkdir(parents=True, exist_ok=True)
+            return write_sl_folder(raw, d / "sim", skip=(fname,))
+        cases.append(Case(f"sl-folder/sim/structure/missing-{fname}", "sl-folder", "structure",
+                          fname != "Metadata", build_f, "sl-folder/sim/control/none"))
+    for omit in ("vehicle_air_data", "vehicle_gps_position", "sensor_combined"):
+        def build_u(d: Path, omit: str = omit) -> Path:
+            d.mkdir(parents=True, exist_ok=True)
+            return write_ulog(raw, d / "sim.ulg", omit=(omit,))
+        cases.append(Case(f"ulog/sim/structure/missing-{omit}", "ulog", "structure",
+                          omit != "vehicle_air_data", build_u, "ulog/sim/control/none"))
+    for a, c in (("IMU", "BARO"), ("GPS", "IMU"), ("BARO", "GPS")):
+        def build_d(d: Path, a: str = a, c: str = c) -> Path:
+            d.mkdir(parents=True, exist_ok=True)
+            return write_dataflash(raw, d / "sim.bin", names={a: c, c: a})
+        cases.append(Case(f"dataflash/sim/structure/fmt-swap-{a}-{c}", "dataflash",
+                          "structure", True, build_d, "dataflash/sim/control/none"))
+    r_shuf = raw.copy()
+    r_shuf.extra["shuffle_records"] = True
+    cases.append(Case("dataflash/sim/structure/records-unsorted", "dataflash", "structure",
+                      False, sim_writer("dataflash", r_shuf), "dataflash/sim/control/none"))
+
+    # ---- the small real cuts in tests/data (always present)
+    real: list[tuple[str, str, Path]] = [
+        ("merged-csv", "car-cut", TEST_DATA / "sensorlogger_car_1hz_cut.csv"),
+        ("sl-folder", "ski-cut", TEST_DATA / "sensorlogger_ski_cut"),
+    ]
+    shared = shared_data_dir() if include_shared else None
+    if shared is not None:
+        real += [
+            ("dataflash", "181", shared / "erle_pxf_181_gps_glitch" / "181.BIN"),
+            ("dataflash", "218", shared / "erle_pxf_218" / "218.BIN"),
+            ("dataflash", "loiter", shared / "erle_pxf_loiter_rtl" / "Loiter_RTL.bin"),
+            ("ulog", "small", shared / "px4_ulog_samples" / "sample_log_small.ulg"),
+            ("ulog", "events", shared / "px4_ulog_samples" / "sample_px4_events.ulg"),
+            ("sl-folder", "ski", shared / "ski_iphone_100hz"),
+            ("merged-csv", "car", shared / "car_phone_1hz_2025-07-18"
+             / "2025-07-18_23-13-43.csv"),
+        ]
+    for fmt, base, src in real:
+        if not src.exists():
+            continue
+        ctrl = f"{fmt}/{base}/control/none"
+        cases.append(Case(ctrl, fmt, "control", False, _copy_src(src), ctrl))
+        hl = HEADER_LEN.get(fmt, 0)
+        muts = byte_mutations(hl)
+        if base in ("218", "loiter", "ski", "car"):  # big logs: a third of the byte cases
+            muts = {k: v for k, v in muts.items() if k in (
+                "truncate-50pct", "flip-100", "swap-blocks", "header-noise", "zero-block")}
+        for name, mut in muts.items():
+            cases.append(_bytes_case(f"{fmt}/{base}/bytes/{name}", fmt, _copy_src(src), mut,
+                                     int(rng.integers(2**31)), ctrl))
+        if fmt == "merged-csv":
+            text = src.read_text()
+            for name, t in csv_text_mutations(text, np.random.default_rng(
+                    int(rng.integers(2**31)))).items():
+                def build_c(d: Path, t: str = t) -> Path:
+                    d.mkdir(parents=True, exist_ok=True)
+                    p = d / "case.csv"
+                    p.write_text(t)
+                    return p
+                benign = name in ("crlf-line-ends", "bom")
+                cases.append(Case(f"{fmt}/{base}/structure/{name}", fmt, "structure",
+                                  not benign, build_c, ctrl))
+        if fmt == "dataflash":
+            patches = {
+                "fmt-swap-IMU-BARO": lambda b: df_patch_fmt_names(b, "IMU", "BARO"),
+                "accz-all-nan": lambda b: df_patch_field(b, "IMU", "AccZ", float("nan")),
+                "press-all-zero": lambda b: df_patch_field(b, "BARO", "Press", 0.0),
+                "gps-alt-zero": lambda b: df_patch_field(b, "GPS", "Alt", 0.0),
+            }
+            for name, fn in patches.items():
+                cases.append(_bytes_case(f"{fmt}/{base}/structure/{name}", fmt, _copy_src(src),
+                                         lambda b, g, fn=fn: fn(b), 0, ctrl))
+    ids = [c.id for c in cases]
+    assert len(ids) == len(set(ids)), "duplicate case ids"
+    return cases
+
+
+def replace_case(c: Case, **kw: Any) -> Case:
+    return replace(c, **kw)
