@@ -32,8 +32,8 @@ at least 5 s before the last fix. Default spacing (start to start) is
 outage length of GNSS between them.
 
 ``cli_holdout(args)`` is the ``vnav-graph holdout`` entry point; it writes ``holdout.json``,
-``holdout.md`` (also printed) and ``holdout.png`` (matplotlib, Agg backend, imported only
-there).
+``holdout.md`` (also printed) and ``holdout.png`` (drawn by ``vnav_graph.report.error_plots``,
+grouped like the run report).
 """
 
 from __future__ import annotations
@@ -293,27 +293,13 @@ def format_markdown(doc: dict[str, Any]) -> str:
 
 
 def plot_holdout(res: HoldoutResult, path: Path) -> None:
-    """Altitude error per estimator over time, outage windows shaded (PNG)."""
-    import matplotlib
+    """Altitude error at the withheld fixes, estimators grouped by family, windows shaded (PNG;
+    drawn by ``vnav_graph.report.error_plots.plot_holdout_errors``)."""
+    from ..report.error_plots import plot_holdout_errors
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(10, 4.5))
-    for a, b in res.windows:
-        ax.axvspan(a, b, color="0.85", zorder=0)
-    for name, s in res.series.items():
-        if s.t is not None and s.alt_err is not None:
-            ax.plot(s.t, s.alt_err, lw=0.9, label=f"{name} ({s.block['alt_rmse_m']:.2f} m)")
-    ax.axhline(0.0, color="k", lw=0.5)
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel("estimate + offset − GNSS height [m]")
-    ax.set_title(f"GNSS-outage holdout: {res.doc['drive']['name']} (grey: GNSS withheld)")
-    if res.series:
-        ax.legend(fontsize=8, loc="best")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    png = plot_holdout_errors(res)
+    if png is not None:
+        path.write_bytes(png.png)
 
 
 def cli_holdout(args: Any) -> int:
