@@ -63,7 +63,7 @@ def test_headline_picks_best_and_states_the_margin() -> None:
     assert h["verdict"] == "better" and h["n_blocks"] == 4
     assert h["text"].startswith("Altitude RMSE: graph-batch best, 1.00 m vs ekf 1.50 m "
                                 "(0.50 m, 33 % lower)")
-    assert "95 % CI [+0.37, +0.63] m" in h["text"]
+    assert "95 % CI [+0.37, +0.63] m (graph-batch lower in 4 of 4 holdout windows)" in h["text"]
     # one estimator has a horizontal RMSE: nothing to rank
     assert comp["metrics"]["horiz_rmse_m"] is None
     assert headline_lines({"comparison": comp}) == [h["text"], "note"]
@@ -77,6 +77,7 @@ def test_headline_tied_when_ci_includes_zero() -> None:
     assert h["best"] == "ekf-rts" and h["verdict"] == "tied"
     assert h["ci95"][0] < 0 < h["ci95"][1]
     assert "ekf-rts and graph-isam2 tied" in h["text"] and "includes 0" in h["text"]
+    assert h["n_blocks_best_lower"] == 2
 
 
 def test_headline_mixed_and_no_ci() -> None:

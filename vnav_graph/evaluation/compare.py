@@ -99,6 +99,7 @@ def rank_metric(values: Mapping[str, float | None],
         verdict = "better" if ci[1] > 0 else ("mixed" if ci[2] < 0 else "tied")
     out = {"metric": key, "best": best, "best_value": best_v, "runner_up": runner,
            "runner_up_value": run_v, "diff": diff, "rel_pct": rel, "n_blocks": len(d),
+           "n_blocks_best_lower": int(sum(x > 0 for x in d)),
            "paired_mean": None if ci is None else ci[0],
            "ci95": None if ci is None else [ci[1], ci[2]], "verdict": verdict}
     out["text"] = headline_text(out, label, block_kind)
@@ -116,13 +117,15 @@ def headline_text(h: Mapping[str, Any], label: str, block_kind: str) -> str:
     lo, hi = h["ci95"]
     ci = (f"paired difference over {h['n_blocks']} {block_kind}s {h['paired_mean']:+.2f} m, "
           f"95 % CI [{lo:+.2f}, {hi:+.2f}] m")
+    wins = (f" ({h['best']} lower in {h['n_blocks_best_lower']} of {h['n_blocks']} "
+            f"{block_kind}s)")
     if h["verdict"] == "better":
-        return f"{label}: {h['best']} best, {vs}; {ci}."
+        return f"{label}: {h['best']} best, {vs}; {ci}{wins}."
     if h["verdict"] == "tied":
         return (f"{label}: {h['best']} and {h['runner_up']} tied: {h['best']} {vs}, but the "
-                f"{ci} includes 0.")
+                f"{ci} includes 0{wins}.")
     return (f"{label}: {h['best']} lowest overall but the {block_kind}s favour "
-            f"{h['runner_up']} (mixed): {vs}; {ci}.")
+            f"{h['runner_up']} (mixed): {vs}; {ci}{wins}.")
 
 
 def comparison(estimators: Mapping[str, Mapping[str, Any]], basis: str,
