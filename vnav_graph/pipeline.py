@@ -144,7 +144,7 @@ def failed_block(error: str, runtime_s: float) -> dict[str, Any]:
     null_param = {"est": None, "sd": None, "truth": None}
     return {
         "status": "failed", "error": error, "alt_rmse_m": None, "alt_max_abs_m": None,
-        "horiz_rmse_m": None, "vel_down_rmse_mps": None, "per_block": [], "nees_mean": None,
+        "horiz_rmse_m": None, "vel_down_rmse_mps": None, "nees_mean": None,
         "nees_dof": None, "runtime_s": runtime_s,
         "realtime_factor": None, "gnss_rejected": None, "warnings": [],
         "baro": {"scale": dict(null_param), "latency_s": dict(null_param),
@@ -176,8 +176,8 @@ def summarize(drive: Drive, results: Sequence[RunResult]) -> dict[str, Any]:
     """The ``summary.json`` document (docs/design.md schema).
 
     Additions to the docs/design.md schema: ``version`` (of vnav_graph), ``scenario`` and
-    ``seed`` (null for a log), ``repairs`` (``reader_repairs``), ``horiz_rmse_m`` and
-    ``per_block`` per estimator, and ``comparison`` (the headline:
+    ``seed`` (null for a log), ``repairs`` (``reader_repairs``), ``horiz_rmse_m`` per
+    estimator, and ``comparison`` (the headline and its per-block RMS values:
     ``vnav_graph.evaluation.compare``; against truth over time blocks of this run, or null
     until ``apply_holdout`` scores a real log).
     """
@@ -188,12 +188,14 @@ def summarize(drive: Drive, results: Sequence[RunResult]) -> dict[str, Any]:
     if drive.truth is not None:
         blocks = time_blocks(float(drive.truth.t[0]), float(drive.truth.t[-1]))
     ests: dict[str, Any] = {}
+    per_block: dict[str, list[dict[str, Any]]] = {}
     for r in results:
         if r.estimate is None:
             ests[r.name] = failed_block(r.error or "unknown error", r.runtime_s)
             continue
         try:
             ests[r.name] = evaluate(r.estimate, drive, blocks)
+            per_block[r.name] = ests[r.name].pop("per_block", [])
         except Exception as exc:
             ests[r.name] = failed_block(f"evaluation: {type(exc).__name__}: {exc}", r.runtime_s)
     for r in results:  # compile time, apart from runtime_s (first run on a machine only)
@@ -201,7 +203,7 @@ def summarize(drive: Drive, results: Sequence[RunResult]) -> dict[str, Any]:
     comp = None
     if blocks is not None:
         comp = comparison(
-            ests, "truth", blocks, "time block",
+            ests, per_block, "truth", blocks, "time block",
             f"One simulated run: the CI is over {len(blocks)} consecutive time blocks of this "
             "run (batch means; blocks are not independent runs). For an interval over runs "
             "use `vnav-graph bench` with several seeds.")
@@ -223,15 +225,15 @@ def apply_holdout(summary: dict[str, Any], holdout_doc: dict[str, Any]) -> dict[
 
     docs/design.md: "With a real log the error metrics are against withheld GNSS". The
     trajectories written by ``run`` use all GNSS; ``alt_rmse_m``/``alt_max_abs_m``/
-    ``horiz_rmse_m``/``vel_down_rmse_mps`` and ``per_block`` (one entry per window) come from
-    a second run of
-    each estimator with GNSS withheld in windows (``vnav_graph.evaluation.holdout``), and the
-    summary says so in ``evaluation``; ``comparison`` is recomputed over the windows. NEES
-    stays null (no reference for the full state).
+    ``horiz_rmse_m``/``vel_down_rmse_mps`` come from a second run of each estimator with GNSS
+    withheld in windows (``vnav_graph.evaluation.holdout``), and the summary says so in
+    ``evaluation``; ``comparison`` is recomputed over the windows (its ``per_block`` = the
+    holdout ``per_window``). NEES stays null (no reference for the full state).
     """
     from .evaluation.compare import comparison
 
     out = json.loads(json.dumps(summary))
+    per_block: dict[str, list[dict[str, Any]]] = {}
     for name, block in out["estimators"].items():
         h = holdout_doc["estimators"].get(name)
         if h is None or block["status"] != "ok":
@@ -239,13 +241,12 @@ def apply_holdout(summary: dict[str, Any], holdout_doc: dict[str, Any]) -> dict[
         for k in ("alt_rmse_m", "alt_max_abs_m", "horiz_rmse_m", "vel_down_rmse_mps",
                   "nees_mean", "nees_dof"):
             block[k] = None
-        block["per_block"] = []
         if h["status"] != "ok":
             block["holdout_error"] = h.get("error")
             continue
         for k in ("alt_rmse_m", "alt_max_abs_m", "horiz_rmse_m", "vel_down_rmse_mps"):
             block[k] = h.get(k)
-        block["per_block"] = h.get("per_window") or []
+        per_block[name] = h.get("per_window") or []
     windows = holdout_doc["windows"]
     out["evaluation"] = {
         "basis": "withheld GNSS (holdout)",
@@ -256,8 +257,8 @@ def apply_holdout(summary: dict[str, Any], holdout_doc: dict[str, Any]) -> dict[
         "onboard": holdout_doc.get("onboard"),
     }
     out["comparison"] = comparison(
-        out["estimators"], "withheld GNSS (holdout)", [(w["t0"], w["t1"]) for w in windows],
-        "holdout window",
+        out["estimators"], per_block, "withheld GNSS (holdout)",
+        [(w["t0"], w["t1"]) for w in windows], "holdout window",
         f"Scored against GNSS withheld in {len(windows)} windows of "
         f"{holdout_doc['outage_s']:g} s (a second run of each estimator without those fixes); "
         "the CI treats the windows as independent (each is preceded by GNSS).")

@@ -19,10 +19,12 @@ from vnav_graph.evaluation.compare import (
 T975 = {1: 12.706, 3: 3.182}
 
 
-def _est(alt: float, blocks: list[float | None], horiz: float | None = None,
-         status: str = "ok") -> dict:
-    return {"status": status, "alt_rmse_m": alt, "horiz_rmse_m": horiz,
-            "per_block": [{"alt_rmse_m": b, "horiz_rmse_m": None} for b in blocks]}
+def _est(alt: float, horiz: float | None = None, status: str = "ok") -> dict:
+    return {"status": status, "alt_rmse_m": alt, "horiz_rmse_m": horiz}
+
+
+def _blocks(alt: list[float | None]) -> list[dict]:
+    return [{"alt_rmse_m": b, "horiz_rmse_m": None} for b in alt]
 
 
 def test_time_blocks_and_block_rmse() -> None:
@@ -48,13 +50,13 @@ def test_paired_interval_closed_form() -> None:
 
 
 def test_headline_picks_best_and_states_the_margin() -> None:
-    ests = {
-        "graph-batch": _est(1.0, [0.9, 1.1, 1.0, 1.0]),
-        "ekf": _est(1.5, [1.3, 1.7, 1.5, 1.5]),  # d = 0.4, 0.6, 0.5, 0.5
-        "loop2": _est(3.0, [3.0, 3.0, 3.0, 3.0]),
-        "broken": _est(0.1, [0.1] * 4, status="failed"),  # never ranked
-    }
-    comp = comparison(ests, "withheld GNSS (holdout)", [(0, 1)] * 4, "holdout window", "note")
+    ests = {"graph-batch": _est(1.0), "ekf": _est(1.5), "loop2": _est(3.0),
+            "broken": _est(0.1, status="failed")}  # failed: never ranked
+    pb = {"graph-batch": _blocks([0.9, 1.1, 1.0, 1.0]),
+          "ekf": _blocks([1.3, 1.7, 1.5, 1.5]),  # d = 0.4, 0.6, 0.5, 0.5
+          "loop2": _blocks([3.0] * 4), "broken": _blocks([0.1] * 4)}
+    comp = comparison(ests, pb, "withheld GNSS (holdout)", [(0, 1)] * 4, "holdout window",
+                      "note")
     h = comp["metrics"]["alt_rmse_m"]
     assert (h["best"], h["runner_up"]) == ("graph-batch", "ekf")
     assert h["diff"] == pytest.approx(0.5) and h["rel_pct"] == pytest.approx(100 / 3)

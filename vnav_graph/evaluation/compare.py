@@ -128,25 +128,26 @@ def headline_text(h: Mapping[str, Any], label: str, block_kind: str) -> str:
             f"{h['runner_up']} (mixed): {vs}; {ci}{wins}.")
 
 
-def comparison(estimators: Mapping[str, Mapping[str, Any]], basis: str,
+def comparison(estimators: Mapping[str, Mapping[str, Any]],
+               per_block: Mapping[str, Sequence[Mapping[str, Any]]], basis: str,
                blocks: Sequence[tuple[float, float]], block_kind: str,
                note: str) -> dict[str, Any]:
-    """``summary["comparison"]`` from the per-estimator blocks of a summary.
+    """``summary["comparison"]``: the headline of each metric and the per-block values it
+    used (``per_block``: name → list aligned with ``blocks`` of dicts with the metric keys).
 
-    Each ok estimator block may carry ``per_block`` (list aligned with ``blocks`` of dicts with
-    the metric keys); failed estimators and missing values are left out of the ranking.
+    ``estimators`` are the summary's estimator blocks; failed estimators and missing values
+    are left out of the ranking.
     """
     metrics: dict[str, Any] = {}
     for key, label in HEADLINE_METRICS:
         vals = {n: m.get(key) for n, m in estimators.items() if m.get("status") == "ok"}
-        pb = {n: [b.get(key) for b in (m.get("per_block") or [])]
-              for n, m in estimators.items()}
+        pb = {n: [b.get(key) for b in rows] for n, rows in per_block.items()}
         metrics[key] = rank_metric(vals, pb, key, label, block_kind)
     return {"basis": basis, "block_kind": block_kind,
             "blocks": [[float(a), float(b)] for a, b in blocks], "note": note,
             "method": "95 % Student-t interval of the paired per-block RMSE difference "
                       "(runner-up − best); tied when it includes 0",
-            "metrics": metrics}
+            "metrics": metrics, "per_block": {n: list(r) for n, r in per_block.items()}}
 
 
 def headline_lines(summary: Mapping[str, Any]) -> list[str]:

@@ -97,9 +97,10 @@ def evaluate(est: Estimate, drive: Drive,
     """Metric block for summary.json / bench.json (docs/design.md schema).
 
     Additions to the docs/design.md block: ``horiz_rmse_m`` (RMS of the north/east position
-    error, estimates providing ``pos_h``), ``warnings``, and with ``blocks`` ``per_block``: the
-    RMS values per time block ``[(t0, t1), ...]`` [s] (the paired comparison of
-    ``vnav_graph.evaluation.compare``).
+    error, estimates providing ``pos_h``) and ``warnings``. With ``blocks`` (time blocks
+    ``[(t0, t1), ...]`` [s]) the block also has ``per_block``, the RMS values per block, which
+    ``pipeline.summarize`` moves to ``summary["comparison"]`` (the paired comparison of
+    ``vnav_graph.evaluation.compare``), so the estimator block stays the bench row.
     """
     out: dict[str, Any] = {
         "status": "ok", "error": None, "alt_rmse_m": None, "alt_max_abs_m": None,
