@@ -331,6 +331,20 @@ def test_log_run_is_scored_and_drawn_against_withheld_gnss(tmp_path, monkeypatch
     assert 'data-name="onboard"><td>onboard: ctun.alt (planted)*</td>' in page
 
 
+def test_log_run_without_holdout_claims_no_score(tmp_path, monkeypatch):
+    monkeypatch.setitem(base._REGISTRY, "ekf-rts", lambda: _Planted("ekf-rts", [2.0]))
+    out = tmp_path / "out"
+    assert main(["run", str(_flat_log(tmp_path)), "--estimators", "ekf-rts", "--no-holdout",
+                 "--out", str(out), "--no-progress"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["comparison"] is None and summary["estimators"]["ekf-rts"]["alt_rmse_m"] is None
+    page = (out / "report.html").read_text(encoding="utf-8")
+    assert assert_table_matches_summary(page, summary) == 2  # runtime and × real time only
+    assert "No headline: a log without truth is scored only by the holdout run" in page
+    assert "a fit residual, not a score" in page and "RMSE" in page
+    assert "withheld from it" not in page
+
+
 def test_plotted_errors_are_the_scored_ones(tmp_path, monkeypatch):
     """The series the report draws for a log are the holdout errors at the withheld fixes:
     their RMS is the summary's number (the old report drew residuals against the GNSS the

@@ -157,8 +157,11 @@ def headline_html(summary: dict[str, Any]) -> str:
 
     lines = headline_lines(summary)
     if not lines:
-        return ('<div id="headline"><p class="headline">No headline: fewer than two '
-                "estimators have a score.</p></div>")
+        why = ("fewer than two estimators have a score" if summary.get("comparison")
+               or summary["drive"]["source"] == "simulated"
+               else "a log without truth is scored only by the holdout run (skipped here)")
+        return f'<div id="headline"><p class="headline">No headline: {why}.</p></div>'
+
     *main, note = lines
     return ('<div id="headline">' + "".join(f'<p class="headline">{_e(x)}</p>' for x in main)
             + f'<p class="note">{_e(note)} {_e(summary["comparison"]["method"])}.</p></div>')
