@@ -8,6 +8,7 @@ tracebacks for debugging.
 from __future__ import annotations
 
 import argparse
+import functools
 import importlib
 import os
 import sys
@@ -164,20 +165,22 @@ def cmd_run(args: argparse.Namespace) -> int:
     configs = getattr(args, "configs", None)  # --config, read by _load_extensions
     results = run_estimators(drive, names, progress=mode, configs=configs)
     summary = summarize(drive, results)
+    holdout = None  # a real log's holdout run: its errors are what the report draws
     if drive.truth is None and drive.gnss is not None and not args.no_holdout:
         from .pipeline import score_holdout
 
         ok = [r.name for r in results if r.estimate is not None]
         if ok:
             with stage("scoring against withheld GNSS (holdout run of every estimator)", mode):
-                summary = score_holdout(summary, drive, ok, progress=mode, configs=configs)
+                summary, holdout = score_holdout(summary, drive, ok, progress=mode,
+                                                 configs=configs)
     from .pipeline import write_outputs
 
     writers = []
     try:
         from .report import write_report  # plots + HTML (optional module)
 
-        writers.append(write_report)
+        writers.append(functools.partial(write_report, holdout=holdout))
     except ModuleNotFoundError as exc:
         if exc.name != "vnav_graph.report":
             raise

@@ -166,79 +166,149 @@ def failed_block(error: str, runtime_s: float) -> dict[str, Any]:
     null_param = {"est": None, "sd": None, "truth": None}
     return {
         "status": "failed", "error": error, "alt_rmse_m": None, "alt_max_abs_m": None,
-        "vel_down_rmse_mps": None, "nees_mean": None, "nees_dof": None, "runtime_s": runtime_s,
+        "horiz_rmse_m": None, "vel_down_rmse_mps": None, "nees_mean": None,
+        "nees_dof": None, "runtime_s": runtime_s,
         "realtime_factor": None, "gnss_rejected": None, "warnings": [],
         "baro": {"scale": dict(null_param), "latency_s": dict(null_param),
                  "bias_m": dict(null_param)},
     }
 
 
+def reader_repairs(meta: Any) -> list[str]:
+    """What the log reader repaired, dropped or noted (``Drive.meta``), one string each.
+
+    Reads the reader's ``notes`` (sentences such as "CLOCK REPAIRED: the boot clock advanced
+    0.92315 s per GPS second ..."), ``repaired`` and ``dropped`` (stream → reason → count) and
+    ``gaps`` (stream → [[start_s, length_s], ...]). Empty for a simulated drive.
+    """
+    out = [str(n) for n in meta.get("notes") or []]
+    for kind in ("repaired", "dropped"):
+        for stream, reasons in (meta.get(kind) or {}).items():
+            for reason, count in reasons.items():
+                out.append(f"{stream}: {kind} {count}: {reason}")
+    for stream, gaps in (meta.get("gaps") or {}).items():
+        if gaps:
+            t0, length = max(gaps, key=lambda g: g[1])
+            out.append(f"{stream}: {len(gaps)} logging gap(s), longest {length:.1f} s "
+                       f"at t = {t0:.1f} s")
+    return out
+
+
 def summarize(drive: Drive, results: Sequence[RunResult]) -> dict[str, Any]:
-    """The ``summary.json`` document (docs/design.md schema)."""
+    """The ``summary.json`` document (docs/design.md schema).
+
+    Additions to the docs/design.md schema: ``version`` (of vnav_graph), ``scenario`` and
+    ``seed`` (null for a log), ``repairs`` (``reader_repairs``), ``horiz_rmse_m`` per
+    estimator, and ``comparison`` (the headline and its per-block RMS values:
+    ``vnav_graph.evaluation.compare``; against truth over time blocks of this run, or null
+    until ``apply_holdout`` scores a real log).
+    """
+    from . import __version__
+    from .evaluation.compare import comparison, time_blocks
+
+    blocks = None
+    if drive.truth is not None:
+        blocks = time_blocks(float(drive.truth.t[0]), float(drive.truth.t[-1]))
     ests: dict[str, Any] = {}
+    per_block: dict[str, list[dict[str, Any]]] = {}
     for r in results:
         if r.estimate is None:
             ests[r.name] = failed_block(r.error or "unknown error", r.runtime_s)
             continue
         try:
-            ests[r.name] = evaluate(r.estimate, drive)
+            ests[r.name] = evaluate(r.estimate, drive, blocks)
+            per_block[r.name] = ests[r.name].pop("per_block", [])
         except Exception as exc:
             ests[r.name] = failed_block(f"evaluation: {type(exc).__name__}: {exc}", r.runtime_s)
     for r in results:  # compile time, apart from runtime_s (first run on a machine only)
         ests[r.name]["jit_s"] = round(r.jit_s, 3)
+    comp = None
+    if blocks is not None:
+        comp = comparison(
+            ests, per_block, "truth", blocks, "time block",
+            f"One simulated run: the CI is over {len(blocks)} consecutive time blocks of this "
+            "run (batch means; blocks are not independent runs). For an interval over runs "
+            "use `vnav-graph bench` with several seeds.")
+    meta = drive.meta
     head: dict[str, Any] = {"name": drive.name, "source": drive.source,
                             "duration_s": drive.duration_s}
-    if drive.meta.get("warnings"):  # additive: what the input checks found (io.sanity)
-        head["warnings"] = [str(w) for w in drive.meta["warnings"]]
-    return {"schema": SUMMARY_SCHEMA, "drive": head, "estimators": ests}
+    if meta.get("warnings"):  # additive: what the input checks found (io.sanity)
+        head["warnings"] = [str(w) for w in meta["warnings"]]
+    return {
+        "schema": SUMMARY_SCHEMA,
+        "version": __version__,
+        "drive": head,
+        "scenario": meta.get("scenario") if drive.source == "simulated" else None,
+        "seed": meta.get("seed") if drive.source == "simulated" else None,
+        "repairs": reader_repairs(meta),
+        "estimators": ests,
+        "comparison": comp,
+    }
 
 
 def apply_holdout(summary: dict[str, Any], holdout_doc: dict[str, Any]) -> dict[str, Any]:
     """For a real log (no truth): fill the error metrics from a GNSS-outage holdout run.
 
-    docs/design.md: "With a real log the error metrics are against withheld GNSS". The trajectories
-    written by ``run`` use all GNSS; ``alt_rmse_m``/``alt_max_abs_m`` come from a second run of
-    each estimator with GNSS withheld in windows (``vnav_graph.evaluation.holdout``), and the
-    summary says so in ``evaluation``. ``vel_down_rmse_mps`` and NEES stay null (no reference).
+    docs/design.md: "With a real log the error metrics are against withheld GNSS". The
+    trajectories written by ``run`` use all GNSS; ``alt_rmse_m``/``alt_max_abs_m``/
+    ``horiz_rmse_m``/``vel_down_rmse_mps`` come from a second run of each estimator with GNSS
+    withheld in windows (``vnav_graph.evaluation.holdout``), and the summary says so in
+    ``evaluation``; ``comparison`` is recomputed over the windows (its ``per_block`` = the
+    holdout ``per_window``). NEES stays null (no reference for the full state).
     """
+    from .evaluation.compare import comparison
+
     out = json.loads(json.dumps(summary))
+    per_block: dict[str, list[dict[str, Any]]] = {}
     for name, block in out["estimators"].items():
         h = holdout_doc["estimators"].get(name)
         if h is None or block["status"] != "ok":
             continue
+        for k in ("alt_rmse_m", "alt_max_abs_m", "horiz_rmse_m", "vel_down_rmse_mps",
+                  "nees_mean", "nees_dof"):
+            block[k] = None
         if h["status"] != "ok":
             block["holdout_error"] = h.get("error")
             continue
-        block["alt_rmse_m"] = h["alt_rmse_m"]
-        block["alt_max_abs_m"] = h["alt_max_abs_m"]
-        block["horiz_rmse_m"] = h.get("horiz_rmse_m")
-        for k in ("vel_down_rmse_mps", "nees_mean", "nees_dof"):
-            block[k] = None
+        for k in ("alt_rmse_m", "alt_max_abs_m", "horiz_rmse_m", "vel_down_rmse_mps"):
+            block[k] = h.get(k)
+        per_block[name] = h.get("per_window") or []
+    windows = holdout_doc["windows"]
     out["evaluation"] = {
         "basis": "withheld GNSS (holdout)",
         "outage_s": holdout_doc["outage_s"],
-        "windows": holdout_doc["windows"],
+        "windows": windows,
         "scoring": holdout_doc["scoring"],
+        "gnss_sd_v_median_m": holdout_doc.get("gnss_sd_v_median_m"),
         "onboard": holdout_doc.get("onboard"),
     }
+    out["comparison"] = comparison(
+        out["estimators"], per_block, "withheld GNSS (holdout)",
+        [(w["t0"], w["t1"]) for w in windows], "holdout window",
+        f"Scored against GNSS withheld in {len(windows)} windows of "
+        f"{holdout_doc['outage_s']:g} s (a second run of each estimator without those fixes); "
+        "the CI treats the windows as independent (each is preceded by GNSS).")
     return out
 
 
 def score_holdout(summary: dict[str, Any], drive: Drive, names: Sequence[str],
                   progress: bool | Mode = False, configs: Mapping[str, Any] | None = None
-                  ) -> dict[str, Any]:
+                  ) -> tuple[dict[str, Any], Any]:
     """The optional holdout scoring of ``run`` (:func:`apply_holdout`), which never sinks the
     run: when the log cannot be scored (GNSS span too short for one outage window, too few
-    fixes) the summary keeps its results and says why in ``evaluation.skipped``."""
+    fixes) the summary keeps its results and says why in ``evaluation.skipped``.
+
+    Returns the summary and the ``HoldoutResult`` (None when skipped), whose error series the
+    report draws."""
     from .evaluation.holdout import run_holdout
 
     try:
-        doc = run_holdout(drive, list(names), progress=progress, configs=configs).doc
+        res = run_holdout(drive, list(names), progress=progress, configs=configs)
     except ValueError as exc:
         out = dict(summary)
         out["evaluation"] = {"basis": None, "skipped": str(exc).splitlines()[0]}
-        return out
-    return apply_holdout(summary, doc)
+        return out, None
+    return apply_holdout(summary, res.doc), res
 
 
 EXIT_SOME_FAILED = 3
@@ -267,12 +337,29 @@ def _fmt(v: Any, spec: str) -> str:
     return "—" if v is None else format(v, spec)
 
 
+# (header with unit, width) of the terminal table; every header carries its unit
+TABLE_COLUMNS = (("estimator", 15), ("status", 7), ("alt RMSE m", 11), ("alt max m", 10),
+                 ("horiz RMSE m", 13), ("vD RMSE m/s", 12), ("NEES/dof", 9),
+                 ("scale %", 16), ("latency ms", 12), ("bias m", 13), ("run s", 8),
+                 ("x RT", 7))
+
+
 def format_table(summary: dict[str, Any]) -> str:
-    """Plain-text comparison table of a summary."""
-    head = (f"{'estimator':<15}{'status':>7}{'alt RMSE':>10}{'alt max':>9}{'vD RMSE':>9}"
-            f"{'NEES':>8}{'scale %':>16}{'latency ms':>16}{'bias m':>15}{'run s':>8}{'x RT':>8}")
-    lines = [f"drive {summary['drive']['name']} ({summary['drive']['source']}, "
-             f"{summary['drive']['duration_s']:.0f} s)", head, "-" * len(head)]
+    """Plain-text comparison table of a summary: headline, table with units, notes."""
+    from .evaluation.compare import headline_lines
+
+    def row(cells: Sequence[str]) -> str:
+        return "".join(f"{c:<{w}}" if k == 0 else f"{c:>{w}}"
+                       for k, (c, (_, w)) in enumerate(zip(cells, TABLE_COLUMNS, strict=True)))
+
+    head = row([h for h, _ in TABLE_COLUMNS])
+    d = summary["drive"]
+    origin = (f"scenario {summary['scenario']}, seed {summary['seed']}"
+              if summary.get("scenario") is not None else d["source"])
+    lines = [f"drive {d['name']} ({origin}, {d['duration_s']:.0f} s), "
+             f"vnav_graph {summary.get('version', '?')}"]
+    lines += [f"HEADLINE {h}" for h in headline_lines(summary)]
+    lines += [head, "-" * len(head)]
 
     def pe(p: dict[str, Any], scale: float, spec: str) -> str:
         if p["est"] is None:
@@ -285,13 +372,18 @@ def format_table(summary: dict[str, Any]) -> str:
     for name, m in summary["estimators"].items():
         b = m["baro"]
         nees = m["nees_mean"] / m["nees_dof"] if m.get("nees_dof") else None
-        lines.append(
-            f"{name:<15}{m['status']:>7}{_fmt(m['alt_rmse_m'], '.2f'):>10}"
-            f"{_fmt(m['alt_max_abs_m'], '.2f'):>9}{_fmt(m['vel_down_rmse_mps'], '.3f'):>9}"
-            f"{_fmt(nees, '.2f'):>8}{pe(b['scale'], 100, '.3f'):>16}"
-            f"{pe(b['latency_s'], 1000, '.0f'):>16}{pe(b['bias_m'], 1, '.2f'):>15}"
-            f"{m['runtime_s']:>8.2f}{_fmt(m['realtime_factor'], '.0f'):>8}"
-        )
+        lines.append(row([
+            name, m["status"], _fmt(m["alt_rmse_m"], ".2f"), _fmt(m["alt_max_abs_m"], ".2f"),
+            _fmt(m.get("horiz_rmse_m"), ".2f"), _fmt(m["vel_down_rmse_mps"], ".3f"),
+            _fmt(nees, ".2f"), pe(b["scale"], 100, ".3f"), pe(b["latency_s"], 1000, ".0f"),
+            pe(b["bias_m"], 1, ".2f"), _fmt(m["runtime_s"], ".2f"),
+            _fmt(m["realtime_factor"], ".0f")]))
+    ev = summary.get("evaluation")
+    ob = ev.get("onboard") if ev else None
+    if ob:
+        lines.append(row(["onboard*", "ok", _fmt(ob["alt_rmse_m"], ".2f"),
+                          _fmt(ob["alt_max_abs_m"], ".2f")] + ["—"] * 8))
+        lines.append(f"* onboard = the autopilot's own estimate {ob['name']}: {ob['note']}")
     truth = next(iter(summary["estimators"].values()), {}).get("baro") if summary[
         "estimators"] else None
     if truth and truth["scale"]["truth"] is not None:
@@ -306,18 +398,19 @@ def format_table(summary: dict[str, Any]) -> str:
     elif ev:
         lines.append(f"errors against {ev['basis']}: {len(ev['windows'])} windows of "
                      f"{ev['outage_s']:.0f} s")
-        ob = ev.get("onboard")
-        if ob:
-            lines.append(f"onboard estimate {ob['name']}: alt RMSE {ob['alt_rmse_m']:.2f} m, "
-                         f"max {ob['alt_max_abs_m']:.2f} m ({ob['note']})")
+    elif summary["drive"]["source"] != "simulated":
+        lines.append("errors: none (a log without truth; scores need the holdout run)")
     else:
-        lines.append("NEES column: mean NEES per degree of freedom (1.0 = consistent)")
+        lines.append("errors against truth; NEES/dof: mean NEES per degree of freedom "
+                     "(1.0 = consistent)")
     jit = sum(m.get("jit_s") or 0.0 for m in summary["estimators"].values())
     if jit > 0.05:
         lines.append(f"numba compiled kernels for {jit:.1f} s (first run on this machine; "
                      "not in 'run s', and cached for later runs)")
     for w in summary["drive"].get("warnings") or []:
         lines.append(f"input warning: {w}")
+    for r in summary.get("repairs") or []:
+        lines.append(f"reader: {r}")
     for name, m in summary["estimators"].items():
         if m["status"] == "failed":
             lines.append(f"{name} failed: {m['error']}")

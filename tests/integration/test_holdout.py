@@ -95,6 +95,12 @@ def test_holdout_scores_planted_errors_exactly(monkeypatch: pytest.MonkeyPatch) 
     # 1 m north on the meridian; tangent-plane vs meridian arc differ by < 1 mm over 1.2 km
     assert p["horiz_rmse_m"] == pytest.approx(1.0, abs=1e-3)
     assert p["gnss_rejected"] == 7
+    # per window: the same 2 m and 1 m in each, 60 fixes each; no v_D (not provided)
+    assert [(w["n"], w["alt_rmse_m"]) for w in p["per_window"]] == [(60, pytest.approx(2.0))] * 4
+    assert all(w["horiz_rmse_m"] == pytest.approx(1.0, abs=1e-3) for w in p["per_window"])
+    assert p["vel_down_rmse_mps"] is None
+    s = res.series["planted"]
+    assert s.withheld.sum() == 240 and np.all(np.isnan(s.horiz_err[~s.withheld]))
     b = doc["estimators"]["broken"]
     assert b["status"] == "failed" and "planted failure" in b["error"]
     assert b["alt_rmse_m"] is None

@@ -81,8 +81,8 @@ def test_failures_are_not_successes(tmp_path, monkeypatch, capsys, fail, code):
 def test_summary_json_is_strict(tmp_path, monkeypatch):
     real = pipeline.evaluate
 
-    def nan_metrics(est, drive):
-        b = real(est, drive)
+    def nan_metrics(est, drive, *args, **kwargs):
+        b = real(est, drive, *args, **kwargs)
         b["alt_rmse_m"] = float("nan")
         b["alt_max_abs_m"] = np.float64(np.inf)
         return b

@@ -18,6 +18,10 @@ For each estimator, with ĥ(t) its height interpolated to the GNSS fix times:
   ``alt_rmse_m = sqrt(mean e²)``, ``alt_max_abs_m = max |e|``.
 - horizontal error (``pos_h`` estimators only): tangent-plane north/east difference to the
   withheld fix, no offset removed; ``horiz_rmse_m`` = RMS of its norm, else null.
+- vertical-velocity error (``vel_d`` estimators, GNSS with velocity): ``v̂_D − v_D,GNSS`` at
+  the withheld fixes, no offset removed; ``vel_down_rmse_mps`` = its RMS, else null.
+- ``per_window``: the same three RMS values and the number of fixes per window (the blocks of
+  the paired comparison in ``vnav_graph.evaluation.compare``).
 - The withheld fixes are noisy themselves: the median reported vertical GNSS sigma inside the
   windows is given as ``gnss_sd_v_median_m``; an RMSE near it means "as good as GNSS".
 
@@ -28,8 +32,8 @@ at least 5 s before the last fix. Default spacing (start to start) is
 outage length of GNSS between them.
 
 ``cli_holdout(args)`` is the ``vnav-graph holdout`` entry point; it writes ``holdout.json``,
-``holdout.md`` (also printed) and ``holdout.png`` (matplotlib, Agg backend, imported only
-there).
+``holdout.md`` (also printed) and ``holdout.png`` (drawn by ``vnav_graph.report.error_plots``,
+grouped like the run report).
 """
 
 from __future__ import annotations
@@ -44,11 +48,12 @@ from typing import Any
 import numpy as np
 
 from ..progress import Mode, mode_for
-from ..types import Drive, Estimate, FloatArray
+from ..types import ERROR_STATE, Drive, Estimate, FloatArray
 
 HOLDOUT_SCHEMA = "vnav_graph.holdout/1"
 TAIL_S = 5.0
 MAX_WINDOWS = 5
+_DOWN = ERROR_STATE["pos_n"].start + 2  # down-position row of the error state
 
 
 @dataclass(frozen=True)
@@ -58,6 +63,10 @@ class Scored:
     block: dict[str, Any]
     t: FloatArray | None = None  # GNSS fix times [s]
     alt_err: FloatArray | None = None  # ĥ + c − h_gnss at every fix [m]
+    withheld: np.ndarray | None = None  # (N,) bool: fix was withheld from the estimator
+    alt_sd: FloatArray | None = None  # sqrt(P_DD + σ_GNSS,D²) at every fix [m], if cov
+    horiz_err: FloatArray | None = None  # NE distance at withheld fixes, NaN elsewhere [m]
+    vd_err: FloatArray | None = None  # v̂_D − v_D,GNSS at every fix [m/s]
 
 
 @dataclass(frozen=True)
@@ -101,8 +110,17 @@ def in_windows(t: FloatArray, windows: Sequence[tuple[float, float]]) -> np.ndar
     return m
 
 
-def score(est: Estimate, drive: Drive, withheld: np.ndarray) -> Scored:
-    """Score an estimate against the GNSS fixes flagged ``withheld`` (module docstring)."""
+def _rms(x: FloatArray) -> float | None:
+    x = x[np.isfinite(x)]
+    return float(np.sqrt(np.mean(x**2))) if x.size else None
+
+
+def score(est: Estimate, drive: Drive, withheld: np.ndarray,
+          windows: Sequence[tuple[float, float]] = ()) -> Scored:
+    """Score an estimate against the GNSS fixes flagged ``withheld`` (module docstring).
+
+    ``windows`` (optional) adds ``per_window`` scores to the block.
+    """
     g = drive.gnss
     assert g is not None
     tr = est.trajectory
@@ -117,6 +135,7 @@ def score(est: Estimate, drive: Drive, withheld: np.ndarray) -> Scored:
     c = float(np.median(h_g[seen] - h_e[seen])) if seen.any() else 0.0
     err = h_e + c - h_g
     e_w = err[w]
+    horiz_err = np.full(t.size, np.nan)
     horiz = None
     if "pos_h" in est.provides and np.all(np.isfinite(tr.lla[:, :2])):
         from ..geo.frames import lla_to_ned
@@ -124,25 +143,45 @@ def score(est: Estimate, drive: Drive, withheld: np.ndarray) -> Scored:
         lla_e = np.column_stack([np.interp(t[w], tr.t, tr.lla[:, j]) for j in range(3)])
         d = lla_to_ned(lla_e, drive.origin_lla)[:, :2] - lla_to_ned(
             g.lla[inside][w], drive.origin_lla)[:, :2]
-        horiz = float(np.sqrt(np.mean(np.sum(d**2, axis=1))))
+        horiz_err[w] = np.sqrt(np.sum(d**2, axis=1))
+        horiz = _rms(horiz_err[w])
+    vd_err = None
+    if "vel_d" in est.provides and g.vel_n is not None:
+        vd_err = np.interp(t, tr.t, tr.vel_down) - g.vel_n[inside, 2]
+    sd = None
+    if est.cov is not None and est.t_cov is not None:
+        var = est.cov[:, _DOWN, _DOWN]
+        ok = np.isfinite(var)
+        if ok.any():
+            sd = np.sqrt(np.clip(np.interp(t, est.t_cov[ok], var[ok]), 0.0, None)
+                         + g.pos_sd[inside, 2] ** 2)
     rej = est.info.get("gnss_rejected") if est.info is not None else None
     block = {
         "status": "ok", "error": None,
         "alt_rmse_m": float(np.sqrt(np.mean(e_w**2))),
         "alt_max_abs_m": float(np.max(np.abs(e_w))),
         "horiz_rmse_m": horiz,
+        "vel_down_rmse_mps": None if vd_err is None else _rms(vd_err[w]),
         "gnss_rejected": None if rej is None else int(rej),
         "alt_offset_m": c,
         "n_scored": int(w.sum()),
         "runtime_s": float(est.runtime_s),
     }
-    return Scored(block, t, err)
+    if windows:
+        block["per_window"] = []
+        for a, b in windows:
+            m = w & (t >= a) & (t <= b)
+            block["per_window"].append({
+                "t0": float(a), "t1": float(b), "n": int(m.sum()),
+                "alt_rmse_m": _rms(err[m]), "horiz_rmse_m": _rms(horiz_err[m]),
+                "vel_down_rmse_mps": None if vd_err is None else _rms(vd_err[m])})
+    return Scored(block, t, err, w, sd, horiz_err, vd_err)
 
 
 def failed(error: str, runtime_s: float) -> dict[str, Any]:
     return {"status": "failed", "error": error, "alt_rmse_m": None, "alt_max_abs_m": None,
-            "horiz_rmse_m": None, "gnss_rejected": None, "alt_offset_m": None, "n_scored": 0,
-            "runtime_s": runtime_s}
+            "horiz_rmse_m": None, "vel_down_rmse_mps": None, "gnss_rejected": None,
+            "alt_offset_m": None, "n_scored": 0, "runtime_s": runtime_s, "per_window": []}
 
 
 def _onboard_score(drive: Drive, withheld: np.ndarray) -> dict[str, Any] | None:
@@ -195,7 +234,7 @@ def run_holdout(drive: Drive, estimators: Sequence[str] | None = None, outage_s:
             results[r.name] = failed(r.error or "unknown error", r.runtime_s)
             continue
         try:
-            s = score(r.estimate, drive, withheld)
+            s = score(r.estimate, drive, withheld, windows)
             results[r.name], series[r.name] = s.block, s
         except Exception as exc:  # one estimator's failure is data, not a crash
             if os.environ.get("VNAV_DEBUG"):
@@ -253,27 +292,13 @@ def format_markdown(doc: dict[str, Any]) -> str:
 
 
 def plot_holdout(res: HoldoutResult, path: Path) -> None:
-    """Altitude error per estimator over time, outage windows shaded (PNG)."""
-    import matplotlib
+    """Altitude error at the withheld fixes, estimators grouped by family, windows shaded (PNG;
+    drawn by ``vnav_graph.report.error_plots.plot_holdout_errors``)."""
+    from ..report.error_plots import plot_holdout_errors
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(10, 4.5))
-    for a, b in res.windows:
-        ax.axvspan(a, b, color="0.85", zorder=0)
-    for name, s in res.series.items():
-        if s.t is not None and s.alt_err is not None:
-            ax.plot(s.t, s.alt_err, lw=0.9, label=f"{name} ({s.block['alt_rmse_m']:.2f} m)")
-    ax.axhline(0.0, color="k", lw=0.5)
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel("estimate + offset − GNSS height [m]")
-    ax.set_title(f"GNSS-outage holdout: {res.doc['drive']['name']} (grey: GNSS withheld)")
-    if res.series:
-        ax.legend(fontsize=8, loc="best")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    png = plot_holdout_errors(res)
+    if png is not None:
+        path.write_bytes(png.png)
 
 
 def cli_holdout(args: Any) -> int:

@@ -7,6 +7,7 @@ that do not apply are ``None``.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -20,6 +21,7 @@ class Errors:
     t: FloatArray
     alt: FloatArray  # estimate − truth [m]
     vel_down: FloatArray | None  # [m/s]
+    horiz: FloatArray | None = None  # |NE position error| [m], estimates providing pos_h
 
 
 def errors_vs_truth(est: Estimate, drive: Drive) -> Errors:
@@ -33,7 +35,14 @@ def errors_vs_truth(est: Estimate, drive: Drive) -> Errors:
     vd = None
     if "vel_d" in est.provides:
         vd = tr.vel_down[m] - truth.vel_down
-    return Errors(t, alt, vd)
+    horiz = None
+    if "pos_h" in est.provides:
+        from ..geo.frames import lla_to_ned
+
+        d = (lla_to_ned(tr.lla[m], drive.origin_lla)[:, :2]
+             - truth.pos_n(drive.origin_lla)[:, :2])
+        horiz = np.sqrt(np.sum(d**2, axis=1))
+    return Errors(t, alt, vd, horiz)
 
 
 def nees(est: Estimate, drive: Drive) -> tuple[FloatArray, int] | None:
@@ -83,11 +92,19 @@ def baro_block(baro: BaroEstimate | None, drive: Drive) -> dict[str, Any]:
     }
 
 
-def evaluate(est: Estimate, drive: Drive) -> dict[str, Any]:
-    """Metric block for summary.json / bench.json (docs/design.md schema)."""
+def evaluate(est: Estimate, drive: Drive,
+             blocks: Sequence[tuple[float, float]] | None = None) -> dict[str, Any]:
+    """Metric block for summary.json / bench.json (docs/design.md schema).
+
+    Additions to the docs/design.md block: ``horiz_rmse_m`` (RMS of the north/east position
+    error, estimates providing ``pos_h``) and ``warnings``. With ``blocks`` (time blocks
+    ``[(t0, t1), ...]`` [s]) the block also has ``per_block``, the RMS values per block, which
+    ``pipeline.summarize`` moves to ``summary["comparison"]`` (the paired comparison of
+    ``vnav_graph.evaluation.compare``), so the estimator block stays the bench row.
+    """
     out: dict[str, Any] = {
         "status": "ok", "error": None, "alt_rmse_m": None, "alt_max_abs_m": None,
-        "vel_down_rmse_mps": None, "nees_mean": None, "nees_dof": None,
+        "horiz_rmse_m": None, "vel_down_rmse_mps": None, "nees_mean": None, "nees_dof": None,
         "runtime_s": float(est.runtime_s),
         "realtime_factor": (drive.duration_s / est.runtime_s) if est.runtime_s > 0 else None,
         "gnss_rejected": est.info.get("gnss_rejected"),
@@ -101,6 +118,16 @@ def evaluate(est: Estimate, drive: Drive) -> dict[str, Any]:
         out["alt_max_abs_m"] = float(np.max(np.abs(err.alt)))
         if err.vel_down is not None:
             out["vel_down_rmse_mps"] = float(np.sqrt(np.mean(err.vel_down**2)))
+        if err.horiz is not None:
+            out["horiz_rmse_m"] = float(np.sqrt(np.mean(err.horiz**2)))
+        if blocks is not None:
+            from .compare import block_rmse
+
+            cols = {"alt_rmse_m": block_rmse(err.t, err.alt, blocks),
+                    "horiz_rmse_m": block_rmse(err.t, err.horiz, blocks),
+                    "vel_down_rmse_mps": block_rmse(err.t, err.vel_down, blocks)}
+            out["per_block"] = [{"t0": a, "t1": b, **{k: v[i] for k, v in cols.items()}}
+                                for i, (a, b) in enumerate(blocks)]
         ne = nees(est, drive)
         if ne is not None:
             out["nees_mean"] = float(np.mean(ne[0]))

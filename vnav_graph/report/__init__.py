@@ -1,86 +1,134 @@
 """Plots and the self-contained HTML report of one ``vnav-graph run``.
 
-``write_report(out_dir, summary, results, drive)`` is called by ``pipeline.write_outputs``
-(through ``cli.cmd_run``) with the temporary output directory; it writes
+``write_report(out_dir, summary, results, drive, holdout=None)`` is called by
+``pipeline.write_outputs`` (through ``cli.cmd_run``) with the temporary output directory; it
+writes
 
-- ``plots/altitude_error.png`` — altitude error vs time per estimator, ±3σ, outages shaded;
-- ``plots/vertical_velocity_error.png`` — vertical-velocity error of every estimator;
-- ``plots/baro_parameters.png`` — final baro scale/latency/bias ± 1σ vs truth;
+- ``plots/altitude_error.png`` — altitude error per estimator, a row per family, ±3σ;
+- ``plots/vertical_velocity_error.png`` — vertical-velocity error, a panel per family;
+- ``plots/baro_parameters.png`` — final baro scale/latency/bias ± 1σ (vs truth if simulated);
 - ``plots/baro_convergence.png`` — baro parameter histories, when an estimator provides one;
-- ``report.html`` — drive info, comparison table, baro table and the plots embedded (base64).
+- ``report.html`` — headline, comparison table, run/drive info, reader repairs, baro table and
+  the plots embedded (base64).
 
-Matplotlib is imported only in ``vnav_graph.report.plots`` (Agg canvas, no pyplot).
+The errors are on the basis of the table (:mod:`vnav_graph.report.errors`): truth for a
+simulated drive; for a real log the errors of the holdout run at the withheld GNSS fixes
+(``holdout`` = the ``holdout.HoldoutResult`` whose document ``pipeline.apply_holdout`` put in
+the summary). Captions say which, and which windows are shaded.
+
+Matplotlib is imported only inside the plotting modules (Agg canvas, no pyplot).
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
 from ..types import Drive
 
-PLOTS = (
-    ("altitude_error.png", "Altitude error vs time per estimator (±3σ band, GNSS outages shaded)",
-     "plot_altitude_errors"),
-    ("vertical_velocity_error.png", "Vertical velocity error vs time",
-     "plot_vertical_velocity_errors"),
-    ("baro_parameters.png", "Barometer parameters: final estimate ± 1σ vs truth",
-     "plot_baro_parameters"),
-    ("baro_convergence.png", "Barometer parameter convergence (±1σ)", "plot_baro_convergence"),
-)
+# why an expected figure can be missing (said in the report instead of silently omitting it)
+ABSENT = {"vertical_velocity_error.png": "No vertical-velocity plot: no estimator provides "
+          "v_D, or there is no reference for it (a log whose GNSS has no velocity).",
+          "altitude_error.png": "No altitude plot: no estimate to draw."}
+
+
+def captions(es: Any, summary: dict[str, Any]) -> dict[str, str]:
+    """Figure captions that are true for this drive and error basis."""
+    from .errors import GIVEN, TRUTH
+
+    n = len(es.windows)
+    if es.basis == TRUTH:
+        ref = "against the simulation truth"
+        shade = (f"shaded: the {n} simulated GNSS outage(s)" if n
+                 else "no GNSS outage in this drive")
+        band = "band: ±3σ of the estimate's covariance"
+    elif es.basis == GIVEN:
+        ref = ("against the GNSS fixes the estimator was given (no holdout run: a fit "
+               "residual, not a score; the table has no error numbers)")
+        shade = f"shaded: {n} holdout window(s)" if n else "nothing shaded"
+        band = "band: ±3σ of sqrt(P + σ_GNSS²)"
+    else:
+        ev = summary.get("evaluation") or {}
+        ref = ("of the holdout run against the GNSS fixes withheld from it, at those fixes "
+               f"only (the basis of the table; {n} window(s) of {ev.get('outage_s', 0):g} s)")
+        shade = "shaded: the withheld windows; the time axis shows only them"
+        band = "band: ±3σ of sqrt(P + σ_GNSS²)"
+    grp = "grouped by family (smoothers, filters, loops/observers) with a shared y-scale"
+    return {
+        "altitude_error.png": f"Altitude error {ref}, one panel per estimator, {grp} per "
+                              f"row; titles give the table's RMSE; {band}; {shade}.",
+        "vertical_velocity_error.png": f"Vertical (down) velocity error {ref}, {grp}; legend "
+                                       f"gives the table's RMSE; {shade}.",
+        "baro_parameters.png": "Barometer parameters: final estimate ± 1σ"
+                               + (" vs truth" if es.basis == TRUTH else " (no truth)") + ".",
+        "baro_convergence.png": "Barometer parameter histories (±1σ) and the σ of scale and "
+                                f"latency from the covariance; {shade}.",
+    }
 
 
 def write_report(out_dir: str | Path, summary: dict[str, Any], results: Sequence[Any],
-                 drive: Drive) -> list[Path]:
+                 drive: Drive, holdout: Any = None) -> list[Path]:
     """Write the PNG plots under ``out_dir/plots`` and ``out_dir/report.html``.
 
     Parameters
     ----------
     out_dir : directory to write into (created if missing)
-    summary : the ``summary.json`` document (``pipeline.summarize``)
+    summary : the ``summary.json`` document (``pipeline.summarize`` / ``apply_holdout``)
     results : ``pipeline.RunResult`` list (estimate or error per estimator)
     drive : the drive the estimators ran on
+    holdout : the ``HoldoutResult`` of a real log (its errors are drawn), or None
 
     Returns the written paths. A plot that fails is skipped with its error noted in the HTML
     (a figure must never cost the user the rest of the report).
     """
-    from .. import __version__
-    from . import plots
+    from . import error_plots, plots
+    from .errors import GIVEN, error_set
     from .html import render_html
 
     out = Path(out_dir)
     (out / "plots").mkdir(parents=True, exist_ok=True)
+    es = error_set(drive, results, holdout)
+    ests = summary["estimators"]
+
+    def values(key: str) -> dict[str, Any]:
+        return {} if es.basis == GIVEN else {n: m.get(key) for n, m in ests.items()}
+
+    caps = captions(es, summary)
+    todo: list[tuple[str, Callable[[], Any]]] = [
+        ("altitude_error.png", lambda: error_plots.plot_altitude_errors(
+            es, values("alt_rmse_m"), drive.name)),
+        ("vertical_velocity_error.png", lambda: error_plots.plot_vertical_velocity_errors(
+            es, values("vel_down_rmse_mps"), drive.name)),
+        ("baro_parameters.png", lambda: plots.plot_baro_parameters(drive, results)),
+        ("baro_convergence.png", lambda: plots.plot_baro_convergence(drive, results,
+                                                                     es.windows)),
+    ]
     written: list[Path] = []
     images: list[tuple[str, bytes]] = []
-    for fname, caption, fn in PLOTS:
+    failed: list[str] = []
+    for fname, draw in todo:
+        caption = caps[fname]
         try:
-            png = getattr(plots, fn)(drive, results)
+            fig = draw()
         except Exception as exc:  # noted in the report instead of aborting it
-            caption = f"{caption}: not drawn ({type(exc).__name__}: {exc})"
-            images.append((caption, b""))
+            failed.append(f"{fname}: not drawn ({type(exc).__name__}: {exc})")
             continue
-        if png is None:
+        if fig is None:
+            if fname in ABSENT:
+                failed.append(ABSENT[fname])
             continue
+        png, notes = (fig, ()) if isinstance(fig, bytes) else (fig.png, fig.notes)
+        if notes:
+            caption += " Clipped to keep the others readable: " + "; ".join(notes) + "."
         p = out / "plots" / fname
         p.write_bytes(png)
         written.append(p)
         images.append((caption, png))
-    page = render_html(summary, drive, [i for i in images if i[1]], __version__)
-    notes = [c for c, png in images if not png]
-    if notes:
-        page = page.replace("<h2>Plots</h2>", "<h2>Plots</h2>" + "".join(
-            f'<p class="note">{_esc(n)}</p>' for n in notes))
     p = out / "report.html"
-    p.write_text(page, encoding="utf-8")
+    p.write_text(render_html(summary, drive, images, failed), encoding="utf-8")
     written.append(p)
     return written
 
 
-def _esc(s: str) -> str:
-    import html
-
-    return html.escape(s)
-
-
-__all__ = ["write_report"]
+__all__ = ["captions", "write_report"]

@@ -1,4 +1,5 @@
-"""One self-contained HTML report: drive info, comparison table, baro parameters, plots.
+"""One self-contained HTML report: headline, comparison table, run and drive info, reader
+repairs, baro parameters, plots.
 
 Images are embedded as ``data:image/png;base64`` URIs and the style sheet is inline, so the
 file can be mailed or archived alone. All text taken from data (names, errors, metadata) is
@@ -20,7 +21,10 @@ table{border-collapse:collapse;margin:0.6em 0 1.2em;font-size:0.88em}
 th,td{border:1px solid #ccc;padding:3px 7px;text-align:right}
 th{background:#f0f0f0} td:first-child,th:first-child{text-align:left}
 tr.failed td{color:#a00} img{max-width:100%;border:1px solid #eee;margin:0.4em 0}
-.note{color:#555;font-size:0.85em}
+.note{color:#555;font-size:0.85em} td.best{font-weight:bold;background:#eef7ee}
+tr.onboard td{color:#555;font-style:italic}
+#headline{border-left:4px solid #2a7;padding:0.2em 0.8em;background:#f6fbf8}
+.headline{font-size:1.05em;margin:0.35em 0} figcaption{font-size:0.85em;color:#333}
 """
 
 
@@ -48,7 +52,7 @@ def drive_rows(drive: Drive) -> list[tuple[str, str]]:
             ("IMU", f"{len(drive.imu)} samples, {drive.imu.rate_hz:.0f} Hz"),
             ("GNSS", "none" if drive.gnss is None else f"{len(drive.gnss)} fixes"),
             ("baro", "none" if drive.baro is None else f"{len(drive.baro)} samples")]
-    for key in ("scenario", "seed", "imu_grade", "gnss_outages", "holdout_windows"):
+    for key in ("imu_grade", "gnss_outages"):
         if key in drive.meta:
             rows.append((key.replace("_", " "), str(drive.meta[key])))
     if drive.baro_truth is not None:
@@ -57,23 +61,52 @@ def drive_rows(drive: Drive) -> list[tuple[str, str]]:
     return rows
 
 
+# (summary key, header, format) of the comparison table; headers carry their unit
+COLUMNS = (("status", "status", None), ("alt_rmse_m", "alt RMSE [m]", ".3f"),
+           ("alt_max_abs_m", "alt max |err| [m]", ".3f"),
+           ("horiz_rmse_m", "horiz RMSE [m]", ".3f"),
+           ("vel_down_rmse_mps", "v<sub>D</sub> RMSE [m/s]", ".4f"),
+           ("nees_per_dof", "NEES/dof", ".2f"), ("runtime_s", "runtime [s]", ".3f"),
+           ("realtime_factor", "× real time", ".0f"))
+
+
+def _cell(m: dict[str, Any], key: str, spec: str | None) -> str:
+    if key == "nees_per_dof":
+        v = (m["nees_mean"] / m["nees_dof"] if m.get("nees_dof") and m.get("nees_mean")
+             is not None else None)
+    else:
+        v = m.get(key)
+    return _e(v) if spec is None else _num(v, spec)
+
+
+_BEST = ' class="best"'
+
+
 def comparison_table(summary: dict[str, Any]) -> str:
-    """HTML table of the per-estimator metrics of ``summary.json``."""
-    head = ("<tr><th>estimator</th><th>status</th><th>alt RMSE [m]</th><th>alt max [m]</th>"
-            "<th>v<sub>D</sub> RMSE [m/s]</th><th>NEES/dof</th><th>runtime [s]</th>"
-            "<th>× real time</th></tr>")
+    """HTML table of the per-estimator metrics of ``summary.json`` (``id="comparison"``;
+    each header has ``data-key``, the summary key of its column), the autopilot's own
+    estimate as a last row when the log has one. Rows are in family order."""
+    from .groups import ordered
+
+    head = "<tr><th>estimator</th>" + "".join(
+        f'<th data-key="{k}">{h}</th>' for k, h, _ in COLUMNS) + "</tr>"
+    best = {(m["best"], k) for k, m in ((summary.get("comparison") or {}).get("metrics")
+                                        or {}).items() if m}
     rows = []
-    for name, m in summary["estimators"].items():
-        nees = m["nees_mean"] / m["nees_dof"] if m.get("nees_dof") and m.get(
-            "nees_mean") is not None else None
+    for name in ordered(list(summary["estimators"])):
+        m = summary["estimators"][name]
         cls = ' class="failed"' if m["status"] != "ok" else ""
-        rows.append(
-            f"<tr{cls}><td>{_e(name)}</td><td>{_e(m['status'])}</td>"
-            f"<td>{_num(m['alt_rmse_m'], '.3f')}</td><td>{_num(m['alt_max_abs_m'], '.3f')}</td>"
-            f"<td>{_num(m['vel_down_rmse_mps'], '.4f')}</td><td>{_num(nees, '.2f')}</td>"
-            f"<td>{_num(m['runtime_s'], '.3f')}</td><td>{_num(m['realtime_factor'], '.0f')}</td>"
-            "</tr>")
-    return f"<table>{head}{''.join(rows)}</table>"
+        cells = "".join(
+            f"<td{_BEST if (name, k) in best else ''}>{_cell(m, k, spec)}</td>"
+            for k, _, spec in COLUMNS)
+        rows.append(f'<tr{cls} data-name="{_e(name)}"><td>{_e(name)}</td>{cells}</tr>')
+    ob = (summary.get("evaluation") or {}).get("onboard")
+    if ob:
+        cells = "".join(f"<td>{_cell(ob, k, spec) if k.startswith('alt') else '—'}</td>"
+                        if k != "status" else "<td>had GNSS</td>" for k, _, spec in COLUMNS)
+        rows.append(f'<tr class="onboard" data-name="onboard"><td>onboard: {_e(ob["name"])}'
+                    f"*</td>{cells}</tr>")
+    return f'<table id="comparison">{head}{"".join(rows)}</table>'
 
 
 def baro_table(summary: dict[str, Any]) -> str:
@@ -98,39 +131,104 @@ def baro_table(summary: dict[str, Any]) -> str:
     return f"<table>{head}{''.join(rows)}</table>"
 
 
+def basis_text(summary: dict[str, Any]) -> str:
+    """One sentence: what the errors in the table are measured against."""
+    ev = summary.get("evaluation")
+    if ev and ev.get("skipped"):
+        return (f"No truth, and the withheld-GNSS scoring was skipped ({ev['skipped']}): the "
+                "table has no error numbers, and the plots show fit residuals against the "
+                "GNSS the estimators were given, not scores.")
+    if ev:
+        n = len(ev["windows"])
+        sd = ev.get("gnss_sd_v_median_m")
+        sd_txt = "" if sd is None else (f" The withheld fixes have a median vertical σ of "
+                                        f"{sd:.2f} m: an RMSE near that is as good as GNSS.")
+        return (f"Errors are against GNSS withheld in {n} window(s) of {ev['outage_s']:g} s "
+                f"(a second run of every estimator without those fixes; {ev['scoring']}). "
+                f"v<sub>D</sub> is against the withheld GNSS velocity; there is no truth, so "
+                f"no NEES.{sd_txt}")
+    if summary["drive"]["source"] == "simulated":
+        return ("Errors are against the simulation truth over the whole drive. NEES/dof: mean "
+                "normalised estimation error squared per degree of freedom over "
+                "position/velocity (1 = consistent covariance).")
+    return ("No truth and no holdout run: the table has no error numbers, and the plots show "
+            "residuals against the GNSS the estimators were given (a fit, not a score). Run "
+            "without --no-holdout to score against withheld GNSS.")
+
+
+def headline_html(summary: dict[str, Any]) -> str:
+    from ..evaluation.compare import headline_lines
+
+    lines = headline_lines(summary)
+    if not lines:
+        why = ("fewer than two estimators have a score" if summary.get("comparison")
+               or summary["drive"]["source"] == "simulated"
+               else "a log without truth is scored only by the holdout run (skipped here)")
+        return f'<div id="headline"><p class="headline">No headline: {why}.</p></div>'
+
+    *main, note = lines
+    return ('<div id="headline">' + "".join(f'<p class="headline">{_e(x)}</p>' for x in main)
+            + f'<p class="note">{_e(note)} {_e(summary["comparison"]["method"])}.</p></div>')
+
+
+def run_rows(summary: dict[str, Any]) -> list[tuple[str, str]]:
+    """(label, value) pairs of the run: version, scenario, seed, scored windows."""
+    rows = [("vnav_graph version", str(summary.get("version"))),
+            ("scenario", "— (real log)" if summary.get("scenario") is None
+             else str(summary["scenario"])),
+            ("seed", "— (real log)" if summary.get("seed") is None else str(summary["seed"]))]
+    ev = summary.get("evaluation")
+    if ev and ev.get("skipped"):
+        rows.append(("withheld-GNSS scoring", f"skipped: {ev['skipped']}"))
+    elif ev:
+        rows.append(("scored windows (withheld GNSS)", ", ".join(
+            f"{w['t0']:.1f}–{w['t1']:.1f} s ({w['n_withheld']} fixes)" for w in ev["windows"])))
+    return rows
+
+
 def render_html(summary: dict[str, Any], drive: Drive,
-                images: Sequence[tuple[str, bytes]], version: str) -> str:
-    """The report page. ``images``: (caption, PNG bytes), embedded in order."""
+                images: Sequence[tuple[str, bytes]], notes: Sequence[str] = ()) -> str:
+    """The report page. ``images``: (caption, PNG bytes), embedded in order; ``notes``:
+    plots that could not be drawn."""
     d = summary["drive"]
-    info = "".join(f"<tr><td>{_e(k)}</td><td>{_e(v)}</td></tr>" for k, v in drive_rows(drive))
-    ref = ("truth (simulated drive)" if drive.truth is not None
-           else "GNSS fixes (no truth: errors are against GNSS; use `vnav-graph holdout` for "
-                "withheld-GNSS scores)")
+    info = "".join(f"<tr><td>{_e(k)}</td><td>{_e(v)}</td></tr>"
+                   for k, v in run_rows(summary) + drive_rows(drive))
     failed = [(n, m["error"]) for n, m in summary["estimators"].items() if m["status"] != "ok"]
     fail_html = "".join(f"<li><b>{_e(n)}</b>: {_e(err)}</li>" for n, err in failed)
     warned = [(n, w) for n, m in summary["estimators"].items() for w in m.get("warnings") or []]
     warn_html = "".join(f"<li><b>{_e(n)}</b>: {_e(w)}</li>" for n, w in warned)
+    repairs = summary.get("repairs") or []
+    rep_html = ("<ul id=\"repairs\">" + "".join(f"<li>{_e(r)}</li>" for r in repairs) + "</ul>"
+                if repairs else '<p class="note" id="repairs">None (simulated drive, or the '
+                "reader changed nothing).</p>")
+    ob = (summary.get("evaluation") or {}).get("onboard")
+    ob_html = (f'<p class="note">* {_e(ob["name"])}: the autopilot\'s own estimate, scored on '
+               f"the same withheld fixes; {_e(ob['note'])}. Not ranked.</p>" if ob else "")
     figs = "".join(
         f"<figure><img alt=\"{_e(cap)}\" src=\"data:image/png;base64,"
         f"{base64.b64encode(png).decode('ascii')}\"><figcaption>{_e(cap)}</figcaption></figure>"
         for cap, png in images)
+    figs = "".join(f'<p class="note">{_e(n)}</p>' for n in notes) + (
+        figs or '<p class="note">No estimate to plot.</p>')
     return f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8">
 <title>vnav-graph report — {_e(d['name'])}</title><style>{_CSS}</style></head>
 <body>
 <h1>vnav-graph report: {_e(d['name'])}</h1>
-<p class="note">vnav_graph {_e(version)}; errors against {_e(ref)}.</p>
-<h2>Drive</h2>
-<table>{info}</table>
+{headline_html(summary)}
+<p class="note" id="basis">{basis_text(summary)}</p>
 <h2>Comparison</h2>
 {comparison_table(summary)}
-<p class="note">NEES/dof: mean normalised estimation error squared per degree of freedom over
-position/velocity (1 = consistent covariance). × real time: drive duration / runtime.</p>
+{ob_html}
 {f'<h3>Failed estimators</h3><ul>{fail_html}</ul>' if failed else ''}
 {f'<h3>Warnings</h3><ul>{warn_html}</ul>' if warned else ''}
+<h2>Run and drive</h2>
+<table>{info}</table>
+<h3>Reader repairs and notes</h3>
+{rep_html}
 <h2>Barometer parameters (estimate ± 1σ)</h2>
 {baro_table(summary)}
 <h2>Plots</h2>
-{figs or '<p class="note">No estimate to plot.</p>'}
+{figs}
 </body></html>
 """

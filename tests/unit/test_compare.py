@@ -1,0 +1,95 @@
+"""The headline: best estimator, runner-up, paired t-interval and verdict on synthetic
+summaries with known answers; block RMSE against hand-computed values."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from vnav_graph.evaluation.compare import (
+    block_rmse,
+    comparison,
+    headline_lines,
+    paired_interval,
+    rank_metric,
+    time_blocks,
+)
+
+# Student t quantiles t_{0.975, df} from tables (independent of scipy)
+T975 = {1: 12.706, 3: 3.182}
+
+
+def _est(alt: float, horiz: float | None = None, status: str = "ok") -> dict:
+    return {"status": status, "alt_rmse_m": alt, "horiz_rmse_m": horiz}
+
+
+def _blocks(alt: list[float | None]) -> list[dict]:
+    return [{"alt_rmse_m": b, "horiz_rmse_m": None} for b in alt]
+
+
+def test_time_blocks_and_block_rmse() -> None:
+    assert time_blocks(0.0, 240.0) == [(30.0 * k, 30.0 * (k + 1)) for k in range(8)]
+    assert len(time_blocks(0.0, 50.0)) == 2  # at least two blocks
+    assert len(time_blocks(0.0, 3600.0)) == 10  # at most ten
+    t = np.arange(0.0, 10.0)  # 0..9
+    e = np.where(t < 5, 3.0, 4.0)
+    e[7] = np.nan  # ignored
+    # blocks [0, 5) and [5, 9]: a sample on the shared edge (t = 5) belongs to the later one
+    assert block_rmse(t, e, [(0.0, 5.0), (5.0, 9.0)]) == [3.0, 4.0]
+    assert block_rmse(t, e, [(20.0, 30.0)]) == [None]
+    assert block_rmse(t, None, [(0.0, 5.0)]) == [None]
+
+
+def test_paired_interval_closed_form() -> None:
+    d = [0.4, 0.6, 0.5, 0.5]  # mean 0.5, sd (ddof 1) = sqrt(0.02/3)
+    mean, lo, hi = paired_interval(d)
+    half = T975[3] * np.sqrt(0.02 / 3) / 2.0
+    assert mean == pytest.approx(0.5)
+    assert (lo, hi) == pytest.approx((0.5 - half, 0.5 + half), abs=1e-3)
+    assert paired_interval([1.0]) is None
+
+
+def test_headline_picks_best_and_states_the_margin() -> None:
+    ests = {"graph-batch": _est(1.0), "ekf": _est(1.5), "loop2": _est(3.0),
+            "broken": _est(0.1, status="failed")}  # failed: never ranked
+    pb = {"graph-batch": _blocks([0.9, 1.1, 1.0, 1.0]),
+          "ekf": _blocks([1.3, 1.7, 1.5, 1.5]),  # d = 0.4, 0.6, 0.5, 0.5
+          "loop2": _blocks([3.0] * 4), "broken": _blocks([0.1] * 4)}
+    comp = comparison(ests, pb, "withheld GNSS (holdout)", [(0, 1)] * 4, "holdout window",
+                      "note")
+    h = comp["metrics"]["alt_rmse_m"]
+    assert (h["best"], h["runner_up"]) == ("graph-batch", "ekf")
+    assert h["diff"] == pytest.approx(0.5) and h["rel_pct"] == pytest.approx(100 / 3)
+    half = T975[3] * np.sqrt(0.02 / 3) / 2.0
+    assert h["ci95"] == pytest.approx([0.5 - half, 0.5 + half], abs=1e-3)
+    assert h["verdict"] == "better" and h["n_blocks"] == 4
+    assert h["text"].startswith("Altitude RMSE: graph-batch best, 1.00 m vs ekf 1.50 m "
+                                "(0.50 m, 33 % lower)")
+    assert "95 % CI [+0.37, +0.63] m (graph-batch lower in 4 of 4 holdout windows)" in h["text"]
+    # one estimator has a horizontal RMSE: nothing to rank
+    assert comp["metrics"]["horiz_rmse_m"] is None
+    assert headline_lines({"comparison": comp}) == [h["text"], "note"]
+
+
+def test_headline_tied_when_ci_includes_zero() -> None:
+    # overall ekf-rts is lower, but per window the sign flips: d = +1, −1, +1, −0.6
+    vals = {"ekf-rts": 2.0, "graph-isam2": 2.1}
+    blocks = {"ekf-rts": [1.0, 3.0, 1.0, 2.6], "graph-isam2": [2.0, 2.0, 2.0, 2.0]}
+    h = rank_metric(vals, blocks, "alt_rmse_m", "Altitude RMSE", "holdout window")
+    assert h["best"] == "ekf-rts" and h["verdict"] == "tied"
+    assert h["ci95"][0] < 0 < h["ci95"][1]
+    assert "ekf-rts and graph-isam2 tied" in h["text"] and "includes 0" in h["text"]
+    assert h["n_blocks_best_lower"] == 2
+
+
+def test_headline_mixed_and_no_ci() -> None:
+    # lower overall RMSE but every paired block favours the runner-up
+    h = rank_metric({"a": 1.0, "b": 1.1}, {"a": [2.0, 2.1, 1.9], "b": [1.0, 1.0, 1.0]},
+                    "alt_rmse_m", "Altitude RMSE", "time block")
+    assert h["verdict"] == "mixed" and h["ci95"][1] < 0
+    # a block missing for one estimator is not paired: one pair left, no interval
+    h = rank_metric({"a": 1.0, "b": 1.1}, {"a": [1.0, None], "b": [1.2, 1.3]},
+                    "alt_rmse_m", "Altitude RMSE", "holdout window")
+    assert h["verdict"] == "no CI" and h["ci95"] is None and h["n_blocks"] == 1
+    assert "no confidence interval" in h["text"]
+    assert rank_metric({"a": 1.0, "b": None}, {}, "alt_rmse_m", "x", "y") is None

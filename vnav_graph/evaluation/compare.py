@@ -1,0 +1,161 @@
+"""Which estimator is best, by how much, and is the difference resolved?
+
+The headline of a run (``summary.json["comparison"]``, the top of ``report.html`` and a line
+of the terminal table) is built here from numbers already in the summary, so every place that
+prints it prints the same words.
+
+Per metric (altitude RMSE, horizontal RMSE where at least two estimators provide it):
+
+- **best** = the estimator with the lowest RMSE in the comparison table, **runner-up** the
+  next one; the difference is ``runner-up − best`` [m] and relative to the runner-up [%].
+- **paired CI**: the same two estimators are scored on the same blocks (holdout windows of a
+  real log, or equal time blocks of one simulated run). With ``d_k = RMSE_runner,k −
+  RMSE_best,k`` over the ``n`` blocks where both have a value, the 95 % interval is the
+  Student-t interval ``mean(d) ± t_{0.975, n−1} · sd(d)/√n``. The t-interval is used rather
+  than a bootstrap because ``n`` is small (2 to 10): a bootstrap of 2 numbers returns their
+  range, which is not a 95 % interval.
+- **verdict**: ``"better"`` when the CI lies above zero, ``"tied"`` when it contains zero,
+  ``"mixed"`` when it lies below zero (per-block differences favour the runner-up although
+  its overall RMSE is higher), ``"no CI"`` with fewer than two paired blocks.
+
+Honesty about the blocks: holdout windows are separated by at least one outage length of
+GNSS, which re-anchors every estimator, so they are close to independent. Time blocks of one
+simulated run are not independent (a baro bias with a time constant of minutes spans blocks);
+this is the batch-means interval of a single run and is labelled so — an interval over runs
+comes from ``vnav-graph bench`` with several seeds.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from ..types import FloatArray
+
+# Time blocks of one simulated run: about 30 s each, at least 2 and at most 10.
+BLOCK_MIN_S = 30.0
+MAX_BLOCKS = 10
+# (summary key, label in the headline)
+HEADLINE_METRICS = (("alt_rmse_m", "Altitude RMSE"), ("horiz_rmse_m", "Horizontal RMSE"))
+
+
+def time_blocks(t0: float, t1: float) -> list[tuple[float, float]]:
+    """Equal contiguous blocks ``[(a, b), ...]`` covering ``[t0, t1]`` [s] (module docstring)."""
+    n = int(min(MAX_BLOCKS, max(2, math.floor((t1 - t0) / BLOCK_MIN_S))))
+    edges = np.linspace(t0, t1, n + 1)
+    return [(float(a), float(b)) for a, b in zip(edges[:-1], edges[1:], strict=True)]
+
+
+def block_rmse(t: FloatArray, err: FloatArray | None,
+               blocks: Sequence[tuple[float, float]]) -> list[float | None]:
+    """RMS of ``err`` over the samples of each block (None where a block has no finite one).
+
+    A sample on a shared edge belongs to the later block, the last block is closed.
+    """
+    out: list[float | None] = []
+    if err is None:
+        return [None] * len(blocks)
+    for k, (a, b) in enumerate(blocks):
+        m = (t >= a) & ((t < b) if k < len(blocks) - 1 else (t <= b)) & np.isfinite(err)
+        out.append(float(np.sqrt(np.mean(err[m] ** 2))) if m.any() else None)
+    return out
+
+
+def paired_interval(d: Sequence[float], level: float = 0.95) -> tuple[float, float, float] | None:
+    """(mean, lo, hi) Student-t interval of the mean of paired differences ``d``; None if n<2."""
+    from scipy.stats import t as student_t
+
+    x = np.asarray(d, dtype=float)
+    if x.size < 2:
+        return None
+    mean = float(np.mean(x))
+    half = float(student_t.ppf(0.5 + level / 2, x.size - 1) * np.std(x, ddof=1) / np.sqrt(x.size))
+    return mean, mean - half, mean + half
+
+
+def rank_metric(values: Mapping[str, float | None],
+                per_block: Mapping[str, Sequence[float | None]], key: str, label: str,
+                block_kind: str) -> dict[str, Any] | None:
+    """The headline block of one metric, or None when fewer than two estimators have it.
+
+    ``values``: overall value per estimator (the table's number); ``per_block``: the same
+    metric per block, aligned across estimators.
+    """
+    have = sorted(((v, n) for n, v in values.items() if v is not None and np.isfinite(v)))
+    if len(have) < 2:
+        return None
+    (best_v, best), (run_v, runner) = have[0], have[1]
+    pb, pr = per_block.get(best) or [], per_block.get(runner) or []
+    d = [r - b for b, r in zip(pb, pr, strict=False) if b is not None and r is not None]
+    ci = paired_interval(d)
+    diff = run_v - best_v
+    rel = 100.0 * diff / run_v if run_v > 0 else None
+    if ci is None:
+        verdict = "no CI"
+    else:
+        verdict = "better" if ci[1] > 0 else ("mixed" if ci[2] < 0 else "tied")
+    out = {"metric": key, "best": best, "best_value": best_v, "runner_up": runner,
+           "runner_up_value": run_v, "diff": diff, "rel_pct": rel, "n_blocks": len(d),
+           "n_blocks_best_lower": int(sum(x > 0 for x in d)),
+           "paired_mean": None if ci is None else ci[0],
+           "ci95": None if ci is None else [ci[1], ci[2]], "verdict": verdict}
+    out["text"] = headline_text(out, label, block_kind)
+    return out
+
+
+def headline_text(h: Mapping[str, Any], label: str, block_kind: str) -> str:
+    """One sentence stating the result of ``rank_metric`` (used by the table and the report)."""
+    rel = "" if h["rel_pct"] is None else f", {h['rel_pct']:.0f} %"
+    vs = (f"{h['best_value']:.2f} m vs {h['runner_up']} {h['runner_up_value']:.2f} m "
+          f"({h['diff']:.2f} m{rel} lower)")
+    if h["verdict"] == "no CI":
+        return (f"{label}: {h['best']} lowest, {vs}; {h['n_blocks']} paired {block_kind}(s): "
+                "no confidence interval (needs two or more).")
+    lo, hi = h["ci95"]
+    ci = (f"paired difference over {h['n_blocks']} {block_kind}s {h['paired_mean']:+.2f} m, "
+          f"95 % CI [{lo:+.2f}, {hi:+.2f}] m")
+    wins = (f" ({h['best']} lower in {h['n_blocks_best_lower']} of {h['n_blocks']} "
+            f"{block_kind}s)")
+    if h["verdict"] == "better":
+        return f"{label}: {h['best']} best, {vs}; {ci}{wins}."
+    if h["verdict"] == "tied":
+        return (f"{label}: {h['best']} and {h['runner_up']} tied: {h['best']} {vs}, but the "
+                f"{ci} includes 0{wins}.")
+    return (f"{label}: {h['best']} lowest overall but the {block_kind}s favour "
+            f"{h['runner_up']} (mixed): {vs}; {ci}{wins}.")
+
+
+def comparison(estimators: Mapping[str, Mapping[str, Any]],
+               per_block: Mapping[str, Sequence[Mapping[str, Any]]], basis: str,
+               blocks: Sequence[tuple[float, float]], block_kind: str,
+               note: str) -> dict[str, Any]:
+    """``summary["comparison"]``: the headline of each metric and the per-block values it
+    used (``per_block``: name → list aligned with ``blocks`` of dicts with the metric keys).
+
+    ``estimators`` are the summary's estimator blocks; failed estimators and missing values
+    are left out of the ranking.
+    """
+    metrics: dict[str, Any] = {}
+    for key, label in HEADLINE_METRICS:
+        vals = {n: m.get(key) for n, m in estimators.items() if m.get("status") == "ok"}
+        pb = {n: [b.get(key) for b in rows] for n, rows in per_block.items()}
+        metrics[key] = rank_metric(vals, pb, key, label, block_kind)
+    return {"basis": basis, "block_kind": block_kind,
+            "blocks": [[float(a), float(b)] for a, b in blocks], "note": note,
+            "method": "95 % Student-t interval of the paired per-block RMSE difference "
+                      "(runner-up − best); tied when it includes 0",
+            "metrics": metrics, "per_block": {n: list(r) for n, r in per_block.items()}}
+
+
+def headline_lines(summary: Mapping[str, Any]) -> list[str]:
+    """The headline sentences of a summary (empty when there is nothing to compare)."""
+    comp = summary.get("comparison")
+    if not comp:
+        return []
+    lines = [m["text"] for m in comp["metrics"].values() if m]
+    if lines and comp.get("note"):
+        lines.append(comp["note"])
+    return lines
