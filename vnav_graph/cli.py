@@ -229,6 +229,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("vnav-graph: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # `vnav-graph run | head`: the reader left; results are written
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())  # no second error when Python flushes at exit
+        return 141
 
 
 if __name__ == "__main__":

@@ -133,18 +133,19 @@ def test_bad_plugin_is_one_line_exit_2(capsys, spec, needle):
 def test_plugin_runs_with_its_config(tmp_path):
     """``run --plugin`` runs the extension like a built-in, and ``--config`` reaches it:
     calib_s = 10 s vs the default 30 s changes its offset estimate; 0.05 s (< one GNSS
-    period at 10 Hz) makes it fail, reported in summary.json while the run succeeds."""
-    def run(cfg):
+    period at 10 Hz) makes it fail, reported in summary.json (exit 4: every estimator of the
+    run failed; the summary is still written)."""
+    def run(cfg, code=0):
         out = tmp_path / f"out{len(list(tmp_path.iterdir()))}"
         args = ["run", "--scenario", "hill-drive", "--seed", "2", "--duration", "60",
                 "--estimators", "baro-only", "--plugin", PLUGIN, "--no-progress",
                 "--out", str(out)]
         if cfg:
             args += ["--config", _toml(tmp_path, f"[baro-only]\n{cfg}\n", f"{out.name}.toml")]
-        assert main(args) == 0
+        assert main(args) == code
         return json.loads((out / "summary.json").read_text())["estimators"]["baro-only"]
 
-    default, short, broken = run(None), run("calib_s = 10"), run("calib_s = 0.05")
+    default, short, broken = run(None), run("calib_s = 10"), run("calib_s = 0.05", code=4)
     assert default["status"] == short["status"] == "ok"
     assert short["baro"]["bias_m"]["est"] != default["baro"]["bias_m"]["est"]
     assert broken["status"] == "failed" and TOO_SHORT in broken["error"]

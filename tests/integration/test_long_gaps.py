@@ -8,6 +8,7 @@ assumed the next keyframe is at most one segment later: a gap longer than ``segm
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from vnav_graph.estimators.graph import GraphBatch
 from vnav_graph.estimators.graph_isam2 import GraphISAM2
@@ -23,6 +24,7 @@ def _with_imu_gap(duration_s: float, t0: float, t1: float):
                                       d.imu.spec))
 
 
+@pytest.mark.slow
 def test_isam2_survives_an_imu_gap_of_two_and_a_half_segments():
     truth_drive, d = _with_imu_gap(300.0, 60.0, 210.0)  # 150 s hole: segments 1 and 2 empty
     e = GraphISAM2().run(d)

@@ -173,7 +173,7 @@ def adaptive_kernel(t, a_up, z_baro, tau, ws2, s_max, func, signal, e0, v0, t_av
         if k == n - 1:
             break
         if abs(dt - dt_prev) > 1e-12 * dt:
-            phi, gam = zoh_nb(dt, ws2, 3)
+            phi, gam = zoh_nb(dt, ws2, np.int64(3))  # int64: the loops' specialisation
             dt_prev = dt
         a = a_up[k]
         if np.isnan(a):
@@ -290,7 +290,7 @@ def ekf_kernel(a_up, z_baro, base_gains, ws2, s_max, func, signal, e0, v0,
         if k < n - 1:
             dt = t[k + 1] - t[k]
         if abs(dt - dt_prev) > 1e-12 * dt:
-            phi, gam = zoh_nb(dt, ws2, 3)
+            phi, gam = zoh_nb(dt, ws2, np.int64(3))  # int64: the loops' specialisation
             fb = np.exp(-dt / tau_b)
             qb = sd_b * sd_b * (1.0 - fb * fb)
             dt_prev = dt

@@ -495,8 +495,10 @@ def vertical_inputs(drive: Drive, config: AhrsConfig | None = None) -> VerticalI
     g_nom = float(gravity(drive.origin_lla[0], drive.origin_lla[2]))
     relevel = _relevel_after_gaps(t, imu.gyro_b, imu.accel_b, cfg.imu_gap_factor * dt_imu,
                                   cfg.level_s, g_nom, cfg.static_accel, cfg.static_rate)
+    # a writable copy of the specific force: its rows reach the shared strapdown step, which
+    # then keeps the EKF's compiled specialisation (a read-only row would compile a second)
     q, f_n, bg, vp, cnt = _ahrs(
-        t, imu.gyro_b, imu.accel_b, q0, np.ascontiguousarray(lla_i),
+        t, imu.gyro_b, np.array(imu.accel_b), q0, np.ascontiguousarray(lla_i),
         np.ascontiguousarray(vel_i), np.ascontiguousarray(sdv_i),
         np.ascontiguousarray(t_g, dtype=float), np.ascontiguousarray(v_g, dtype=float),
         np.ascontiguousarray(g_g, dtype=float), np.ascontiguousarray(cor_g, dtype=float), ok,
