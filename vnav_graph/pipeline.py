@@ -58,7 +58,7 @@ def resolve_estimators(names: Sequence[str] | None) -> list[str]:
 
 
 @contextmanager
-def interrupt_flag() -> Iterator[list[int]]:
+def interrupt_flag(what: str = "estimator") -> Iterator[list[int]]:
     """Record SIGINT while an estimator runs; the caller stops after it (``run_one``).
 
     Raising ``KeyboardInterrupt`` from the handler while a numba kernel runs is not safe: it
@@ -75,7 +75,7 @@ def interrupt_flag() -> Iterator[list[int]]:
         if flag:
             raise KeyboardInterrupt
         flag.append(signum)
-        print("vnav-graph: interrupt: stopping after the current estimator "
+        print(f"vnav-graph: interrupt: stopping after the current {what} "
               "(Ctrl-C again to stop at once)", file=sys.stderr, flush=True)
 
     old = signal.signal(signal.SIGINT, handler)

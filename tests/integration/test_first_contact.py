@@ -197,3 +197,45 @@ def test_sigint_during_run_leaves_no_output(tmp_path: Path) -> None:
     assert p.returncode == 130, err
     assert "interrupted" in err and "Traceback" not in err
     assert not out.exists() or not any(out.iterdir())
+
+
+def _interrupt_after(args: list[str], marker: str, delay_s: float = 0.3):
+    p = subprocess.Popen([sys.executable, "-m", "vnav_graph", *args], stderr=subprocess.PIPE,
+                         stdout=subprocess.PIPE, text=True)
+    t0 = time.time()
+    for line in p.stderr:  # wait until the work is under way
+        if marker in line or time.time() - t0 > 180:
+            break
+    time.sleep(delay_s)
+    p.send_signal(signal.SIGINT)
+    _, err = p.communicate(timeout=300)
+    return p.returncode, err
+
+
+def test_sigint_during_bench_records_what_finished(tmp_path: Path) -> None:
+    out = tmp_path / "b"
+    code, err = _interrupt_after(
+        ["bench", "--quick", "--scenarios", "hill-drive", "--seeds", "4", "--estimators",
+         "loop3,vkf4", "--workers", "1", "--out", str(out)], "bench [1/8]")
+    assert code == 130, err
+    assert "Traceback" not in err and "interrupted: wrote the" in err
+    doc = json.loads((out / "bench.json").read_text())
+    assert doc["config"]["interrupted"] is True and doc["config"]["runs_planned"] == 8
+    assert 1 <= len(doc["runs"]) < 8
+    assert all(r["status"] == "ok" for r in doc["runs"])  # finished runs, not killed ones
+    assert not list(out.glob(".*tmp*"))
+
+
+def test_sigint_during_holdout_leaves_no_output(tmp_path: Path) -> None:
+    from vnav_graph.io import save_npz
+    from vnav_graph.simulation import simulate
+
+    d = simulate("hill-drive", 1, duration_s=400.0)
+    log = tmp_path / "log.npz"
+    save_npz(d.replace(truth=None, baro_truth=None), log)
+    out = tmp_path / "h"
+    code, err = _interrupt_after(["holdout", str(log), "--estimators", "ekf,ekf-rts,vkf4",
+                                  "--out", str(out)], "holdout run [2/3]")
+    assert code == 130, err
+    assert "Traceback" not in err
+    assert not out.exists() or not any(out.iterdir())

@@ -41,7 +41,7 @@ import tempfile
 import time
 import traceback
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import CancelledError, ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass, is_dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -263,30 +263,60 @@ def run_tasks(
     A task whose worker dies (``BrokenProcessPool``, a lost Dask worker) is recorded as a
     failed row with that error.
     """
+    from ..pipeline import interrupt_flag
+
     rows: list[dict[str, Any] | None] = [None] * len(tasks)
     mode = progress if isinstance(progress, str) else mode_for(bool(progress))
     bar = Counter(len(tasks), "bench", mode)
+    interrupted: list[int] = []
     try:
         if dask is not None:
             _run_dask(tasks, dask, rows, bar)
         elif workers <= 1:
-            for i, task in enumerate(tasks):
-                rows[i] = run_task(task)
-                bar.update(_label(task))
+            with interrupt_flag("run") as interrupted:
+                for i, task in enumerate(tasks):
+                    rows[i] = run_task(task)
+                    bar.update(_label(task))
+                    if interrupted:
+                        break
         else:
-            with ProcessPoolExecutor(max_workers=workers) as pool:
+            with interrupt_flag("run") as interrupted, ProcessPoolExecutor(
+                    max_workers=workers, initializer=_ignore_sigint) as pool:
                 futs = {pool.submit(run_task, t): i for i, t in enumerate(tasks)}
                 for fut in as_completed(futs):
                     i = futs[fut]
                     try:
                         rows[i] = fut.result()
+                    except CancelledError:
+                        continue
                     except Exception as exc:  # the worker process died
                         rows[i] = _failed_row(tasks[i], f"worker: {type(exc).__name__}: {exc}")
                     bar.update(_label(tasks[i]))
+                    if interrupted:  # finish the running tasks, start no new one
+                        for f in futs:
+                            f.cancel()
     finally:
         bar.close()
+    if interrupted:
+        raise BenchInterrupted([r for r in rows if r is not None])
     return [r if r is not None else _failed_row(t, "worker: no result")
             for r, t in zip(rows, tasks, strict=True)]
+
+
+class BenchInterrupted(KeyboardInterrupt):
+    """Ctrl-C during a bench: ``rows`` holds the runs that finished (in task order)."""
+
+    def __init__(self, rows: list[dict[str, Any]]) -> None:
+        super().__init__()
+        self.rows = rows
+
+
+def _ignore_sigint() -> None:
+    """Pool workers ignore Ctrl-C (it reaches the whole process group): the parent decides,
+    and an interrupt inside a numba kernel is not safe."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _dask_client(dask: Any) -> tuple[Any, Callable[[], None]]:
@@ -400,7 +430,11 @@ def bench(
     ``configs``: estimator name → config object (``--config``), echoed in ``config``."""
     tasks = make_tasks(scenarios, seeds, estimators, duration_s, configs)
     t0 = time.perf_counter()
-    runs = run_tasks(tasks, workers=workers, dask=dask, progress=progress)
+    interrupted = False
+    try:
+        runs = run_tasks(tasks, workers=workers, dask=dask, progress=progress)
+    except BenchInterrupted as exc:  # Ctrl-C: the document of the runs that finished
+        runs, interrupted = exc.rows, True
     wall = time.perf_counter() - t0
     from .. import __version__
 
@@ -411,6 +445,7 @@ def bench(
                    "executor": "dask" if dask is not None else
                    ("local" if workers <= 1 else f"process-pool({workers})"),
                    "wall_s": wall, "vnav_graph_version": __version__,
+                   "interrupted": interrupted, "runs_planned": len(tasks),
                    "estimator_configs": {n: _json_config(c) for n, c in
                                          (configs or {}).items() if n in estimators}},
         "runs": runs,
@@ -526,6 +561,11 @@ def cli_bench(args: Any) -> int:
                 dask=args.dask, progress=progress, configs=getattr(args, "configs", None))
     write_bench(doc, out)
     n_ok = sum(r["status"] == "ok" for r in doc["runs"])
+    if doc["config"]["interrupted"]:
+        print(f"vnav-graph: interrupted: wrote the {len(doc['runs'])} of "
+              f"{doc['config']['runs_planned']} runs that finished to {out / 'bench.json'}",
+              file=sys.stderr)
+        return 130
     print(format_bench_md(doc))
     print(f"wrote {out / 'bench.json'} and {out / 'bench.md'}: {n_ok}/{len(doc['runs'])} runs "
           f"ok in {doc['config']['wall_s']:.1f} s")
