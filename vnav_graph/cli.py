@@ -144,6 +144,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
 def cmd_run(args: argparse.Namespace) -> int:
     from .io import load_drive
+    from .jit import Prewarm
     from .outputs import check_out_dir
     from .pipeline import format_table, resolve_estimators, run_estimators, summarize
     from .progress import mode_for, stage
@@ -152,18 +153,25 @@ def cmd_run(args: argparse.Namespace) -> int:
     names = resolve_estimators(args.estimators)  # validate before any work
     out = check_out_dir(args.out)
     mode = mode_for(not args.no_progress)
-    if args.drive is not None:
-        if args.scenario is not None:
-            raise ValueError("give either a DRIVE or --scenario, not both")
-        with stage(f"reading {Path(args.drive).name}", mode):
-            drive = load_drive(args.drive)
-    else:
-        over = {} if args.duration is None else {"duration_s": args.duration}
-        scenario = args.scenario or "default"
-        with stage(f"simulating scenario {scenario} (seed {args.seed})", mode):
-            drive = simulate(scenario, args.seed, **over)
+    if args.drive is not None and args.scenario is not None:
+        raise ValueError("give either a DRIVE or --scenario, not both")
+    # first run on a machine: a second process starts compiling kernels while the drive loads
+    pre = Prewarm.start(names)
+    try:
+        if args.drive is not None:
+            with stage(f"reading {Path(args.drive).name}", mode):
+                drive = load_drive(args.drive)
+        else:
+            over = {} if args.duration is None else {"duration_s": args.duration}
+            scenario = args.scenario or "default"
+            with stage(f"simulating scenario {scenario} (seed {args.seed})", mode):
+                drive = simulate(scenario, args.seed, **over)
+    except BaseException:
+        if pre is not None:
+            pre.close()
+        raise
     configs = getattr(args, "configs", None)  # --config, read by _load_extensions
-    results = run_estimators(drive, names, progress=mode, configs=configs)
+    results = run_estimators(drive, names, progress=mode, configs=configs, prewarm=pre)
     summary = summarize(drive, results)
     holdout = None  # a real log's holdout run: its errors are what the report draws
     if drive.truth is None and drive.gnss is not None and not args.no_holdout:

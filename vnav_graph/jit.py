@@ -82,13 +82,15 @@ class CompileTimer:
 
 
 # --- compiling in a second process -------------------------------------------------------------
-# The first run on a machine compiles every kernel (about 70 s of CPU for all estimators, most
-# of it in the EKF and the vertical filters' AHRS). Compilation holds the GIL and numba's
-# compiler lock, so threads do not help; a second process does. ``Prewarm`` starts
-# ``python -m vnav_graph.jit NAME ...``, which runs each named estimator on a short simulated
-# drive (compiling its kernels into the shared on-disk cache) and leaves a stamp per estimator.
-# The main process runs the other estimators meanwhile and, before an estimator the child is
-# compiling, waits for its stamp (``wait``), then loads the kernels from the cache.
+# The first run on a machine compiles every kernel (about 85 s of CPU for all estimators on
+# this 2-core machine: ~45 s the vertical filters and their AHRS, ~50 s the EKF and its RTS
+# when compiled alone, ~6 s the graph). Compilation holds the GIL and numba's compiler lock,
+# so threads do not help; a second process does. ``Prewarm`` starts
+# ``python -m vnav_graph.jit KEY FAMILY ...``, which runs the family's estimators on a short
+# simulated drive (compiling their kernels into the shared on-disk cache) and leaves a stamp
+# per family. The main process runs the first family meanwhile; before an estimator of the
+# child's family it compiles any remaining cold family itself, then waits for the stamp
+# (``wait``) and loads the kernels from the cache.
 
 FAMILIES = {  # estimators that share kernels: compiled together, by one process
     "vertical": ("observer1d", "loop2", "loop3", "loop3-adaptive", "vkf4", "vekf7"),
@@ -128,19 +130,22 @@ def is_warm(family: str, key: str | None = None) -> bool:
 class Prewarm:
     """Compile the kernels of some estimator families in a child process (see above)."""
 
-    def __init__(self, families: list[str], key: str) -> None:
+    def __init__(self, families: list[str], key: str, local: list[str] | None = None) -> None:
         import subprocess
 
         self.families, self.key = families, key
+        self.local = list(local or [])  # compiled by this process while it waits for the child
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "vnav_graph.jit", key, *families],
             stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
 
     @classmethod
     def start(cls, names: list[str]) -> Prewarm | None:
-        """A child compiling every cold family of ``names`` but the first one met (which this
-        process compiles meanwhile); None when at most one family is cold. ``VNAV_PREWARM=0``
-        turns it off."""
+        """A child compiling the second cold family of ``names`` (in run order) while this
+        process compiles the first; families after those two are compiled by this process
+        while it waits for the child (measured on the default run: the EKF family alone costs
+        about as much as the vertical filters, the graph's kernels a tenth of it). None when at
+        most one family is cold. ``VNAV_PREWARM=0`` turns it off."""
         if os.environ.get("VNAV_PREWARM", "1") == "0":
             return None
         key = _source_key()
@@ -152,7 +157,7 @@ class Prewarm:
         if len(cold) < 2:
             return None
         try:
-            return cls(cold[1:], key)
+            return cls(cold[1:2], key, cold[2:])
         except OSError:
             return None
 
@@ -165,6 +170,9 @@ class Prewarm:
         if f not in self.families:
             return 0.0
         t0 = time.perf_counter()
+        if self.local and not is_warm(f, self.key):  # use the wait: compile the others here
+            local, self.local = self.local, []
+            _compile_families(self.key, local)
         while (not is_warm(f, self.key) and self.proc.poll() is None
                and time.perf_counter() - t0 < timeout_s):
             time.sleep(0.05)
@@ -177,19 +185,23 @@ class Prewarm:
 
 
 def _compile_families(key: str, families: list[str]) -> None:
-    """Child process: run each family's estimators on a short drive, stamp each family."""
+    """Run each family's estimators on a short drive (compiling their kernels into the cache),
+    then stamp the family. In the child, or in the main process while it waits."""
     import warnings
 
     from .estimators.base import create
     from .simulation import simulate
 
-    warnings.simplefilter("ignore")
     scenario, seed, duration = PREWARM_DRIVE
-    drive = simulate(scenario, seed, duration_s=duration)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        drive = simulate(scenario, seed, duration_s=duration)
     for fam in families:
         for name in FAMILIES[fam]:
             try:
-                create(name).run(drive)
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    create(name).run(drive)
             except Exception:  # the real run reports errors; here only the kernels matter
                 pass
         p = stamp(fam, key)

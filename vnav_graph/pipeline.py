@@ -116,17 +116,19 @@ def run_one(name: str, drive: Drive, config: Any = None, waited_s: float = 0.0) 
 
 def run_estimators(drive: Drive, names: Sequence[str], progress: bool | Mode = True,
                    configs: Mapping[str, Any] | None = None,
-                   desc: str = "estimators") -> list[RunResult]:
+                   desc: str = "estimators", prewarm: Any = "auto") -> list[RunResult]:
     """Run each named estimator on ``drive``; failures are captured, not raised.
 
     ``progress``: a ``vnav_graph.progress`` mode, or a bool (True: bar on a terminal, a line
     per estimator otherwise). ``configs`` maps estimator names to their config objects.
     On a machine where the kernels are not compiled yet, a second process compiles the later
-    estimator families meanwhile (``vnav_graph.jit.Prewarm``).
+    estimator families meanwhile (``vnav_graph.jit.Prewarm``): ``prewarm="auto"`` starts one
+    here, or pass one started earlier (``cli.cmd_run`` starts it before reading the drive) or
+    None. It is closed here.
     """
     mode = progress if isinstance(progress, str) else mode_for(bool(progress))
     configs = configs or {}
-    pre = Prewarm.start(list(names))
+    pre = Prewarm.start(list(names)) if prewarm == "auto" else prewarm
     if pre is not None:
         say(f"first run on this machine: compiling kernels (cached for later runs; "
             f"{', '.join(pre.families)} in a second process)", mode)
