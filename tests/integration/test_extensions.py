@@ -48,16 +48,18 @@ def _one_line_error(capsys, rc):
 def test_load_configs_overrides_only_the_given_keys(tmp_path):
     from vnav_graph.estimators.ekf import EkfConfig
     from vnav_graph.estimators.loops import Loop3Config
+    from vnav_graph.estimators.vertical_input import AhrsConfig
 
     cfg = load_configs(_toml(tmp_path, "[loop3]\ntau = 40\ngains = [0.15, 0.0075, 1e-4]\n"
-                                       "[ekf]\ngate_prob = 0.999\n"
-                                       "default_imu = { gyro_noise_density = 1e-4 }\n"))
-    assert cfg["loop3"] == Loop3Config(tau=40.0, gains=(0.15, 0.0075, 1e-4))
+                                       "ahrs = { tilt_omega = 0.04 }\n"
+                                       "[ekf]\ngate_prob = 0.999\n"))
+    assert cfg["loop3"] == Loop3Config(tau=40.0, gains=(0.15, 0.0075, 1e-4),
+                                       ahrs=AhrsConfig(tilt_omega=0.04))
     assert isinstance(cfg["loop3"].tau, float)  # a TOML integer given for a float field
     ekf = cfg["ekf"]
-    assert ekf.gate_prob == 0.999 and ekf.default_imu.gyro_noise_density == 1e-4
-    # untouched keys, also inside the nested spec, keep the estimator's defaults
-    assert ekf.default_imu.accel_noise_density == EkfConfig().default_imu.accel_noise_density
+    assert ekf.gate_prob == 0.999 and cfg["loop3"].ahrs.tilt_omega == 0.04
+    # untouched keys, also inside the nested config, keep the estimator's defaults
+    assert cfg["loop3"].ahrs.yaw_gain == Loop3Config().ahrs.yaw_gain
     assert ekf.max_consecutive_rejects == EkfConfig().max_consecutive_rejects
 
 
@@ -68,7 +70,7 @@ def test_load_configs_overrides_only_the_given_keys(tmp_path):
     ("[graph-batch]\nmax_iterations = 3.5\n", "max_iterations: expected int, got float"),
     ("[graph-batch]\ngravity_correction = 1\n", "gravity_correction: expected bool, got int"),
     ("[loop3]\ngains = [1.0, 2.0]\n", "gains: expected 3 values, got 2"),
-    ("[ekf]\ndefault_imu = { gyro_noise = 1.0 }\n", "unknown key 'default_imu.gyro_noise'"),
+    ("[loop3]\nahrs = { tilt_omegaa = 1.0 }\n", "unknown key 'ahrs.tilt_omegaa'"),
     ("[ekf]\ngate_prob = 2.0\n", "[ekf]: EkfConfig.gate_prob: must be in (0.5, 1)"),
     ("max_iterations = 3\n", "top-level key 'max_iterations' is not an [estimator] table"),
     ("[graph-batch\n", "not valid TOML"),

@@ -9,9 +9,9 @@ every key not given keeps the estimator's own default::
 
     [ekf]
     gate_prob = 0.999
-    default_imu = { gyro_noise_density = 1e-4 }   # a nested config: a (sub-)table
 
     [loop3]
+    ahrs = { tilt_omega = 0.04 }                  # a nested config: a (sub-)table
     gains = [0.15, 0.0075, 0.000125]              # a tuple field: an array
 
 Values are checked against the field types before any work: ``int`` (a TOML integer),

@@ -27,18 +27,14 @@ Outputs
 
 Noise
 -----
-From ``drive.imu.spec`` / ``drive.baro.spec`` / ``drive.gnss.spec`` when present, else the
-documented defaults of ``EkfConfig`` (real logs carry no spec). IMU: ``real_log_imu_spec`` —
-the ``PHONE_IMU`` floors (an uncalibrated phone/autopilot MEMS: gyro bias 0.5 °/s, accel bias
-0.1 m/s², scale 1 %) with the white-noise densities raised to the level measured in the log
-itself: σ_white = 1.4826·median|Δx|/√2 per axis (first differences remove the motion below
-≈ f_s/4; the robust MAD ignores manoeuvre steps), density = max over axes of σ_white/√f_s. The
-filter cannot tell vibration from sensor noise without a reference, so the measured
-sample-to-sample scatter is taken as white noise (a phone on a skier: 0.036 m/s²/√Hz and
-0.31 °/s/√Hz, 100× the MPU-9250 datasheet). GNSS: per-fix sigmas of the stream, baro
-``BaroSpec`` defaults with a 10 m bias sigma and the bias
-prior mean taken from the first baro sample minus the initial GNSS height (a relative baro
-altitude would otherwise be hundreds of metres off). Discrete variances come from
+The shared sensor model of the drive (``nav.sensor_model``, the same for ekf, ekf-rts,
+vekf7 and both graphs): the drive's specs when present; on a real log the IMU noise inferred
+from the log (``infer_imu_spec``: the ``REAL_LOG_IMU`` prior raised to the measured white
+scatter — a phone on a skier shows 0.036 m/s²/√Hz and 0.31 °/s/√Hz, 100× the MPU-9250
+datasheet — plus a vibration bias walk), ``REAL_LOG_BARO`` for the baro (10 m bias σ);
+GNSS: per-fix sigmas of the stream. On a real log the baro bias prior mean is taken from
+the first baro sample minus the initial GNSS height (a relative baro altitude would
+otherwise be hundreds of metres off). Discrete variances come from
 ``vnav_graph.sensors.noise`` only. Small floors keep P positive definite with ideal sensors.
 
 References: Groves, *Principles of GNSS, Inertial and Multisensor Integrated Navigation
@@ -49,17 +45,19 @@ seed 001 (baro error model); Rauch, Tung & Striebel, AIAA J. 3(8), 1965.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 
-from ..config import DEG, IMU_PRESETS, REAL_LOG_BARO, BaroSpec, ImuSpec
+from ..config import DEG, REAL_LOG_BARO, BaroSpec, ImuSpec
 from ..geo.earth import OMEGA_IE, gravity, radii
 from ..geo.frames import quat_to_mat, rph_to_quat
+from ..nav.gaps import GAP_ACCEL_SD
 from ..nav.levelling import coarse_level
+from ..nav.sensor_model import baro_prior, sensor_model
 from ..sensors.noise import gm_process_var, white_sd
 from ..types import (
     ERROR_STATE_DIM,
@@ -77,54 +75,6 @@ NDArrayInt = Any
 PROVIDES = frozenset({"alt", "vel_d", "pos_h", "vel_h", "att", "baro", "cov"})
 
 
-# Floors for real logs without an IMU spec: an uncalibrated phone / hobby-autopilot MEMS
-# (iPhone/Android "uncalibrated" gyro turn-on bias is ≲ 0.5 °/s, accelerometer ≲ 0.1 m/s²,
-# scale ≲ 1 %); noise densities are the MPU-9250 datasheet values (``consumer`` preset) and
-# are raised to the measured level by ``real_log_imu_spec``.
-PHONE_IMU = ImuSpec(
-    name="phone",
-    gyro_noise_density=IMU_PRESETS["consumer"].gyro_noise_density,
-    gyro_bias_sd=0.5 * DEG,
-    gyro_bias_tau=600.0,
-    gyro_bias_rw=IMU_PRESETS["consumer"].gyro_bias_rw,
-    accel_noise_density=IMU_PRESETS["consumer"].accel_noise_density,
-    accel_bias_sd=0.1,
-    accel_bias_tau=600.0,
-    accel_bias_rw=IMU_PRESETS["consumer"].accel_bias_rw,
-    accel_scale_sd=0.01,
-)
-
-
-VRE_MIN_RATE_HZ = 10.0
-
-
-def measured_white_sd(x: FloatArray) -> FloatArray:
-    """Per-axis white-noise σ of samples x (N, 3): 1.4826·median|Δx|/√2 (robust, MAD of the
-    first differences; for white noise of σ, Δx has σ√2, for slow motion Δx ≈ 0)."""
-    if x.shape[0] < 3:
-        return np.zeros(x.shape[1])
-    return 1.4826 * np.median(np.abs(np.diff(x, axis=0)), axis=0) / np.sqrt(2.0)
-
-
-def real_log_imu_spec(imu: Any, base: ImuSpec, k_vre: float = 0.14) -> ImuSpec:
-    """``base`` with noise densities raised to the measured white level (module docstring).
-
-    density = max_axis σ_white / √f_s [unit/√Hz] with f_s = ``imu.rate_hz``; accelerometer
-    bias random walk ≥ k_vre·σ_white,accel [m/s²/√s] (vibration rectification: a vibrating
-    MEMS accelerometer — clipping, asymmetric response — shows bias shifts that grow with the
-    vibration; k_vre = 0.14 /√s is set on 181.BIN, whose |f| averages 7.3-8.9 m/s² for 8 s while
-    the baro climbs, σ_white = 0.75 m/s²; it gives 0.01 m/s²/√s on 218.BIN, 0.05 on the ski log).
-    Only for IMUs sampled at ≥ ``VRE_MIN_RATE_HZ``: at 1 Hz (averaged phone logs) the first
-    differences are the vehicle's own manoeuvres, not vibration.
-    """
-    rt = np.sqrt(imu.rate_hz)
-    g_nd = float(np.max(measured_white_sd(imu.gyro_b))) / rt
-    a_sd = float(np.max(measured_white_sd(imu.accel_b)))
-    vib = imu.rate_hz >= VRE_MIN_RATE_HZ
-    return replace(base, name=f"{base.name}-measured",
-                   gyro_noise_density=max(base.gyro_noise_density, g_nd),
-                   accel_noise_density=max(base.accel_noise_density, a_sd / rt),
-                   accel_bias_rw=max(base.accel_bias_rw, k_vre * a_sd if vib else 0.0))
 
 
 @dataclass(frozen=True)
@@ -141,10 +91,10 @@ class EkfConfig:
     prior (with a baro) or the height accepted (without); max_gnss_sd_v: GNSS heights whose
     own σ_v [m] exceeds this are not used; gnss_probation_s: a GNSS height, once rejected, is
     used again after passing the gate this long without a break (``ekf_model`` docstring);
-    gap_factor, gap_min_s: an IMU interval longer than max(gap_factor·median Δt, gap_min_s) is
-    a logging gap, bridged at constant velocity with the unknown motion gap_accel_sd [m/s²/√s],
-    gap_yaw_rw [rad/√s] added to the covariance, roll/pitch re-levelled from the mean specific
-    force of the first gap_level_s after it with σ gap_level_sd [rad]; align_max_s: maximum
+    IMU logging gaps (``nav.gaps``: the shared rule) are bridged at constant velocity with the
+    shared unknown motion ``GAP_ACCEL_SD``, gap_yaw_rw [rad/√s] added to the covariance,
+    roll/pitch re-levelled from the mean specific force of the first gap_level_s after it
+    with σ gap_level_sd [rad]; align_max_s: maximum
     static levelling window; initial_heading / initial_heading_sd: given heading [rad] (None =
     from the GNSS track once moving faster than heading_speed_min [m/s], σ from the velocity
     noise and sideslip_sd); accel_scale: estimate accelerometer scale factors (None = when the
@@ -167,28 +117,10 @@ class EkfConfig:
     heading_speed_min: float = 0.5
     sideslip_sd: float = 2.0 * DEG
     accel_scale: bool | None = None
-    default_imu: ImuSpec = field(default_factory=lambda: PHONE_IMU)
-    measure_imu_noise: bool = True
-    # baro model of a log without a spec: the package-wide REAL_LOG_BARO (every estimator
-    # uses it; its latency prior N(0.1, 0.1) s comes as a uniform range). Until session 4
-    # this was BaroSpec(bias_sd=10, noise_sd=0.5) with a fixed latency, so the latency prior
-    # was the 0.01 s floor below and τd was in effect not estimated on real logs.
-    default_baro: BaroSpec = field(default_factory=lambda: REAL_LOG_BARO)
-    min_latency_sd: float = 0.01
-    min_scale_sd: float = 1e-4
-    min_baro_noise_sd: float = 0.05
-    min_baro_bias_sd: float = 0.01
-    min_gyro_noise_density: float = 1e-5  # rad/s/√Hz
-    min_accel_noise_density: float = 1e-4  # m/s²/√Hz
-    min_gyro_bias_sd: float = 1e-5  # rad/s
-    min_accel_bias_sd: float = 1e-4  # m/s²
     min_tilt_sd: float = 1e-4  # rad, levelling residual besides the accel-bias term
     max_gnss_sd_v: float = 15.0
     baro_reaccept_s: float = 1.0
     gnss_probation_s: float = 10.0
-    gap_factor: float = 5.0
-    gap_min_s: float = 0.25
-    gap_accel_sd: float = 1.0  # m/s²/√s
     gap_level_sd: float = 0.05  # rad
     gap_level_s: float = 1.0
     gap_yaw_rw: float = 0.05  # rad/√s
@@ -236,17 +168,6 @@ def _white_var(density: float, dt: FloatArray) -> FloatArray:
     return out
 
 
-def _baro_priors(spec: BaroSpec, cfg: EkfConfig) -> tuple[float, float, float, float]:
-    """(scale sd, latency mean, latency sd, noise sd) from a baro spec."""
-    s_sd = max(spec.scale_sd, abs(spec.scale or 0.0), cfg.min_scale_sd)
-    if spec.latency_range_s is not None:
-        lo, hi = spec.latency_range_s
-        tau_m, tau_sd = 0.5 * (lo + hi), (hi - lo) / np.sqrt(12.0)
-    else:
-        tau_m, tau_sd = spec.latency_s, cfg.min_latency_sd
-    return s_sd, tau_m, max(tau_sd, cfg.min_latency_sd), max(spec.noise_sd, cfg.min_baro_noise_sd)
-
-
 def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
     """One forward EKF pass over ``drive`` (see module docstring)."""
     imu = drive.imu
@@ -255,24 +176,21 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
     if n < 3:
         raise ValueError("ekf: the IMU stream needs at least 3 samples")
     rate = imu.rate_hz
-    if isinstance(imu.spec, ImuSpec):
-        ispec: ImuSpec = imu.spec
-    elif cfg.measure_imu_noise:
-        ispec = real_log_imu_spec(imu, cfg.default_imu)
-    else:
-        ispec = cfg.default_imu
+    model = sensor_model(drive)  # the noise model every estimator shares (nav.sensor_model)
+    ispec: ImuSpec = model.imu
     est_scale = cfg.accel_scale if cfg.accel_scale is not None else (
         not isinstance(imu.spec, ImuSpec) or ispec.accel_scale_sd > 0)
     gnss, baro = drive.gnss, drive.baro
     bspec_given = baro is not None and isinstance(baro.spec, BaroSpec)
-    bspec: BaroSpec = baro.spec if bspec_given else cfg.default_baro  # type: ignore[union-attr]
+    bp = model.baro if model.baro is not None else baro_prior(REAL_LOG_BARO)
     h0 = float(drive.origin_lla[2])
 
     # --- grids -------------------------------------------------------------------------
     m_grid = max(1, round(rate / cfg.cov_rate_hz))
     dts = np.diff(t)
-    gap_step = dts > max(cfg.gap_factor * float(np.median(dts)), cfg.gap_min_s)
-    gaps = np.flatnonzero(gap_step)
+    gaps = model.gaps
+    gap_step = np.zeros(dts.size, dtype=bool)
+    gap_step[gaps] = True
     grid_idx = np.union1d(np.union1d(np.arange(0, n, m_grid), [n - 1]),
                           np.r_[gaps, gaps + 1]).astype(np.int64)
     kk = grid_idx.size
@@ -292,23 +210,21 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
     # --- discrete process noise per grid interval (noise.py) ---------------------------
     dtg = np.r_[0.0, np.diff(t[grid_idx])]
     qd = np.zeros((kk, km.NX))
-    g_nd = max(ispec.gyro_noise_density, cfg.min_gyro_noise_density)
-    a_nd = max(ispec.accel_noise_density, cfg.min_accel_noise_density)
-    g_bsd = max(ispec.gyro_bias_sd, cfg.min_gyro_bias_sd)
-    a_bsd = max(ispec.accel_bias_sd, cfg.min_accel_bias_sd)
+    g_nd, a_nd = ispec.gyro_noise_density, ispec.accel_noise_density
+    g_bsd, a_bsd = ispec.gyro_bias_sd, ispec.accel_bias_sd
     qd[:, km.IVEL:km.IVEL + 3] = _white_var(a_nd, dtg)[:, None]
     qd[:, km.IATT:km.IATT + 3] = _white_var(g_nd, dtg)[:, None]
     qd[:, km.IBG:km.IBG + 3] = (gm_process_var(dtg, ispec.gyro_bias_tau, g_bsd)
                                 + _white_var(ispec.gyro_bias_rw, dtg))[:, None]
     qd[:, km.IBA:km.IBA + 3] = (gm_process_var(dtg, ispec.accel_bias_tau, a_bsd)
                                 + _white_var(ispec.accel_bias_rw, dtg))[:, None]
-    b_bsd = max(bspec.bias_sd, cfg.min_baro_bias_sd)
-    qd[:, km.IBB] = gm_process_var(dtg, bspec.bias_tau, b_bsd)
+    b_bsd = bp.bias_sd
+    qd[:, km.IBB] = gm_process_var(dtg, bp.bias_tau, b_bsd)
     # IMU gaps: the grid interval ending at gap end i+1 is exactly the gap (ekf_model docstring)
     kg = np.searchsorted(grid_idx, gaps + 1)
     dg = dtg[kg]
-    qd[kg, km.IPOS:km.IPOS + 3] += (cfg.gap_accel_sd**2 * dg**3 / 3.0)[:, None]
-    qd[kg, km.IVEL:km.IVEL + 3] = (cfg.gap_accel_sd**2 * dg)[:, None]
+    qd[kg, km.IPOS:km.IPOS + 3] += (GAP_ACCEL_SD**2 * dg**3 / 3.0)[:, None]
+    qd[kg, km.IVEL:km.IVEL + 3] = (GAP_ACCEL_SD**2 * dg)[:, None]
     qd[kg, km.IATT:km.IATT + 2] = cfg.gap_level_sd**2
     qd[kg, km.IATT + 2] = cfg.gap_yaw_rw**2 * dg
     gap_rp = np.full((n, 2), np.nan)
@@ -350,7 +266,7 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
         pos_var = pos_var + (np.linalg.norm(v0) * abs(tg[j9 - 1] - t[0])) ** 2
     else:
         lla0 = drive.origin_lla.copy()
-        pos_var = np.array([100.0**2, 100.0**2, bspec.bias_sd**2])
+        pos_var = np.array([100.0**2, 100.0**2, bp.bias_sd**2])
         vel_var = np.full(3, 1.0)
     p0[0:3, 0:3] = np.diag(pos_var)
     p0[3:6, 3:6] = np.diag(vel_var)
@@ -365,7 +281,7 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
     p0[12:15, 12:15] = p_ba
     ka_sd = max(ispec.accel_scale_sd, 1e-3 if not isinstance(imu.spec, ImuSpec) else 0.0)
     p0[18:21, 18:21] = (ka_sd if est_scale else 1e-7) ** 2 * np.eye(3)
-    s_sd, tau_m, tau_sd, b_noise = _baro_priors(bspec, cfg)
+    s_sd, tau_m, tau_sd, b_noise = bp.scale_sd, bp.latency_mean, bp.latency_sd, bp.noise_sd
     par0 = np.zeros(12)
     par0[km.PTD] = tau_m
     if baro is not None and not bspec_given:
@@ -384,10 +300,10 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
         ev_type_l.append(np.zeros(gnss.t.size, dtype=np.int64))
         ev_idx_l.append(np.arange(gnss.t.size))
         tr = track_heading(gnss, cfg.sideslip_sd)
-        g_lla, g_psd = gnss.lla, gnss.pos_sd
-        has_vel = gnss.vel_n is not None
+        g_lla, g_psd = gnss.lla, model.gnss_pos_sd
+        has_vel = gnss.vel_n is not None and model.gnss_vel_sd is not None
         g_vel = gnss.vel_n if has_vel else np.zeros((gnss.t.size, 3))
-        g_vsd = gnss.vel_sd if has_vel else np.ones((gnss.t.size, 3))
+        g_vsd = model.gnss_vel_sd if has_vel else np.ones((gnss.t.size, 3))
         tr_yaw, tr_speed, tr_sd = tr.yaw, tr.speed, tr.yaw_sd
     else:
         g_lla = g_psd = g_vel = g_vsd = np.zeros((0, 3))
@@ -423,7 +339,7 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
     gate2 = float(chi2.ppf(cfg.gate_prob, 2))
     gate1 = float(chi2.ppf(cfg.gate_prob, 1))
     tilt_rate_sd = np.sqrt(2.0) * OMEGA_IE * np.cos(lla0[0])
-    tau = (ispec.gyro_bias_tau, ispec.accel_bias_tau, bspec.bias_tau)
+    tau = (ispec.gyro_bias_tau, ispec.accel_bias_tau, bp.bias_tau)
     if cfg.heading_source not in ("auto", "track", "accel"):
         raise ValueError("EkfConfig.heading_source: 'auto', 'track' or 'accel'")
     heading_accel = bool(has_vel) and cfg.heading_source in ("auto", "accel")

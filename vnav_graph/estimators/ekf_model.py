@@ -112,6 +112,7 @@ import numpy as np
 from numba import njit
 
 from ..geo.earth import OMEGA_IE, gravity_scalar, radii_scalar
+from ..nav.gnss_gate import REFUSE, USE_INFLATE, height_gate
 from ..nav.rotations import quat_exp, quat_mul, quat_to_dcm, rpy_quat, skew3
 from ..nav.rotations import yaw_of as _yaw
 from .strapdown import nav_rates, strapdown_step
@@ -360,9 +361,7 @@ def run_filter(
     heading_ok = heading_known
     t_heading = t[0] if heading_known else np.nan
     consec_pos = 0
-    consec_v = 0
-    v_suspect = False
-    v_run_start = np.nan
+    v_gate = np.array([0.0, 0.0, np.nan])  # nav.gnss_gate state
     consec_baro = 0
     rej_v = np.zeros(ng, dtype=np.bool_)
 
@@ -645,35 +644,14 @@ def run_filter(
                     s_v = hv @ p @ hv + rv
                     inn_pos[idx, 2] = -nu_v / np.sqrt(s_v)
                     usable = g_pos_sd[idx, 2] <= max_sd_v
-                    long_run = consec_v >= max_consec
-                    use_v = False
-                    inflate = False
-                    if long_run and not has_baro:
-                        use_v = True
-                    elif not v_suspect:
-                        use_v = usable and nu_v * nu_v <= gate_v * s_v
-                    else:
-                        s_t = s_v + (b_prior_var if long_run else 0.0)
-                        if usable and nu_v * nu_v <= gate_v * s_t:
-                            if np.isnan(v_run_start):
-                                v_run_start = pend_t[e]
-                            if pend_t[e] - v_run_start >= probation_s:
-                                use_v = True
-                                inflate = long_run
-                        else:
-                            v_run_start = np.nan
+                    code = height_gate(v_gate, pend_t[e], usable, nu_v * nu_v, s_v, gate_v,
+                                       probation_s, max_consec, b_prior_var, not has_baro)
+                    use_v = code != REFUSE
                     if use_v:
-                        if inflate:
+                        if code == USE_INFLATE:
                             p[IBB, IBB] += b_prior_var
                         _scalar_update(p, dx, hv, pend_y[e, 2], rv)
-                        consec_v = 0
-                        v_suspect = False
-                        v_run_start = np.nan
                     else:
-                        consec_v += 1
-                        if not v_suspect and consec_v >= 2:
-                            v_suspect = True
-                            v_run_start = np.nan
                         rej_v[idx] = True
                         rej_pos[idx] = True
                     if mm == 6:

@@ -11,9 +11,12 @@ import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import B, C, K, V, X
 
-from ..config import IMU_PRESETS, REAL_LOG_BARO, BaroSpec, ImuSpec
+from ..config import REAL_LOG_BARO, BaroSpec, ImuSpec
 from ..geo.earth import gravity
+from ..nav.gaps import GAP_ACCEL_SD, cv_bridge_noise
+from ..nav.gaps import imu_gaps as nav_imu_gaps
 from ..nav.levelling import coarse_level
+from ..nav.sensor_model import BaroPrior, baro_prior, sensor_model
 from ..sensors.noise import gm_process_var, gm_transition
 from ..types import (
     Drive,
@@ -21,12 +24,9 @@ from ..types import (
 )
 from . import graph_factors as gf
 
-# logging gaps: an interval whose largest IMU sample spacing exceeds
-# max(GAP_MIN_S, GAP_FACTOR × median spacing) gets random-walk factors instead of an IMU factor
-GAP_MIN_S = 2.0
-GAP_FACTOR = 20.0
+# logging gaps (the shared rule of nav.gaps): an interval containing one gets random-walk
+# factors instead of an IMU factor, with the shared unknown-acceleration PSD GAP_ACCEL_SD²
 GAP_VEL_SD = 5.0  # m/s, unknown velocity change folded into the position random walk
-GAP_ACCEL_SD = 2.0  # m/s², white acceleration level over the gap
 GAP_TILT_SD = 0.2  # rad, roll/pitch of the re-levelling prior after a gap
 GAP_YAW_SD = 0.5  # rad, yaw after a gap: kept from before it, loosely
 
@@ -34,13 +34,9 @@ GAP_YAW_SD = 0.5  # rad, yaw after a gap: kept from before it, loosely
 def imu_gaps(t: np.ndarray, kf_idx: np.ndarray) -> np.ndarray:
     """Boolean (n_kf − 1,): interval k contains an IMU logging gap.
 
-    A gap is a sample spacing above max(``GAP_MIN_S``, ``GAP_FACTOR`` × median spacing).
+    A gap is a sample spacing the shared rule calls one (``nav.gaps.imu_gaps``).
     """
-    dt = np.diff(t)
-    if dt.size == 0:
-        return np.zeros(max(kf_idx.size - 1, 0), bool)
-    thr = max(GAP_MIN_S, GAP_FACTOR * float(np.median(dt)))
-    big = np.flatnonzero(dt > thr)  # sample j → j+1
+    big = nav_imu_gaps(t)  # sample j → j+1
     k = np.searchsorted(kf_idx, big, side="right") - 1
     out = np.zeros(max(kf_idx.size - 1, 0), bool)
     k = k[(k >= 0) & (k < out.size)]
@@ -123,7 +119,7 @@ class _Problem:
     dense: gf.DenseIncrements
     params: Any
     imu_spec: ImuSpec
-    baro_spec: BaroSpec | None
+    baro_spec: BaroPrior | None  # the shared baro prior (nav.sensor_model)
     # GNSS in the tangent frame
     g_t: FloatArray
     g_pos: FloatArray
@@ -155,18 +151,16 @@ def _setup(drive: Drive, cfg: GraphConfig) -> _Problem:
     origin = np.asarray(drive.origin_lla, float)
     h0 = float(origin[2])
     g0 = float(gravity(origin[0], origin[2]))
-    spec = imu.spec if isinstance(imu.spec, ImuSpec) else _spec_from_data(imu, origin)
-    bspec = None
-    if drive.baro is not None:
-        # a log without a spec: the package-wide real-log prior (the same in every estimator)
-        bspec = drive.baro.spec if isinstance(drive.baro.spec, BaroSpec) else REAL_LOG_BARO
+    model = sensor_model(drive)  # the noise model every estimator shares (nav.sensor_model)
+    spec = model.imu
+    bspec = model.baro
     kf_idx = gf.keyframe_indices(imu.t, cfg.keyframe_dt)
     dense = gf.dense_preintegration(imu.t, imu.gyro_b, imu.accel_b, kf_idx)
     omega_t = gf.earth_rate_t(origin) if cfg.coriolis else np.zeros(3)
     p = gtsam.PreintegrationCombinedParams.MakeSharedD(g0)
     # continuous-time densities (STYLE.md pitfall 3); floors keep noiseless drives regular
-    p.setAccelerometerCovariance(np.eye(3) * _floor(spec.accel_noise_density, 1e-4) ** 2)
-    p.setGyroscopeCovariance(np.eye(3) * _floor(spec.gyro_noise_density, 1e-6) ** 2)
+    p.setAccelerometerCovariance(np.eye(3) * spec.accel_noise_density**2)
+    p.setGyroscopeCovariance(np.eye(3) * spec.gyro_noise_density**2)
     p.setIntegrationCovariance(np.eye(3) * 1e-8)
     # Gauss-Markov bias approximated by a random walk of PSD 2σ²/τ + rw²
     qa = 2 * spec.accel_bias_sd**2 / spec.accel_bias_tau + spec.accel_bias_rw**2
@@ -186,41 +180,19 @@ def _setup(drive: Drive, cfg: GraphConfig) -> _Problem:
     inside = (gn.t >= t_kf[0]) & (gn.t <= t_kf[-1])
     g_kf = np.where(on_kf, j, -1)
     g_kf[~inside] = -2
-    use = _pregate_gnss(drive, gn.t, gn.lla[:, 2], gn.pos_sd[:, 2], _baro_priors(bspec),
+    use = _pregate_gnss(drive, gn.t, gn.lla[:, 2], model.gnss_pos_sd[:, 2], _baro_priors(bspec),
                         cfg.gnss_gate_prob,
                         None if gn.vel_n is None else gn.vel_n[:, 2],
                         None if gn.vel_sd is None else gn.vel_sd[:, 2])
     P = _Problem(drive, cfg, origin, h0, g0, omega_t, kf_idx, t_kf, dense, p, spec, bspec,
-                 gn.t, pos, gn.pos_sd, vel, gn.vel_sd, np.asarray(gn.lever_arm_b, float),
+                 gn.t, pos, model.gnss_pos_sd, vel, model.gnss_vel_sd,
+                 np.asarray(gn.lever_arm_b, float),
                  g_kf, use)
     P.g_rej_pre = P.gnss_rejected
     if not np.any(use & inside):
         raise ValueError("graph: every GNSS fix inside the IMU span was rejected by the "
                          "baro-consistency gate")
     return P
-
-
-def _spec_from_data(imu: Any, origin: FloatArray) -> ImuSpec:
-    """IMU noise model for a log without a spec: the consumer preset with data-driven floors.
-
-    White-noise density from first differences, σ_w = std(Δf)/√2 per sample → density
-    σ_w·√dt (vibration of a multirotor shows up here and must be treated as noise at the
-    keyframe scale), and an accelerometer bias sigma of at least |median|f| − γ|, the
-    specific-force magnitude error at rest-like epochs. The preset alone (3 mg/√Hz, 50 mg)
-    made the IMU factors outweigh baro and GNSS by orders of magnitude on the Erle logs."""
-    base = IMU_PRESETS["consumer"]
-    dt = float(np.median(np.diff(imu.t))) if imu.t.size > 1 else 0.01
-    if imu.t.size < 10:
-        return base
-    sa = float(np.median(np.std(np.diff(imu.accel_b, axis=0), axis=0))) / np.sqrt(2.0)
-    sg = float(np.median(np.std(np.diff(imu.gyro_b, axis=0), axis=0))) / np.sqrt(2.0)
-    fmag = float(np.median(np.linalg.norm(imu.accel_b, axis=1)))
-    ba = abs(fmag - float(gravity(origin[0], origin[2])))
-    from dataclasses import replace as _replace
-
-    return _replace(base, accel_noise_density=max(base.accel_noise_density, sa * np.sqrt(dt)),
-                    gyro_noise_density=max(base.gyro_noise_density, sg * np.sqrt(dt)),
-                    accel_bias_sd=max(base.accel_bias_sd, 2.0 * ba))
 
 
 def _pregate_gnss(drive: Drive, t: FloatArray, h: FloatArray, sd_h: FloatArray,
@@ -288,20 +260,12 @@ def _pregate_gnss(drive: Drive, t: FloatArray, h: FloatArray, sd_h: FloatArray,
     return use
 
 
-def _baro_priors(bs: BaroSpec | None) -> dict[str, float]:
-    """Prior mean and sigma of s, τd and b_0 from the baro spec (uniform latency range →
-    its mean and width/√12)."""
-    if bs is None:
-        return {"s_sd": 0.01, "tau0": 0.1, "tau_sd": 0.1, "b_sd": 3.0, "b_tau": 1800.0,
-                "noise": 0.3}
-    if bs.latency_range_s is not None:
-        lo, hi = bs.latency_range_s
-        tau0, tau_sd = 0.5 * (lo + hi), max((hi - lo) / np.sqrt(12.0), 0.01)
-    else:
-        tau0, tau_sd = bs.latency_s, 0.05
-    s_sd = bs.scale_sd if bs.scale is None else max(bs.scale_sd, 1e-4)
-    return {"s_sd": max(s_sd, 1e-4), "tau0": tau0, "tau_sd": tau_sd,
-            "b_sd": max(bs.bias_sd, 1e-3), "b_tau": bs.bias_tau, "noise": max(bs.noise_sd, 1e-3)}
+def _baro_priors(bs: BaroSpec | BaroPrior | None) -> dict[str, float]:
+    """Prior mean and sigma of s, τd and b_0 as a dict (``nav.sensor_model.baro_prior``: the
+    shared rule; a drive without a baro gets the real-log prior, which then goes unused)."""
+    bp = bs if isinstance(bs, BaroPrior) else baro_prior(REAL_LOG_BARO if bs is None else bs)
+    return {"s_sd": bp.scale_sd, "tau0": bp.latency_mean, "tau_sd": bp.latency_sd,
+            "b_sd": bp.bias_sd, "b_tau": bp.bias_tau, "noise": bp.noise_sd}
 
 
 def _gravity_delta(P: _Problem, pos: FloatArray) -> FloatArray:
@@ -384,16 +348,16 @@ def gap_factors(P: _Problem, k: int, rot: FloatArray, pos: FloatArray, vel: Floa
 
     A gap of T seconds with no IMU samples carries no inertial information (one "sample"
     spanning it is usually a transient — on the Erle log the crash spike — and a
-    CombinedImuFactor built from it asserts a 200 m/s velocity change with a σ of 0.6 m/s;
-    in the batch graph, Loiter_RTL's 24 s gap then pulled the baro scale to −28 %). Instead,
-    with a_rw = ``GAP_ACCEL_SD``: v_{k+1} − v_k ~ N(0, (a_rw T)²), b_{k+1} − b_k ~ N(0, q_b T)
-    with the bias PSD q_b of the preintegration (Forster et al. 2017, Eq. 48), and a
-    re-alignment prior on X(k+1): roll and pitch levelled from the mean specific force of the
-    first 0.5 s after the gap (σ ``GAP_TILT_SD``; the vehicle may have been flipped — Erle
-    crash log: f_z +9.8 before, −9.8 after — and the weak factors cannot pull a 180° error
-    back inside Gauss-Newton's basin), yaw kept from before the gap (σ ``GAP_YAW_SD``),
-    position at the last GNSS fix at or before t_{k+1} (within 1.5 s; else constant
-    velocity) with σ_p = v_sd T + ½ a_rw T². Every new variable stays constrained.
+    CombinedImuFactor built from it asserts a 200 m/s velocity change with a σ of 0.6 m/s; in
+    the batch graph, Loiter_RTL's 24 s gap then pulled the baro scale to −28 %). Instead, with q
+    = ``GAP_ACCEL_SD``² (``nav.gaps``): v_{k+1} − v_k ~ N(0, q T), b_{k+1} − b_k ~ N(0, q_b T)
+    with the bias PSD q_b of the preintegration (Forster et al. 2017, Eq. 48), and a re-
+    alignment prior on X(k+1): roll and pitch levelled from the mean specific force of the first
+    0.5 s after the gap (σ ``GAP_TILT_SD``; the vehicle may have been flipped — Erle crash log:
+    f_z +9.8 before, −9.8 after — and the weak factors cannot pull a 180° error back inside
+    Gauss-Newton's basin), yaw kept from before the gap (σ ``GAP_YAW_SD``), position at the last
+    GNSS fix at or before t_{k+1} (within 1.5 s; else constant velocity) with σ_p = v_sd T + √(q
+    T³/3). Every new variable stays constrained.
 
     ``rot, pos, vel``: current keyframe states (only index k is read). Returns (Pose3 value of
     X(k+1), velocity value (3,), factors).
@@ -414,13 +378,14 @@ def gap_factors(P: _Problem, k: int, rot: FloatArray, pos: FloatArray, vel: Floa
     lev = gtsam.Rot3(_level(P.drive.imu.accel_b[j0:j1].mean(axis=0))).ypr()
     yaw = gtsam.Rot3(rot[k]).ypr()[0]
     x1 = gtsam.Pose3(gtsam.Rot3.Ypr(yaw, lev[1], lev[2]), p1)
-    sd_p = GAP_VEL_SD * T + 0.5 * GAP_ACCEL_SD * T * T
+    var_p, _, var_v = cv_bridge_noise(GAP_ACCEL_SD**2, T)
+    sd_p = GAP_VEL_SD * T + float(np.sqrt(var_p))
     bp = P.params
     q_b = np.r_[np.diag(bp.getBiasAccCovariance()), np.diag(bp.getBiasOmegaCovariance())]
     fs = [
         gtsam.PriorFactorPose3(X(k + 1), x1,
                                _noise([GAP_TILT_SD, GAP_TILT_SD, GAP_YAW_SD] + [sd_p] * 3)),
-        gtsam.BetweenFactorVector(V(k), V(k + 1), np.zeros(3), _noise([GAP_ACCEL_SD * T] * 3)),
+        gtsam.BetweenFactorVector(V(k), V(k + 1), np.zeros(3), _noise([np.sqrt(var_v)] * 3)),
         gtsam.BetweenFactorConstantBias(B(k), B(k + 1), gtsam.imuBias.ConstantBias(),
                                         _noise(np.sqrt(q_b * T))),
     ]

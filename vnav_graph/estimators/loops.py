@@ -56,6 +56,7 @@ from numba import njit
 from scipy.linalg import expm, solve_discrete_are
 
 from ..geo.earth import gravity, radii
+from ..nav.gaps import imu_gaps
 from ..types import Drive, Estimate, FloatArray, Trajectory
 from .vertical_input import AhrsConfig, vertical_inputs
 
@@ -153,11 +154,8 @@ def loop_kernel(t, a_up, z_baro, ws2, gains, x0, scale):
     return x, err
 
 
-GAP_FACTOR = 5.0
-
-
-def bridge_gaps(inp: LoopInputs, gap_factor: float = GAP_FACTOR) -> tuple[LoopInputs, FloatArray]:
-    """Fill IMU logging gaps (steps longer than gap_factor × the median step) with epochs at
+def bridge_gaps(inp: LoopInputs) -> tuple[LoopInputs, FloatArray]:
+    """Fill IMU logging gaps (the shared rule, ``nav.gaps.imu_gaps``) with epochs at
     the median step: a_up = NaN there (the kernels then assume zero vertical acceleration:
     input = the loop's accelerometer-bias estimate c, or 0 for the 2nd order — a held
     acceleration sample would integrate one noisy value over the whole gap, ½aT²), z_baro
@@ -170,7 +168,7 @@ def bridge_gaps(inp: LoopInputs, gap_factor: float = GAP_FACTOR) -> tuple[LoopIn
         return inp, np.ones(t.size, dtype=bool)
     dt = np.diff(t)
     dt_nom = float(np.median(dt))
-    big = np.flatnonzero(dt > gap_factor * dt_nom)
+    big = imu_gaps(t)
     if big.size == 0:
         return inp, np.ones(t.size, dtype=bool)
     ins = [np.arange(t[i] + dt_nom, t[i + 1] - 0.5 * dt_nom, dt_nom) for i in big]

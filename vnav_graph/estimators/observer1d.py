@@ -85,6 +85,7 @@ from scipy.linalg import solve_discrete_lyapunov
 
 from ..config import G0
 from ..geo.earth import gravity, radii
+from ..nav.gaps import gap_threshold
 from ..types import Drive, Estimate, FloatArray, Trajectory
 from .vertical_input import AhrsConfig, vertical_inputs
 
@@ -306,8 +307,8 @@ class Observer1D:
         rn, re = radii(drive.origin_lla[0])
         grav_grad = 2.0 * float(gravity(drive.origin_lla[0], h0)) / float(np.sqrt(rn * re))
         t_fix, z_fix = _gps_up(drive)
-        # IMU logging gaps: steps > 5 × the median (as ``loops.bridge_gaps``)
-        gap_dt = 5.0 * float(np.median(np.diff(vi.t))) if vi.t.size > 2 else np.inf
+        # IMU logging gaps: the shared rule (nav.gaps)
+        gap_dt = gap_threshold(vi.t)
         k0 = int(np.searchsorted(t_fix, vi.t[0]))
         z_init = z_fix[min(k0, z_fix.size - 1)]
         x0 = np.array([[z_init, 0.0, 0.0]])

@@ -66,8 +66,10 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from ..config import REAL_LOG_BARO
 from ..geo.earth import gravity_scalar, radii, radii_scalar
+from ..nav.gaps import GAP_ACCEL_SD, cv_bridge_noise, gap_threshold
+from ..nav.gnss_gate import NO_LIMIT, REFUSE, height_gate, new_gate_state
+from ..nav.sensor_model import sensor_model
 from ..sensors.baro import baro_jacobian, measure_baro
 from ..sensors.noise import gm_process_var, gm_transition
 from ..types import (
@@ -98,25 +100,25 @@ class VEKF7Config:
         NEES is ≈ 2.5× too large
     tilt_sd, input_corr_s : AHRS tilt σ with GNSS [rad] and correlation time [s] of the
         manoeuvre-dependent f_D error, see ``input_error_psd``
-    accel_bias_sd, accel_bias_tau : Gauss-Markov σ [m/s²] / τ [s] of B_z; spec or 0.02 / 3600
-    accel_bias_rw : extra random walk of B_z [m/s²/√s] for other-axis, attitude and Coriolis
-        errors of the vertical specific force (not in eq. 5's state)
-    accel_scale_sd : prior σ of K_z [-]; spec or 1e-3
-    scale_prior_sd : prior σ of dSF [-]; spec ``scale_sd`` or 0.02
+    Every ``None`` below takes the drive's shared sensor model (``nav.sensor_model``, the
+    same values ekf and the graphs use); a number overrides it for this filter only.
+    accel_bias_sd, accel_bias_tau : Gauss-Markov σ [m/s²] / τ [s] of B_z
+    accel_bias_rw : random walk floor of B_z [m/s²/√s] for other-axis, attitude and Coriolis
+        errors of the vertical specific force (not in eq. 5's state); the shared model's
+        (vibration) walk when larger
+    accel_scale_sd : prior σ of K_z [-]
+    scale_prior_sd : prior σ of dSF [-]
     latency_prior, latency_prior_sd : prior mean and σ of Td [s]
-    bias_prior_sd, bias_tau : σ [m] and τ [s] of the baro Gauss-Markov bias; spec or 10 / 3600
-    baro_noise_sd : white baro noise [m]; spec or 0.5
+    bias_prior_sd, bias_tau : σ [m] and τ [s] of the baro Gauss-Markov bias
+    baro_noise_sd : white baro noise [m]
     gnss_vertical_sd : GNSS height σ [m] when the stream gives none (it always does)
     use_gnss_velocity : use the GNSS vertical velocity when the receiver gives it
     gnss_gate_sigma : reject GNSS innovations beyond this many σ
     max_gnss_sd_v, gnss_probation_s : GNSS heights with σ_v above this [m] are not used; after
         two consecutive refusals a height is used again only after ``gnss_probation_s`` [s] of
-        consistent fixes (``GnssHeightGate``)
-    k_vre : for an IMU without spec (real logs) the B_z random walk is at least k_vre·σ_white
-        [m/s²/√s], σ_white the measured accelerometer white scatter (``ekf.real_log_imu_spec``:
-        vibration rectification)
-    gap_factor, gap_accel_sd : an IMU step longer than gap_factor × the median step is bridged
-        at constant vertical velocity with unknown acceleration σ_a [m/s²/√s]
+        consistent fixes (``nav.gnss_gate.height_gate``)
+    IMU logging gaps (the shared rule, ``nav.gaps``) are bridged at constant vertical velocity
+    with the shared unknown acceleration ``GAP_ACCEL_SD`` [m/s²/√s].
     cov_rate_hz : rate at which covariances are stored in the Estimate
     ahrs : attitude-reference gains for ``vertical_inputs``
     """
@@ -130,8 +132,8 @@ class VEKF7Config:
     accel_bias_rw: float = 2e-4
     accel_scale_sd: float | None = None
     scale_prior_sd: float | None = None
-    latency_prior: float = 0.1
-    latency_prior_sd: float = 0.2
+    latency_prior: float | None = None
+    latency_prior_sd: float | None = None
     bias_prior_sd: float | None = None
     bias_tau: float | None = None
     baro_noise_sd: float | None = None
@@ -140,49 +142,8 @@ class VEKF7Config:
     gnss_gate_sigma: float = 5.0
     max_gnss_sd_v: float = 15.0
     gnss_probation_s: float = 10.0
-    k_vre: float = 0.14
-    gap_factor: float = 5.0
-    gap_accel_sd: float = 1.0
     cov_rate_hz: float = 1.0
     ahrs: AhrsConfig | None = None
-
-
-class GnssHeightGate:
-    """GNSS-height fault detection and exclusion shared by ``vekf7`` and ``vkf4`` (the rule of
-    ``ekf_model``): a fix is used when its σ_v ≤ ``max_sd_v`` and r² ≤ gate·S; an isolated
-    refusal is only a refusal, after two consecutive refusals the GNSS height is on probation
-    and used again only after passing (and being usable) for ``probation_s`` without a break.
-    There is no forced acceptance: with a barometer the vertical is determined without GNSS.
-    """
-
-    def __init__(self, gate_sigma: float, max_sd_v: float, probation_s: float) -> None:
-        self.gate2 = gate_sigma**2
-        self.max_sd_v = max_sd_v
-        self.probation_s = probation_s
-        self.consec = 0
-        self.suspect = False
-        self.run_start = np.nan
-
-    def use(self, t: float, r: float, s: float, sd_v: float) -> bool:
-        """True if the fix at time t [s] with innovation r [m], innovation variance s [m²] and
-        reported σ_v [m] is to be used."""
-        ok = sd_v <= self.max_sd_v and r * r <= self.gate2 * s
-        if not self.suspect:
-            if ok:
-                self.consec = 0
-                return True
-        elif ok:
-            if np.isnan(self.run_start):
-                self.run_start = t
-            if t - self.run_start >= self.probation_s:
-                self.suspect, self.consec, self.run_start = False, 0, np.nan
-                return True
-        else:
-            self.run_start = np.nan
-        self.consec += 1
-        if self.consec >= 2 and not self.suspect:
-            self.suspect, self.run_start = True, np.nan
-        return False
 
 
 def input_error_psd(
@@ -220,11 +181,9 @@ def input_error_psd(
     return base_psd + 2.0 * corr_s * var_f
 
 
-def _spec_value(spec: object, name: str, fallback: float, min_value: float = 0.0) -> float:
-    v = getattr(spec, name, None) if spec is not None else None
-    if v is None or not np.isfinite(v) or v <= min_value:
-        return fallback
-    return float(v)
+def _given(value: float | None, shared: float) -> float:
+    """A config override when set, else the shared sensor model's value."""
+    return float(shared if value is None else value)
 
 
 @njit(cache=True)
@@ -251,10 +210,11 @@ def _propagate(k0, k1, t, f_down, g_lat, c33, f_z, cor, rho2, phi_b, q_b, phi_ab
             f[IBB, IBB] = phi_b[k]
             f[II, IBB] = dt
             p[:, :] = f @ p @ f.T
-            p[IH, IH] += gap_q * dt**3 / 3.0
-            p[IH, IV] += gap_q * dt**2 / 2.0
-            p[IV, IH] += gap_q * dt**2 / 2.0
-            p[IV, IV] += gap_q * dt
+            q_hh, q_hv, q_vv = cv_bridge_noise(gap_q, dt)
+            p[IH, IH] += q_hh
+            p[IH, IV] += q_hv
+            p[IV, IH] += q_hv
+            p[IV, IV] += q_vv
             p[IB, IB] += q_ab[k]
             p[IBB, IBB] += q_b[k]
             h_out[k + 1] = nom[IH]
@@ -321,8 +281,11 @@ class VEKF7:
         if drive.baro is None:
             raise ValueError("vekf7: the drive has no baro stream")
         vi: VerticalInputs = vertical_inputs(drive, cfg.ahrs)
-        imu_spec = drive.imu.spec
-        baro_spec = drive.baro.spec
+        model = sensor_model(drive)  # shared with ekf and the graphs (nav.sensor_model)
+        ims = model.imu
+        bp = model.baro
+        assert bp is not None
+        g_psd, g_vsd = model.gnss_pos_sd, model.gnss_vel_sd
         t = drive.imu.t
         n = t.size
         dt = np.diff(t)
@@ -333,28 +296,18 @@ class VEKF7:
             q_acc = np.full(n, cfg.accel_psd)
         else:
             q_acc = input_error_psd(
-                drive, vi, _spec_value(imu_spec, "accel_noise_density", 3e-3) ** 2
-                + cfg.input_error_psd, cfg.tilt_sd, _spec_value(imu_spec, "gyro_bias_sd", 1e-4),
-                cfg.input_corr_s)
-        ab_sd = cfg.accel_bias_sd if cfg.accel_bias_sd is not None else _spec_value(
-            imu_spec, "accel_bias_sd", 0.02)
-        ab_tau = cfg.accel_bias_tau if cfg.accel_bias_tau is not None else _spec_value(
-            imu_spec, "accel_bias_tau", 3600.0)
-        ab_rw = max(cfg.accel_bias_rw, _spec_value(imu_spec, "accel_bias_rw", 0.0))
-        if imu_spec is None and drive.imu.rate_hz >= 10.0:  # see ekf.real_log_imu_spec
-            from .ekf import measured_white_sd
-
-            ab_rw = max(ab_rw, cfg.k_vre * float(np.max(measured_white_sd(drive.imu.accel_b))))
-        k_sd = cfg.accel_scale_sd if cfg.accel_scale_sd is not None else _spec_value(
-            imu_spec, "accel_scale_sd", 1e-3)
-        s_sd = cfg.scale_prior_sd if cfg.scale_prior_sd is not None else _spec_value(
-            baro_spec, "scale_sd", REAL_LOG_BARO.scale_sd)
-        b_sd = cfg.bias_prior_sd if cfg.bias_prior_sd is not None else _spec_value(
-            baro_spec, "bias_sd", REAL_LOG_BARO.bias_sd)
-        b_tau = cfg.bias_tau if cfg.bias_tau is not None else _spec_value(
-            baro_spec, "bias_tau", REAL_LOG_BARO.bias_tau)
-        r_baro = (cfg.baro_noise_sd if cfg.baro_noise_sd is not None else _spec_value(
-            baro_spec, "noise_sd", REAL_LOG_BARO.noise_sd)) ** 2
+                drive, vi, ims.accel_noise_density**2 + cfg.input_error_psd, cfg.tilt_sd,
+                ims.gyro_bias_sd, cfg.input_corr_s)
+        ab_sd = _given(cfg.accel_bias_sd, ims.accel_bias_sd)
+        ab_tau = _given(cfg.accel_bias_tau, ims.accel_bias_tau)
+        ab_rw = max(cfg.accel_bias_rw, ims.accel_bias_rw)
+        k_sd = _given(cfg.accel_scale_sd, ims.accel_scale_sd)
+        s_sd = _given(cfg.scale_prior_sd, bp.scale_sd)
+        b_sd = _given(cfg.bias_prior_sd, bp.bias_sd)
+        b_tau = _given(cfg.bias_tau, bp.bias_tau)
+        r_baro = _given(cfg.baro_noise_sd, bp.noise_sd) ** 2
+        td0 = _given(cfg.latency_prior, bp.latency_mean)
+        td_sd = _given(cfg.latency_prior_sd, bp.latency_sd)
         phi_b = gm_transition(dt, b_tau)
         q_b = gm_process_var(dt, b_tau, b_sd)
         phi_ab = gm_transition(dt, ab_tau)
@@ -375,17 +328,17 @@ class VEKF7:
         p = np.zeros((NX, NX))
         if gn is not None and gn.t[0] <= t[0] + 5.0:
             nom[IH] = float(gn.lla[0, 2])
-            p[IH, IH] = float(gn.pos_sd[0, 2]) ** 2
+            p[IH, IH] = float(g_psd[0, 2]) ** 2
         else:
             nom[IH] = float(np.interp(t[0], drive.baro.t, baro_alt))
             p[IH, IH] = b_sd**2 + 1.0
         if gn is not None and gn.vel_n is not None and gn.t[0] <= t[0] + 5.0:
             nom[IV] = -float(gn.vel_n[0, 2])
         p[IV, IV] = 0.5**2
-        nom[ITD] = cfg.latency_prior
+        nom[ITD] = td0
         np.fill_diagonal(p, np.diag(p) + np.array(
             [0.0, 0.0, ab_sd**2 + 1e-12, k_sd**2 + 1e-12, s_sd**2 + 1e-12,
-             cfg.latency_prior_sd**2, b_sd**2, 0.0]))
+             td_sd**2, b_sd**2, 0.0]))
 
         # ---- measurement events, processed at the first IMU epoch at or after their stamp
         ev_t = [drive.baro.t]
@@ -423,10 +376,11 @@ class VEKF7:
         k_cur = 0
         next_cov = t[0]
         hz = np.zeros(NX)
-        gap_dt = cfg.gap_factor * float(np.median(dt))
+        gap_dt = gap_threshold(t)
         args = (t, vi.f_down, vi.lat, vi.c33, vi.f_z_b, vi.coriolis_down, rho2, phi_b, q_b,
-                phi_ab, q_ab, q_acc, gap_dt, cfg.gap_accel_sd**2)
-        gate = GnssHeightGate(cfg.gnss_gate_sigma, cfg.max_gnss_sd_v, cfg.gnss_probation_s)
+                phi_ab, q_ab, q_acc, gap_dt, GAP_ACCEL_SD**2)
+        gate = new_gate_state()
+        gate2 = cfg.gnss_gate_sigma**2
         for j in range(et.size):
             k = int(kk[j])
             if k > k_cur:
@@ -447,17 +401,18 @@ class VEKF7:
                 i = int(ei[j])
                 hz[:] = 0.0
                 hz[IH] = 1.0
-                var_r = float(gn.pos_sd[i, 2]) ** 2
+                var_r = float(g_psd[i, 2]) ** 2
                 r = float(gn.lla[i, 2]) - (h_m + lever_dz[k])
-                if not gate.use(float(et[j]), r, _innovation_var(p, hz, var_r),
-                                float(gn.pos_sd[i, 2])):
+                if height_gate(gate, float(et[j]), float(g_psd[i, 2]) <= cfg.max_gnss_sd_v,
+                               r * r, _innovation_var(p, hz, var_r), gate2,
+                               cfg.gnss_probation_s, NO_LIMIT, 0.0, False) == REFUSE:
                     rejected += 1
                 else:
                     innov["gnss_alt"].append(_update(nom, p, hz.copy(), r, var_r))
-                    if cfg.use_gnss_velocity and gn.vel_n is not None and gn.vel_sd is not None:
+                    if cfg.use_gnss_velocity and gn.vel_n is not None and g_vsd is not None:
                         hz[:] = 0.0
                         hz[IV] = 1.0
-                        var_v = float(gn.vel_sd[i, 2]) ** 2
+                        var_v = float(g_vsd[i, 2]) ** 2
                         rv = -float(gn.vel_n[i, 2]) - nom[IV]
                         if rv**2 <= cfg.gnss_gate_sigma**2 * _innovation_var(p, hz, var_v):
                             innov["gnss_vel"].append(_update(nom, p, hz.copy(), rv, var_v))
@@ -484,7 +439,7 @@ class VEKF7:
         baro = BaroEstimate(
             scale=ParamEstimate(float(nom[IS]), float(np.sqrt(p[IS, IS])), s_sd),
             latency_s=ParamEstimate(float(nom[ITD]), float(np.sqrt(p[ITD, ITD])),
-                                    cfg.latency_prior_sd),
+                                    td_sd),
             bias_m=ParamEstimate(float(nom[II] / dur), float(np.sqrt(p[II, II]) / dur), b_sd),
         )
         info = {

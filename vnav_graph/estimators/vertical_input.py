@@ -77,7 +77,7 @@ stands for "the INS attitude" of the papers:
    outage tilt the platform by 0.1 rad, hence the long trigger: within a minute the
    bias-corrected gyros are better.
 
-7. **IMU logging gaps** (a step > ``imu_gap_factor`` × the median, e.g. 22 s on
+7. **IMU logging gaps** (the shared rule of ``nav.gaps``, e.g. 22 s on
    erle_pxf_loiter_rtl): no rates inside, so no propagation across it; roll and pitch are
    re-levelled from the first ``level_s`` after the gap when those samples are static (the
    loiter quad flipped over at 51.5 s and was set upright during the gap), the yaw and the
@@ -121,6 +121,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..geo.earth import OMEGA_IE, gravity, radii
+from ..nav.gaps import gap_threshold
 from ..types import Drive, FloatArray
 from .vertical_ahrs import _ahrs, _poly_velocity
 
@@ -179,8 +180,8 @@ class AhrsConfig:
     static_rate : the fallback runs only when |mean(ω̃ − b̂_g)| over its window is below this
         [rad/s] (no turn: a turn carries a centripetal acceleration)
     static_accel : ... and | |mean f̃_b| − g | is below this [m/s²]
-    imu_gap_factor : an IMU step longer than imu_gap_factor × the median step is a logging
-        gap: attitude held across it, no velocity matching over it (step 7)
+    IMU logging gaps (``nav.gaps``): attitude held across them, no velocity matching over
+    them (step 7)
     """
 
     level_s: float = 2.0
@@ -211,14 +212,13 @@ class AhrsConfig:
     accel_level_tau_s: float = 30.0
     static_rate: float = 0.03
     static_accel: float = 0.3
-    imu_gap_factor: float = 5.0
 
     def __post_init__(self) -> None:
         for n in ("level_s", "tilt_omega", "tilt_zeta", "v_course_min", "max_correction",
                   "max_tilt_feedback", "gap_factor", "tilt_filter_s", "tilt_sd0",
                   "sd_v_default", "sd_v_nominal", "sd_v_max", "reinit_s", "pos_vel_window_s",
                   "fallback_after_s", "accel_level_window_s", "accel_level_tau_s",
-                  "static_rate", "static_accel", "imu_gap_factor", "heading_sd"):
+                  "static_rate", "static_accel", "heading_sd"):
             if not getattr(self, n) > 0:
                 raise ValueError(f"AhrsConfig.{n}: must be > 0")
         if self.yaw_gain < 0 or self.gyro_bias_sd < 0:
@@ -424,7 +424,6 @@ def vertical_inputs(drive: Drive, config: AhrsConfig | None = None) -> VerticalI
     imu = drive.imu
     t = imu.t
     n = t.size
-    dt_imu = float(np.median(np.diff(t))) if n > 1 else 0.01
     lev = t <= t[0] + cfg.level_s
     q0 = _coarse_level(imu.accel_b[lev])
     gn = drive.gnss
@@ -493,7 +492,7 @@ def vertical_inputs(drive: Drive, config: AhrsConfig | None = None) -> VerticalI
     gate2 = np.inf if (cfg.gate_prob is None or info["velocity_source"] == "positions") \
         else -2.0 * np.log(cfg.gate_prob)
     g_nom = float(gravity(drive.origin_lla[0], drive.origin_lla[2]))
-    relevel = _relevel_after_gaps(t, imu.gyro_b, imu.accel_b, cfg.imu_gap_factor * dt_imu,
+    relevel = _relevel_after_gaps(t, imu.gyro_b, imu.accel_b, gap_threshold(t),
                                   cfg.level_s, g_nom, cfg.static_accel, cfg.static_rate)
     # a writable copy of the specific force: its rows reach the shared strapdown step, which
     # then keeps the EKF's compiled specialisation (a read-only row would compile a second)
@@ -507,7 +506,7 @@ def vertical_inputs(drive: Drive, config: AhrsConfig | None = None) -> VerticalI
         a_static_eff, cfg.tilt_filter_s, cfg.gap_factor, gate2, cfg.tilt_sd0, cfg.gyro_bias_sd,
         cfg.heading_sd, r_nom, cfg.reinit_s, cfg.fallback_after_s, cfg.accel_level_window_s,
         cfg.accel_level_tau_s, cfg.static_rate, cfg.static_accel, g_nom,
-        cfg.imu_gap_factor * dt_imu, relevel,
+        gap_threshold(t), relevel,
     )
     for key, val in zip(("levelling_accepted", "levelling_rejected", "levelling_reinit",
                          "levelling_unusable", "vertical_dropped", "accel_level_updates",

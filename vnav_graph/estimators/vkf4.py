@@ -61,8 +61,10 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from ..config import REAL_LOG_BARO
 from ..geo.earth import gravity_scalar
+from ..nav.gaps import GAP_ACCEL_SD, cv_bridge_noise, gap_threshold
+from ..nav.gnss_gate import NO_LIMIT, REFUSE, height_gate
+from ..nav.sensor_model import sensor_model
 from ..sensors.noise import gm_process_var, gm_transition
 from ..types import (
     ERROR_STATE_DIM,
@@ -89,16 +91,16 @@ class VKF4Config:
     bias_corr_s : time over which an unmodelled accelerometer bias is treated as white [s]
     input_error_psd, tilt_sd, input_corr_s : see ``vekf7.VEKF7Config``
     baro_slow_sd, baro_slow_tau : σ₃ [m], τ₃ [s] of Δh_baro; None: √(bias_sd² +
-        (scale_sd·``alt_span_m``)²) and the spec bias_tau (fallbacks 10 m, 3600 s)
+        (scale_sd·``alt_span_m``)²) and bias_tau of the shared baro prior
     alt_span_m : altitude span over which the scale error accumulates into Δh_baro [m]
     baro_fast_sd, baro_fast_tau : σ₄ [m], τ₄ [s] of the fast Markov state Δh_m
-    baro_noise_sd : white baro noise [m]; spec or 0.5
+    baro_noise_sd : white baro noise [m]; None: the shared baro prior's
     use_gnss : use GNSS heights when available (False: pure seed-004 baro-inertial loop)
     gnss_gate_sigma : reject GNSS innovations beyond this many σ
-    max_gnss_sd_v, gnss_probation_s, gap_factor, gap_accel_sd : as in ``VEKF7Config``
-    k_vre : IMU without spec sampled at ≥ 10 Hz: an accelerometer bias random walk
-        k_vre·σ_white [m/s²/√s] (``ekf.real_log_imu_spec``) is added to A as its white
-        equivalent over ``bias_corr_s``, (k_vre·σ_white)²·bias_corr_s²/3
+    max_gnss_sd_v, gnss_probation_s : as in ``VEKF7Config``
+    The IMU and baro noise come from the shared sensor model (``nav.sensor_model``); on a log
+    without an IMU spec its inferred accelerometer bias walk q_rw is added to A as its white
+    equivalent over ``bias_corr_s``, q_rw²·bias_corr_s²/3; IMU gaps follow ``nav.gaps``.
     cov_rate_hz : rate at which covariances are stored
     ahrs : attitude-reference gains
     """
@@ -118,18 +120,8 @@ class VKF4Config:
     gnss_gate_sigma: float = 5.0
     max_gnss_sd_v: float = 15.0
     gnss_probation_s: float = 10.0
-    k_vre: float = 0.14
-    gap_factor: float = 5.0
-    gap_accel_sd: float = 1.0
     cov_rate_hz: float = 1.0
     ahrs: AhrsConfig | None = None
-
-
-def _spec(spec: object, name: str, fallback: float) -> float:
-    v = getattr(spec, name, None) if spec is not None else None
-    if v is None or not np.isfinite(v) or v <= 0:
-        return fallback
-    return float(v)
 
 
 @njit(cache=True)
@@ -139,8 +131,8 @@ def _run(t, a_in, lat, h_init, v_init, p0, phi3, q3, phi4, q4, a_psd,
     """Numba kernel: INS propagation at the IMU epochs, events processed at the first IMU
     epoch at or after their stamp. a_in = f_D + cor_D (gravity added at the INS height).
     ev_kind 0 = baro (ev_z = h_baro), 1 = GNSS (ev_z = h_GNSS, reported σ_v ev_sd). GNSS
-    heights pass ``vekf7.GnssHeightGate``'s rule (σ_v limit, probation after two consecutive
-    refusals); an IMU step longer than gap_dt is bridged at constant velocity with the
+    heights pass ``nav.gnss_gate.height_gate``'s plain rule (σ_v limit, probation after two
+    consecutive refusals); an IMU step longer than gap_dt is bridged at constant velocity with the
     unknown-acceleration PSD gap_q."""
     n = t.size
     h_out = np.empty(n)
@@ -158,9 +150,7 @@ def _run(t, a_in, lat, h_init, v_init, p0, phi3, q3, phi4, q4, a_psd,
     next_cov = t[0]
     nu = np.full(m, np.nan)
     rejected = 0
-    consec = 0
-    suspect = False
-    run_start = np.nan
+    gate_state = np.array([0.0, 0.0, np.nan])  # nav.gnss_gate state
     j = 0
     for k in range(n):
         if k > 0:
@@ -181,11 +171,11 @@ def _run(t, a_in, lat, h_init, v_init, p0, phi3, q3, phi4, q4, a_psd,
             f[3, 3] = phi4[k - 1]
             x = f @ x
             p = f @ p @ f.T
-            a = a_psd[k - 1] if dt <= gap_dt else gap_q
-            p[0, 0] += a * dt**3 / 3.0
-            p[0, 1] += -a * dt**2 / 2.0
-            p[1, 0] += -a * dt**2 / 2.0
-            p[1, 1] += a * dt
+            q_hh, q_hv, q_vv = cv_bridge_noise(a_psd[k - 1] if dt <= gap_dt else gap_q, dt)
+            p[0, 0] += q_hh
+            p[0, 1] -= q_hv  # Δh (up) against Δv_d (down)
+            p[1, 0] -= q_hv
+            p[1, 1] += q_vv
             p[2, 2] += q3[k - 1]
             p[3, 3] += q4[k - 1]
         while j < m and ev_k[j] == k:
@@ -200,26 +190,9 @@ def _run(t, a_in, lat, h_init, v_init, p0, phi3, q3, phi4, q4, a_psd,
             ph = p @ hrow
             s = hrow @ ph + ev_var[j]
             if ev_kind[j] == 1:
-                ok = ev_sd[j] <= max_sd_v and r * r <= gate2 * s
-                use = False
-                if not suspect:
-                    use = ok
-                elif ok:
-                    if np.isnan(run_start):
-                        run_start = ev_t[j]
-                    if ev_t[j] - run_start >= probation_s:
-                        use = True
-                        suspect = False
-                        run_start = np.nan
-                else:
-                    run_start = np.nan
-                if use:
-                    consec = 0
-                else:
-                    consec += 1
-                    if consec >= 2 and not suspect:
-                        suspect = True
-                        run_start = np.nan
+                code = height_gate(gate_state, ev_t[j], ev_sd[j] <= max_sd_v, r * r, s, gate2,
+                                   probation_s, NO_LIMIT, 0.0, False)
+                if code == REFUSE:
                     rejected += 1
                     j += 1
                     continue
@@ -259,7 +232,9 @@ class VKF4:
         if drive.baro is None:
             raise ValueError("vkf4: the drive has no baro stream")
         vi = vertical_inputs(drive, cfg.ahrs)
-        imu_spec, baro_spec = drive.imu.spec, drive.baro.spec
+        model = sensor_model(drive)  # shared noise model (nav.sensor_model)
+        ims, bp = model.imu, model.baro
+        assert bp is not None
         t = drive.imu.t
         n = t.size
         dt = np.diff(t)
@@ -267,23 +242,15 @@ class VKF4:
             a_psd = np.full(n, cfg.accel_psd)
         else:
             a_psd = input_error_psd(
-                drive, vi, _spec(imu_spec, "accel_noise_density", 3e-3) ** 2
-                + _spec(imu_spec, "accel_bias_sd", 0.02) ** 2 * cfg.bias_corr_s
-                + cfg.input_error_psd, cfg.tilt_sd, _spec(imu_spec, "gyro_bias_sd", 1e-4),
-                cfg.input_corr_s)
-        if cfg.accel_psd is None and imu_spec is None and drive.imu.rate_hz >= 10.0:
-            from .ekf import measured_white_sd
-
-            rw = cfg.k_vre * float(np.max(measured_white_sd(drive.imu.accel_b)))
-            a_psd = a_psd + rw**2 * cfg.bias_corr_s**2 / 3.0
+                drive, vi, ims.accel_noise_density**2
+                + ims.accel_bias_sd**2 * cfg.bias_corr_s
+                + cfg.input_error_psd, cfg.tilt_sd, ims.gyro_bias_sd, cfg.input_corr_s)
+            if model.imu_inferred:  # the inferred vibration bias walk, as white over bias_corr_s
+                a_psd = a_psd + ims.accel_bias_rw**2 * cfg.bias_corr_s**2 / 3.0
         s3 = cfg.baro_slow_sd if cfg.baro_slow_sd is not None else float(np.hypot(
-            _spec(baro_spec, "bias_sd", REAL_LOG_BARO.bias_sd),
-            _spec(baro_spec, "scale_sd", REAL_LOG_BARO.scale_sd)
-            * cfg.alt_span_m))
-        tau3 = cfg.baro_slow_tau if cfg.baro_slow_tau is not None else _spec(
-            baro_spec, "bias_tau", REAL_LOG_BARO.bias_tau)
-        r_baro = (cfg.baro_noise_sd if cfg.baro_noise_sd is not None else _spec(
-            baro_spec, "noise_sd", REAL_LOG_BARO.noise_sd)) ** 2
+            bp.bias_sd, bp.scale_sd * cfg.alt_span_m))
+        tau3 = cfg.baro_slow_tau if cfg.baro_slow_tau is not None else bp.bias_tau
+        r_baro = (cfg.baro_noise_sd if cfg.baro_noise_sd is not None else bp.noise_sd) ** 2
         phi3, q3 = gm_transition(dt, tau3), gm_process_var(dt, tau3, s3)
         phi4 = gm_transition(dt, cfg.baro_fast_tau)
         q4 = gm_process_var(dt, cfg.baro_fast_tau, cfg.baro_fast_sd)
@@ -293,7 +260,8 @@ class VKF4:
         tb = drive.baro.t
         ev = [(tb, np.zeros(tb.size, np.int64), drive.baro.altitude, np.full(tb.size, r_baro))]
         if gn is not None:
-            ev.append((gn.t, np.ones(gn.t.size, np.int64), gn.lla[:, 2], gn.pos_sd[:, 2] ** 2))
+            g_var = model.gnss_pos_sd[:, 2] ** 2
+            ev.append((gn.t, np.ones(gn.t.size, np.int64), gn.lla[:, 2], g_var))
         et = np.concatenate([e[0] for e in ev])
         ek = np.concatenate([e[1] for e in ev])
         ez = np.concatenate([e[2] for e in ev])
@@ -308,7 +276,7 @@ class VKF4:
 
         # initial state: first GNSS height (or baro), at rest
         if gn is not None and gn.t[0] <= t[0] + 5.0:
-            h_init, var_h = float(gn.lla[0, 2]), float(gn.pos_sd[0, 2]) ** 2
+            h_init, var_h = float(gn.lla[0, 2]), float(model.gnss_pos_sd[0, 2]) ** 2
         else:
             h_init, var_h = float(np.interp(t[0], tb, drive.baro.altitude)), s3**2
         v_init = float(gn.vel_n[0, 2]) if gn is not None and gn.vel_n is not None else 0.0
@@ -317,7 +285,7 @@ class VKF4:
             t, vi.f_down + vi.coriolis_down, vi.lat, h_init, v_init, p0, phi3, q3, phi4, q4,
             a_psd, kk, ek, ez, evar, lag, cfg.gnss_gate_sigma**2, 1.0 / cfg.cov_rate_hz,
             et, esd, cfg.max_gnss_sd_v, cfg.gnss_probation_s,
-            cfg.gap_factor * float(np.median(dt)), cfg.gap_accel_sd**2)
+            gap_threshold(t), GAP_ACCEL_SD**2)
 
         lla = np.column_stack([np.full(n, np.nan), np.full(n, np.nan), h_out])
         vel = np.column_stack([np.full(n, np.nan), np.full(n, np.nan), v_out])

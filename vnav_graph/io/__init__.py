@@ -32,7 +32,7 @@ def load_drive(path: str | Path, check: bool = True) -> Drive:
         drive, noise = quietly(check_drive, drive)
         if noise.count:  # numpy warnings on odd values inside the checks
             meta = dict(drive.meta)
-            meta["warnings"] = [*meta["warnings"], noise.summary()]
+            meta["warnings"] = [*list(meta.get("warnings") or []), noise.summary()]
             drive = drive.replace(meta=meta)
     return drive
 

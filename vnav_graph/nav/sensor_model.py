@@ -1,0 +1,227 @@
+"""The sensor model every estimator of a drive receives: one place, one set of rules.
+
+``sensor_model(drive)`` returns a frozen :class:`SensorModel` holding
+
+- ``imu``: the IMU noise model (an :class:`~vnav_graph.config.ImuSpec`). A simulated drive
+  carries its spec; a real log does not, and the model is inferred from the data
+  (:func:`infer_imu_spec`). Numerical floors keep noiseless simulated drives regular.
+- ``baro``: the prior of the baro error states (:class:`BaroPrior`: scale factor s, latency
+  τd, Gauss-Markov bias b, white noise), from the drive's :class:`BaroSpec` or, on a real
+  log, from the package-wide ``REAL_LOG_BARO``.
+- ``gnss_pos_sd`` / ``gnss_vel_sd``: the per-fix GNSS σ [m, m/s] every estimator weights the
+  fixes with (the receiver's σ, floored at ``GNSS_SD_FLOOR``).
+- ``gaps``: the IMU logging gaps (:mod:`vnav_graph.nav.gaps`).
+
+ekf, ekf-rts, vekf7 and both graph smoothers take every noise parameter from here; the test
+``tests/unit/test_sensor_model.py`` checks that they receive identical values on simulated
+drives and on every shared real log. Which estimator uses which part is tabled in README.md.
+
+Units: SI throughout (m, s, rad); densities are root PSDs (unit/√Hz), random walks
+unit/√s, as in :mod:`vnav_graph.config`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, replace
+from typing import Any
+
+import numpy as np
+
+from ..config import DEG, IMU_PRESETS, REAL_LOG_BARO, BaroSpec, ImuSpec
+from ..types import FloatArray
+from .gaps import imu_gaps
+
+# Real-log IMU prior (a phone / autopilot MEMS IMU of unknown make): the consumer preset's
+# densities, generous turn-on biases (a phone's uncalibrated gyro bias reaches 0.5 °/s, its
+# accelerometer bias 0.1 m/s²) and a 1 % accelerometer scale factor. A turn-on bias is a
+# random constant that then drifts slowly: the Gauss-Markov τ is set so that the in-run
+# drift over 10 min is ≈ 0.05 °/s and 0.02 m/s² (σ_drift² = 2σ²·600 s/τ), consumer-MEMS
+# bias instability with temperature; τ = 600 s would let the whole turn-on bias wander
+# within ten minutes, which lets heading and tilt drift on a hovering multirotor.
+_DRIFT_S = 600.0
+REAL_LOG_IMU = ImuSpec(
+    name="phone",
+    gyro_noise_density=IMU_PRESETS["consumer"].gyro_noise_density,
+    gyro_bias_sd=0.5 * DEG,
+    gyro_bias_tau=2.0 * _DRIFT_S * (0.5 / 0.05) ** 2,  # 120 000 s
+    gyro_bias_rw=IMU_PRESETS["consumer"].gyro_bias_rw,
+    accel_noise_density=IMU_PRESETS["consumer"].accel_noise_density,
+    accel_bias_sd=0.1,
+    accel_bias_tau=2.0 * _DRIFT_S * (0.1 / 0.02) ** 2,  # 30 000 s
+    accel_bias_rw=IMU_PRESETS["consumer"].accel_bias_rw,
+    accel_scale_sd=0.01,
+)
+
+# Vibration rectification coefficient [1/√s] and the lowest IMU rate at which first
+# differences measure vibration rather than manoeuvres (``infer_imu_spec``).
+K_VRE = 0.14
+VRE_MIN_RATE_HZ = 10.0
+
+# Numerical floors: they keep a noiseless simulated drive's covariances regular and are far
+# below any real sensor (gyro 1e-6 rad/s/√Hz = 0.003 °/√h).
+MIN_GYRO_NOISE_DENSITY = 1e-6  # rad/s/√Hz
+MIN_ACCEL_NOISE_DENSITY = 1e-4  # m/s²/√Hz
+MIN_GYRO_BIAS_SD = 1e-6  # rad/s
+MIN_ACCEL_BIAS_SD = 1e-4  # m/s²
+MIN_SCALE_SD = 1e-4  # –
+MIN_LATENCY_SD = 0.01  # s
+MIN_BARO_NOISE_SD = 1e-3  # m
+MIN_BARO_BIAS_SD = 1e-3  # m
+GNSS_SD_FLOOR = 0.01  # m, m/s
+
+
+@dataclass(frozen=True)
+class BaroPrior:
+    """Prior of the baro error model h_baro(t) = (1 + s)·h(t − τd) + b(t) + w (docs/design.md).
+
+    scale_sd [–] (mean 0), latency_mean / latency_sd [s], bias_sd [m] and bias_tau [s] of the
+    first-order Gauss-Markov bias, noise_sd [m] of the white noise w.
+    """
+
+    scale_sd: float
+    latency_mean: float
+    latency_sd: float
+    bias_sd: float
+    bias_tau: float
+    noise_sd: float
+
+
+@dataclass(frozen=True)
+class SensorModel:
+    """What every estimator of one drive is given (module docstring)."""
+
+    imu: ImuSpec
+    imu_inferred: bool
+    baro: BaroPrior | None
+    gnss_pos_sd: FloatArray | None
+    gnss_vel_sd: FloatArray | None
+    gaps: np.ndarray  # (G,) int: IMU sample i → i+1 is a gap
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-ready parameters (arrays as their min / median / max) for comparisons."""
+        out: dict[str, Any] = {"imu": asdict(self.imu), "imu_inferred": self.imu_inferred,
+                               "baro": None if self.baro is None else asdict(self.baro),
+                               "gaps": [int(i) for i in self.gaps]}
+        for name in ("gnss_pos_sd", "gnss_vel_sd"):
+            a = getattr(self, name)
+            out[name] = None if a is None else [float(np.min(a)), float(np.median(a)),
+                                                float(np.max(a))]
+        return out
+
+
+def measured_white_sd(x: FloatArray, rate_hz: float) -> FloatArray:
+    """Per-axis white-noise σ of samples x (N, 3) from their first differences Δx (white
+    noise of σ gives Δx of σ√2; slow motion gives Δx ≈ 0).
+
+    At ≥ ``VRE_MIN_RATE_HZ`` the differences are vibration and sensor noise, heavy-tailed on
+    a multirotor or a skier's phone: their standard deviation is used, because the variance
+    is what the estimators propagate (a robust scale would understate it 2×, measured on the
+    shared logs). Below that rate (1 Hz averaged phone logs) the differences are the
+    vehicle's own manoeuvres, and the robust scale 1.4826·median|Δx| ignores them."""
+    if x.shape[0] < 3:
+        return np.zeros(x.shape[1])
+    if rate_hz >= VRE_MIN_RATE_HZ:
+        return np.std(np.diff(x, axis=0), axis=0) / np.sqrt(2.0)
+    return robust_white_sd(x)
+
+
+def robust_white_sd(x: FloatArray) -> FloatArray:
+    """Per-axis 1.4826·median|Δx|/√2: the white σ of x (N, 3), robust to manoeuvre steps."""
+    if x.shape[0] < 3:
+        return np.zeros(x.shape[1])
+    return 1.4826 * np.median(np.abs(np.diff(x, axis=0)), axis=0) / np.sqrt(2.0)
+
+
+def infer_imu_spec(imu: Any, g0: float, base: ImuSpec = REAL_LOG_IMU,
+                   k_vre: float = K_VRE) -> ImuSpec:
+    """IMU noise model of a log without a spec: ``base`` raised to what the data show.
+
+    - white-noise densities ≥ max_axis σ_white / √f_s [unit/√Hz] (``measured_white_sd``;
+      a multirotor's vibration is noise at the estimators' time scales);
+    - accelerometer bias random walk ≥ k_vre·σ_robust,accel [m/s²/√s] (vibration
+      rectification: a vibrating MEMS accelerometer — clipping, asymmetric response — shows
+      bias shifts that grow with the vibration; k_vre = 0.14 /√s is set on 181.BIN, whose |f|
+      averages 7.3-8.9 m/s² for 8 s while the baro climbs, σ_robust = 0.75 m/s²). Only for
+      IMUs sampled at ≥ ``VRE_MIN_RATE_HZ``: at 1 Hz (averaged phone logs) the differences
+      are the vehicle's own manoeuvres;
+    - accelerometer bias σ ≥ 2·|median |f| − g0| [m/s²], the specific-force magnitude error
+      (a vehicle spends most of its time unaccelerated).
+    """
+    if imu.t.size < 10:
+        return base
+    rate = float(imu.rate_hz)
+    rt = np.sqrt(rate)
+    g_nd = float(np.max(measured_white_sd(imu.gyro_b, rate))) / rt
+    a_sd = float(np.max(measured_white_sd(imu.accel_b, rate)))
+    vib = rate >= VRE_MIN_RATE_HZ
+    a_rob = float(np.max(robust_white_sd(imu.accel_b)))  # the scale k_vre was set on
+    fmag = float(np.median(np.linalg.norm(imu.accel_b, axis=1)))
+    return replace(base, name=f"{base.name}-measured",
+                   gyro_noise_density=max(base.gyro_noise_density, g_nd),
+                   accel_noise_density=max(base.accel_noise_density, a_sd / rt),
+                   accel_bias_rw=max(base.accel_bias_rw, k_vre * a_rob if vib else 0.0),
+                   accel_bias_sd=max(base.accel_bias_sd, 2.0 * abs(fmag - g0)))
+
+
+def floor_imu_spec(spec: ImuSpec) -> ImuSpec:
+    """``spec`` with the numerical floors applied (module constants)."""
+    return replace(spec,
+                   gyro_noise_density=max(spec.gyro_noise_density, MIN_GYRO_NOISE_DENSITY),
+                   accel_noise_density=max(spec.accel_noise_density, MIN_ACCEL_NOISE_DENSITY),
+                   gyro_bias_sd=max(spec.gyro_bias_sd, MIN_GYRO_BIAS_SD),
+                   accel_bias_sd=max(spec.accel_bias_sd, MIN_ACCEL_BIAS_SD))
+
+
+def baro_prior(spec: BaroSpec) -> BaroPrior:
+    """Prior of the baro states from a spec.
+
+    Scale: σ = max(scale_sd, |scale|) (a spec that fixes the scale states its size, not its
+    sign). Latency: a uniform range gives its mean and width/√12, a fixed latency itself.
+    Every σ is floored (module constants)."""
+    s_sd = max(spec.scale_sd, abs(spec.scale or 0.0), MIN_SCALE_SD)
+    if spec.latency_range_s is not None:
+        lo, hi = spec.latency_range_s
+        tau_m, tau_sd = 0.5 * (lo + hi), (hi - lo) / np.sqrt(12.0)
+    else:
+        tau_m, tau_sd = spec.latency_s, 0.0
+    return BaroPrior(scale_sd=float(s_sd), latency_mean=float(tau_m),
+                     latency_sd=float(max(tau_sd, MIN_LATENCY_SD)),
+                     bias_sd=float(max(spec.bias_sd, MIN_BARO_BIAS_SD)),
+                     bias_tau=float(spec.bias_tau),
+                     noise_sd=float(max(spec.noise_sd, MIN_BARO_NOISE_SD)))
+
+
+def drive_baro_spec(drive: Any) -> BaroSpec | None:
+    """The drive's baro spec, ``REAL_LOG_BARO`` for a log without one, None without a baro."""
+    if drive.baro is None:
+        return None
+    spec = drive.baro.spec
+    return spec if isinstance(spec, BaroSpec) else REAL_LOG_BARO
+
+
+def _gnss_sd(a: Any) -> FloatArray | None:
+    if a is None:
+        return None
+    a = np.asarray(a, dtype=float)
+    return np.where(np.isfinite(a), np.maximum(a, GNSS_SD_FLOOR), a)
+
+
+def sensor_model(drive: Any) -> SensorModel:
+    """The shared sensor model of ``drive`` (module docstring)."""
+    from ..geo.earth import gravity
+
+    imu = drive.imu
+    inferred = not isinstance(imu.spec, ImuSpec)
+    if inferred:
+        lat, h = float(drive.origin_lla[0]), float(drive.origin_lla[2])
+        spec = infer_imu_spec(imu, float(gravity(lat, h)))
+    else:
+        spec = imu.spec
+    bspec = drive_baro_spec(drive)
+    gn = drive.gnss
+    return SensorModel(
+        imu=floor_imu_spec(spec), imu_inferred=inferred,
+        baro=None if bspec is None else baro_prior(bspec),
+        gnss_pos_sd=None if gn is None else _gnss_sd(gn.pos_sd),
+        gnss_vel_sd=None if gn is None else _gnss_sd(gn.vel_sd),
+        gaps=imu_gaps(imu.t))
