@@ -47,14 +47,14 @@ def builtin_floor(drive: Any) -> float:
     import gtsam
     from gtsam.symbol_shorthand import B, C, V, X
 
-    from vnav_graph.estimators import graph as g
+    from vnav_graph.estimators.graph import init, problem
     from vnav_graph.geo.atmosphere import isa_pressure
 
-    cfg = g.GraphConfig()
-    P = g._setup(drive, cfg)
-    pri = g._baro_priors(P.baro_spec)
-    rot, pos, vel = g._initial_states(P)
-    pims = g._pims_for(P, rot, pos)
+    cfg = problem.GraphConfig()
+    P = problem.setup(drive, cfg)
+    pri = P.pri
+    rot, pos, vel = init.initial_states(P)
+    pims = problem.pims_for(P, rot, pos)
     bt = drive.baro.t
     alt = drive.baro.altitude
     j = np.clip(np.searchsorted(bt, P.t_kf), 0, bt.size - 1)
@@ -62,14 +62,14 @@ def builtin_floor(drive: Any) -> float:
     graph = gtsam.NonlinearFactorGraph()
     s = P.imu_spec
     graph.add(gtsam.PriorFactorPose3(X(0), gtsam.Pose3(gtsam.Rot3(rot[0]), pos[0]),
-                                     g._noise([0.05, 0.05, 0.5, 10.0, 10.0, 10.0])))
-    graph.add(gtsam.PriorFactorVector(V(0), vel[0], g._noise([2.0] * 3)))
+                                     problem.noise([0.05, 0.05, 0.5, 10.0, 10.0, 10.0])))
+    graph.add(gtsam.PriorFactorVector(V(0), vel[0], problem.noise([2.0] * 3)))
     graph.add(gtsam.PriorFactorConstantBias(
         B(0), gtsam.imuBias.ConstantBias(),
-        g._noise([max(s.accel_bias_sd, 1e-4)] * 3 + [max(s.gyro_bias_sd, 1e-6)] * 3)))
-    graph.add(gtsam.PriorFactorDouble(C(0), 0.0, g._noise([pri["b_sd"]])))
+        problem.noise([max(s.accel_bias_sd, 1e-4)] * 3 + [max(s.gyro_bias_sd, 1e-6)] * 3)))
+    graph.add(gtsam.PriorFactorDouble(C(0), 0.0, problem.noise([pri["b_sd"]])))
     vals = gtsam.Values()
-    baro_noise = g._noise([pri["noise"]])
+    baro_noise = problem.noise([pri["noise"]])
     # NED graph, +z-up factor: feed the pressure of the mirrored height −(h − h0)
     p_kpa = isa_pressure(-(alt[j] - P.h0)) / 1000.0
     for k in range(P.n_kf):
@@ -77,7 +77,7 @@ def builtin_floor(drive: Any) -> float:
         vals.insert(V(k), vel[k])
         vals.insert(B(k), gtsam.imuBias.ConstantBias())
         vals.insert(C(k), 0.0)
-        for f in g._keyframe_fix_factors(P, k):
+        for f in problem.keyframe_fix_factors(P, k):
             graph.add(f)
         graph.add(gtsam.BarometricFactor(X(k), C(k), float(p_kpa[k]), baro_noise))
         if k + 1 < P.n_kf:
@@ -85,7 +85,7 @@ def builtin_floor(drive: Any) -> float:
                                               pims[k]))
             dt = float(P.t_kf[k + 1] - P.t_kf[k])
             graph.add(gtsam.BetweenFactorDouble(
-                C(k), C(k + 1), 0.0, g._noise([pri["b_sd"] * np.sqrt(2 * dt / pri["b_tau"])])))
+                C(k), C(k + 1), 0.0, problem.noise([pri["b_sd"] * np.sqrt(2 * dt / pri["b_tau"])])))
     params = gtsam.LevenbergMarquardtParams()
     params.setRelativeErrorTol(1e-9)
     params.setMaxIterations(50)

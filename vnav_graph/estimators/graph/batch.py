@@ -1,6 +1,6 @@
-"""GTSAM factor-graph smoother: ``graph-batch`` (full batch) and ``graph-isam2`` (incremental).
+"""``graph-batch`` (full-batch GTSAM smoothing) and the outputs shared with ``graph-isam2``.
 
-The only modules that import gtsam are ``graph*.py``. Design (details and measurements in
+Only the modules of this subpackage import gtsam. Design (details and measurements in
 ``docs/graph.md``):
 
 - Frame: one Earth-fixed tangent-plane NED frame ``t`` at ``Drive.origin_lla``;
@@ -16,7 +16,7 @@ The only modules that import gtsam are ``graph*.py``. Design (details and measur
   fixes at keyframe epochs, priors, and the exact Gauss-Markov chain
   b_{k+1} = e^{−Δt/τ} b_k + w, var w = σ²(1 − e^{−2Δt/τ}) as linear factors.
 - Baro samples and GNSS fixes between keyframes: linearised in numpy, vectorised over all
-  samples (``graph_factors``), reduced to one information block per interval and added to the
+  samples (``factors``), reduced to one information block per interval and added to the
   linearised C++ graph inside our own Gauss-Newton loop (batch), or wrapped once as
   ``LinearContainerFactor`` (incremental).
 
@@ -32,9 +32,8 @@ from typing import Any
 import numpy as np
 from gtsam.symbol_shorthand import B, K, X
 
-from ..geo.frames import mat_to_quat, ned_to_lla
-from ..types import (
-    ERROR_STATE,
+from ...geo.frames import mat_to_quat, ned_to_lla
+from ...types import (
     BaroEstimate,
     Drive,
     Estimate,
@@ -42,41 +41,15 @@ from ..types import (
     ParamEstimate,
     Trajectory,
 )
-from . import graph_factors as gf
-from . import graph_linalg as gla
-from .graph_init import _initial_states  # noqa: F401 (re-exported)
-
-# the problem and solver pieces live in graph_problem / graph_solve (size); graph_isam2,
-# benchmarks and tests reach them through this module
-from .graph_problem import (  # noqa: F401 (re-exported)
-    GraphConfig,
-    _baro_priors,
-    _build_batch_graph,
-    _gm_factor,
-    _gravity_delta,
-    _hessian_pieces,
-    _keyframe_fix_factors,
-    _level,
-    _noise,
-    _pims_for,
-    _preintegrate,
-    _prior_factors,
-    _Problem,
-    _setup,
-    _states_from_values,
-    gap_factors,
-    imu_gaps,
-)
-from .graph_solve import (  # noqa: F401 (re-exported)
-    _BatchResult,
-    _factorize,
-    _gauss_newton,
-    _Layout,
-    _normal_equations,
-)
+from . import factors as gf
+from . import linalg as gla
+from .init import initial_states
+from .linalg import single_thread_blas
+from .problem import GraphConfig, Problem, build_batch_graph, pims_for, setup, states_from_values
+from .solve import BatchResult, Layout, factorize, gauss_newton, normal_equations
 
 
-def _solver_warnings(res: _BatchResult, cfg: GraphConfig, what: str = "Gauss-Newton",
+def solver_warnings(res: BatchResult, cfg: GraphConfig, what: str = "Gauss-Newton",
                      estimator: str = "graph-batch") -> list[str]:
     """User-facing warning for a solve that did not converge (``info["warnings"]``)."""
     if res.stop == "max_iterations":
@@ -92,22 +65,11 @@ def _solver_warnings(res: _BatchResult, cfg: GraphConfig, what: str = "Gauss-New
     return []
 
 
-def single_thread_blas() -> Any:
-    """Context limiting BLAS to one thread. The solver's BLAS work is many small batched
-    products and one banded Cholesky; with OpenBLAS's default two threads on this 2-core
-    machine, one busy core made the 10-minute batch solve 0.27 → 0.34 s (ratio to the
-    single-threaded C++ floor 2.0 → 2.5), single-threaded it stayed at 0.28 s; idle, both
-    take the same time (``docs/graph.md``)."""
-    from threadpoolctl import threadpool_limits
-
-    return threadpool_limits(limits=1, user_api="blas")
-
-
 # ----------------------------------------------------------------------------------------
 # Outputs
 
 
-def _output_times(P: _Problem) -> FloatArray:
+def output_times(P: Problem) -> FloatArray:
     t = P.drive.imu.t
     n = max(int(round(P.cfg.output_rate_hz and (1.0 / P.cfg.output_rate_hz) / np.median(
         np.diff(t)))), 1)
@@ -116,7 +78,7 @@ def _output_times(P: _Problem) -> FloatArray:
     return t[idx]
 
 
-def _trajectory(P: _Problem, st: gf.KeyframeStates, vals: Any, t_q: FloatArray) -> Trajectory:
+def trajectory(P: Problem, st: gf.KeyframeStates, vals: Any, t_q: FloatArray) -> Trajectory:
     k = gf.interval_of(P.t_kf, t_q)
     ip = gf.interpolate(P.dense, st, t_q, k)
     lla = ned_to_lla(ip["p"], P.origin)
@@ -136,7 +98,7 @@ def _trajectory(P: _Problem, st: gf.KeyframeStates, vals: Any, t_q: FloatArray) 
     return Trajectory(t_q, lla, vel_n, q, bg, ba, bb if P.drive.baro is not None else None)
 
 
-def _cov_18(P: _Problem, fac: gla.ArrowFactor, sb: FloatArray, lay: _Layout, vals: Any,
+def cov_18(P: Problem, fac: gla.ArrowFactor, sb: FloatArray, lay: Layout, vals: Any,
             k: int) -> FloatArray:
     """18×18 ERROR_STATE covariance at keyframe k from the selected inverse of the final
     normal equations (joint marginal of X_k, V_k, B_k, C_k and the global (s, τd)).
@@ -165,7 +127,7 @@ def _cov_18(P: _Problem, fac: gla.ArrowFactor, sb: FloatArray, lay: _Layout, val
     return cov
 
 
-def _gm_mean_prior_sd(sd: float, tau: float, dur: float) -> float:
+def gm_mean_prior_sd(sd: float, tau: float, dur: float) -> float:
     """Prior sigma of the time average of a stationary GM process over ``dur`` seconds:
     var = σ²·(2τ/D)(1 − (τ/D)(1 − e^{−D/τ}))."""
     if dur <= 0 or not np.isfinite(tau):
@@ -174,21 +136,21 @@ def _gm_mean_prior_sd(sd: float, tau: float, dur: float) -> float:
     return float(sd * np.sqrt(max(2 * x * (1 - x * (1 - np.exp(-1 / x))), 0.0)))
 
 
-def _outputs(P: _Problem, res: _BatchResult, pri: dict[str, float],
+def outputs(P: Problem, res: BatchResult, pri: dict[str, float],
              calib_key: int | None) -> dict[str, Any]:
     vals = res.values
     lay = res.layout
-    st = _states_from_values(P, vals, res.calib_of_kf)
-    traj = _trajectory(P, st, vals, _output_times(P))
+    st = states_from_values(P, vals, res.calib_of_kf)
+    traj = trajectory(P, st, vals, output_times(P))
     # covariance of the final linear system: one banded factorisation + selected inversion
     fac = res.fac
     if fac is None:
-        ab, bm, dm, _ = _normal_equations(P, lay, res.graph, vals, res.rows)
-        fac = _factorize(ab, bm, dm)
+        ab, bm, dm, _ = normal_equations(P, lay, res.graph, vals, res.rows)
+        fac = factorize(ab, bm, dm)
     sb = fac.band_inverse()
     nk = P.n_kf
     sel = np.unique(np.linspace(0, nk - 1, min(P.cfg.cov_epochs, nk)).astype(int))
-    cov = np.array([_cov_18(P, fac, sb, lay, vals, int(k)) for k in sel])
+    cov = np.array([cov_18(P, fac, sb, lay, vals, int(k)) for k in sel])
     out: dict[str, Any] = {"trajectory": traj, "cov": cov, "t_cov": P.t_kf[sel]}
     if P.drive.baro is None or calib_key is None:
         out["baro"] = None
@@ -210,7 +172,7 @@ def _outputs(P: _Problem, res: _BatchResult, pri: dict[str, float],
     b_sd_given_s = float(np.sqrt(max(b_var - cov_sb**2 / pk[0, 0], 0.0))) if pk[0, 0] > 0 \
         else b_sd
     dur = float(P.t_kf[-1] - P.t_kf[0])
-    b_prior = _gm_mean_prior_sd(pri["b_sd"], pri["b_tau"], dur)
+    b_prior = gm_mean_prior_sd(pri["b_sd"], pri["b_tau"], dur)
     baro = BaroEstimate(
         scale=ParamEstimate(float(kc[0]), float(np.sqrt(pk[0, 0])), pri["s_sd"]),
         latency_s=ParamEstimate(float(kc[1]), float(np.sqrt(pk[1, 1])), pri["tau_sd"]),
@@ -239,7 +201,7 @@ def _outputs(P: _Problem, res: _BatchResult, pri: dict[str, float],
 # Estimators
 
 
-def _provides(drive: Drive) -> frozenset[str]:
+def provides(drive: Drive) -> frozenset[str]:
     q = {"alt", "vel_d", "pos_h", "vel_h", "att", "cov"}
     if drive.baro is not None:
         q.add("baro")
@@ -260,21 +222,21 @@ class GraphBatch:
 
     def _run(self, drive: Drive) -> Estimate:
         t0 = time.perf_counter()
-        P = _setup(drive, self.config)
-        pri = _baro_priors(P.baro_spec)
-        rot, pos, vel = _initial_states(P)
+        P = setup(drive, self.config)
+        pri = P.pri
+        rot, pos, vel = initial_states(P)
         t1 = time.perf_counter()
-        pims = _pims_for(P, rot, pos)
+        pims = pims_for(P, rot, pos)
         t2 = time.perf_counter()
         calib = np.zeros(P.n_kf, dtype=int)
-        graph, vals = _build_batch_graph(P, rot, pos, vel, pims, pri, calib)
-        res = _gauss_newton(P, graph, vals, calib, pri)
+        graph, vals = build_batch_graph(P, rot, pos, vel, pims, pri, calib)
+        res = gauss_newton(P, graph, vals, calib, pri)
         t3 = time.perf_counter()
-        out = _outputs(P, res, pri, K(0) if drive.baro is not None else None)
+        out = outputs(P, res, pri, K(0) if drive.baro is not None else None)
         t4 = time.perf_counter()
         info = {"keyframes": P.n_kf, "iterations": res.iterations, "final_cost": res.cost,
                 "converged": res.converged, "stop": res.stop,
-                "warnings": _solver_warnings(res, self.config),
+                "warnings": solver_warnings(res, self.config),
                 "baro_bias_lag_s": res.bias_lag,
                 "gnss_rejected": P.gnss_rejected, "gnss_rejected_pregate": P.g_rej_pre,
                 "gnss_rejected_postsolve": P.g_rej_post,
@@ -283,23 +245,6 @@ class GraphBatch:
                              "outputs": t4 - t3},
                 "frame": "tangent-plane NED at origin; gravity-difference and Coriolis "
                          "corrections" if self.config.gravity_correction else "tangent-plane"}
-        return Estimate(self.name, out["trajectory"], _provides(drive), out["cov"],
+        return Estimate(self.name, out["trajectory"], provides(drive), out["cov"],
                         out["t_cov"], out["baro"], time.perf_counter() - t0, info=info,
                         config=self.config)
-
-
-ERROR_STATE_KEYS = tuple(ERROR_STATE)
-
-
-def __getattr__(name: str) -> Any:
-    """``GraphISAM2`` lives in graph_isam2.py (size), which imports this module; the registry
-    names graph:GraphISAM2. Resolved lazily so that either module can be imported first."""
-    if name == "GraphISAM2":
-        from .graph_isam2 import GraphISAM2
-
-        return GraphISAM2
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-__all__ = ["ERROR_STATE_KEYS", "GraphBatch", "GraphConfig", "GraphISAM2"]  # noqa: F822
-

@@ -11,25 +11,25 @@ import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import B, C, K, V, X
 
-from ..types import (
+from ...types import (
     FloatArray,
 )
-from . import graph_factors as gf
-from . import graph_linalg as gla
-from .graph_problem import (
-    _gnss_batch_idx,
-    _gnss_chi2,
-    _interval_rows,
-    _Problem,
-    _states_from_values,
+from . import factors as gf
+from . import linalg as gla
+from .problem import (
+    Problem,
+    gnss_batch_idx,
+    gnss_chi2,
+    interval_rows,
+    states_from_values,
 )
 
 # ----------------------------------------------------------------------------------------
-# Batch Gauss-Newton on our own banded-arrow normal equations (graph_linalg)
+# Batch Gauss-Newton on our own banded-arrow normal equations (``linalg``)
 
 
 @dataclass
-class _Layout:
+class Layout:
     """Column layout of the batch normal equations: keyframe k owns columns
     k·bs + [X (6, Pose3 tangent: rotation, translation), V (3), B (6, accel then gyro), C (1)]
     (bs = 16, or 15 without baro), then the global (s, τd) of K(0). ``g2m`` maps GTSAM's
@@ -42,7 +42,7 @@ class _Layout:
     n_cols: int
     g2m: np.ndarray
     keys: list[Any]
-    pattern: Any = None  # _SparsePattern of the graph last linearised with this layout
+    pattern: Any = None  # SparsePattern of the graph last linearised with this layout
 
     @property
     def bandwidth(self) -> int:
@@ -50,7 +50,7 @@ class _Layout:
 
     @property
     def term_cols(self) -> np.ndarray:
-        """Interval-term columns (graph_factors order) present in this layout."""
+        """Interval-term columns (``factors`` order) present in this layout."""
         core = np.arange(gf.N_CORE if self.has_baro else 12)
         return np.r_[core, np.arange(gf.N_CORE, gf.N_COLS)]
 
@@ -83,7 +83,7 @@ class _Layout:
         return vv
 
 
-def _layout(P: _Problem) -> _Layout:
+def layout(P: Problem) -> Layout:
     nk = P.n_kf
     has_baro = P.drive.baro is not None
     bs = 16 if has_baro else 15
@@ -99,17 +99,17 @@ def _layout(P: _Problem) -> _Layout:
     items.sort(key=lambda it: it[0])
     g2m = np.concatenate([off + np.arange(dim) for _, dim, off in items])
     n_cols = n_band + (2 if has_baro else 0)
-    return _Layout(nk, bs, has_baro, n_band, n_cols, g2m, [it[0] for it in items])
+    return Layout(nk, bs, has_baro, n_band, n_cols, g2m, [it[0] for it in items])
 
 
 @dataclass
-class _BatchResult:
+class BatchResult:
     values: Any
     graph: Any  # C++ NonlinearFactorGraph
     cost: float
     iterations: int
     calib_of_kf: np.ndarray
-    layout: _Layout
+    layout: Layout
     rows: gf.IntervalRows  # interval terms linearised at ``values``
     fac: gla.ArrowFactor | None = None  # factorised normal equations at ``values``, if kept
     bias_lag: float = 0.0  # baro-bias read time offset of the last solve (baro_rows)
@@ -121,7 +121,7 @@ class _BatchResult:
 
 
 @dataclass
-class _SparsePattern:
+class SparsePattern:
     """Row/column bookkeeping of GTSAM's sparse Jacobian of one graph: the pattern (entry
     order included) is the same at every linearisation point, so it is computed once."""
 
@@ -135,7 +135,7 @@ class _SparsePattern:
     n_rows: int
 
 
-def _sparse_pattern(lay: _Layout, i: np.ndarray, j: np.ndarray) -> _SparsePattern:
+def sparse_pattern(lay: Layout, i: np.ndarray, j: np.ndarray) -> SparsePattern:
     pat = lay.pattern
     if pat is not None and np.array_equal(pat.i, i) and np.array_equal(pat.j, j):
         return pat
@@ -145,20 +145,20 @@ def _sparse_pattern(lay: _Layout, i: np.ndarray, j: np.ndarray) -> _SparsePatter
     nrow = int(i.max()) + 1
     a = np.flatnonzero(~is_b)
     order = np.argsort(i[a], kind="stable")
-    pat = _SparsePattern(i, j, np.flatnonzero(is_b), i[is_b], a[order],
+    pat = SparsePattern(i, j, np.flatnonzero(is_b), i[is_b], a[order],
                          lay.g2m[j[a[order]]],
                          np.r_[0, np.cumsum(np.bincount(i[a], minlength=nrow))], nrow)
     lay.pattern = pat
     return pat
 
 
-def _normal_equations(P: _Problem, lay: _Layout, graph: Any, vals: Any,
+def normal_equations(P: Problem, lay: Layout, graph: Any, vals: Any,
                       rows: gf.IntervalRows) -> tuple[Any, ...]:
     """Arrow-form normal equations of the C++ factors (GTSAM linearisation, sparse Jacobian)
     plus the interval terms (per-interval information blocks)."""
     gfg = graph.linearize(vals)
     sj = gfg.sparseJacobian_()
-    pat = _sparse_pattern(lay, sj[0].astype(np.int64) - 1, sj[1].astype(np.int64) - 1)
+    pat = sparse_pattern(lay, sj[0].astype(np.int64) - 1, sj[1].astype(np.int64) - 1)
     v = sj[2]
     b = np.zeros(pat.n_rows)
     b[pat.rhs_rows] = v[pat.rhs_entries]
@@ -170,7 +170,7 @@ def _normal_equations(P: _Problem, lay: _Layout, graph: Any, vals: Any,
                         lay.block_cols(groups), lam[:, tc[:, None], tc[None, :]], eta[:, tc])
 
 
-def _factorize(ab: FloatArray, bm: FloatArray, dm: FloatArray) -> gla.ArrowFactor:
+def factorize(ab: FloatArray, bm: FloatArray, dm: FloatArray) -> gla.ArrowFactor:
     """Cholesky of the normal equations; if H is numerically singular (e.g. 1 Hz averaged
     IMU with an unobservable direction), retry with growing Marquardt damping μ·diag(H)."""
     mu = 0.0
@@ -188,26 +188,26 @@ def _factorize(ab: FloatArray, bm: FloatArray, dm: FloatArray) -> gla.ArrowFacto
         "— the drive does not determine the states (check IMU rate/units and GNSS coverage)")
 
 
-def _damped(ab: FloatArray, bm: FloatArray, dm: FloatArray, mu: float) -> gla.ArrowFactor:
+def damped(ab: FloatArray, bm: FloatArray, dm: FloatArray, mu: float) -> gla.ArrowFactor:
     """Factorisation of H + μ·diag(H) (Levenberg-Marquardt damping)."""
     ab2 = ab.copy()
     ab2[0] *= 1.0 + mu
-    return _factorize(ab2, bm, dm + mu * np.diag(np.diag(dm)))
+    return factorize(ab2, bm, dm + mu * np.diag(np.diag(dm)))
 
 
-def _gn_core(P: _Problem, lay: _Layout, graph: Any, vals: Any, calib_of_kf: np.ndarray,
-             pri: dict[str, float]) -> _BatchResult:
+def gn_core(P: Problem, lay: Layout, graph: Any, vals: Any, calib_of_kf: np.ndarray,
+             pri: dict[str, float]) -> BatchResult:
     """Gauss-Newton on the total cost (C++ factors + interval terms); a step that raises the
     cost is retried with Levenberg-Marquardt damping μ·diag(H) (μ from 1e-5, ×10 per
     retry, ÷10 after a success, back to plain Gauss-Newton below 1e-6). On the simulated
     drives every full step is accepted; on hovering-multirotor logs the weakly determined
     heading makes the full step overshoot (docs/graph.md). The interval rows evaluated at an
     accepted candidate are reused as its linearisation."""
-    st = _states_from_values(P, vals, calib_of_kf)
+    st = states_from_values(P, vals, calib_of_kf)
     # the baro bias is read at t_s − λ with λ fixed while τd moves, so that the cost is smooth
-    # along τd (graph_factors.baro_rows); λ follows τd when they drift > bias_lag_tol apart
+    # along τd (factors.baro_rows); λ follows τd when they drift > bias_lag_tol apart
     lag = float(np.median(st.latency))
-    rows = _interval_rows(P, st, pri, lag)
+    rows = interval_rows(P, st, pri, lag)
     cost = graph.error(vals) + 0.5 * float(rows.r @ rows.r)
     it = 0
     fac = None
@@ -216,8 +216,8 @@ def _gn_core(P: _Problem, lay: _Layout, graph: Any, vals: Any, calib_of_kf: np.n
     failed = False
     for it in range(1, P.cfg.max_iterations + 1):
         converged = False
-        ab, bm, dm, g = _normal_equations(P, lay, graph, vals, rows)
-        fac = _factorize(ab, bm, dm)
+        ab, bm, dm, g = normal_equations(P, lay, graph, vals, rows)
+        fac = factorize(ab, bm, dm)
         delta = fac.solve(g)
         dec = 0.5 * float(delta @ g)  # decrease predicted by the quadratic model
         if P.cfg.verbose:
@@ -229,21 +229,21 @@ def _gn_core(P: _Problem, lay: _Layout, graph: Any, vals: Any, calib_of_kf: np.n
             break
         fac = None
         if mu > 0.0:
-            delta = _damped(ab, bm, dm, mu).solve(g)
+            delta = damped(ab, bm, dm, mu).solve(g)
         failed = False
         while True:
             cand = vals.retract(lay.vector_values(delta))
-            st_c = _states_from_values(P, cand, calib_of_kf)
+            st_c = states_from_values(P, cand, calib_of_kf)
             lat = float(np.median(st_c.latency))
             lag_c = lat if abs(lat - lag) > P.cfg.bias_lag_tol else lag
-            rows_c = _interval_rows(P, st_c, pri, lag_c)
+            rows_c = interval_rows(P, st_c, pri, lag_c)
             new_cost = graph.error(cand) + 0.5 * float(rows_c.r @ rows_c.r)
             ref = cost
             if lag_c != lag and new_cost > cost:
                 # λ moved with τd: a slightly different cost function — compare the
                 # candidate with the current point under the new λ (rare: early iterations
                 # gain far more than the ≈ 10 that moving λ by tens of ms changes)
-                r_ref = _interval_rows(P, st, pri, lag_c).r
+                r_ref = interval_rows(P, st, pri, lag_c).r
                 ref = graph.error(vals) + 0.5 * float(r_ref @ r_ref)
             if new_cost <= ref * (1 + 1e-12):
                 mu = 0.0 if mu <= 1e-6 else mu / 10.0
@@ -255,7 +255,7 @@ def _gn_core(P: _Problem, lay: _Layout, graph: Any, vals: Any, calib_of_kf: np.n
             if mu > 1e3:
                 failed = True  # no descent even as a tiny gradient step: stop here
                 break
-            delta = _damped(ab, bm, dm, mu).solve(g)
+            delta = damped(ab, bm, dm, mu).solve(g)
         if failed:
             if P.cfg.verbose:
                 print(f"GN it {it}: no step lowers the cost (μ > 1e3); stopping")
@@ -273,29 +273,29 @@ def _gn_core(P: _Problem, lay: _Layout, graph: Any, vals: Any, calib_of_kf: np.n
             converged = True
             break
     stop = "converged" if converged else ("no_descent" if failed else "max_iterations")
-    return _BatchResult(vals, graph, cost, it, calib_of_kf, lay, rows, fac, lag, stop)
+    return BatchResult(vals, graph, cost, it, calib_of_kf, lay, rows, fac, lag, stop)
 
 
-def _gauss_newton(P: _Problem, graph: Any, vals: Any, calib_of_kf: np.ndarray,
-                  pri: dict[str, float]) -> _BatchResult:
+def gauss_newton(P: Problem, graph: Any, vals: Any, calib_of_kf: np.ndarray,
+                  pri: dict[str, float]) -> BatchResult:
     """Gauss-Newton solve, then the post-solve GNSS gate: fixes whose whitened residual χ²
     (3 dof position, 6 with velocity) exceeds the ``gnss_gate_prob`` quantile are rejected
     and the problem re-solved from the current solution (≤ ``gate_rounds`` rounds).
     The residual of a fix that took part in the fit is smaller than its innovation, so the
     gate is conservative (Groves §17.3)."""
-    lay = _layout(P)
-    res = _gn_core(P, lay, graph, vals, calib_of_kf, pri)
+    lay = layout(P)
+    res = gn_core(P, lay, graph, vals, calib_of_kf, pri)
     if P.cfg.gnss_gate_prob <= 0:
         return res
     from scipy.stats import chi2
 
     iters = res.iterations
     for _ in range(P.cfg.gate_rounds):
-        idx = _gnss_batch_idx(P)
+        idx = gnss_batch_idx(P)
         if idx.size == 0:
             break
-        st = _states_from_values(P, res.values, calib_of_kf)
-        c2, dof = _gnss_chi2(P, st, idx)
+        st = states_from_values(P, res.values, calib_of_kf)
+        c2, dof = gnss_chi2(P, st, idx)
         # post-solve gate at the squared tail probability: a false rejection costs a whole
         # re-solve, a glitch has χ² in the thousands either way
         bad = c2 > chi2.ppf(1.0 - (1.0 - P.cfg.gnss_gate_prob) ** 2, dof)
@@ -303,7 +303,7 @@ def _gauss_newton(P: _Problem, graph: Any, vals: Any, calib_of_kf: np.ndarray,
             break
         P.g_use[idx[bad]] = False
         P.g_rej_post += int(bad.sum())
-        res = _gn_core(P, lay, graph, res.values, calib_of_kf, pri)
+        res = gn_core(P, lay, graph, res.values, calib_of_kf, pri)
         iters += res.iterations
     res.iterations = iters
     return res

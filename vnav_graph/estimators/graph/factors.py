@@ -39,11 +39,11 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from ..geo.earth import OMEGA_IE, gravity
-from ..geo.frames import lla_to_ned, ned_to_lla, skew
-from ..nav.rotations import so3_exp
-from ..sensors.baro import baro_jacobian, measure_baro
-from ..types import FloatArray
+from ...geo.earth import OMEGA_IE, gravity
+from ...geo.frames import lla_to_ned, ned_to_lla, skew
+from ...nav.rotations import so3_exp
+from ...sensors.baro import baro_jacobian, measure_baro
+from ...types import FloatArray
 
 N_COLS = 19
 N_CORE = 16  # columns of the five key blocks below (the incremental front end uses these)
