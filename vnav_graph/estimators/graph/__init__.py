@@ -8,8 +8,11 @@ importing a submodule such as ``factors`` does not load the estimators). Modules
 - ``factors``: the custom baro/GNSS terms, linearised in vectorised numpy, and frame helpers;
 - ``init``: initial keyframe states from GNSS and the IMU;
 - ``solve``: batch Gauss-Newton / Levenberg-Marquardt with the post-solve GNSS gate;
+- ``layout``: column layout from the graph's keys, the banded-arrow fast path (system and
+  covariance) and the test whether a graph fits it;
 - ``linalg``: banded-arrow normal equations, Cholesky and selected inversion;
-- ``general``: interval information blocks as GTSAM HessianFactor pieces;
+- ``general``: the general sparse path (GTSAM elimination of the linearised graph) and the
+  interval information blocks as GTSAM HessianFactor pieces;
 - ``batch``: outputs (trajectory, covariance, baro parameters) and ``GraphBatch``;
 - ``isam2``: ``GraphISAM2``, the incremental front end.
 

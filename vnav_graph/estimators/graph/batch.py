@@ -27,10 +27,12 @@ References: Forster et al., "On-Manifold Preintegration", IEEE T-RO 2017; Kaess 
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from typing import Any
 
+import gtsam
 import numpy as np
-from gtsam.symbol_shorthand import B, K, X
+from gtsam.symbol_shorthand import B, C, K, V, X
 
 from ...geo.frames import mat_to_quat, ned_to_lla
 from ...types import (
@@ -42,11 +44,10 @@ from ...types import (
     Trajectory,
 )
 from . import factors as gf
-from . import linalg as gla
 from .init import initial_states
 from .linalg import single_thread_blas
 from .problem import GraphConfig, Problem, build_batch_graph, pims_for, setup, states_from_values
-from .solve import BatchResult, Layout, factorize, gauss_newton, normal_equations
+from .solve import BatchResult, gauss_newton, linear_system
 
 
 def solver_warnings(res: BatchResult, cfg: GraphConfig, what: str = "Gauss-Newton",
@@ -98,14 +99,15 @@ def trajectory(P: Problem, st: gf.KeyframeStates, vals: Any, t_q: FloatArray) ->
     return Trajectory(t_q, lla, vel_n, q, bg, ba, bb if P.drive.baro is not None else None)
 
 
-def cov_18(P: Problem, fac: gla.ArrowFactor, sb: FloatArray, lay: Layout, vals: Any,
-            k: int) -> FloatArray:
+def cov_18(P: Problem, cov_of: Any, vals: Any, k: int) -> FloatArray:
     """18×18 ERROR_STATE covariance at keyframe k from the selected inverse of the final
-    normal equations (joint marginal of X_k, V_k, B_k, C_k and the global (s, τd)).
+    normal equations (joint marginal of X_k, V_k, B_k, C_k and the global (s, τd);
+    ``cov_of``: ``layout.BandedCovariance`` or ``general.GeneralCovariance``).
 
     Pose3 tangent (ω_b, v_b): att_t = R ω_b, δp_t = R v_b; then t → local NED with C_nt.
     ConstantBias (accel, gyro) → bias_gyro 9:12, bias_accel 12:15 (body frame)."""
-    full = fac.cov_block(sb, k * lay.bs + np.arange(lay.bs))
+    keys = [X(k), V(k), B(k)] + ([C(k), K(0)] if P.drive.baro is not None else [])
+    full = cov_of.joint(keys)
     n = full.shape[0]
     r = vals.atPose3(X(k)).rotation().matrix()
     lla = ned_to_lla(vals.atPose3(X(k)).translation()[None, :], P.origin)
@@ -127,6 +129,32 @@ def cov_18(P: Problem, fac: gla.ArrowFactor, sb: FloatArray, lay: Layout, vals: 
     return cov
 
 
+def value_of(vals: Any, key: int) -> list[float] | None:
+    """A variable's value as a flat list (vector, scalar, Pose3 as its 4×4 matrix, Rot3 as
+    its 3×3 matrix), None for other types."""
+    for get in ("atVector", "atDouble", "atPose3", "atRot3"):
+        try:
+            v = getattr(vals, get)(key)
+        except RuntimeError:
+            continue
+        if hasattr(v, "matrix"):
+            v = v.matrix()
+        return np.atleast_1d(np.asarray(v, float)).ravel().tolist()
+    return None
+
+
+def extra_variables(lay: Any, cov_of: Any, vals: Any) -> dict[str, dict[str, Any]]:
+    """Variables outside the keyframe template and K(0) (added by a user): value, σ of each
+    tangent component and their covariance, keyed by GTSAM's key name (e.g. "m0")."""
+    out = {}
+    for key in lay.extra_keys:
+        cov = cov_of.joint([key])
+        out[gtsam.DefaultKeyFormatter(key)] = {
+            "est": value_of(vals, key), "sd": np.sqrt(np.clip(np.diag(cov), 0, None)).tolist(),
+            "cov": cov.tolist()}
+    return out
+
+
 def gm_mean_prior_sd(sd: float, tau: float, dur: float) -> float:
     """Prior sigma of the time average of a stationary GM process over ``dur`` seconds:
     var = σ²·(2τ/D)(1 − (τ/D)(1 − e^{−D/τ}))."""
@@ -142,32 +170,32 @@ def outputs(P: Problem, res: BatchResult, pri: dict[str, float],
     lay = res.layout
     st = states_from_values(P, vals, res.calib_of_kf)
     traj = trajectory(P, st, vals, output_times(P))
-    # covariance of the final linear system: one banded factorisation + selected inversion
-    fac = res.fac
-    if fac is None:
-        ab, bm, dm, _ = normal_equations(P, lay, res.graph, vals, res.rows)
-        fac = factorize(ab, bm, dm)
-    sb = fac.band_inverse()
+    # covariance of the final linear system: banded factorisation + selected inversion, or
+    # GTSAM's marginals of the eliminated graph (general path)
+    system = res.system
+    if system is None:
+        system = linear_system(P, lay, res.graph, vals, res.rows)
+    cov_of = system.covariance()
     nk = P.n_kf
     sel = np.unique(np.linspace(0, nk - 1, min(P.cfg.cov_epochs, nk)).astype(int))
-    cov = np.array([cov_18(P, fac, sb, lay, vals, int(k)) for k in sel])
-    out: dict[str, Any] = {"trajectory": traj, "cov": cov, "t_cov": P.t_kf[sel]}
+    cov = np.array([cov_18(P, cov_of, vals, int(k)) for k in sel])
+    out: dict[str, Any] = {"trajectory": traj, "cov": cov, "t_cov": P.t_kf[sel],
+                           "extra": extra_variables(lay, cov_of, vals)}
     if P.drive.baro is None or calib_key is None:
         out["baro"] = None
         out["observability"] = {}
         return out
     kc = vals.atVector(calib_key)
-    pk = fac.s_inv
+    pk = cov_of.joint([calib_key])
     # sigma of the time-averaged bias b̄ = (1/K) Σ b_k: uᵀ H⁻¹ u with u = 1/K on every C(k)
-    u = np.zeros(lay.n_cols)
-    u[np.arange(nk) * lay.bs + 15] = 1.0 / nk
+    u = {C(k): np.full(1, 1.0 / nk) for k in range(nk)}
     b_mean = float(np.mean(st.baro_bias))
-    hu = fac.solve(u)
-    b_var = max(float(u @ hu), 0.0)
+    hu = cov_of.solve(u, [C(k) for k in range(nk)] + [calib_key])
+    b_var = max(float(sum(float(u[key][0] * hu[key][0]) for key in u)), 0.0)
     b_sd = float(np.sqrt(b_var))
     # b is referenced to h0 (docs/design.md): at a height Δh above h0 an error δs moves it by
     # −δs·Δh, so a flight far above h0 ties b̄ to s (sortie: corr −0.995)
-    cov_sb = float(hu[lay.n_band])
+    cov_sb = float(hu[calib_key][0])
     corr_sb = cov_sb / np.sqrt(b_var * pk[0, 0]) if b_var > 0 and pk[0, 0] > 0 else 0.0
     b_sd_given_s = float(np.sqrt(max(b_var - cov_sb**2 / pk[0, 0], 0.0))) if pk[0, 0] > 0 \
         else b_sd
@@ -213,8 +241,13 @@ class GraphBatch:
 
     name = "graph-batch"
 
-    def __init__(self, config: GraphConfig | None = None) -> None:
+    def __init__(self, config: GraphConfig | None = None,
+                 extend: Callable[[Problem, Any, Any], None] | None = None) -> None:
+        """``extend(problem, graph, values)``, if given, is called once the graph is built and
+        may add GTSAM factors to ``graph`` and new variables (with their priors) to ``values``
+        (provisional hook; the solve picks the general path when they do not fit the band)."""
         self.config = config or GraphConfig()
+        self.extend = extend
 
     def run(self, drive: Drive) -> Estimate:
         with single_thread_blas():
@@ -230,6 +263,8 @@ class GraphBatch:
         t2 = time.perf_counter()
         calib = np.zeros(P.n_kf, dtype=int)
         graph, vals = build_batch_graph(P, rot, pos, vel, pims, pri, calib)
+        if self.extend is not None:
+            self.extend(P, graph, vals)
         res = gauss_newton(P, graph, vals, calib, pri)
         t3 = time.perf_counter()
         out = outputs(P, res, pri, K(0) if drive.baro is not None else None)
@@ -237,7 +272,8 @@ class GraphBatch:
         info = {"keyframes": P.n_kf, "iterations": res.iterations, "final_cost": res.cost,
                 "converged": res.converged, "stop": res.stop,
                 "warnings": solver_warnings(res, self.config),
-                "baro_bias_lag_s": res.bias_lag,
+                "baro_bias_lag_s": res.bias_lag, "solver": res.solver,
+                "extra_variables": out["extra"],
                 "gnss_rejected": P.gnss_rejected, "gnss_rejected_pregate": P.g_rej_pre,
                 "gnss_rejected_postsolve": P.g_rej_post,
                 "observability": out["observability"],

@@ -77,6 +77,10 @@ class GraphConfig:
     back-substitution threshold (None: GTSAM's 1e-3); see ``docs/graph.md`` for the measured
     per-update latencies; final_batch: run the batch solver after the incremental pass to
     produce the smoothed trajectory.
+    solver: linear algebra of the batch solve — "auto" (the banded-arrow fast path when every
+    factor couples keyframes at most one apart and the added variables are few, else GTSAM's
+    sparse elimination), "banded" (error when the graph does not fit) or "general" (GTSAM
+    elimination always; same solution, slower; ``layout``, ``general``).
     gnss_gate_prob: probability of the χ² gates on GNSS fixes (0 switches gating off):
     a causal pre-gate of the GNSS height against the barometer and a post-solve gate of
     each fix's normalised position (+ velocity) residual, repeated ≤ ``gate_rounds`` times.
@@ -104,6 +108,12 @@ class GraphConfig:
     gnss_gate_prob: float = 0.9999
     gate_rounds: int = 3
     verbose: bool = False
+    solver: str = "auto"
+
+    def __post_init__(self) -> None:
+        if self.solver not in ("auto", "banded", "general"):
+            raise ValueError(f"GraphConfig.solver must be 'auto', 'banded' or 'general', not "
+                             f"{self.solver!r}")
 
 
 # ----------------------------------------------------------------------------------------

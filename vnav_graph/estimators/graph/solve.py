@@ -1,21 +1,26 @@
-"""Batch solver of ``graph-batch``: banded-arrow normal equations of the linearised C++ graph
-plus the interval terms, Gauss-Newton with Levenberg-Marquardt fallback, post-solve GNSS gate
-(details and measurements in ``docs/graph.md``)."""
+"""Batch solver of ``graph-batch``: Gauss-Newton with Levenberg-Marquardt fallback on the
+linearised C++ graph plus the interval terms, post-solve GNSS gate (details and measurements
+in ``docs/graph.md``). The linear algebra is the banded-arrow fast path (``layout``,
+``linalg``) when the graph's structure fits it, else GTSAM's sparse elimination
+(``general``); ``GraphConfig.solver`` forces either."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 from typing import Any
 
-import gtsam
 import numpy as np
-from gtsam.symbol_shorthand import B, C, K, V, X
 
-from ...types import (
-    FloatArray,
-)
 from . import factors as gf
-from . import linalg as gla
+from .general import GeneralSystem
+from .layout import (
+    MAX_GLOBAL_DIM,
+    BandedSystem,
+    Layout,
+    interval_info,
+    linearize,
+    make_layout,
+)
 from .problem import (
     Problem,
     gnss_batch_idx,
@@ -25,81 +30,11 @@ from .problem import (
 )
 
 # ----------------------------------------------------------------------------------------
-# Batch Gauss-Newton on our own banded-arrow normal equations (``linalg``)
+# Batch Gauss-Newton over the linearised graph: banded-arrow fast path (``layout``) or GTSAM
+# elimination (``general``), chosen from the structure of the graph
 
 
-@dataclass
-class Layout:
-    """Column layout of the batch normal equations: keyframe k owns columns
-    k·bs + [X (6, Pose3 tangent: rotation, translation), V (3), B (6, accel then gyro), C (1)]
-    (bs = 16, or 15 without baro), then the global (s, τd) of K(0). ``g2m`` maps GTSAM's
-    sparse-Jacobian columns (keys in sorted order) to ours."""
-
-    nk: int
-    bs: int
-    has_baro: bool
-    n_band: int
-    n_cols: int
-    g2m: np.ndarray
-    keys: list[Any]
-    pattern: Any = None  # SparsePattern of the graph last linearised with this layout
-
-    @property
-    def bandwidth(self) -> int:
-        return 2 * self.bs - 1
-
-    @property
-    def term_cols(self) -> np.ndarray:
-        """Interval-term columns (``factors`` order) present in this layout."""
-        core = np.arange(gf.N_CORE if self.has_baro else 12)
-        return np.r_[core, np.arange(gf.N_CORE, gf.N_COLS)]
-
-    def block_cols(self, k: np.ndarray) -> np.ndarray:
-        """Our columns of the interval-term blocks (X_k, X_k+1, [C_k, C_k+1, K,] accel bias
-        of B_k), in the order of ``term_cols`` (G, 19|15)."""
-        k = np.asarray(k)[:, None]
-        six = np.arange(6)[None, :]
-        parts = [k * self.bs + six, (k + 1) * self.bs + six]
-        if self.has_baro:
-            parts += [k * self.bs + 15, (k + 1) * self.bs + 15,
-                      np.full_like(k, self.n_band), np.full_like(k, self.n_band + 1)]
-        parts.append(k * self.bs + 9 + np.arange(3)[None, :])
-        return np.concatenate(parts, axis=1)
-
-    def vector_values(self, delta: FloatArray) -> Any:
-        vv = gtsam.VectorValues()
-        ins = vv.insert
-        bs = self.bs
-        d = delta[:self.n_band].reshape(self.nk, bs)
-        for k in range(self.nk):
-            row = d[k]
-            ins(X(k), row[0:6])
-            ins(V(k), row[6:9])
-            ins(B(k), row[9:15])
-            if self.has_baro:
-                ins(C(k), row[15:16])
-        if self.has_baro:
-            ins(K(0), delta[self.n_band:])
-        return vv
-
-
-def layout(P: Problem) -> Layout:
-    nk = P.n_kf
-    has_baro = P.drive.baro is not None
-    bs = 16 if has_baro else 15
-    n_band = nk * bs
-    items = []
-    for k in range(nk):
-        o = k * bs
-        items += [(X(k), 6, o), (V(k), 3, o + 6), (B(k), 6, o + 9)]
-        if has_baro:
-            items.append((C(k), 1, o + 15))
-    if has_baro:
-        items.append((K(0), 2, n_band))
-    items.sort(key=lambda it: it[0])
-    g2m = np.concatenate([off + np.arange(dim) for _, dim, off in items])
-    n_cols = n_band + (2 if has_baro else 0)
-    return Layout(nk, bs, has_baro, n_band, n_cols, g2m, [it[0] for it in items])
+SOLVERS = ("auto", "banded", "general")
 
 
 @dataclass
@@ -111,7 +46,7 @@ class BatchResult:
     calib_of_kf: np.ndarray
     layout: Layout
     rows: gf.IntervalRows  # interval terms linearised at ``values``
-    fac: gla.ArrowFactor | None = None  # factorised normal equations at ``values``, if kept
+    system: Any = None  # linear system at ``values`` (BandedSystem | GeneralSystem), if kept
     bias_lag: float = 0.0  # baro-bias read time offset of the last solve (baro_rows)
     stop: str = "converged"  # "converged" | "max_iterations" | "no_descent"
 
@@ -119,80 +54,39 @@ class BatchResult:
     def converged(self) -> bool:
         return self.stop == "converged"
 
-
-@dataclass
-class SparsePattern:
-    """Row/column bookkeeping of GTSAM's sparse Jacobian of one graph: the pattern (entry
-    order included) is the same at every linearisation point, so it is computed once."""
-
-    i: np.ndarray
-    j: np.ndarray
-    rhs_entries: np.ndarray  # entries of the right-hand-side column
-    rhs_rows: np.ndarray
-    a_sorted: np.ndarray  # matrix entries, ordered by row
-    cols_sorted: np.ndarray  # their columns in our layout
-    indptr: np.ndarray
-    n_rows: int
+    @property
+    def solver(self) -> str:
+        return "banded" if self.layout.banded else "general"
 
 
-def sparse_pattern(lay: Layout, i: np.ndarray, j: np.ndarray) -> SparsePattern:
-    pat = lay.pattern
-    if pat is not None and np.array_equal(pat.i, i) and np.array_equal(pat.j, j):
-        return pat
-    if int(j.max()) != lay.n_cols:
-        raise RuntimeError("graph: linearised C++ graph does not cover the expected variables")
-    is_b = j == lay.n_cols
-    nrow = int(i.max()) + 1
-    a = np.flatnonzero(~is_b)
-    order = np.argsort(i[a], kind="stable")
-    pat = SparsePattern(i, j, np.flatnonzero(is_b), i[is_b], a[order],
-                         lay.g2m[j[a[order]]],
-                         np.r_[0, np.cumsum(np.bincount(i[a], minlength=nrow))], nrow)
-    lay.pattern = pat
-    return pat
+def batch_layout(P: Problem, graph: Any, vals: Any) -> Layout:
+    """Column layout from the keys of the graph (``layout.make_layout``)."""
+    return make_layout(P.n_kf, P.drive.baro is not None, graph.keyVector(), vals.dims())
 
 
-def normal_equations(P: Problem, lay: Layout, graph: Any, vals: Any,
-                      rows: gf.IntervalRows) -> tuple[Any, ...]:
-    """Arrow-form normal equations of the C++ factors (GTSAM linearisation, sparse Jacobian)
-    plus the interval terms (per-interval information blocks)."""
-    gfg = graph.linearize(vals)
-    sj = gfg.sparseJacobian_()
-    pat = sparse_pattern(lay, sj[0].astype(np.int64) - 1, sj[1].astype(np.int64) - 1)
-    v = sj[2]
-    b = np.zeros(pat.n_rows)
-    b[pat.rhs_rows] = v[pat.rhs_entries]
-    # interval terms: reduced per interval to (Λ_k, η_k) (batched BLAS), added as blocks
-    groups, lam, eta, _ = gf.group_information(rows, P.n_kf - 1)
-    tc = lay.term_cols
-    return gla.assemble(lay.n_cols, lay.n_band, lay.bandwidth, pat.indptr, pat.cols_sorted,
-                        v[pat.a_sorted], b,
-                        lay.block_cols(groups), lam[:, tc[:, None], tc[None, :]], eta[:, tc])
-
-
-def factorize(ab: FloatArray, bm: FloatArray, dm: FloatArray) -> gla.ArrowFactor:
-    """Cholesky of the normal equations; if H is numerically singular (e.g. 1 Hz averaged
-    IMU with an unobservable direction), retry with growing Marquardt damping μ·diag(H)."""
-    mu = 0.0
-    for _ in range(6):
-        try:
-            if mu == 0.0:
-                return gla.factorize(ab, bm, dm)
-            ab2 = ab.copy()
-            ab2[0] += mu * ab[0] + 1e-12
-            return gla.factorize(ab2, bm, dm + np.diag(mu * np.diag(dm) + 1e-12))
-        except gla.LinAlgError:
-            mu = 1e-9 if mu == 0.0 else mu * 100.0
-    raise RuntimeError(
-        "graph: the Gauss-Newton system stays singular even with Marquardt damping 1e-1·diag(H) "
-        "— the drive does not determine the states (check IMU rate/units and GNSS coverage)")
-
-
-def damped(ab: FloatArray, bm: FloatArray, dm: FloatArray, mu: float) -> gla.ArrowFactor:
-    """Factorisation of H + μ·diag(H) (Levenberg-Marquardt damping)."""
-    ab2 = ab.copy()
-    ab2[0] *= 1.0 + mu
-    return factorize(ab2, bm, dm + mu * np.diag(np.diag(dm)))
+def linear_system(P: Problem, lay: Layout, graph: Any, vals: Any,
+                  rows: gf.IntervalRows) -> BandedSystem | GeneralSystem:
+    """The Gauss-Newton system at ``vals``: the C++ factors linearised by GTSAM plus the
+    interval terms (per-interval information blocks). The first call decides the path
+    (``GraphConfig.solver``; "auto": banded when the structure fits, ``Layout.fits_band``)."""
+    info = interval_info(lay, rows, P.n_kf)
+    if lay.banded is None:
+        solver = P.cfg.solver
+        gfg, pat, v = linearize(lay, graph, vals)
+        fits = lay.fits_band()
+        if solver == "banded" and not fits:
+            raise ValueError(
+                "graph: solver = 'banded' but the graph does not fit the keyframe band (a "
+                "factor links keyframes more than one apart, or the added variables have more "
+                f"than {MAX_GLOBAL_DIM} dimensions); use solver = 'auto' or 'general'")
+        lay.banded = fits if solver == "auto" else solver == "banded"
+        if lay.banded:
+            return BandedSystem.build(lay, pat, v, info)
+        return GeneralSystem(lay, gfg, info)
+    if lay.banded:
+        _, pat, v = linearize(lay, graph, vals)
+        return BandedSystem.build(lay, pat, v, info)
+    return GeneralSystem(lay, graph.linearize(vals), info)
 
 
 def gn_core(P: Problem, lay: Layout, graph: Any, vals: Any, calib_of_kf: np.ndarray,
@@ -210,16 +104,14 @@ def gn_core(P: Problem, lay: Layout, graph: Any, vals: Any, calib_of_kf: np.ndar
     rows = interval_rows(P, st, pri, lag)
     cost = graph.error(vals) + 0.5 * float(rows.r @ rows.r)
     it = 0
-    fac = None
+    system = None
     mu = 0.0
     converged = False
     failed = False
     for it in range(1, P.cfg.max_iterations + 1):
         converged = False
-        ab, bm, dm, g = normal_equations(P, lay, graph, vals, rows)
-        fac = factorize(ab, bm, dm)
-        delta = fac.solve(g)
-        dec = 0.5 * float(delta @ g)  # decrease predicted by the quadratic model
+        system = linear_system(P, lay, graph, vals, rows)
+        delta, dec = system.step()  # dec: decrease predicted by the quadratic model
         if P.cfg.verbose:
             print(f"GN it {it}: predicted decrease {dec:.3g}")
         if dec < P.cfg.abs_tol:
@@ -227,12 +119,11 @@ def gn_core(P: Problem, lay: Layout, graph: Any, vals: Any, calib_of_kf: np.ndar
             # normal equations at the solution — is kept for the covariance
             converged = True
             break
-        fac = None
         if mu > 0.0:
-            delta = damped(ab, bm, dm, mu).solve(g)
+            delta = system.damped(mu)
         failed = False
         while True:
-            cand = vals.retract(lay.vector_values(delta))
+            cand = vals.retract(delta)
             st_c = states_from_values(P, cand, calib_of_kf)
             lat = float(np.median(st_c.latency))
             lag_c = lat if abs(lat - lag) > P.cfg.bias_lag_tol else lag
@@ -255,7 +146,7 @@ def gn_core(P: Problem, lay: Layout, graph: Any, vals: Any, calib_of_kf: np.ndar
             if mu > 1e3:
                 failed = True  # no descent even as a tiny gradient step: stop here
                 break
-            delta = damped(ab, bm, dm, mu).solve(g)
+            delta = system.damped(mu)
         if failed:
             if P.cfg.verbose:
                 print(f"GN it {it}: no step lowers the cost (μ > 1e3); stopping")
@@ -266,6 +157,7 @@ def gn_core(P: Problem, lay: Layout, graph: Any, vals: Any, calib_of_kf: np.ndar
                   + (f" (bias lag {lag:.4f} -> {lag_c:.4f} s)" if lag_c != lag else ""))
         cost_prev = cost
         vals, st, rows, cost = cand, st_c, rows_c, new_cost
+        system = None
         if lag_c != lag:
             lag = lag_c  # a new cost function: no convergence test on this step
             continue
@@ -273,7 +165,7 @@ def gn_core(P: Problem, lay: Layout, graph: Any, vals: Any, calib_of_kf: np.ndar
             converged = True
             break
     stop = "converged" if converged else ("no_descent" if failed else "max_iterations")
-    return BatchResult(vals, graph, cost, it, calib_of_kf, lay, rows, fac, lag, stop)
+    return BatchResult(vals, graph, cost, it, calib_of_kf, lay, rows, system, lag, stop)
 
 
 def gauss_newton(P: Problem, graph: Any, vals: Any, calib_of_kf: np.ndarray,
@@ -283,7 +175,7 @@ def gauss_newton(P: Problem, graph: Any, vals: Any, calib_of_kf: np.ndarray,
     and the problem re-solved from the current solution (≤ ``gate_rounds`` rounds).
     The residual of a fix that took part in the fit is smaller than its innovation, so the
     gate is conservative (Groves §17.3)."""
-    lay = layout(P)
+    lay = batch_layout(P, graph, vals)
     res = gn_core(P, lay, graph, vals, calib_of_kf, pri)
     if P.cfg.gnss_gate_prob <= 0:
         return res
