@@ -273,6 +273,7 @@ class GraphBatch:
                 "converged": res.converged, "stop": res.stop,
                 "warnings": solver_warnings(res, self.config),
                 "baro_bias_lag_s": res.bias_lag, "solver": res.solver,
+                "robust_weights": res.rows.weights,
                 "extra_variables": out["extra"],
                 "gnss_rejected": P.gnss_rejected, "gnss_rejected_pregate": P.g_rej_pre,
                 "gnss_rejected_postsolve": P.g_rej_post,

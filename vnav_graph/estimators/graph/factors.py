@@ -231,11 +231,18 @@ class KeyframeStates:
 @dataclass(frozen=True)
 class IntervalRows:
     """Whitened rows ``r + J δ`` of the interval terms: interval index ``k`` (M,), residual
-    ``r`` (M,) and Jacobian ``jac`` (M, 16) in the column order of this module."""
+    ``r`` (M,) and Jacobian ``jac`` (M, 19) in the column order of this module."""
 
     k: np.ndarray
     r: FloatArray
     jac: FloatArray
+    loss: float | None = None  # Σρ of the measurements when robust losses reweighted the rows
+    weights: dict | None = None  # per-measurement IRLS weights (``robust``), by type
+
+    @property
+    def cost(self) -> float:
+        """The terms' cost: Σρ under robust losses, else ½‖r‖²."""
+        return self.loss if self.loss is not None else 0.5 * float(self.r @ self.r)
 
 
 def interval_of(t_kf: FloatArray, t: FloatArray) -> np.ndarray:

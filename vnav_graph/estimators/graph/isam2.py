@@ -60,6 +60,7 @@ from .problem import (
     prior_factors,
     setup,
 )
+from .robust import reweight
 from .solve import gauss_newton
 
 # averaged low-rate IMU logs (median spacing ≥ LOW_RATE_DT, e.g. the 1 Hz phone logs): a
@@ -378,6 +379,7 @@ class GraphISAM2:
         interval k and all GNSS fixes strictly inside it, linearised at the current
         estimate."""
         has_baro = P.drive.baro is not None
+        cfg, ks = P.cfg, P.cfg.loss_threshold_sd
         j = int(seg[k])
         s_k, tau_k = (cal[j][0], cal[j][1]) if has_baro else (0.0, 0.0)
         parts = []
@@ -398,13 +400,21 @@ class GraphISAM2:
             # bias read at t_s − τd of this linearisation, as in the batch solve
             rows = gf.baro_rows(P.dense, st, bt[sel], bz[sel], pri["noise"], P.h0, P.origin,
                                 bias_lag=float(tau_k))
-            # samples whose delayed time is outside [t_k, t_k+1) are clipped into interval k
-            parts.append(gf.IntervalRows(np.full(rows.k.size, k), rows.r, rows.jac))
+            # samples whose delayed time is outside [t_k, t_k+1) are clipped into interval k;
+            # robust losses: IRLS weights at this (only) linearisation
+            rw, jw, _, _ = reweight(rows.r, rows.jac, 1, cfg.loss_baro, ks[2])
+            parts.append(gf.IntervalRows(np.full(rows.k.size, k), rw, jw))
         if g_idx.size:
-            parts.append(gf.gnss_rows(
+            rows = gf.gnss_rows(
                 P.dense, st, P.g_t[g_idx], P.g_pos[g_idx], P.g_pos_sd[g_idx],
                 None if P.g_vel is None else P.g_vel[g_idx],
-                None if P.g_vel_sd is None else P.g_vel_sd[g_idx], P.lever))
+                None if P.g_vel_sd is None else P.g_vel_sd[g_idx], P.lever)
+            n = 3 * g_idx.size  # position rows, then velocity rows
+            for sl, loss, kk in ((slice(0, n), cfg.loss_gnss_pos, ks[0]),
+                                 (slice(n, None), cfg.loss_gnss_vel, ks[1])):
+                if rows.r[sl].size:
+                    rw, jw, _, _ = reweight(rows.r[sl], rows.jac[sl], 3, loss, kk)
+                    parts.append(gf.IntervalRows(rows.k[sl], rw, jw))
         if not parts:
             return None, baro_next
         rows = gf.concat_rows(*parts)

@@ -20,6 +20,7 @@ from ...types import (
     FloatArray,
 )
 from . import factors as gf
+from .robust import check_loss, reweight, robust_noise
 
 # logging gaps: an interval whose largest IMU sample spacing exceeds
 # max(GAP_MIN_S, GAP_FACTOR × median spacing) gets random-walk factors instead of an IMU factor
@@ -81,6 +82,10 @@ class GraphConfig:
     factor couples keyframes at most one apart and the added variables are few, else GTSAM's
     sparse elimination), "banded" (error when the graph does not fit) or "general" (GTSAM
     elimination always; same solution, slower; ``layout``, ``general``).
+    loss_gnss_pos, loss_gnss_vel, loss_baro: robust loss of each measurement type, "none",
+    "huber" or "cauchy" (``robust``), with the thresholds ``loss_threshold_sd`` [σ] in that
+    order (GNSS position, GNSS velocity, baro); a GNSS fix's loss is of the Mahalanobis norm
+    of its 3-vector residual. The final weights are in ``Estimate.info["robust_weights"]``.
     gnss_gate_prob: probability of the χ² gates on GNSS fixes (0 switches gating off):
     a causal pre-gate of the GNSS height against the barometer and a post-solve gate of
     each fix's normalised position (+ velocity) residual, repeated ≤ ``gate_rounds`` times.
@@ -109,11 +114,22 @@ class GraphConfig:
     gate_rounds: int = 3
     verbose: bool = False
     solver: str = "auto"
+    loss_gnss_pos: str = "none"
+    loss_gnss_vel: str = "none"
+    loss_baro: str = "none"
+    loss_threshold_sd: tuple[float, float, float] = (2.0, 2.0, 2.0)
 
     def __post_init__(self) -> None:
         if self.solver not in ("auto", "banded", "general"):
             raise ValueError(f"GraphConfig.solver must be 'auto', 'banded' or 'general', not "
                              f"{self.solver!r}")
+        for f in ("loss_gnss_pos", "loss_gnss_vel", "loss_baro"):
+            check_loss(getattr(self, f), f)
+        if len(self.loss_threshold_sd) != 3 or not all(
+                np.isfinite(k) and k > 0 for k in self.loss_threshold_sd):
+            raise ValueError("GraphConfig.loss_threshold_sd must be three positive thresholds "
+                             "[σ] (GNSS position, GNSS velocity, baro), not "
+                             f"{self.loss_threshold_sd!r}")
 
 
 # ----------------------------------------------------------------------------------------
@@ -365,9 +381,12 @@ def prior_factors(P: Problem, r0: FloatArray, p0: FloatArray, v0: FloatArray,
 def keyframe_fix_factors(P: Problem, k: int) -> list[Any]:
     out = []
     for i in np.flatnonzero((P.g_kf == k) & P.g_use):
-        out.append(gtsam.GPSFactorArm(X(k), P.g_pos[i], P.lever, noise(P.g_pos_sd[i])))
+        cfg = P.cfg
+        out.append(gtsam.GPSFactorArm(X(k), P.g_pos[i], P.lever, robust_noise(
+            noise(P.g_pos_sd[i]), cfg.loss_gnss_pos, cfg.loss_threshold_sd[0])))
         if P.g_vel is not None and P.g_vel_sd is not None and not np.any(P.lever):
-            out.append(gtsam.PriorFactorVector(V(k), P.g_vel[i], noise(P.g_vel_sd[i])))
+            out.append(gtsam.PriorFactorVector(V(k), P.g_vel[i], robust_noise(
+                noise(P.g_vel_sd[i]), cfg.loss_gnss_vel, cfg.loss_threshold_sd[1])))
     return out
 
 
@@ -483,18 +502,40 @@ def gnss_rows_of(P: Problem, st: gf.KeyframeStates, idx: np.ndarray) -> gf.Inter
 
 
 def interval_rows(P: Problem, st: gf.KeyframeStates, pri: dict[str, float],
-                   bias_lag: float) -> gf.IntervalRows:
-    """Baro and GNSS interval rows; ``bias_lag``: see ``factors.baro_rows``."""
+                  bias_lag: float) -> gf.IntervalRows:
+    """Baro and GNSS interval rows; ``bias_lag``: see ``factors.baro_rows``. Under robust
+    losses (``GraphConfig.loss_*``) the rows are reweighted (IRLS, ``robust.reweight``),
+    ``loss`` holds Σρ and ``weights`` the weight of every sample and fix."""
+    cfg = P.cfg
+    k_baro, k_pos, k_vel = (cfg.loss_threshold_sd[2], cfg.loss_threshold_sd[0],
+                            cfg.loss_threshold_sd[1])
     parts = []
+    loss = 0.0
+    weights: dict[str, Any] = {}
     if P.drive.baro is not None:
         bt = P.drive.baro.t
         m = (bt >= P.t_kf[0]) & (bt <= P.t_kf[-1])
-        parts.append(gf.baro_rows(P.dense, st, bt[m], P.drive.baro.altitude[m], pri["noise"],
-                                  P.h0, P.origin, bias_lag=bias_lag))
+        rows = gf.baro_rows(P.dense, st, bt[m], P.drive.baro.altitude[m], pri["noise"],
+                            P.h0, P.origin, bias_lag=bias_lag)
+        r, j, w, rho = reweight(rows.r, rows.jac, 1, cfg.loss_baro, k_baro)
+        parts.append(gf.IntervalRows(rows.k, r, j))
+        loss += rho
+        weights.update(baro_t=bt[m], baro=w)
     idx = gnss_batch_idx(P)
     if idx.size:
-        parts.append(gnss_rows_of(P, st, idx))
-    return gf.concat_rows(*parts)
+        rows = gnss_rows_of(P, st, idx)
+        n = 3 * idx.size  # position rows (fix-major, 3 per fix), then velocity rows
+        r, j, w, rho = reweight(rows.r[:n], rows.jac[:n], 3, cfg.loss_gnss_pos, k_pos)
+        parts.append(gf.IntervalRows(rows.k[:n], r, j))
+        loss += rho
+        weights.update(gnss_t=P.g_t[idx], gnss_pos=w, gnss_vel=None)
+        if rows.r.size > n:
+            r, j, w, rho = reweight(rows.r[n:], rows.jac[n:], 3, cfg.loss_gnss_vel, k_vel)
+            parts.append(gf.IntervalRows(rows.k[n:], r, j))
+            loss += rho
+            weights["gnss_vel"] = w
+    out = gf.concat_rows(*parts)
+    return gf.IntervalRows(out.k, out.r, out.jac, loss, weights)
 
 
 def gnss_chi2(P: Problem, st: gf.KeyframeStates, idx: np.ndarray) -> tuple[FloatArray, int]:

@@ -102,7 +102,7 @@ def gn_core(P: Problem, lay: Layout, graph: Any, vals: Any, calib_of_kf: np.ndar
     # along τd (factors.baro_rows); λ follows τd when they drift > bias_lag_tol apart
     lag = float(np.median(st.latency))
     rows = interval_rows(P, st, pri, lag)
-    cost = graph.error(vals) + 0.5 * float(rows.r @ rows.r)
+    cost = graph.error(vals) + rows.cost
     it = 0
     system = None
     mu = 0.0
@@ -128,14 +128,13 @@ def gn_core(P: Problem, lay: Layout, graph: Any, vals: Any, calib_of_kf: np.ndar
             lat = float(np.median(st_c.latency))
             lag_c = lat if abs(lat - lag) > P.cfg.bias_lag_tol else lag
             rows_c = interval_rows(P, st_c, pri, lag_c)
-            new_cost = graph.error(cand) + 0.5 * float(rows_c.r @ rows_c.r)
+            new_cost = graph.error(cand) + rows_c.cost
             ref = cost
             if lag_c != lag and new_cost > cost:
                 # λ moved with τd: a slightly different cost function — compare the
                 # candidate with the current point under the new λ (rare: early iterations
                 # gain far more than the ≈ 10 that moving λ by tens of ms changes)
-                r_ref = interval_rows(P, st, pri, lag_c).r
-                ref = graph.error(vals) + 0.5 * float(r_ref @ r_ref)
+                ref = graph.error(vals) + interval_rows(P, st, pri, lag_c).cost
             if new_cost <= ref * (1 + 1e-12):
                 mu = 0.0 if mu <= 1e-6 else mu / 10.0
                 break
