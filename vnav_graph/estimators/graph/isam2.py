@@ -143,6 +143,71 @@ def _threshold_map(cfg: GraphConfig) -> Any:
     return m
 
 
+def _info(P: Any, cfg: GraphConfig, res: Any, out: dict[str, Any], upd_ms: Any, brk: Any,
+          robust: bool, fallback: str | None, times: dict[str, float],
+          isam_k: list[float] | None, n_seg: int, name: str) -> dict[str, Any]:
+    """``Estimate.info`` of graph-isam2."""
+    return {
+        "keyframes": P.n_kf, "iterations_final": res.iterations,
+        "converged_final": res.converged, "stop_final": res.stop,
+        "gnss_rejected": P.gnss_rejected, "gnss_rejected_pregate": P.g_rej_pre,
+        "gnss_rejected_postsolve": P.g_rej_post,
+        "observability": out["observability"],
+        "update_ms": upd_ms,
+        "update_breakdown": brk,
+        "update_p50_ms": float(np.percentile(upd_ms, 50)) if upd_ms.size else 0.0,
+        "update_p99_ms": float(np.percentile(upd_ms, 99)) if upd_ms.size else 0.0,
+        **times,
+        "isam2_last_segment_calibration": isam_k,
+        "segments": n_seg,
+        "isam2_fallback": fallback,
+        "warnings": solver_warnings(res, cfg, "final smoothing pass", name)
+        + ([] if fallback is None else [
+            f"iSAM2 update failed and was retried with dogleg ({fallback})"]),
+        "isam2_settings": {"keyframe_dt": cfg.keyframe_dt, "dogleg": robust,
+                           "relinearize_skip": cfg.relinearize_skip,
+                           "relinearize_typed": cfg.relinearize_typed,
+                           "relinearize_threshold": cfg.relinearize_threshold},
+    }
+
+
+def _first_keyframe(P: Any, r0: Any, p0: Any, v0: Any, k0: Any) -> tuple[Any, Any]:
+    """Factors (priors, fixes) and values of keyframe 0 for the first iSAM2 update."""
+    graph0 = prior_factors(P, r0, p0, v0, P.pri, K(0))
+    vals0 = gtsam.Values()
+    vals0.insert(X(0), gtsam.Pose3(gtsam.Rot3(r0), p0))
+    vals0.insert(V(0), v0)
+    vals0.insert(B(0), gtsam.imuBias.ConstantBias())
+    if P.drive.baro is not None:
+        vals0.insert(C(0), np.zeros(1))
+        vals0.insert(K(0), k0)
+    for f in keyframe_fix_factors(P, 0):
+        graph0.add(f)
+    return graph0, vals0
+
+
+def _isam2_params(cfg: GraphConfig, robust: bool) -> Any:
+    """ISAM2Params of one pass: typed relinearisation thresholds, Gauss-Newton (or, for the
+    robust retry, dogleg) with the configured wildfire threshold, QR factorisation."""
+    params = gtsam.ISAM2Params()
+    params.setRelinearizeThreshold(_threshold_map(cfg))
+    params.relinearizeSkip = cfg.relinearize_skip
+    params.enableRelinearization = cfg.relinearize_threshold > 0
+    params.enablePartialRelinearizationCheck = cfg.partial_relinearization_check
+    if robust:
+        dl = gtsam.ISAM2DoglegParams()
+        if cfg.wildfire_threshold is not None:
+            dl.setWildfireThreshold(cfg.wildfire_threshold)
+        params.setOptimizationParams(dl)
+    elif cfg.wildfire_threshold is not None:
+        params.setOptimizationParams(gtsam.ISAM2GaussNewtonParams(cfg.wildfire_threshold))
+    # QR: Cholesky of the squared information failed ("indeterminate system") on
+    # hill-drives with the consumer IMU (whitened gyro-bias rows ~1e4 next to metre-level
+    # position rows); QR keeps the conditioning of the Jacobian.
+    params.setFactorization("QR")
+    return params
+
+
 class GraphISAM2:
     """``graph-isam2``: incremental iSAM2 front end + final batch smoothing pass."""
 
@@ -188,24 +253,7 @@ class GraphISAM2:
         rot_i, pos_i, vel_i = initial_states(P)
         nk = P.n_kf
         seg = _segments(P)
-        params = gtsam.ISAM2Params()
-        params.setRelinearizeThreshold(_threshold_map(cfg))
-        params.relinearizeSkip = cfg.relinearize_skip
-        params.enableRelinearization = cfg.relinearize_threshold > 0
-        params.enablePartialRelinearizationCheck = cfg.partial_relinearization_check
-        if robust:
-            dl = gtsam.ISAM2DoglegParams()
-            if cfg.wildfire_threshold is not None:
-                dl.setWildfireThreshold(cfg.wildfire_threshold)
-            params.setOptimizationParams(dl)
-        elif cfg.wildfire_threshold is not None:
-            params.setOptimizationParams(gtsam.ISAM2GaussNewtonParams(
-                cfg.wildfire_threshold))
-        # QR: Cholesky of the squared information failed ("indeterminate system") on
-        # hill-drives with the consumer IMU (whitened gyro-bias rows ~1e4 next to metre-level
-        # position rows); QR keeps the conditioning of the Jacobian.
-        params.setFactorization("QR")
-        isam = gtsam.ISAM2(params)
+        isam = gtsam.ISAM2(_isam2_params(cfg, robust))
         # running linearisation arrays (keyframe states as last estimated)
         rot = np.zeros((nk, 3, 3))
         pos = np.zeros((nk, 3))
@@ -214,17 +262,7 @@ class GraphISAM2:
         cb = np.zeros(nk)
         cal = {0: np.array([0.0, pri["tau0"]])}
         rot[0], pos[0], vel[0] = rot_i[0], pos_i[0], vel_i[0]
-        graph0 = prior_factors(P, rot[0], pos[0], vel[0], pri, K(0))
-        vals0 = gtsam.Values()
-        vals0.insert(X(0), gtsam.Pose3(gtsam.Rot3(rot[0]), pos[0]))
-        vals0.insert(V(0), vel[0])
-        vals0.insert(B(0), gtsam.imuBias.ConstantBias())
-        if has_baro:
-            vals0.insert(C(0), np.zeros(1))
-            vals0.insert(K(0), cal[0])
-        for f in keyframe_fix_factors(P, 0):
-            graph0.add(f)
-        isam.update(graph0, vals0)
+        isam.update(*_first_keyframe(P, rot[0], pos[0], vel[0], cal[0]))
         bt = drive.baro.t if has_baro else np.zeros(0)
         bz = drive.baro.altitude if has_baro else np.zeros(0)
         g_between = np.flatnonzero((P.g_kf == -1) & P.g_use)
@@ -343,29 +381,9 @@ class GraphISAM2:
         if has_baro:
             j_last = int(seg[-1])
             isam_k = est.atVector(K(j_last)).tolist()
-        info = {
-            "keyframes": nk, "iterations_final": res.iterations, "converged_final": res.converged,
-            "stop_final": res.stop,
-            "gnss_rejected": P.gnss_rejected, "gnss_rejected_pregate": P.g_rej_pre,
-            "gnss_rejected_postsolve": P.g_rej_post,
-            "observability": out["observability"],
-            "update_ms": upd_ms,
-            "update_breakdown": brk,
-            "update_p50_ms": float(np.percentile(upd_ms, 50)) if upd_ms.size else 0.0,
-            "update_p99_ms": float(np.percentile(upd_ms, 99)) if upd_ms.size else 0.0,
-            "online_s": t_online - t_start,
-            "final_smoothing_s": t_final - t_online,
-            "isam2_last_segment_calibration": isam_k,
-            "segments": int(seg[-1]) + 1,
-            "isam2_fallback": fallback,
-            "warnings": solver_warnings(res, cfg, "final smoothing pass", self.name)
-            + ([] if fallback is None else [
-                f"iSAM2 update failed and was retried with dogleg ({fallback})"]),
-            "isam2_settings": {"keyframe_dt": cfg.keyframe_dt, "dogleg": robust,
-                               "relinearize_skip": cfg.relinearize_skip,
-                               "relinearize_typed": cfg.relinearize_typed,
-                               "relinearize_threshold": cfg.relinearize_threshold},
-        }
+        info = _info(P, cfg, res, out, upd_ms, brk, robust, fallback,
+                     {"online_s": t_online - t_start, "final_smoothing_s": t_final - t_online},
+                     isam_k, int(seg[-1]) + 1, self.name)
         return Estimate(self.name, out["trajectory"], provides(drive), out["cov"],
                         out["t_cov"], out["baro"], time.perf_counter() - t_start,
                         online=online_traj, info=info, config=self.config)
