@@ -4,7 +4,8 @@
 
 Writes ``DIR/graph_perf.json`` with exactly the keys
 ``drive_duration_s, keyframes, batch_s, builtin_floor_s, batch_over_floor, isam2_s,
-isam2_realtime_factor, isam2_update_p99_ms, ekf_s, ekf_realtime_factor, peak_rss_mb``.
+isam2_realtime_factor, isam2_update_p99_ms, ekf_s, ekf_realtime_factor, peak_rss_mb,
+general_over_floor``.
 
 - ``batch_s``: graph-batch graph construction + Gauss-Newton solve (all baro samples and
   GNSS fixes, custom terms linearised in numpy each iteration). Shared set-up (initial
@@ -15,6 +16,9 @@ isam2_realtime_factor, isam2_update_p99_ms, ekf_s, ekf_realtime_factor, peak_rss
   is fed mirrored because the graph is NED; bias only, one baro sample per keyframe, bias
   random walk as ``BetweenFactorDouble``) — only C++ factors — solved with GTSAM's
   Levenberg-Marquardt in the same run.
+- ``general_over_floor``: the same graph-batch solve (same drive, same run) with the general
+  sparse path forced (``GraphConfig(solver="general")``: GTSAM elimination of the linearised
+  graph, the interval terms as HessianFactor pieces), over ``builtin_floor_s``.
 - ``isam2_s``: the whole ``graph-isam2`` run (online pass + final smoothing + outputs);
   ``isam2_update_p99_ms``: 99th percentile of the per-keyframe online update, including the
   Python work of that keyframe (preintegration, interval linearisation).
@@ -39,7 +43,7 @@ import numpy as np
 
 KEYS = ("drive_duration_s", "keyframes", "batch_s", "builtin_floor_s", "batch_over_floor",
         "isam2_s", "isam2_realtime_factor", "isam2_update_p99_ms", "ekf_s",
-        "ekf_realtime_factor", "peak_rss_mb")
+        "ekf_realtime_factor", "peak_rss_mb", "general_over_floor")
 
 
 def builtin_floor(drive: Any) -> float:
@@ -47,14 +51,14 @@ def builtin_floor(drive: Any) -> float:
     import gtsam
     from gtsam.symbol_shorthand import B, C, V, X
 
-    from vnav_graph.estimators import graph as g
+    from vnav_graph.estimators.graph import init, problem
     from vnav_graph.geo.atmosphere import isa_pressure
 
-    cfg = g.GraphConfig()
-    P = g._setup(drive, cfg)
-    pri = g._baro_priors(P.baro_spec)
-    rot, pos, vel = g._initial_states(P)
-    pims = g._pims_for(P, rot, pos)
+    cfg = problem.GraphConfig()
+    P = problem.setup(drive, cfg)
+    pri = P.pri
+    rot, pos, vel = init.initial_states(P)
+    pims = problem.pims_for(P, rot, pos)
     bt = drive.baro.t
     alt = drive.baro.altitude
     j = np.clip(np.searchsorted(bt, P.t_kf), 0, bt.size - 1)
@@ -62,14 +66,14 @@ def builtin_floor(drive: Any) -> float:
     graph = gtsam.NonlinearFactorGraph()
     s = P.imu_spec
     graph.add(gtsam.PriorFactorPose3(X(0), gtsam.Pose3(gtsam.Rot3(rot[0]), pos[0]),
-                                     g._noise([0.05, 0.05, 0.5, 10.0, 10.0, 10.0])))
-    graph.add(gtsam.PriorFactorVector(V(0), vel[0], g._noise([2.0] * 3)))
+                                     problem.noise([0.05, 0.05, 0.5, 10.0, 10.0, 10.0])))
+    graph.add(gtsam.PriorFactorVector(V(0), vel[0], problem.noise([2.0] * 3)))
     graph.add(gtsam.PriorFactorConstantBias(
         B(0), gtsam.imuBias.ConstantBias(),
-        g._noise([max(s.accel_bias_sd, 1e-4)] * 3 + [max(s.gyro_bias_sd, 1e-6)] * 3)))
-    graph.add(gtsam.PriorFactorDouble(C(0), 0.0, g._noise([pri["b_sd"]])))
+        problem.noise([max(s.accel_bias_sd, 1e-4)] * 3 + [max(s.gyro_bias_sd, 1e-6)] * 3)))
+    graph.add(gtsam.PriorFactorDouble(C(0), 0.0, problem.noise([pri["b_sd"]])))
     vals = gtsam.Values()
-    baro_noise = g._noise([pri["noise"]])
+    baro_noise = problem.noise([pri["noise"]])
     # NED graph, +z-up factor: feed the pressure of the mirrored height −(h − h0)
     p_kpa = isa_pressure(-(alt[j] - P.h0)) / 1000.0
     for k in range(P.n_kf):
@@ -77,7 +81,7 @@ def builtin_floor(drive: Any) -> float:
         vals.insert(V(k), vel[k])
         vals.insert(B(k), gtsam.imuBias.ConstantBias())
         vals.insert(C(k), 0.0)
-        for f in g._keyframe_fix_factors(P, k):
+        for f in problem.keyframe_fix_factors(P, k):
             graph.add(f)
         graph.add(gtsam.BarometricFactor(X(k), C(k), float(p_kpa[k]), baro_noise))
         if k + 1 < P.n_kf:
@@ -85,7 +89,7 @@ def builtin_floor(drive: Any) -> float:
                                               pims[k]))
             dt = float(P.t_kf[k + 1] - P.t_kf[k])
             graph.add(gtsam.BetweenFactorDouble(
-                C(k), C(k + 1), 0.0, g._noise([pri["b_sd"] * np.sqrt(2 * dt / pri["b_tau"])])))
+                C(k), C(k + 1), 0.0, problem.noise([pri["b_sd"] * np.sqrt(2 * dt / pri["b_tau"])])))
     params = gtsam.LevenbergMarquardtParams()
     params.setRelativeErrorTol(1e-9)
     params.setMaxIterations(50)
@@ -113,7 +117,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     ap.add_argument("--out", required=True, type=Path)
     ap.add_argument("--seed", type=int, default=0)
     a = ap.parse_args(argv)
-    from vnav_graph.estimators.graph import GraphBatch, GraphISAM2
+    from vnav_graph.estimators.graph import GraphBatch, GraphConfig, GraphISAM2
     from vnav_graph.simulation.scenario import simulate
 
     duration = 600.0 if a.quick else 3600.0
@@ -121,10 +125,13 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     # a one-off cost that the C++-only floor does not have
     warm = simulate("hill-drive", a.seed, duration_s=60.0, imu_rate_hz=200.0)
     GraphBatch().run(warm)
+    GraphBatch(GraphConfig(solver="general")).run(warm)
     GraphISAM2().run(warm)
     drive = simulate("hill-drive", a.seed, duration_s=duration, imu_rate_hz=200.0)
     eb = GraphBatch().run(drive)
     batch_s = float(eb.info["timing_s"]["solve"])
+    eg = GraphBatch(GraphConfig(solver="general")).run(drive)
+    general_s = float(eg.info["timing_s"]["solve"])
     floor_s = builtin_floor(drive)
     ei = GraphISAM2().run(drive)
     ekf_s, ekf_rf = ekf_timing(duration, 200.0)
@@ -140,13 +147,16 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         "ekf_s": ekf_s,
         "ekf_realtime_factor": ekf_rf,
         "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+        "general_over_floor": general_s / floor_s,
     }
     assert tuple(out) == KEYS
     a.out.mkdir(parents=True, exist_ok=True)
     (a.out / "graph_perf.json").write_text(json.dumps(out, indent=2) + "\n")
     print(json.dumps(out, indent=2))
     print(f"graph-batch full run {eb.runtime_s:.1f} s (timing {eb.info['timing_s']}), "
-          f"GN iterations {eb.info['iterations']}; isam2 online {ei.info['online_s']:.1f} s, "
+          f"GN iterations {eb.info['iterations']}; general path: solve {general_s:.2f} s, "
+          f"full run {eg.runtime_s:.1f} s, {eg.info['iterations']} iterations; "
+          f"isam2 online {ei.info['online_s']:.1f} s, "
           f"final smoothing {ei.info['final_smoothing_s']:.1f} s, "
           f"p50 {ei.info['update_p50_ms']:.1f} ms", file=sys.stderr)
     return out

@@ -134,7 +134,7 @@ def test_imu_logging_gap_is_bridged_not_preintegrated(monkeypatch):
     gap factors, not by a CombinedImuFactor built from the one sample pair spanning it.
     Measured on this drive: altitude RMSE 0.11 m with gap factors, 0.35 m with the IMU factor
     across the gap (the old batch behaviour, reproduced here by hiding the gap)."""
-    from vnav_graph.estimators import graph_problem as gp
+    from vnav_graph.estimators.graph import problem as gp
     from vnav_graph.evaluation.metrics import errors_vs_truth
     from vnav_graph.types import ImuStream
 

@@ -68,8 +68,9 @@ from gtsam.symbol_shorthand import B, V, X
 
 from vnav_graph.config import IMU_PRESETS
 from vnav_graph.estimators import graph as g
-from vnav_graph.estimators import graph_factors as gf
 from vnav_graph.estimators.ekf import EKFRTS
+from vnav_graph.estimators.graph import factors as gf
+from vnav_graph.estimators.graph import problem as gp
 from vnav_graph.evaluation.metrics import errors_vs_truth
 from vnav_graph.geo.earth import gravity
 from vnav_graph.geo.frames import lla_to_ned, quat_to_mat
@@ -153,7 +154,7 @@ class VerticalProblem:
         self.t_kf = t_kf = imu.t[kf_idx]
         nk = t_kf.size
         self.T = np.diff(t_kf)
-        self.pri = g._baro_priors(drive.baro.spec)
+        self.pri = gp.setup(drive, gp.GraphConfig()).pri
         on = np.isin(est.trajectory.t, t_kf)
         assert on.sum() == nk, "keyframe epochs must be output epochs"
         tr = est.trajectory

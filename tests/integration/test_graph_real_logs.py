@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from vnav_graph.estimators import graph as g
-from vnav_graph.estimators import graph_isam2 as gi
+from vnav_graph.estimators.graph import isam2 as gi
+from vnav_graph.estimators.graph import problem as gp
 from vnav_graph.evaluation.holdout import run_holdout
 
 LOITER = "erle_pxf_loiter_rtl/Loiter_RTL.bin"
@@ -27,14 +27,14 @@ def _load(data_dir: Path, rel: str):  # noqa: ANN202
 
 def test_loiter_gap_detected(data_dir: Path) -> None:
     d = _load(data_dir, LOITER)
-    P = g._setup(d, g.GraphConfig())
-    gap = g.imu_gaps(d.imu.t, P.kf_idx)
+    P = gp.setup(d, gp.GraphConfig())
+    gap = gp.imu_gaps(d.imu.t, P.kf_idx)
     # the log has exactly one IMU logging gap (after the crash), 24.09 s long
     k = np.flatnonzero(gap)
     assert k.size == 1
     j0, j1 = P.kf_idx[k[0]], P.kf_idx[k[0] + 1]
     assert np.max(np.diff(d.imu.t[j0:j1 + 1])) == pytest.approx(24.094, abs=1e-3)
-    msg = str(gi._update_error(P, int(k[0]), RuntimeError(""), True))
+    msg = str(gi.update_error(P, int(k[0]), RuntimeError(""), True))
     # the message names keyframe, time and cause instead of GTSAM's empty text
     assert f"keyframe {k[0] + 1}" in msg
     assert f"t = {P.t_kf[k[0] + 1]:.2f} s" in msg

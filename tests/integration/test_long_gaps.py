@@ -10,8 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from vnav_graph.estimators.graph import GraphBatch
-from vnav_graph.estimators.graph_isam2 import GraphISAM2
+from vnav_graph.estimators.graph import GraphBatch, GraphISAM2
 from vnav_graph.evaluation.metrics import errors_vs_truth
 from vnav_graph.simulation import simulate
 from vnav_graph.types import ImuStream

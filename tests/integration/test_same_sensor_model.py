@@ -17,9 +17,11 @@ import numpy as np
 import pytest
 
 from vnav_graph.estimators import ekf_model as km
-from vnav_graph.estimators import graph as graph_mod
 from vnav_graph.estimators import vekf7 as vekf7_mod
 from vnav_graph.estimators.base import create
+from vnav_graph.estimators.graph import batch as batch_mod
+from vnav_graph.estimators.graph import isam2 as isam2_mod
+from vnav_graph.estimators.graph import problem as problem_mod
 from vnav_graph.nav.gaps import gap_threshold
 from vnav_graph.simulation import simulate
 
@@ -75,18 +77,18 @@ def _ekf_used(drive, name: str, monkeypatch: pytest.MonkeyPatch) -> dict:
 
 def _graph_used(drive, name: str, monkeypatch: pytest.MonkeyPatch) -> dict:
     got: dict = {}
-    orig = graph_mod._setup
+    orig = problem_mod.setup
 
     def capture(d, cfg):
         got["P"] = orig(d, cfg)
         raise _Stop
 
-    monkeypatch.setattr(graph_mod, "_setup", capture)
+    monkeypatch.setattr(batch_mod if name == "graph-batch" else isam2_mod, "setup", capture)
     with pytest.raises(_Stop):
         create(name).run(drive)
     monkeypatch.undo()
     P = got["P"]
-    pri = graph_mod._baro_priors(P.baro_spec)
+    pri = P.pri
     spec = P.imu_spec
     return {
         "accel_nd": float(np.sqrt(P.params.getAccelerometerCovariance()[0, 0])),
@@ -95,7 +97,7 @@ def _graph_used(drive, name: str, monkeypatch: pytest.MonkeyPatch) -> dict:
         "bias_tau": (spec.gyro_bias_tau, spec.accel_bias_tau, pri["b_tau"]),
         "baro": (pri["s_sd"], pri["tau0"], pri["tau_sd"], pri["b_sd"], pri["noise"]),
         "gnss_pos_sd": P.g_pos_sd, "gnss_vel_sd": P.g_vel_sd,
-        "gap_intervals": np.flatnonzero(graph_mod.imu_gaps(drive.imu.t, P.kf_idx)),
+        "gap_intervals": np.flatnonzero(problem_mod.imu_gaps(drive.imu.t, P.kf_idx)),
         "kf_idx": P.kf_idx,
     }
 

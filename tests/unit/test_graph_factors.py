@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from vnav_graph.estimators import graph_factors as gf
+from vnav_graph.estimators.graph import factors as gf
 from vnav_graph.geo.earth import gravity
 from vnav_graph.geo.frames import lla_to_ned, ned_to_lla
 

@@ -24,7 +24,7 @@ The section names the estimator, not its config class: ``[graph-batch]`` and
 ``[graph-isam2]`` are set independently although both take a ``GraphConfig``. A section for
 an extension estimator (``--plugin``) works the same when that estimator has a dataclass
 ``config`` attribute. Note that ``graph-isam2`` applies its low-IMU-rate settings only to its
-default config (``graph_isam2.LOW_RATE_SETTINGS``); any ``[graph-isam2]`` section turns that off.
+default config (``graph.isam2.LOW_RATE_SETTINGS``); any ``[graph-isam2]`` section turns that off.
 """
 
 from __future__ import annotations

@@ -1,28 +1,29 @@
 """Problem set-up of the factor-graph smoothers: configuration, GNSS pre-gate, priors, the
 C++ factors (IMU preintegration, Gauss-Markov baro-bias chain) and the interval rows of the
-custom baro/GNSS terms at a linearisation point. Used by ``graph`` (batch) and ``graph_isam2``."""
+custom baro/GNSS terms at a linearisation point. Used by ``batch``, ``solve`` and ``isam2``."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import B, C, K, V, X
 
-from ..config import REAL_LOG_BARO, BaroSpec, ImuSpec
-from ..geo.earth import gravity
-from ..nav.gaps import GAP_ACCEL_SD, cv_bridge_noise
-from ..nav.gaps import imu_gaps as nav_imu_gaps
-from ..nav.levelling import coarse_level
-from ..nav.sensor_model import BaroPrior, baro_prior, sensor_model
-from ..sensors.noise import gm_process_var, gm_transition
-from ..types import (
+from ...config import REAL_LOG_BARO, BaroSpec, ImuSpec
+from ...geo.earth import gravity
+from ...nav.gaps import GAP_ACCEL_SD, cv_bridge_noise
+from ...nav.gaps import imu_gaps as nav_imu_gaps
+from ...nav.levelling import coarse_level
+from ...nav.sensor_model import BaroPrior, baro_prior, sensor_model
+from ...sensors.noise import gm_process_var, gm_transition
+from ...types import (
     Drive,
     FloatArray,
 )
-from . import graph_factors as gf
+from . import factors as gf
+from .robust import check_loss, reweight, robust_noise
 
 # logging gaps (the shared rule of nav.gaps): an interval containing one gets random-walk
 # factors instead of an IMU factor, with the shared unknown-acceleration PSD GAP_ACCEL_SD²
@@ -58,7 +59,7 @@ class GraphConfig:
     used until session 4 left it unconverged with a −26 % scale and 23 wrongly gated fixes;
     ``info["converged"]`` says whether the cap was hit); bias_lag_tol [s]: the baro bias is read at
     t_s − λ, λ the latency at the start of the solve, re-set when τd moves further than this
-    (``graph_factors.baro_rows``);
+    (``factors.baro_rows``);
     output_rate_hz: rate of the output trajectory (interpolated between keyframes with the
     IMU-shaped interpolant); cov_epochs: maximum number of keyframes with an 18×18 covariance;
     gravity_correction / coriolis: tangent-frame corrections (off only for studies);
@@ -73,6 +74,14 @@ class GraphConfig:
     back-substitution threshold (None: GTSAM's 1e-3); see ``docs/graph.md`` for the measured
     per-update latencies; final_batch: run the batch solver after the incremental pass to
     produce the smoothed trajectory.
+    solver: linear algebra of the batch solve — "auto" (the banded-arrow fast path when every
+    factor couples keyframes at most one apart and the added variables are few, else GTSAM's
+    sparse elimination), "banded" (error when the graph does not fit) or "general" (GTSAM
+    elimination always; same solution, slower; ``layout``, ``general``).
+    loss_gnss_pos, loss_gnss_vel, loss_baro: robust loss of each measurement type, "none",
+    "huber" or "cauchy" (``robust``), with the thresholds ``loss_threshold_sd`` [σ] in that
+    order (GNSS position, GNSS velocity, baro); a GNSS fix's loss is of the Mahalanobis norm
+    of its 3-vector residual. The final weights are in ``Estimate.info["robust_weights"]``.
     gnss_gate_prob: probability of the χ² gates on GNSS fixes (0 switches gating off):
     a causal pre-gate of the GNSS height against the barometer and a post-solve gate of
     each fix's normalised position (+ velocity) residual, repeated ≤ ``gate_rounds`` times.
@@ -100,6 +109,23 @@ class GraphConfig:
     gnss_gate_prob: float = 0.9999
     gate_rounds: int = 3
     verbose: bool = False
+    solver: str = "auto"
+    loss_gnss_pos: str = "none"
+    loss_gnss_vel: str = "none"
+    loss_baro: str = "none"
+    loss_threshold_sd: tuple[float, float, float] = (2.0, 2.0, 2.0)
+
+    def __post_init__(self) -> None:
+        if self.solver not in ("auto", "banded", "general"):
+            raise ValueError(f"GraphConfig.solver must be 'auto', 'banded' or 'general', not "
+                             f"{self.solver!r}")
+        for f in ("loss_gnss_pos", "loss_gnss_vel", "loss_baro"):
+            check_loss(getattr(self, f), f)
+        if len(self.loss_threshold_sd) != 3 or not all(
+                np.isfinite(k) and k > 0 for k in self.loss_threshold_sd):
+            raise ValueError("GraphConfig.loss_threshold_sd must be three positive thresholds "
+                             "[σ] (GNSS position, GNSS velocity, baro), not "
+                             f"{self.loss_threshold_sd!r}")
 
 
 # ----------------------------------------------------------------------------------------
@@ -107,7 +133,7 @@ class GraphConfig:
 
 
 @dataclass
-class _Problem:
+class Problem:
     drive: Drive
     cfg: GraphConfig
     origin: FloatArray
@@ -131,7 +157,8 @@ class _Problem:
     g_use: np.ndarray  # fixes not rejected by the gates (bool)
     g_rej_pre: int = 0  # rejected by the baro-consistency pre-gate
     g_rej_post: int = 0  # rejected by the post-solve residual gate
-    g_incr: Any = None  # (fix indices, dense increments at them), see _gnss_rows_of
+    g_incr: Any = None  # (fix indices, dense increments at them), see gnss_rows_of
+    pri: dict[str, float] = field(default_factory=dict)  # baro priors (_baro_priors)
 
     @property
     def gnss_rejected(self) -> int:
@@ -146,7 +173,7 @@ def _floor(x: float, lo: float) -> float:
     return float(max(x, lo))
 
 
-def _setup(drive: Drive, cfg: GraphConfig) -> _Problem:
+def setup(drive: Drive, cfg: GraphConfig) -> Problem:
     imu = drive.imu
     origin = np.asarray(drive.origin_lla, float)
     h0 = float(origin[2])
@@ -184,11 +211,12 @@ def _setup(drive: Drive, cfg: GraphConfig) -> _Problem:
                         cfg.gnss_gate_prob,
                         None if gn.vel_n is None else gn.vel_n[:, 2],
                         None if gn.vel_sd is None else gn.vel_sd[:, 2])
-    P = _Problem(drive, cfg, origin, h0, g0, omega_t, kf_idx, t_kf, dense, p, spec, bspec,
-                 gn.t, pos, model.gnss_pos_sd, vel, model.gnss_vel_sd,
-                 np.asarray(gn.lever_arm_b, float),
+    P = Problem(drive, cfg, origin, h0, g0, omega_t, kf_idx, t_kf, dense, p, spec, bspec,
+                gn.t, pos, model.gnss_pos_sd, vel, model.gnss_vel_sd,
+                np.asarray(gn.lever_arm_b, float),
                  g_kf, use)
     P.g_rej_pre = P.gnss_rejected
+    P.pri = _baro_priors(bspec)
     if not np.any(use & inside):
         raise ValueError("graph: every GNSS fix inside the IMU span was rejected by the "
                          "baro-consistency gate")
@@ -268,14 +296,14 @@ def _baro_priors(bs: BaroSpec | BaroPrior | None) -> dict[str, float]:
             "b_sd": bp.bias_sd, "b_tau": bp.bias_tau, "noise": bp.noise_sd}
 
 
-def _gravity_delta(P: _Problem, pos: FloatArray) -> FloatArray:
+def gravity_delta(P: Problem, pos: FloatArray) -> FloatArray:
     """δg_k = g_t(p_k) − [0, 0, γ0] (K, 3) [m/s²] (zero when the correction is disabled)."""
     if not P.cfg.gravity_correction:
         return np.zeros_like(pos)
     return gf.gravity_t(pos, P.origin) - np.array([0.0, 0.0, P.g0])
 
 
-def _preintegrate(P: _Problem, k: int, r_k: FloatArray, dg_k: FloatArray,
+def preintegrate(P: Problem, k: int, r_k: FloatArray, dg_k: FloatArray,
                   bias: Any) -> Any:
     """Preintegrate interval k with midpoint samples; δg folded into the specific force:
     f' = f + (R_k ΔR_j)ᵀ δg_k."""
@@ -293,42 +321,45 @@ def _preintegrate(P: _Problem, k: int, r_k: FloatArray, dg_k: FloatArray,
     return pim
 
 
-def _noise(sd: FloatArray) -> Any:
+def noise(sd: FloatArray) -> Any:
     return gtsam.noiseModel.Diagonal.Sigmas(np.asarray(sd, dtype=float))
 
 
-def _prior_factors(P: _Problem, r0: FloatArray, p0: FloatArray, v0: FloatArray,
+def prior_factors(P: Problem, r0: FloatArray, p0: FloatArray, v0: FloatArray,
                    pri: dict[str, float], calib_key: int) -> gtsam.NonlinearFactorGraph:
     g = gtsam.NonlinearFactorGraph()
     s = P.imu_spec
     g.add(gtsam.PriorFactorPose3(X(0), gtsam.Pose3(gtsam.Rot3(r0), p0),
-                                 _noise([0.05, 0.05, 0.5, 10.0, 10.0, 10.0])))
-    g.add(gtsam.PriorFactorVector(V(0), v0, _noise([2.0, 2.0, 2.0])))
+                                 noise([0.05, 0.05, 0.5, 10.0, 10.0, 10.0])))
+    g.add(gtsam.PriorFactorVector(V(0), v0, noise([2.0, 2.0, 2.0])))
     g.add(gtsam.PriorFactorConstantBias(
         B(0), gtsam.imuBias.ConstantBias(),
-        _noise([_floor(s.accel_bias_sd, 1e-4)] * 3 + [_floor(s.gyro_bias_sd, 1e-6)] * 3)))
+        noise([_floor(s.accel_bias_sd, 1e-4)] * 3 + [_floor(s.gyro_bias_sd, 1e-6)] * 3)))
     if P.drive.baro is not None:
-        g.add(gtsam.PriorFactorVector(C(0), np.zeros(1), _noise([pri["b_sd"]])))
+        g.add(gtsam.PriorFactorVector(C(0), np.zeros(1), noise([pri["b_sd"]])))
         g.add(gtsam.PriorFactorVector(calib_key, np.array([0.0, pri["tau0"]]),
-                                      _noise([pri["s_sd"], pri["tau_sd"]])))
+                                      noise([pri["s_sd"], pri["tau_sd"]])))
     return g
 
 
-def _keyframe_fix_factors(P: _Problem, k: int) -> list[Any]:
+def keyframe_fix_factors(P: Problem, k: int) -> list[Any]:
     out = []
     for i in np.flatnonzero((P.g_kf == k) & P.g_use):
-        out.append(gtsam.GPSFactorArm(X(k), P.g_pos[i], P.lever, _noise(P.g_pos_sd[i])))
+        cfg = P.cfg
+        out.append(gtsam.GPSFactorArm(X(k), P.g_pos[i], P.lever, robust_noise(
+            noise(P.g_pos_sd[i]), cfg.loss_gnss_pos, cfg.loss_threshold_sd[0])))
         if P.g_vel is not None and P.g_vel_sd is not None and not np.any(P.lever):
-            out.append(gtsam.PriorFactorVector(V(k), P.g_vel[i], _noise(P.g_vel_sd[i])))
+            out.append(gtsam.PriorFactorVector(V(k), P.g_vel[i], robust_noise(
+                noise(P.g_vel_sd[i]), cfg.loss_gnss_vel, cfg.loss_threshold_sd[1])))
     return out
 
 
-def _gm_factor(k: int, dt: float, pri: dict[str, float]) -> Any:
+def gm_factor(k: int, dt: float, pri: dict[str, float]) -> Any:
     """Exact discrete Gauss-Markov link b_{k+1} − φ b_k = w as a (linear) C++ factor."""
     phi = float(gm_transition(dt, pri["b_tau"]))
     sd = float(np.sqrt(max(gm_process_var(dt, pri["b_tau"], pri["b_sd"]), 1e-12)))
     jf = gtsam.JacobianFactor(C(k), np.array([[-phi]]), C(k + 1), np.array([[1.0]]),
-                              np.zeros(1), _noise([sd]))
+                              np.zeros(1), noise([sd]))
     lin = gtsam.Values()
     lin.insert(C(k), np.zeros(1))
     lin.insert(C(k + 1), np.zeros(1))
@@ -336,13 +367,13 @@ def _gm_factor(k: int, dt: float, pri: dict[str, float]) -> Any:
 
 
 
-def _level(f_b: FloatArray) -> FloatArray:
+def level(f_b: FloatArray) -> FloatArray:
     """Rotation matrix of the roll/pitch from a static specific force (coarse_level), yaw 0."""
     roll, pitch = coarse_level(f_b)
     return gtsam.Rot3.Ypr(0.0, pitch, roll).matrix()
 
 
-def gap_factors(P: _Problem, k: int, rot: FloatArray, pos: FloatArray, vel: FloatArray
+def gap_factors(P: Problem, k: int, rot: FloatArray, pos: FloatArray, vel: FloatArray
                 ) -> tuple[Any, FloatArray, list[Any]]:
     """Weak factors replacing the IMU factor over a logging gap in interval k (both smoothers).
 
@@ -375,7 +406,7 @@ def gap_factors(P: _Problem, k: int, rot: FloatArray, pos: FloatArray, vel: Floa
     imu_t = P.drive.imu.t
     j0 = int(P.kf_idx[k + 1])
     j1 = max(int(np.searchsorted(imu_t, imu_t[j0] + 0.5)), j0 + 1)
-    lev = gtsam.Rot3(_level(P.drive.imu.accel_b[j0:j1].mean(axis=0))).ypr()
+    lev = gtsam.Rot3(level(P.drive.imu.accel_b[j0:j1].mean(axis=0))).ypr()
     yaw = gtsam.Rot3(rot[k]).ypr()[0]
     x1 = gtsam.Pose3(gtsam.Rot3.Ypr(yaw, lev[1], lev[2]), p1)
     var_p, _, var_v = cv_bridge_noise(GAP_ACCEL_SD**2, T)
@@ -384,10 +415,10 @@ def gap_factors(P: _Problem, k: int, rot: FloatArray, pos: FloatArray, vel: Floa
     q_b = np.r_[np.diag(bp.getBiasAccCovariance()), np.diag(bp.getBiasOmegaCovariance())]
     fs = [
         gtsam.PriorFactorPose3(X(k + 1), x1,
-                               _noise([GAP_TILT_SD, GAP_TILT_SD, GAP_YAW_SD] + [sd_p] * 3)),
-        gtsam.BetweenFactorVector(V(k), V(k + 1), np.zeros(3), _noise([np.sqrt(var_v)] * 3)),
+                               noise([GAP_TILT_SD, GAP_TILT_SD, GAP_YAW_SD] + [sd_p] * 3)),
+        gtsam.BetweenFactorVector(V(k), V(k + 1), np.zeros(3), noise([np.sqrt(var_v)] * 3)),
         gtsam.BetweenFactorConstantBias(B(k), B(k + 1), gtsam.imuBias.ConstantBias(),
-                                        _noise(np.sqrt(q_b * T))),
+                                        noise(np.sqrt(q_b * T))),
     ]
     return x1, v1, fs
 
@@ -395,7 +426,7 @@ def gap_factors(P: _Problem, k: int, rot: FloatArray, pos: FloatArray, vel: Floa
 # Interval terms → GTSAM Hessian blocks
 
 
-def _states_from_values(P: _Problem, vals: Any, calib_of_kf: np.ndarray) -> gf.KeyframeStates:
+def states_from_values(P: Problem, vals: Any, calib_of_kf: np.ndarray) -> gf.KeyframeStates:
     nk = P.n_kf
     poses = gtsam.utilities.extractPose3(vals)
     rot = poses[:, :9].reshape(nk, 3, 3)
@@ -412,18 +443,18 @@ def _states_from_values(P: _Problem, vals: Any, calib_of_kf: np.ndarray) -> gf.K
         cb = np.zeros(nk)
         s = np.zeros(nk)
         tau = np.zeros(nk)
-    dg = _gravity_delta(P, pos)
+    dg = gravity_delta(P, pos)
     acc = np.array([0.0, 0.0, P.g0]) + dg - 2 * np.cross(P.omega_t, vel)
     return gf.KeyframeStates(rot, pos, vel, ba, cb, s, tau, acc)
 
 
-def _gnss_batch_idx(P: _Problem) -> np.ndarray:
+def gnss_batch_idx(P: Problem) -> np.ndarray:
     """Fixes used by the batch: every kept fix inside the keyframe span (on keyframe epochs
     too — at τ = 0 the interpolant is exactly X_k, so the row equals GPSFactorArm's)."""
     return np.flatnonzero(P.g_use & (P.g_kf >= -1))
 
 
-def _gnss_rows_of(P: _Problem, st: gf.KeyframeStates, idx: np.ndarray) -> gf.IntervalRows:
+def gnss_rows_of(P: Problem, st: gf.KeyframeStates, idx: np.ndarray) -> gf.IntervalRows:
     t_g = P.g_t[idx]
     # the IMU increments at the fixes depend on the fix times only: cached per fix set
     if P.g_incr is None or not np.array_equal(P.g_incr[0], idx):
@@ -435,86 +466,59 @@ def _gnss_rows_of(P: _Problem, st: gf.KeyframeStates, idx: np.ndarray) -> gf.Int
         None if P.g_vel_sd is None else P.g_vel_sd[idx], P.lever, incr=P.g_incr[1])
 
 
-def _interval_rows(P: _Problem, st: gf.KeyframeStates, pri: dict[str, float],
-                   bias_lag: float) -> gf.IntervalRows:
-    """Baro and GNSS interval rows; ``bias_lag``: see ``graph_factors.baro_rows``."""
+def interval_rows(P: Problem, st: gf.KeyframeStates, pri: dict[str, float],
+                  bias_lag: float) -> gf.IntervalRows:
+    """Baro and GNSS interval rows; ``bias_lag``: see ``factors.baro_rows``. Under robust
+    losses (``GraphConfig.loss_*``) the rows are reweighted (IRLS, ``robust.reweight``),
+    ``loss`` holds Σρ and ``weights`` the weight of every sample and fix."""
+    cfg = P.cfg
+    k_baro, k_pos, k_vel = (cfg.loss_threshold_sd[2], cfg.loss_threshold_sd[0],
+                            cfg.loss_threshold_sd[1])
     parts = []
+    loss = 0.0
+    weights: dict[str, Any] = {}
     if P.drive.baro is not None:
         bt = P.drive.baro.t
         m = (bt >= P.t_kf[0]) & (bt <= P.t_kf[-1])
-        parts.append(gf.baro_rows(P.dense, st, bt[m], P.drive.baro.altitude[m], pri["noise"],
-                                  P.h0, P.origin, bias_lag=bias_lag))
-    idx = _gnss_batch_idx(P)
+        rows = gf.baro_rows(P.dense, st, bt[m], P.drive.baro.altitude[m], pri["noise"],
+                            P.h0, P.origin, bias_lag=bias_lag)
+        r, j, w, rho = reweight(rows.r, rows.jac, 1, cfg.loss_baro, k_baro)
+        parts.append(gf.IntervalRows(rows.k, r, j))
+        loss += rho
+        weights.update(baro_t=bt[m], baro=w)
+    idx = gnss_batch_idx(P)
     if idx.size:
-        parts.append(_gnss_rows_of(P, st, idx))
-    return gf.concat_rows(*parts)
+        rows = gnss_rows_of(P, st, idx)
+        n = 3 * idx.size  # position rows (fix-major, 3 per fix), then velocity rows
+        r, j, w, rho = reweight(rows.r[:n], rows.jac[:n], 3, cfg.loss_gnss_pos, k_pos)
+        parts.append(gf.IntervalRows(rows.k[:n], r, j))
+        loss += rho
+        weights.update(gnss_t=P.g_t[idx], gnss_pos=w, gnss_vel=None)
+        if rows.r.size > n:
+            r, j, w, rho = reweight(rows.r[n:], rows.jac[n:], 3, cfg.loss_gnss_vel, k_vel)
+            parts.append(gf.IntervalRows(rows.k[n:], r, j))
+            loss += rho
+            weights["gnss_vel"] = w
+    out = gf.concat_rows(*parts)
+    return gf.IntervalRows(out.k, out.r, out.jac, loss, weights)
 
 
-def _gnss_chi2(P: _Problem, st: gf.KeyframeStates, idx: np.ndarray) -> tuple[FloatArray, int]:
+def gnss_chi2(P: Problem, st: gf.KeyframeStates, idx: np.ndarray) -> tuple[FloatArray, int]:
     """χ² of each fix's whitened residual at the solution (position, + velocity when the log
     has it) and its degrees of freedom."""
-    rows = _gnss_rows_of(P, st, idx)
+    rows = gnss_rows_of(P, st, idx)
     m = idx.size
     r = rows.r.reshape(-1, m, 3)  # (1 or 2, m, 3): position rows, then velocity rows
     return np.sum(r**2, axis=(0, 2)), 3 * r.shape[0]
 
 
-def _group_keys(P: _Problem, k: int, calib_key: int) -> list[int]:
-    return [X(k), X(k + 1), C(k), C(k + 1), calib_key]
-
-
-def _hessian_pieces(keys: list[int], lam: FloatArray, eta: FloatArray,
-                    active: tuple[int, ...]) -> list[Any]:
-    """Split one group's information (16×16, η) into ≤3-key HessianFactors (pair cover)."""
-    blocks = gf.BLOCKS
-    sl = [slice(a, a + n) for a, n in blocks]
-    if len(active) <= 3:
-        trip = [tuple(active)]
-    else:
-        trip = [tr for tr in gf.PAIR_COVER]
-    owned_pair: set[tuple[int, int]] = set()
-    owned_diag: set[int] = set()
-    out = []
-    for tr in trip:
-        tr = tuple(b for b in tr if b in active)
-        gmat = {}
-        gvec = {}
-        for a_i, a in enumerate(tr):
-            gvec[a] = (eta[sl[a]] if a not in owned_diag else np.zeros(blocks[a][1]))
-            for b in tr[a_i:]:
-                if a == b:
-                    gmat[a, a] = lam[sl[a], sl[a]] if a not in owned_diag else \
-                        np.zeros((blocks[a][1],) * 2)
-                elif (a, b) in owned_pair:
-                    gmat[a, b] = np.zeros((blocks[a][1], blocks[b][1]))
-                else:
-                    gmat[a, b] = lam[sl[a], sl[b]]
-                    owned_pair.add((a, b))
-        owned_diag.update(tr)
-        kk = [keys[a] for a in tr]
-        if len(tr) == 3:
-            a, b, c = tr
-            out.append(gtsam.HessianFactor(kk[0], kk[1], kk[2], gmat[a, a], gmat[a, b],
-                                           gmat[a, c], gvec[a], gmat[b, b], gmat[b, c], gvec[b],
-                                           gmat[c, c], gvec[c], 0.0))
-        elif len(tr) == 2:
-            a, b = tr
-            out.append(gtsam.HessianFactor(kk[0], kk[1], gmat[a, a], gmat[a, b], gvec[a],
-                                           gmat[b, b], gvec[b], 0.0))
-        else:
-            (a,) = tr
-            out.append(gtsam.HessianFactor(kk[0], gmat[a, a], gvec[a], 0.0))
-    return out
-
-
-
-def _build_batch_graph(P: _Problem, rot: FloatArray, pos: FloatArray, vel: FloatArray,
+def build_batch_graph(P: Problem, rot: FloatArray, pos: FloatArray, vel: FloatArray,
                        pims: list[Any], pri: dict[str, float],
                        calib_of_kf: np.ndarray) -> tuple[Any, Any]:
     """C++ part of the batch graph: priors, CombinedImuFactors (``gap_factors`` over IMU
     logging gaps) and the Gauss-Markov links. Every GNSS fix (on keyframe epochs too) enters
     as an interval term so that the gates can drop it without rebuilding the graph."""
-    graph = _prior_factors(P, rot[0], pos[0], vel[0], pri, K(0))
+    graph = prior_factors(P, rot[0], pos[0], vel[0], pri, K(0))
     vals = gtsam.Values()
     nk = P.n_kf
     gap = imu_gaps(P.drive.imu.t, P.kf_idx)
@@ -536,16 +540,16 @@ def _build_batch_graph(P: _Problem, rot: FloatArray, pos: FloatArray, vel: Float
                 graph.add(gtsam.CombinedImuFactor(X(k), V(k), X(k + 1), V(k + 1), B(k),
                                                   B(k + 1), pims[k]))
             if P.drive.baro is not None:
-                graph.add(_gm_factor(k, float(P.t_kf[k + 1] - P.t_kf[k]), pri))
+                graph.add(gm_factor(k, float(P.t_kf[k + 1] - P.t_kf[k]), pri))
     if P.drive.baro is not None:
         for j in np.unique(calib_of_kf):
             vals.insert(K(int(j)), np.array([0.0, pri["tau0"]]))
     return graph, vals
 
 
-def _pims_for(P: _Problem, rot: FloatArray, pos: FloatArray) -> list[Any]:
-    dg = _gravity_delta(P, pos)
+def pims_for(P: Problem, rot: FloatArray, pos: FloatArray) -> list[Any]:
+    dg = gravity_delta(P, pos)
     bias0 = gtsam.imuBias.ConstantBias()
-    return [_preintegrate(P, k, rot[k], dg[k], bias0) for k in range(P.n_kf - 1)]
+    return [preintegrate(P, k, rot[k], dg[k], bias0) for k in range(P.n_kf - 1)]
 
 

@@ -23,12 +23,13 @@ O(n·w²), no dense inverse.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numba import njit
 from scipy.linalg import LinAlgError, cho_solve_banded, cholesky_banded
 
-from ..types import FloatArray
+from ...types import FloatArray
 
 
 @dataclass
@@ -215,3 +216,14 @@ def factorize(ab: FloatArray, bmat: FloatArray, dmat: FloatArray) -> ArrowFactor
         raise LinAlgError("Schur complement of the global variables is not positive "
                           "definite") from exc
     return ArrowFactor(cb, wb, np.linalg.inv(s), n)
+
+
+def single_thread_blas() -> Any:
+    """Context limiting BLAS to one thread. The solver's BLAS work is many small batched
+    products and one banded Cholesky; with OpenBLAS's default two threads on this 2-core
+    machine, one busy core made the 10-minute batch solve 0.27 → 0.34 s (ratio to the
+    single-threaded C++ floor 2.0 → 2.5), single-threaded it stayed at 0.28 s; idle, both
+    take the same time (``docs/graph.md``)."""
+    from threadpoolctl import threadpool_limits
+
+    return threadpool_limits(limits=1, user_api="blas")

@@ -1,6 +1,6 @@
-"""GTSAM factor-graph smoother: ``graph-batch`` (full batch) and ``graph-isam2`` (incremental).
+"""``graph-batch`` (full-batch GTSAM smoothing) and the outputs shared with ``graph-isam2``.
 
-The only modules that import gtsam are ``graph*.py``. Design (details and measurements in
+Only the modules of this subpackage import gtsam. Design (details and measurements in
 ``docs/graph.md``):
 
 - Frame: one Earth-fixed tangent-plane NED frame ``t`` at ``Drive.origin_lla``;
@@ -16,7 +16,7 @@ The only modules that import gtsam are ``graph*.py``. Design (details and measur
   fixes at keyframe epochs, priors, and the exact Gauss-Markov chain
   b_{k+1} = e^{−Δt/τ} b_k + w, var w = σ²(1 − e^{−2Δt/τ}) as linear factors.
 - Baro samples and GNSS fixes between keyframes: linearised in numpy, vectorised over all
-  samples (``graph_factors``), reduced to one information block per interval and added to the
+  samples (``factors``), reduced to one information block per interval and added to the
   linearised C++ graph inside our own Gauss-Newton loop (batch), or wrapped once as
   ``LinearContainerFactor`` (incremental).
 
@@ -27,14 +27,15 @@ References: Forster et al., "On-Manifold Preintegration", IEEE T-RO 2017; Kaess 
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from typing import Any
 
+import gtsam
 import numpy as np
-from gtsam.symbol_shorthand import B, K, X
+from gtsam.symbol_shorthand import B, C, K, V, X
 
-from ..geo.frames import mat_to_quat, ned_to_lla
-from ..types import (
-    ERROR_STATE,
+from ...geo.frames import mat_to_quat, ned_to_lla
+from ...types import (
     BaroEstimate,
     Drive,
     Estimate,
@@ -42,41 +43,14 @@ from ..types import (
     ParamEstimate,
     Trajectory,
 )
-from . import graph_factors as gf
-from . import graph_linalg as gla
-from .graph_init import _initial_states  # noqa: F401 (re-exported)
-
-# the problem and solver pieces live in graph_problem / graph_solve (size); graph_isam2,
-# benchmarks and tests reach them through this module
-from .graph_problem import (  # noqa: F401 (re-exported)
-    GraphConfig,
-    _baro_priors,
-    _build_batch_graph,
-    _gm_factor,
-    _gravity_delta,
-    _hessian_pieces,
-    _keyframe_fix_factors,
-    _level,
-    _noise,
-    _pims_for,
-    _preintegrate,
-    _prior_factors,
-    _Problem,
-    _setup,
-    _states_from_values,
-    gap_factors,
-    imu_gaps,
-)
-from .graph_solve import (  # noqa: F401 (re-exported)
-    _BatchResult,
-    _factorize,
-    _gauss_newton,
-    _Layout,
-    _normal_equations,
-)
+from . import factors as gf
+from .init import initial_states
+from .linalg import single_thread_blas
+from .problem import GraphConfig, Problem, build_batch_graph, pims_for, setup, states_from_values
+from .solve import BatchResult, gauss_newton, linear_system
 
 
-def _solver_warnings(res: _BatchResult, cfg: GraphConfig, what: str = "Gauss-Newton",
+def solver_warnings(res: BatchResult, cfg: GraphConfig, what: str = "Gauss-Newton",
                      estimator: str = "graph-batch") -> list[str]:
     """User-facing warning for a solve that did not converge (``info["warnings"]``)."""
     if res.stop == "max_iterations":
@@ -92,22 +66,11 @@ def _solver_warnings(res: _BatchResult, cfg: GraphConfig, what: str = "Gauss-New
     return []
 
 
-def single_thread_blas() -> Any:
-    """Context limiting BLAS to one thread. The solver's BLAS work is many small batched
-    products and one banded Cholesky; with OpenBLAS's default two threads on this 2-core
-    machine, one busy core made the 10-minute batch solve 0.27 → 0.34 s (ratio to the
-    single-threaded C++ floor 2.0 → 2.5), single-threaded it stayed at 0.28 s; idle, both
-    take the same time (``docs/graph.md``)."""
-    from threadpoolctl import threadpool_limits
-
-    return threadpool_limits(limits=1, user_api="blas")
-
-
 # ----------------------------------------------------------------------------------------
 # Outputs
 
 
-def _output_times(P: _Problem) -> FloatArray:
+def output_times(P: Problem) -> FloatArray:
     t = P.drive.imu.t
     n = max(int(round(P.cfg.output_rate_hz and (1.0 / P.cfg.output_rate_hz) / np.median(
         np.diff(t)))), 1)
@@ -116,7 +79,7 @@ def _output_times(P: _Problem) -> FloatArray:
     return t[idx]
 
 
-def _trajectory(P: _Problem, st: gf.KeyframeStates, vals: Any, t_q: FloatArray) -> Trajectory:
+def trajectory(P: Problem, st: gf.KeyframeStates, vals: Any, t_q: FloatArray) -> Trajectory:
     k = gf.interval_of(P.t_kf, t_q)
     ip = gf.interpolate(P.dense, st, t_q, k)
     lla = ned_to_lla(ip["p"], P.origin)
@@ -136,14 +99,15 @@ def _trajectory(P: _Problem, st: gf.KeyframeStates, vals: Any, t_q: FloatArray) 
     return Trajectory(t_q, lla, vel_n, q, bg, ba, bb if P.drive.baro is not None else None)
 
 
-def _cov_18(P: _Problem, fac: gla.ArrowFactor, sb: FloatArray, lay: _Layout, vals: Any,
-            k: int) -> FloatArray:
+def cov_18(P: Problem, cov_of: Any, vals: Any, k: int) -> FloatArray:
     """18×18 ERROR_STATE covariance at keyframe k from the selected inverse of the final
-    normal equations (joint marginal of X_k, V_k, B_k, C_k and the global (s, τd)).
+    normal equations (joint marginal of X_k, V_k, B_k, C_k and the global (s, τd);
+    ``cov_of``: ``layout.BandedCovariance`` or ``general.GeneralCovariance``).
 
     Pose3 tangent (ω_b, v_b): att_t = R ω_b, δp_t = R v_b; then t → local NED with C_nt.
     ConstantBias (accel, gyro) → bias_gyro 9:12, bias_accel 12:15 (body frame)."""
-    full = fac.cov_block(sb, k * lay.bs + np.arange(lay.bs))
+    keys = [X(k), V(k), B(k)] + ([C(k), K(0)] if P.drive.baro is not None else [])
+    full = cov_of.joint(keys)
     n = full.shape[0]
     r = vals.atPose3(X(k)).rotation().matrix()
     lla = ned_to_lla(vals.atPose3(X(k)).translation()[None, :], P.origin)
@@ -165,7 +129,33 @@ def _cov_18(P: _Problem, fac: gla.ArrowFactor, sb: FloatArray, lay: _Layout, val
     return cov
 
 
-def _gm_mean_prior_sd(sd: float, tau: float, dur: float) -> float:
+def value_of(vals: Any, key: int) -> list[float] | None:
+    """A variable's value as a flat list (vector, scalar, Pose3 as its 4×4 matrix, Rot3 as
+    its 3×3 matrix), None for other types."""
+    for get in ("atVector", "atDouble", "atPose3", "atRot3"):
+        try:
+            v = getattr(vals, get)(key)
+        except RuntimeError:
+            continue
+        if hasattr(v, "matrix"):
+            v = v.matrix()
+        return np.atleast_1d(np.asarray(v, float)).ravel().tolist()
+    return None
+
+
+def extra_variables(lay: Any, cov_of: Any, vals: Any) -> dict[str, dict[str, Any]]:
+    """Variables outside the keyframe template and K(0) (added by a user): value, σ of each
+    tangent component and their covariance, keyed by GTSAM's key name (e.g. "m0")."""
+    out = {}
+    for key in lay.extra_keys:
+        cov = cov_of.joint([key])
+        out[gtsam.DefaultKeyFormatter(key)] = {
+            "est": value_of(vals, key), "sd": np.sqrt(np.clip(np.diag(cov), 0, None)).tolist(),
+            "cov": cov.tolist()}
+    return out
+
+
+def gm_mean_prior_sd(sd: float, tau: float, dur: float) -> float:
     """Prior sigma of the time average of a stationary GM process over ``dur`` seconds:
     var = σ²·(2τ/D)(1 − (τ/D)(1 − e^{−D/τ}))."""
     if dur <= 0 or not np.isfinite(tau):
@@ -174,43 +164,43 @@ def _gm_mean_prior_sd(sd: float, tau: float, dur: float) -> float:
     return float(sd * np.sqrt(max(2 * x * (1 - x * (1 - np.exp(-1 / x))), 0.0)))
 
 
-def _outputs(P: _Problem, res: _BatchResult, pri: dict[str, float],
+def outputs(P: Problem, res: BatchResult, pri: dict[str, float],
              calib_key: int | None) -> dict[str, Any]:
     vals = res.values
     lay = res.layout
-    st = _states_from_values(P, vals, res.calib_of_kf)
-    traj = _trajectory(P, st, vals, _output_times(P))
-    # covariance of the final linear system: one banded factorisation + selected inversion
-    fac = res.fac
-    if fac is None:
-        ab, bm, dm, _ = _normal_equations(P, lay, res.graph, vals, res.rows)
-        fac = _factorize(ab, bm, dm)
-    sb = fac.band_inverse()
+    st = states_from_values(P, vals, res.calib_of_kf)
+    traj = trajectory(P, st, vals, output_times(P))
+    # covariance of the final linear system: banded factorisation + selected inversion, or
+    # GTSAM's marginals of the eliminated graph (general path)
+    system = res.system
+    if system is None:
+        system = linear_system(P, lay, res.graph, vals, res.rows)
+    cov_of = system.covariance()
     nk = P.n_kf
     sel = np.unique(np.linspace(0, nk - 1, min(P.cfg.cov_epochs, nk)).astype(int))
-    cov = np.array([_cov_18(P, fac, sb, lay, vals, int(k)) for k in sel])
-    out: dict[str, Any] = {"trajectory": traj, "cov": cov, "t_cov": P.t_kf[sel]}
+    cov = np.array([cov_18(P, cov_of, vals, int(k)) for k in sel])
+    out: dict[str, Any] = {"trajectory": traj, "cov": cov, "t_cov": P.t_kf[sel],
+                           "extra": extra_variables(lay, cov_of, vals)}
     if P.drive.baro is None or calib_key is None:
         out["baro"] = None
         out["observability"] = {}
         return out
     kc = vals.atVector(calib_key)
-    pk = fac.s_inv
+    pk = cov_of.joint([calib_key])
     # sigma of the time-averaged bias b̄ = (1/K) Σ b_k: uᵀ H⁻¹ u with u = 1/K on every C(k)
-    u = np.zeros(lay.n_cols)
-    u[np.arange(nk) * lay.bs + 15] = 1.0 / nk
+    u = {C(k): np.full(1, 1.0 / nk) for k in range(nk)}
     b_mean = float(np.mean(st.baro_bias))
-    hu = fac.solve(u)
-    b_var = max(float(u @ hu), 0.0)
+    hu = cov_of.solve(u, [C(k) for k in range(nk)] + [calib_key])
+    b_var = max(float(sum(float(u[key][0] * hu[key][0]) for key in u)), 0.0)
     b_sd = float(np.sqrt(b_var))
     # b is referenced to h0 (docs/design.md): at a height Δh above h0 an error δs moves it by
     # −δs·Δh, so a flight far above h0 ties b̄ to s (sortie: corr −0.995)
-    cov_sb = float(hu[lay.n_band])
+    cov_sb = float(hu[calib_key][0])
     corr_sb = cov_sb / np.sqrt(b_var * pk[0, 0]) if b_var > 0 and pk[0, 0] > 0 else 0.0
     b_sd_given_s = float(np.sqrt(max(b_var - cov_sb**2 / pk[0, 0], 0.0))) if pk[0, 0] > 0 \
         else b_sd
     dur = float(P.t_kf[-1] - P.t_kf[0])
-    b_prior = _gm_mean_prior_sd(pri["b_sd"], pri["b_tau"], dur)
+    b_prior = gm_mean_prior_sd(pri["b_sd"], pri["b_tau"], dur)
     baro = BaroEstimate(
         scale=ParamEstimate(float(kc[0]), float(np.sqrt(pk[0, 0])), pri["s_sd"]),
         latency_s=ParamEstimate(float(kc[1]), float(np.sqrt(pk[1, 1])), pri["tau_sd"]),
@@ -239,7 +229,7 @@ def _outputs(P: _Problem, res: _BatchResult, pri: dict[str, float],
 # Estimators
 
 
-def _provides(drive: Drive) -> frozenset[str]:
+def provides(drive: Drive) -> frozenset[str]:
     q = {"alt", "vel_d", "pos_h", "vel_h", "att", "cov"}
     if drive.baro is not None:
         q.add("baro")
@@ -251,8 +241,13 @@ class GraphBatch:
 
     name = "graph-batch"
 
-    def __init__(self, config: GraphConfig | None = None) -> None:
+    def __init__(self, config: GraphConfig | None = None,
+                 extend: Callable[[Problem, Any, Any], None] | None = None) -> None:
+        """``extend(problem, graph, values)``, if given, is called once the graph is built and
+        may add GTSAM factors to ``graph`` and new variables (with their priors) to ``values``
+        (provisional hook; the solve picks the general path when they do not fit the band)."""
         self.config = config or GraphConfig()
+        self.extend = extend
 
     def run(self, drive: Drive) -> Estimate:
         with single_thread_blas():
@@ -260,22 +255,26 @@ class GraphBatch:
 
     def _run(self, drive: Drive) -> Estimate:
         t0 = time.perf_counter()
-        P = _setup(drive, self.config)
-        pri = _baro_priors(P.baro_spec)
-        rot, pos, vel = _initial_states(P)
+        P = setup(drive, self.config)
+        pri = P.pri
+        rot, pos, vel = initial_states(P)
         t1 = time.perf_counter()
-        pims = _pims_for(P, rot, pos)
+        pims = pims_for(P, rot, pos)
         t2 = time.perf_counter()
         calib = np.zeros(P.n_kf, dtype=int)
-        graph, vals = _build_batch_graph(P, rot, pos, vel, pims, pri, calib)
-        res = _gauss_newton(P, graph, vals, calib, pri)
+        graph, vals = build_batch_graph(P, rot, pos, vel, pims, pri, calib)
+        if self.extend is not None:
+            self.extend(P, graph, vals)
+        res = gauss_newton(P, graph, vals, calib, pri)
         t3 = time.perf_counter()
-        out = _outputs(P, res, pri, K(0) if drive.baro is not None else None)
+        out = outputs(P, res, pri, K(0) if drive.baro is not None else None)
         t4 = time.perf_counter()
         info = {"keyframes": P.n_kf, "iterations": res.iterations, "final_cost": res.cost,
                 "converged": res.converged, "stop": res.stop,
-                "warnings": _solver_warnings(res, self.config),
-                "baro_bias_lag_s": res.bias_lag,
+                "warnings": solver_warnings(res, self.config),
+                "baro_bias_lag_s": res.bias_lag, "solver": res.solver,
+                "robust_weights": res.rows.weights,
+                "extra_variables": out["extra"],
                 "gnss_rejected": P.gnss_rejected, "gnss_rejected_pregate": P.g_rej_pre,
                 "gnss_rejected_postsolve": P.g_rej_post,
                 "observability": out["observability"],
@@ -283,23 +282,6 @@ class GraphBatch:
                              "outputs": t4 - t3},
                 "frame": "tangent-plane NED at origin; gravity-difference and Coriolis "
                          "corrections" if self.config.gravity_correction else "tangent-plane"}
-        return Estimate(self.name, out["trajectory"], _provides(drive), out["cov"],
+        return Estimate(self.name, out["trajectory"], provides(drive), out["cov"],
                         out["t_cov"], out["baro"], time.perf_counter() - t0, info=info,
                         config=self.config)
-
-
-ERROR_STATE_KEYS = tuple(ERROR_STATE)
-
-
-def __getattr__(name: str) -> Any:
-    """``GraphISAM2`` lives in graph_isam2.py (size), which imports this module; the registry
-    names graph:GraphISAM2. Resolved lazily so that either module can be imported first."""
-    if name == "GraphISAM2":
-        from .graph_isam2 import GraphISAM2
-
-        return GraphISAM2
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-__all__ = ["ERROR_STATE_KEYS", "GraphBatch", "GraphConfig", "GraphISAM2"]  # noqa: F822
-

@@ -39,11 +39,11 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from ..geo.earth import OMEGA_IE, gravity
-from ..geo.frames import lla_to_ned, ned_to_lla, skew
-from ..nav.rotations import so3_exp
-from ..sensors.baro import baro_jacobian, measure_baro
-from ..types import FloatArray
+from ...geo.earth import OMEGA_IE, gravity
+from ...geo.frames import lla_to_ned, ned_to_lla, skew
+from ...nav.rotations import so3_exp
+from ...sensors.baro import baro_jacobian, measure_baro
+from ...types import FloatArray
 
 N_COLS = 19
 N_CORE = 16  # columns of the five key blocks below (the incremental front end uses these)
@@ -231,11 +231,18 @@ class KeyframeStates:
 @dataclass(frozen=True)
 class IntervalRows:
     """Whitened rows ``r + J δ`` of the interval terms: interval index ``k`` (M,), residual
-    ``r`` (M,) and Jacobian ``jac`` (M, 16) in the column order of this module."""
+    ``r`` (M,) and Jacobian ``jac`` (M, 19) in the column order of this module."""
 
     k: np.ndarray
     r: FloatArray
     jac: FloatArray
+    loss: float | None = None  # Σρ of the measurements when robust losses reweighted the rows
+    weights: dict | None = None  # per-measurement IRLS weights (``robust``), by type
+
+    @property
+    def cost(self) -> float:
+        """The terms' cost: Σρ under robust losses, else ½‖r‖²."""
+        return self.loss if self.loss is not None else 0.5 * float(self.r @ self.r)
 
 
 def interval_of(t_kf: FloatArray, t: FloatArray) -> np.ndarray:

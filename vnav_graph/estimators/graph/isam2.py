@@ -7,7 +7,7 @@ global variable tied to every baro sample: the graph stays chain-structured, so 
 re-eliminates the cliques of the last keyframes (a global K sits in the root clique and every
 new baro term touches it — measured in ``docs/graph.md``).
 
-Baro samples and GNSS fixes between keyframes are linearised once (numpy, ``graph_factors``)
+Baro samples and GNSS fixes between keyframes are linearised once (numpy, ``factors``)
 at the current estimate when their interval is complete (one keyframe later, so that every
 delayed sample t_s − τd of the interval has arrived) and inserted as one
 ``LinearContainerFactor`` per interval — no Python callback ever runs inside iSAM2.
@@ -25,7 +25,7 @@ anyway. Measurements in ``docs/graph.md``.
 
 Outputs: ``Estimate.online`` holds what was known at each keyframe (the iSAM2 estimate of the
 newest keyframe right after its update); ``Estimate.trajectory`` is the final smoothed
-solution — the batch Gauss-Newton of ``graph.py`` (global s, τd, all terms relinearised)
+solution — the batch Gauss-Newton of ``solve`` (global s, τd, all terms relinearised)
 started from the iSAM2 estimate, so it equals ``graph-batch`` to solver tolerance.
 """
 
@@ -39,10 +39,29 @@ import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import B, C, K, V, X
 
-from ..geo.frames import mat_to_quat, ned_to_lla
-from ..types import Drive, Estimate, Trajectory
-from . import graph as g
-from . import graph_factors as gf
+from ...geo.frames import mat_to_quat, ned_to_lla
+from ...types import Drive, Estimate, Trajectory
+from . import factors as gf
+from .batch import outputs, provides, solver_warnings
+from .general import hessian_pieces
+from .init import initial_states
+from .linalg import single_thread_blas
+from .problem import (
+    GraphConfig,
+    build_batch_graph,
+    gap_factors,
+    gm_factor,
+    gravity_delta,
+    imu_gaps,
+    keyframe_fix_factors,
+    noise,
+    pims_for,
+    preintegrate,
+    prior_factors,
+    setup,
+)
+from .robust import reweight
+from .solve import gauss_newton
 
 # averaged low-rate IMU logs (median spacing ≥ LOW_RATE_DT, e.g. the 1 Hz phone logs): a
 # keyframe every sample made a 93-min log take 5563 updates (213 s online), and after its 37 s
@@ -58,7 +77,7 @@ ROBUST_SETTINGS = {"relinearize_skip": 1, "relinearize_typed": None,
 DIVERGED_SPEED = 1e4  # m/s: an online velocity above this means the solution diverged
 
 
-def _update_error(P: Any, k: int, exc: BaseException | None, gap: bool) -> RuntimeError:
+def update_error(P: Any, k: int, exc: BaseException | None, gap: bool) -> RuntimeError:
     """A RuntimeError naming the keyframe, its time and the likely cause of a failed update.
 
     GTSAM's IndeterminantLinearSystemException reaches Python with an empty or generic
@@ -110,7 +129,7 @@ def _segment_span(P: Any, seg: np.ndarray, j: int) -> float:
     return max(float(P.cfg.segment_s), t1 - t0)
 
 
-def _threshold_map(cfg: g.GraphConfig) -> Any:
+def _threshold_map(cfg: GraphConfig) -> Any:
     """Per-variable-type relinearisation thresholds (tangent-space components)."""
     if cfg.relinearize_typed is None:
         return cfg.relinearize_threshold
@@ -124,13 +143,78 @@ def _threshold_map(cfg: g.GraphConfig) -> Any:
     return m
 
 
+def _info(P: Any, cfg: GraphConfig, res: Any, out: dict[str, Any], upd_ms: Any, brk: Any,
+          robust: bool, fallback: str | None, times: dict[str, float],
+          isam_k: list[float] | None, n_seg: int, name: str) -> dict[str, Any]:
+    """``Estimate.info`` of graph-isam2."""
+    return {
+        "keyframes": P.n_kf, "iterations_final": res.iterations,
+        "converged_final": res.converged, "stop_final": res.stop,
+        "gnss_rejected": P.gnss_rejected, "gnss_rejected_pregate": P.g_rej_pre,
+        "gnss_rejected_postsolve": P.g_rej_post,
+        "observability": out["observability"],
+        "update_ms": upd_ms,
+        "update_breakdown": brk,
+        "update_p50_ms": float(np.percentile(upd_ms, 50)) if upd_ms.size else 0.0,
+        "update_p99_ms": float(np.percentile(upd_ms, 99)) if upd_ms.size else 0.0,
+        **times,
+        "isam2_last_segment_calibration": isam_k,
+        "segments": n_seg,
+        "isam2_fallback": fallback,
+        "warnings": solver_warnings(res, cfg, "final smoothing pass", name)
+        + ([] if fallback is None else [
+            f"iSAM2 update failed and was retried with dogleg ({fallback})"]),
+        "isam2_settings": {"keyframe_dt": cfg.keyframe_dt, "dogleg": robust,
+                           "relinearize_skip": cfg.relinearize_skip,
+                           "relinearize_typed": cfg.relinearize_typed,
+                           "relinearize_threshold": cfg.relinearize_threshold},
+    }
+
+
+def _first_keyframe(P: Any, r0: Any, p0: Any, v0: Any, k0: Any) -> tuple[Any, Any]:
+    """Factors (priors, fixes) and values of keyframe 0 for the first iSAM2 update."""
+    graph0 = prior_factors(P, r0, p0, v0, P.pri, K(0))
+    vals0 = gtsam.Values()
+    vals0.insert(X(0), gtsam.Pose3(gtsam.Rot3(r0), p0))
+    vals0.insert(V(0), v0)
+    vals0.insert(B(0), gtsam.imuBias.ConstantBias())
+    if P.drive.baro is not None:
+        vals0.insert(C(0), np.zeros(1))
+        vals0.insert(K(0), k0)
+    for f in keyframe_fix_factors(P, 0):
+        graph0.add(f)
+    return graph0, vals0
+
+
+def _isam2_params(cfg: GraphConfig, robust: bool) -> Any:
+    """ISAM2Params of one pass: typed relinearisation thresholds, Gauss-Newton (or, for the
+    robust retry, dogleg) with the configured wildfire threshold, QR factorisation."""
+    params = gtsam.ISAM2Params()
+    params.setRelinearizeThreshold(_threshold_map(cfg))
+    params.relinearizeSkip = cfg.relinearize_skip
+    params.enableRelinearization = cfg.relinearize_threshold > 0
+    params.enablePartialRelinearizationCheck = cfg.partial_relinearization_check
+    if robust:
+        dl = gtsam.ISAM2DoglegParams()
+        if cfg.wildfire_threshold is not None:
+            dl.setWildfireThreshold(cfg.wildfire_threshold)
+        params.setOptimizationParams(dl)
+    elif cfg.wildfire_threshold is not None:
+        params.setOptimizationParams(gtsam.ISAM2GaussNewtonParams(cfg.wildfire_threshold))
+    # QR: Cholesky of the squared information failed ("indeterminate system") on
+    # hill-drives with the consumer IMU (whitened gyro-bias rows ~1e4 next to metre-level
+    # position rows); QR keeps the conditioning of the Jacobian.
+    params.setFactorization("QR")
+    return params
+
+
 class GraphISAM2:
     """``graph-isam2``: incremental iSAM2 front end + final batch smoothing pass."""
 
     name = "graph-isam2"
 
-    def __init__(self, config: g.GraphConfig | None = None) -> None:
-        self.config = config or g.GraphConfig()
+    def __init__(self, config: GraphConfig | None = None) -> None:
+        self.config = config or GraphConfig()
 
     def run(self, drive: Drive) -> Estimate:
         """Incremental pass with the configured (fast) settings; if it fails or diverges,
@@ -144,7 +228,7 @@ class GraphISAM2:
         cfg0 = self.config
         dt_imu = np.diff(drive.imu.t)
         if dt_imu.size and float(np.median(dt_imu)) >= LOW_RATE_DT and self.config == \
-                g.GraphConfig(**{f.name: getattr(self.config, f.name)
+                GraphConfig(**{f.name: getattr(self.config, f.name)
                                  for f in dataclasses.fields(self.config)
                                  if f.name not in LOW_RATE_SETTINGS}):
             cfg0 = dataclasses.replace(self.config, **LOW_RATE_SETTINGS)
@@ -156,37 +240,20 @@ class GraphISAM2:
             cfg = dataclasses.replace(cfg0, **ROBUST_SETTINGS)
             return self._run(drive, cfg, True, t_start, str(exc))
 
-    def _run(self, drive: Drive, cfg: g.GraphConfig, robust: bool, t_start: float,
+    def _run(self, drive: Drive, cfg: GraphConfig, robust: bool, t_start: float,
              fallback: str | None) -> Estimate:
-        with g.single_thread_blas():
+        with single_thread_blas():
             return self._run_pass(drive, cfg, robust, t_start, fallback)
 
-    def _run_pass(self, drive: Drive, cfg: g.GraphConfig, robust: bool, t_start: float,
+    def _run_pass(self, drive: Drive, cfg: GraphConfig, robust: bool, t_start: float,
                   fallback: str | None) -> Estimate:
-        P = g._setup(drive, cfg)
-        pri = g._baro_priors(P.baro_spec)
+        P = setup(drive, cfg)
+        pri = P.pri
         has_baro = drive.baro is not None
-        rot_i, pos_i, vel_i = g._initial_states(P)
+        rot_i, pos_i, vel_i = initial_states(P)
         nk = P.n_kf
         seg = _segments(P)
-        params = gtsam.ISAM2Params()
-        params.setRelinearizeThreshold(_threshold_map(cfg))
-        params.relinearizeSkip = cfg.relinearize_skip
-        params.enableRelinearization = cfg.relinearize_threshold > 0
-        params.enablePartialRelinearizationCheck = cfg.partial_relinearization_check
-        if robust:
-            dl = gtsam.ISAM2DoglegParams()
-            if cfg.wildfire_threshold is not None:
-                dl.setWildfireThreshold(cfg.wildfire_threshold)
-            params.setOptimizationParams(dl)
-        elif cfg.wildfire_threshold is not None:
-            params.setOptimizationParams(gtsam.ISAM2GaussNewtonParams(
-                cfg.wildfire_threshold))
-        # QR: Cholesky of the squared information failed ("indeterminate system") on
-        # hill-drives with the consumer IMU (whitened gyro-bias rows ~1e4 next to metre-level
-        # position rows); QR keeps the conditioning of the Jacobian.
-        params.setFactorization("QR")
-        isam = gtsam.ISAM2(params)
+        isam = gtsam.ISAM2(_isam2_params(cfg, robust))
         # running linearisation arrays (keyframe states as last estimated)
         rot = np.zeros((nk, 3, 3))
         pos = np.zeros((nk, 3))
@@ -195,24 +262,14 @@ class GraphISAM2:
         cb = np.zeros(nk)
         cal = {0: np.array([0.0, pri["tau0"]])}
         rot[0], pos[0], vel[0] = rot_i[0], pos_i[0], vel_i[0]
-        graph0 = g._prior_factors(P, rot[0], pos[0], vel[0], pri, K(0))
-        vals0 = gtsam.Values()
-        vals0.insert(X(0), gtsam.Pose3(gtsam.Rot3(rot[0]), pos[0]))
-        vals0.insert(V(0), vel[0])
-        vals0.insert(B(0), gtsam.imuBias.ConstantBias())
-        if has_baro:
-            vals0.insert(C(0), np.zeros(1))
-            vals0.insert(K(0), cal[0])
-        for f in g._keyframe_fix_factors(P, 0):
-            graph0.add(f)
-        isam.update(graph0, vals0)
+        isam.update(*_first_keyframe(P, rot[0], pos[0], vel[0], cal[0]))
         bt = drive.baro.t if has_baro else np.zeros(0)
         bz = drive.baro.altitude if has_baro else np.zeros(0)
         g_between = np.flatnonzero((P.g_kf == -1) & P.g_use)
         gk = gf.interval_of(P.t_kf, P.g_t[g_between])
         pims: list[Any] = []
         imu_t = drive.imu.t
-        gap = g.imu_gaps(imu_t, P.kf_idx)
+        gap = imu_gaps(imu_t, P.kf_idx)
         upd_ms = np.zeros(nk - 1)
         # per update: preintegration, interval term, isam.update, estimate read-back [ms];
         # variables relinearised, variables re-eliminated
@@ -237,15 +294,15 @@ class GraphISAM2:
 
         for k in range(nk - 1):
             tu = time.perf_counter()
-            dg = g._gravity_delta(P, pos[k:k + 1])[0]
+            dg = gravity_delta(P, pos[k:k + 1])[0]
             b_k = gtsam.imuBias.ConstantBias(bias[k, 0:3], bias[k, 3:6])
-            pim = g._preintegrate(P, k, rot[k], dg, b_k)
+            pim = preintegrate(P, k, rot[k], dg, b_k)
             pims.append(pim)
             t_pre = time.perf_counter()
             nf = gtsam.NonlinearFactorGraph()
             nv = gtsam.Values()
             if gap[k]:
-                x1, v1, gap_f = g.gap_factors(P, k, rot, pos, vel)
+                x1, v1, gap_f = gap_factors(P, k, rot, pos, vel)
                 nv.insert(X(k + 1), x1)
                 nv.insert(V(k + 1), v1)
                 for f in gap_f:
@@ -257,19 +314,19 @@ class GraphISAM2:
                 nf.add(gtsam.CombinedImuFactor(X(k), V(k), X(k + 1), V(k + 1), B(k), B(k + 1),
                                                pim))
             nv.insert(B(k + 1), b_k)
-            for f in g._keyframe_fix_factors(P, k + 1):
+            for f in keyframe_fix_factors(P, k + 1):
                 nf.add(f)
             if has_baro:
                 dt = float(P.t_kf[k + 1] - P.t_kf[k])
                 nv.insert(C(k + 1), np.array([cb[k]]))
-                nf.add(g._gm_factor(k, dt, pri))
+                nf.add(gm_factor(k, dt, pri))
                 if seg[k + 1] != seg[k]:
                     j = int(seg[k + 1])
                     cal[j] = cal[j - 1].copy()
                     nv.insert(K(j), cal[j])
                     span = _segment_span(P, seg, j)
                     nf.add(gtsam.BetweenFactorVector(K(j - 1), K(j), np.zeros(2),
-                                                     g._noise(calib_rw * np.sqrt(span))))
+                                                     noise(calib_rw * np.sqrt(span))))
             if k >= 1:
                 lcf, baro_next = self._interval_factor(
                     P, k - 1, rot, pos, vel, bias, cb, cal, seg, bt, bz, baro_next,
@@ -282,10 +339,10 @@ class GraphISAM2:
                 t_upd = time.perf_counter()
                 refresh([k + 1] if k < 1 else [k - 1, k, k + 1])
             except RuntimeError as exc:
-                raise _update_error(P, k, exc, bool(gap[k])) from exc
+                raise update_error(P, k, exc, bool(gap[k])) from exc
             if not (np.all(np.isfinite(rot[k + 1])) and np.all(np.isfinite(pos[k + 1]))
                     and np.linalg.norm(vel[k + 1]) < DIVERGED_SPEED):
-                raise _update_error(P, k, None, bool(gap[k]))
+                raise update_error(P, k, None, bool(gap[k]))
             if has_baro:
                 j = int(seg[k + 1])
                 cal[j] = isam.calculateEstimateVector(K(j))
@@ -313,41 +370,21 @@ class GraphISAM2:
             # the online pass needed the retry: its estimate is a poor starting point (ski
             # holdout: 22 m withheld-height RMSE after 12 iterations), so the final pass
             # starts where graph-batch starts and therefore equals it
-            graph, res_vals = g._build_batch_graph(P, rot_i, pos_i, vel_i,
-                                                   g._pims_for(P, rot_i, pos_i), pri, calib0)
+            graph, res_vals = build_batch_graph(P, rot_i, pos_i, vel_i,
+                                                   pims_for(P, rot_i, pos_i), pri, calib0)
         else:
             res_vals, graph = self._batch_from(P, est, pims, pri, seg)
-        res = g._gauss_newton(P, graph, res_vals, calib0, pri)
+        res = gauss_newton(P, graph, res_vals, calib0, pri)
         t_final = time.perf_counter()
-        out = g._outputs(P, res, pri, K(0) if has_baro else None)
+        out = outputs(P, res, pri, K(0) if has_baro else None)
         isam_k = None
         if has_baro:
             j_last = int(seg[-1])
             isam_k = est.atVector(K(j_last)).tolist()
-        info = {
-            "keyframes": nk, "iterations_final": res.iterations, "converged_final": res.converged,
-            "stop_final": res.stop,
-            "gnss_rejected": P.gnss_rejected, "gnss_rejected_pregate": P.g_rej_pre,
-            "gnss_rejected_postsolve": P.g_rej_post,
-            "observability": out["observability"],
-            "update_ms": upd_ms,
-            "update_breakdown": brk,
-            "update_p50_ms": float(np.percentile(upd_ms, 50)) if upd_ms.size else 0.0,
-            "update_p99_ms": float(np.percentile(upd_ms, 99)) if upd_ms.size else 0.0,
-            "online_s": t_online - t_start,
-            "final_smoothing_s": t_final - t_online,
-            "isam2_last_segment_calibration": isam_k,
-            "segments": int(seg[-1]) + 1,
-            "isam2_fallback": fallback,
-            "warnings": g._solver_warnings(res, cfg, "final smoothing pass", self.name)
-            + ([] if fallback is None else [
-                f"iSAM2 update failed and was retried with dogleg ({fallback})"]),
-            "isam2_settings": {"keyframe_dt": cfg.keyframe_dt, "dogleg": robust,
-                               "relinearize_skip": cfg.relinearize_skip,
-                               "relinearize_typed": cfg.relinearize_typed,
-                               "relinearize_threshold": cfg.relinearize_threshold},
-        }
-        return Estimate(self.name, out["trajectory"], g._provides(drive), out["cov"],
+        info = _info(P, cfg, res, out, upd_ms, brk, robust, fallback,
+                     {"online_s": t_online - t_start, "final_smoothing_s": t_final - t_online},
+                     isam_k, int(seg[-1]) + 1, self.name)
+        return Estimate(self.name, out["trajectory"], provides(drive), out["cov"],
                         out["t_cov"], out["baro"], time.perf_counter() - t_start,
                         online=online_traj, info=info, config=self.config)
 
@@ -360,6 +397,7 @@ class GraphISAM2:
         interval k and all GNSS fixes strictly inside it, linearised at the current
         estimate."""
         has_baro = P.drive.baro is not None
+        cfg, ks = P.cfg, P.cfg.loss_threshold_sd
         j = int(seg[k])
         s_k, tau_k = (cal[j][0], cal[j][1]) if has_baro else (0.0, 0.0)
         parts = []
@@ -373,20 +411,28 @@ class GraphISAM2:
         st = gf.KeyframeStates(
             rot, pos, vel, bias[:, 0:3], cb, np.full(nk, s_k), np.full(nk, tau_k),
             np.tile(np.array([0.0, 0.0, P.g0]), (nk, 1)))
-        acc = (np.array([0.0, 0.0, P.g0]) + g._gravity_delta(P, pos[k:k + 1])[0]
+        acc = (np.array([0.0, 0.0, P.g0]) + gravity_delta(P, pos[k:k + 1])[0]
                - 2 * np.cross(P.omega_t, vel[k]))
         st.accel_t[k] = acc
         if has_baro and sel.size:
             # bias read at t_s − τd of this linearisation, as in the batch solve
             rows = gf.baro_rows(P.dense, st, bt[sel], bz[sel], pri["noise"], P.h0, P.origin,
                                 bias_lag=float(tau_k))
-            # samples whose delayed time is outside [t_k, t_k+1) are clipped into interval k
-            parts.append(gf.IntervalRows(np.full(rows.k.size, k), rows.r, rows.jac))
+            # samples whose delayed time is outside [t_k, t_k+1) are clipped into interval k;
+            # robust losses: IRLS weights at this (only) linearisation
+            rw, jw, _, _ = reweight(rows.r, rows.jac, 1, cfg.loss_baro, ks[2])
+            parts.append(gf.IntervalRows(np.full(rows.k.size, k), rw, jw))
         if g_idx.size:
-            parts.append(gf.gnss_rows(
+            rows = gf.gnss_rows(
                 P.dense, st, P.g_t[g_idx], P.g_pos[g_idx], P.g_pos_sd[g_idx],
                 None if P.g_vel is None else P.g_vel[g_idx],
-                None if P.g_vel_sd is None else P.g_vel_sd[g_idx], P.lever))
+                None if P.g_vel_sd is None else P.g_vel_sd[g_idx], P.lever)
+            n = 3 * g_idx.size  # position rows, then velocity rows
+            for sl, loss, kk in ((slice(0, n), cfg.loss_gnss_pos, ks[0]),
+                                 (slice(n, None), cfg.loss_gnss_vel, ks[1])):
+                if rows.r[sl].size:
+                    rw, jw, _, _ = reweight(rows.r[sl], rows.jac[sl], 3, loss, kk)
+                    parts.append(gf.IntervalRows(rows.k[sl], rw, jw))
         if not parts:
             return None, baro_next
         rows = gf.concat_rows(*parts)
@@ -401,7 +447,7 @@ class GraphISAM2:
         keys = [X(k), X(k + 1), C(k), C(k + 1), K(j)]
         active = (0, 1, 2, 3, 4) if has_baro else (0, 1)
         gfg = gtsam.GaussianFactorGraph()
-        for f in g._hessian_pieces(keys, lam[0], eta[0], active):
+        for f in hessian_pieces(keys, lam[0], eta[0], active):
             gfg.push_back(f)
         lin = gtsam.Values()
         lin.insert(X(k), gtsam.Pose3(gtsam.Rot3(rot[k]), pos[k]))
@@ -418,7 +464,7 @@ class GraphISAM2:
         lla = ned_to_lla(online[:, 0:3], P.origin)
         c_tn = gf.rot_t_n(lla, P.origin)
         vel_n = np.einsum("nji,nj->ni", c_tn, online[:, 3:6])
-        from ..geo.frames import quat_to_mat
+        from ...geo.frames import quat_to_mat
 
         q = mat_to_quat(np.swapaxes(c_tn, 1, 2) @ quat_to_mat(online[:, 6:10]))
         return Trajectory(P.t_kf, lla, vel_n, q)
@@ -431,7 +477,7 @@ class GraphISAM2:
         rot = poses[:, :9].reshape(nk, 3, 3)
         pos = poses[:, 9:12]
         vel = np.array([est.atVector(V(k)) for k in range(nk)])
-        graph, vals = g._build_batch_graph(P, rot, pos, vel, pims, pri,
+        graph, vals = build_batch_graph(P, rot, pos, vel, pims, pri,
                                            np.zeros(nk, dtype=int))
         for k in range(nk):
             vals.update(B(k), est.atConstantBias(B(k)))

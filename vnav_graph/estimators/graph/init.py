@@ -5,16 +5,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..geo.frames import ned_to_lla
-from ..nav.rotations import so3_exp
-from ..types import (
+from ...geo.frames import ned_to_lla
+from ...nav.rotations import so3_exp
+from ...types import (
     FloatArray,
 )
-from . import graph_factors as gf
-from .graph_problem import _level, _Problem
+from . import factors as gf
+from .problem import Problem, level
 
 
-def _initial_states(P: _Problem) -> tuple[FloatArray, FloatArray, FloatArray]:
+def initial_states(P: Problem) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Initial R_tb, p_t, v_t at keyframes from GNSS and the IMU (no filter involved).
 
     Position/velocity: GNSS at keyframes (lever arm removed), else propagated with the
@@ -77,7 +77,7 @@ def _initial_states(P: _Problem) -> tuple[FloatArray, FloatArray, FloatArray]:
         rot_triad[k] = _triad(f_b[k], np.array([1.0, 0.0, 0.0]), f_t[k], vel_kf[k])
     k0 = int(np.flatnonzero(triad_ok)[0]) if triad_ok.any() else -1
     if k0 < 0:
-        r = _level(f_b[0])
+        r = level(f_b[0])
     else:
         r = rot_triad[k0]
         for k in range(k0 - 1, -1, -1):

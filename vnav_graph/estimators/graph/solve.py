@@ -1,0 +1,203 @@
+"""Batch solver of ``graph-batch``: Gauss-Newton with Levenberg-Marquardt fallback on the
+linearised C++ graph plus the interval terms, post-solve GNSS gate (details and measurements
+in ``docs/graph.md``). The linear algebra is the banded-arrow fast path (``layout``,
+``linalg``) when the graph's structure fits it, else GTSAM's sparse elimination
+(``general``); ``GraphConfig.solver`` forces either."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from . import factors as gf
+from .general import GeneralSystem
+from .layout import (
+    MAX_GLOBAL_DIM,
+    BandedSystem,
+    Layout,
+    interval_info,
+    linearize,
+    make_layout,
+)
+from .problem import (
+    Problem,
+    gnss_batch_idx,
+    gnss_chi2,
+    interval_rows,
+    states_from_values,
+)
+
+# ----------------------------------------------------------------------------------------
+# Batch Gauss-Newton over the linearised graph: banded-arrow fast path (``layout``) or GTSAM
+# elimination (``general``), chosen from the structure of the graph
+
+
+SOLVERS = ("auto", "banded", "general")
+
+
+@dataclass
+class BatchResult:
+    values: Any
+    graph: Any  # C++ NonlinearFactorGraph
+    cost: float
+    iterations: int
+    calib_of_kf: np.ndarray
+    layout: Layout
+    rows: gf.IntervalRows  # interval terms linearised at ``values``
+    system: Any = None  # linear system at ``values`` (BandedSystem | GeneralSystem), if kept
+    bias_lag: float = 0.0  # baro-bias read time offset of the last solve (baro_rows)
+    stop: str = "converged"  # "converged" | "max_iterations" | "no_descent"
+
+    @property
+    def converged(self) -> bool:
+        return self.stop == "converged"
+
+    @property
+    def solver(self) -> str:
+        return "banded" if self.layout.banded else "general"
+
+
+def batch_layout(P: Problem, graph: Any, vals: Any) -> Layout:
+    """Column layout from the keys of the graph (``layout.make_layout``)."""
+    return make_layout(P.n_kf, P.drive.baro is not None, graph.keyVector(), vals.dims())
+
+
+def linear_system(P: Problem, lay: Layout, graph: Any, vals: Any,
+                  rows: gf.IntervalRows) -> BandedSystem | GeneralSystem:
+    """The Gauss-Newton system at ``vals``: the C++ factors linearised by GTSAM plus the
+    interval terms (per-interval information blocks). The first call decides the path
+    (``GraphConfig.solver``; "auto": banded when the structure fits, ``Layout.fits_band``)."""
+    info = interval_info(lay, rows, P.n_kf)
+    if lay.banded is None:
+        solver = P.cfg.solver
+        gfg, pat, v = linearize(lay, graph, vals)
+        fits = lay.fits_band()
+        if solver == "banded" and not fits:
+            raise ValueError(
+                "graph: solver = 'banded' but the graph does not fit the keyframe band (a "
+                "factor links keyframes more than one apart, or the added variables have more "
+                f"than {MAX_GLOBAL_DIM} dimensions); use solver = 'auto' or 'general'")
+        lay.banded = fits if solver == "auto" else solver == "banded"
+        if lay.banded:
+            return BandedSystem.build(lay, pat, v, info)
+        return GeneralSystem(lay, gfg, info)
+    if lay.banded:
+        _, pat, v = linearize(lay, graph, vals)
+        return BandedSystem.build(lay, pat, v, info)
+    return GeneralSystem(lay, graph.linearize(vals), info)
+
+
+def gn_core(P: Problem, lay: Layout, graph: Any, vals: Any, calib_of_kf: np.ndarray,
+             pri: dict[str, float]) -> BatchResult:
+    """Gauss-Newton on the total cost (C++ factors + interval terms); a step that raises the
+    cost is retried with Levenberg-Marquardt damping μ·diag(H) (μ from 1e-5, ×10 per
+    retry, ÷10 after a success, back to plain Gauss-Newton below 1e-6). On the simulated
+    drives every full step is accepted; on hovering-multirotor logs the weakly determined
+    heading makes the full step overshoot (docs/graph.md). The interval rows evaluated at an
+    accepted candidate are reused as its linearisation."""
+    st = states_from_values(P, vals, calib_of_kf)
+    # the baro bias is read at t_s − λ with λ fixed while τd moves, so that the cost is smooth
+    # along τd (factors.baro_rows); λ follows τd when they drift > bias_lag_tol apart
+    lag = float(np.median(st.latency))
+    rows = interval_rows(P, st, pri, lag)
+    cost = graph.error(vals) + rows.cost
+    it = 0
+    system = None
+    mu = 0.0
+    converged = False
+    failed = False
+    for it in range(1, P.cfg.max_iterations + 1):
+        converged = False
+        system = linear_system(P, lay, graph, vals, rows)
+        delta, dec = system.step()  # dec: decrease predicted by the quadratic model
+        if P.cfg.verbose:
+            print(f"GN it {it}: predicted decrease {dec:.3g}")
+        if dec < P.cfg.abs_tol:
+            # converged at ``vals``: the step is not taken, and this factorisation — of the
+            # normal equations at the solution — is kept for the covariance
+            converged = True
+            break
+        if mu > 0.0:
+            delta = system.damped(mu)
+        failed = False
+        while True:
+            cand = vals.retract(delta)
+            st_c = states_from_values(P, cand, calib_of_kf)
+            lat = float(np.median(st_c.latency))
+            lag_c = lat if abs(lat - lag) > P.cfg.bias_lag_tol else lag
+            rows_c = interval_rows(P, st_c, pri, lag_c)
+            new_cost = graph.error(cand) + rows_c.cost
+            ref = cost
+            if lag_c != lag and new_cost > cost:
+                # λ moved with τd: a slightly different cost function — compare the
+                # candidate with the current point under the new λ (rare: early iterations
+                # gain far more than the ≈ 10 that moving λ by tens of ms changes)
+                ref = graph.error(vals) + interval_rows(P, st, pri, lag_c).cost
+            if new_cost <= ref * (1 + 1e-12):
+                mu = 0.0 if mu <= 1e-6 else mu / 10.0
+                break
+            if mu == 0.0 and abs(new_cost - ref) < P.cfg.rel_tol * ref:
+                converged = True
+                break  # converged: the change is at round-off level
+            mu = 1e-5 if mu == 0.0 else mu * 10.0
+            if mu > 1e3:
+                failed = True  # no descent even as a tiny gradient step: stop here
+                break
+            delta = system.damped(mu)
+        if failed:
+            if P.cfg.verbose:
+                print(f"GN it {it}: no step lowers the cost (μ > 1e3); stopping")
+            break
+        rel = (cost - new_cost) / max(cost, 1e-12)
+        if P.cfg.verbose:
+            print(f"GN it {it}: cost {cost:.10g} -> {new_cost:.10g} μ {mu:.0e}"
+                  + (f" (bias lag {lag:.4f} -> {lag_c:.4f} s)" if lag_c != lag else ""))
+        cost_prev = cost
+        vals, st, rows, cost = cand, st_c, rows_c, new_cost
+        system = None
+        if lag_c != lag:
+            lag = lag_c  # a new cost function: no convergence test on this step
+            continue
+        if mu == 0.0 and (abs(rel) < P.cfg.rel_tol or abs(cost_prev - cost) < P.cfg.abs_tol):
+            converged = True
+            break
+    stop = "converged" if converged else ("no_descent" if failed else "max_iterations")
+    return BatchResult(vals, graph, cost, it, calib_of_kf, lay, rows, system, lag, stop)
+
+
+def gauss_newton(P: Problem, graph: Any, vals: Any, calib_of_kf: np.ndarray,
+                  pri: dict[str, float]) -> BatchResult:
+    """Gauss-Newton solve, then the post-solve GNSS gate: fixes whose whitened residual χ²
+    (3 dof position, 6 with velocity) exceeds the ``gnss_gate_prob`` quantile are rejected
+    and the problem re-solved from the current solution (≤ ``gate_rounds`` rounds).
+    The residual of a fix that took part in the fit is smaller than its innovation, so the
+    gate is conservative (Groves §17.3)."""
+    lay = batch_layout(P, graph, vals)
+    res = gn_core(P, lay, graph, vals, calib_of_kf, pri)
+    if P.cfg.gnss_gate_prob <= 0:
+        return res
+    from scipy.stats import chi2
+
+    iters = res.iterations
+    for _ in range(P.cfg.gate_rounds):
+        idx = gnss_batch_idx(P)
+        if idx.size == 0:
+            break
+        st = states_from_values(P, res.values, calib_of_kf)
+        c2, dof = gnss_chi2(P, st, idx)
+        # post-solve gate at the squared tail probability: a false rejection costs a whole
+        # re-solve, a glitch has χ² in the thousands either way
+        bad = c2 > chi2.ppf(1.0 - (1.0 - P.cfg.gnss_gate_prob) ** 2, dof)
+        if not np.any(bad) or np.all(bad):
+            break
+        P.g_use[idx[bad]] = False
+        P.g_rej_post += int(bad.sum())
+        res = gn_core(P, lay, graph, res.values, calib_of_kf, pri)
+        iters += res.iterations
+    res.iterations = iters
+    return res
+
+
+
