@@ -17,7 +17,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from vnav_graph.estimators.ekf import EKF, EKFRTS
+from vnav_graph.estimators.ekf.filter import EKF, EKFRTS
 from vnav_graph.simulation.scenario import simulate
 
 

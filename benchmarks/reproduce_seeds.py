@@ -18,7 +18,7 @@ renders ``docs/results_seeds.md`` (or PATH) from these numbers beside the papers
 What each number is
 -------------------
 - seed 003 (1-DOF INS/GPS altitude observer, L = [0.4, 0.04, 0.002], GPS σ 2 m at 1 Hz):
-  ``vnav_graph.estimators.observer1d.seed003_monte_carlo`` (its docstring defines the steady
+  ``vnav_graph.studies.seed003.seed003_monte_carlo`` (its docstring defines the steady
   σ, the GPS-only σ and the settling time). Paper: ≈ 1.2 m, 2 m, ≈ 50 s.
 - seed 001 §4.1 (simulation with DGPS at 2 Hz and baro at 40 Hz; their KF 5.7 m RMS vs 11.3 m
   for the 3rd-order loop): the ``sortie`` scenario (GNSS 2 Hz, baro 40 Hz, baro scale, latency
@@ -70,7 +70,7 @@ SEED004_ESTIMATORS = ("vkf4", "vekf7", "loop3", "ekf")
 
 
 def seed003(n_runs: int) -> dict[str, float]:
-    from vnav_graph.estimators.observer1d import seed003_monte_carlo
+    from vnav_graph.studies.seed003 import seed003_monte_carlo
 
     r = seed003_monte_carlo(n_runs=n_runs)
     return {"seed003_steady_sd_m": float(r.steady_sd_m),

@@ -86,7 +86,7 @@ class BaroOnly:
 def loop3_tau60(config: Any = None) -> Any:
     """A variant of a built-in: the 3rd-order loop with a 60 s triple pole instead of 20 s
     (slower: trusts the inertial channel longer, filters more baro noise)."""
-    from vnav_graph.estimators.loops import Loop3, Loop3Config
+    from vnav_graph.estimators.vertical.loops import Loop3, Loop3Config
 
     return Loop3(config or Loop3Config(tau=60.0))
 

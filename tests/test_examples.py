@@ -71,7 +71,7 @@ def test_ex_custom_estimator(monkeypatch):
         assert r["baro"]["bias_m"]["est"] == pytest.approx(bias, rel=1e-12)
     variant = [r for r in doc["runs"] if r["estimator"] == "loop3-tau60"]
     if variant:  # the registered variant gives exactly what the class gives when run directly
-        from vnav_graph.estimators.loops import Loop3, Loop3Config
+        from vnav_graph.estimators.vertical.loops import Loop3, Loop3Config
         from vnav_graph.evaluation.metrics import evaluate
 
         drive = simulate(shorten_scenario("hill-drive", 60.0), 0)

@@ -14,7 +14,7 @@ import pytest
 from scipy.stats import chi2
 
 from vnav_graph.config import BaroSpec, GnssSpec, ImuSpec
-from vnav_graph.estimators.ekf import EKF, EKFRTS
+from vnav_graph.estimators.ekf.filter import EKF, EKFRTS
 from vnav_graph.evaluation.metrics import nees
 from vnav_graph.geo.frames import lla_to_ned
 from vnav_graph.sensors.noise import gm_process_var

@@ -13,7 +13,7 @@ from dataclasses import replace
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from vnav_graph.estimators.ekf import EKF, EkfConfig
+from vnav_graph.estimators.ekf.filter import EKF, EkfConfig
 from vnav_graph.simulation.scenario import simulate
 
 

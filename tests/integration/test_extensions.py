@@ -46,9 +46,9 @@ def _one_line_error(capsys, rc):
 
 
 def test_load_configs_overrides_only_the_given_keys(tmp_path):
-    from vnav_graph.estimators.ekf import EkfConfig
-    from vnav_graph.estimators.loops import Loop3Config
-    from vnav_graph.estimators.vertical_input import AhrsConfig
+    from vnav_graph.estimators.ekf.filter import EkfConfig
+    from vnav_graph.estimators.vertical.inputs import AhrsConfig
+    from vnav_graph.estimators.vertical.loops import Loop3Config
 
     cfg = load_configs(_toml(tmp_path, "[loop3]\ntau = 40\ngains = [0.15, 0.0075, 1e-4]\n"
                                        "ahrs = { tilt_omega = 0.04 }\n"

@@ -68,7 +68,7 @@ from gtsam.symbol_shorthand import B, V, X
 
 from vnav_graph.config import IMU_PRESETS
 from vnav_graph.estimators import graph as g
-from vnav_graph.estimators.ekf import EKFRTS
+from vnav_graph.estimators.ekf.filter import EKFRTS
 from vnav_graph.estimators.graph import factors as gf
 from vnav_graph.estimators.graph import problem as gp
 from vnav_graph.evaluation.metrics import errors_vs_truth

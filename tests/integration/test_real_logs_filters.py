@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from vnav_graph.estimators import base
-from vnav_graph.estimators.ekf import EKF, EKFRTS
+from vnav_graph.estimators.ekf.filter import EKF, EKFRTS
 from vnav_graph.evaluation.holdout import run_holdout
 from vnav_graph.simulation import simulate
 

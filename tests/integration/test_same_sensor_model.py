@@ -16,12 +16,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from vnav_graph.estimators import ekf_model as km
-from vnav_graph.estimators import vekf7 as vekf7_mod
 from vnav_graph.estimators.base import create
+from vnav_graph.estimators.ekf import kernel as kernel_mod
+from vnav_graph.estimators.ekf import model as km
 from vnav_graph.estimators.graph import batch as batch_mod
 from vnav_graph.estimators.graph import isam2 as isam2_mod
 from vnav_graph.estimators.graph import problem as problem_mod
+from vnav_graph.estimators.vertical import vekf7 as vekf7_mod
 from vnav_graph.nav.gaps import gap_threshold
 from vnav_graph.simulation import simulate
 
@@ -44,13 +45,13 @@ class _Stop(Exception):
 
 def _ekf_used(drive, name: str, monkeypatch: pytest.MonkeyPatch) -> dict:
     got: dict = {}
-    sig = inspect.signature(km.run_filter.py_func)
+    sig = inspect.signature(kernel_mod.run_filter.py_func)
 
     def capture(*args):
         got.update(sig.bind(*args).arguments)
         raise _Stop
 
-    monkeypatch.setattr(km, "run_filter", capture)
+    monkeypatch.setattr(kernel_mod, "run_filter", capture)
     with pytest.raises(_Stop):
         create(name).run(drive)
     monkeypatch.undo()

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from vnav_graph.config import IMU_PRESETS
-from vnav_graph.estimators.vertical_input import vertical_inputs
+from vnav_graph.estimators.vertical.inputs import vertical_inputs
 from vnav_graph.geo.frames import attitude_error_n, quat_to_mat
 from vnav_graph.simulation import simulate
 

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from vnav_graph.config import IMU_PRESETS
-from vnav_graph.estimators.loops import LoopInputs, gains3, run_loop, schuler_vertical
-from vnav_graph.estimators.vertical_input import velocity_from_positions, vertical_inputs
+from vnav_graph.estimators.vertical.inputs import velocity_from_positions, vertical_inputs
+from vnav_graph.estimators.vertical.loops import LoopInputs, gains3, run_loop, schuler_vertical
 from vnav_graph.geo.earth import OMEGA_IE, radii
 from vnav_graph.geo.frames import attitude_error_n, quat_to_mat
 from vnav_graph.simulation import load_scenario, simulate

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from vnav_graph.estimators.adaptive import AdaptiveConfig, run_adaptive
-from vnav_graph.estimators.loops import LoopInputs, gains3, loop_inputs, run_loop
+from vnav_graph.estimators.vertical.adaptive import AdaptiveConfig, run_adaptive
+from vnav_graph.estimators.vertical.loops import LoopInputs, gains3, loop_inputs, run_loop
 from vnav_graph.simulation import simulate
 
 WS2 = 3.08e-6

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from vnav_graph.estimators.adaptive import (
+from vnav_graph.estimators.vertical.adaptive import (
     IB,
     IH,
     IS,
@@ -16,7 +16,7 @@ from vnav_graph.estimators.adaptive import (
     _to_error_state,
     run_adaptive_ekf,
 )
-from vnav_graph.estimators.loops import LoopInputs, discrete_model
+from vnav_graph.estimators.vertical.loops import LoopInputs, discrete_model
 from vnav_graph.types import ERROR_STATE
 
 WS2 = 3.08e-6

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg import expm
 
-from vnav_graph.estimators import ekf_model as km
-from vnav_graph.estimators.alignment import level_tilt_bias_jacobian
+from vnav_graph.estimators.ekf import model as km
+from vnav_graph.estimators.ekf.alignment import level_tilt_bias_jacobian
 from vnav_graph.geo.earth import gravity
 from vnav_graph.geo.frames import attitude_error_n, quat_to_mat, rph_to_quat
 from vnav_graph.nav.levelling import coarse_level
@@ -71,7 +71,7 @@ def test_joseph_scalar_update_equals_standard_form(rng):
     y = 1.3
     p1 = p.copy()
     dx = np.zeros(km.NX)
-    km._scalar_update(p1, dx, h, y, r)
+    km.scalar_update(p1, dx, h, y, r)
     k = p @ h / (h @ p @ h + r)
     # with the optimal gain the Joseph form equals (I − K h) P (round-off only)
     np.testing.assert_allclose(p1, (np.eye(km.NX) - np.outer(k, h)) @ p, atol=1e-10)

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.linalg import solve_discrete_are
 
-from vnav_graph.estimators.loops import (
+from vnav_graph.estimators.vertical.loops import (
     Loop2,
     Loop3,
     LoopInputs,

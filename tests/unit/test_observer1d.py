@@ -5,16 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from vnav_graph.estimators.observer1d import (
+from vnav_graph.estimators.vertical.observer1d import (
     Observer1D,
     ObserverConfig,
     analytic_settling,
     observer_kernel,
-    seed003_monte_carlo,
-    seed003_noise_for_sigma,
     steady_state,
 )
 from vnav_graph.simulation import simulate
+from vnav_graph.studies.seed003 import seed003_monte_carlo, seed003_noise_for_sigma
 
 
 @pytest.fixture(scope="module")

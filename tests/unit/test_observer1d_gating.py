@@ -8,15 +8,15 @@ import dataclasses
 import numpy as np
 import pytest
 
-from vnav_graph.estimators.observer1d import (
+from vnav_graph.estimators.vertical.observer1d import (
     Observer1D,
     _gate_var,
     gate_threshold,
     observer_kernel_gated,
-    seed003_monte_carlo,
     steady_state,
 )
 from vnav_graph.simulation import simulate
+from vnav_graph.studies.seed003 import seed003_monte_carlo
 
 QA = 300e-6 * 9.80665  # consumer accelerometer noise density [m/s²/√Hz]
 

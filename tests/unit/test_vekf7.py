@@ -1,4 +1,4 @@
-"""Seed-001 7-state vertical EKF (vnav_graph.estimators.vekf7)."""
+"""Seed-001 7-state vertical EKF (vnav_graph.estimators.vertical.vekf7)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from vnav_graph.estimators.vekf7 import (
+from vnav_graph.estimators.vertical.vekf7 import (
     IB,
     IBB,
     IH,
@@ -140,7 +140,7 @@ def test_covariance_layout(runs) -> None:
 def test_rmse_below_loop3_on_seed001_sortie() -> None:
     # Seed 001 §4.1: on a simulated sortie (DGPS 2 Hz, baro 40 Hz) their KF reached 5.7 m
     # RMS against 11.3 m for the 3rd-order loop. The same ordering must hold here.
-    loops = pytest.importorskip("vnav_graph.estimators.loops")
+    loops = pytest.importorskip("vnav_graph.estimators.vertical.loops")
     d = simulate("sortie", 1, duration_s=600.0)
     r7 = evaluate(VEKF7().run(d), d)["alt_rmse_m"]
     r3 = evaluate(loops.Loop3().run(d), d)["alt_rmse_m"]

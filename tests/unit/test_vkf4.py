@@ -1,4 +1,4 @@
-"""Seed-004 4-state baro-inertial Kalman filter (vnav_graph.estimators.vkf4)."""
+"""Seed-004 4-state baro-inertial Kalman filter (vnav_graph.estimators.vertical.vkf4)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import pytest
 from scipy.stats import chi2
 
 from vnav_graph.config import IMU_PRESETS
-from vnav_graph.estimators.vkf4 import VKF4, VKF4Config
+from vnav_graph.estimators.vertical.vkf4 import VKF4, VKF4Config
 from vnav_graph.evaluation.metrics import errors_vs_truth, nees
 from vnav_graph.simulation import load_scenario, simulate
 

@@ -28,14 +28,14 @@ class Estimator(Protocol):
 # name -> "module:attribute" of a callable(config | None) -> Estimator, in report order.
 _REGISTRY: dict[str, str | Callable[..., Estimator]] = {}
 _CORE: dict[str, str] = {
-    "observer1d": "vnav_graph.estimators.observer1d:Observer1D",
-    "loop2": "vnav_graph.estimators.loops:Loop2",
-    "loop3": "vnav_graph.estimators.loops:Loop3",
-    "loop3-adaptive": "vnav_graph.estimators.adaptive:AdaptiveLoop3",
-    "vkf4": "vnav_graph.estimators.vkf4:VKF4",
-    "vekf7": "vnav_graph.estimators.vekf7:VEKF7",
-    "ekf": "vnav_graph.estimators.ekf:EKF",
-    "ekf-rts": "vnav_graph.estimators.ekf:EKFRTS",
+    "observer1d": "vnav_graph.estimators.vertical.observer1d:Observer1D",
+    "loop2": "vnav_graph.estimators.vertical.loops:Loop2",
+    "loop3": "vnav_graph.estimators.vertical.loops:Loop3",
+    "loop3-adaptive": "vnav_graph.estimators.vertical.adaptive:AdaptiveLoop3",
+    "vkf4": "vnav_graph.estimators.vertical.vkf4:VKF4",
+    "vekf7": "vnav_graph.estimators.vertical.vekf7:VEKF7",
+    "ekf": "vnav_graph.estimators.ekf.filter:EKF",
+    "ekf-rts": "vnav_graph.estimators.ekf.filter:EKFRTS",
     "graph-isam2": "vnav_graph.estimators.graph:GraphISAM2",
     "graph-batch": "vnav_graph.estimators.graph:GraphBatch",
 }

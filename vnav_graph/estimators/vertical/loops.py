@@ -7,7 +7,7 @@ vertical channel", AIAA J. Guidance & Control 3(2). Up form: h altitude [m], v v
     3rd order:  ḣ = v − k1·e,   v̇ = a_up + ω_s²·(h − h0) − k2·e − c,   ċ = k3·e
     2nd order:  the same without c,
 
-with a_up = −(f_D + g(lat, h0) + cor_D) from ``vertical_input.vertical_inputs`` and
+with a_up = −(f_D + g(lat, h0) + cor_D) from ``vertical.inputs.vertical_inputs`` and
 ω_s² = 2g/R the gravity-gradient positive feedback of the free-inertial channel (g decreases
 with height, so a height error feeds a growing acceleration error; time constant
 1/ω_s ≈ 570 s).
@@ -32,7 +32,7 @@ they do not calibrate the barometer.
 
 The loops are baro-inertial: they use the IMU and the baro stream (``drive.baro.altitude``)
 only. GNSS enters only through the attitude reference that stands for "the INS attitude"
-(``vertical_input``), never the vertical channel.
+(``vertical.inputs``), never the vertical channel.
 
 Discrete implementation at the IMU rate (step Δt_k, any spacing — real logs jitter by ±10 %):
 x_{k+1} = Φ(Δt_k) x_k + Γ(Δt_k) a_k − Δt_k·g·e_k with
@@ -55,10 +55,10 @@ import numpy as np
 from numba import njit
 from scipy.linalg import expm, solve_discrete_are
 
-from ..geo.earth import gravity, radii
-from ..nav.gaps import imu_gaps
-from ..types import Drive, Estimate, FloatArray, Trajectory
-from .vertical_input import AhrsConfig, vertical_inputs
+from ...geo.earth import gravity, radii
+from ...nav.gaps import imu_gaps
+from ...types import Drive, Estimate, FloatArray, Trajectory
+from .inputs import AhrsConfig, vertical_inputs
 
 
 def schuler_vertical(lat: float, h: float) -> float:

@@ -21,7 +21,7 @@ enter the vertical specific force), K_z^a, dSF and Td are random constants, and 
 Gauss-Markov baro bias with the exact discrete transition of ``vnav_graph.sensors.noise``.
 
 Nominal INS vertical channel (the "INS" of the seed; inputs from
-``vertical_input.vertical_inputs``, a GNSS-aided attitude reference, never truth)::
+``vertical.inputs.vertical_inputs``, a GNSS-aided attitude reference, never truth)::
 
     dv_D/dt = f_D − C33·(B̂_z + K̂_z·F_z) + g(lat, h) + cor_D,    dh/dt = −v_D
 
@@ -66,13 +66,13 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from ..geo.earth import gravity_scalar, radii, radii_scalar
-from ..nav.gaps import GAP_ACCEL_SD, cv_bridge_noise, gap_threshold
-from ..nav.gnss_gate import NO_LIMIT, REFUSE, height_gate, new_gate_state
-from ..nav.sensor_model import sensor_model
-from ..sensors.baro import baro_jacobian, measure_baro
-from ..sensors.noise import gm_process_var, gm_transition
-from ..types import (
+from ...geo.earth import gravity_scalar, radii, radii_scalar
+from ...nav.gaps import GAP_ACCEL_SD, cv_bridge_noise, gap_threshold
+from ...nav.gnss_gate import NO_LIMIT, REFUSE, height_gate, new_gate_state
+from ...nav.sensor_model import sensor_model
+from ...sensors.baro import baro_jacobian, measure_baro
+from ...sensors.noise import gm_process_var, gm_transition
+from ...types import (
     ERROR_STATE_DIM,
     BaroEstimate,
     Drive,
@@ -81,7 +81,7 @@ from ..types import (
     ParamEstimate,
     Trajectory,
 )
-from .vertical_input import AhrsConfig, VerticalInputs, vertical_inputs
+from .inputs import AhrsConfig, VerticalInputs, vertical_inputs
 
 NX = 8  # 7 filter states + the accumulator I = ∫ b dt
 IH, IV, IB, IK, IS, ITD, IBB, II = range(NX)
@@ -152,15 +152,15 @@ def input_error_psd(
 ) -> FloatArray:
     """PSD of the vertical specific-force input error at the IMU epochs [(m/s²)²/Hz], (N,).
 
-    The attitude reference (``vertical_input``) is GNSS-aided: with fixes its tilt error is
+    The attitude reference (``vertical.inputs``) is GNSS-aided: with fixes its tilt error is
     ≈ ``tilt_sd``; in a GNSS outage it grows with the gyro bias, σ_ψ = tilt_sd + σ_bg·t_gap,
     and it has no Coriolis term there (no horizontal velocity). The f_D error is then
     σ_f² = (σ_ψ·|f_h|)² + (2Ω_ie·|v_h|)²·[in outage], |f_h| the horizontal specific force, and
     is treated as white with PSD base_psd + 2·corr_s·σ_f² (first-order Markov of correlation
     time corr_s and variance σ_f², integrated over its correlation time).
     """
-    from ..geo.earth import OMEGA_IE
-    from ..geo.frames import quat_to_mat
+    from ...geo.earth import OMEGA_IE
+    from ...geo.frames import quat_to_mat
 
     t = vi.t
     f_n = np.einsum("nij,nj->ni", quat_to_mat(vi.q_nb), drive.imu.accel_b)
@@ -360,7 +360,7 @@ class VEKF7:
         # antenna height offset −[C_nb l]_D from the attitude reference (zero lever arm: 0)
         lever_dz = np.zeros(n)
         if gn is not None and np.any(gn.lever_arm_b != 0):
-            from ..geo.frames import quat_to_mat
+            from ...geo.frames import quat_to_mat
 
             lever_dz = -(quat_to_mat(vi.q_nb) @ gn.lever_arm_b)[:, 2]
 

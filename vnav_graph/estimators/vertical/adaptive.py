@@ -53,8 +53,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
-from ..config import REAL_LOG_BARO
-from ..types import (
+from ...config import REAL_LOG_BARO
+from ...types import (
     ERROR_STATE_DIM,
     BaroEstimate,
     Drive,
@@ -63,9 +63,9 @@ from ..types import (
     ParamEstimate,
     Trajectory,
 )
+from .inputs import AhrsConfig
 from .loops import LoopInputs, _estimate, bridge_gaps, loop_inputs, zoh_nb
 from .observer1d import gate_threshold
-from .vertical_input import AhrsConfig
 
 _FUNCS = {"none": 0, "linear": 1, "exp": 2, "tanh": 3, "sigmoid": 4}
 _SIGNALS = {"error": 0, "vz": 1}
@@ -424,7 +424,7 @@ class AdaptiveLoop3:
         if cfg.ekf_control:
             return self._run_ekf(drive, inp, t0)
         x, err, s = run_adaptive(inp, cfg)
-        # baro-inertial: GNSS only reaches the attitude reference (vertical_input), never the
+        # baro-inertial: GNSS only reaches the attitude reference (vertical.inputs), never the
         # height channel, so no GNSS is gated and no gnss_rejected is claimed
         return _estimate(self.name, inp.t, x[:, 0] + inp.h0, x[:, 1],
                          time.perf_counter() - t0, cfg,

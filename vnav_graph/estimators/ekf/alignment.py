@@ -23,8 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..geo.earth import radii
-from ..types import FloatArray, GnssStream, ImuStream
+from ...geo.earth import radii
+from ...types import FloatArray, GnssStream, ImuStream
 
 
 def static_window_end(imu: ImuStream, max_s: float, min_s: float = 0.5,

@@ -30,7 +30,7 @@ In GNSS outages only the baro updates: the INS channel then follows the baro cor
 last baro-error estimate, so the altitude error stays bounded (it grows only with the change of
 the true baro error, e.g. the scale error times the altitude change, over the outage).
 
-INS vertical channel (inputs from ``vertical_input.vertical_inputs``, never truth)::
+INS vertical channel (inputs from ``vertical.inputs.vertical_inputs``, never truth)::
 
     dv_D/dt = f_D + g(lat, h) + cor_D,   dh/dt = −v_D     (WGS-84 gravity at the INS height)
 
@@ -61,12 +61,12 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from ..geo.earth import gravity_scalar
-from ..nav.gaps import GAP_ACCEL_SD, cv_bridge_noise, gap_threshold
-from ..nav.gnss_gate import NO_LIMIT, REFUSE, height_gate
-from ..nav.sensor_model import sensor_model
-from ..sensors.noise import gm_process_var, gm_transition
-from ..types import (
+from ...geo.earth import gravity_scalar
+from ...nav.gaps import GAP_ACCEL_SD, cv_bridge_noise, gap_threshold
+from ...nav.gnss_gate import NO_LIMIT, REFUSE, height_gate
+from ...nav.sensor_model import sensor_model
+from ...sensors.noise import gm_process_var, gm_transition
+from ...types import (
     ERROR_STATE_DIM,
     BaroEstimate,
     Drive,
@@ -75,8 +75,8 @@ from ..types import (
     ParamEstimate,
     Trajectory,
 )
+from .inputs import AhrsConfig, vertical_inputs
 from .vekf7 import input_error_psd
-from .vertical_input import AhrsConfig, vertical_inputs
 
 NX = 4
 

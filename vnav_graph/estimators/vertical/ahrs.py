@@ -1,6 +1,6 @@
 """Numba kernels of the GNSS-aided AHRS that feeds the classical vertical estimators.
 
-The method, its parameters and its tested accuracy are described in ``vertical_input`` (which
+The method, its parameters and its tested accuracy are described in ``vertical.inputs`` (which
 assembles the kernel inputs and owns ``AhrsConfig``); this module holds only the compiled
 loops: ``_ahrs`` (levelling, gyro integration with the shared strapdown step, velocity-matching
 tilt feedback, gap handling) and ``_poly_velocity`` (GNSS velocity from positions)."""
@@ -10,9 +10,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..nav.rotations import quat_exp, quat_mul, quat_to_dcm
-from ..nav.rotations import rpy_quat as _rpy_quat
-from .strapdown import strapdown_step
+from ...nav.rotations import quat_exp, quat_mul, quat_to_dcm
+from ...nav.rotations import rpy_quat as _rpy_quat
+from ..ekf.strapdown import strapdown_step
 
 
 @njit(cache=True)

@@ -120,10 +120,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..geo.earth import OMEGA_IE, gravity, radii
-from ..nav.gaps import gap_threshold
-from ..types import Drive, FloatArray
-from .vertical_ahrs import _ahrs, _poly_velocity
+from ...geo.earth import OMEGA_IE, gravity, radii
+from ...nav.gaps import gap_threshold
+from ...types import Drive, FloatArray
+from .ahrs import _ahrs, _poly_velocity
 
 
 @dataclass(frozen=True)
@@ -280,8 +280,8 @@ def _thin(t: FloatArray, min_dt: float) -> FloatArray:
 
 def _coarse_level(accel_b: FloatArray) -> FloatArray:
     """Roll/pitch from a mean specific force at rest (Groves eq. 5.101), yaw 0; returns q_nb."""
-    from ..geo.frames import rph_to_quat
-    from ..nav.levelling import coarse_level
+    from ...geo.frames import rph_to_quat
+    from ...nav.levelling import coarse_level
 
     roll, pitch = coarse_level(np.mean(accel_b, axis=0))
     return rph_to_quat(np.array([[roll, pitch, 0.0]]))[0]

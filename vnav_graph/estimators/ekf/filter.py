@@ -1,7 +1,7 @@
 """Reference INS/GNSS/baro error-state EKF (``ekf``) and its RTS smoother (``ekf-rts``).
 
 The filter equations, the covariance grid, the measurement timing and the heading handling
-are documented in ``vnav_graph.estimators.ekf_model`` (the numba kernels). This module turns
+are documented in ``vnav_graph.estimators.ekf.model`` (the numba kernels). This module turns
 a ``Drive`` into the kernel inputs (noise from the drive's specs, alignment, event list) and
 the kernel outputs into an ``Estimate``.
 
@@ -20,7 +20,7 @@ Outputs
 - innovations: normalised (z − h(x̃))/√S_ii of every accepted measurement component:
   ``gnss_pos`` (N, 3), ``gnss_vel`` (N, 3), ``baro`` (N,).
 - info: ``gnss_rejected`` (fixes whose horizontal pair or height was refused: χ² gate,
-  σ_v limit or probation, ``ekf_model`` docstring), ``gnss_alt_rejected`` (height refused),
+  σ_v limit or probation, ``ekf.model`` docstring), ``gnss_alt_rejected`` (height refused),
   ``imu_gaps`` ([start, length] of bridged IMU gaps [s]), ``gnss_vel_rejected``,
   ``baro_rejected``, ``heading_time_s`` (time the heading last became known),
   ``heading_source`` (given / accel-matching / gnss-track), rates used.
@@ -49,17 +49,16 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 
-from ..config import DEG, REAL_LOG_BARO, BaroSpec, ImuSpec
-from ..geo.earth import OMEGA_IE, gravity, radii
-from ..geo.frames import quat_to_mat, rph_to_quat
-from ..nav.gaps import GAP_ACCEL_SD
-from ..nav.levelling import coarse_level
-from ..nav.sensor_model import baro_prior, sensor_model
-from ..sensors.noise import gm_process_var, white_sd
-from ..types import (
+from ...config import DEG, REAL_LOG_BARO, BaroSpec, ImuSpec
+from ...geo.earth import OMEGA_IE, gravity
+from ...geo.frames import quat_to_mat, rph_to_quat
+from ...nav.gaps import GAP_ACCEL_SD
+from ...nav.levelling import coarse_level
+from ...nav.sensor_model import baro_prior, sensor_model
+from ...sensors.noise import gm_process_var, white_sd
+from ...types import (
     ERROR_STATE_DIM,
     BaroEstimate,
     Drive,
@@ -68,7 +67,8 @@ from ..types import (
     ParamEstimate,
     Trajectory,
 )
-from . import ekf_model as km
+from . import kernel, rts
+from . import model as km
 from .alignment import level_tilt_bias_jacobian, static_window_end, track_heading
 
 NDArrayInt = Any
@@ -90,7 +90,7 @@ class EkfConfig:
     and the GNSS-height probation gate is widened by the baro-bias
     prior (with a baro) or the height accepted (without); max_gnss_sd_v: GNSS heights whose
     own σ_v [m] exceeds this are not used; gnss_probation_s: a GNSS height, once rejected, is
-    used again after passing the gate this long without a break (``ekf_model`` docstring);
+    used again after passing the gate this long without a break (``ekf.model`` docstring);
     IMU logging gaps (``nav.gaps``: the shared rule) are bridged at constant velocity with the
     shared unknown motion ``GAP_ACCEL_SD``, gap_yaw_rw [rad/√s] added to the covariance,
     roll/pitch re-levelled from the mean specific force of the first gap_level_s after it
@@ -103,7 +103,7 @@ class EkfConfig:
     align_chunk_s, align_forget_s, align_sd_max: acceleration-matching chunk length [s],
     forgetting time [s] and the σ [rad] below which the heading is accepted;
     gap_heading_forget_s: IMU gaps at least this long [s] make the heading unknown again
-    (``ekf_model`` docstring).
+    (``ekf.model`` docstring).
     """
 
     cov_rate_hz: float = 10.0
@@ -220,7 +220,7 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
                                 + _white_var(ispec.accel_bias_rw, dtg))[:, None]
     b_bsd = bp.bias_sd
     qd[:, km.IBB] = gm_process_var(dtg, bp.bias_tau, b_bsd)
-    # IMU gaps: the grid interval ending at gap end i+1 is exactly the gap (ekf_model docstring)
+    # IMU gaps: the grid interval ending at gap end i+1 is exactly the gap (ekf.model docstring)
     kg = np.searchsorted(grid_idx, gaps + 1)
     dg = dtg[kg]
     qd[kg, km.IPOS:km.IPOS + 3] += (GAP_ACCEL_SD**2 * dg**3 / 3.0)[:, None]
@@ -344,7 +344,7 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
         raise ValueError("EkfConfig.heading_source: 'auto', 'track' or 'accel'")
     heading_accel = bool(has_vel) and cfg.heading_source in ("auto", "accel")
 
-    res = km.run_filter(
+    res = kernel.run_filter(
         t, imu.gyro_b, imu.accel_b, grid_of, out_of, kk, out_idx.size, cov_out_of,
         cov_grid.size, lla0, v0, q0, par0, p0, qd, *tau,
         ev_t, ev_type, ev_idx, np.ascontiguousarray(g_lla), np.ascontiguousarray(g_psd),
@@ -446,48 +446,6 @@ class EKF:
         return _estimate(self.name, run, traj, run.par, cov, t0, None, self.config)
 
 
-def smooth_corrections(run: _Run, es: FloatArray) -> FloatArray:
-    """Smoothed error estimate at every output epoch (N_out, 21), estimated minus true.
-
-    At a grid epoch it is ê^s_k; inside (t_k, t_{k+1}) it is interpolated linearly between
-    ê^s_k (after the update at t_k) and ê^s_{k+1} + c_{k+1} (the same error relative to the
-    un-updated nominal state that runs up to t_{k+1}); across a heading reset it is held.
-    """
-    assert run.rts is not None
-    corr, reset_at = run.rts[3], run.rts[4]
-    grid_t = run.t_grid
-    k = np.searchsorted(grid_t, run.t_out, side="right") - 1
-    k = np.clip(k, 0, grid_t.size - 1)
-    at_grid = np.isclose(run.t_out, grid_t[k], rtol=0, atol=1e-12)
-    kn = np.minimum(k + 1, grid_t.size - 1)
-    span = np.where(kn > k, grid_t[kn] - grid_t[k], 1.0)
-    al = np.where(at_grid, 0.0, (run.t_out - grid_t[k]) / span)[:, None]
-    right = es[kn] + corr[kn]
-    right = np.where(np.isnan(reset_at[kn])[:, None], right, es[k])
-    return (1.0 - al) * es[k] + al * right
-
-
-def apply_error(lla: FloatArray, vel: FloatArray, q: FloatArray, par: FloatArray,
-                e: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-    """Remove estimated errors e (N, 21) (estimated minus true) from nominal states."""
-    rn, re = radii(lla[:, 0])
-    lla2 = lla.copy()
-    lla2[:, 0] -= e[:, 0] / (rn + lla[:, 2])
-    lla2[:, 1] -= e[:, 1] / ((re + lla[:, 2]) * np.cos(lla[:, 0]))
-    lla2[:, 2] += e[:, 2]
-    vel2 = vel - e[:, 3:6]
-    rot = Rotation.from_rotvec(-e[:, 6:9]) * Rotation.from_quat(q, scalar_first=True)
-    q2 = rot.as_quat(scalar_first=True)
-    par2 = par.copy()
-    par2[:, km.PBG:km.PBG + 3] -= e[:, km.IBG:km.IBG + 3]
-    par2[:, km.PBA:km.PBA + 3] -= e[:, km.IBA:km.IBA + 3]
-    par2[:, km.PKA:km.PKA + 3] -= e[:, km.IKA:km.IKA + 3]
-    par2[:, km.PSC] -= e[:, km.ISC]
-    par2[:, km.PTD] -= e[:, km.ITD]
-    par2[:, km.PBB] -= e[:, km.IBB]
-    return lla2, vel2, q2, par2
-
-
 class EKFRTS:
     """``ekf`` followed by a Rauch-Tung-Striebel smoother on the covariance grid."""
 
@@ -503,10 +461,10 @@ class EKFRTS:
         rts_p, rts_ing, rts_q, corr, reset_at = run.rts
         cov_out_of = np.full(run.t_grid.size, -1, dtype=np.int64)
         cov_out_of[run.cov_grid] = np.arange(run.cov_grid.size)
-        es, cov_s = km.rts_smooth(rts_p, rts_ing, rts_q, corr, reset_at, *run.tau,
+        es, cov_s = rts.rts_smooth(rts_p, rts_ing, rts_q, corr, reset_at, *run.tau,
                                   cov_out_of, run.cov_grid.size)
-        e_out = smooth_corrections(run, es)
-        lla, vel, q, par = apply_error(run.lla, run.vel, run.q, run.par, e_out)
+        e_out = rts.smooth_corrections(run.t_grid, run.t_out, run.rts[3], run.rts[4], es)
+        lla, vel, q, par = rts.apply_error(run.lla, run.vel, run.q, run.par, e_out)
         online = _trajectory(run, run.lla, run.vel, run.q, run.par)
         traj = _trajectory(run, lla, vel, q, par)
         cov = _unpack_cov(cov_s, run.has_baro)
