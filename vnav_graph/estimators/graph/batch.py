@@ -46,7 +46,15 @@ from ...types import (
 from . import factors as gf
 from .init import initial_states
 from .linalg import single_thread_blas
-from .problem import GraphConfig, Problem, build_batch_graph, pims_for, setup, states_from_values
+from .problem import (
+    GraphConfig,
+    Problem,
+    build_batch_graph,
+    low_rate_config,
+    pims_for,
+    setup,
+    states_from_values,
+)
 from .solve import BatchResult, gauss_newton, linear_system
 
 
@@ -255,7 +263,7 @@ class GraphBatch:
 
     def _run(self, drive: Drive) -> Estimate:
         t0 = time.perf_counter()
-        P = setup(drive, self.config)
+        P = setup(drive, low_rate_config(self.config, drive))
         pri = P.pri
         rot, pos, vel = initial_states(P)
         t1 = time.perf_counter()

@@ -47,6 +47,8 @@ from .general import hessian_pieces
 from .init import initial_states
 from .linalg import single_thread_blas
 from .problem import (
+    LOW_RATE_DT,
+    LOW_RATE_KEYFRAME_DT,
     GraphConfig,
     build_batch_graph,
     gap_factors,
@@ -68,8 +70,7 @@ from .solve import gauss_newton
 # GNSS gap the typed thresholds relinearised ~140 variables per update; 5 s keyframes and
 # looser thresholds (relinearisation every 50 updates) bring it to ~9 s. Applied only when the
 # other settings are the defaults of those fields.
-LOW_RATE_DT = 0.5
-LOW_RATE_SETTINGS = {"keyframe_dt": 5.0, "relinearize_skip": 50,
+LOW_RATE_SETTINGS = {"keyframe_dt": LOW_RATE_KEYFRAME_DT, "relinearize_skip": 50,
                      "relinearize_typed": (0.1, 5.0, 2.0, 0.5, 0.02)}
 # settings of the retry after a failed/diverged incremental pass (GraphISAM2.run)
 ROBUST_SETTINGS = {"relinearize_skip": 1, "relinearize_typed": None,

@@ -1,0 +1,30 @@
+"""Both graph smoothers use 5 s keyframes on averaged low-rate (≤ 2 Hz) IMU logs."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from types import SimpleNamespace
+
+import numpy as np
+
+from vnav_graph.estimators.graph.isam2 import LOW_RATE_SETTINGS
+from vnav_graph.estimators.graph.problem import (
+    LOW_RATE_KEYFRAME_DT,
+    GraphConfig,
+    low_rate_config,
+)
+
+
+def _drive(rate_hz: float) -> SimpleNamespace:
+    return SimpleNamespace(imu=SimpleNamespace(t=np.arange(0.0, 600.0, 1.0 / rate_hz)))
+
+
+def test_low_rate_imu_gets_long_keyframes() -> None:
+    cfg = GraphConfig()
+    assert low_rate_config(cfg, _drive(1.0)).keyframe_dt == LOW_RATE_KEYFRAME_DT
+    assert low_rate_config(cfg, _drive(100.0)) is cfg
+    # a user's own keyframe spacing is kept
+    own = replace(cfg, keyframe_dt=2.0)
+    assert low_rate_config(own, _drive(1.0)) is own
+    # graph-isam2 uses the same keyframes on such logs
+    assert LOW_RATE_SETTINGS["keyframe_dt"] == LOW_RATE_KEYFRAME_DT
