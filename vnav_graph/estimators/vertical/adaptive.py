@@ -54,6 +54,7 @@ import numpy as np
 from numba import njit
 
 from ...config import REAL_LOG_BARO
+from ...nav.sensor_model import sensor_model
 from ...types import (
     ERROR_STATE_DIM,
     BaroEstimate,
@@ -434,17 +435,19 @@ class AdaptiveLoop3:
 
     def _run_ekf(self, drive: Drive, inp: LoopInputs, t0: float) -> Estimate:
         cfg = self.config
+        model = sensor_model(drive)
         gn = drive.gnss
         if gn is None or len(gn) == 0:
             t_fix, z_fix, r_fix = np.empty(0), np.empty(0), np.empty(0)
         else:
             t_fix, z_fix = gn.t, gn.lla[:, 2] - inp.h0
-            sd = gn.pos_sd[:, 2] if gn.pos_sd is not None else np.full(t_fix.size, 3.0)
-            r_fix = sd**2
+            r_fix = model.gnss_pos_sd[:, 2] ** 2
         bdt = float(np.median(np.diff(drive.baro.t))) if len(drive.baro) > 1 else 0.04
+        # the shared sensor model (nav.sensor_model): IMU noise, baro noise/bias/scale priors
+        # (this loop has no latency state, by the seed paper's design)
         h, v, s, err, t_cov, p_cov, x_cov, code, nu = run_adaptive_ekf(
-            inp, cfg, t_fix, z_fix, r_fix, imu_spec=drive.imu.spec,
-            baro_spec=drive.baro.spec, baro_dt=bdt)
+            inp, cfg, t_fix, z_fix, r_fix, imu_spec=model.imu, baro_spec=model.baro,
+            baro_dt=bdt)
         n = inp.t.size
         nan = np.full(n, np.nan)
         traj = Trajectory(inp.t, np.column_stack([nan, nan, h + inp.h0]),
