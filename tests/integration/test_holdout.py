@@ -157,3 +157,47 @@ def test_glitch_log_gnss_is_gated(name: str, data_dir: Path) -> None:
     # baro noise + a 4 % scale over 48 m + IMU-aided dynamics stay under 5 m RMS; following
     # the GNSS would give ~99 m RMS (GNSS − baro, README)
     assert np.sqrt(np.mean(d**2)) < 5.0
+
+
+def _flat_drive_with_baro(rng: np.random.Generator) -> Drive:
+    """``_flat_drive`` with a 10 Hz baro that follows the true height (+ a 12 m datum, 0.3 m
+    noise) and GNSS heights with their reported 2 m of noise."""
+    d = _flat_drive()
+    g = d.gnss
+    lla = g.lla.copy()
+    lla[:, 2] += 2.0 * rng.standard_normal(g.t.size)
+    tb = np.arange(0.0, 600.0, 0.1)
+    from vnav_graph.types import BaroStream
+
+    baro = BaroStream(tb, alt=500.0 + 0.05 * tb + 12.0 + 0.3 * rng.standard_normal(tb.size))
+    return d.replace(gnss=GnssStream(g.t, lla, g.pos_sd), baro=baro)
+
+
+def test_spike_in_withheld_window_leaves_scores_unchanged(
+        monkeypatch: pytest.MonkeyPatch, rng: np.random.Generator) -> None:
+    """Issue 13: 8 withheld fixes jumping to +15…17 m while the baro stays flat are not a
+    height the vehicle had; scored against them every estimator would look worse."""
+    monkeypatch.setitem(base._REGISTRY, "planted", _Planted)
+    clean = _flat_drive_with_baro(rng)
+    g = clean.gnss
+    lla = g.lla.copy()
+    j = int(np.searchsorted(g.t, 240.0))  # inside the second window (209.85-269.85)
+    lla[j:j + 8, 2] += [15.0, 16.0, 17.0, 17.0, 17.0, 17.0, 16.0, 15.0]
+    spiked = clean.replace(gnss=GnssStream(g.t, lla, g.pos_sd))
+    a = run_holdout(clean, ["planted"]).doc
+    b = run_holdout(spiked, ["planted"]).doc
+    assert a["reference_screening"]["excluded"] == 0  # no good fix is thrown away
+    sb = b["reference_screening"]
+    assert sb["excluded"] == 8 and sb["by_check"]["baro_climb"] == 8
+    assert sb["excluded_t"] == pytest.approx(list(g.t[j:j + 8]))
+    pa, pb = a["estimators"]["planted"], b["estimators"]["planted"]
+    assert pb["alt_offset_m"] == pytest.approx(pa["alt_offset_m"], abs=1e-9)
+    # the same score as the clean log without those 8 (clean, noisy) fixes
+    keep = np.ones(g.t.size, bool)
+    keep[j:j + 8] = False
+    c = run_holdout(clean.replace(gnss=g.select(keep)), ["planted"]).doc
+    pc = c["estimators"]["planted"]
+    assert pc["alt_rmse_m"] == pytest.approx(pb["alt_rmse_m"], abs=1e-9)
+    assert pc["horiz_rmse_m"] == pytest.approx(pb["horiz_rmse_m"], abs=1e-9)
+    assert pb["n_scored"] == pa["n_scored"] - 8
+    assert pb["alt_max_abs_m"] < 10.0  # no spike error is scored

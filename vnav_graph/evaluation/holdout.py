@@ -49,6 +49,7 @@ import numpy as np
 
 from ..progress import Mode, mode_for
 from ..types import ERROR_STATE, Drive, Estimate, FloatArray
+from .screening import screen_reference
 
 HOLDOUT_SCHEMA = "vnav_graph.holdout/1"
 TAIL_S = 5.0
@@ -116,10 +117,13 @@ def _rms(x: FloatArray) -> float | None:
 
 
 def score(est: Estimate, drive: Drive, withheld: np.ndarray,
-          windows: Sequence[tuple[float, float]] = ()) -> Scored:
+          windows: Sequence[tuple[float, float]] = (),
+          given: np.ndarray | None = None) -> Scored:
     """Score an estimate against the GNSS fixes flagged ``withheld`` (module docstring).
 
-    ``windows`` (optional) adds ``per_window`` scores to the block.
+    ``windows`` (optional) adds ``per_window`` scores to the block. ``given``: the fixes the
+    estimator was given (the datum offset is taken over them; default ``~withheld``) — a
+    withheld fix excluded by the reference screen is in neither set.
     """
     g = drive.gnss
     assert g is not None
@@ -129,7 +133,7 @@ def score(est: Estimate, drive: Drive, withheld: np.ndarray,
     h_g = g.lla[inside, 2]
     h_e = np.interp(t, tr.t, tr.alt)
     w = withheld[inside]
-    seen = ~w
+    seen = (~withheld if given is None else given)[inside]
     if not w.any():
         raise ValueError("estimate does not cover any withheld GNSS fix")
     c = float(np.median(h_g[seen] - h_e[seen])) if seen.any() else 0.0
@@ -184,14 +188,15 @@ def failed(error: str, runtime_s: float) -> dict[str, Any]:
             "alt_offset_m": None, "n_scored": 0, "runtime_s": runtime_s, "per_window": []}
 
 
-def _onboard_score(drive: Drive, withheld: np.ndarray) -> dict[str, Any] | None:
+def _onboard_score(drive: Drive, withheld: np.ndarray,
+                   given: np.ndarray) -> dict[str, Any] | None:
     ob = drive.meta.get("onboard")
     if not ob or drive.gnss is None:
         return None
     t, alt = np.asarray(ob["t"], float), np.asarray(ob["alt"], float)
     g = drive.gnss
     inside = (g.t >= t[0]) & (g.t <= t[-1])
-    w, seen = withheld & inside, ~withheld & inside
+    w, seen = withheld & inside, given & inside
     if not w.any() or not seen.any():
         return None
     h_e = np.interp(g.t, t, alt)
@@ -225,6 +230,7 @@ def run_holdout(drive: Drive, estimators: Sequence[str] | None = None, outage_s:
         raise ValueError("no estimators available in this build")
     windows = choose_windows(drive.gnss.t, outage_s, spacing_s)
     withheld = in_windows(drive.gnss.t, windows)
+    reference, screen = screen_reference(drive, withheld)
     held = drive.replace(gnss=drive.gnss.select(~withheld),
                          meta={**drive.meta, "gnss_holdout_windows": [list(w) for w in windows]})
     results: dict[str, dict[str, Any]] = {}
@@ -234,7 +240,8 @@ def run_holdout(drive: Drive, estimators: Sequence[str] | None = None, outage_s:
             results[r.name] = failed(r.error or "unknown error", r.runtime_s)
             continue
         try:
-            s = score(r.estimate, drive, withheld, windows)
+            s = score(r.estimate, drive, reference, windows, given=~withheld)
+            s.block["warnings"] = [str(x) for x in (r.estimate.info or {}).get("warnings") or []]
             results[r.name], series[r.name] = s.block, s
         except Exception as exc:  # one estimator's failure is data, not a crash
             if os.environ.get("VNAV_DEBUG"):
@@ -253,15 +260,24 @@ def run_holdout(drive: Drive, estimators: Sequence[str] | None = None, outage_s:
         "windows": [{"t0": a, "t1": b, "n_withheld": int(in_windows(drive.gnss.t, [(a, b)]).sum())}
                     for a, b in windows],
         "gnss_withheld": int(withheld.sum()),
+        "reference_screening": screen,
         "gnss_sd_v_median_m": float(np.median(sd_v)) if sd_v.size else None,
-        "scoring": ("alt error = estimate + c - withheld GNSS height at each withheld fix, "
+        "scoring": ("alt error = estimate + c - withheld GNSS height at each withheld fix "
+                    "that passes the reference screen (reference_screening), "
                     "c = median(GNSS height - estimate) over the fixes given to the estimator "
                     "(datum offset, reported as alt_offset_m); horiz error = NE distance to the "
                     "withheld fix, no offset removed"),
         "estimators": results,
-        "onboard": _onboard_score(drive, withheld),
+        "onboard": _onboard_score(drive, reference, ~withheld),
     }
     return HoldoutResult(doc, windows, series)
+
+
+def _screen_note(sc: dict[str, Any] | None) -> str:
+    if not sc or not sc.get("excluded"):
+        return ""
+    parts = ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in sc["by_check"].items() if v)
+    return f" ({sc['excluded']} excluded as implausible references: {parts})"
 
 
 def format_markdown(doc: dict[str, Any]) -> str:
@@ -273,7 +289,8 @@ def format_markdown(doc: dict[str, Any]) -> str:
     lines = [
         f"# GNSS-outage holdout: {d['name']} ({d['format']}, {d['duration_s']:.0f} s)", "",
         f"{len(doc['windows'])} window(s) of {doc['outage_s']:g} s, "
-        f"{doc['gnss_withheld']} GNSS fixes withheld; median GNSS vertical sigma in the "
+        f"{doc['gnss_withheld']} GNSS fixes withheld"
+        f"{_screen_note(doc.get('reference_screening'))}; median GNSS vertical sigma in the "
         f"windows {f(doc['gnss_sd_v_median_m'])} m. Scoring: {doc['scoring']}.", "",
         "| estimator | status | alt RMSE m | alt max m | horiz RMSE m | GNSS rejected "
         "| offset m | run s |",

@@ -1,0 +1,115 @@
+"""Plausibility screening of the withheld GNSS fixes a holdout scores against.
+
+A withheld fix is a *reference*: when it is wrong (a multipath spike, a height jump), every
+estimator is scored against the error. The screen uses only the log itself — no estimator's
+output — and excludes a withheld fix when any of these fails:
+
+- **baro climb**: the GNSS-minus-baro height difference d(t) = h_GNSS(t) − h_baro(t) changes
+  slowly (baro bias drift, scale × height change); a fix whose d departs from the running
+  median of d over ±``BARO_HALF_S`` (the fixes around it, withheld or not) by more than
+  ``K_SIGMA`` × σ is not a height the vehicle had. σ = max(reported σ_v, the robust scatter of
+  d about its running median over the whole log, ``MIN_SD_M``): a receiver whose heights
+  wander is judged by its own wander, not by its optimistic σ;
+- **vertical speed**: a single fix that jumps from *both* neighbours at more than
+  ``MAX_VSPEED`` (a spike, not a climb);
+- **reported velocity** (when the log has GNSS velocity): a fix whose horizontal position
+  disagrees with *both* neighbours' positions carried by the mean reported velocity, beyond
+  ``K_SIGMA`` × σ (σ from the reported position and velocity σ and an acceleration of
+  ``MAX_ACCEL`` over the interval).
+
+The counts by check and the excluded times go into ``holdout.json["reference_screening"]``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from ..types import Drive, FloatArray
+
+BARO_HALF_S = 15.0  # s
+K_SIGMA = 5.0
+MIN_SD_M = 0.5  # m
+MAX_VSPEED = 60.0  # m/s
+MAX_ACCEL = 5.0  # m/s²
+
+
+def _running_median(t: FloatArray, x: FloatArray, half: float) -> FloatArray:
+    lo = np.searchsorted(t, t - half, side="left")
+    hi = np.searchsorted(t, t + half, side="right")
+    return np.array([np.median(x[a:b]) for a, b in zip(lo, hi, strict=True)])
+
+
+def _baro_check(drive: Drive) -> np.ndarray | None:
+    """Bool (N,) over all fixes: passes the baro-climb check (None: no baro to check with)."""
+    g, b = drive.gnss, drive.baro
+    if b is None or b.t.size < 2 or g is None:
+        return None
+    inside = (g.t >= b.t[0]) & (g.t <= b.t[-1])
+    ok = np.ones(g.t.size, dtype=bool)
+    if inside.sum() < 5:
+        return None
+    t = g.t[inside]
+    d = g.lla[inside, 2] - np.interp(t, b.t, b.altitude)
+    dev = d - _running_median(t, d, BARO_HALF_S)
+    scatter = 1.4826 * float(np.median(np.abs(dev)))
+    sd = np.maximum(np.maximum(g.pos_sd[inside, 2], scatter), MIN_SD_M)
+    ok[inside] = np.abs(dev) <= K_SIGMA * sd
+    return ok
+
+
+def _vspeed_check(drive: Drive) -> np.ndarray:
+    g = drive.gnss
+    assert g is not None
+    ok = np.ones(g.t.size, dtype=bool)
+    if g.t.size < 3:
+        return ok
+    h, t = g.lla[:, 2], g.t
+    rate = np.abs(np.diff(h)) / np.maximum(np.diff(t), 1e-3)
+    fast = rate > MAX_VSPEED
+    ok[1:-1] = ~(fast[:-1] & fast[1:])
+    return ok
+
+
+def _velocity_check(drive: Drive) -> np.ndarray | None:
+    g = drive.gnss
+    if g is None or g.vel_n is None or g.vel_sd is None or g.t.size < 3:
+        return None
+    from ..geo.frames import lla_to_ned
+
+    p = lla_to_ned(g.lla, drive.origin_lla)[:, :2]
+    v, sv, sp = g.vel_n[:, :2], g.vel_sd[:, :2], g.pos_sd[:, :2]
+    dt = np.diff(g.t)[:, None]
+    miss = (p[1:] - p[:-1]) - 0.5 * (v[1:] + v[:-1]) * dt
+    var = (sp[1:] ** 2 + sp[:-1] ** 2 + (0.5 * dt) ** 2 * (sv[1:] ** 2 + sv[:-1] ** 2)
+           + (0.5 * MAX_ACCEL * dt**2) ** 2)
+    bad = np.any(miss**2 > K_SIGMA**2 * var, axis=1)
+    ok = np.ones(g.t.size, dtype=bool)
+    ok[1:-1] = ~(bad[:-1] & bad[1:])
+    return ok
+
+
+def screen_reference(drive: Drive, withheld: np.ndarray) -> tuple[np.ndarray, dict[str, Any]]:
+    """(usable, report): ``usable`` (N,) bool is ``withheld`` minus the implausible fixes;
+    ``report`` is the JSON block (module docstring)."""
+    g = drive.gnss
+    assert g is not None
+    checks = {"baro_climb": _baro_check(drive), "vertical_speed": _vspeed_check(drive),
+              "reported_velocity": _velocity_check(drive)}
+    keep = withheld.copy()
+    by_check: dict[str, int | None] = {}
+    for name, ok in checks.items():
+        if ok is None:
+            by_check[name] = None  # not applicable to this log
+            continue
+        by_check[name] = int(np.sum(withheld & ~ok))
+        keep &= ok
+    excluded = withheld & ~keep
+    report = {
+        "method": "baro-climb consistency, vertical-speed spikes, position vs reported "
+                  "velocity (no estimator output); see vnav_graph/evaluation/screening.py",
+        "withheld": int(withheld.sum()), "excluded": int(excluded.sum()),
+        "by_check": by_check, "excluded_t": [float(x) for x in g.t[excluded]],
+    }
+    return keep, report
