@@ -7,7 +7,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from vnav_graph.config import BaroSpec
+from vnav_graph.config import REAL_LOG_BARO, BaroSpec
 from vnav_graph.nav.gaps import GAP_MIN_S, cv_bridge_noise, gap_threshold, imu_gaps
 from vnav_graph.nav.gnss_gate import (
     NO_LIMIT,
@@ -18,7 +18,6 @@ from vnav_graph.nav.gnss_gate import (
     new_gate_state,
 )
 from vnav_graph.nav.sensor_model import (
-    MIN_LATENCY_SD,
     REAL_LOG_IMU,
     baro_prior,
     infer_imu_spec,
@@ -83,11 +82,15 @@ def test_baro_prior_closed_forms() -> None:
     assert p.latency_mean == pytest.approx(0.2)
     assert p.latency_sd == pytest.approx(0.2 / np.sqrt(12.0))  # uniform: width/√12
     assert (p.scale_sd, p.bias_sd, p.bias_tau, p.noise_sd) == (0.02, 3.0, 900.0, 0.3)
-    # a spec that fixes the scale states its size; a fixed latency gets the floor σ
-    fixed = baro_prior(BaroSpec(scale=-0.05, scale_sd=0.0, latency_s=0.25,
-                                latency_range_s=None))
-    assert fixed.scale_sd == 0.05
-    assert (fixed.latency_mean, fixed.latency_sd) == (0.25, MIN_LATENCY_SD)
+    # a spec that fixes the truth (a scale, a zero scale σ, a fixed latency) does not leak it:
+    # the estimators get the documented real-log prior (issue 13)
+    dflt = baro_prior(REAL_LOG_BARO)
+    for fixed in (BaroSpec(scale=-0.05, scale_sd=0.0, latency_s=0.25, latency_range_s=None),
+                  BaroSpec(scale_sd=0.0, latency_s=0.0, latency_range_s=None)):
+        p = baro_prior(fixed)
+        assert p.scale_sd == dflt.scale_sd == 0.02
+        assert (p.latency_mean, p.latency_sd) == (dflt.latency_mean, dflt.latency_sd)
+        assert dflt.latency_mean == pytest.approx(0.1) and dflt.latency_sd == pytest.approx(0.1)
 
 
 def test_gap_rule() -> None:

@@ -173,18 +173,25 @@ def floor_imu_spec(spec: ImuSpec) -> ImuSpec:
 
 
 def baro_prior(spec: BaroSpec) -> BaroPrior:
-    """Prior of the baro states from a spec.
+    """Prior of the baro states from a spec — a prior, never the simulated truth.
 
-    Scale: σ = max(scale_sd, |scale|) (a spec that fixes the scale states its size, not its
-    sign). Latency: a uniform range gives its mean and width/√12, a fixed latency itself.
-    Every σ is floored (module constants)."""
-    s_sd = max(spec.scale_sd, abs(spec.scale or 0.0), MIN_SCALE_SD)
-    if spec.latency_range_s is not None:
-        lo, hi = spec.latency_range_s
-        tau_m, tau_sd = 0.5 * (lo + hi), (hi - lo) / np.sqrt(12.0)
+    A spec *draws* its scale s ~ N(0, scale_sd) and its latency uniformly in
+    ``latency_range_s``: those are datasheet-like statements and give the prior (the range its
+    mean and width/√12). A spec that *fixes* a value (``scale`` set or ``scale_sd`` = 0; a
+    fixed ``latency_s`` without a range) states the truth of a simulation, which an estimator
+    must not be told: it gets the documented default prior of ``REAL_LOG_BARO`` instead
+    (scale σ 2 %, latency N(0.1 s, 0.1 s)). Bias and noise σ are process statistics and are
+    taken as given. Every σ is floored (module constants)."""
+    if spec.scale is None and spec.scale_sd > 0:
+        s_sd = spec.scale_sd
     else:
-        tau_m, tau_sd = spec.latency_s, 0.0
-    return BaroPrior(scale_sd=float(s_sd), latency_mean=float(tau_m),
+        s_sd = REAL_LOG_BARO.scale_sd
+    rng = spec.latency_range_s if spec.latency_range_s is not None else \
+        REAL_LOG_BARO.latency_range_s
+    assert rng is not None
+    lo, hi = rng
+    tau_m, tau_sd = 0.5 * (lo + hi), (hi - lo) / np.sqrt(12.0)
+    return BaroPrior(scale_sd=float(max(s_sd, MIN_SCALE_SD)), latency_mean=float(tau_m),
                      latency_sd=float(max(tau_sd, MIN_LATENCY_SD)),
                      bias_sd=float(max(spec.bias_sd, MIN_BARO_BIAS_SD)),
                      bias_tau=float(spec.bias_tau),
