@@ -139,3 +139,19 @@ def test_bad_input_is_one_line_error(what, exts, match):
     with pytest.raises(ValueError, match=match) as exc:
         GraphBatch(extensions=exts).run(d)
     assert "\n" not in str(exc.value)
+
+
+def test_extra_variables_reach_summary_json(runs):
+    import json
+
+    from vnav_graph.pipeline import RunResult, summarize
+
+    d, eb, ei, e0 = runs
+    s = json.loads(json.dumps(summarize(d, [RunResult(e.estimator + tag, e, None, e.runtime_s)
+                                            for e, tag in ((eb, ""), (ei, ""), (e0, "-0"))])))
+    mean, sd = _m_closed_form()
+    for name in ("graph-batch", "graph-isam2"):
+        m = s["estimators"][name]["extra_variables"]["m0"]
+        assert m["est"][0] == pytest.approx(mean, abs=1e-9)
+        assert m["sd"][0] == pytest.approx(sd, rel=1e-9)
+    assert s["estimators"]["graph-isam2-0"]["extra_variables"] is None  # null, not omitted
