@@ -60,6 +60,7 @@ from gtsam.symbol_shorthand import B, C, V, X
 
 from ...geo.frames import lla_to_ned
 from ...types import Drive, FloatArray
+from .factors import rot_t_n
 
 __all__ = ["RESERVED", "GraphExtension", "GraphView", "Terms", "Variable", "B", "C", "V", "X"]
 
@@ -100,6 +101,11 @@ class GraphView:
     def to_tangent(self, lla: FloatArray) -> FloatArray:
         """Positions (lat, lon [rad], h [m]), shape (N, 3), in the tangent frame [m]."""
         return lla_to_ned(np.atleast_2d(np.asarray(lla, float)), self.origin_lla)
+
+    def rot_t_n(self, lla: FloatArray) -> FloatArray:
+        """C_tn (N, 3, 3): local-level NED at each ``lla`` → the tangent frame (to bring a
+        NED-resolved vector or attitude C_nb into the graph's frame: C_tn C_nb)."""
+        return rot_t_n(np.atleast_2d(np.asarray(lla, float)), self.origin_lla)
 
     def rotation(self, k: int) -> FloatArray:
         """Initial attitude of keyframe k: rotation matrix body → tangent frame (3, 3)."""
