@@ -22,9 +22,15 @@ without the factor, and how many detected standstill keyframes were in fact movi
 speed > 5 cm/s). Measured (hill-drive, 120 s, graph-batch), standstill velocity RMS error
 without → with: seed 0 19.4 → 5.3 mm/s, seed 1 17.6 → 5.0 mm/s, seed 2 22.7 → 6.7 mm/s, no
 false detection; the whole-drive velocity error does not grow (26.1 → 24.8, 27.6 → 26.7,
-24.6 → 18.5 mm/s). The test asserts, on seeds 0 and 1, that the standstill velocity error at
-least halves, that no detected standstill keyframe was moving, and that the whole-drive
-velocity error does not grow by more than 5 %.
+24.6 → 18.5 mm/s). The altitude is not its target: whole-drive altitude RMSE on the 180 s
+bench drive 0.085 → 0.130 m (seed 0), 0.267 → 0.268 m (seed 1), 0.112 → 0.116 m (seed 2)
+— the vibration makes the IMU noisier than the noise model the graph trusts, and pinning the
+velocity at the stops moves that mismatch elsewhere (not investigated further). Without the
+vibration the detector fires while cruising and the altitude RMSE grows to 6–10 m
+(``test_zupt_detector_needs_vibration`` checks the false detections). The test asserts, on
+seeds 0 and 1, that the standstill velocity error at least halves, that no detected
+standstill keyframe was moving, and that the whole-drive velocity error does not grow by more
+than 5 %.
 
 Run once through the bench (two plugin estimators on the same vibrating drives: road
 vibration only, and road vibration + zero-velocity factor)::

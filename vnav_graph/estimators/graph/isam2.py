@@ -23,6 +23,11 @@ only deltas of *old* variables are left stale by it (the newest keyframes sit in
 clique and are always exact), and old variables are relinearised by the final batch pass
 anyway. Measurements in ``docs/graph.md``.
 
+User extensions (``extend``): each factor enters the update that creates the last keyframe it
+touches, each new variable (with its prior) the first update that uses it; the final pass has
+them all. ``info["extra_variables_online"]``: iSAM2's estimate and marginal σ of the new
+variables after the last update; ``info["extra_variables"]``: the final pass's.
+
 Outputs: ``Estimate.online`` holds what was known at each keyframe (the iSAM2 estimate of the
 newest keyframe right after its update); ``Estimate.trajectory`` is the final smoothed
 solution — the batch Gauss-Newton of ``solve`` (global s, τd, all terms relinearised)
