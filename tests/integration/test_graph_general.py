@@ -13,6 +13,7 @@ from gtsam.symbol_shorthand import M, X
 from vnav_graph.estimators.graph import GraphBatch, GraphConfig
 from vnav_graph.estimators.graph import init as gi
 from vnav_graph.estimators.graph import problem as gp
+from vnav_graph.estimators.graph.extend import Terms, Variable
 from vnav_graph.estimators.graph.solve import gauss_newton
 from vnav_graph.simulation.scenario import simulate
 
@@ -93,11 +94,12 @@ def _m_closed_form() -> tuple[float, float]:
     return mean, float(1 / np.sqrt(w.sum()))
 
 
-def _add_m(graph, vals) -> None:
-    vals.insert(M(0), np.zeros(1))
-    for mean, sd in M_PRIORS:
-        graph.add(gtsam.PriorFactorVector(M(0), np.array([mean]),
-                                          gtsam.noiseModel.Isotropic.Sigma(1, sd)))
+def _m_terms() -> Terms:
+    """The new scalar m0: its first prior as the Variable's, the second as a factor."""
+    (m1, s1), (m2, s2) = M_PRIORS
+    return Terms([gtsam.PriorFactorVector(M(0), np.array([m2]),
+                                          gtsam.noiseModel.Isotropic.Sigma(1, s2))],
+                 [Variable(M(0), 0.0, s1, prior_mean=m1)])
 
 
 @pytest.fixture(scope="module")
@@ -111,15 +113,15 @@ def span_case():
     res = gauss_newton(P, graph, vals, np.zeros(P.n_kf, dtype=int), P.pri)
     rel = res.values.atPose3(X(0)).between(res.values.atPose3(X(SPAN)))
 
-    def extend(P, graph, vals):
+    def extend(view):
         # a relative-pose measurement X0 → X10 equal to the optimum's: it adds information
         # but no gradient there, so the optimum must not move
-        graph.add(gtsam.BetweenFactorPose3(
-            X(0), X(SPAN), rel, gtsam.noiseModel.Diagonal.Sigmas(np.r_[[0.01] * 3, [0.05] * 3])))
-        _add_m(graph, vals)
+        return Terms([gtsam.BetweenFactorPose3(
+            X(0), X(SPAN), rel, gtsam.noiseModel.Diagonal.Sigmas(np.r_[[0.01] * 3, [0.05] * 3]))]
+            + _m_terms().factors, _m_terms().variables)
 
     base = GraphBatch(TIGHT).run(d)
-    ext = GraphBatch(TIGHT, extend=extend).run(d)
+    ext = GraphBatch(TIGHT, extensions=[extend]).run(d)
     return d, base, ext, extend
 
 
@@ -150,11 +152,11 @@ def test_new_global_variable_stays_on_the_banded_path(span_case):
     agrees with the general path."""
     d = span_case[0]
 
-    def extend(P, graph, vals):
-        _add_m(graph, vals)
+    def extend(view):
+        return _m_terms()
 
-    eb = GraphBatch(extend=extend).run(d)
-    eg = GraphBatch(GraphConfig(solver="general"), extend=extend).run(d)
+    eb = GraphBatch(extensions=[extend]).run(d)
+    eg = GraphBatch(GraphConfig(solver="general"), extensions=[extend]).run(d)
     assert (eb.info["solver"], eg.info["solver"]) == ("banded", "general")
     mean, sd = _m_closed_form()
     for e in (eb, eg):
@@ -167,7 +169,7 @@ def test_new_global_variable_stays_on_the_banded_path(span_case):
 def test_banded_forced_on_an_off_band_graph_is_one_line_error(span_case):
     d, _, _, extend = span_case
     with pytest.raises(ValueError, match="does not fit the keyframe band") as exc:
-        GraphBatch(replace(TIGHT, solver="banded"), extend=extend).run(d)
+        GraphBatch(replace(TIGHT, solver="banded"), extensions=[extend]).run(d)
     assert "\n" not in str(exc.value)
 
 

@@ -92,12 +92,24 @@ def baro_block(baro: BaroEstimate | None, drive: Drive) -> dict[str, Any]:
     }
 
 
+def extra_variables_block(extra: Any) -> dict[str, Any] | None:
+    """Value and σ of every added variable (``Estimate.info["extra_variables"]``; the
+    covariance matrices stay in the estimate), None when there are none."""
+    if not extra:
+        return None
+    return {str(k): {"est": [float(x) for x in v["est"]] if v.get("est") is not None else None,
+                     "sd": [float(x) for x in v["sd"]]}
+            for k, v in extra.items()}
+
+
 def evaluate(est: Estimate, drive: Drive,
              blocks: Sequence[tuple[float, float]] | None = None) -> dict[str, Any]:
     """Metric block for summary.json / bench.json (docs/design.md schema).
 
     Additions to the docs/design.md block: ``horiz_rmse_m`` (RMS of the north/east position
-    error, estimates providing ``pos_h``) and ``warnings``. With ``blocks`` (time blocks
+    error, estimates providing ``pos_h``), ``warnings`` and ``extra_variables`` (the
+    variables a graph extension added, ``{"m0": {"est": [...], "sd": [...]}}`` from
+    ``info["extra_variables"]``; null for an estimator without them). With ``blocks`` (time blocks
     ``[(t0, t1), ...]`` [s]) the block also has ``per_block``, the RMS values per block, which
     ``pipeline.summarize`` moves to ``summary["comparison"]`` (the paired comparison of
     ``vnav_graph.evaluation.compare``), so the estimator block stays the bench row.
@@ -111,6 +123,7 @@ def evaluate(est: Estimate, drive: Drive,
         # things the user should know about this result (e.g. a solver that stopped at its
         # iteration cap); an addition to the docs/design.md block, always a list
         "warnings": [str(w) for w in est.info.get("warnings", [])],
+        "extra_variables": extra_variables_block(est.info.get("extra_variables")),
     }
     if drive.truth is not None:
         err = errors_vs_truth(est, drive)

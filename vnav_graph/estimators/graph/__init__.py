@@ -14,7 +14,10 @@ importing a submodule such as ``factors`` does not load the estimators). Modules
 - ``general``: the general sparse path (GTSAM elimination of the linearised graph) and the
   interval information blocks as GTSAM HessianFactor pieces;
 - ``batch``: outputs (trajectory, covariance, baro parameters) and ``GraphBatch``;
-- ``isam2``: ``GraphISAM2``, the incremental front end.
+- ``isam2``: ``GraphISAM2``, the incremental front end;
+- ``extend``: the public extension point — user factors and variables for both smoothers
+  (``GraphBatch(config, extensions=[...])``, ``GraphISAM2(config, extensions=[...])``;
+  guide in ``docs/extending.md``).
 
 Design, measurements and references in ``docs/graph.md``.
 """

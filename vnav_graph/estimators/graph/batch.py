@@ -27,7 +27,7 @@ References: Forster et al., "On-Manifold Preintegration", IEEE T-RO 2017; Kaess 
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Sequence
 from typing import Any
 
 import gtsam
@@ -44,6 +44,7 @@ from ...types import (
     Trajectory,
 )
 from . import factors as gf
+from .extend import GraphExtension, check_extensions, collect, make_view
 from .init import initial_states
 from .linalg import single_thread_blas
 from .problem import (
@@ -250,12 +251,12 @@ class GraphBatch:
     name = "graph-batch"
 
     def __init__(self, config: GraphConfig | None = None,
-                 extend: Callable[[Problem, Any, Any], None] | None = None) -> None:
-        """``extend(problem, graph, values)``, if given, is called once the graph is built and
-        may add GTSAM factors to ``graph`` and new variables (with their priors) to ``values``
-        (provisional hook; the solve picks the general path when they do not fit the band)."""
+                 extensions: Sequence[GraphExtension] | None = None) -> None:
+        """``extensions``: user factors and variables (``graph.extend``), each a callable
+        ``view -> Terms`` called once per run; the solve picks the general path by itself
+        when their factors do not fit the keyframe band."""
         self.config = config or GraphConfig()
-        self.extend = extend
+        self.extensions = check_extensions(extensions)
 
     def run(self, drive: Drive) -> Estimate:
         with single_thread_blas():
@@ -271,8 +272,8 @@ class GraphBatch:
         t2 = time.perf_counter()
         calib = np.zeros(P.n_kf, dtype=int)
         graph, vals = build_batch_graph(P, rot, pos, vel, pims, pri, calib)
-        if self.extend is not None:
-            self.extend(P, graph, vals)
+        if self.extensions:
+            collect(self.extensions, make_view(P, vals)).add_to_batch(graph, vals)
         res = gauss_newton(P, graph, vals, calib, pri)
         t3 = time.perf_counter()
         out = outputs(P, res, pri, K(0) if drive.baro is not None else None)

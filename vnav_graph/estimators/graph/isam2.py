@@ -23,6 +23,11 @@ only deltas of *old* variables are left stale by it (the newest keyframes sit in
 clique and are always exact), and old variables are relinearised by the final batch pass
 anyway. Measurements in ``docs/graph.md``.
 
+User extensions (``extend``): each factor enters the update that creates the last keyframe it
+touches, each new variable (with its prior) the first update that uses it; the final pass has
+them all. ``info["extra_variables_online"]``: iSAM2's estimate and marginal σ of the new
+variables after the last update; ``info["extra_variables"]``: the final pass's.
+
 Outputs: ``Estimate.online`` holds what was known at each keyframe (the iSAM2 estimate of the
 newest keyframe right after its update); ``Estimate.trajectory`` is the final smoothed
 solution — the batch Gauss-Newton of ``solve`` (global s, τd, all terms relinearised)
@@ -33,6 +38,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from collections.abc import Sequence
 from typing import Any
 
 import gtsam
@@ -42,7 +48,8 @@ from gtsam.symbol_shorthand import B, C, K, V, X
 from ...geo.frames import mat_to_quat, ned_to_lla
 from ...types import Drive, Estimate, Trajectory
 from . import factors as gf
-from .batch import outputs, provides, solver_warnings
+from .batch import outputs, provides, solver_warnings, value_of
+from .extend import Collected, GraphExtension, check_extensions, collect, key_name, make_view
 from .general import hessian_pieces
 from .init import initial_states
 from .linalg import single_thread_blas
@@ -56,6 +63,7 @@ from .problem import (
     gravity_delta,
     imu_gaps,
     keyframe_fix_factors,
+    keyframe_poses,
     noise,
     pims_for,
     preintegrate,
@@ -130,8 +138,9 @@ def _segment_span(P: Any, seg: np.ndarray, j: int) -> float:
     return max(float(P.cfg.segment_s), t1 - t0)
 
 
-def _threshold_map(cfg: GraphConfig) -> Any:
-    """Per-variable-type relinearisation thresholds (tangent-space components)."""
+def _threshold_map(cfg: GraphConfig, ext: Collected | None = None) -> Any:
+    """Per-variable-type relinearisation thresholds (tangent-space components); the letters
+    of the extensions' variables get theirs (``Variable.relinearize_threshold``)."""
     if cfg.relinearize_typed is None:
         return cfg.relinearize_threshold
     rot, trans, vel, ba, bg = cfg.relinearize_typed
@@ -141,6 +150,9 @@ def _threshold_map(cfg: GraphConfig) -> Any:
     m.insert(("b", np.array([ba] * 3 + [bg] * 3)))
     m.insert(("c", np.full(1, 1e9)))
     m.insert(("k", np.full(2, 1e9)))
+    if ext is not None:
+        for ch, thr in ext.threshold_entries(cfg.relinearize_threshold).items():
+            m.insert((ch, thr))
     return m
 
 
@@ -172,6 +184,20 @@ def _info(P: Any, cfg: GraphConfig, res: Any, out: dict[str, Any], upd_ms: Any, 
     }
 
 
+def _extra_online(isam: Any, est: Any, ext: Collected | None) -> dict[str, dict[str, Any]]:
+    """The extensions' variables as iSAM2 holds them after the last update (value, σ and
+    covariance from ``ISAM2.marginalCovariance``), by key name; {} without extensions."""
+    out: dict[str, dict[str, Any]] = {}
+    if ext is None:
+        return out
+    for key in ext.variables:
+        cov = np.atleast_2d(isam.marginalCovariance(key))
+        out[key_name(key)] = {"est": value_of(est, key),
+                              "sd": np.sqrt(np.clip(np.diag(cov), 0, None)).tolist(),
+                              "cov": cov.tolist()}
+    return out
+
+
 def _first_keyframe(P: Any, r0: Any, p0: Any, v0: Any, k0: Any) -> tuple[Any, Any]:
     """Factors (priors, fixes) and values of keyframe 0 for the first iSAM2 update."""
     graph0 = prior_factors(P, r0, p0, v0, P.pri, K(0))
@@ -187,11 +213,11 @@ def _first_keyframe(P: Any, r0: Any, p0: Any, v0: Any, k0: Any) -> tuple[Any, An
     return graph0, vals0
 
 
-def _isam2_params(cfg: GraphConfig, robust: bool) -> Any:
+def _isam2_params(cfg: GraphConfig, robust: bool, ext: Collected | None = None) -> Any:
     """ISAM2Params of one pass: typed relinearisation thresholds, Gauss-Newton (or, for the
     robust retry, dogleg) with the configured wildfire threshold, QR factorisation."""
     params = gtsam.ISAM2Params()
-    params.setRelinearizeThreshold(_threshold_map(cfg))
+    params.setRelinearizeThreshold(_threshold_map(cfg, ext))
     params.relinearizeSkip = cfg.relinearize_skip
     params.enableRelinearization = cfg.relinearize_threshold > 0
     params.enablePartialRelinearizationCheck = cfg.partial_relinearization_check
@@ -214,8 +240,13 @@ class GraphISAM2:
 
     name = "graph-isam2"
 
-    def __init__(self, config: GraphConfig | None = None) -> None:
+    def __init__(self, config: GraphConfig | None = None,
+                 extensions: Sequence[GraphExtension] | None = None) -> None:
+        """``extensions``: user factors and variables (``graph.extend``); each factor enters
+        the update that creates the last keyframe it touches, each new variable (with its
+        prior) the first update that uses it, and the final smoothing pass has them all."""
         self.config = config or GraphConfig()
+        self.extensions = check_extensions(extensions)
 
     def run(self, drive: Drive) -> Estimate:
         """Incremental pass with the configured (fast) settings; if it fails or diverges,
@@ -254,7 +285,13 @@ class GraphISAM2:
         rot_i, pos_i, vel_i = initial_states(P)
         nk = P.n_kf
         seg = _segments(P)
-        isam = gtsam.ISAM2(_isam2_params(cfg, robust))
+        calib0 = np.zeros(nk, dtype=int)
+        ext = None
+        if self.extensions:
+            # the view is the batch's: the same initial values (no IMU factors needed)
+            vals_i = build_batch_graph(P, rot_i, pos_i, vel_i, None, pri, calib0)[1]
+            ext = collect(self.extensions, make_view(P, vals_i))
+        isam = gtsam.ISAM2(_isam2_params(cfg, robust, ext))
         # running linearisation arrays (keyframe states as last estimated)
         rot = np.zeros((nk, 3, 3))
         pos = np.zeros((nk, 3))
@@ -263,7 +300,13 @@ class GraphISAM2:
         cb = np.zeros(nk)
         cal = {0: np.array([0.0, pri["tau0"]])}
         rot[0], pos[0], vel[0] = rot_i[0], pos_i[0], vel_i[0]
-        isam.update(*_first_keyframe(P, rot[0], pos[0], vel[0], cal[0]))
+        graph0, vals0 = _first_keyframe(P, rot[0], pos[0], vel[0], cal[0])
+        if ext is not None:
+            fs, nv_ext = ext.at_keyframe(0)
+            for f in fs:
+                graph0.add(f)
+            vals0.insert(nv_ext)
+        isam.update(graph0, vals0)
         bt = drive.baro.t if has_baro else np.zeros(0)
         bz = drive.baro.altitude if has_baro else np.zeros(0)
         g_between = np.flatnonzero((P.g_kf == -1) & P.g_use)
@@ -328,6 +371,11 @@ class GraphISAM2:
                     span = _segment_span(P, seg, j)
                     nf.add(gtsam.BetweenFactorVector(K(j - 1), K(j), np.zeros(2),
                                                      noise(calib_rw * np.sqrt(span))))
+            if ext is not None:
+                fs, nv_ext = ext.at_keyframe(k + 1)
+                for f in fs:
+                    nf.add(f)
+                nv.insert(nv_ext)
             if k >= 1:
                 lcf, baro_next = self._interval_factor(
                     P, k - 1, rot, pos, vel, bias, cb, cal, seg, bt, bz, baro_next,
@@ -365,16 +413,20 @@ class GraphISAM2:
         t_online = time.perf_counter()
         est = isam.calculateEstimate()
         online_traj = self._online_trajectory(P, online)
+        extra_online = _extra_online(isam, est, ext)
         # final smoothing pass: batch Gauss-Newton with one global (s, τd)
-        calib0 = np.zeros(nk, dtype=int)
         if robust:
             # the online pass needed the retry: its estimate is a poor starting point (ski
             # holdout: 22 m withheld-height RMSE after 12 iterations), so the final pass
             # starts where graph-batch starts and therefore equals it
             graph, res_vals = build_batch_graph(P, rot_i, pos_i, vel_i,
                                                    pims_for(P, rot_i, pos_i), pri, calib0)
+            if ext is not None:
+                ext.add_to_batch(graph, res_vals)
         else:
             res_vals, graph = self._batch_from(P, est, pims, pri, seg)
+            if ext is not None:
+                ext.add_to_batch(graph, res_vals, values_from=est)
         res = gauss_newton(P, graph, res_vals, calib0, pri)
         t_final = time.perf_counter()
         out = outputs(P, res, pri, K(0) if has_baro else None)
@@ -385,6 +437,9 @@ class GraphISAM2:
         info = _info(P, cfg, res, out, upd_ms, brk, robust, fallback,
                      {"online_s": t_online - t_start, "final_smoothing_s": t_final - t_online},
                      isam_k, int(seg[-1]) + 1, self.name)
+        info["solver_final"] = res.solver
+        info["extra_variables"] = out["extra"]
+        info["extra_variables_online"] = extra_online
         return Estimate(self.name, out["trajectory"], provides(drive), out["cov"],
                         out["t_cov"], out["baro"], time.perf_counter() - t_start,
                         online=online_traj, info=info, config=self.config)
@@ -474,9 +529,7 @@ class GraphISAM2:
     def _batch_from(P: Any, est: Any, pims: list[Any], pri: dict[str, float],
                     seg: Any) -> tuple[Any, Any]:
         nk = P.n_kf
-        poses = gtsam.utilities.extractPose3(est)
-        rot = poses[:, :9].reshape(nk, 3, 3)
-        pos = poses[:, 9:12]
+        rot, pos = keyframe_poses(est, nk)
         vel = np.array([est.atVector(V(k)) for k in range(nk)])
         graph, vals = build_batch_graph(P, rot, pos, vel, pims, pri,
                                            np.zeros(nk, dtype=int))

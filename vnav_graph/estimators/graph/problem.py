@@ -445,11 +445,20 @@ def gap_factors(P: Problem, k: int, rot: FloatArray, pos: FloatArray, vel: Float
 # Interval terms → GTSAM Hessian blocks
 
 
+def keyframe_poses(vals: Any, nk: int) -> tuple[FloatArray, FloatArray]:
+    """Rotations (K, 3, 3) and positions (K, 3) of X(0 … K−1) in ``vals``. Fast path: every
+    Pose3 in ``vals`` is a keyframe pose; with Pose3 variables added by an extension
+    (``extend``) the keyframe poses are read one by one."""
+    poses = gtsam.utilities.extractPose3(vals)
+    if poses.shape[0] != nk:
+        poses = np.array([np.r_[p.rotation().matrix().ravel(), p.translation()]
+                          for p in (vals.atPose3(X(k)) for k in range(nk))])
+    return poses[:, :9].reshape(nk, 3, 3), poses[:, 9:12]
+
+
 def states_from_values(P: Problem, vals: Any, calib_of_kf: np.ndarray) -> gf.KeyframeStates:
     nk = P.n_kf
-    poses = gtsam.utilities.extractPose3(vals)
-    rot = poses[:, :9].reshape(nk, 3, 3)
-    pos = poses[:, 9:12]
+    rot, pos = keyframe_poses(vals, nk)
     vel = gtsam.utilities.extractVectors(vals, "v")
     at_bias = vals.atConstantBias
     ba = np.array([at_bias(B(k)).accelerometer() for k in range(nk)])
@@ -532,11 +541,12 @@ def gnss_chi2(P: Problem, st: gf.KeyframeStates, idx: np.ndarray) -> tuple[Float
 
 
 def build_batch_graph(P: Problem, rot: FloatArray, pos: FloatArray, vel: FloatArray,
-                       pims: list[Any], pri: dict[str, float],
+                       pims: list[Any] | None, pri: dict[str, float],
                        calib_of_kf: np.ndarray) -> tuple[Any, Any]:
     """C++ part of the batch graph: priors, CombinedImuFactors (``gap_factors`` over IMU
     logging gaps) and the Gauss-Markov links. Every GNSS fix (on keyframe epochs too) enters
-    as an interval term so that the gates can drop it without rebuilding the graph."""
+    as an interval term so that the gates can drop it without rebuilding the graph.
+    ``pims`` None: no IMU factors (only the initial values are wanted)."""
     graph = prior_factors(P, rot[0], pos[0], vel[0], pri, K(0))
     vals = gtsam.Values()
     nk = P.n_kf
@@ -555,7 +565,7 @@ def build_batch_graph(P: Problem, rot: FloatArray, pos: FloatArray, vel: FloatAr
                 for f in fs:
                     graph.add(f)
                 rot[k + 1], pos[k + 1], vel[k + 1] = x1.rotation().matrix(), x1.translation(), v1
-            else:
+            elif pims is not None:
                 graph.add(gtsam.CombinedImuFactor(X(k), V(k), X(k + 1), V(k + 1), B(k),
                                                   B(k + 1), pims[k]))
             if P.drive.baro is not None:
