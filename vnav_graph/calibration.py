@@ -13,10 +13,22 @@ the height above the drive origin: H_G = h_GNSS − h0, H_B = h_baro − h0, h0 
 multiplied by (1 + dSF) (``baro_jacobian``); the regression coefficient θ_Td is therefore
 (1 + dSF)·Td and ``calibrate_baro`` reports Td = θ_Td / (1 + dSF).
 
-Standard errors come from the residual variance, cov = (MᵀM)⁻¹·σ̂², σ̂² = RSS/(N − 3)
-(ordinary least squares with white residuals; the GNSS height noise enters both dH and the
-regressor H_G, which biases dSF by −σ_G²/var(H_G) — negligible for altitude changes of
-hundreds of metres, and flagged through the observability warnings otherwise).
+``calibrate_arrays`` without a noise model is the paper's ordinary least squares: standard
+errors from the residual variance, cov = (MᵀM)⁻¹·σ̂², σ̂² = RSS/(N − 3), right only for white
+residuals. A real baro's bias is not a constant but a Gauss-Markov process (docs/design.md),
+so the residuals are correlated over the bias time constant and those standard errors are
+several times too small (issue 13: σ 10-16× smaller than the error on a sortie variant).
+``calibrate_baro`` therefore solves the same regression by **generalised least squares** with
+the residual covariance of the shared baro model (``nav.sensor_model``: the drive's bias σ_b
+and τ_b — the real-log prior on a log — and white baro plus GNSS height noise):
+C = σ_b²·exp(−|t_i − t_j|/τ_b) + diag(σ_baro² + σ_GNSS,v²), θ = (MᵀC⁻¹M)⁻¹MᵀC⁻¹dH,
+cov = (MᵀC⁻¹M)⁻¹·max(1, s²) with s² the whitened residual variance (when the data scatter
+more than the model says, the σ grow with them and a warning says so). At most
+``MAX_GLS_EPOCHS`` evenly spaced epochs enter (C is dense). Outliers (GNSS height spikes) are
+removed first: residuals that depart from their running median over ±``OUTLIER_HALF_S`` by
+more than ``OUTLIER_K`` robust σ. The GNSS height noise enters both dH and the regressor
+H_G, which biases dSF by −σ_G²/var(H_G) — negligible for altitude changes of hundreds of
+metres, and flagged through the observability warnings otherwise.
 
 Observability warnings (``BaroCalibration.warnings``):
 
@@ -61,6 +73,10 @@ WARN_FRACTION = 0.5
 MAX_CONDITION = 1.0e3
 # Baro samples must bracket a GNSS epoch within this gap to be interpolated to it [s].
 MAX_BARO_GAP_S = 1.0
+MAX_GLS_EPOCHS = 1500
+OUTLIER_HALF_S = 15.0  # s
+OUTLIER_K = 6.0
+POOR_FIT_S2 = 4.0  # whitened residual variance above which the fit is called poor
 
 
 @dataclass(frozen=True)
@@ -77,6 +93,9 @@ class BaroCalibration:
     condition : condition number of the design with unit-RMS columns
     velocity_source : "gnss_velocity" or "differentiated_height"
     warnings : human-readable observability / conditioning warnings (empty if none)
+    method : "ols" (the paper's) or "gls" (with the baro noise model, ``calibrate_baro``)
+    outliers : number of epochs removed as outliers
+    fit_ratio : whitened residual variance s² (1 when the noise model fits; GLS only)
     """
 
     scale: float
@@ -91,11 +110,25 @@ class BaroCalibration:
     condition: float
     velocity_source: str
     warnings: tuple[str, ...]
+    method: str = "ols"
+    outliers: int = 0
+    fit_ratio: float | None = None
+
+
+def _outliers(t: FloatArray, r: FloatArray) -> np.ndarray:
+    """Residuals that leave their running median over ±OUTLIER_HALF_S by > OUTLIER_K robust σ
+    (a bias drifts slowly; a GNSS height spike does not)."""
+    lo = np.searchsorted(t, t - OUTLIER_HALF_S, side="left")
+    hi = np.searchsorted(t, t + OUTLIER_HALF_S, side="right")
+    dev = r - np.array([np.median(r[a:b]) for a, b in zip(lo, hi, strict=True)])
+    sc = 1.4826 * float(np.median(np.abs(dev)))
+    return np.abs(dev) > OUTLIER_K * max(sc, 1e-9)
 
 
 def calibrate_arrays(
     h_gnss_rel: FloatArray, v_up: FloatArray, h_baro_rel: FloatArray,
-    velocity_source: str = "gnss_velocity",
+    velocity_source: str = "gnss_velocity", t: FloatArray | None = None,
+    noise: tuple[float, float, FloatArray] | None = None,
 ) -> BaroCalibration:
     """Solve seed 001 eq. 4 for (dSF, Td, B).
 
@@ -105,6 +138,8 @@ def calibrate_arrays(
     v_up : (N,) vertical speed +up at the same epochs, V_G [m/s]
     h_baro_rel : (N,) baro altitude above the drive origin at the same epochs, H_B [m]
     velocity_source : recorded in the result (adds a warning if "differentiated_height")
+    t : (N,) epoch times [s]; with ``noise`` = (σ_b [m], τ_b [s], σ_white (N,) [m]) the
+        regression is the GLS of the module docstring, with outliers removed; else OLS
     """
     hg = np.asarray(h_gnss_rel, dtype=float)
     vg = np.asarray(v_up, dtype=float)
@@ -112,12 +147,50 @@ def calibrate_arrays(
     if not (hg.shape == vg.shape == hb.shape) or hg.ndim != 1:
         raise ValueError("calibrate_baro: H_G, V_G and H_B must be 1-D arrays of equal length")
     ok = np.isfinite(hg) & np.isfinite(vg) & np.isfinite(hb)
+    gls = t is not None and noise is not None
+    n_out = 0
+    if gls:
+        assert t is not None and noise is not None
+        tt = np.asarray(t, dtype=float)
+        w_sd = np.broadcast_to(np.asarray(noise[2], dtype=float), hg.shape)
+        ok &= np.isfinite(tt) & np.isfinite(w_sd)
+        if ok.sum() >= 10:
+            # spikes: residuals of a first OLS fit against their running median
+            m0 = np.column_stack([hg[ok], -vg[ok], np.ones(int(ok.sum()))])
+            th0, *_ = np.linalg.lstsq(m0, hb[ok] - hg[ok], rcond=None)
+            bad = _outliers(tt[ok], hb[ok] - hg[ok] - m0 @ th0)
+            n_out = int(bad.sum())
+            idx = np.flatnonzero(ok)
+            ok[idx[bad]] = False
+        stride = max(1, int(np.ceil(ok.sum() / MAX_GLS_EPOCHS)))
+        keep = np.flatnonzero(ok)[::stride]
+        ok = np.zeros(hg.size, dtype=bool)
+        ok[keep] = True
+        tt, w_sd = tt[ok], w_sd[ok]
     hg, vg, hb = hg[ok], vg[ok], hb[ok]
     n = hg.size
     if n < 10:
         raise ValueError(f"calibrate_baro: only {n} usable GNSS/baro epochs (need >= 10)")
     m = np.column_stack([hg, -vg, np.ones(n)])  # M_G, eq. 4
     dh = hb - hg  # eq. 3
+    fit_ratio = None
+    if gls:
+        # the baro height as the regressor: H_G − H_B = β·H_B + θ_V·V_G + θ_B with
+        # β = −dSF/(1 + dSF), θ_V = (1 + dSF)·Td, θ_B = −B. Whitening boosts the high
+        # frequencies, where GNSS height noise (≈ 2 m) would bias a GNSS-height regressor
+        # (errors in variables, −σ_G²/var(H̃_G): −4 % on hill-drive); the baro's is 0.3 m.
+        m = np.column_stack([hb, vg, np.ones(n)])
+        dh = hg - hb
+        assert noise is not None
+        b_sd, b_tau = float(noise[0]), float(noise[1])
+        # a constant bias (τ_b infinite) is B itself: only the drifting part is noise
+        kern = np.exp(-np.abs(tt[:, None] - tt[None, :]) / b_tau) if np.isfinite(b_tau) \
+            else np.zeros((n, n))
+        chol = np.linalg.cholesky(b_sd**2 * kern + np.diag(w_sd**2))
+        from scipy.linalg import solve_triangular
+
+        m = solve_triangular(chol, m, lower=True)  # whitened design and data
+        dh = solve_triangular(chol, dh, lower=True)
     # unit-RMS column scaling: conditioning of the problem, not of its units
     scl = np.sqrt(np.mean(m**2, axis=0))
     scl[scl == 0] = 1.0
@@ -128,9 +201,19 @@ def calibrate_arrays(
     theta = theta_s / scl
     resid = dh - m @ theta
     sigma2 = float(resid @ resid) / max(n - 3, 1)
+    if gls:  # whitened: σ̂² is the fit ratio s²; never let it shrink the model's σ
+        fit_ratio = sigma2
+        sigma2 = max(1.0, sigma2)
     # (MᵀM)⁻¹σ̂² via the scaled design (pinv tolerates a singular design: the flag says so)
     cov = np.linalg.pinv(ms.T @ ms) / np.outer(scl, scl) * sigma2
-    s_hat, theta_td, b_hat = (float(x) for x in theta)
+    if gls:  # (β, θ_V, θ_B) → (dSF, θ_Td, B), first-order propagation
+        beta = float(theta[0])
+        s_hat = -beta / (1.0 + beta)
+        theta_td, b_hat = float(theta[1]), -float(theta[2])
+        j0 = np.diag([-1.0 / (1.0 + beta) ** 2, 1.0, -1.0])
+        cov = j0 @ cov @ j0.T
+    else:
+        s_hat, theta_td, b_hat = (float(x) for x in theta)
     # θ_Td = (1 + dSF)·Td in the exact model (see module docstring); first-order propagation
     td_hat = theta_td / (1.0 + s_hat)
     j = np.array([[1.0, 0.0, 0.0], [-theta_td / (1 + s_hat) ** 2, 1.0 / (1 + s_hat), 0.0],
@@ -147,6 +230,11 @@ def calibrate_arrays(
     if cond > MAX_CONDITION:
         warns.append(f"design ill-conditioned (condition number {cond:.3g} > {MAX_CONDITION:g}):"
                      " dSF, Td and B cannot be separated by this data")
+    if fit_ratio is not None and fit_ratio > POOR_FIT_S2:
+        warns.append(f"poor fit: the residuals scatter {np.sqrt(fit_ratio):.2g}x more than the "
+                     "baro/GNSS noise model allows (standard errors scaled up by that factor)")
+    if n_out:
+        warns.append(f"{n_out} epochs removed as outliers (GNSS/baro spikes)")
     if velocity_source == "differentiated_height":
         warns.append("V_G differentiated from GNSS heights (no GNSS velocity): Td is noisy and "
                      "biased toward zero")
@@ -154,7 +242,8 @@ def calibrate_arrays(
         scale=s_hat, latency_s=td_hat, bias_m=b_hat, scale_sd=float(sd[0]),
         latency_sd=float(sd[1]), bias_sd=float(sd[2]), cov=cov, residual_sd=float(np.sqrt(
             sigma2)), n_epochs=int(n), condition=cond, velocity_source=velocity_source,
-        warnings=tuple(warns),
+        warnings=tuple(warns), method="gls" if gls else "ols", outliers=n_out,
+        fit_ratio=fit_ratio,
     )
 
 
@@ -188,13 +277,22 @@ def calibrate_baro(drive: Drive) -> BaroCalibration:
             raise ValueError("calibrate-baro: too few GNSS fixes to differentiate heights")
         vg = np.gradient(g.lla[:, 2], tg)
         src = "differentiated_height"
-    return calibrate_arrays(hg[use], vg[use], hb[use] - h0, velocity_source=src)
+    from .nav.sensor_model import sensor_model
+
+    model = sensor_model(drive)
+    bp = model.baro
+    assert bp is not None and model.gnss_pos_sd is not None
+    w_sd = np.sqrt(bp.noise_sd**2 + model.gnss_pos_sd[:, 2] ** 2)
+    return calibrate_arrays(hg[use], vg[use], hb[use] - h0, velocity_source=src, t=tg[use],
+                            noise=(bp.bias_sd, bp.bias_tau, w_sd[use]))
 
 
 def format_calibration(cal: BaroCalibration) -> str:
     """A small text table of the estimates ± standard errors, then the warnings."""
+    how = ("generalised least squares with the Gauss-Markov baro bias" if cal.method == "gls"
+           else "ordinary least squares")
     lines = [
-        f"baro calibration vs GNSS (seed 001 eq. 4), {cal.n_epochs} epochs, "
+        f"baro calibration vs GNSS (seed 001 eq. 4, {how}), {cal.n_epochs} epochs, "
         f"V_G from {cal.velocity_source.replace('_', ' ')}",
         f"{'parameter':<12}{'estimate':>14}{'std. error':>14}",
         f"{'dSF [%]':<12}{100 * cal.scale:>14.4f}{100 * cal.scale_sd:>14.4f}",
