@@ -182,6 +182,18 @@ def score(est: Estimate, drive: Drive, withheld: np.ndarray,
     return Scored(block, t, err, w, sd, horiz_err, vd_err)
 
 
+def _baro_block(est: Estimate) -> dict[str, Any] | None:
+    """Baro parameters of the holdout run: {name: {"est", "sd"}} (s [-], τd [s], b [m])."""
+    if est.baro is None:
+        return None
+    out: dict[str, Any] = {}
+    for k in ("scale", "latency_s", "bias_m"):
+        p = getattr(est.baro, k)
+        out[k] = None if p is None else {
+            "est": float(p.est), "sd": None if p.sd is None else float(p.sd)}
+    return out
+
+
 def failed(error: str, runtime_s: float) -> dict[str, Any]:
     return {"status": "failed", "error": error, "alt_rmse_m": None, "alt_max_abs_m": None,
             "horiz_rmse_m": None, "vel_down_rmse_mps": None, "gnss_rejected": None,
@@ -242,6 +254,7 @@ def run_holdout(drive: Drive, estimators: Sequence[str] | None = None, outage_s:
         try:
             s = score(r.estimate, drive, reference, windows, given=~withheld)
             s.block["warnings"] = [str(x) for x in (r.estimate.info or {}).get("warnings") or []]
+            s.block["baro"] = _baro_block(r.estimate)
             results[r.name], series[r.name] = s.block, s
         except Exception as exc:  # one estimator's failure is data, not a crash
             if os.environ.get("VNAV_DEBUG"):
