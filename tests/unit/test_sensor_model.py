@@ -58,8 +58,9 @@ def test_inferred_density_is_sigma_over_root_rate(rng) -> None:
     spec = infer_imu_spec(imu, G0)
     assert spec.accel_noise_density == pytest.approx(0.5 / np.sqrt(200.0), rel=0.03)
     assert spec.gyro_noise_density == pytest.approx(0.02 / np.sqrt(200.0), rel=0.03)
-    # vibration bias walk from the robust scale (the scale k_vre was calibrated on)
-    assert spec.accel_bias_rw == pytest.approx(0.14 * 0.5, rel=0.03)
+    assert spec.accel_bias_rw == REAL_LOG_IMU.accel_bias_rw  # no vibration walk by default
+    # a user's vibration bias walk k·σ uses the robust scale of the differences
+    assert infer_imu_spec(imu, G0, k_vre=0.14).accel_bias_rw == pytest.approx(0.07, rel=0.03)
 
 
 def test_quiet_imu_keeps_the_prior_and_low_rate_has_no_vibration_walk(rng) -> None:
