@@ -263,10 +263,12 @@ class _Initial:
     lever: FloatArray  # GNSS antenna lever arm in b [m]
 
 
-def _initial_state(drive: Drive, cfg: EkfConfig, ispec: ImuSpec, bp: BaroPrior,
+def _initial_state(drive: Drive, cfg: EkfConfig, model: SensorModel, bp: BaroPrior,
                    est_scale: bool) -> _Initial:
     """Coarse levelling over the static start, position and velocity from the first fixes
-    (heading given or unknown), and the prior covariance of every state."""
+    (heading given or unknown; variances from the shared model's floored GNSS sigmas), and
+    the prior covariance of every state."""
+    ispec = model.imu
     imu, gnss, baro = drive.imu, drive.gnss, drive.baro
     t = imu.t
     i_static = static_window_end(imu, cfg.align_max_s)
@@ -291,10 +293,11 @@ def _initial_state(drive: Drive, cfg: EkfConfig, ispec: ImuSpec, bp: BaroPrior,
         lla0 = np.median(gnss.lla[j0:j9], axis=0)
         d_n = c0 @ lever
         lla0[2] += d_n[2]  # antenna → IMU, vertical part (heading may be unknown)
-        pos_var = gnss.pos_sd[j0] ** 2 + (0.0 if heading_known else lever @ lever)
-        if gnss.vel_n is not None and gnss.vel_sd is not None:
+        assert model.gnss_pos_sd is not None
+        pos_var = model.gnss_pos_sd[j0] ** 2 + (0.0 if heading_known else lever @ lever)
+        if gnss.vel_n is not None and model.gnss_vel_sd is not None:
             v0 = gnss.vel_n[j0].copy()
-            vel_var = gnss.vel_sd[j0] ** 2
+            vel_var = model.gnss_vel_sd[j0] ** 2
         else:
             vel_var = np.full(3, 1.0)
         # motion between t0 and the fixes used
@@ -414,7 +417,7 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
     gaps = model.gaps
     gr = _grids(t, gaps, imu.rate_hz, cfg)
     qd = _process_noise(t, gr.grid_idx, gaps, ispec, bp, cfg)
-    ini = _initial_state(drive, cfg, ispec, bp, est_scale)
+    ini = _initial_state(drive, cfg, model, bp, est_scale)
     ev = _events(drive, model, gr.grid_idx, ini.g_latency, cfg)
     baro = drive.baro
     max_consec_baro = 1
