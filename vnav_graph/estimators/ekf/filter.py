@@ -429,18 +429,28 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
     tau = (ispec.gyro_bias_tau, ispec.accel_bias_tau, bp.bias_tau)
     heading_accel = ev.has_vel and cfg.heading_source in ("auto", "accel")
 
+    # scalars coerced to one numba type each (float64, int64, bool): one compiled kernel
     res = kernel.run_filter(
-        t, imu.gyro_b, imu.accel_b, gr.grid_of, gr.out_of, gr.grid_idx.size, gr.out_idx.size,
-        gr.cov_out_of, gr.cov_grid.size, ini.lla0, ini.v0, ini.q0, ini.par0, ini.p0, qd, *tau,
-        ev.ev_t, ev.ev_type, ev.ev_idx, ev.g_lla, ev.g_psd, ev.g_vel, ev.g_vsd, ev.has_vel,
-        ini.lever, ev.tr_yaw, ev.tr_speed, ev.tr_sd, ev.b_alt, bp.noise_sd,
-        float(drive.origin_lla[2]), gate2, gate2, gate1,
-        cfg.max_consecutive_rejects, ini.heading_known, cfg.heading_speed_min,
-        ini.yaw_unknown_var, tilt_rate_sd, ev.max_pending, store_rts,
-        gate1, cfg.max_gnss_sd_v, cfg.gnss_probation_s, baro is not None, bp.bias_sd**2,
-        gr.gap_step, _gap_relevel(imu, gaps, cfg), max_consec_baro,
-        heading_accel, cfg.align_chunk_s, cfg.align_forget_s, cfg.align_sd_max,
-        float(np.sqrt(2.0) * ispec.accel_bias_sd), cfg.gap_heading_forget_s,
+        kernel.Grids(t, imu.gyro_b, imu.accel_b, gr.grid_of, gr.out_of, int(gr.grid_idx.size),
+                     int(gr.out_idx.size), gr.cov_out_of, int(gr.cov_grid.size), gr.gap_step,
+                     _gap_relevel(imu, gaps, cfg)),
+        kernel.Initial(ini.lla0, ini.v0, ini.q0, ini.par0, ini.p0, bool(ini.heading_known)),
+        kernel.Noise(qd, *(float(x) for x in tau), float(ini.yaw_unknown_var),
+                     float(tilt_rate_sd), float(bp.bias_sd**2)),
+        kernel.Events(ev.ev_t, ev.ev_type, ev.ev_idx, int(ev.max_pending)),
+        kernel.GnssData(ev.g_lla, ev.g_psd, ev.g_vel, ev.g_vsd, bool(ev.has_vel), ini.lever,
+                        ev.tr_yaw, ev.tr_speed, ev.tr_sd),
+        kernel.BaroData(ev.b_alt, float(bp.noise_sd), float(drive.origin_lla[2]),
+                        baro is not None),
+        kernel.Settings(
+            gate_pos=gate2, gate_vel=gate2, gate_v=gate1, gate_baro=gate1,
+            max_consec=int(cfg.max_consecutive_rejects), max_consec_baro=int(max_consec_baro),
+            max_sd_v=float(cfg.max_gnss_sd_v), probation_s=float(cfg.gnss_probation_s),
+            heading_v_min=float(cfg.heading_speed_min), heading_accel=bool(heading_accel),
+            align_chunk_s=float(cfg.align_chunk_s), align_forget_s=float(cfg.align_forget_s),
+            align_sd_max=float(cfg.align_sd_max),
+            align_acc_sd=float(np.sqrt(2.0) * ispec.accel_bias_sd),
+            gap_forget_s=float(cfg.gap_heading_forget_s), store_rts=bool(store_rts)),
     )
     innov, info = _report(drive, res, gr, gaps, ini, cfg, heading_accel, est_scale, ev.has_vel)
     prior = {"scale": bp.scale_sd, "latency": bp.latency_sd, "bias": bp.bias_sd}
