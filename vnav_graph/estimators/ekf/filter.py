@@ -32,9 +32,10 @@ vekf7 and both graphs): the drive's specs when present; on a real log the IMU no
 from the log (``infer_imu_spec``: the ``REAL_LOG_IMU`` prior raised to the measured white
 scatter — a phone on a skier shows 0.036 m/s²/√Hz and 0.31 °/s/√Hz, 100× the MPU-9250
 datasheet — plus a vibration bias walk), ``REAL_LOG_BARO`` for the baro (10 m bias σ);
-GNSS: per-fix sigmas of the stream. On a real log the baro bias prior mean is taken from
-the first baro sample minus the initial GNSS height (a relative baro altitude would
-otherwise be hundreds of metres off). Discrete variances come from
+GNSS: per-fix sigmas of the stream floored at ``GNSS_SD_FLOOR`` (``nav.sensor_model``), in
+the updates and in the initial position/velocity variances. On a real log the baro bias
+prior mean is taken from the first baro sample minus the initial GNSS height (a relative baro
+altitude would otherwise be hundreds of metres off). Discrete variances come from
 ``vnav_graph.sensors.noise`` only. Small floors keep P positive definite with ideal sensors.
 
 References: Groves, *Principles of GNSS, Inertial and Multisensor Integrated Navigation
