@@ -1,7 +1,7 @@
 """ekf, ekf-rts, vekf7, graph-batch and graph-isam2 receive the same sensor model (issue 12).
 
 The numbers are read where each estimator hands them to its numerical core, not from the
-shared function: the EKF's ``run_filter`` arguments (process-noise table, initial
+shared function: the EKF's ``run_filter`` input records (process-noise table, initial
 covariance, baro noise, GNSS sigmas, gap flags), the graph's problem set-up (preintegration
 covariances, baro prior, GNSS sigmas, gap intervals) and vekf7's propagation and update
 calls. An estimator that re-derived a parameter on its own would differ here.
@@ -55,10 +55,12 @@ def _ekf_used(drive, name: str, monkeypatch: pytest.MonkeyPatch) -> dict:
     with pytest.raises(_Stop):
         create(name).run(drive)
     monkeypatch.undo()
-    t, grid_of, qd, p0 = got["t"], got["grid_of"], got["q_diag"], got["p0"]
+    grids, init, noise = got["grids"], got["init"], got["noise"]
+    gnss, baro = got["gnss"], got["baro"]
+    t, grid_of, qd, p0 = grids.t, grids.grid_of, noise.q_diag, init.p0
     tg = t[grid_of >= 0]
     dtg = np.diff(tg)
-    gap = np.flatnonzero(got["gap_step"])
+    gap = np.flatnonzero(grids.gap_step)
     ok = np.flatnonzero(dtg > 0)[:5] + 1  # regular grid intervals (no gap in the first ones)
     ok = ok[~np.isin(np.flatnonzero(grid_of >= 0)[ok], gap + 1)]
     return {
@@ -66,12 +68,12 @@ def _ekf_used(drive, name: str, monkeypatch: pytest.MonkeyPatch) -> dict:
         "gyro_nd": float(np.sqrt(qd[ok[0], km.IATT] / dtg[ok[0] - 1])),
         "gyro_bias_sd": float(np.sqrt(p0[9, 9])),
         "accel_bias_sd": float(np.sqrt(p0[12, 12])),
-        "bias_tau": (float(got["tau_g"]), float(got["tau_a"]), float(got["tau_b"])),
-        "baro": (float(np.sqrt(p0[15, 15])), float(got["par0"][km.PTD]),
+        "bias_tau": (float(noise.tau_g), float(noise.tau_a), float(noise.tau_b)),
+        "baro": (float(np.sqrt(p0[15, 15])), float(init.par0[km.PTD]),
                  float(np.sqrt(p0[16, 16])), float(np.sqrt(p0[17, 17])),
-                 float(got["b_sd"])),
-        "gnss_pos_sd": np.asarray(got["g_pos_sd"]),
-        "gnss_vel_sd": np.asarray(got["g_vel_sd"]) if got["has_vel"] else None,
+                 float(baro.sd)),
+        "gnss_pos_sd": np.asarray(gnss.pos_sd),
+        "gnss_vel_sd": np.asarray(gnss.vel_sd) if gnss.has_vel else None,
         "gaps": gap,
     }
 

@@ -32,9 +32,10 @@ vekf7 and both graphs): the drive's specs when present; on a real log the IMU no
 from the log (``infer_imu_spec``: the ``REAL_LOG_IMU`` prior raised to the measured white
 scatter — a phone on a skier shows 0.036 m/s²/√Hz and 0.31 °/s/√Hz, 100× the MPU-9250
 datasheet — plus a vibration bias walk), ``REAL_LOG_BARO`` for the baro (10 m bias σ);
-GNSS: per-fix sigmas of the stream. On a real log the baro bias prior mean is taken from
-the first baro sample minus the initial GNSS height (a relative baro altitude would
-otherwise be hundreds of metres off). Discrete variances come from
+GNSS: per-fix sigmas of the stream floored at ``GNSS_SD_FLOOR`` (``nav.sensor_model``), in
+the updates and in the initial position/velocity variances. On a real log the baro bias
+prior mean is taken from the first baro sample minus the initial GNSS height (a relative baro
+altitude would otherwise be hundreds of metres off). Discrete variances come from
 ``vnav_graph.sensors.noise`` only. Small floors keep P positive definite with ideal sensors.
 
 References: Groves, *Principles of GNSS, Inertial and Multisensor Integrated Navigation
@@ -56,7 +57,7 @@ from ...geo.earth import OMEGA_IE, gravity
 from ...geo.frames import quat_to_mat, rph_to_quat
 from ...nav.gaps import GAP_ACCEL_SD
 from ...nav.levelling import coarse_level
-from ...nav.sensor_model import baro_prior, sensor_model
+from ...nav.sensor_model import BaroPrior, SensorModel, baro_prior, sensor_model
 from ...sensors.noise import gm_process_var, white_sd
 from ...types import (
     ERROR_STATE_DIM,
@@ -64,6 +65,7 @@ from ...types import (
     Drive,
     Estimate,
     FloatArray,
+    ImuStream,
     ParamEstimate,
     Trajectory,
 )
@@ -73,8 +75,6 @@ from .alignment import level_tilt_bias_jacobian, static_window_end, track_headin
 
 NDArrayInt = Any
 PROVIDES = frozenset({"alt", "vel_d", "pos_h", "vel_h", "att", "baro", "cov"})
-
-
 
 
 @dataclass(frozen=True)
@@ -168,28 +168,33 @@ def _white_var(density: float, dt: FloatArray) -> FloatArray:
     return out
 
 
-def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
-    """One forward EKF pass over ``drive`` (see module docstring)."""
-    imu = drive.imu
-    t = imu.t
-    n = t.size
-    if n < 3:
-        raise ValueError("ekf: the IMU stream needs at least 3 samples")
-    rate = imu.rate_hz
-    model = sensor_model(drive)  # the noise model every estimator shares (nav.sensor_model)
-    ispec: ImuSpec = model.imu
-    est_scale = cfg.accel_scale if cfg.accel_scale is not None else (
-        not isinstance(imu.spec, ImuSpec) or ispec.accel_scale_sd > 0)
-    gnss, baro = drive.gnss, drive.baro
-    bspec_given = baro is not None and isinstance(baro.spec, BaroSpec)
-    bp = model.baro if model.baro is not None else baro_prior(REAL_LOG_BARO)
-    h0 = float(drive.origin_lla[2])
+@dataclass(frozen=True)
+class _Grids:
+    """Which IMU epochs are covariance-grid, covariance-output and trajectory-output epochs.
 
-    # --- grids -------------------------------------------------------------------------
+    ``grid_idx``: IMU samples of the propagation grid (every ``m_grid``-th, the last, both
+    ends of every IMU gap); ``grid_of[i]``: grid number of IMU sample i (−1 if none);
+    ``cov_grid``: grid numbers output every ``e_cov``-th (and the last), ``cov_out_of[k]``
+    their slot; ``out_idx`` / ``out_of``: the same for the trajectory (every ``d_out``-th
+    sample, every grid epoch, the last); ``gap_step[i]``: IMU interval i → i+1 is a gap.
+    """
+
+    m_grid: int
+    grid_idx: NDArrayInt
+    grid_of: NDArrayInt
+    e_cov: int
+    cov_grid: NDArrayInt
+    cov_out_of: NDArrayInt
+    d_out: int
+    out_idx: NDArrayInt
+    out_of: NDArrayInt
+    gap_step: NDArrayInt
+
+
+def _grids(t: FloatArray, gaps: NDArrayInt, rate: float, cfg: EkfConfig) -> _Grids:
+    n = t.size
     m_grid = max(1, round(rate / cfg.cov_rate_hz))
-    dts = np.diff(t)
-    gaps = model.gaps
-    gap_step = np.zeros(dts.size, dtype=bool)
+    gap_step = np.zeros(n - 1, dtype=bool)
     gap_step[gaps] = True
     grid_idx = np.union1d(np.union1d(np.arange(0, n, m_grid), [n - 1]),
                           np.r_[gaps, gaps + 1]).astype(np.int64)
@@ -206,20 +211,22 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
     out_idx = np.union1d(np.union1d(np.arange(0, n, d_out), grid_idx), [n - 1])
     out_of = np.full(n, -1, dtype=np.int64)
     out_of[out_idx] = np.arange(out_idx.size)
+    return _Grids(m_grid, grid_idx, grid_of, e_cov, cov_grid, cov_out_of, d_out, out_idx,
+                  out_of, gap_step)
 
-    # --- discrete process noise per grid interval (noise.py) ---------------------------
+
+def _process_noise(t: FloatArray, grid_idx: NDArrayInt, gaps: NDArrayInt, ispec: ImuSpec,
+                   bp: BaroPrior, cfg: EkfConfig) -> FloatArray:
+    """Discrete process-noise variances (diagonal) per grid interval, (K, NX) (noise.py)."""
     dtg = np.r_[0.0, np.diff(t[grid_idx])]
-    qd = np.zeros((kk, km.NX))
-    g_nd, a_nd = ispec.gyro_noise_density, ispec.accel_noise_density
-    g_bsd, a_bsd = ispec.gyro_bias_sd, ispec.accel_bias_sd
-    qd[:, km.IVEL:km.IVEL + 3] = _white_var(a_nd, dtg)[:, None]
-    qd[:, km.IATT:km.IATT + 3] = _white_var(g_nd, dtg)[:, None]
-    qd[:, km.IBG:km.IBG + 3] = (gm_process_var(dtg, ispec.gyro_bias_tau, g_bsd)
+    qd = np.zeros((grid_idx.size, km.NX))
+    qd[:, km.IVEL:km.IVEL + 3] = _white_var(ispec.accel_noise_density, dtg)[:, None]
+    qd[:, km.IATT:km.IATT + 3] = _white_var(ispec.gyro_noise_density, dtg)[:, None]
+    qd[:, km.IBG:km.IBG + 3] = (gm_process_var(dtg, ispec.gyro_bias_tau, ispec.gyro_bias_sd)
                                 + _white_var(ispec.gyro_bias_rw, dtg))[:, None]
-    qd[:, km.IBA:km.IBA + 3] = (gm_process_var(dtg, ispec.accel_bias_tau, a_bsd)
+    qd[:, km.IBA:km.IBA + 3] = (gm_process_var(dtg, ispec.accel_bias_tau, ispec.accel_bias_sd)
                                 + _white_var(ispec.accel_bias_rw, dtg))[:, None]
-    b_bsd = bp.bias_sd
-    qd[:, km.IBB] = gm_process_var(dtg, bp.bias_tau, b_bsd)
+    qd[:, km.IBB] = gm_process_var(dtg, bp.bias_tau, bp.bias_sd)
     # IMU gaps: the grid interval ending at gap end i+1 is exactly the gap (ekf.model docstring)
     kg = np.searchsorted(grid_idx, gaps + 1)
     dg = dtg[kg]
@@ -227,15 +234,46 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
     qd[kg, km.IVEL:km.IVEL + 3] = (GAP_ACCEL_SD**2 * dg)[:, None]
     qd[kg, km.IATT:km.IATT + 2] = cfg.gap_level_sd**2
     qd[kg, km.IATT + 2] = cfg.gap_yaw_rw**2 * dg
-    gap_rp = np.full((n, 2), np.nan)
+    return qd
+
+
+def _gap_relevel(imu: ImuStream, gaps: NDArrayInt, cfg: EkfConfig) -> FloatArray:
+    """Roll/pitch [rad] after each IMU gap from the mean specific force of its first
+    ``gap_level_s``, at the gap's end sample (NaN elsewhere), (N, 2)."""
+    t = imu.t
+    gap_rp = np.full((t.size, 2), np.nan)
     for i in gaps:
         j1 = max(int(np.searchsorted(t, t[i + 1] + cfg.gap_level_s, side="right")), i + 2)
         gap_rp[i + 1] = coarse_level(imu.accel_b[i + 1:j1].mean(axis=0))
+    return gap_rp
 
-    # --- alignment -----------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class _Initial:
+    """Initial nominal state, covariance and parameters of the kernel (alignment)."""
+
+    lla0: FloatArray
+    v0: FloatArray
+    q0: FloatArray
+    par0: FloatArray
+    p0: FloatArray
+    heading_known: bool
+    yaw_unknown_var: float
+    i_static: int  # end of the static levelling window (IMU samples)
+    g_latency: float  # GNSS latency [s] subtracted from the fix stamps
+    lever: FloatArray  # GNSS antenna lever arm in b [m]
+
+
+def _initial_state(drive: Drive, cfg: EkfConfig, model: SensorModel, bp: BaroPrior,
+                   est_scale: bool) -> _Initial:
+    """Coarse levelling over the static start, position and velocity from the first fixes
+    (heading given or unknown; variances from the shared model's floored GNSS sigmas), and
+    the prior covariance of every state."""
+    ispec = model.imu
+    imu, gnss, baro = drive.imu, drive.gnss, drive.baro
+    t = imu.t
     i_static = static_window_end(imu, cfg.align_max_s)
-    f_mean = imu.accel_b[:i_static].mean(axis=0)
-    roll, pitch = coarse_level(f_mean)
+    roll, pitch = coarse_level(imu.accel_b[:i_static].mean(axis=0))
     heading_known = cfg.initial_heading is not None
     yaw0 = float(cfg.initial_heading) if heading_known else 0.0
     q0 = rph_to_quat([roll, pitch, yaw0])[0]
@@ -256,10 +294,11 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
         lla0 = np.median(gnss.lla[j0:j9], axis=0)
         d_n = c0 @ lever
         lla0[2] += d_n[2]  # antenna → IMU, vertical part (heading may be unknown)
-        pos_var = gnss.pos_sd[j0] ** 2 + (0.0 if heading_known else lever @ lever)
-        if gnss.vel_n is not None and gnss.vel_sd is not None:
+        assert model.gnss_pos_sd is not None
+        pos_var = model.gnss_pos_sd[j0] ** 2 + (0.0 if heading_known else lever @ lever)
+        if gnss.vel_n is not None and model.gnss_vel_sd is not None:
             v0 = gnss.vel_n[j0].copy()
-            vel_var = gnss.vel_sd[j0] ** 2
+            vel_var = model.gnss_vel_sd[j0] ** 2
         else:
             vel_var = np.full(3, 1.0)
         # motion between t0 and the fixes used
@@ -270,30 +309,56 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
         vel_var = np.full(3, 1.0)
     p0[0:3, 0:3] = np.diag(pos_var)
     p0[3:6, 3:6] = np.diag(vel_var)
-    p_ba = a_bsd**2 * np.eye(3)
+    p_ba = ispec.accel_bias_sd**2 * np.eye(3)
     m_tilt = level_tilt_bias_jacobian(c0, float(gravity(lla0[0], lla0[2])))
     p0[6:9, 6:9] = m_tilt @ p_ba @ m_tilt.T + cfg.min_tilt_sd**2 * np.diag([1.0, 1.0, 0.0])
     yaw_unknown_var = np.pi**2 / 3.0
     p0[8, 8] = cfg.initial_heading_sd**2 if heading_known else yaw_unknown_var
     p0[6:9, 12:15] = m_tilt @ p_ba
     p0[12:15, 6:9] = (m_tilt @ p_ba).T
-    p0[9:12, 9:12] = g_bsd**2 * np.eye(3)
+    p0[9:12, 9:12] = ispec.gyro_bias_sd**2 * np.eye(3)
     p0[12:15, 12:15] = p_ba
     ka_sd = max(ispec.accel_scale_sd, 1e-3 if not isinstance(imu.spec, ImuSpec) else 0.0)
     p0[18:21, 18:21] = (ka_sd if est_scale else 1e-7) ** 2 * np.eye(3)
-    s_sd, tau_m, tau_sd, b_noise = bp.scale_sd, bp.latency_mean, bp.latency_sd, bp.noise_sd
     par0 = np.zeros(12)
-    par0[km.PTD] = tau_m
-    if baro is not None and not bspec_given:
+    par0[km.PTD] = bp.latency_mean
+    if baro is not None and not isinstance(baro.spec, BaroSpec):
         # real log: baro bias prior centred on the first sample (relative altimeters)
         jb = int(np.searchsorted(baro.t, t[0]))
         jb = min(jb, baro.t.size - 1)
         par0[km.PBB] = float(baro.altitude[jb]) - lla0[2]
-    p0[15, 15] = s_sd**2
-    p0[16, 16] = tau_sd**2
-    p0[17, 17] = b_bsd**2
+    p0[15, 15] = bp.scale_sd**2
+    p0[16, 16] = bp.latency_sd**2
+    p0[17, 17] = bp.bias_sd**2
+    return _Initial(lla0, v0, q0, par0, p0, heading_known, yaw_unknown_var, i_static,
+                    g_latency, lever)
 
-    # --- measurement events ------------------------------------------------------------
+
+@dataclass(frozen=True)
+class _Events:
+    """GNSS fixes and baro samples merged into one time-sorted event list, with the per-fix
+    arrays the kernel reads (empty without the stream)."""
+
+    ev_t: FloatArray
+    ev_type: NDArrayInt  # 0 GNSS fix, 1 baro sample
+    ev_idx: NDArrayInt  # index into the stream
+    max_pending: int  # most events inside one grid interval, + 1
+    g_lla: FloatArray
+    g_psd: FloatArray
+    g_vel: FloatArray
+    g_vsd: FloatArray
+    has_vel: bool
+    tr_yaw: FloatArray
+    tr_speed: FloatArray
+    tr_sd: FloatArray
+    b_alt: FloatArray
+
+
+def _events(drive: Drive, model: SensorModel, grid_idx: NDArrayInt, g_latency: float,
+            cfg: EkfConfig) -> _Events:
+    t = drive.imu.t
+    n = t.size
+    gnss, baro = drive.gnss, drive.baro
     ev_t_l, ev_type_l, ev_idx_l = [], [], []
     if gnss is not None:
         ev_t_l.append(gnss.t - g_latency)
@@ -332,39 +397,83 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
         ev_t = np.where(np.abs(t[j] - ev_t) < 1e-6, t[j], ev_t)
     counts = np.diff(np.searchsorted(ev_t, t[grid_idx], side="right"))
     max_pending = int(counts.max()) + 1 if counts.size else 1
+    return _Events(ev_t, ev_type, ev_idx, max_pending, np.ascontiguousarray(g_lla),
+                   np.ascontiguousarray(g_psd), np.ascontiguousarray(g_vel),
+                   np.ascontiguousarray(g_vsd), bool(has_vel), tr_yaw, tr_speed, tr_sd, b_alt)
 
+
+def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
+    """One forward EKF pass over ``drive`` (see module docstring)."""
+    imu = drive.imu
+    t = imu.t
+    if t.size < 3:
+        raise ValueError("ekf: the IMU stream needs at least 3 samples")
+    if cfg.heading_source not in ("auto", "track", "accel"):
+        raise ValueError("EkfConfig.heading_source: 'auto', 'track' or 'accel'")
+    model = sensor_model(drive)  # the noise model every estimator shares (nav.sensor_model)
+    ispec: ImuSpec = model.imu
+    est_scale = cfg.accel_scale if cfg.accel_scale is not None else (
+        not isinstance(imu.spec, ImuSpec) or ispec.accel_scale_sd > 0)
+    bp = model.baro if model.baro is not None else baro_prior(REAL_LOG_BARO)
+    gaps = model.gaps
+    gr = _grids(t, gaps, imu.rate_hz, cfg)
+    qd = _process_noise(t, gr.grid_idx, gaps, ispec, bp, cfg)
+    ini = _initial_state(drive, cfg, model, bp, est_scale)
+    ev = _events(drive, model, gr.grid_idx, ini.g_latency, cfg)
+    baro = drive.baro
     max_consec_baro = 1
     if baro is not None and baro.t.size > 1:
         max_consec_baro = max(3, round(cfg.baro_reaccept_s / float(np.median(np.diff(baro.t)))))
     gate2 = float(chi2.ppf(cfg.gate_prob, 2))
     gate1 = float(chi2.ppf(cfg.gate_prob, 1))
-    tilt_rate_sd = np.sqrt(2.0) * OMEGA_IE * np.cos(lla0[0])
+    tilt_rate_sd = np.sqrt(2.0) * OMEGA_IE * np.cos(ini.lla0[0])
     tau = (ispec.gyro_bias_tau, ispec.accel_bias_tau, bp.bias_tau)
-    if cfg.heading_source not in ("auto", "track", "accel"):
-        raise ValueError("EkfConfig.heading_source: 'auto', 'track' or 'accel'")
-    heading_accel = bool(has_vel) and cfg.heading_source in ("auto", "accel")
+    heading_accel = ev.has_vel and cfg.heading_source in ("auto", "accel")
 
+    # scalars coerced to one numba type each (float64, int64, bool): one compiled kernel
     res = kernel.run_filter(
-        t, imu.gyro_b, imu.accel_b, grid_of, out_of, kk, out_idx.size, cov_out_of,
-        cov_grid.size, lla0, v0, q0, par0, p0, qd, *tau,
-        ev_t, ev_type, ev_idx, np.ascontiguousarray(g_lla), np.ascontiguousarray(g_psd),
-        np.ascontiguousarray(g_vel), np.ascontiguousarray(g_vsd), has_vel, lever,
-        tr_yaw, tr_speed, tr_sd, b_alt, b_noise, h0, gate2, gate2, gate1,
-        cfg.max_consecutive_rejects, heading_known, cfg.heading_speed_min, yaw_unknown_var,
-        tilt_rate_sd, max_pending, store_rts,
-        gate1, cfg.max_gnss_sd_v, cfg.gnss_probation_s, baro is not None, b_bsd**2, gap_step,
-        gap_rp, max_consec_baro,
-        heading_accel, cfg.align_chunk_s, cfg.align_forget_s, cfg.align_sd_max,
-        float(np.sqrt(2.0) * a_bsd), cfg.gap_heading_forget_s,
+        kernel.Grids(t, imu.gyro_b, imu.accel_b, gr.grid_of, gr.out_of, int(gr.grid_idx.size),
+                     int(gr.out_idx.size), gr.cov_out_of, int(gr.cov_grid.size), gr.gap_step,
+                     _gap_relevel(imu, gaps, cfg)),
+        kernel.Initial(ini.lla0, ini.v0, ini.q0, ini.par0, ini.p0, bool(ini.heading_known)),
+        kernel.Noise(qd, *(float(x) for x in tau), float(ini.yaw_unknown_var),
+                     float(tilt_rate_sd), float(bp.bias_sd**2)),
+        kernel.Events(ev.ev_t, ev.ev_type, ev.ev_idx, int(ev.max_pending)),
+        kernel.GnssData(ev.g_lla, ev.g_psd, ev.g_vel, ev.g_vsd, bool(ev.has_vel), ini.lever,
+                        ev.tr_yaw, ev.tr_speed, ev.tr_sd),
+        kernel.BaroData(ev.b_alt, float(bp.noise_sd), float(drive.origin_lla[2]),
+                        baro is not None),
+        kernel.Settings(
+            gate_pos=gate2, gate_vel=gate2, gate_v=gate1, gate_baro=gate1,
+            max_consec=int(cfg.max_consecutive_rejects), max_consec_baro=int(max_consec_baro),
+            max_sd_v=float(cfg.max_gnss_sd_v), probation_s=float(cfg.gnss_probation_s),
+            heading_v_min=float(cfg.heading_speed_min), heading_accel=bool(heading_accel),
+            align_chunk_s=float(cfg.align_chunk_s), align_forget_s=float(cfg.align_forget_s),
+            align_sd_max=float(cfg.align_sd_max),
+            align_acc_sd=float(np.sqrt(2.0) * ispec.accel_bias_sd),
+            gap_forget_s=float(cfg.gap_heading_forget_s), store_rts=bool(store_rts)),
     )
+    innov, info = _report(drive, res, gr, gaps, ini, cfg, heading_accel, est_scale, ev.has_vel)
+    prior = {"scale": bp.scale_sd, "latency": bp.latency_sd, "bias": bp.bias_sd}
+    rts = tuple(res[5:10]) if store_rts else None
+    return _Run(t[gr.out_idx], *res[:4], t[gr.grid_idx], gr.grid_idx, gr.out_idx,
+                gr.cov_grid, res[4], rts, innov, info, prior, tau, baro is not None)
+
+
+def _report(drive: Drive, res: tuple[Any, ...], gr: _Grids, gaps: NDArrayInt, ini: _Initial,
+            cfg: EkfConfig, heading_accel: bool, est_scale: bool,
+            has_vel: bool) -> tuple[dict[str, FloatArray], dict[str, Any]]:
+    """Innovations of the accepted measurements and ``Estimate.info`` (module docstring)."""
     (o_lla, o_v, o_q, o_par, cov_p, rts_p, rts_ing, rts_q, corr, reset_at,
      inn_pos, inn_vel, inn_baro, rej_pos, rej_vel, rej_baro, t_heading, rej_v) = res
+    t = drive.imu.t
+    gnss = drive.gnss
     innov: dict[str, FloatArray] = {}
     if gnss is not None:
         innov["gnss_pos"] = inn_pos[np.isfinite(inn_pos[:, 0]) & ~rej_pos]
         if has_vel:
             innov["gnss_vel"] = inn_vel[np.isfinite(inn_vel[:, 0]) & ~rej_vel]
-    if baro is not None:
+    if drive.baro is not None:
         innov["baro"] = inn_baro[np.isfinite(inn_baro) & ~rej_baro]
     info = {
         "gnss_rejected": int(rej_pos.sum()),
@@ -374,19 +483,16 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
         "imu_gaps": [[float(t[i]), float(t[i + 1] - t[i])] for i in gaps],
         "baro_rejected": int(rej_baro.sum()),
         "heading_time_s": None if np.isnan(t_heading) else float(t_heading),
-        "cov_rate_hz": float(rate / m_grid),
-        "cov_output_every": int(e_cov),
-        "traj_decimation": int(d_out),
+        "cov_rate_hz": float(drive.imu.rate_hz / gr.m_grid),
+        "cov_output_every": int(gr.e_cov),
+        "traj_decimation": int(gr.d_out),
         "accel_scale_estimated": bool(est_scale),
         "accel_scale": o_par[-1, km.PKA:km.PKA + 3].copy(),
-        "static_align_s": float(t[i_static - 1] - t[0]),
-        "heading_source": ("given" if heading_known else
+        "static_align_s": float(t[ini.i_static - 1] - t[0]),
+        "heading_source": ("given" if ini.heading_known else
                            "accel-matching" if heading_accel else "gnss-track"),
     }
-    prior = {"scale": s_sd, "latency": tau_sd, "bias": b_bsd}
-    rts = (rts_p, rts_ing, rts_q, corr, reset_at) if store_rts else None
-    return _Run(t[out_idx], o_lla, o_v, o_q, o_par, t[grid_idx], grid_idx, out_idx, cov_grid,
-                cov_p, rts, innov, info, prior, tau, baro is not None)
+    return innov, info
 
 
 def _unpack_cov(packed: FloatArray, has_baro: bool) -> FloatArray:

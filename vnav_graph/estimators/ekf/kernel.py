@@ -3,12 +3,21 @@
 The error-state model, its measurement rows and the update steps it calls are in
 ``ekf.model`` (whose docstring describes the filter); this module holds only the loop that
 strings them together, a documented numba kernel kept whole so that it compiles once.
+
+Its inputs are seven typed records (``NamedTuple``s of arrays and scalars, which numba passes
+as tuples: a field read is resolved at compile time and costs nothing): :class:`Grids`,
+:class:`Initial`, :class:`Noise`, :class:`Events`, :class:`GnssData`, :class:`BaroData` and
+:class:`Settings`, built by ``ekf.filter``. Every field keeps one numba type (float64
+arrays, C-contiguous; int64 counts; float scalars; bools) so that the kernel compiles once.
 """
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
+from numpy.typing import NDArray
 
 from ...geo.earth import radii_scalar
 from ...nav.gnss_gate import REFUSE, USE_INFLATE, height_gate
@@ -43,31 +52,135 @@ from .model import (
 )
 from .strapdown import nav_rates, strapdown_step
 
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+BoolArray = NDArray[np.bool_]
+
+
+class Grids(NamedTuple):
+    """The IMU samples (N) and where each lands: covariance grid, outputs, gaps."""
+
+    t: FloatArray  # (N,) IMU stamps [s]
+    gyro: FloatArray  # (N, 3) angular rate in b [rad/s]
+    accel: FloatArray  # (N, 3) specific force in b [m/s²]
+    grid_of: IntArray  # (N,) grid epoch of IMU sample i, −1 if none
+    out_of: IntArray  # (N,) output-trajectory slot of IMU sample i, −1 if none
+    n_grid: int  # number of grid epochs K
+    n_out: int  # number of output-trajectory epochs
+    cov_out_of: IntArray  # (K,) covariance-output slot of grid epoch k, −1 if none
+    n_cov_out: int  # number of covariance-output epochs
+    gap_step: BoolArray  # (N−1,) IMU interval i → i+1 is a gap (a grid interval of its own)
+    gap_rp: FloatArray  # (N, 2) roll, pitch re-levelled at a gap's end sample [rad], else NaN
+
+
+class Initial(NamedTuple):
+    """The state at the first IMU sample (alignment)."""
+
+    lla0: FloatArray  # (3,) latitude, longitude [rad], height [m]
+    v0: FloatArray  # (3,) velocity in n [m/s]
+    q0: FloatArray  # (4,) attitude q_nb
+    par0: FloatArray  # (12,) biases, baro scale / latency / bias, accel scale (ekf.model P*)
+    p0: FloatArray  # (NX, NX) error covariance
+    heading_known: bool  # the heading is given (else acquired in flight)
+
+
+class Noise(NamedTuple):
+    """Process noise and Gauss-Markov time constants."""
+
+    q_diag: FloatArray  # (K, NX) discrete process-noise variances per grid interval
+    tau_g: float  # gyro bias correlation time [s]
+    tau_a: float  # accel bias correlation time [s]
+    tau_b: float  # baro bias correlation time [s]
+    yaw_unknown_var: float  # yaw variance while the heading is unknown [rad²]
+    tilt_rate_sd: float  # tilt growth while the heading is unknown [rad/s]
+    b_prior_var: float  # baro-bias prior variance [m²] (GNSS-height gate widening)
+
+
+class Events(NamedTuple):
+    """GNSS fixes and baro samples merged and sorted by time."""
+
+    t: FloatArray  # (E,) event stamps [s]
+    kind: IntArray  # (E,) 0 GNSS fix, 1 baro sample
+    idx: IntArray  # (E,) index into the GNSS or baro arrays
+    max_pending: int  # most events inside one grid interval, + 1
+
+
+class GnssData(NamedTuple):
+    """Per-fix GNSS data (G fixes; zero rows without GNSS)."""
+
+    lla: FloatArray  # (G, 3) antenna position [rad, rad, m]
+    pos_sd: FloatArray  # (G, 3) NED position σ [m] (shared model, floored)
+    vel: FloatArray  # (G, 3) velocity in n [m/s]
+    vel_sd: FloatArray  # (G, 3) velocity σ [m/s]
+    has_vel: bool  # the velocity is used
+    lever: FloatArray  # (3,) antenna lever arm in b [m]
+    track_yaw: FloatArray  # (G,) course over ground [rad]
+    track_speed: FloatArray  # (G,) horizontal speed [m/s]
+    track_sd: FloatArray  # (G,) σ of the course as a heading [rad]
+
+
+class BaroData(NamedTuple):
+    """Baro samples (B; zero without a barometer)."""
+
+    alt: FloatArray  # (B,) baro altitude [m]
+    sd: float  # white baro noise σ [m]
+    h0: float  # reference height of the baro model [m]
+    has_baro: bool
+
+
+class Settings(NamedTuple):
+    """Gates, re-acceptance and heading-acquisition settings (``EkfConfig``)."""
+
+    gate_pos: float  # χ²₂ gate of the horizontal position pair
+    gate_vel: float  # χ²₂ gate of the horizontal velocity pair
+    gate_v: float  # χ²₁ gate of the GNSS height and vertical velocity
+    gate_baro: float  # χ²₁ gate of the baro
+    max_consec: int  # refusals after which a horizontal pair is forced in
+    max_consec_baro: int  # refusals after which a baro sample is forced in
+    max_sd_v: float  # GNSS heights with a larger σ are not used [m]
+    probation_s: float  # GNSS-height probation [s]
+    heading_v_min: float  # speed above which the track gives the heading [m/s]
+    heading_accel: bool  # acquire the heading by acceleration matching
+    align_chunk_s: float
+    align_forget_s: float
+    align_sd_max: float  # [rad]
+    align_acc_sd: float  # specific-force error of a chunk [m/s²]
+    gap_forget_s: float  # IMU gaps this long make the heading unknown [s]
+    store_rts: bool  # keep what the RTS smoother needs
+
 
 @njit(cache=True)
-def run_filter(
-    t, gyro, accel, grid_of, out_of, n_grid, n_out, cov_out_of, n_cov_out,
-    lla0, v0, q0, par0, p0, q_diag,
-    tau_g, tau_a, tau_b,
-    ev_t, ev_type, ev_idx,
-    g_lla, g_pos_sd, g_vel, g_vel_sd, has_vel, lever, tr_yaw, tr_speed, tr_sd,
-    b_alt, b_sd, h0,
-    gate_pos, gate_vel, gate_baro, max_consec,
-    heading_known, heading_v_min, yaw_unknown_var, tilt_rate_sd,
-    max_pending, store_rts,
-    gate_v, max_sd_v, probation_s, has_baro, b_prior_var, gap_step, gap_rp, max_consec_baro,
-    heading_accel, align_chunk_s, align_forget_s, align_sd_max, align_acc_sd,
-    gap_forget_s,
-):
+def run_filter(grids, init, noise, events, gnss, baro, settings):
     """Forward error-state EKF over the whole drive (see module docstring).
 
-    ``grid_of[i]`` / ``out_of[i]`` / ``cov_out_of[k]``: slot of IMU sample i in the grid / the
-    output trajectory (−1 if none), of grid epoch k in the covariance output. ``ev_*``: merged
-    measurement events sorted by time (type 0 GNSS fix, 1 baro sample). ``gate_pos`` /
-    ``gate_vel``: χ²₂ gates of the horizontal pairs, ``gate_v`` / ``gate_baro``: χ²₁ gates;
-    ``gap_step[i]``: IMU interval i → i+1 is a gap (a grid interval of its own). Returns the output
-    trajectory, packed covariances and, when ``store_rts``, what the RTS smoother needs.
+    The records are described by their classes (:class:`Grids` ... :class:`Settings`).
+    Returns the output trajectory, packed covariances and, when ``settings.store_rts``, what
+    the RTS smoother needs.
     """
+    # the loop below reads plain names (numba resolves the record fields at compile time)
+    t, gyro, accel = grids.t, grids.gyro, grids.accel
+    grid_of, out_of, n_grid, n_out = grids.grid_of, grids.out_of, grids.n_grid, grids.n_out
+    cov_out_of, n_cov_out = grids.cov_out_of, grids.n_cov_out
+    gap_step, gap_rp = grids.gap_step, grids.gap_rp
+    lla0, v0, q0, par0, p0 = init.lla0, init.v0, init.q0, init.par0, init.p0
+    heading_known = init.heading_known
+    q_diag, tau_g, tau_a, tau_b = noise.q_diag, noise.tau_g, noise.tau_a, noise.tau_b
+    yaw_unknown_var, tilt_rate_sd = noise.yaw_unknown_var, noise.tilt_rate_sd
+    b_prior_var = noise.b_prior_var
+    ev_t, ev_type, ev_idx, max_pending = events.t, events.kind, events.idx, events.max_pending
+    g_lla, g_pos_sd, g_vel, g_vel_sd = gnss.lla, gnss.pos_sd, gnss.vel, gnss.vel_sd
+    has_vel, lever = gnss.has_vel, gnss.lever
+    tr_yaw, tr_speed, tr_sd = gnss.track_yaw, gnss.track_speed, gnss.track_sd
+    b_alt, b_sd, h0, has_baro = baro.alt, baro.sd, baro.h0, baro.has_baro
+    gate_pos, gate_vel, gate_v, gate_baro = (settings.gate_pos, settings.gate_vel,
+                                             settings.gate_v, settings.gate_baro)
+    max_consec, max_consec_baro = settings.max_consec, settings.max_consec_baro
+    max_sd_v, probation_s = settings.max_sd_v, settings.probation_s
+    heading_v_min, heading_accel = settings.heading_v_min, settings.heading_accel
+    align_chunk_s, align_forget_s = settings.align_chunk_s, settings.align_forget_s
+    align_sd_max, align_acc_sd = settings.align_sd_max, settings.align_acc_sd
+    gap_forget_s, store_rts = settings.gap_forget_s, settings.store_rts
+
     n = t.size
     out_lla = np.empty((n_out, 3))
     out_v = np.empty((n_out, 3))

@@ -65,11 +65,12 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
+from numpy.typing import NDArray
 
 from ...geo.earth import gravity_scalar, radii, radii_scalar
 from ...nav.gaps import GAP_ACCEL_SD, cv_bridge_noise, gap_threshold
 from ...nav.gnss_gate import NO_LIMIT, REFUSE, height_gate, new_gate_state
-from ...nav.sensor_model import sensor_model
+from ...nav.sensor_model import SensorModel, sensor_model
 from ...sensors.baro import baro_jacobian, measure_baro
 from ...sensors.noise import gm_process_var, gm_transition
 from ...types import (
@@ -83,6 +84,7 @@ from ...types import (
 )
 from .inputs import AhrsConfig, VerticalInputs, vertical_inputs
 
+IntArray = NDArray[np.int64]
 NX = 8  # 7 filter states + the accumulator I = ∫ b dt
 IH, IV, IB, IK, IS, ITD, IBB, II = range(NX)
 
@@ -266,6 +268,228 @@ def _innovation_var(p: FloatArray, hrow: FloatArray, var_r: float) -> float:
     return float(hrow @ p @ hrow + var_r)
 
 
+@dataclass(frozen=True)
+class _Noise:
+    """Process noise per IMU step and priors of one run (discrete values from sensors.noise)."""
+
+    q_acc: FloatArray  # vertical specific-force PSD at the IMU epochs [(m/s²)²/Hz]
+    phi_b: FloatArray  # baro-bias transition per IMU step
+    q_b: FloatArray  # baro-bias process variance per IMU step [m²]
+    phi_ab: FloatArray  # B_z transition per IMU step
+    q_ab: FloatArray  # B_z process variance per IMU step [(m/s²)²]
+    r_baro: float  # baro noise variance [m²]
+    ab_sd: float  # prior σ of B_z [m/s²]
+    k_sd: float  # prior σ of K_z
+    s_sd: float  # prior σ of dSF
+    td0: float  # prior mean of Td [s]
+    td_sd: float  # prior σ of Td [s]
+    b_sd: float  # prior σ of the baro bias [m]
+
+
+def _noise(drive: Drive, vi: VerticalInputs, model: SensorModel, cfg: VEKF7Config) -> _Noise:
+    """The shared sensor model (``nav.sensor_model``) with ``cfg``'s overrides."""
+    ims = model.imu
+    bp = model.baro
+    assert bp is not None
+    t = drive.imu.t
+    dt = np.diff(t)
+    if cfg.accel_psd is not None:
+        q_acc = np.full(t.size, cfg.accel_psd)
+    else:
+        q_acc = input_error_psd(
+            drive, vi, ims.accel_noise_density**2 + cfg.input_error_psd, cfg.tilt_sd,
+            ims.gyro_bias_sd, cfg.input_corr_s)
+    ab_sd = _given(cfg.accel_bias_sd, ims.accel_bias_sd)
+    ab_tau = _given(cfg.accel_bias_tau, ims.accel_bias_tau)
+    ab_rw = max(cfg.accel_bias_rw, ims.accel_bias_rw)
+    b_sd = _given(cfg.bias_prior_sd, bp.bias_sd)
+    b_tau = _given(cfg.bias_tau, bp.bias_tau)
+    return _Noise(
+        q_acc=q_acc,
+        phi_b=gm_transition(dt, b_tau),
+        q_b=gm_process_var(dt, b_tau, b_sd),
+        phi_ab=gm_transition(dt, ab_tau),
+        q_ab=gm_process_var(dt, ab_tau, ab_sd) + ab_rw**2 * dt,
+        r_baro=_given(cfg.baro_noise_sd, bp.noise_sd) ** 2,
+        ab_sd=ab_sd,
+        k_sd=_given(cfg.accel_scale_sd, ims.accel_scale_sd),
+        s_sd=_given(cfg.scale_prior_sd, bp.scale_sd),
+        td0=_given(cfg.latency_prior, bp.latency_mean),
+        td_sd=_given(cfg.latency_prior_sd, bp.latency_sd),
+        b_sd=b_sd,
+    )
+
+
+def _transport_rate2(drive: Drive, vi: VerticalInputs) -> FloatArray:
+    """ρ_E² + ρ_N² at the IMU epochs from the GNSS horizontal velocity (0 without it)."""
+    t = drive.imu.t
+    h0 = float(drive.origin_lla[2])
+    gn = drive.gnss
+    rho2 = np.zeros(t.size)
+    if gn is not None and gn.vel_n is not None:
+        vn = np.interp(t, gn.t, gn.vel_n[:, 0])
+        ve = np.interp(t, gn.t, gn.vel_n[:, 1])
+        rn, re = radii(vi.lat)
+        rho2 = (ve / (re + h0)) ** 2 + (vn / (rn + h0)) ** 2
+    return rho2
+
+
+def _initial_state(drive: Drive, g_psd: FloatArray | None,
+                   nz: _Noise) -> tuple[FloatArray, FloatArray]:
+    """Nominal state and covariance at the first IMU epoch: GNSS height and vertical velocity
+    when a fix comes within 5 s, else the baro altitude with the bias prior."""
+    assert drive.baro is not None
+    t0 = drive.imu.t[0]
+    gn = drive.gnss
+    nom = np.zeros(NX)
+    p = np.zeros((NX, NX))
+    if gn is not None and gn.t[0] <= t0 + 5.0:
+        assert g_psd is not None
+        nom[IH] = float(gn.lla[0, 2])
+        p[IH, IH] = float(g_psd[0, 2]) ** 2
+    else:
+        nom[IH] = float(np.interp(t0, drive.baro.t, drive.baro.altitude))
+        p[IH, IH] = nz.b_sd**2 + 1.0
+    if gn is not None and gn.vel_n is not None and gn.t[0] <= t0 + 5.0:
+        nom[IV] = -float(gn.vel_n[0, 2])
+    p[IV, IV] = 0.5**2
+    nom[ITD] = nz.td0
+    np.fill_diagonal(p, np.diag(p) + np.array(
+        [0.0, 0.0, nz.ab_sd**2 + 1e-12, nz.k_sd**2 + 1e-12, nz.s_sd**2 + 1e-12,
+         nz.td_sd**2, nz.b_sd**2, 0.0]))
+    return nom, p
+
+
+def _events(drive: Drive) -> tuple[FloatArray, IntArray, IntArray, IntArray]:
+    """Measurement events inside the IMU span sorted by time (baro first on a tie): stamp,
+    kind (0 baro, 1 GNSS), sample index, and the first IMU epoch at or after the stamp (where
+    the event is processed)."""
+    assert drive.baro is not None
+    t = drive.imu.t
+    gn = drive.gnss
+    ev_t = [drive.baro.t]
+    ev_kind = [np.zeros(drive.baro.t.size, dtype=np.int64)]
+    ev_idx = [np.arange(drive.baro.t.size)]
+    if gn is not None:
+        ev_t.append(gn.t)
+        ev_kind.append(np.ones(gn.t.size, dtype=np.int64))
+        ev_idx.append(np.arange(gn.t.size))
+    et = np.concatenate(ev_t)
+    ek = np.concatenate(ev_kind)
+    ei = np.concatenate(ev_idx)
+    order = np.lexsort((ek, et))
+    et, ek, ei = et[order], ek[order], ei[order]
+    keep = (et >= t[0]) & (et <= t[-1])
+    et, ek, ei = et[keep], ek[keep], ei[keep]
+    return et, ek, ei, np.searchsorted(t, et, side="left")
+
+
+def _lever_dz(drive: Drive, vi: VerticalInputs) -> FloatArray:
+    """Antenna height offset −[C_nb l]_D from the attitude reference (zero lever arm: 0)."""
+    gn = drive.gnss
+    if gn is not None and np.any(gn.lever_arm_b != 0):
+        from ...geo.frames import quat_to_mat
+
+        return -(quat_to_mat(vi.q_nb) @ gn.lever_arm_b)[:, 2]
+    return np.zeros(drive.imu.t.size)
+
+
+@dataclass
+class _Pass:
+    """What the filter pass produces: heights / vertical speeds (+up) at every IMU epoch, the
+    covariance samples, the normalised innovations and the count of refused GNSS heights."""
+
+    h: FloatArray
+    v: FloatArray
+    t_cov: list[float]
+    p_cov: list[FloatArray]
+    innov: dict[str, list[float]]
+    rejected: int
+
+
+def _gnss_update(nom: FloatArray, p: FloatArray, gate: FloatArray, t_m: float, i: int,
+                 h_m: float, lever_dz: float, drive: Drive, g_psd: FloatArray,
+                 g_vsd: FloatArray | None, cfg: VEKF7Config, out: _Pass) -> None:
+    """GNSS height through the shared probation gate, then (if used) its vertical velocity."""
+    gn = drive.gnss
+    assert gn is not None
+    hz = np.zeros(NX)
+    hz[IH] = 1.0
+    var_r = float(g_psd[i, 2]) ** 2
+    r = float(gn.lla[i, 2]) - (h_m + lever_dz)
+    if height_gate(gate, t_m, float(g_psd[i, 2]) <= cfg.max_gnss_sd_v,
+                   r * r, _innovation_var(p, hz, var_r), cfg.gnss_gate_sigma**2,
+                   cfg.gnss_probation_s, NO_LIMIT, 0.0, False) == REFUSE:
+        out.rejected += 1
+        return
+    out.innov["gnss_alt"].append(_update(nom, p, hz.copy(), r, var_r))
+    if cfg.use_gnss_velocity and gn.vel_n is not None and g_vsd is not None:
+        hz[:] = 0.0
+        hz[IV] = 1.0
+        var_v = float(g_vsd[i, 2]) ** 2
+        rv = -float(gn.vel_n[i, 2]) - nom[IV]
+        if rv**2 <= cfg.gnss_gate_sigma**2 * _innovation_var(p, hz, var_v):
+            out.innov["gnss_vel"].append(_update(nom, p, hz.copy(), rv, var_v))
+
+
+def _filter_pass(drive: Drive, vi: VerticalInputs, model: SensorModel, nz: _Noise,
+                 nom: FloatArray, p: FloatArray, cfg: VEKF7Config) -> _Pass:
+    """Propagate through the IMU epochs and update at each event (module docstring); ``nom``
+    and ``p`` end as the final state."""
+    assert drive.baro is not None
+    g_psd, g_vsd = model.gnss_pos_sd, model.gnss_vel_sd
+    t = drive.imu.t
+    n = t.size
+    h0 = float(drive.origin_lla[2])
+    baro_alt = drive.baro.altitude
+    et, ek, ei, kk = _events(drive)
+    lever_dz = _lever_dz(drive, vi)
+    out = _Pass(np.empty(n), np.empty(n), [], [],
+                {"baro": [], "gnss_alt": [], "gnss_vel": []}, 0)
+    h_out, v_out = out.h, out.v
+    h_out[0], v_out[0] = nom[IH], nom[IV]
+    cov_dt = 1.0 / cfg.cov_rate_hz
+    k_cur = 0
+    next_cov = t[0]
+    hz = np.zeros(NX)
+    args = (t, vi.f_down, vi.lat, vi.c33, vi.f_z_b, vi.coriolis_down,
+            _transport_rate2(drive, vi), nz.phi_b, nz.q_b, nz.phi_ab, nz.q_ab, nz.q_acc,
+            gap_threshold(t), GAP_ACCEL_SD**2)
+    gate = new_gate_state()
+    for j in range(et.size):
+        k = int(kk[j])
+        if k > k_cur:
+            _propagate(k_cur, k, *args, nom, p, h_out, v_out)
+            k_cur = k
+        lag = t[k] - et[j]  # evaluate the model at the measurement stamp
+        h_m = nom[IH] - nom[IV] * lag
+        if ek[j] == 0:
+            i = int(ei[j])
+            z = float(baro_alt[i])
+            zhat = float(measure_baro(h_m, nom[IV], nom[IS], nom[ITD], nom[IBB], h0))
+            jac = baro_jacobian(h_m, nom[IV], nom[IS], nom[ITD], h0)
+            hz[:] = 0.0
+            hz[IH], hz[IV], hz[IS], hz[ITD], hz[IBB] = jac
+            out.innov["baro"].append(_update(nom, p, hz.copy(), z - zhat, nz.r_baro))
+        else:
+            assert g_psd is not None
+            _gnss_update(nom, p, gate, float(et[j]), int(ei[j]), h_m, float(lever_dz[k]),
+                         drive, g_psd, g_vsd, cfg, out)
+        h_out[k], v_out[k] = nom[IH], nom[IV]
+        if t[k] >= next_cov:
+            out.t_cov.append(float(t[k]))
+            out.p_cov.append(p.copy())
+            next_cov = t[k] + cov_dt
+    if k_cur < n - 1:
+        _propagate(k_cur, n - 1, *args, nom, p, h_out, v_out)
+    if out.t_cov and out.t_cov[-1] >= t[-1]:  # the last epoch holds the final covariance
+        out.t_cov.pop()
+        out.p_cov.pop()
+    out.t_cov.append(float(t[-1]))
+    out.p_cov.append(p.copy())
+    return out
+
+
 class VEKF7:
     """Seed-001 7-state vertical EKF (see module docstring)."""
 
@@ -282,168 +506,23 @@ class VEKF7:
             raise ValueError("vekf7: the drive has no baro stream")
         vi: VerticalInputs = vertical_inputs(drive, cfg.ahrs)
         model = sensor_model(drive)  # shared with ekf and the graphs (nav.sensor_model)
-        ims = model.imu
-        bp = model.baro
-        assert bp is not None
-        g_psd, g_vsd = model.gnss_pos_sd, model.gnss_vel_sd
+        nz = _noise(drive, vi, model, cfg)
+        nom, p = _initial_state(drive, model.gnss_pos_sd, nz)
+        res = _filter_pass(drive, vi, model, nz, nom, p, cfg)
+
         t = drive.imu.t
         n = t.size
-        dt = np.diff(t)
-        h0 = float(drive.origin_lla[2])
-
-        # ---- noise and priors (discrete values only through sensors.noise)
-        if cfg.accel_psd is not None:
-            q_acc = np.full(n, cfg.accel_psd)
-        else:
-            q_acc = input_error_psd(
-                drive, vi, ims.accel_noise_density**2 + cfg.input_error_psd, cfg.tilt_sd,
-                ims.gyro_bias_sd, cfg.input_corr_s)
-        ab_sd = _given(cfg.accel_bias_sd, ims.accel_bias_sd)
-        ab_tau = _given(cfg.accel_bias_tau, ims.accel_bias_tau)
-        ab_rw = max(cfg.accel_bias_rw, ims.accel_bias_rw)
-        k_sd = _given(cfg.accel_scale_sd, ims.accel_scale_sd)
-        s_sd = _given(cfg.scale_prior_sd, bp.scale_sd)
-        b_sd = _given(cfg.bias_prior_sd, bp.bias_sd)
-        b_tau = _given(cfg.bias_tau, bp.bias_tau)
-        r_baro = _given(cfg.baro_noise_sd, bp.noise_sd) ** 2
-        td0 = _given(cfg.latency_prior, bp.latency_mean)
-        td_sd = _given(cfg.latency_prior_sd, bp.latency_sd)
-        phi_b = gm_transition(dt, b_tau)
-        q_b = gm_process_var(dt, b_tau, b_sd)
-        phi_ab = gm_transition(dt, ab_tau)
-        q_ab = gm_process_var(dt, ab_tau, ab_sd) + ab_rw**2 * dt
-
-        # ---- transport-rate term ρ_E² + ρ_N² from GNSS horizontal velocity
-        gn = drive.gnss
-        rho2 = np.zeros(n)
-        if gn is not None and gn.vel_n is not None:
-            vn = np.interp(t, gn.t, gn.vel_n[:, 0])
-            ve = np.interp(t, gn.t, gn.vel_n[:, 1])
-            rn, re = radii(vi.lat)
-            rho2 = (ve / (re + h0)) ** 2 + (vn / (rn + h0)) ** 2
-
-        # ---- initial state
-        baro_alt = drive.baro.altitude
-        nom = np.zeros(NX)
-        p = np.zeros((NX, NX))
-        if gn is not None and gn.t[0] <= t[0] + 5.0:
-            nom[IH] = float(gn.lla[0, 2])
-            p[IH, IH] = float(g_psd[0, 2]) ** 2
-        else:
-            nom[IH] = float(np.interp(t[0], drive.baro.t, baro_alt))
-            p[IH, IH] = b_sd**2 + 1.0
-        if gn is not None and gn.vel_n is not None and gn.t[0] <= t[0] + 5.0:
-            nom[IV] = -float(gn.vel_n[0, 2])
-        p[IV, IV] = 0.5**2
-        nom[ITD] = td0
-        np.fill_diagonal(p, np.diag(p) + np.array(
-            [0.0, 0.0, ab_sd**2 + 1e-12, k_sd**2 + 1e-12, s_sd**2 + 1e-12,
-             td_sd**2, b_sd**2, 0.0]))
-
-        # ---- measurement events, processed at the first IMU epoch at or after their stamp
-        ev_t = [drive.baro.t]
-        ev_kind = [np.zeros(drive.baro.t.size, dtype=np.int64)]
-        ev_idx = [np.arange(drive.baro.t.size)]
-        if gn is not None:
-            ev_t.append(gn.t)
-            ev_kind.append(np.ones(gn.t.size, dtype=np.int64))
-            ev_idx.append(np.arange(gn.t.size))
-        et = np.concatenate(ev_t)
-        ek = np.concatenate(ev_kind)
-        ei = np.concatenate(ev_idx)
-        order = np.lexsort((ek, et))
-        et, ek, ei = et[order], ek[order], ei[order]
-        keep = (et >= t[0]) & (et <= t[-1])
-        et, ek, ei = et[keep], ek[keep], ei[keep]
-        kk = np.searchsorted(t, et, side="left")
-
-        # antenna height offset −[C_nb l]_D from the attitude reference (zero lever arm: 0)
-        lever_dz = np.zeros(n)
-        if gn is not None and np.any(gn.lever_arm_b != 0):
-            from ...geo.frames import quat_to_mat
-
-            lever_dz = -(quat_to_mat(vi.q_nb) @ gn.lever_arm_b)[:, 2]
-
-        h_out = np.empty(n)
-        v_out = np.empty(n)
-        h_out[0], v_out[0] = nom[IH], nom[IV]
-        cov_dt = 1.0 / cfg.cov_rate_hz
-        t_cov: list[float] = []
-        p_cov: list[FloatArray] = []
-        b_hist: list[float] = []
-        innov: dict[str, list[float]] = {"baro": [], "gnss_alt": [], "gnss_vel": []}
-        rejected = 0
-        k_cur = 0
-        next_cov = t[0]
-        hz = np.zeros(NX)
-        gap_dt = gap_threshold(t)
-        args = (t, vi.f_down, vi.lat, vi.c33, vi.f_z_b, vi.coriolis_down, rho2, phi_b, q_b,
-                phi_ab, q_ab, q_acc, gap_dt, GAP_ACCEL_SD**2)
-        gate = new_gate_state()
-        gate2 = cfg.gnss_gate_sigma**2
-        for j in range(et.size):
-            k = int(kk[j])
-            if k > k_cur:
-                _propagate(k_cur, k, *args, nom, p, h_out, v_out)
-                k_cur = k
-            lag = t[k] - et[j]  # evaluate the model at the measurement stamp
-            h_m = nom[IH] - nom[IV] * lag
-            if ek[j] == 0:
-                i = int(ei[j])
-                z = float(baro_alt[i])
-                zhat = float(measure_baro(h_m, nom[IV], nom[IS], nom[ITD], nom[IBB], h0))
-                jac = baro_jacobian(h_m, nom[IV], nom[IS], nom[ITD], h0)
-                hz[:] = 0.0
-                hz[IH], hz[IV], hz[IS], hz[ITD], hz[IBB] = jac
-                innov["baro"].append(_update(nom, p, hz.copy(), z - zhat, r_baro))
-            else:
-                assert gn is not None
-                i = int(ei[j])
-                hz[:] = 0.0
-                hz[IH] = 1.0
-                var_r = float(g_psd[i, 2]) ** 2
-                r = float(gn.lla[i, 2]) - (h_m + lever_dz[k])
-                if height_gate(gate, float(et[j]), float(g_psd[i, 2]) <= cfg.max_gnss_sd_v,
-                               r * r, _innovation_var(p, hz, var_r), gate2,
-                               cfg.gnss_probation_s, NO_LIMIT, 0.0, False) == REFUSE:
-                    rejected += 1
-                else:
-                    innov["gnss_alt"].append(_update(nom, p, hz.copy(), r, var_r))
-                    if cfg.use_gnss_velocity and gn.vel_n is not None and g_vsd is not None:
-                        hz[:] = 0.0
-                        hz[IV] = 1.0
-                        var_v = float(g_vsd[i, 2]) ** 2
-                        rv = -float(gn.vel_n[i, 2]) - nom[IV]
-                        if rv**2 <= cfg.gnss_gate_sigma**2 * _innovation_var(p, hz, var_v):
-                            innov["gnss_vel"].append(_update(nom, p, hz.copy(), rv, var_v))
-            h_out[k], v_out[k] = nom[IH], nom[IV]
-            if t[k] >= next_cov:
-                t_cov.append(float(t[k]))
-                p_cov.append(p.copy())
-                b_hist.append(float(nom[IBB]))
-                next_cov = t[k] + cov_dt
-        if k_cur < n - 1:
-            _propagate(k_cur, n - 1, *args, nom, p, h_out, v_out)
-        if t_cov and t_cov[-1] >= t[-1]:  # the last epoch holds the final covariance
-            t_cov.pop()
-            p_cov.pop()
-        t_cov.append(float(t[-1]))
-        p_cov.append(p.copy())
-
-        # ---- outputs
         dur = float(t[-1] - t[0])
-        lla = np.column_stack([np.full(n, np.nan), np.full(n, np.nan), h_out])
-        vel = np.column_stack([np.full(n, np.nan), np.full(n, np.nan), -v_out])
-        traj = Trajectory(t, lla, vel)
-        cov18 = _to_error_state(np.array(p_cov)) if p_cov else None
+        lla = np.column_stack([np.full(n, np.nan), np.full(n, np.nan), res.h])
+        vel = np.column_stack([np.full(n, np.nan), np.full(n, np.nan), -res.v])
         baro = BaroEstimate(
-            scale=ParamEstimate(float(nom[IS]), float(np.sqrt(p[IS, IS])), s_sd),
-            latency_s=ParamEstimate(float(nom[ITD]), float(np.sqrt(p[ITD, ITD])),
-                                    td_sd),
-            bias_m=ParamEstimate(float(nom[II] / dur), float(np.sqrt(p[II, II]) / dur), b_sd),
+            scale=ParamEstimate(float(nom[IS]), float(np.sqrt(p[IS, IS])), nz.s_sd),
+            latency_s=ParamEstimate(float(nom[ITD]), float(np.sqrt(p[ITD, ITD])), nz.td_sd),
+            bias_m=ParamEstimate(float(nom[II] / dur), float(np.sqrt(p[II, II]) / dur),
+                                 nz.b_sd),
         )
         info = {
-            "gnss_rejected": rejected,
+            "gnss_rejected": res.rejected,
             "accel_bias_z": float(nom[IB]),
             "accel_bias_z_sd": float(np.sqrt(p[IB, IB])),
             "accel_scale_z": float(nom[IK]),
@@ -451,11 +530,11 @@ class VEKF7:
             "baro_bias_final": float(nom[IBB]),
         }
         return Estimate(
-            estimator=self.name, trajectory=traj,
+            estimator=self.name, trajectory=Trajectory(t, lla, vel),
             provides=frozenset({"alt", "vel_d", "baro", "cov"}),
-            cov=cov18, t_cov=np.array(t_cov) if p_cov else None, baro=baro,
+            cov=_to_error_state(np.array(res.p_cov)), t_cov=np.array(res.t_cov), baro=baro,
             runtime_s=time.perf_counter() - t_start,
-            innovations={k: np.asarray(v) for k, v in innov.items()},
+            innovations={k: np.asarray(v) for k, v in res.innov.items()},
             info=info, config=cfg,
         )
 

@@ -52,6 +52,7 @@ import io
 import os
 from collections.abc import Sequence
 from contextlib import redirect_stdout
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -246,10 +247,54 @@ def read_dataflash(path: str | Path, clock: str = "auto") -> Drive:
     firmware = next((r.get("Message") for r in msgs["MSG"]
                      if str(r.get("Message", "")).startswith(("Ardu", "APM"))), None)
 
-    # ---- IMU -------------------------------------------------------------------------
-    imu_rows = [r for r in msgs["IMU"] if _instance0(r)]
+    t_imu, gyro, acc = _read_imu(msgs["IMU"], path.name, report)
+    fixes = _read_gnss(msgs, path.name, report)
+    t_ref = float(t_imu[0])
+    clock_meta = _choose_clock(clock, fixes, t_ref, report)
+    basis_gps = clock_meta["basis"].startswith("GPS")
+    t_gnss = fixes.t
+    if basis_gps:
+        assert fixes.clock_fit is not None
+        t_imu = local_to_gps_seconds(t_imu, fixes.clock_fit.ratio, t_ref)
+        t_gnss = local_to_gps_seconds(t_gnss, fixes.clock_fit.ratio, t_ref)
+
+    def tmap(t: np.ndarray) -> np.ndarray:
+        assert fixes.clock_fit is not None or not basis_gps
+        return local_to_gps_seconds(t, fixes.clock_fit.ratio, t_ref) if basis_gps else t
+
+    find_gaps(t_imu, "imu", report)
+    find_gaps(t_gnss, "gnss", report)
+    gnss = GnssStream(t_gnss, fixes.lla, fixes.pos_sd, fixes.vel_n, fixes.vel_sd)
+    baro, baro_offset = _read_baro(msgs["BARO"], gnss, report, tmap)
+    onboard = _onboard(msgs, params, gnss, report, tmap)
+
+    meta: dict[str, Any] = {
+        "source": "log",
+        "name": path.stem,
+        "format": "ardupilot-dataflash",
+        "firmware": firmware,
+        "clock": clock_meta,
+        "imu_frame": "ArduPilot body frame (forward-right-down), used as logged",
+        "height_reference": "msl",
+        "height_note": "GPS.Alt is above mean sea level (not ellipsoidal); every height in this "
+                       "drive uses that reference",
+        "baro_alt_offset_m": baro_offset,
+        "averaged_1s": False,
+        "boot_clock_per_gps_second": report.clock_rate,
+        **report.as_meta(),
+    }
+    if onboard is not None:
+        meta["onboard"] = onboard
+    return Drive(ImuStream(t_imu, gyro, acc), gnss, baro, fixes.lla[0].copy(), meta=meta)
+
+
+def _read_imu(rows: list[dict[str, Any]], name: str,
+              report: Report) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Boot-clock stamps [s], gyro [rad/s] and specific force [m/s²] of IMU instance 0:
+    non-finite, out-of-range and non-increasing samples dropped (and reported)."""
+    imu_rows = [r for r in rows if _instance0(r)]
     if len(imu_rows) < 10:
-        raise ValueError(f"{path.name}: DataFlash log has no IMU data "
+        raise ValueError(f"{name}: DataFlash log has no IMU data "
                          f"({len(imu_rows)} IMU records; truncated or not a flight log?)")
     t_imu = np.array([_time_s(r) for r in imu_rows])
     gyro = np.column_stack([_col(imu_rows, f"Gyr{a}") for a in "XYZ"])
@@ -264,14 +309,30 @@ def read_dataflash(path: str | Path, clock: str = "auto") -> Drive:
     t_imu, gyro, acc = t_imu[keep], gyro[keep], acc[keep]
     if t_imu.size < 10:
         why = "; ".join(f"{c} {r}" for r, c in report.dropped.get("imu", {}).items())
-        raise ValueError(f"{path.name}: only {t_imu.size} of {len(imu_rows)} IMU records are "
+        raise ValueError(f"{name}: only {t_imu.size} of {len(imu_rows)} IMU records are "
                          f"usable ({why or 'fields missing'}; corrupt FMT records or NaN "
                          "samples?)")
+    return t_imu, gyro, acc
 
-    # ---- GNSS ------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class _Fixes:
+    """The usable 3-D fixes of GPS instance 0, stamped on the boot clock."""
+
+    t: np.ndarray  # boot-clock stamps [s] (GPS time mapped by ``clock_fit``, or receipt)
+    gps_time: np.ndarray  # GPS seconds (week·604800 + time of week)
+    lla: np.ndarray
+    vel_n: np.ndarray | None
+    pos_sd: np.ndarray
+    vel_sd: np.ndarray | None
+    clock_fit: ClockFit | None
+
+
+def _read_gnss(msgs: dict[str, list[dict[str, Any]]], name: str, report: Report) -> _Fixes:
+    """3-D fixes of ``GPS`` (instance 0) with their sigmas (module docstring)."""
     gps_rows = [r for r in msgs["GPS"] if _instance0(r)]
     if not gps_rows:
-        raise ValueError(f"{path.name}: DataFlash log has no GPS records")
+        raise ValueError(f"{name}: DataFlash log has no GPS records")
     status = _col(gps_rows, "Status")
     lat = _col(gps_rows, "Lat")
     lon = _col(gps_rows, "Lng")
@@ -294,10 +355,11 @@ def read_dataflash(path: str | Path, clock: str = "auto") -> Drive:
     report.drop("gnss", "invalid position", int((m & bad_pos).sum()))
     m &= ~bad_pos
     if m.sum() < 2:
-        raise ValueError(f"{path.name}: no GNSS 3-D fixes in the log")
+        raise ValueError(f"{name}: no GNSS 3-D fixes in the log")
     idx = np.flatnonzero(m)
     gtime = gps_time[idx]
     # the same fix logged twice (same GPS time) is a duplicate, whatever its receipt stamp
+    clock_fit: ClockFit | None
     if np.all(np.isfinite(gtime)):
         keep = monotonic_mask(gtime, "gnss", report)
         idx, gtime = idx[keep], gtime[keep]
@@ -309,75 +371,45 @@ def read_dataflash(path: str | Path, clock: str = "auto") -> Drive:
         t_gnss = t_recv[idx]
         report.notes.append("GNSS stamped with receipt time (GPS time missing)")
     lla = np.column_stack([lat[idx] * DEG, lon[idx] * DEG, alt[idx]])
-    vel_n = np.column_stack([spd[idx] * np.cos(crs[idx] * DEG), spd[idx] * np.sin(crs[idx] * DEG),
-                             vz[idx]])
+    vel_n: np.ndarray | None = np.column_stack(
+        [spd[idx] * np.cos(crs[idx] * DEG), spd[idx] * np.sin(crs[idx] * DEG), vz[idx]])
     pos_sd, vel_sd = _gnss_sigmas(msgs["GPA"] or msgs["UBX3"], t_recv[idx], hdop[idx], report)
     if not np.all(np.isfinite(vel_n)):
         report.notes.append("GNSS velocity incomplete in the log: velocity not used")
         vel_n = vel_sd = None
+    return _Fixes(t_gnss, gtime, lla, vel_n, pos_sd, vel_sd, clock_fit)
 
-    # ---- clock: boot time, or boot time re-expressed in GPS seconds -------------------
-    t_ref = float(t_imu[0])
+
+def _choose_clock(clock: str, fixes: _Fixes, t_ref: float, report: Report) -> dict[str, Any]:
+    """``meta["clock"]``: boot time, or boot time re-expressed in GPS seconds (module
+    docstring, Clock); its ``basis`` starts with "GPS" when the streams are to be re-stamped."""
     clock_meta: dict[str, Any] = {"basis": "autopilot boot time [s]",
                                   "boot_clock_per_gps_second": report.clock_rate}
-    if clock_fit is not None:
-        ev = _speed_evidence(t_gnss, gtime, lla, vel_n)
-        clock_meta["fit"] = {"offset_s": clock_fit.offset, "receipt_jitter_sd_s": clock_fit.sd,
-                             "receipts_off_fit": clock_fit.n_outliers}
-        clock_meta["evidence"] = ev or {}
-        r = clock_fit.ratio
-        off = abs(r - 1.0) > CLOCK_RATIO_TOL
-        if clock == "gps" or (clock == "auto" and off):
-            t_imu = local_to_gps_seconds(t_imu, r, t_ref)
-            t_gnss = local_to_gps_seconds(t_gnss, r, t_ref)
-            clock_meta["basis"] = "GPS time [s] (boot clock rescaled)"
-            clock_meta["t_ref_s"] = t_ref
-            report.repair("clock", "boot-clock stamps rescaled to GPS seconds "
-                          "(t = t_ref + (t_boot - t_ref)/r)", 1)
-            report.notes.append(
-                f"CLOCK REPAIRED: the boot clock advanced {r:.5f} s per GPS second "
-                f"({(r - 1) * 100:+.2f} %); IMU, baro, GNSS and onboard stamps are rescaled to "
-                f"GPS seconds keeping t = {t_ref:.3f} s fixed (read with clock='boot' to keep "
-                "the raw boot clock)")
-        elif off:
-            report.notes.append(
-                f"WARNING: the boot clock advanced {r:.5f} s per GPS second "
-                f"({(r - 1) * 100:+.2f} %); streams kept on the boot clock (clock='boot'): IMU "
-                "intervals are then off by this factor if GPS time is right")
-    basis_gps = clock_meta["basis"].startswith("GPS")
-
-    def tmap(t: np.ndarray) -> np.ndarray:
-        return local_to_gps_seconds(t, clock_fit.ratio, t_ref) if basis_gps else t
-
-    find_gaps(t_imu, "imu", report)
-    find_gaps(t_gnss, "gnss", report)
-    gnss = GnssStream(t_gnss, lla, pos_sd, vel_n, vel_sd)
-
-    # ---- baro ------------------------------------------------------------------------
-    baro, baro_offset = _read_baro(msgs["BARO"], gnss, report, tmap)
-
-    # ---- onboard estimate -------------------------------------------------------------
-    onboard = _onboard(msgs, params, gnss, report, tmap)
-
-    origin = lla[0].copy()
-    meta: dict[str, Any] = {
-        "source": "log",
-        "name": path.stem,
-        "format": "ardupilot-dataflash",
-        "firmware": firmware,
-        "clock": clock_meta,
-        "imu_frame": "ArduPilot body frame (forward-right-down), used as logged",
-        "height_reference": "msl",
-        "height_note": "GPS.Alt is above mean sea level (not ellipsoidal); every height in this "
-                       "drive uses that reference",
-        "baro_alt_offset_m": baro_offset,
-        "averaged_1s": False,
-        "boot_clock_per_gps_second": report.clock_rate,
-        **report.as_meta(),
-    }
-    if onboard is not None:
-        meta["onboard"] = onboard
-    return Drive(ImuStream(t_imu, gyro, acc), gnss, baro, origin, meta=meta)
+    clock_fit = fixes.clock_fit
+    if clock_fit is None:
+        return clock_meta
+    ev = _speed_evidence(fixes.t, fixes.gps_time, fixes.lla, fixes.vel_n)
+    clock_meta["fit"] = {"offset_s": clock_fit.offset, "receipt_jitter_sd_s": clock_fit.sd,
+                         "receipts_off_fit": clock_fit.n_outliers}
+    clock_meta["evidence"] = ev or {}
+    r = clock_fit.ratio
+    off = abs(r - 1.0) > CLOCK_RATIO_TOL
+    if clock == "gps" or (clock == "auto" and off):
+        clock_meta["basis"] = "GPS time [s] (boot clock rescaled)"
+        clock_meta["t_ref_s"] = t_ref
+        report.repair("clock", "boot-clock stamps rescaled to GPS seconds "
+                      "(t = t_ref + (t_boot - t_ref)/r)", 1)
+        report.notes.append(
+            f"CLOCK REPAIRED: the boot clock advanced {r:.5f} s per GPS second "
+            f"({(r - 1) * 100:+.2f} %); IMU, baro, GNSS and onboard stamps are rescaled to "
+            f"GPS seconds keeping t = {t_ref:.3f} s fixed (read with clock='boot' to keep "
+            "the raw boot clock)")
+    elif off:
+        report.notes.append(
+            f"WARNING: the boot clock advanced {r:.5f} s per GPS second "
+            f"({(r - 1) * 100:+.2f} %); streams kept on the boot clock (clock='boot'): IMU "
+            "intervals are then off by this factor if GPS time is right")
+    return clock_meta
 
 
 def _gnss_sigmas(gpa_rows: list[dict[str, Any]], t_fix: np.ndarray, hdop: np.ndarray,
