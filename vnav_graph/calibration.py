@@ -19,7 +19,7 @@ residuals. A real baro's bias is not a constant but a Gauss-Markov process (docs
 so the residuals are correlated over the bias time constant and those standard errors are
 several times too small (issue 13: σ 10-16× smaller than the error on a sortie variant).
 ``calibrate_baro`` therefore solves the same regression by **generalised least squares** with
-the residual covariance of the shared baro model (``nav.sensor_model``: the drive's bias σ_b
+the residual covariance of the shared baro model (``sensors.model``: the drive's bias σ_b
 and τ_b — the real-log prior on a log — and white baro plus GNSS height noise):
 C = σ_b²·exp(−|t_i − t_j|/τ_b) + diag(σ_baro² + σ_GNSS,v²), θ = (MᵀC⁻¹M)⁻¹MᵀC⁻¹dH,
 cov = (MᵀC⁻¹M)⁻¹·max(1, s²) with s² the whitened residual variance (when the data scatter
@@ -277,7 +277,7 @@ def calibrate_baro(drive: Drive) -> BaroCalibration:
             raise ValueError("calibrate-baro: too few GNSS fixes to differentiate heights")
         vg = np.gradient(g.lla[:, 2], tg)
         src = "differentiated_height"
-    from .nav.sensor_model import sensor_model
+    from .sensors.model import sensor_model
 
     model = sensor_model(drive)
     bp = model.baro

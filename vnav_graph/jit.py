@@ -36,18 +36,42 @@ def cache_root() -> Path:
     return Path(user_cache_dir("vnav_graph", appauthor=False))
 
 
+KEEP_CACHES = 3  # source versions whose compiled kernels are kept side by side
+
+
 def configure_cache() -> str:
     """Point numba's cache at the user cache directory unless ``NUMBA_CACHE_DIR`` is set.
 
-    Returns the directory in use. Works also when numba was imported first (its config
-    module is then updated directly).
+    The directory is ``<cache>/numba/<source key>``: one per version of the package's
+    sources. numba invalidates a cached kernel only when *its own* file changes; a kernel
+    that calls a function of another module keeps the old callee (or, after a module moved,
+    fails to load with ModuleNotFoundError). A fresh directory per source version rules that
+    out; the ``KEEP_CACHES`` most recent are kept. Returns the directory in use. Works also
+    when numba was imported first (its config module is then updated directly).
     """
-    path = os.environ.get("NUMBA_CACHE_DIR") or str(cache_root() / "numba")
+    path = os.environ.get("NUMBA_CACHE_DIR")
+    if not path:
+        base = cache_root() / "numba"
+        path = str(base / _source_key())
+        _prune(base, Path(path))
     os.environ["NUMBA_CACHE_DIR"] = path
     cfg = sys.modules.get("numba.core.config")
     if cfg is not None and not getattr(cfg, "CACHE_DIR", ""):
         cfg.CACHE_DIR = path
     return path
+
+
+def _prune(base: Path, current: Path) -> None:
+    """Remove all but the ``KEEP_CACHES`` most recently used source-version directories."""
+    try:
+        dirs = [d for d in base.iterdir() if d.is_dir() and d != current]
+    except OSError:
+        return
+    import shutil
+
+    dirs.sort(key=lambda d: d.stat().st_mtime, reverse=True)
+    for d in dirs[KEEP_CACHES - 1:]:
+        shutil.rmtree(d, ignore_errors=True)
 
 
 class CompileTimer:

@@ -149,12 +149,33 @@ def test_numba_cache_goes_to_the_user_cache_dir(tmp_path: Path) -> None:
     env["VNAV_CACHE_DIR"] = str(tmp_path / "c")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                        env=env, check=True)
-    # numba imported first: its config is updated all the same
-    assert r.stdout.split() == [str(tmp_path / "c" / "numba")] * 2
+    # numba imported first: its config is updated all the same; one directory per version
+    # of the package's sources (a kernel's cache is not invalidated when a callee in another
+    # module changes or moves: after the estimators moved into subpackages, a cached EKF
+    # smoother failed with ModuleNotFoundError)
+    cfg_dir, env_dir = r.stdout.split()
+    assert cfg_dir == env_dir and Path(cfg_dir).parent == tmp_path / "c" / "numba"
+    assert Path(cfg_dir).name == jit._source_key()
     env["NUMBA_CACHE_DIR"] = str(tmp_path / "mine")  # the user's own setting wins
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                        env=env, check=True)
     assert r.stdout.split() == [str(tmp_path / "mine")] * 2
+
+
+def test_old_source_versions_are_pruned(tmp_path: Path) -> None:
+    base = tmp_path / "numba"
+    old = []
+    for k in range(5):
+        d = base / f"v{k}"
+        d.mkdir(parents=True)
+        os.utime(d, (1000.0 + k, 1000.0 + k))
+        old.append(d)
+    cur = base / "current"
+    cur.mkdir()
+    jit._prune(base, cur)
+    kept = sorted(p.name for p in base.iterdir())
+    # the current directory and the KEEP_CACHES − 1 most recently used others
+    assert kept == ["current", "v3", "v4"] and jit.KEEP_CACHES == 3
 
 
 def test_package_tree_holds_no_numba_cache() -> None:

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from vnav_graph.config import IMU_PRESETS
-from vnav_graph.estimators.ekf.strapdown import NavState, integrate
 from vnav_graph.geo.frames import attitude_error_n, lla_to_ned
+from vnav_graph.nav.strapdown import NavState, integrate
 from vnav_graph.simulation import simulate
 
 

@@ -17,7 +17,7 @@ from vnav_graph.nav.gnss_gate import (
     height_gate,
     new_gate_state,
 )
-from vnav_graph.nav.sensor_model import (
+from vnav_graph.sensors.model import (
     REAL_LOG_IMU,
     baro_prior,
     infer_imu_spec,

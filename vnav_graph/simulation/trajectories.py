@@ -13,7 +13,7 @@ with analytic first and second derivatives. From them, exactly:
 
 Latitude, longitude and height follow from integrating v_n (trapezoidal on the dense truth
 grid, with the radii of curvature), so truth, IMU and the mechanisation of
-``vnav_graph.estimators.ekf.strapdown`` agree to integration accuracy.
+``vnav_graph.nav.strapdown`` agree to integration accuracy.
 """
 
 from __future__ import annotations

@@ -27,12 +27,12 @@ Outputs
 
 Noise
 -----
-The shared sensor model of the drive (``nav.sensor_model``, the same for ekf, ekf-rts,
+The shared sensor model of the drive (``sensors.model``, the same for ekf, ekf-rts,
 vekf7 and both graphs): the drive's specs when present; on a real log the IMU noise inferred
 from the log (``infer_imu_spec``: the ``REAL_LOG_IMU`` prior raised to the measured white
 scatter — a phone on a skier shows 0.036 m/s²/√Hz and 0.31 °/s/√Hz, 100× the MPU-9250
 datasheet — plus a vibration bias walk), ``REAL_LOG_BARO`` for the baro (10 m bias σ);
-GNSS: per-fix sigmas of the stream floored at ``GNSS_SD_FLOOR`` (``nav.sensor_model``), in
+GNSS: per-fix sigmas of the stream floored at ``GNSS_SD_FLOOR`` (``sensors.model``), in
 the updates and in the initial position/velocity variances. On a real log the baro bias
 prior mean is taken from the first baro sample minus the initial GNSS height (a relative baro
 altitude would otherwise be hundreds of metres off). Discrete variances come from
@@ -57,7 +57,7 @@ from ...geo.earth import OMEGA_IE, gravity
 from ...geo.frames import quat_to_mat, rph_to_quat
 from ...nav.gaps import GAP_ACCEL_SD
 from ...nav.levelling import coarse_level
-from ...nav.sensor_model import BaroPrior, SensorModel, baro_prior, sensor_model
+from ...sensors.model import BaroPrior, SensorModel, baro_prior, sensor_model
 from ...sensors.noise import gm_process_var, white_sd
 from ...types import (
     ERROR_STATE_DIM,
@@ -410,7 +410,7 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
         raise ValueError("ekf: the IMU stream needs at least 3 samples")
     if cfg.heading_source not in ("auto", "track", "accel"):
         raise ValueError("EkfConfig.heading_source: 'auto', 'track' or 'accel'")
-    model = sensor_model(drive)  # the noise model every estimator shares (nav.sensor_model)
+    model = sensor_model(drive)  # the noise model every estimator shares (sensors.model)
     ispec: ImuSpec = model.imu
     est_scale = cfg.accel_scale if cfg.accel_scale is not None else (
         not isinstance(imu.spec, ImuSpec) or ispec.accel_scale_sd > 0)

@@ -23,6 +23,7 @@ from ...geo.earth import radii_scalar
 from ...nav.gnss_gate import REFUSE, USE_INFLATE, height_gate
 from ...nav.rotations import quat_mul, quat_to_dcm, rpy_quat, skew3
 from ...nav.rotations import yaw_of as _yaw
+from ...nav.strapdown import nav_rates, strapdown_step
 from .model import (
     IATT,
     IBB,
@@ -50,7 +51,6 @@ from .model import (
     step_phi,
     vector_update,
 )
-from .strapdown import nav_rates, strapdown_step
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]

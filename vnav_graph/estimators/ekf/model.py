@@ -113,7 +113,7 @@ from numba import njit
 
 from ...geo.earth import OMEGA_IE, gravity_scalar, radii_scalar
 from ...nav.rotations import quat_exp, quat_mul, skew3
-from .strapdown import nav_rates
+from ...nav.strapdown import nav_rates
 
 NX = 21  # internal error-state dimension
 NPACK = NX * (NX + 1) // 2

@@ -16,7 +16,7 @@ from ...geo.earth import gravity
 from ...nav.gaps import GAP_ACCEL_SD, cv_bridge_noise
 from ...nav.gaps import imu_gaps as nav_imu_gaps
 from ...nav.levelling import coarse_level
-from ...nav.sensor_model import BaroPrior, baro_prior, sensor_model
+from ...sensors.model import BaroPrior, baro_prior, sensor_model
 from ...sensors.noise import gm_process_var, gm_transition
 from ...types import (
     Drive,
@@ -164,7 +164,7 @@ class Problem:
     dense: gf.DenseIncrements
     params: Any
     imu_spec: ImuSpec
-    baro_spec: BaroPrior | None  # the shared baro prior (nav.sensor_model)
+    baro_spec: BaroPrior | None  # the shared baro prior (sensors.model)
     # GNSS in the tangent frame
     g_t: FloatArray
     g_pos: FloatArray
@@ -197,7 +197,7 @@ def setup(drive: Drive, cfg: GraphConfig) -> Problem:
     origin = np.asarray(drive.origin_lla, float)
     h0 = float(origin[2])
     g0 = float(gravity(origin[0], origin[2]))
-    model = sensor_model(drive)  # the noise model every estimator shares (nav.sensor_model)
+    model = sensor_model(drive)  # the noise model every estimator shares (sensors.model)
     spec = model.imu
     bspec = model.baro
     kf_idx = gf.keyframe_indices(imu.t, cfg.keyframe_dt)
@@ -308,7 +308,7 @@ def _pregate_gnss(drive: Drive, t: FloatArray, h: FloatArray, sd_h: FloatArray,
 
 
 def _baro_priors(bs: BaroSpec | BaroPrior | None) -> dict[str, float]:
-    """Prior mean and sigma of s, τd and b_0 as a dict (``nav.sensor_model.baro_prior``: the
+    """Prior mean and sigma of s, τd and b_0 as a dict (``sensors.model.baro_prior``: the
     shared rule; a drive without a baro gets the real-log prior, which then goes unused)."""
     bp = bs if isinstance(bs, BaroPrior) else baro_prior(REAL_LOG_BARO if bs is None else bs)
     return {"s_sd": bp.scale_sd, "tau0": bp.latency_mean, "tau_sd": bp.latency_sd,

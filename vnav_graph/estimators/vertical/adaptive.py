@@ -54,7 +54,7 @@ import numpy as np
 from numba import njit
 
 from ...config import REAL_LOG_BARO
-from ...nav.sensor_model import sensor_model
+from ...sensors.model import sensor_model
 from ...types import (
     ERROR_STATE_DIM,
     BaroEstimate,
@@ -443,7 +443,7 @@ class AdaptiveLoop3:
             t_fix, z_fix = gn.t, gn.lla[:, 2] - inp.h0
             r_fix = model.gnss_pos_sd[:, 2] ** 2
         bdt = float(np.median(np.diff(drive.baro.t))) if len(drive.baro) > 1 else 0.04
-        # the shared sensor model (nav.sensor_model): IMU noise, baro noise/bias/scale priors
+        # the shared sensor model (sensors.model): IMU noise, baro noise/bias/scale priors
         # (this loop has no latency state, by the seed paper's design)
         h, v, s, err, t_cov, p_cov, x_cov, code, nu = run_adaptive_ekf(
             inp, cfg, t_fix, z_fix, r_fix, imu_spec=model.imu, baro_spec=model.baro,

@@ -12,7 +12,7 @@ from numba import njit
 
 from ...nav.rotations import quat_exp, quat_mul, quat_to_dcm
 from ...nav.rotations import rpy_quat as _rpy_quat
-from ..ekf.strapdown import strapdown_step
+from ...nav.strapdown import strapdown_step
 
 
 @njit(cache=True)

@@ -87,7 +87,7 @@ from scipy.linalg import solve_discrete_lyapunov
 from ...config import G0
 from ...geo.earth import gravity, radii
 from ...nav.gaps import gap_threshold
-from ...nav.sensor_model import sensor_model
+from ...sensors.model import sensor_model
 from ...types import Drive, Estimate, FloatArray, Trajectory
 from .inputs import AhrsConfig, vertical_inputs
 
@@ -316,7 +316,7 @@ class Observer1D:
         x0 = np.array([[z_init, 0.0, 0.0]])
         period = float(np.median(np.diff(t_fix))) if t_fix.size > 1 else 1.0
         sd_g = cfg.gnss_sd
-        if sd_g is None:  # the median of the shared model's GNSS σ_v (nav.sensor_model)
+        if sd_g is None:  # the median of the shared model's GNSS σ_v (sensors.model)
             sd_g = float(np.median(sensor_model(drive).gnss_pos_sd[:, 2]))
         ss = steady_state(cfg.gain, period, sd_g, cfg.accel_noise_density, cfg.accel_bias_rw)
         warm = (analytic_settling(cfg.gain, period) if cfg.warmup_s is None

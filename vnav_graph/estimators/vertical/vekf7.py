@@ -70,8 +70,8 @@ from numpy.typing import NDArray
 from ...geo.earth import gravity_scalar, radii, radii_scalar
 from ...nav.gaps import GAP_ACCEL_SD, cv_bridge_noise, gap_threshold
 from ...nav.gnss_gate import NO_LIMIT, REFUSE, height_gate, new_gate_state
-from ...nav.sensor_model import SensorModel, sensor_model
 from ...sensors.baro import baro_jacobian, measure_baro
+from ...sensors.model import SensorModel, sensor_model
 from ...sensors.noise import gm_process_var, gm_transition
 from ...types import (
     ERROR_STATE_DIM,
@@ -102,7 +102,7 @@ class VEKF7Config:
         NEES is ≈ 2.5× too large
     tilt_sd, input_corr_s : AHRS tilt σ with GNSS [rad] and correlation time [s] of the
         manoeuvre-dependent f_D error, see ``input_error_psd``
-    Every ``None`` below takes the drive's shared sensor model (``nav.sensor_model``, the
+    Every ``None`` below takes the drive's shared sensor model (``sensors.model``, the
     same values ekf and the graphs use); a number overrides it for this filter only.
     accel_bias_sd, accel_bias_tau : Gauss-Markov σ [m/s²] / τ [s] of B_z
     accel_bias_rw : random walk floor of B_z [m/s²/√s] for other-axis, attitude and Coriolis
@@ -287,7 +287,7 @@ class _Noise:
 
 
 def _noise(drive: Drive, vi: VerticalInputs, model: SensorModel, cfg: VEKF7Config) -> _Noise:
-    """The shared sensor model (``nav.sensor_model``) with ``cfg``'s overrides."""
+    """The shared sensor model (``sensors.model``) with ``cfg``'s overrides."""
     ims = model.imu
     bp = model.baro
     assert bp is not None
@@ -505,7 +505,7 @@ class VEKF7:
         if drive.baro is None:
             raise ValueError("vekf7: the drive has no baro stream")
         vi: VerticalInputs = vertical_inputs(drive, cfg.ahrs)
-        model = sensor_model(drive)  # shared with ekf and the graphs (nav.sensor_model)
+        model = sensor_model(drive)  # shared with ekf and the graphs (sensors.model)
         nz = _noise(drive, vi, model, cfg)
         nom, p = _initial_state(drive, model.gnss_pos_sd, nz)
         res = _filter_pass(drive, vi, model, nz, nom, p, cfg)

@@ -64,7 +64,7 @@ from numba import njit
 from ...geo.earth import gravity_scalar
 from ...nav.gaps import GAP_ACCEL_SD, cv_bridge_noise, gap_threshold
 from ...nav.gnss_gate import NO_LIMIT, REFUSE, height_gate
-from ...nav.sensor_model import sensor_model
+from ...sensors.model import sensor_model
 from ...sensors.noise import gm_process_var, gm_transition
 from ...types import (
     ERROR_STATE_DIM,
@@ -98,7 +98,7 @@ class VKF4Config:
     use_gnss : use GNSS heights when available (False: pure seed-004 baro-inertial loop)
     gnss_gate_sigma : reject GNSS innovations beyond this many σ
     max_gnss_sd_v, gnss_probation_s : as in ``VEKF7Config``
-    The IMU and baro noise come from the shared sensor model (``nav.sensor_model``); on a log
+    The IMU and baro noise come from the shared sensor model (``sensors.model``); on a log
     without an IMU spec its inferred accelerometer bias walk q_rw is added to A as its white
     equivalent over ``bias_corr_s``, q_rw²·bias_corr_s²/3; IMU gaps follow ``nav.gaps``.
     cov_rate_hz : rate at which covariances are stored
@@ -232,7 +232,7 @@ class VKF4:
         if drive.baro is None:
             raise ValueError("vkf4: the drive has no baro stream")
         vi = vertical_inputs(drive, cfg.ahrs)
-        model = sensor_model(drive)  # shared noise model (nav.sensor_model)
+        model = sensor_model(drive)  # shared noise model (sensors.model)
         ims, bp = model.imu, model.baro
         assert bp is not None
         t = drive.imu.t

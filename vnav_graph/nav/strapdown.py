@@ -24,10 +24,10 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from ...geo.earth import OMEGA_IE, gravity_scalar, radii_scalar
-from ...nav.rotations import cross3 as _cross
-from ...nav.rotations import quat_exp, quat_mul, quat_to_dcm
-from ...types import FloatArray, ImuStream, Trajectory
+from ..geo.earth import OMEGA_IE, gravity_scalar, radii_scalar
+from ..types import FloatArray, ImuStream, Trajectory
+from .rotations import cross3 as _cross
+from .rotations import quat_exp, quat_mul, quat_to_dcm
 
 
 @njit(cache=True)

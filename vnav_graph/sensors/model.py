@@ -28,8 +28,8 @@ from typing import Any
 import numpy as np
 
 from ..config import DEG, IMU_PRESETS, REAL_LOG_BARO, BaroSpec, ImuSpec
+from ..nav.gaps import imu_gaps
 from ..types import FloatArray
-from .gaps import imu_gaps
 
 # Real-log IMU prior (a phone / autopilot MEMS IMU of unknown make): the consumer preset's
 # densities, generous turn-on biases (a phone's uncalibrated gyro bias reaches 0.5 °/s, its
