@@ -410,6 +410,19 @@ class GraphISAM2:
                 nf = gtsam.NonlinearFactorGraph()
                 nf.add(lcf)
                 isam.update(nf, gtsam.Values())
+        return self._finish(drive, P, cfg, isam, online, ext, robust, fallback, t_start,
+                            (rot_i, pos_i, vel_i), pims, seg, upd_ms, brk)
+
+    def _finish(self, drive: Drive, P: Any, cfg: GraphConfig, isam: Any, online: Any,
+                ext: Any, robust: bool, fallback: str | None, t_start: float,
+                init: tuple[Any, Any, Any], pims: list[Any], seg: Any, upd_ms: Any,
+                brk: Any) -> Estimate:
+        """After the online pass: read the online estimate, run the final smoothing pass
+        (batch Gauss-Newton with one global (s, τd)) and assemble the Estimate."""
+        pri = P.pri
+        has_baro = drive.baro is not None
+        rot_i, pos_i, vel_i = init
+        calib0 = np.zeros(P.n_kf, dtype=int)
         t_online = time.perf_counter()
         est = isam.calculateEstimate()
         online_traj = self._online_trajectory(P, online)
