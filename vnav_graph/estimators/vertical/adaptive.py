@@ -65,7 +65,7 @@ from ...types import (
     Trajectory,
 )
 from .inputs import AhrsConfig
-from .loops import LoopInputs, _estimate, bridge_gaps, loop_inputs, zoh_nb
+from .loops import LoopInputs, bridge_gaps, loop_estimate, loop_inputs, zoh_nb
 from .observer1d import gate_threshold
 
 _FUNCS = {"none": 0, "linear": 1, "exp": 2, "tanh": 3, "sigmoid": 4}
@@ -427,7 +427,7 @@ class AdaptiveLoop3:
         x, err, s = run_adaptive(inp, cfg)
         # baro-inertial: GNSS only reaches the attitude reference (vertical.inputs), never the
         # height channel, so no GNSS is gated and no gnss_rejected is claimed
-        return _estimate(self.name, inp.t, x[:, 0] + inp.h0, x[:, 1],
+        return loop_estimate(self.name, inp.t, x[:, 0] + inp.h0, x[:, 1],
                          time.perf_counter() - t0, cfg,
                          {"uses": "imu+baro", "speedup_mean": float(np.mean(s)),
                           "speedup_max": float(np.max(s)),

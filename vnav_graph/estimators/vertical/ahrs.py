@@ -2,8 +2,9 @@
 
 The method, its parameters and its tested accuracy are described in ``vertical.inputs`` (which
 assembles the kernel inputs and owns ``AhrsConfig``); this module holds only the compiled
-loops: ``_ahrs`` (levelling, gyro integration with the shared strapdown step, velocity-matching
-tilt feedback, gap handling) and ``_poly_velocity`` (GNSS velocity from positions)."""
+loops: ``ahrs_kernel`` (levelling, gyro integration with the shared strapdown step,
+velocity-matching tilt feedback, gap handling) and ``poly_velocity`` (GNSS velocity from
+positions)."""
 
 from __future__ import annotations
 
@@ -26,7 +27,7 @@ def _clamp(x, m):
 
 
 @njit(cache=True)
-def _ahrs(t, gyro, accel, q0, lla_i, vel_i, sdv_i, t_g, v_g, g_g, cor_g, ok_g, r_g, vert_g,
+def ahrs_kernel(t, gyro, accel, q0, lla_i, vel_i, sdv_i, t_g, v_g, g_g, cor_g, ok_g, r_g, vert_g,
           use_g, kp, ki, k_yaw, ki_yaw, v_min, max_corr, max_fb, a_static, t_filt, gap,
           gate2, sd0, sd_bg, sd_yaw, r_nom, reinit_s, fb_after, lvl_win, lvl_tau, st_rate,
           st_acc, g_nom, imu_gap, relevel):
@@ -247,7 +248,7 @@ def _ahrs(t, gyro, accel, q0, lla_i, vel_i, sdv_i, t_g, v_g, g_g, cor_g, ok_g, r
 
 
 @njit(cache=True)
-def _poly_velocity(t, p, sd, half, seg):
+def poly_velocity(t, p, sd, half, seg):
     """Slope at each fix of a 1/σ²-weighted quadratic fit of p (M, 3) over the fixes of the
     same segment within ±half seconds; σ of the slope from (XᵀWX)⁻¹. NaN where < 3 fixes."""
     m = t.size

@@ -123,7 +123,7 @@ import numpy as np
 from ...geo.earth import OMEGA_IE, gravity, radii
 from ...nav.gaps import gap_threshold
 from ...types import Drive, FloatArray
-from .ahrs import _ahrs, _poly_velocity
+from .ahrs import ahrs_kernel, poly_velocity
 
 
 @dataclass(frozen=True)
@@ -334,7 +334,7 @@ def velocity_from_positions(t: FloatArray, lla: FloatArray, pos_sd: FloatArray,
     """
     seg = np.concatenate([[0], np.cumsum(np.diff(t) > gap_s)]).astype(np.int64)
     sd = np.where(np.isfinite(pos_sd) & (pos_sd > 0), pos_sd, 1e6)
-    return _poly_velocity(np.ascontiguousarray(t, dtype=float), _ned(lla),
+    return poly_velocity(np.ascontiguousarray(t, dtype=float), _ned(lla),
                           np.ascontiguousarray(sd, dtype=float), 0.5 * window_s, seg)
 
 
@@ -496,7 +496,7 @@ def vertical_inputs(drive: Drive, config: AhrsConfig | None = None) -> VerticalI
                                   cfg.level_s, g_nom, cfg.static_accel, cfg.static_rate)
     # a writable copy of the specific force: its rows reach the shared strapdown step, which
     # then keeps the EKF's compiled specialisation (a read-only row would compile a second)
-    q, f_n, bg, vp, cnt = _ahrs(
+    q, f_n, bg, vp, cnt = ahrs_kernel(
         t, imu.gyro_b, np.array(imu.accel_b), q0, np.ascontiguousarray(lla_i),
         np.ascontiguousarray(vel_i), np.ascontiguousarray(sdv_i),
         np.ascontiguousarray(t_g, dtype=float), np.ascontiguousarray(v_g, dtype=float),

@@ -206,7 +206,7 @@ def loop_inputs(drive: Drive, ahrs: AhrsConfig | None = None) -> LoopInputs:
     return LoopInputs(vi.t, a_up, z, h0, schuler_vertical(drive.origin_lla[0], h0))
 
 
-def _estimate(name: str, t: FloatArray, h: FloatArray, v_up: FloatArray, runtime: float,
+def loop_estimate(name: str, t: FloatArray, h: FloatArray, v_up: FloatArray, runtime: float,
               config, info) -> Estimate:
     n = t.size
     nan = np.full(n, np.nan)
@@ -275,7 +275,7 @@ class _FixedGainLoop:
         x, err = run_loop(inp, g)
         info = {"gains": g, "uses": "imu+baro", **self._extra_info(x),
                 "loop_error_rms_m": float(np.sqrt(np.mean(err**2)))}
-        return _estimate(self.name, inp.t, x[:, 0] + inp.h0, x[:, 1],
+        return loop_estimate(self.name, inp.t, x[:, 0] + inp.h0, x[:, 1],
                          time.perf_counter() - t0, self.config, info)
 
 
