@@ -10,7 +10,8 @@ with an unknown acceleration of PSD q = ``GAP_ACCEL_SD``² [(m/s²)²/Hz] per ax
 (Groves, *Principles of GNSS, Inertial and Multisensor Integrated Navigation Systems*, 2nd
 ed., §3.4.1, the constant-velocity model) q·T³/3 to the position variance, q·T²/2 to the
 position-velocity covariance and q·T to the velocity variance over a gap of T seconds
-(:func:`cv_bridge_noise`); the graph smoothers put the same q on their velocity link.
+(:func:`cv_bridge_noise`). The graph smoothers use the same gap rule; their gap factor bounds
+the velocity change by a sustained acceleration instead (``graph.problem.GAP_ACCEL_LEVEL``).
 """
 
 from __future__ import annotations
