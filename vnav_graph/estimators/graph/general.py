@@ -213,13 +213,7 @@ class GeneralCovariance:
         return 0.5 * (x + x.T)
 
     def solve(self, u: dict[int, FloatArray], out: list[int]) -> dict[int, FloatArray]:
-        lay = self.lay
-        vec = np.zeros(lay.n_cols)
-        for key, val in u.items():
-            c, n = lay.key_cols[key]
-            vec[c:c + n] = val
-        x = self.lu.solve(vec)
-        return {key: x[lay.key_cols[key][0]:sum(lay.key_cols[key])] for key in out}
+        return self.lay.solve_by_key(self.lu.solve, u, out)
 
 
 def hessian_pieces(keys: list[int], lam: FloatArray, eta: FloatArray,

@@ -100,6 +100,17 @@ class Layout:
             ins(key, delta[c:c + n])
         return vv
 
+    def solve_by_key(self, solve: Any, u: dict[int, FloatArray],
+                     out: list[int]) -> dict[int, FloatArray]:
+        """``solve`` (a column-vector solve, H⁻¹·) of u given per key (absent keys: 0),
+        returned for the keys ``out`` (shared by the banded and the general factorisation)."""
+        vec = np.zeros(self.n_cols)
+        for key, val in u.items():
+            c, n = self.key_cols[key]
+            vec[c:c + n] = val
+        x = solve(vec)
+        return {key: x[self.key_cols[key][0]:sum(self.key_cols[key])] for key in out}
+
     def from_vector_values(self, vv: Any) -> FloatArray:
         """Our column vector of a ``gtsam.VectorValues``."""
         out = np.zeros(self.n_cols)
@@ -299,13 +310,7 @@ class BandedCovariance:
 
     def solve(self, u: dict[int, FloatArray], out: list[int]) -> dict[int, FloatArray]:
         """H⁻¹u for u given per key (absent keys: 0), returned for the keys ``out``."""
-        lay = self.lay
-        vec = np.zeros(lay.n_cols)
-        for key, val in u.items():
-            c, n = lay.key_cols[key]
-            vec[c:c + n] = val
-        x = self.fac.solve(vec)
-        return {key: x[lay.key_cols[key][0]:sum(lay.key_cols[key])] for key in out}
+        return self.lay.solve_by_key(self.fac.solve, u, out)
 
 
 def factorize(ab: FloatArray, bm: FloatArray, dm: FloatArray) -> gla.ArrowFactor:
