@@ -22,6 +22,7 @@ class Errors:
     alt: FloatArray  # estimate − truth [m]
     vel_down: FloatArray | None  # [m/s]
     horiz: FloatArray | None = None  # |NE position error| [m], estimates providing pos_h
+    heading: FloatArray | None = None  # yaw error wrapped to [-180, 180) [deg], "att"
 
 
 def errors_vs_truth(est: Estimate, drive: Drive) -> Errors:
@@ -42,7 +43,24 @@ def errors_vs_truth(est: Estimate, drive: Drive) -> Errors:
         d = (lla_to_ned(tr.lla[m], drive.origin_lla)[:, :2]
              - truth.pos_n(drive.origin_lla)[:, :2])
         horiz = np.sqrt(np.sum(d**2, axis=1))
-    return Errors(t, alt, vd, horiz)
+    heading = None
+    if "att" in est.provides and tr.q_nb is not None and truth.q_nb is not None:
+        dyaw = tr.to_rph()[m, 2] - truth.to_rph()[:, 2]
+        heading = np.degrees((dyaw + np.pi) % (2.0 * np.pi) - np.pi)
+    return Errors(t, alt, vd, horiz, heading)
+
+
+def outage_max(t: FloatArray, err: FloatArray | None,
+               windows: Sequence[Sequence[float]]) -> float | None:
+    """max |err| over the samples inside the GNSS outage ``windows`` [(t0, t1), ...] [s];
+    None without windows, samples or errors."""
+    if err is None or not windows:
+        return None
+    m = np.zeros(t.size, dtype=bool)
+    for a, b in windows:
+        m |= (t >= a) & (t < b)
+    m &= np.isfinite(err)
+    return float(np.max(np.abs(err[m]))) if m.any() else None
 
 
 def nees(est: Estimate, drive: Drive) -> tuple[FloatArray, int] | None:
@@ -107,7 +125,10 @@ def evaluate(est: Estimate, drive: Drive,
     """Metric block for summary.json / bench.json (docs/design.md schema).
 
     Additions to the docs/design.md block: ``horiz_rmse_m`` (RMS of the north/east position
-    error, estimates providing ``pos_h``), ``warnings`` and ``extra_variables`` (the
+    error, estimates providing ``pos_h``), ``heading_rmse_deg`` (RMS of the yaw error wrapped
+    to ±180°, estimates providing ``att``), ``outage_alt_max_m`` / ``outage_horiz_max_m``
+    (max |error| inside the drive's GNSS outages, ``meta["gnss_outages"]``; null without
+    outages), ``warnings`` and ``extra_variables`` (the
     variables a graph extension added, ``{"m0": {"est": [...], "sd": [...]}}`` from
     ``info["extra_variables"]``; null for an estimator without them). With ``blocks`` (time blocks
     ``[(t0, t1), ...]`` [s]) the block also has ``per_block``, the RMS values per block, which
@@ -116,8 +137,9 @@ def evaluate(est: Estimate, drive: Drive,
     """
     out: dict[str, Any] = {
         "status": "ok", "error": None, "alt_rmse_m": None, "alt_max_abs_m": None,
-        "horiz_rmse_m": None, "vel_down_rmse_mps": None, "nees_mean": None, "nees_dof": None,
-        "runtime_s": float(est.runtime_s),
+        "horiz_rmse_m": None, "heading_rmse_deg": None, "outage_alt_max_m": None,
+        "outage_horiz_max_m": None, "vel_down_rmse_mps": None, "nees_mean": None,
+        "nees_dof": None, "runtime_s": float(est.runtime_s),
         "realtime_factor": (drive.duration_s / est.runtime_s) if est.runtime_s > 0 else None,
         "gnss_rejected": est.info.get("gnss_rejected"),
         # things the user should know about this result (e.g. a solver that stopped at its
@@ -133,6 +155,11 @@ def evaluate(est: Estimate, drive: Drive,
             out["vel_down_rmse_mps"] = float(np.sqrt(np.mean(err.vel_down**2)))
         if err.horiz is not None:
             out["horiz_rmse_m"] = float(np.sqrt(np.mean(err.horiz**2)))
+        if err.heading is not None:
+            out["heading_rmse_deg"] = float(np.sqrt(np.mean(err.heading**2)))
+        outages = drive.meta.get("gnss_outages") or []
+        out["outage_alt_max_m"] = outage_max(err.t, err.alt, outages)
+        out["outage_horiz_max_m"] = outage_max(err.t, err.horiz, outages)
         if blocks is not None:
             from .compare import block_rmse
 

@@ -57,7 +57,8 @@ BENCH_SCHEMA = "vnav_graph.bench/1"
 AGG_METRICS = (
     "alt_rmse_m", "nees_mean", "runtime_s", "vel_down_rmse_mps", "alt_max_abs_m",
     "nees_per_dof", "realtime_factor", "baro_scale_abs_err", "baro_latency_abs_err_s",
-    "baro_bias_abs_err_m",
+    "baro_bias_abs_err_m", "horiz_rmse_m", "heading_rmse_deg", "outage_alt_max_m",
+    "outage_horiz_max_m", "gnss_rejected",
 )
 
 # `bench --quick`: CI-sized. Short drives, two scenarios, three seeds (the smallest number
@@ -476,13 +477,16 @@ def format_bench_md(doc: dict[str, Any]) -> str:
     ]
     for sc, by_est in doc["aggregate"].items():
         lines += [f"## {sc}", "",
-                  "| estimator | ok/runs | alt RMSE [m] | alt max [m] | vD RMSE [m/s] | "
+                  "| estimator | ok/runs | alt RMSE [m] | alt max [m] | horiz RMSE [m] | "
+                  "heading RMSE [deg] | vD RMSE [m/s] | "
                   "NEES/dof | scale err [%] | latency err [ms] | bias err [m] | runtime [s] |",
-                  "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+                  "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
         for est, c in by_est.items():
             lines.append(
                 f"| {est} | {c['n_ok']}/{c['n_runs']} | {_fmt_ci(c['alt_rmse_m'], '.2f')} | "
                 f"{_fmt_ci(c['alt_max_abs_m'], '.2f')} | "
+                f"{_fmt_ci(c['horiz_rmse_m'], '.2f')} | "
+                f"{_fmt_ci(c['heading_rmse_deg'], '.2f')} | "
                 f"{_fmt_ci(c['vel_down_rmse_mps'], '.3f')} | "
                 f"{_fmt_ci(c['nees_per_dof'], '.2f')} | "
                 f"{_fmt_ci(c['baro_scale_abs_err'], '.3f', 100)} | "
