@@ -42,7 +42,8 @@ def test_outage_max_reads_only_the_outage_windows(drive):
     m = evaluate(_planted(drive, 0.0, 4.0), drive)
     assert m["outage_alt_max_m"] == pytest.approx(4.0, abs=1e-3)
     assert m["alt_max_abs_m"] == pytest.approx(4.0, abs=1e-3)
-    assert m["outage_horiz_max_m"] == pytest.approx(0.0, abs=1e-6)
+    # a 4 m height change moves the tangent-plane NE projection by < 1 mm
+    assert m["outage_horiz_max_m"] == pytest.approx(0.0, abs=1e-3)
 
 
 def test_outage_max_without_windows_or_samples_is_null():
