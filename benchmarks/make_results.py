@@ -11,8 +11,10 @@ Only the page, from output that already exists in a directory::
     python benchmarks/make_results.py bench-results [-o docs/results.md]
 
 Inputs, from the results directory: ``bench.json`` (``vnav-graph bench``, required),
-``reproductions.json`` (``benchmarks/reproduce_seeds.py``) and ``graph_perf.json``
-(``benchmarks/bench_graph.py``), each optional.
+``reproductions.json`` (``benchmarks/reproduce_seeds.py``), ``graph_perf.json``
+(``benchmarks/bench_graph.py``) and ``hard/`` (``benchmarks/hard_scenarios.py``: the
+EKF-vs-graph study on the hard scenarios; its plots are copied to ``docs/img/``), each
+optional.
 
 What the page says is computed, not written: for each pair of approaches that isolates one
 effect (e.g. ``ekf`` → ``ekf-rts``: smoothing; ``ekf-rts`` → ``graph-batch``: relinearisation
@@ -27,6 +29,7 @@ from __future__ import annotations
 import argparse
 import datetime as _dt
 import json
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -326,6 +329,15 @@ def render(results_dir: Path) -> str:
     else:
         out += ["Not generated in this run (`benchmarks/reproduce_seeds.py` output "
                 "`reproductions.json` missing).", ""]
+    hard = results_dir / "hard"
+    if (hard / "bench.json").is_file():
+        import importlib.util
+
+        spec = importlib.util.spec_from_file_location(
+            "hard_scenarios", REPO / "benchmarks" / "hard_scenarios.py")
+        mod = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(mod)
+        out += mod.render_section(hard)
     perf = results_dir / "graph_perf.json"
     out += ["## Factor-graph performance", ""]
     if perf.is_file():
@@ -353,6 +365,10 @@ def run_all(out: Path, quick: bool, seeds: int | None) -> None:
             if r.returncode != 0:
                 print(f"make_results: {script} exited {r.returncode}; its section is omitted",
                       file=sys.stderr)
+    hard = [py, str(REPO / "benchmarks" / "hard_scenarios.py"), "--out", str(out / "hard")]
+    hard += ["--quick"] if quick else (["--seeds", str(max(seeds or 0, 20))])
+    if subprocess.run(hard).returncode != 0:
+        print("make_results: hard_scenarios.py failed; its section is omitted", file=sys.stderr)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -380,6 +396,10 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     Path(a.output).parent.mkdir(parents=True, exist_ok=True)
     Path(a.output).write_text(page + "\n", encoding="utf-8")
+    img = Path(a.output).parent / "img"
+    for png in sorted((results / "hard").glob("hard-*.png")):
+        img.mkdir(exist_ok=True)
+        shutil.copyfile(png, img / png.name)
     print(f"wrote {a.output}")
     return 0
 

@@ -1,0 +1,58 @@
+"""The paired statistics and the goal check of benchmarks/hard_scenarios.py."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.stats import t as student_t
+
+from vnav_graph.evaluation.montecarlo import aggregate
+
+_P = Path(__file__).resolve().parents[2] / "benchmarks" / "hard_scenarios.py"
+_spec = importlib.util.spec_from_file_location("hard_scenarios", _P)
+hs = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(hs)
+
+
+def test_paired_stats_closed_form():
+    xa, xb = np.array([2.0, 4.0, 6.0]), np.array([1.0, 2.5, 2.5])
+    s = hs.paired_stats(xa, xb)
+    d = xa - xb
+    half = student_t.ppf(0.975, 2) * np.std(d, ddof=1) / np.sqrt(3)
+    assert s["diff"] == pytest.approx(d.mean())
+    assert s["diff_ci95"] == pytest.approx([d.mean() - half, d.mean() + half])
+    assert s["gain"] == pytest.approx(d.mean() / xa.mean())
+    # exactly proportional pairs: the gain is known without spread
+    s = hs.paired_stats(xa, 0.5 * xa)
+    assert s["gain"] == pytest.approx(0.5)
+    assert s["gain_ci95"] == pytest.approx([0.5, 0.5])
+
+
+def _row(sc, est, seed, horiz):
+    return {"scenario": sc, "seed": seed, "estimator": est, "status": "ok",
+            "alt_rmse_m": 1.0, "horiz_rmse_m": horiz, "heading_rmse_deg": None,
+            "nees_mean": 3.0, "nees_dof": 3, "runtime_s": 1.0, "baro": {}}
+
+
+def test_goal_needs_twenty_percent_and_a_ci_above_zero(tmp_path):
+    rng = np.random.default_rng(0)
+    runs = []
+    for seed in range(10):
+        base = 10.0 + rng.normal()
+        runs += [_row("urban", "ekf", seed, base + 5), _row("urban", "ekf-rts", seed, base),
+                 _row("urban", "graph-batch", seed, 0.7 * base + 0.1 * rng.normal()),
+                 _row("urban", "graph-isam2", seed, 0.9 * base + 0.1 * rng.normal())]
+    doc = {"config": {"seeds": list(range(10)), "duration_s": None},
+           "runs": runs, "aggregate": aggregate(runs)}
+    st = hs.study(doc)["urban"]
+    assert st["ekf-rts|graph-batch|horiz_rmse_m"]["goal_met"]  # 30 % better
+    g = st["ekf-rts|graph-isam2|horiz_rmse_m"]
+    assert g["significant"] and not g["goal_met"]  # 10 % better: significant, below goal
+    assert not st["ekf-rts|graph-batch|alt_rmse_m"]["goal_met"]  # identical values
+    (tmp_path / "bench.json").write_text(json.dumps(doc))
+    page = "\n".join(hs.render_section(tmp_path))
+    assert "met on 1 (urban)" in page
