@@ -42,6 +42,14 @@ def _positive(obj: Any, *names: str) -> None:
             raise ValueError(f"{type(obj).__name__}.{n}: must be finite and >= 0, got {v!r}")
 
 
+def _range(obj: Any, *names: str) -> None:
+    for n in names:
+        w = getattr(obj, n)
+        if len(w) != 2 or not (np.isfinite(w[0]) and np.isfinite(w[1]) and 0 < w[0] <= w[1]):
+            raise ValueError(f"{type(obj).__name__}.{n}: must be (lo, hi) with 0 < lo <= hi, "
+                             f"got {w!r}")
+
+
 @dataclass(frozen=True)
 class ImuSpec:
     """IMU error model, identical on the three axes.
@@ -126,6 +134,35 @@ class GnssSpec:
     ``latency_s`` earlier than its stamp; 0 = perfectly stamped); lever_arm_b [m];
     outages: ((t0, t1), ...) windows without fixes [s]; outlier_prob per fix and
     outlier_sd [m] of the added error when a fix is an outlier.
+
+    Urban error model (``vnav_graph.sensors.gnss``; every part is off at its default, and its
+    random numbers come from a separate generator, so a spec without it simulates exactly as
+    before):
+
+    gm_sd_h / gm_sd_v : float
+        Steady-state sigma of a first-order Gauss-Markov position error per axis (north and
+        east / down) [m]; 0 = off. It models the slowly varying residual of atmosphere, orbit
+        and diffuse multipath. With it on, the reported ``GnssStream.pos_sd`` is
+        sqrt(pos_sd² + gm_sd²): the receiver's accuracy estimate covers its ordinary errors.
+    gm_tau_s : float
+        Correlation time of that error [s] (> 0).
+    burst_fraction : float
+        Fraction of the drive (hence of the fixes) inside multipath bursts, in [0, 0.9];
+        0 = off.
+    burst_len_s : (float, float)
+        Range of burst durations [s], drawn uniformly.
+    burst_err_m : (float, float)
+        Range of the magnitude of a burst's position offset [m], drawn uniformly per burst.
+        Inside a burst a fix gets that offset along a random direction (azimuth uniform,
+        elevation uniform in ±30°: mostly horizontal) plus a correlated jitter of 20 % of it.
+        The reported ``pos_sd`` does not change in a burst: it understates the error there.
+    burst_vel_sd : float
+        Sigma of the white velocity error added per axis to fixes in a burst [m/s] (Doppler is
+        hit less than code ranges by multipath; the reported ``vel_sd`` does not change).
+    random_outages_per_hour : float
+        Mean rate of random outages (Poisson count over the drive) [1/h]; 0 = off.
+    random_outage_len_s : (float, float)
+        Range of random-outage durations [s], drawn uniformly.
     """
 
     rate_hz: float = 10.0
@@ -137,10 +174,26 @@ class GnssSpec:
     outages: tuple[tuple[float, float], ...] = ()
     outlier_prob: float = 0.0
     outlier_sd: float = 30.0
+    gm_sd_h: float = 0.0
+    gm_sd_v: float = 0.0
+    gm_tau_s: float = 60.0
+    burst_fraction: float = 0.0
+    burst_len_s: tuple[float, float] = (5.0, 30.0)
+    burst_err_m: tuple[float, float] = (5.0, 50.0)
+    burst_vel_sd: float = 0.5
+    random_outages_per_hour: float = 0.0
+    random_outage_len_s: tuple[float, float] = (5.0, 20.0)
 
     def __post_init__(self) -> None:
         _positive(self, "pos_sd_h", "pos_sd_v", "vel_sd", "latency_s", "outlier_prob",
-                  "outlier_sd")
+                  "outlier_sd", "gm_sd_h", "gm_sd_v", "burst_vel_sd",
+                  "random_outages_per_hour")
+        if not (np.isfinite(self.gm_tau_s) and self.gm_tau_s > 0):
+            raise ValueError(f"GnssSpec.gm_tau_s: must be finite and > 0, got {self.gm_tau_s!r}")
+        if not 0.0 <= self.burst_fraction <= 0.9:
+            raise ValueError(f"GnssSpec.burst_fraction: must be in [0, 0.9], "
+                             f"got {self.burst_fraction!r}")
+        _range(self, "burst_len_s", "burst_err_m", "random_outage_len_s")
         if not self.rate_hz > 0:
             raise ValueError("GnssSpec.rate_hz: must be > 0")
         if not (self.pos_sd_h > 0 and self.pos_sd_v > 0):
@@ -164,6 +217,11 @@ class BaroSpec:
     as everywhere in the package (see ``vnav_graph.sensors.baro``).
     ``physical`` = True generates pressure through the ISA with a temperature offset (that
     makes s) and a drifting sea-level pressure (that makes b) instead of adding s and b.
+    isa_offset_k [K]: the day's temperature offset from the ISA (hot day > 0), ``physical``
+    mode only. The atmosphere is then ISA + dT with T0/(T0 + dT) = (1 + s)·T0/(T0 +
+    isa_offset_k), so the altimeter's effective scale is (1 + s)·T0/(T0 + isa_offset_k) − 1
+    (≈ s − 0.35 %/K · isa_offset_k); ``s`` is the sensor's part and ``BaroTruth.scale`` the
+    effective one.
     """
 
     rate_hz: float = 25.0
@@ -176,9 +234,15 @@ class BaroSpec:
     bias_init: float | None = None
     noise_sd: float = 0.3
     physical: bool = False
+    isa_offset_k: float = 0.0
 
     def __post_init__(self) -> None:
         _positive(self, "scale_sd", "bias_sd", "noise_sd")
+        if not (np.isfinite(self.isa_offset_k) and abs(self.isa_offset_k) <= 50.0):
+            raise ValueError(f"BaroSpec.isa_offset_k: must be within ±50 K, "
+                             f"got {self.isa_offset_k!r}")
+        if self.isa_offset_k != 0.0 and not self.physical:
+            raise ValueError("BaroSpec.isa_offset_k: needs physical = True (it acts on pressure)")
         if not self.rate_hz > 0 or not self.bias_tau > 0:
             raise ValueError("BaroSpec.rate_hz / bias_tau: must be > 0")
         if self.latency_s > 2.0:

@@ -2,8 +2,9 @@
 
 Scenario files live in ``vnav_graph/scenarios/*.toml`` (``benchmarks/scenarios`` links there).
 A scenario picks a trajectory kind, a duration, sensor rates and the error models; every
-random draw comes from ``np.random.default_rng(seed)`` so a (scenario, seed) pair always gives
-the same drive.
+random draw comes from ``np.random.default_rng(seed)`` (the trajectory from
+``default_rng([seed, 1])``, the urban GNSS errors from ``default_rng([seed, 2])``) so a
+(scenario, seed) pair always gives the same drive.
 """
 
 from __future__ import annotations
@@ -48,8 +49,9 @@ def scenario_from_dict(d: dict[str, Any]) -> ScenarioConfig:
     gnss_d = dict(d.pop("gnss", {}))
     if "outages" in gnss_d:
         gnss_d["outages"] = tuple(tuple(float(x) for x in w) for w in gnss_d["outages"])
-    if "lever_arm_b" in gnss_d:
-        gnss_d["lever_arm_b"] = tuple(float(x) for x in gnss_d["lever_arm_b"])
+    for key in ("lever_arm_b", "burst_len_s", "burst_err_m", "random_outage_len_s"):
+        if key in gnss_d:
+            gnss_d[key] = tuple(float(x) for x in gnss_d[key])
     gnss: GnssSpec = replace_fields(GnssSpec(), **gnss_d)
     baro_d = dict(d.pop("baro", {}))
     if "latency_range_s" in baro_d:
@@ -113,7 +115,10 @@ def simulate(scenario: ScenarioConfig | str, seed: int = 0, **overrides: Any) ->
     def omega_nb(tq: np.ndarray) -> np.ndarray:
         return np.column_stack([np.interp(tq, t, kin.omega_nb_b[:, j]) for j in range(3)])
 
-    gnss, outliers = simulate_gnss(kin.truth, omega_nb, cfg.gnss, rng)
+    # the urban GNSS errors draw from their own generator: switching them on leaves every
+    # other draw of the drive unchanged
+    gnss, gnss_log = simulate_gnss(kin.truth, omega_nb, cfg.gnss, rng,
+                                   urban_rng=np.random.default_rng([seed, 2]))
     t_baro = np.arange(0.0, cfg.duration_s + 1e-9, 1.0 / cfg.baro.rate_hz)
     baro, baro_truth, bias_b = simulate_baro(
         t_baro, t, kin.truth.alt, float(origin[2]), cfg.baro, rng
@@ -129,8 +134,12 @@ def simulate(scenario: ScenarioConfig | str, seed: int = 0, **overrides: Any) ->
         "source": "simulated",
         "kind": cfg.kind,
         "imu_grade": cfg.imu.name,
-        "gnss_outages": [list(w) for w in cfg.gnss.outages],
-        "gnss_outliers": int(outliers.sum()),
+        # every window without fixes: the configured ones, then the random ones
+        "gnss_outages": [list(w) for w in cfg.gnss.outages + gnss_log.random_outages],
+        "gnss_random_outages": [list(w) for w in gnss_log.random_outages],
+        "gnss_burst_windows": [list(w) for w in gnss_log.burst_windows],
+        "gnss_burst_fixes": int(gnss_log.in_burst.sum()),
+        "gnss_outliers": int(gnss_log.outlier.sum()),
         "accel_scale_true": imu_err.accel_scale.tolist(),
     }
     return Drive(imu, gnss, baro, origin, truth, baro_truth, MappingProxyType(meta))

@@ -166,12 +166,24 @@ def _rph_to_mat(roll: FloatArray, pitch: FloatArray, yaw: FloatArray) -> FloatAr
 def hill_drive_profiles(
     duration_s: float, rng: np.random.Generator, *, max_grade: float = 0.10,
     static_s: float = 20.0, radius_m: float = 3000.0, relief_m: float = 250.0,
+    accel_mps2: float = 1.5, speed_range_mps: tuple[float, float] = (8.0, 25.0),
 ) -> tuple[SmoothProfile, SmoothProfile, SmoothProfile]:
-    """Car drive: stops, accelerations to 8-25 m/s, turns of 30-120°, grades up to ±max_grade.
+    """Car drive: stops, accelerations to cruise speeds drawn in ``speed_range_mps`` [m/s],
+    turns of 30-120°, grades up to ±max_grade.
 
     Segments are planned on a coarse dead-reckoned position so the drive stays within
-    ``radius_m`` of the start and within ``relief_m`` of the start height.
+    ``radius_m`` of the start and within ``relief_m`` of the start height. The car stands
+    still for ``static_s`` [s] (0: it starts from rest and accelerates at once, a cold start
+    without a standstill to level on); a speed change takes |Δv|/``accel_mps2`` [s] (mean
+    acceleration; the C² ramp peaks at 1.875 times that), at least 3 s.
     """
+    if not static_s >= 0 or not accel_mps2 > 0:
+        raise ValueError(f"hill-drive: static_s must be >= 0 and accel_mps2 > 0, "
+                         f"got {static_s!r}, {accel_mps2!r}")
+    v_lo, v_hi = (float(x) for x in speed_range_mps)
+    if not 0 < v_lo <= v_hi:
+        raise ValueError(f"hill-drive: speed_range_mps must be (lo, hi) with 0 < lo <= hi, "
+                         f"got {speed_range_mps!r}")
     speed = SmoothProfile(0.0, [])
     heading = SmoothProfile(float(rng.uniform(-np.pi, np.pi)), [])
     fpa = SmoothProfile(0.0, [])
@@ -192,8 +204,8 @@ def hill_drive_profiles(
             t += dur + float(rng.uniform(5.0, 20.0))
             v = 0.0
             continue
-        v_new = float(rng.uniform(8.0, 25.0))
-        dur_v = max(abs(v_new - v) / 1.5, 3.0)
+        v_new = float(rng.uniform(v_lo, v_hi))
+        dur_v = max(abs(v_new - v) / accel_mps2, 3.0)
         speed.add(t, dur_v, v_new - v)
         # grade: stay inside the relief band
         target = float(rng.uniform(-max_grade, max_grade))
