@@ -101,7 +101,8 @@ class EkfConfig:
     IMU spec has accel_scale_sd > 0 or there is no spec); heading_source: "auto" (acceleration
     matching when the GNSS stream has velocity, else the track), "accel" or "track";
     align_chunk_s, align_forget_s, align_sd_max: acceleration-matching chunk length [s],
-    forgetting time [s] and the σ [rad] below which the heading is accepted;
+    forgetting time [s] and the σ [rad] below which the heading is accepted (also the course
+    of the GNSS track);
     gap_heading_forget_s: IMU gaps at least this long [s] make the heading unknown again
     (``ekf.model`` docstring).
     """
@@ -364,7 +365,7 @@ def _events(drive: Drive, model: SensorModel, grid_idx: NDArrayInt, g_latency: f
         ev_t_l.append(gnss.t - g_latency)
         ev_type_l.append(np.zeros(gnss.t.size, dtype=np.int64))
         ev_idx_l.append(np.arange(gnss.t.size))
-        tr = track_heading(gnss, cfg.sideslip_sd)
+        tr = track_heading(gnss, cfg.sideslip_sd, drive.imu)
         g_lla, g_psd = gnss.lla, model.gnss_pos_sd
         has_vel = gnss.vel_n is not None and model.gnss_vel_sd is not None
         g_vel = gnss.vel_n if has_vel else np.zeros((gnss.t.size, 3))

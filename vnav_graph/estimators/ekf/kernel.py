@@ -379,7 +379,9 @@ def run_filter(grids, init, noise, events, gnss, baro, settings):
                     prev_vfix = idx
                     pend_tv = tm
                 elif not heading_ok:
-                    if tr_speed[idx] > heading_v_min and np.isnan(reset_delta):
+                    # the course is the heading only when moving and known well enough
+                    if (tr_speed[idx] > heading_v_min and tr_sd[idx] <= align_sd_max
+                            and np.isnan(reset_delta)):
                         dlt = tr_yaw[idx] - _yaw(qm)
                         reset_delta = np.arctan2(np.sin(dlt), np.cos(dlt))
                         reset_sd = tr_sd[idx]
