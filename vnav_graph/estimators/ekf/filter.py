@@ -71,7 +71,12 @@ from ...types import (
 )
 from . import kernel, rts
 from . import model as km
-from .alignment import level_tilt_bias_jacobian, static_window_end, track_heading
+from .alignment import (
+    level_tilt_bias_jacobian,
+    moving_start,
+    static_window_end,
+    track_heading,
+)
 
 NDArrayInt = Any
 PROVIDES = frozenset({"alt", "vel_d", "pos_h", "vel_h", "att", "baro", "cov"})
@@ -274,7 +279,14 @@ def _initial_state(drive: Drive, cfg: EkfConfig, model: SensorModel, bp: BaroPri
     imu, gnss, baro = drive.imu, drive.gnss, drive.baro
     t = imu.t
     i_static = static_window_end(imu, cfg.align_max_s)
-    roll, pitch = coarse_level(imu.accel_b[:i_static].mean(axis=0))
+    mv = moving_start(imu, gnss, i_static)
+    tilt_extra_var = 0.0
+    if mv is None:
+        roll, pitch = coarse_level(imu.accel_b[:i_static].mean(axis=0))
+    else:  # moving from the start: level on f_b minus the GNSS-derived acceleration
+        i_static = mv.i_end
+        roll, pitch = coarse_level(imu.accel_b[:i_static].mean(axis=0) - mv.accel_b)
+        tilt_extra_var = (mv.accel_sd / 9.81) ** 2
     heading_known = cfg.initial_heading is not None
     yaw0 = float(cfg.initial_heading) if heading_known else 0.0
     q0 = rph_to_quat([roll, pitch, yaw0])[0]
@@ -312,7 +324,8 @@ def _initial_state(drive: Drive, cfg: EkfConfig, model: SensorModel, bp: BaroPri
     p0[3:6, 3:6] = np.diag(vel_var)
     p_ba = ispec.accel_bias_sd**2 * np.eye(3)
     m_tilt = level_tilt_bias_jacobian(c0, float(gravity(lla0[0], lla0[2])))
-    p0[6:9, 6:9] = m_tilt @ p_ba @ m_tilt.T + cfg.min_tilt_sd**2 * np.diag([1.0, 1.0, 0.0])
+    p0[6:9, 6:9] = m_tilt @ p_ba @ m_tilt.T + (cfg.min_tilt_sd**2 + tilt_extra_var) * np.diag(
+        [1.0, 1.0, 0.0])
     yaw_unknown_var = np.pi**2 / 3.0
     p0[8, 8] = cfg.initial_heading_sd**2 if heading_known else yaw_unknown_var
     p0[6:9, 12:15] = m_tilt @ p_ba
