@@ -70,6 +70,8 @@ LABELS = {
 # the chain of the study: (a, b) pairs, d = a − b (positive: b better)
 CHAIN = (("ekf", "ekf-rts"), ("ekf-rts", "graph-batch"), ("ekf-rts", "graph-isam2"))
 GOAL_REL = 0.20
+# NEES/dof above which a winner counts as overconfident (unless the loser's is higher)
+NEES_MAX = 2.0
 QUICK_SEEDS, QUICK_DURATION_S = 3, 240.0
 START_S = 60.0
 
@@ -153,6 +155,18 @@ def study(doc: dict[str, Any]) -> dict[str, Any]:
                                      and s["diff_ci95"][0] > 0 and s["gain"] is not None
                                      and s["gain"] >= GOAL_REL)
                 out[sc][f"{a}|{b}|{key}"] = s
+            # a win bought by overconfidence does not count: b's NEES/dof must be at most
+            # NEES_MAX or at most a's
+            na = (doc["aggregate"][sc].get(a) or {}).get("nees_per_dof") or {}
+            nb = (doc["aggregate"][sc].get(b) or {}).get("nees_per_dof") or {}
+            honest = nb.get("mean") is not None and (
+                nb["mean"] <= NEES_MAX or (na.get("mean") is not None and nb["mean"] <= na["mean"]))
+            for key in keys:
+                st = out[sc][f"{a}|{b}|{key}"]
+                st["consistent"] = bool(honest)
+                if st["goal_met"] and not honest:
+                    st["goal_met"] = False
+                    st["overconfident"] = True
     return out
 
 
@@ -295,7 +309,9 @@ def render_section(results: Path) -> list[str]:
              f"configuration `benchmarks/hard_scenarios.toml` (graphs: Huber loss on GNSS; EKF: "
              "its χ² gates and track alignment). Goal of the study: graph-batch at least "
              f"{GOAL_REL:.0%} better than ekf-rts on a scenario's primary metric with the "
-             "paired 95 % CI of the difference excluding zero. Gains are 1 − mean(b)/mean(a) "
+             "paired 95 % CI of the difference excluding zero, and a mean NEES/dof at most "
+             f"{NEES_MAX:g} or at most ekf-rts's (a win bought by overconfidence does not "
+             "count). Gains are 1 − mean(b)/mean(a) "
              "with a delta-method 95 % CI over the paired seeds.", ""]
     for sc, by_est in doc["aggregate"].items():
         prim = PRIMARY.get(sc, ("alt_rmse_m",))
@@ -320,7 +336,8 @@ def render_section(results: Path) -> list[str]:
                     continue
                 label, unit, scale, spec = LABELS[key]
                 verdict = ("**goal met**" if s["goal_met"] else
-                           ("significant" if s["significant"] else "not significant"))
+                           "significant, but overconfident (NEES/dof)" if s.get("overconfident")
+                           else ("significant" if s["significant"] else "not significant"))
                 parts.append(f"{label}: d = {_f(s['diff'], scale, spec)}"
                              f"{_ci(s['diff_ci95'], scale, spec)} {unit}, gain "
                              f"{_f(s['gain'], 100, '.0f')}{_ci(s['gain_ci95'], 100, '.0f')} % "
