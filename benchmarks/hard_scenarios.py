@@ -312,7 +312,18 @@ def render_section(results: Path) -> list[str]:
              "paired 95 % CI of the difference excluding zero, and a mean NEES/dof at most "
              f"{NEES_MAX:g} or at most ekf-rts's (a win bought by overconfidence does not "
              "count). Gains are 1 − mean(b)/mean(a) "
-             "with a delta-method 95 % CI over the paired seeds.", ""]
+             "with a delta-method 95 % CI over the paired seeds.", "",
+             "The EKF at its best: χ² gates on every measurement; no static alignment "
+             "needed (in-motion levelling removes the GNSS-measured acceleration of the "
+             "first second); the heading-uncertain initialisation (yaw held unknown and "
+             "decoupled until the GNSS track or acceleration matching gives it with σ ≤ 15°, "
+             "a course counting only above 5σ of its noise). The iterated EKF update is left "
+             "out: once the heading is known the GNSS and baro models are close to linear in "
+             "the error state (ekf NEES/dof in the tables below), and what an iterated update "
+             "cannot undo — the heading reset, the gating decisions — is what separates the "
+             "approaches here. The graphs: whole-trajectory Gauss-Newton (relinearisation), "
+             "Huber loss on the GNSS fixes (re-weighted at every iteration), post-solve χ² "
+             "gates.", ""]
     for sc, by_est in doc["aggregate"].items():
         prim = PRIMARY.get(sc, ("alt_rmse_m",))
         lines += [f"### `{sc}`", "", "| estimator | ok/runs | " + " | ".join(

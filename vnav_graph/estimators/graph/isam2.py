@@ -441,6 +441,20 @@ class GraphISAM2:
             if ext is not None:
                 ext.add_to_batch(graph, res_vals, values_from=est)
         res = gauss_newton(P, graph, res_vals, calib0, pri)
+        restarted = False
+        if not robust and not res.converged:
+            # the online estimate can sit outside Gauss-Newton's basin after a long outage
+            # with a MEMS IMU (long-outage seed 1: 100 iterations, 466 m horizontal RMSE, 202
+            # fixes gated out): solve again from graph-batch's starting point and keep the
+            # lower cost
+            g2, v2 = build_batch_graph(P, rot_i, pos_i, vel_i, pims_for(P, rot_i, pos_i),
+                                       pri, calib0)
+            if ext is not None:
+                ext.add_to_batch(g2, v2)
+            res2 = gauss_newton(P, g2, v2, calib0, pri)
+            restarted = True
+            if res2.converged or res2.cost < res.cost:
+                res = res2
         t_final = time.perf_counter()
         out = outputs(P, res, pri, K(0) if has_baro else None)
         isam_k = None
@@ -451,6 +465,7 @@ class GraphISAM2:
                      {"online_s": t_online - t_start, "final_smoothing_s": t_final - t_online},
                      isam_k, int(seg[-1]) + 1, self.name)
         info["solver_final"] = res.solver
+        info["final_pass_restarted"] = restarted
         info["extra_variables"] = out["extra"]
         info["extra_variables_online"] = extra_online
         return Estimate(self.name, out["trajectory"], provides(drive), out["cov"],
