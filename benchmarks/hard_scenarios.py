@@ -223,23 +223,38 @@ def attribute(drive: Any, ests: dict[str, Any]) -> dict[str, Any]:
 
 
 def plot(drive: Any, ests: dict[str, Any], path: Path, title: str) -> None:
-    """Altitude, horizontal and heading error against time, outages and bursts shaded."""
-    from vnav_graph.evaluation.metrics import errors_vs_truth
+    """Altitude, horizontal and heading error and the NEES/dof of position and velocity
+    against time, outages and bursts shaded."""
+    from vnav_graph.evaluation.metrics import errors_vs_truth, nees
     from vnav_graph.report import canvas
 
     errs = {n: errors_vs_truth(e, drive) for n, e in ests.items()}
     kinds = [k for k in ("alt", "horiz", "heading")
              if all(getattr(e, k) is not None for e in errs.values())]
-    fig = canvas.figure(9.0, 2.2 * len(kinds) + 0.6, left=0.09)
-    axes = fig.subplots(len(kinds), 1, sharex=True)
+    ne = {n: nees(e, drive) for n, e in ests.items()}
+    panels = kinds + (["nees"] if all(v is not None for v in ne.values()) else [])
+    fig = canvas.figure(9.0, 2.2 * len(panels) + 0.6, left=0.09)
+    axes = fig.subplots(len(panels), 1, sharex=True)
     axes = np.atleast_1d(axes)
     units = {"alt": "altitude error [m]", "horiz": "horizontal error [m]",
              "heading": "heading error [deg]"}
-    for ax, kind in zip(axes, kinds, strict=True):
+    for ax in axes:
         for a, b in drive.meta.get("gnss_outages") or []:
-            ax.axvspan(a, b, color="0.85", lw=0, label=None)
+            ax.axvspan(a, b, color="0.85", lw=0)
         for a, b in drive.meta.get("gnss_burst_windows") or []:
-            ax.axvspan(a, b, color="#f6d8ae", lw=0, label=None)
+            ax.axvspan(a, b, color="#f6d8ae", lw=0)
+    if "nees" in panels:
+        ax = axes[-1]
+        for (name, (val, dof)), col in zip(ne.items(), ("C0", "C3"), strict=False):
+            t_c = ests[name].t_cov[(ests[name].t_cov >= drive.truth.t[0])
+                                   & (ests[name].t_cov <= drive.truth.t[-1])]
+            ax.semilogy(t_c, np.maximum(val / dof, 1e-3), color=col, lw=0.8,
+                        label=f"{name} (mean {np.mean(val) / dof:.3g})")
+        ax.axhline(1.0, color="0.4", lw=0.6, ls="--")
+        ax.set_ylabel("NEES/dof")
+        ax.grid(alpha=0.3)
+        ax.legend(loc="upper right", fontsize=8)
+    for ax, kind in zip(axes, kinds, strict=False):
         for (name, e), col in zip(errs.items(), ("C0", "C3"), strict=False):
             s = canvas.decimate(e.t.size, 3000)
             y = getattr(e, kind)
@@ -389,6 +404,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--scenarios", default=",".join(SCENARIOS))
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--no-explain", action="store_true", help="skip plots and attribution")
+    ap.add_argument("--explain-only", action="store_true",
+                    help="plots, attribution and page section from an existing bench.json")
     ap.add_argument("--out", required=True)
     a = ap.parse_args(argv)
     from vnav_graph.estimators.configfile import load_configs
@@ -400,9 +417,13 @@ def main(argv: list[str] | None = None) -> int:
     duration = QUICK_DURATION_S if a.quick else None
     configs = load_configs(CONFIG)
     scenarios = [s for s in a.scenarios.split(",") if s]
-    doc = bench(scenarios, list(ESTIMATORS), list(range(seeds)), duration_s=duration,
-                workers=a.workers, progress=True, configs=configs)
-    write_bench(doc, out)
+    if a.explain_only:
+        doc = json.loads((out / "bench.json").read_text())
+        duration = doc["config"]["duration_s"]
+    else:
+        doc = bench(scenarios, list(ESTIMATORS), list(range(seeds)), duration_s=duration,
+                    workers=a.workers, progress=True, configs=configs)
+        write_bench(doc, out)
     (out / "study.json").write_text(json.dumps(study(doc), indent=1) + "\n")
     if not a.no_explain:
         attr = explain(doc, out, configs, duration)
