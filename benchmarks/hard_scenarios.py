@@ -69,6 +69,28 @@ LABELS = {
 }
 # the chain of the study: (a, b) pairs, d = a − b (positive: b better)
 CHAIN = (("ekf", "ekf-rts"), ("ekf-rts", "graph-batch"), ("ekf-rts", "graph-isam2"))
+# the mechanism each scenario was built to expose; the page prints it next to the measured
+# attribution (where in the drive the difference lies), so a reader can check one by the other
+MECHANISM = {
+    "cold-start": "the EKF's heading is unknown until acceleration matching gives it, a few "
+    "seconds after the start; that acquisition is a state reset, and the RTS pass carries no "
+    "information back across it, so ekf-rts keeps the wrong heading of the first seconds; "
+    "the graph solves the whole trajectory at once and the gyro ties the first seconds to "
+    "the heading observed later",
+    "cold-start-posonly": "as in cold-start, with the course from the GNSS track (positions "
+    "only): the heading before the track is usable stays wrong in ekf-rts, not in the graph",
+    "urban": "a burst fix that passes the EKF's χ² gate (its reported σ understates the "
+    "error) is absorbed for good; the graph re-weights every fix against the smoothed "
+    "trajectory at each iteration (Huber), so burst fixes lose their weight after the fact",
+    "long-outage": "with GNSS velocity around the outages both smoothers bridge them with the "
+    "same IMU model; relinearisation has nothing to correct once the heading is known. "
+    "graph-isam2 is the exception: its online pass diverges inside these outages on many "
+    "seeds (its horizontal RMSE and GNSS rejections in the table) and its final pass does "
+    "not always recover — a defect of the incremental front end, left open",
+    "hot-baro": "both estimate scale, latency and the Gauss-Markov bias with the same model; "
+    "the graph relinearises the scale × height product over the whole sortie, the EKF keeps "
+    "its forward linearisation points (cause not isolated further)",
+}
 GOAL_REL = 0.20
 # NEES/dof above which a winner counts as overconfident (unless the loser's is higher)
 NEES_MAX = 2.0
@@ -151,7 +173,9 @@ def study(doc: dict[str, Any]) -> dict[str, Any]:
                 s = paired_stats(xa, xb)
                 s["significant"] = bool(s["diff_ci95"] is not None and (
                     s["diff_ci95"][0] > 0 or s["diff_ci95"][1] < 0))
-                s["goal_met"] = bool(key in prim and s["diff_ci95"] is not None
+                # the goal is about the graphs against ekf-rts; other pairs are context
+                s["goal_met"] = bool(a == "ekf-rts" and key in prim
+                                     and s["diff_ci95"] is not None
                                      and s["diff_ci95"][0] > 0 and s["gain"] is not None
                                      and s["gain"] >= GOAL_REL)
                 out[sc][f"{a}|{b}|{key}"] = s
@@ -370,7 +394,24 @@ def render_section(results: Path) -> list[str]:
                              f"({verdict}, n = {s['n']})")
             if parts:
                 lines.append(f"- {a} → {b}: " + "; ".join(parts) + ".")
+        if sc in MECHANISM:
+            lines += ["", f"Mechanism: {MECHANISM[sc]}."]
         a_sc = attr.get(sc)
+        kind_of = {"alt_rmse_m": "alt", "outage_alt_max_m": "alt", "horiz_rmse_m": "horiz",
+                   "outage_horiz_max_m": "horiz", "heading_rmse_deg": "heading"}
+        blk = (a_sc or {}).get(kind_of.get(prim[0], "alt"))
+        if blk:
+            part, p = max(blk["parts"].items(),
+                          key=lambda kv: abs(kv[1]["share_of_difference"] or 0.0))
+            s0 = st[sc].get(f"ekf-rts|graph-batch|{prim[0]}") or {}
+            share = _f(p["share_of_difference"], 100, ".0f")
+            lines += ["", f"Measured: on seed {a_sc['seed']}, {share} % "
+                      f"of the {kind_of.get(prim[0], 'alt')} squared-error difference lies in "
+                      f"'{part}' ({p['share_of_time']:.0%} of the time; RMS there "
+                      f"{_f(p['rms_ekf_rts'], 1, '.3g')} ekf-rts vs "
+                      f"{_f(p['rms_graph_batch'], 1, '.3g')} graph-batch)"
+                      + ("" if s0.get("significant") else
+                         "; over the seeds the difference is not significant") + "."]
         if a_sc:
             lines += ["", f"Where the ekf-rts − graph-batch difference comes from (seed "
                       f"{a_sc['seed']}, the median seed on {LABELS[prim[0]][0]}; share of "
