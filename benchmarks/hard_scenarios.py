@@ -99,17 +99,11 @@ START_S = 60.0
 
 
 def _value(row: dict[str, Any], key: str) -> float | None:
-    if key in row and key not in ("baro_scale_abs_err", "baro_latency_abs_err_s"):
-        v = row[key]
-        return None if v is None or not math.isfinite(v) else float(v)
-    if key == "nees_per_dof":
-        nm, nd = row.get("nees_mean"), row.get("nees_dof")
-        return nm / nd if nm is not None and nd else None
-    k = {"baro_scale_abs_err": "scale", "baro_latency_abs_err_s": "latency_s"}.get(key)
-    p = ((row.get("baro") or {}).get(k) or {}) if k else {}
-    if p.get("est") is None or p.get("truth") is None:
-        return None
-    return abs(p["est"] - p["truth"])
+    """A run's metric, or one derived from it (NEES/dof, baro errors), None if not finite."""
+    from vnav_graph.evaluation.montecarlo import derived_metrics
+
+    v = (row | derived_metrics(row)).get(key)
+    return None if v is None or not math.isfinite(v) else float(v)
 
 
 def paired_values(runs: list[dict[str, Any]], scenario: str, a: str, b: str, key: str

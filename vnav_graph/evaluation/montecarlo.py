@@ -387,7 +387,7 @@ def mean_ci95(values: Iterable[float | None]) -> dict[str, Any]:
     return {"mean": mean, "ci95": [mean - half, mean + half], "sd": sd, "n": n}
 
 
-def _derived(row: dict[str, Any]) -> dict[str, float | None]:
+def derived_metrics(row: dict[str, Any]) -> dict[str, float | None]:
     """Per-run metrics derived from the summary block (NEES per dof, baro parameter errors)."""
     out: dict[str, float | None] = {}
     nm, nd = row.get("nees_mean"), row.get("nees_dof")
@@ -411,7 +411,7 @@ def aggregate(runs: Sequence[dict[str, Any]]) -> dict[str, dict[str, dict[str, A
     for sc, by_est in groups.items():
         out[sc] = {}
         for est, rows in by_est.items():
-            ok = [r | _derived(r) for r in rows if r["status"] == "ok"]
+            ok = [r | derived_metrics(r) for r in rows if r["status"] == "ok"]
             cell: dict[str, Any] = {"n_runs": len(rows), "n_ok": len(ok),
                                     "n_failed": len(rows) - len(ok)}
             for m in AGG_METRICS:
@@ -580,5 +580,6 @@ def cli_bench(args: Any) -> int:
     return 0
 
 
-__all__ = ["BENCH_SCHEMA", "BenchTask", "aggregate", "bench", "cli_bench", "format_bench_md",
+__all__ = ["BENCH_SCHEMA", "BenchTask", "aggregate", "bench", "cli_bench", "derived_metrics",
+           "format_bench_md",
            "make_tasks", "mean_ci95", "run_task", "run_tasks", "shorten_scenario", "write_bench"]

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...geo.earth import radii
+from ...geo.frames import lla_to_ned
 from ...types import FloatArray, GnssStream, ImuStream
 
 
@@ -101,12 +101,9 @@ def track_heading(gnss: GnssStream, sideslip_sd: float, imu: ImuStream | None = 
         turn = np.zeros(gnss.t.size)
         valid = np.ones(gnss.t.size, dtype=bool)
     else:
-        lat, lon = gnss.lla[:, 0], gnss.lla[:, 1]
-        rn, re = radii(lat)
-        # relative to the first fix: lat·(R + h) would leak the height noise (σ_v 2 m ×
-        # 0.8 rad) into "north"
-        north = (lat - lat[0]) * (rn + gnss.lla[:, 2])
-        east = (lon - lon[0]) * (re + gnss.lla[:, 2]) * np.cos(lat)
+        # tangent plane at the first fix (lat·(R + h), used before, leaked the height noise,
+        # σ_v 2 m × 0.8 rad, into "north")
+        north, east = lla_to_ned(gnss.lla, gnss.lla[0])[:, :2].T
         if gnss.t.size < 3:
             z = np.zeros(gnss.t.size)
             return Track(z, z, np.full(gnss.t.size, np.pi))
@@ -163,10 +160,6 @@ def moving_start(imu: ImuStream, gnss: GnssStream | None, i_static: int,
         return None
     t = imu.t
     t0 = t[0]
-    lat, lon = gnss.lla[:, 0], gnss.lla[:, 1]
-    rn, re = radii(lat)
-    north = (lat - lat[0]) * (rn + gnss.lla[:, 2])
-    east = (lon - lon[0]) * (re + gnss.lla[:, 2]) * np.cos(lat)
     t_static = t[max(i_static - 1, 0)]
     has_vel = gnss.vel_n is not None and gnss.vel_sd is not None
     i_end = max(2, int(np.searchsorted(t, t0 + window_s, side="right")))
@@ -186,7 +179,7 @@ def moving_start(imu: ImuStream, gnss: GnssStream | None, i_static: int,
     else:
         # the distance from the first fix; moving when the fitted parabola's increase over
         # 4 s exceeds 3 σ of that increase (a standstill's noise gives none; P = 0.13 %)
-        dist = np.hypot(north - north[0], east - east[0])
+        dist = np.hypot(*lla_to_ned(gnss.lla, gnss.lla[0])[:, :2].T)
         fit_m = (gnss.t >= t0) & (gnss.t <= t0 + 4.0)
         if fit_m.sum() < 5:
             return None

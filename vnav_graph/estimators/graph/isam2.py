@@ -445,8 +445,8 @@ class GraphISAM2:
         if not robust and not res.converged:
             # the online estimate can sit outside Gauss-Newton's basin after a long outage
             # with a MEMS IMU (long-outage seed 1: 100 iterations, 466 m horizontal RMSE, 202
-            # fixes gated out): solve again from graph-batch's starting point and keep the
-            # lower cost
+            # fixes gated out): solve again from graph-batch's starting point and keep that
+            # solution when it converges or ends at a lower cost
             g2, v2 = build_batch_graph(P, rot_i, pos_i, vel_i, pims_for(P, rot_i, pos_i),
                                        pri, calib0)
             if ext is not None:
