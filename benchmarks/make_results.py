@@ -35,7 +35,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from vnav_graph.evaluation.montecarlo import mean_ci95
+from vnav_graph.evaluation.montecarlo import derived_metrics, mean_ci95
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -103,17 +103,8 @@ def _fmt(m: dict[str, Any] | None, scale: float, spec: str) -> str:
 
 
 def _derived(row: dict[str, Any], key: str) -> float | None:
-    if key in row:
-        return row[key]
-    baro = row.get("baro") or {}
-    k = {"baro_scale_abs_err": "scale", "baro_latency_abs_err_s": "latency_s",
-         "baro_bias_abs_err_m": "bias_m"}.get(key)
-    if k is None:
-        return None
-    p = baro.get(k) or {}
-    if p.get("est") is None or p.get("truth") is None:
-        return None
-    return abs(p["est"] - p["truth"])
+    """A run's metric or one derived from it (``montecarlo.derived_metrics``)."""
+    return (row | derived_metrics(row)).get(key)
 
 
 def paired(runs: list[dict[str, Any]], scenario: str, a: str, b: str, key: str
