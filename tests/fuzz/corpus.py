@@ -2,9 +2,9 @@
 
 Nothing here is committed as data: every case is written at test time from
 
-- a **simulated drive** (``hill-drive``, seed 1, 120 s), written by the small writers below in
-  all five formats: ``.npz`` (``save_npz``), ArduPilot DataFlash ``.bin``, PX4 ``.ulg``, a
-  Sensor Logger CSV folder and a merged 1 Hz CSV;
+- a **simulated drive** (``hill-drive``, seed 1, 120 s), written by the small writers of
+  ``writers`` in all five formats: ``.npz`` (``save_npz``), ArduPilot DataFlash ``.bin``,
+  PX4 ``.ulg``, a Sensor Logger CSV folder and a merged 1 Hz CSV;
 - the **small real cuts in tests/data** (always present);
 - the **shared real logs** (``$VNAV_DATA`` or ``../shared/data``; those cases are left out when
   the folder is absent).
@@ -34,14 +34,26 @@ import shutil
 import struct
 import zipfile
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from .writers import (  # also re-exported for the tests
+    G0,
+    Raw,
+    npz_arrays,
+    sim_raw,
+    write_dataflash,
+    write_merged_csv,
+    write_npz,
+    write_npz_arrays,
+    write_sl_folder,
+    write_ulog,
+)
+
 SEED = 20261128
-G0 = 9.80665
 REPO = Path(__file__).resolve().parents[2]
 TEST_DATA = REPO / "tests" / "data"
 
@@ -54,291 +66,6 @@ def shared_data_dir() -> Path | None:
     return None
 
 
-# ------------------------------------------------------------------------ raw streams
-@dataclass
-class Raw:
-    """Plain arrays of one drive in logger units (what a writer puts into a file)."""
-
-    t_imu: np.ndarray  # s
-    gyro: np.ndarray  # (N, 3) rad/s, FRD body
-    acc: np.ndarray  # (N, 3) m/s², FRD body, gravity included
-    t_gnss: np.ndarray
-    lat_deg: np.ndarray
-    lon_deg: np.ndarray
-    h: np.ndarray  # m
-    vel_n: np.ndarray  # (M, 3) m/s NED
-    sd_h: np.ndarray
-    sd_v: np.ndarray
-    t_baro: np.ndarray
-    press: np.ndarray  # Pa
-    baro_alt: np.ndarray  # m (ISA altitude of press)
-    epoch_s: float = 1.75e9  # wall-clock start for formats that carry one
-    extra: dict[str, Any] = field(default_factory=dict)
-
-    def copy(self) -> Raw:
-        return Raw(**{k: (v.copy() if isinstance(v, np.ndarray) else v)
-                      for k, v in self.__dict__.items() if k != "extra"},
-                   extra=dict(self.extra))
-
-
-def sim_raw() -> tuple[Raw, Any]:
-    """The simulated base: hill-drive seed 1, 120 s, IMU decimated to 100 Hz."""
-    from vnav_graph.geo.atmosphere import isa_pressure
-    from vnav_graph.simulation import simulate
-
-    d = simulate("hill-drive", 1, duration_s=120.0)
-    i = d.imu
-    k = slice(None, None, 2)
-    g, b = d.gnss, d.baro
-    press = np.asarray(isa_pressure(b.altitude), dtype=float)
-    raw = Raw(i.t[k] + 1.0, i.gyro_b[k], i.accel_b[k], g.t + 1.0, np.degrees(g.lla[:, 0]),
-              np.degrees(g.lla[:, 1]), g.lla[:, 2].copy(), g.vel_n.copy(), g.pos_sd[:, 0].copy(),
-              g.pos_sd[:, 2].copy(), b.t + 1.0, press, np.asarray(b.altitude, dtype=float))
-    return raw, d
-
-
-# ---------------------------------------------------------------------------- writers
-def write_npz(raw: Raw, path: Path, drive: Any = None) -> Path:
-    """The ``save_npz`` layout: the simulated Drive's truth, streams from ``raw``."""
-    arrays, header = npz_arrays(raw, drive)
-    return write_npz_arrays(arrays, header, path)
-
-
-def npz_arrays(raw: Raw, drive: Any = None) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-    """The arrays and JSON header ``save_npz`` would write, from raw streams (no validation,
-    so hostile values reach the file)."""
-    deg = np.pi / 180.0
-    n = raw.t_gnss.size
-    arrays = {
-        "imu_t": raw.t_imu, "imu_gyro_b": raw.gyro, "imu_accel_b": raw.acc,
-        "origin_lla": np.array([raw.lat_deg[0] * deg, raw.lon_deg[0] * deg, raw.h[0]]),
-        "gnss_t": raw.t_gnss,
-        "gnss_lla": np.column_stack([raw.lat_deg * deg, raw.lon_deg * deg, raw.h]),
-        "gnss_pos_sd": np.column_stack([raw.sd_h, raw.sd_h, raw.sd_v]),
-        "gnss_lever_arm_b": np.zeros(3), "gnss_vel_n": raw.vel_n,
-        "gnss_vel_sd": np.full((n, 3), 0.1), "baro_t": raw.t_baro, "baro_alt": raw.baro_alt,
-    }
-    header: dict[str, Any] = {"format": "vnav_graph.drive/1",
-                              "meta": {"name": "fuzz", "source": "log"},
-                              "imu_spec": None, "gnss_spec": None, "baro_spec": None}
-    if drive is not None and raw.extra.get("truth", True):
-        tr = drive.truth
-        keep = (tr.t + 1.0 >= raw.t_imu[0]) & (tr.t + 1.0 <= raw.t_imu[-1])
-        arrays.update(truth_t=tr.t[keep] + 1.0, truth_lla=tr.lla[keep],
-                      truth_vel_n=tr.vel_n[keep], truth_q_nb=tr.q_nb[keep])
-        if tr.bias_baro is not None:
-            arrays["truth_bias_baro"] = tr.bias_baro[keep]
-        header["meta"]["source"] = "simulated"
-        from dataclasses import asdict
-
-        header["baro_truth"] = asdict(drive.baro_truth)
-        from vnav_graph.io.drive_io import _spec_to_json
-
-        header["imu_spec"] = _spec_to_json(drive.imu.spec)
-        header["gnss_spec"] = _spec_to_json(drive.gnss.spec)
-        header["baro_spec"] = _spec_to_json(drive.baro.spec)
-    return arrays, header
-
-
-def write_npz_arrays(arrays: dict[str, np.ndarray], header: Any, path: Path,
-                     header_bytes: bytes | None = None) -> Path:
-    out = dict(arrays)
-    hb = header_bytes if header_bytes is not None else json.dumps(header).encode()
-    out["header"] = np.frombuffer(hb, dtype=np.uint8)
-    with open(path, "wb") as fh:
-        np.savez_compressed(fh, **out)
-    return path
-
-
-def write_merged_csv(raw: Raw, path: Path, time_style: str = "iso",
-                     columns: dict[str, str] | None = None) -> Path:
-    """1 s means of every stream, one row per second (the merged Sensor Logger layout).
-    Phone axes: x_d = y_b, y_d = x_b, z_d = −z_b (flat phone, screen up)."""
-    t0 = raw.t_imu[0]
-    sec = np.floor(raw.t_imu - t0).astype(int)
-    nrow = int(sec.max())
-    rows = []
-
-    def mean_at(t: np.ndarray, v: np.ndarray, a: float) -> np.ndarray:
-        m = (t >= a) & (t < a + 1.0)
-        if not m.any():
-            j = int(np.clip(np.searchsorted(t, a), 0, t.size - 1))
-            return v[j]
-        return v[m].mean(axis=0)
-
-    for k in range(nrow):
-        a = t0 + k
-        acc = mean_at(raw.t_imu, raw.acc, a)
-        gyr = mean_at(raw.t_imu, raw.gyro, a)
-        ad = (acc[1], acc[0], -acc[2])
-        gd = (gyr[1], gyr[0], -gyr[2])
-        j = int(np.clip(np.searchsorted(raw.t_gnss, a), 0, raw.t_gnss.size - 1))
-        p = float(mean_at(raw.t_baro, raw.press, a))
-        epoch = raw.epoch_s + k
-        if time_style == "iso":
-            import datetime as dt
-
-            ts = dt.datetime.fromtimestamp(epoch, dt.UTC).strftime("%Y-%m-%d %H:%M:%S+00:00")
-        elif time_style == "s":
-            ts = f"{epoch:.0f}"
-        elif time_style == "ms":
-            ts = f"{epoch * 1e3:.0f}"
-        elif time_style == "us":
-            ts = f"{epoch * 1e6:.0f}"
-        else:  # ns
-            ts = f"{int(epoch) * 10**9}"
-        rows.append([ts, raw.sd_v[j], raw.sd_h[j] * 1.5, raw.h[j], raw.lon_deg[j],
-                     raw.lat_deg[j], ad[2], ad[1], ad[0], gd[2], gd[1], gd[0], p / 100.0])
-    names = ["time", "verticalAccuracy", "horizontalAccuracy", "altitude", "longitude",
-             "latitude", "acc_z", "acc_y", "acc_x", "gyro_z", "gyro_y", "gyro_x", "pressure"]
-    if columns:
-        names = [columns.get(n, n) for n in names]
-    lines = [",".join(names)]
-    for r in rows:
-        lines.append(",".join([r[0]] + [repr(float(x)) for x in r[1:]]))
-    path.write_text("\n".join(lines) + "\n")
-    return path
-
-
-def write_sl_folder(raw: Raw, path: Path, skip: tuple[str, ...] = ()) -> Path:
-    """Sensor Logger per-sensor CSV export (Android, standardised units)."""
-    path.mkdir(parents=True, exist_ok=True)
-    t0 = raw.t_imu[0]
-    ns0 = int(raw.epoch_s) * 10**9
-
-    def dump(name: str, t: np.ndarray, cols: dict[str, np.ndarray]) -> None:
-        if name in skip:
-            return
-        out = io.StringIO()
-        out.write("time,seconds_elapsed," + ",".join(cols) + "\n")
-        mat = np.column_stack(list(cols.values()))
-        for k in range(t.size):
-            se = float(t[k] - t0)
-            out.write(f"{ns0 + int(se * 1e9) if np.isfinite(se) else 0},{se!r},"
-                      + ",".join(repr(float(x)) for x in mat[k]) + "\n")
-        (path / f"{name}.csv").write_text(out.getvalue())
-
-    acc, gyr = raw.acc, raw.gyro
-    dump("AccelerometerUncalibrated", raw.t_imu,
-         {"z": -acc[:, 2], "y": acc[:, 0], "x": acc[:, 1]})
-    dump("GyroscopeUncalibrated", raw.t_imu, {"z": -gyr[:, 2], "y": gyr[:, 0], "x": gyr[:, 1]})
-    dump("Location", raw.t_gnss, {"altitude": raw.h, "latitude": raw.lat_deg,
-                                  "longitude": raw.lon_deg,
-                                  "horizontalAccuracy": raw.sd_h * 1.5,
-                                  "verticalAccuracy": raw.sd_v})
-    dump("Barometer", raw.t_baro, {"relativeAltitude": raw.baro_alt - raw.baro_alt[0],
-                                   "pressure": raw.press / 100.0})
-    if "Metadata" not in skip:
-        (path / "Metadata.csv").write_text(
-            "version,device name,platform,standardisation\n3,fuzz phone,android,true\n")
-    return path
-
-
-# DataFlash: FMT(128) defines every other message; header 0xA3 0x95 <type>
-_DF_STRUCT = {"B": "B", "H": "H", "I": "I", "f": "f", "L": "i", "Q": "Q", "n": "4s",
-              "N": "16s", "Z": "64s", "b": "b", "h": "h", "i": "i", "d": "d", "q": "q"}
-DF_MSGS = {
-    "IMU": (130, "QffffffB", "TimeUS,GyrX,GyrY,GyrZ,AccX,AccY,AccZ,I"),
-    "GPS": (131, "QBIHBfLLffffB", "TimeUS,Status,GMS,GWk,NSats,HDop,Lat,Lng,Alt,Spd,GCrs,VZ,I"),
-    "BARO": (132, "QffffB", "TimeUS,Alt,Press,Temp,CRt,I"),
-}
-
-
-def _df_fmt(type_id: int, name: str, fmt: str, cols: str) -> bytes:
-    length = 3 + struct.calcsize("<" + "".join(_DF_STRUCT[c] for c in fmt))
-    return b"\xa3\x95\x80" + struct.pack("<BB4s16s64s", type_id, length, name.encode(),
-                                         fmt.encode(), cols.encode())
-
-
-def write_dataflash(raw: Raw, path: Path, names: dict[str, str] | None = None) -> Path:
-    """Minimal ArduPilot DataFlash log: FMT records, then IMU/GPS/BARO in time order.
-    ``names`` renames messages in the FMT records only (the FMT-swap damage)."""
-    names = names or {}
-    out = [_df_fmt(128, "FMT", "BBnNZ", "Type,Length,Name,Format,Columns")]
-    for name, (tid, fmt, cols) in DF_MSGS.items():
-        out.append(_df_fmt(tid, names.get(name, name), fmt, cols))
-    recs: list[tuple[float, bytes]] = []
-
-    def pack(name: str, *vals: Any) -> bytes:
-        tid, fmt, _ = DF_MSGS[name]
-        return b"\xa3\x95" + bytes([tid]) + struct.pack(
-            "<" + "".join(_DF_STRUCT[c] for c in fmt), *vals)
-
-    def us(t: float) -> int:
-        return int(round(t * 1e6)) if np.isfinite(t) and t >= 0 else 0
-
-    for k in range(raw.t_imu.size):
-        recs.append((raw.t_imu[k], pack("IMU", us(raw.t_imu[k]), *raw.gyro[k], *raw.acc[k], 0)))
-    gps_week, tow0 = 2360, 300_000.0
-    for k in range(raw.t_gnss.size):
-        v = raw.vel_n[k]
-        spd = float(np.hypot(v[0], v[1]))
-        crs = float(np.degrees(np.arctan2(v[1], v[0])) % 360.0)
-        t = raw.t_gnss[k]
-        recs.append((t, pack("GPS", us(t), 3, int((tow0 + (t if np.isfinite(t) else 0)) * 1e3)
-                             % 2**32, gps_week, 10, raw.sd_h[k], _i32(raw.lat_deg[k] * 1e7),
-                             _i32(raw.lon_deg[k] * 1e7), raw.h[k], spd, crs, v[2], 0)))
-    for k in range(raw.t_baro.size):
-        t = raw.t_baro[k]
-        recs.append((t, pack("BARO", us(t), raw.baro_alt[k] - raw.baro_alt[0], raw.press[k],
-                             20.0, 0.0, 0)))
-    order = sorted(range(len(recs)), key=lambda j: (recs[j][0] if np.isfinite(recs[j][0])
-                                                   else 0.0, j))
-    if raw.extra.get("shuffle_records"):
-        order = list(range(len(recs)))
-    path.write_bytes(b"".join(out) + b"".join(recs[j][1] for j in order))
-    return path
-
-
-def _i32(x: float) -> int:
-    return int(np.clip(np.nan_to_num(x, nan=0.0), -2**31, 2**31 - 1))
-
-
-def write_ulog(raw: Raw, path: Path, omit: tuple[str, ...] = ()) -> Path:
-    """Minimal ULog v1 (header, flags, formats, subscriptions, data) in the layout PX4 uses."""
-    codes = {"uint64_t": "Q", "float": "f", "int32_t": "i", "uint8_t": "B"}
-
-    def msg(kind: bytes, payload: bytes) -> bytes:
-        return struct.pack("<HB", len(payload), kind[0]) + payload
-
-    def us(t: float) -> int:
-        return int(round(t * 1e6)) if np.isfinite(t) and t >= 0 else 0
-
-    topics: dict[str, tuple[str, list[tuple]]] = {
-        "sensor_combined": ("uint64_t timestamp;float[3] gyro_rad;float[3] accelerometer_m_s2;",
-                            [(us(raw.t_imu[k]), *raw.gyro[k], *raw.acc[k])
-                             for k in range(raw.t_imu.size)]),
-        "vehicle_gps_position": (
-            "uint64_t timestamp;int32_t lat;int32_t lon;int32_t alt;int32_t alt_ellipsoid;"
-            "float eph;float epv;float s_variance_m_s;float vel_n_m_s;float vel_e_m_s;"
-            "float vel_d_m_s;uint8_t vel_ned_valid;uint8_t fix_type;",
-            [(us(raw.t_gnss[k]), _i32(raw.lat_deg[k] * 1e7), _i32(raw.lon_deg[k] * 1e7),
-              _i32(raw.h[k] * 1e3), _i32(raw.h[k] * 1e3), raw.sd_h[k], raw.sd_v[k], 0.2,
-              *raw.vel_n[k], 1, 3) for k in range(raw.t_gnss.size)]),
-        "vehicle_air_data": ("uint64_t timestamp;float baro_pressure_pa;",
-                             [(us(raw.t_baro[k]), raw.press[k]) for k in range(raw.t_baro.size)]),
-    }
-    topics = {k: v for k, v in topics.items() if k not in omit}
-    out = b"ULog\x01\x12\x35\x01" + struct.pack("<Q", 0)
-    out += msg(b"B", bytes(16) + struct.pack("<3Q", 0, 0, 0))
-    for name, (fmt, _) in topics.items():
-        out += msg(b"F", f"{name}:{fmt}".encode())
-    for i, name in enumerate(topics):
-        out += msg(b"A", struct.pack("<BH", 0, i) + name.encode())
-    rows = []
-    for i, (_, (fmt, data)) in enumerate(topics.items()):
-        pk = "<"
-        for fld in fmt.strip(";").split(";"):
-            typ = fld.split(" ")[0]
-            base, _, n = typ.partition("[")
-            pk += (n.rstrip("]") if n else "") + codes[base]
-        rows += [(r[0], i, struct.pack(pk, *r)) for r in data]
-    if not raw.extra.get("shuffle_records"):
-        rows = sorted(rows, key=lambda x: x[0])
-    for _, i, payload in rows:
-        out += msg(b"D", struct.pack("<H", i) + payload)
-    path.write_bytes(out)
-    return path
 
 
 WRITERS: dict[str, Callable[..., Path]] = {
