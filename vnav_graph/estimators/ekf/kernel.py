@@ -20,6 +20,7 @@ from numba import njit
 from numpy.typing import NDArray
 
 from ...geo.earth import radii_scalar
+from ...nav.arrays import put
 from ...nav.gnss_gate import REFUSE, USE_INFLATE, height_gate
 from ...nav.rotations import quat_mul, quat_to_dcm, rpy_quat, skew3
 from ...nav.rotations import yaw_of as _yaw
@@ -250,7 +251,10 @@ def run_filter(grids, init, noise, events, gnss, baro, settings):
 
     if out_of[0] >= 0:
         o = out_of[0]
-        out_lla[o], out_v[o], out_q[o], out_par[o] = lla, v, q, par
+        put(out_lla[o], lla)
+        put(out_v[o], v)
+        put(out_q[o], q)
+        put(out_par[o], par)
     if grid_of[0] >= 0:
         if store_rts:
             pack(p, rts_p[0])
@@ -404,9 +408,9 @@ def run_filter(grids, init, noise, events, gnss, baro, settings):
                 pend_type[n_pend] = ev_type[je]
                 pend_idx[n_pend] = idx
                 pend_t[n_pend] = tm
-                pend_y[n_pend] = y
-                pend_h[n_pend] = hm
-                pend_r[n_pend] = r
+                put(pend_y[n_pend], y)
+                put(pend_h[n_pend], hm)
+                put(pend_r[n_pend], r)
                 pend_m[n_pend] = mm
                 n_pend += 1
             je += 1
@@ -415,12 +419,12 @@ def run_filter(grids, init, noise, events, gnss, baro, settings):
         if k >= 0:
             dtg = t[i + 1] - t_prev_grid
             ing = np.zeros(NING)
-            ing[0:9] = quat_to_dcm(q).copy().reshape(9)
-            ing[9:12] = acc_fn / max(acc_n, 1)
-            ing[12:15] = acc_fb / max(acc_n, 1)
+            put(ing[0:9], quat_to_dcm(q).copy().reshape(9))
+            put(ing[9:12], acc_fn / max(acc_n, 1))
+            put(ing[12:15], acc_fb / max(acc_n, 1))
             ing[15] = lla[0]
             ing[16] = lla[2]
-            ing[17:20] = v
+            put(ing[17:20], v)
             ing[20] = 0.0 if heading_ok else 1.0
             ing[21] = dtg
             ing[22] = 1.0 if gap_step[i] else 0.0
@@ -453,8 +457,8 @@ def run_filter(grids, init, noise, events, gnss, baro, settings):
                 t_heading = t[i + 1]
                 reset_delta = np.nan
             if store_rts:
-                rts_ing[k] = ing
-                rts_q[k] = qd
+                put(rts_ing[k], ing)
+                put(rts_q[k], qd)
             # measurement updates at the grid epoch
             dx = np.zeros(NX)
             for e in range(n_pend):
@@ -485,7 +489,7 @@ def run_filter(grids, init, noise, events, gnss, baro, settings):
                     ok, nis, nrm = vector_update(
                         p, dx, heff[:2].copy(), pend_y[e, :2].copy(), pend_r[e, :2].copy(),
                         gate_pos, force_h)
-                    inn_pos[idx, :2] = nrm
+                    put(inn_pos[idx, :2], nrm)
                     rej_pos[idx] = not ok
                     consec_pos = 0 if nis <= gate_pos else consec_pos + 1
                     # height: fault detection and exclusion (module docstring)
@@ -509,7 +513,7 @@ def run_filter(grids, init, noise, events, gnss, baro, settings):
                         ok, nis, nrm = vector_update(
                             p, dx, heff[3:5].copy(), pend_y[e, 3:5].copy(),
                             pend_r[e, 3:5].copy(), gate_vel, False)
-                        inn_vel[idx, :2] = nrm
+                        put(inn_vel[idx, :2], nrm)
                         rej_vel[idx] = not ok
                         if use_v:
                             ok, nis, nrm = vector_update(
@@ -529,7 +533,7 @@ def run_filter(grids, init, noise, events, gnss, baro, settings):
             n_pend = 0
             apply_correction(lla, v, q, par, dx)
             if store_rts:
-                corr[k] = dx
+                put(corr[k], dx)
                 pack(p, rts_p[k])
             if cov_out_of[k] >= 0:
                 pack(p, cov_out[cov_out_of[k]])
@@ -540,7 +544,10 @@ def run_filter(grids, init, noise, events, gnss, baro, settings):
 
         o = out_of[i + 1]
         if o >= 0:
-            out_lla[o], out_v[o], out_q[o], out_par[o] = lla, v, q, par
+            put(out_lla[o], lla)
+            put(out_v[o], v)
+            put(out_q[o], q)
+            put(out_par[o], par)
 
     return (out_lla, out_v, out_q, out_par, cov_out, rts_p, rts_ing, rts_q, corr, reset_at,
             inn_pos, inn_vel, inn_baro, rej_pos, rej_vel, rej_baro, t_heading, rej_v)

@@ -112,6 +112,7 @@ import numpy as np
 from numba import njit
 
 from ...geo.earth import OMEGA_IE, gravity_scalar, radii_scalar
+from ...nav.arrays import put, solve
 from ...nav.rotations import quat_exp, quat_mul, skew3
 from ...nav.strapdown import nav_rates
 
@@ -173,15 +174,15 @@ def build_f(ing, tau_g, tau_a, tau_b):
     g = gravity_scalar(lat, h)
     for i in range(3):
         f[IPOS + i, IVEL + i] = 1.0
-    f[IVEL:IVEL + 3, IVEL:IVEL + 3] = -skew3(2.0 * w_ie + w_en)
-    f[IVEL:IVEL + 3, IATT:IATT + 3] = -skew3(fn)
+    put(f[IVEL:IVEL + 3, IVEL:IVEL + 3], -skew3(2.0 * w_ie + w_en))
+    put(f[IVEL:IVEL + 3, IATT:IATT + 3], -skew3(fn))
     f[IVEL + 2, IPOS + 2] = 2.0 * g / (np.sqrt(rn * re) + h)
     for i in range(3):
         for j in range(3):
             f[IVEL + i, IBA + j] = -c[i, j]
             f[IVEL + i, IKA + j] = -c[i, j] * fb[j]
             f[IATT + i, IBG + j] = -c[i, j]
-    f[IATT:IATT + 3, IATT:IATT + 3] = -skew3(w_in)
+    put(f[IATT:IATT + 3, IATT:IATT + 3], -skew3(w_in))
     f[IATT + 0, IVEL + 1] = -1.0 / (re + h)
     f[IATT + 1, IVEL + 0] = 1.0 / (rn + h)
     f[IATT + 2, IVEL + 1] = np.tan(lat) / (re + h)
@@ -274,7 +275,7 @@ def vector_update(p, dx, hm, y, rdiag, gate, force):
     s = hm @ p @ hm.T
     for i in range(m):
         s[i, i] += rdiag[i]
-    nis = nu @ np.linalg.solve(s, nu)
+    nis = nu @ solve(s, nu.reshape((m, 1)))[:, 0]  # one specialisation of solve (2-D)
     norm = np.empty(m)
     for i in range(m):
         norm[i] = -nu[i] / np.sqrt(s[i, i])  # sign of z − h(x̃)
@@ -296,7 +297,7 @@ def apply_correction(lla, v, q, par, dx):
         v[i] -= dx[IVEL + i]
     qn = quat_mul(quat_exp(-dx[IATT:IATT + 3].copy()), q)
     qn /= np.sqrt(np.sum(qn * qn))
-    q[:] = qn
+    put(q[:], qn)
     for i in range(3):
         par[PBG + i] -= dx[IBG + i]
         par[PBA + i] -= dx[IBA + i]

@@ -13,6 +13,7 @@ from numba import njit
 from scipy.spatial.transform import Rotation
 
 from ...geo.earth import radii
+from ...nav.arrays import outer, put, solve
 from ...types import FloatArray
 from .model import (
     IBA,
@@ -62,11 +63,11 @@ def rts_smooth(rts_p, rts_ing, rts_q, corr, reset_at, tau_g, tau_a, tau_b, cov_o
             pm[a, a] += rts_q[k + 1, a]
         # G = P⁺ Φᵀ (P⁻)⁻¹ through the correlation matrix (scales differ by ~1e12)
         dinv = 1.0 / np.sqrt(np.diag(pm))
-        corr_m = pm * np.outer(dinv, dinv)
+        corr_m = pm * outer(dinv, dinv)
         rhs = (phi @ pk) * dinv.reshape(NX, 1)
-        gt = np.linalg.solve(corr_m, rhs) * dinv.reshape(NX, 1)
+        gt = solve(corr_m, rhs) * dinv.reshape(NX, 1)
         g = gt.T
-        es[k] = g @ (es[k + 1] + corr[k + 1])
+        put(es[k], g @ (es[k + 1] + corr[k + 1]))
         ps = pk + g @ (ps - pm) @ g.T
         ps = 0.5 * (ps + ps.T)
         if cov_out_of[k] >= 0:

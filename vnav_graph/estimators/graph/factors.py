@@ -41,6 +41,7 @@ from numba import njit
 
 from ...geo.earth import OMEGA_IE, gravity
 from ...geo.frames import lla_to_ned, ned_to_lla, skew
+from ...nav.arrays import put
 from ...nav.rotations import so3_exp
 from ...sensors.baro import baro_jacobian, measure_baro
 from ...types import FloatArray
@@ -120,9 +121,9 @@ def _dense(t, gyro, accel, kf_idx):
         v = np.zeros(3)
         p = np.zeros(3)
         for j in range(kf_idx[k], kf_idx[k + 1]):
-            dr[j] = r
-            dv[j] = v
-            dp[j] = p
+            put(dr[j], r)
+            put(dv[j], v)
+            put(dp[j], p)
             dt = t[j + 1] - t[j]
             r_new = r @ so3_exp(0.5 * (gyro[j] + gyro[j + 1]) * dt)
             a0 = r @ accel[j]
@@ -130,15 +131,15 @@ def _dense(t, gyro, accel, kf_idx):
             p = p + v * dt + (a0 / 3.0 + a1 / 6.0) * dt * dt
             v = v + 0.5 * (a0 + a1) * dt
             r = r_new
-            dr_n[j] = r
-            dv_n[j] = v
-            dp_n[j] = p
+            put(dr_n[j], r)
+            put(dv_n[j], v)
+            put(dp_n[j], p)
     last = kf_idx[-1]
     for j in range(last, n):
-        dr[j] = np.eye(3)
+        put(dr[j], np.eye(3))
         dv[j] = 0.0
         dp[j] = 0.0
-        dr_n[j] = np.eye(3)
+        put(dr_n[j], np.eye(3))
         dv_n[j] = 0.0
         dp_n[j] = 0.0
     return dr, dv, dp, dr_n, dv_n, dp_n

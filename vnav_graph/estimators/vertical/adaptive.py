@@ -54,6 +54,7 @@ import numpy as np
 from numba import njit
 
 from ...config import REAL_LOG_BARO
+from ...nav.arrays import outer, put
 from ...sensors.model import sensor_model
 from ...types import (
     ERROR_STATE_DIM,
@@ -150,7 +151,7 @@ def adaptive_kernel(t, a_up, z_baro, tau, ws2, s_max, func, signal, e0, v0, t_av
     x = np.empty((n, 3))
     err = np.empty(n)
     s_out = np.empty(n)
-    x[0] = x0
+    put(x[0], x0)
     ebar = 0.0
     dt = t[1] - t[0] if n > 1 else 1.0
     dt_prev = -1.0
@@ -285,8 +286,8 @@ def ekf_kernel(a_up, z_baro, base_gains, ws2, s_max, func, signal, e0, v0,
             code[j] = 0
             kg = ph / sv
             x += kg * innov
-            ikh = np.eye(NX) - np.outer(kg, hrow)
-            p = ikh @ p @ ikh.T + r_fix[j] * np.outer(kg, kg)  # Joseph form
+            ikh = np.eye(NX) - outer(kg, hrow)
+            p = ikh @ p @ ikh.T + r_fix[j] * outer(kg, kg)  # Joseph form
             j += 1
         if k < n - 1:
             dt = t[k + 1] - t[k]

@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from ...nav.arrays import outer, put
 from ...nav.rotations import quat_exp, quat_mul, quat_to_dcm
 from ...nav.rotations import rpy_quat as _rpy_quat
 from ...nav.strapdown import strapdown_step
@@ -50,11 +51,11 @@ def ahrs_kernel(t, gyro, accel, q0, lla_i, vel_i, sdv_i, t_g, v_g, g_g, cor_g, o
     f_n = np.empty((n, 3))
     vp_out = np.empty((n, 2))
     cnt = np.zeros(7, dtype=np.int64)
-    q[0] = q0
+    put(q[0], q0)
     bg = np.zeros(3)
     psi = np.zeros(3)  # current attitude-error estimate (n frame), applied as a rate
     c = quat_to_dcm(q0)
-    f_n[0] = c @ accel[0]
+    put(f_n[0], c @ accel[0])
     cum = np.zeros(3)  # ∫ f_n dt from t[0]
     cum_prev = np.zeros(3)
     cum_arr = np.zeros((n, 3))  # prefix integral of f_n (for the accelerometer fallback)
@@ -70,7 +71,7 @@ def ahrs_kernel(t, gyro, accel, q0, lla_i, vel_i, sdv_i, t_g, v_g, g_g, cor_g, o
             vp[1] = v_g[j, 1]
             vp_valid = True
         j += 1
-    vp_out[0] = vp
+    put(vp_out[0], vp)
     f_at_last = np.zeros(3)  # ∫ f_n up to the previous fix time
     have_last = j > 0  # a fix at or before t[0]: integral there is 0
     yaw_done = False
@@ -102,10 +103,10 @@ def ahrs_kernel(t, gyro, accel, q0, lla_i, vel_i, sdv_i, t_g, v_g, g_g, cor_g, o
             # interval that touches the gap.
             if np.isfinite(relevel[k + 1, 0]):
                 c0 = quat_to_dcm(q[k])
-                q[k + 1] = _rpy_quat(relevel[k + 1, 0], relevel[k + 1, 1],
-                                     np.arctan2(c0[1, 0], c0[0, 0]))
+                put(q[k + 1], _rpy_quat(relevel[k + 1, 0], relevel[k + 1, 1],
+                                        np.arctan2(c0[1, 0], c0[0, 0])))
             else:
-                q[k + 1] = q[k]
+                put(q[k + 1], q[k])
             psi[0] = 0.0
             psi[1] = 0.0
             t_gap_end = t[k + 1]
@@ -116,16 +117,16 @@ def ahrs_kernel(t, gyro, accel, q0, lla_i, vel_i, sdv_i, t_g, v_g, g_g, cor_g, o
             w1 = gyro[k + 1] - bg - corr_p
             _, _, qn = strapdown_step(lla_i[k], vel_k, q[k], w0, w1, accel[k], accel[k + 1],
                                       dt)
-            q[k + 1] = qn
-        bg_out[k] = bg
+            put(q[k + 1], qn)
+        put(bg_out[k], bg)
         qn = q[k + 1]
         c1 = quat_to_dcm(qn)
-        f_n[k + 1] = c1 @ accel[k + 1]
+        put(f_n[k + 1], c1 @ accel[k + 1])
         cum_prev = cum.copy()
         cum = cum + 0.5 * (f_n[k] + f_n[k + 1]) * dt
-        cum_arr[k + 1] = cum
-        gyr_arr[k + 1] = gyr_arr[k] + 0.5 * (gyro[k] + gyro[k + 1]) * dt
-        acc_arr[k + 1] = acc_arr[k] + 0.5 * (accel[k] + accel[k + 1]) * dt
+        put(cum_arr[k + 1], cum)
+        put(gyr_arr[k + 1], gyr_arr[k] + 0.5 * (gyro[k] + gyro[k + 1]) * dt)
+        put(acc_arr[k + 1], acc_arr[k] + 0.5 * (accel[k] + accel[k + 1]) * dt)
         if dt <= imu_gap:
             vp[0] += 0.5 * (f_n[k, 0] + f_n[k + 1, 0]) * dt
             vp[1] += 0.5 * (f_n[k, 1] + f_n[k + 1, 1]) * dt
@@ -139,7 +140,7 @@ def ahrs_kernel(t, gyro, accel, q0, lla_i, vel_i, sdv_i, t_g, v_g, g_g, cor_g, o
             course = np.arctan2(vel_i[k + 1, 1], vel_i[k + 1, 0])
             if not yaw_done:
                 dq = quat_exp(np.array([0.0, 0.0, _wrap_nb(course - yaw)]))
-                q[k + 1] = quat_mul(dq, qn)
+                put(q[k + 1], quat_mul(dq, qn))
                 yaw_done = True
                 psi[2] = 0.0
                 skip = True  # the current fix interval mixes two headings
@@ -240,8 +241,8 @@ def ahrs_kernel(t, gyro, accel, q0, lla_i, vel_i, sdv_i, t_g, v_g, g_g, cor_g, o
                 psi_until = tk + 0.4 * lvl_win
                 t_acc = tk
                 cnt[5] += 1
-        vp_out[k + 1] = vp
-    bg_out[n - 1] = bg
+        put(vp_out[k + 1], vp)
+    put(bg_out[n - 1], bg)
     if not vp_valid:
         vp_out[:] = 0.0
     return q, f_n, bg_out, vp_out, cnt
@@ -272,7 +273,7 @@ def poly_velocity(t, p, sd, half, seg):
                 w = 1.0 / (sd[i, ax] * sd[i, ax])
                 dtt = t[i] - t[j]
                 x = np.array([1.0, dtt, dtt * dtt])
-                xtx += w * np.outer(x, x)
+                xtx += w * outer(x, x)
                 xty += w * x * p[i, ax]
             if abs(np.linalg.det(xtx)) < 1e-300:
                 continue

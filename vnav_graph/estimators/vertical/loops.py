@@ -56,6 +56,7 @@ from numba import njit
 from scipy.linalg import expm, solve_discrete_are
 
 from ...geo.earth import gravity, radii
+from ...nav.arrays import put
 from ...nav.gaps import imu_gaps
 from ...types import Drive, Estimate, FloatArray, Trajectory
 from .inputs import AhrsConfig, vertical_inputs
@@ -130,7 +131,7 @@ def loop_kernel(t, a_up, z_baro, ws2, gains, x0, scale):
     n = a_up.size
     x = np.empty((n, n_s))
     err = np.empty(n)
-    x[0] = x0
+    put(x[0], x0)
     dt_prev = -1.0
     phi = np.eye(n_s)
     gam = np.zeros(n_s)

@@ -68,6 +68,7 @@ from numba import njit
 from numpy.typing import NDArray
 
 from ...geo.earth import gravity_scalar, radii, radii_scalar
+from ...nav.arrays import outer, put
 from ...nav.gaps import GAP_ACCEL_SD, cv_bridge_noise, gap_threshold
 from ...nav.gnss_gate import NO_LIMIT, REFUSE, height_gate, new_gate_state
 from ...sensors.baro import baro_jacobian, measure_baro
@@ -211,7 +212,7 @@ def _propagate(k0, k1, t, f_down, g_lat, c33, f_z, cor, rho2, phi_b, q_b, phi_ab
             f[IB, IB] = phi_ab[k]
             f[IBB, IBB] = phi_b[k]
             f[II, IBB] = dt
-            p[:, :] = f @ p @ f.T
+            put(p[:, :], f @ p @ f.T)
             q_hh, q_hv, q_vv = cv_bridge_noise(gap_q, dt)
             p[IH, IH] += q_hh
             p[IH, IV] += q_hv
@@ -244,7 +245,7 @@ def _propagate(k0, k1, t, f_down, g_lat, c33, f_z, cor, rho2, phi_b, q_b, phi_ab
         f[IB, IB] = phi_ab[k]
         f[IBB, IBB] = phi_b[k]
         f[II, IBB] = dt
-        p[:, :] = f @ p @ f.T
+        put(p[:, :], f @ p @ f.T)
         p[IV, IV] += q_acc[k] * dt
         p[IB, IB] += q_ab[k]
         p[IBB, IBB] += q_b[k]
@@ -259,8 +260,8 @@ def _update(nom, p, hrow, r, var_r):
     s = hrow @ ph + var_r
     k = ph / s
     nom += k * r
-    a = np.eye(NX) - np.outer(k, hrow)
-    p[:, :] = a @ p @ a.T + var_r * np.outer(k, k)
+    a = np.eye(NX) - outer(k, hrow)
+    put(p[:, :], a @ p @ a.T + var_r * outer(k, k))
     return r / np.sqrt(s)
 
 

@@ -62,6 +62,7 @@ import numpy as np
 from numba import njit
 
 from ...geo.earth import gravity_scalar
+from ...nav.arrays import outer, put
 from ...nav.gaps import GAP_ACCEL_SD, cv_bridge_noise, gap_threshold
 from ...nav.gnss_gate import NO_LIMIT, REFUSE, height_gate
 from ...sensors.model import sensor_model
@@ -198,8 +199,8 @@ def _run(t, a_in, lat, h_init, v_init, p0, phi3, q3, phi4, q4, a_psd,
                     continue
             kg = ph / s
             x = x + kg * r
-            ikh = np.eye(NX) - np.outer(kg, hrow)
-            p = ikh @ p @ ikh.T + ev_var[j] * np.outer(kg, kg)
+            ikh = np.eye(NX) - outer(kg, hrow)
+            p = ikh @ p @ ikh.T + ev_var[j] * outer(kg, kg)
             nu[j] = r / np.sqrt(s)
             # closed loop: correct the INS and reset its error states
             h -= x[0]
@@ -210,7 +211,7 @@ def _run(t, a_in, lat, h_init, v_init, p0, phi3, q3, phi4, q4, a_psd,
         h_out[k], v_out[k] = h, vd
         if t[k] >= next_cov and nc < ncov:
             t_cov[nc] = t[k]
-            p_cov[nc] = p
+            put(p_cov[nc], p)
             x3_cov[nc] = x[2]
             nc += 1
             next_cov = t[k] + cov_dt
