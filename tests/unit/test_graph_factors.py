@@ -186,3 +186,16 @@ def test_group_information_equals_dense_normal_equations():
         np.testing.assert_allclose(lam[gi], rows.jac[m].T @ rows.jac[m], atol=1e-12)
         np.testing.assert_allclose(eta[gi], -rows.jac[m].T @ rows.r[m], atol=1e-12)
     assert cost == pytest.approx(0.5 * np.sum(rows.r**2), rel=1e-14)
+
+
+def test_nearest_fix_gap_equals_the_brute_force_distance():
+    """The initialiser's distance from each keyframe to the nearest GNSS fix (searchsorted,
+    no (keyframes × fixes) matrix) equals the brute-force minimum, unsorted fixes included."""
+    from vnav_graph.estimators.graph.init import _nearest_gap
+
+    rng = np.random.default_rng(3)
+    for _ in range(100):
+        fixes = rng.uniform(0.0, 100.0, rng.integers(1, 60))
+        q = rng.uniform(-10.0, 110.0, rng.integers(1, 90))
+        brute = np.min(np.abs(fixes[None, :] - q[:, None]), axis=1)
+        np.testing.assert_array_equal(_nearest_gap(fixes, q), brute)

@@ -38,8 +38,7 @@ def initial_states(P: Problem) -> tuple[FloatArray, FloatArray, FloatArray]:
     u = P.g_use
     gt, pos = P.g_t[u], P.g_pos[u]
     vel = None if P.g_vel is None else P.g_vel[u]
-    near = np.min(np.abs(gt[None, :] - P.t_kf[:, None]), axis=1) if nk * gt.size < 5e7 else \
-        np.abs(gt[np.clip(np.searchsorted(gt, P.t_kf), 0, gt.size - 1)] - P.t_kf)
+    near = _nearest_gap(gt, P.t_kf)
     rate = 1.0 / max(float(np.median(np.diff(gt))), 1e-3) if gt.size > 1 else 1.0
     has = near <= max(0.6 / rate, 0.02)
     pos_kf = np.column_stack([np.interp(P.t_kf, gt, pos[:, i]) for i in range(3)])
@@ -121,6 +120,18 @@ def initial_states(P: Problem) -> tuple[FloatArray, FloatArray, FloatArray]:
             p1, v1 = pos_kf[k + 1], vel_kf[k + 1]
         rot[k + 1], p_out[k + 1], v_out[k + 1] = r1, p1, v1
     return rot, p_out, v_out
+
+
+def _nearest_gap(t_ref: FloatArray, t_q: FloatArray) -> FloatArray:
+    """|t_q − nearest t_ref| for every t_q, in O((n + m) log n) memory-light steps (the
+    (m, n) difference matrix it replaces took 520 MB transient on a 30-min drive)."""
+    if t_ref.size == 0:
+        return np.full(t_q.shape, np.inf)
+    ts = np.sort(t_ref)
+    j = np.searchsorted(ts, t_q)
+    lo = ts[np.clip(j - 1, 0, ts.size - 1)]
+    hi = ts[np.clip(j, 0, ts.size - 1)]
+    return np.minimum(np.abs(t_q - lo), np.abs(hi - t_q))
 
 
 def _unit(x: FloatArray) -> FloatArray:
