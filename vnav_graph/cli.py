@@ -12,6 +12,7 @@ import functools
 import importlib
 import os
 import sys
+import time
 import traceback
 from collections.abc import Sequence
 from pathlib import Path
@@ -150,6 +151,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     from .progress import mode_for, stage
     from .simulation import simulate
 
+    t_start = time.perf_counter()
     names = resolve_estimators(args.estimators)  # validate before any work
     out = check_out_dir(args.out)
     mode = mode_for(not args.no_progress)
@@ -195,7 +197,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     with stage(f"writing results, plots and report to {out}", mode):
         write_outputs(out, summary, results, drive, writers)
     print(format_table(summary))
-    print(f"\nwrote {out / 'summary.json'}")
+    # the wall time of the whole command (a first run's compile included): what a user waited
+    print(f"\nwrote {out / 'summary.json'} (run took {time.perf_counter() - t_start:.1f} s)")
     from .pipeline import run_status
 
     code, line = run_status(summary)

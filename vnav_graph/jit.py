@@ -106,10 +106,11 @@ class CompileTimer:
 
 
 # --- compiling in a second process -------------------------------------------------------------
-# The first run on a machine compiles every kernel (about 85 s of CPU for all estimators on
-# this 2-core machine: ~45 s the vertical filters and their AHRS, ~50 s the EKF and its RTS
-# when compiled alone, ~6 s the graph). Compilation holds the GIL and numba's compiler lock,
-# so threads do not help; a second process does. ``Prewarm`` starts
+# The first run on a machine compiles every kernel: 76 s of CPU for all estimators on this
+# 2-core machine, measured side by side with the code before nav.arrays (97 s): ~28 s the
+# vertical filters and their AHRS (was 44), ~41 s the EKF and its RTS (was 46), ~5 s the
+# graph. Compilation holds the GIL and numba's compiler lock, so threads do not help; a
+# second process does. ``Prewarm`` starts
 # ``python -m vnav_graph.jit KEY FAMILY ...``, which runs the family's estimators on a short
 # simulated drive (compiling their kernels into the shared on-disk cache) and leaves a stamp
 # per family. The main process runs the first family meanwhile; before an estimator of the
