@@ -188,6 +188,23 @@ def test_group_information_equals_dense_normal_equations():
     assert cost == pytest.approx(0.5 * np.sum(rows.r**2), rel=1e-14)
 
 
+
+def test_group_information_in_chunks_equals_one_block(monkeypatch):
+    """Chunked padding gives the same Λ, η (to rounding: the zero padding changes BLAS's
+    summation blocking), for sorted and unsorted rows."""
+    rng = np.random.default_rng(9)
+    k = np.sort(rng.integers(0, 23, 300))
+    for kk in (k, rng.permutation(k)):
+        rows = gf.IntervalRows(kk, rng.normal(size=300), rng.normal(size=(300, gf.N_COLS)))
+        monkeypatch.setattr(gf, "GROUP_CHUNK", 10**6)
+        one = gf.group_information(rows, 23)
+        monkeypatch.setattr(gf, "GROUP_CHUNK", 4)
+        chunked = gf.group_information(rows, 23)
+        np.testing.assert_array_equal(one[0], chunked[0])
+        for a, b in zip(one[1:3], chunked[1:3], strict=True):
+            np.testing.assert_allclose(a, b, rtol=1e-13, atol=1e-13)
+        assert one[3] == chunked[3]
+
 def test_nearest_fix_gap_equals_the_brute_force_distance():
     """The initialiser's distance from each keyframe to the nearest GNSS fix (searchsorted,
     no (keyframes × fixes) matrix) equals the brute-force minimum, unsorted fixes included."""
