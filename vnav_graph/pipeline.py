@@ -23,7 +23,7 @@ from typing import Any
 from .estimators.base import available, create
 from .evaluation.metrics import evaluate
 from .io.jsonout import dumps_strict
-from .jit import CompileTimer, Prewarm, mark_warm
+from .jit import CompileTimer, Prewarm, family_of, mark_warm
 from .progress import Mode, mode_for, say, steps
 from .types import Drive, Estimate
 
@@ -132,16 +132,26 @@ def run_estimators(drive: Drive, names: Sequence[str], progress: bool | Mode = T
     if pre is not None:
         say(f"first run on this machine: compiling kernels (cached for later runs; "
             f"{', '.join(pre.families)} in a second process)", mode)
-    results = []
+    order = list(range(len(names)))
+    if pre is not None:
+        # the child's families last: this process compiles and runs everything else first
+        # instead of waiting for the child half-way (jit.py: the first run of the default
+        # drive); the results keep the requested order
+        order = ([i for i, n in enumerate(names) if family_of(n) not in pre.families]
+                 + [i for i, n in enumerate(names) if family_of(n) in pre.families])
+        pre.local = []  # those families are compiled here before the first wait anyway
+    results: dict[int, RunResult] = {}
     try:
-        for name in steps(names, desc, mode):
+        for i in steps(order, desc, mode, label=lambda i: names[i]):
+            name = names[i]
             waited = pre.wait(name) if pre is not None else 0.0
-            results.append(run_one(name, drive, configs.get(name), waited))
+            results[i] = run_one(name, drive, configs.get(name), waited)
     finally:
         if pre is not None:
             pre.close()
-    mark_warm([r.name for r in results if r.estimate is not None])
-    return results
+    out = [results[i] for i in sorted(results)]
+    mark_warm([r.name for r in out if r.estimate is not None])
+    return out
 
 
 def run_captured(name: str, drive: Drive, config: Any = None) -> Estimate:
