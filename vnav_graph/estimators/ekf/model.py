@@ -275,7 +275,10 @@ def vector_update(p, dx, hm, y, rdiag, gate, force):
     s = hm @ p @ hm.T
     for i in range(m):
         s[i, i] += rdiag[i]
-    nis = nu @ solve(s, nu.reshape((m, 1)))[:, 0]  # one specialisation of solve (2-D)
+    x = solve(s, nu.reshape((m, 1)))  # 2-D: the specialisation the RTS smoother compiles
+    nis = 0.0
+    for i in range(m):
+        nis += nu[i] * x[i, 0]
     norm = np.empty(m)
     for i in range(m):
         norm[i] = -nu[i] / np.sqrt(s[i, i])  # sign of z − h(x̃)
