@@ -76,9 +76,8 @@ class GraphConfig:
     linear factors and are never relinearised; relinearize_skip: iSAM2 relinearizeSkip;
     partial_relinearization_check: iSAM2 option of that name; wildfire_threshold: iSAM2
     back-substitution threshold (None: GTSAM's 1e-3); see ``docs/graph.md`` for the measured
-    per-update latencies; final_batch: graph-isam2 also runs the batch solver after its
-    incremental pass, as a separate labelled output (``info["final_batch"]``; what it returns
-    is iSAM2's own smoothed estimate).
+    per-update latencies; final_batch: run the batch solver after the incremental pass to
+    produce the smoothed trajectory.
     solver: linear algebra of the batch solve — "auto" (the banded-arrow fast path when every
     factor couples keyframes at most one apart and the added variables are few, else GTSAM's
     sparse elimination), "banded" (error when the graph does not fit) or "general" (GTSAM
