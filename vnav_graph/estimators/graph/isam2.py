@@ -394,30 +394,27 @@ class GraphISAM2:
             t_pre = time.perf_counter()
             nf = gtsam.NonlinearFactorGraph()
             nv = gtsam.Values()
-            if gap[k]:
-                x1, v1, pred_f = gap_factors(P, k, rot, pos, vel)
-            else:
-                nav = pim.predict(gtsam.NavState(gtsam.Rot3(rot[k]), pos[k], vel[k]), b_k)
-                x1, v1 = nav.pose(), nav.velocity()
-                pred_f = [gtsam.CombinedImuFactor(X(k), V(k), X(k + 1), V(k + 1), B(k),
-                                                  B(k + 1), pim)]
-            rot[k + 1], pos[k + 1], vel[k + 1] = x1.rotation().matrix(), x1.translation(), v1
-            bias[k + 1], cb[k + 1] = bias[k], cb[k]
             # interval terms first (their new factor indices come first): the relinearised
-            # ones; interval k-1 with its baro samples (complete now: every delayed sample
-            # has arrived); interval k with its GNSS fixes only (all arrived by t_k+1)
+            # ones, then interval k-1, complete now (every delayed baro sample has arrived)
             ks = list(terms.pending)
             if k >= 1:
                 terms.assign_baro(k - 1, float(cal_seg[seg[k - 1], 1]), last=False)
                 ks.append(k - 1)
-            completed = int(k >= 1 and terms.index[k - 1] >= 0)
-            made, removed = swap_in(nf, ks + [k])
+            made, removed = swap_in(nf, ks)
             n_swap = len(removed)
-            terms.relinearized += n_swap - completed
-            nv.insert(X(k + 1), x1)
-            nv.insert(V(k + 1), v1)
-            for f in pred_f:
-                nf.add(f)
+            terms.relinearized += n_swap
+            if gap[k]:
+                x1, v1, gap_f = gap_factors(P, k, rot, pos, vel)
+                nv.insert(X(k + 1), x1)
+                nv.insert(V(k + 1), v1)
+                for f in gap_f:
+                    nf.add(f)
+            else:
+                nav = pim.predict(gtsam.NavState(gtsam.Rot3(rot[k]), pos[k], vel[k]), b_k)
+                nv.insert(X(k + 1), nav.pose())
+                nv.insert(V(k + 1), nav.velocity())
+                nf.add(gtsam.CombinedImuFactor(X(k), V(k), X(k + 1), V(k + 1), B(k), B(k + 1),
+                                               pim))
             nv.insert(B(k + 1), b_k)
             for f in keyframe_fix_factors(P, k + 1):
                 nf.add(f)
@@ -463,7 +460,7 @@ class GraphISAM2:
             upd_ms[k] = 1e3 * (t_end - tu)
             brk[k] = (1e3 * (t_pre - tu), 1e3 * (t_lcf - t_pre), 1e3 * (t_upd - t_lcf),
                       1e3 * (t_end - t_upd), ures.getVariablesRelinearized(),
-                      ures.getVariablesReeliminated(), n_swap - completed)
+                      ures.getVariablesReeliminated(), n_swap)
         def settle(ks: list[int], rounds: int, extra: Any = (), remove: Any = ()) -> None:
             """iSAM2 updates with forced relinearisation, the due interval terms swapped
             in, until nothing is beyond the thresholds (at most ``rounds``)."""
@@ -498,7 +495,6 @@ class GraphISAM2:
         if nk >= 2:
             terms.assign_baro(nk - 2, float(cal_seg[seg[nk - 2], 1]), last=True)
             ks.append(nk - 2)
-            terms.relinearized -= int(terms.index[nk - 2] >= 0)  # completed, not relinearised
         tie = [gtsam.BetweenFactorVector(K(j - 1), K(j), np.zeros(2), noise(TIE_SD))
                for j in range(1, n_seg)] if has_baro else []
         settle(ks, 1 if has_baro else SETTLE_ROUNDS, tie, rw_idx)

@@ -103,7 +103,7 @@ class GraphConfig:
     segment_s: float = 60.0
     calib_rw: tuple[float, float] = (2e-5, 2e-4)
     relinearize_threshold: float = 0.05
-    relinearize_skip: int = 1
+    relinearize_skip: int = 10
     partial_relinearization_check: bool = False
     relinearize_typed: tuple[float, float, float, float, float] | None = (
         0.02, 1.0, 0.5, 0.1, 0.005)
