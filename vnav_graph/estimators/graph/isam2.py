@@ -470,10 +470,8 @@ class GraphISAM2:
                 terms.relinearized += len(removed)
                 for f in extra if r == 0 else ():
                     nf.add(f)
-                # an empty constraint map: plain COLAMD for the re-elimination (iSAM2's
-                # default puts every key of the new factors last — here nearly all keys)
                 ures = isam.update(nf, gtsam.Values(), removed + list(remove if r == 0 else ()),
-                                   gtsam.KeyGroupMap(), force_relinearize=True)
+                                   force_relinearize=True)
                 new_idx = list(ures.getNewFactorsIndices())
                 for i, kk in enumerate(made):
                     terms.index[kk] = new_idx[i]
