@@ -28,20 +28,14 @@ clique and are always exact), and old variables are relinearised by the final ba
 anyway. Measurements in ``docs/graph.md``.
 
 User extensions (``extend``): each factor enters the update that creates the last keyframe it
-touches, each new variable (with its prior) the first update that uses it.
-``info["extra_variables_online"]``: iSAM2's estimate and marginal σ of the new variables
-after the last update; ``info["extra_variables"]``: at the smoothed estimate.
+touches, each new variable (with its prior) the first update that uses it; the final pass has
+them all. ``info["extra_variables_online"]``: iSAM2's estimate and marginal σ of the new
+variables after the last update; ``info["extra_variables"]``: the final pass's.
 
 Outputs: ``Estimate.online`` holds what was known at each keyframe (the iSAM2 estimate of the
-newest keyframe right after its update). ``Estimate.trajectory``, ``cov`` and ``baro`` are
-iSAM2's own smoothed estimate (``calculateBestEstimate``) after the final rounds: the
-segments' K are tied into one (s, τd) — the batch's model — every interval term is
-relinearised with the batch's sample partition, and forced-relinearisation updates run until
-nothing is beyond the thresholds (``info["isam2_final_rounds"]``). Its covariances are those
-of the problem linearised at that estimate (banded selected inversion, as for graph-batch):
-iSAM2's ``marginalCovariance`` was too slow for them (docs/graph.md). With
-``GraphConfig.final_batch`` the batch Gauss-Newton of ``solve`` started from that estimate
-runs as well; its result is only ``info["final_batch"]`` (a separate, labelled output).
+newest keyframe right after its update); ``Estimate.trajectory`` is the final smoothed
+solution — the batch Gauss-Newton of ``solve`` (global s, τd, all terms relinearised)
+started from the iSAM2 estimate, so it equals ``graph-batch`` to solver tolerance.
 """
 
 from __future__ import annotations
@@ -79,8 +73,8 @@ from .problem import (
     prior_factors,
     setup,
 )
-from .relin import IntervalTerms, read_states
-from .solve import gauss_newton, linearised_at
+from .relin import IntervalTerms
+from .solve import gauss_newton
 
 # averaged low-rate IMU logs (median spacing ≥ LOW_RATE_DT, e.g. the 1 Hz phone logs): a
 # keyframe every sample made a 93-min log take 5563 updates (213 s online), and after its 37 s
@@ -95,9 +89,7 @@ ROBUST_SETTINGS = {"relinearize_skip": 1, "relinearize_typed": None,
 DIVERGED_SPEED = 1e4
 # after the last keyframe: at most this many iSAM2 updates that relinearise every variable
 # and interval term beyond the thresholds (stops earlier when nothing is left to relinearise)
-SETTLE_ROUNDS = 5
-# σ of (s, τd [s]) differences that tie the segments' K into one at the end
-TIE_SD = (1e-8, 1e-7)  # m/s: an online velocity above this means the solution diverged
+SETTLE_ROUNDS = 5  # m/s: an online velocity above this means the solution diverged
 
 
 def update_error(P: Any, k: int, exc: BaseException | None, gap: bool) -> RuntimeError:
@@ -170,12 +162,13 @@ def _threshold_map(cfg: GraphConfig, ext: Collected | None = None) -> Any:
     return m
 
 
-def _info(P: Any, cfg: GraphConfig, out: dict[str, Any], upd_ms: Any, brk: Any,
+def _info(P: Any, cfg: GraphConfig, res: Any, out: dict[str, Any], upd_ms: Any, brk: Any,
           robust: bool, fallback: str | None, times: dict[str, float],
-          terms: IntervalTerms, n_seg: int) -> dict[str, Any]:
+          isam_k: list[float] | None, n_seg: int, name: str) -> dict[str, Any]:
     """``Estimate.info`` of graph-isam2."""
     return {
-        "keyframes": P.n_kf,
+        "keyframes": P.n_kf, "iterations_final": res.iterations,
+        "converged_final": res.converged, "stop_final": res.stop,
         "gnss_rejected": P.gnss_rejected, "gnss_rejected_pregate": P.g_rej_pre,
         "gnss_rejected_postsolve": P.g_rej_post,
         "observability": out["observability"],
@@ -184,13 +177,12 @@ def _info(P: Any, cfg: GraphConfig, out: dict[str, Any], upd_ms: Any, brk: Any,
         "update_p50_ms": float(np.percentile(upd_ms, 50)) if upd_ms.size else 0.0,
         "update_p99_ms": float(np.percentile(upd_ms, 99)) if upd_ms.size else 0.0,
         **times,
-        "isam2_relinearized": terms.relinearized,
-        "isam2_final_rounds": terms.settle,
-        "isam2_last_segment_calibration": terms.k_last_online,
+        "isam2_last_segment_calibration": isam_k,
         "segments": n_seg,
         "isam2_fallback": fallback,
-        "warnings": [] if fallback is None else [
-            f"iSAM2 update failed and was retried with dogleg ({fallback})"],
+        "warnings": solver_warnings(res, cfg, "final smoothing pass", name)
+        + ([] if fallback is None else [
+            f"iSAM2 update failed and was retried with dogleg ({fallback})"]),
         "isam2_settings": {"keyframe_dt": cfg.keyframe_dt, "dogleg": robust,
                            "relinearize_skip": cfg.relinearize_skip,
                            "relinearize_typed": cfg.relinearize_typed,
@@ -210,6 +202,22 @@ def _extra_online(isam: Any, est: Any, ext: Collected | None) -> dict[str, dict[
                               "sd": np.sqrt(np.clip(np.diag(cov), 0, None)).tolist(),
                               "cov": cov.tolist()}
     return out
+
+
+def _read_all(est: Any, rot: Any, pos: Any, vel: Any, bias: Any, cb: Any, cal_seg: Any,
+              has_baro: bool) -> None:
+    """Every keyframe state and segment calibration of ``est`` into the running arrays."""
+    for k in range(rot.shape[0]):
+        pose = est.atPose3(X(k))
+        rot[k] = pose.rotation().matrix()
+        pos[k] = pose.translation()
+        vel[k] = est.atVector(V(k))
+        bias[k] = est.atConstantBias(B(k)).vector()
+        if has_baro:
+            cb[k] = est.atVector(C(k))[0]
+    if has_baro:
+        for j in range(cal_seg.shape[0]):
+            cal_seg[j] = est.atVector(K(j))
 
 
 def _first_keyframe(P: Any, r0: Any, p0: Any, v0: Any, k0: Any) -> tuple[Any, Any]:
@@ -335,8 +343,6 @@ class GraphISAM2:
         calib_rw = np.asarray(cfg.calib_rw, float)
         n_seg = int(seg[-1]) + 1
         cal_seg = np.tile(cal[0], (n_seg, 1))
-        rw_idx: list[int] = []  # factor indices of the K(j-1) -> K(j) random walks
-        rw_pos = -1
 
         def refresh(keys_k: Any) -> None:
             est = isam.calculateEstimate(
@@ -358,9 +364,6 @@ class GraphISAM2:
             for kk, f in zip(ks, terms.factors(ks, rot, pos, vel, bias, cb,
                                                lambda j: cal_seg[j]), strict=True):
                 if f is None:
-                    if terms.index[kk] >= 0:  # no terms left (samples reassigned)
-                        removed.append(int(terms.index[kk]))
-                        terms.index[kk] = -1
                     continue
                 nf.add(f)
                 made.append(kk)
@@ -427,7 +430,6 @@ class GraphISAM2:
                     cal_seg[j] = cal_seg[j - 1]
                     nv.insert(K(j), cal_seg[j].copy())
                     span = _segment_span(P, seg, j)
-                    rw_pos = nf.size()
                     nf.add(gtsam.BetweenFactorVector(K(j - 1), K(j), np.zeros(2),
                                                      noise(calib_rw * np.sqrt(span))))
             if ext is not None:
@@ -445,9 +447,6 @@ class GraphISAM2:
                     for key in nf.at(i).keys():
                         last.insert2(key, 1)
                 ures = isam.update(nf, nv, removed, last)
-                if rw_pos >= 0:
-                    rw_idx.append(int(ures.getNewFactorsIndices()[rw_pos]))
-                    rw_pos = -1
                 t_upd = time.perf_counter()
                 after_update(ures, made, k, k + 1)
             except RuntimeError as exc:
@@ -461,44 +460,27 @@ class GraphISAM2:
             brk[k] = (1e3 * (t_pre - tu), 1e3 * (t_lcf - t_pre), 1e3 * (t_upd - t_lcf),
                       1e3 * (t_end - t_upd), ures.getVariablesRelinearized(),
                       ures.getVariablesReeliminated(), n_swap)
-        def settle(ks: list[int], rounds: int, extra: Any = (), remove: Any = ()) -> None:
-            """iSAM2 updates with forced relinearisation, the due interval terms swapped
-            in, until nothing is beyond the thresholds (at most ``rounds``)."""
-            for r in range(rounds):
-                nf = gtsam.NonlinearFactorGraph()
-                made, removed = swap_in(nf, ks)
-                terms.relinearized += len(removed)
-                for f in extra if r == 0 else ():
-                    nf.add(f)
-                ures = isam.update(nf, gtsam.Values(), removed + list(remove if r == 0 else ()),
-                                   force_relinearize=True)
-                new_idx = list(ures.getNewFactorsIndices())
-                for i, kk in enumerate(made):
-                    terms.index[kk] = new_idx[i]
-                read_states(isam.calculateBestEstimate(), rot, pos, vel, bias, cb, cal_seg,
-                          has_baro)
-                ks = [int(i) for i in terms.due(np.arange(nk - 1), rot, pos, bias, cal_seg)]
-                terms.settle.append((len(made), ures.getVariablesRelinearized()))
-                if not ks and ures.getVariablesRelinearized() == 0:
-                    break
-
-        terms.t_loop = time.perf_counter()
-        terms.k_last_online = cal_seg[-1].tolist() if has_baro else None
-        terms.extra_online = _extra_online(isam, isam.calculateEstimate(), ext)
-        # after the last keyframe: its interval's terms; the segments' K tied into one (s,
-        # τd), the batch's model (the random walks are removed); then every interval term
-        # relinearised with the batch's sample partition at the final τd, and rounds until
-        # nothing is beyond the thresholds
+        # the last interval's terms, then relinearisation rounds until nothing is due
         ks = list(terms.pending)
         if nk >= 2:
             terms.assign_baro(nk - 2, float(cal_seg[seg[nk - 2], 1]), last=True)
             ks.append(nk - 2)
-        tie = [gtsam.BetweenFactorVector(K(j - 1), K(j), np.zeros(2), noise(TIE_SD))
-               for j in range(1, n_seg)] if has_baro else []
-        settle(ks, 1 if has_baro else SETTLE_ROUNDS, tie, rw_idx)
-        if has_baro and nk >= 2:
-            terms.reassign_all(cal_seg)
-            settle(list(range(nk - 1)), SETTLE_ROUNDS)
+        settle = []
+        for _ in range(SETTLE_ROUNDS):
+            nf = gtsam.NonlinearFactorGraph()
+            made, removed = swap_in(nf, ks)
+            terms.relinearized += len(removed)
+            ures = isam.update(nf, gtsam.Values(), removed, force_relinearize=True)
+            new_idx = list(ures.getNewFactorsIndices())
+            for i, kk in enumerate(made):
+                terms.index[kk] = new_idx[i]
+            est = isam.calculateBestEstimate()
+            _read_all(est, rot, pos, vel, bias, cb, cal_seg, has_baro)
+            ks = [int(i) for i in terms.due(np.arange(nk - 1), rot, pos, bias, cal_seg)]
+            settle.append((len(removed), ures.getVariablesRelinearized()))
+            if not ks and ures.getVariablesRelinearized() == 0:
+                break
+        terms.settle = settle
         return self._finish(drive, P, cfg, isam, online, ext, robust, fallback, t_start,
                             (rot_i, pos_i, vel_i), pims, seg, upd_ms, brk, terms)
 
@@ -506,49 +488,23 @@ class GraphISAM2:
                 ext: Any, robust: bool, fallback: str | None, t_start: float,
                 init: tuple[Any, Any, Any], pims: list[Any], seg: Any, upd_ms: Any,
                 brk: Any, terms: IntervalTerms) -> Estimate:
-        """After the online pass and the final rounds: the Estimate from iSAM2's own
-        smoothed estimate and marginals; the batch pass, when ``cfg.final_batch``, only into
-        ``info["final_batch"]``."""
-        t_final = time.perf_counter()
-        est = isam.calculateBestEstimate()
-        # outputs at iSAM2's estimate (states, K of the last segment — the segments are tied
-        # into one K by now); covariances of the problem linearised there, by the banded
-        # selected inversion: ISAM2.marginalCovariance took 1.8-2.8 s per key and a 5-key
-        # jointMarginalCovariance 140-320 s (4.4 GB) on a 300 s drive (docs/graph.md)
-        vals, graph = self._batch_from(P, est, pims, P.pri, seg)
-        if ext is not None:
-            ext.add_to_batch(graph, vals, values_from=est)
-        res = linearised_at(P, graph, vals, np.zeros(P.n_kf, dtype=int), P.pri)
-        out = outputs(P, res, P.pri, K(0) if drive.baro is not None else None)
-        t_out = time.perf_counter()
-        info = _info(P, cfg, out, upd_ms, brk, robust, fallback,
-                     {"online_s": terms.t_loop - t_start, "final_rounds_s": t_final - terms.t_loop,
-                      "outputs_s": t_out - t_final}, terms, int(seg[-1]) + 1)
-        info["baro_bias_lag_s"] = res.bias_lag
-        info["extra_variables"] = out["extra"]
-        info["extra_variables_online"] = terms.extra_online
-        if cfg.final_batch:
-            info["final_batch"] = self._final_batch(P, est, ext, robust, init, pims, seg)
-        return Estimate(self.name, out["trajectory"], provides(drive), out["cov"],
-                        out["t_cov"], out["baro"], time.perf_counter() - t_start,
-                        online=self._online_trajectory(P, online), info=info,
-                        config=self.config)
-
-    def _final_batch(self, P: Any, est: Any, ext: Any, robust: bool, init: tuple[Any, Any, Any],
-                     pims: list[Any], seg: Any) -> dict[str, Any]:
-        """A separate, labelled output (not what graph-isam2 returns): the batch Gauss-Newton
-        of ``solve`` (global s, τd) started from the iSAM2 estimate — it equals graph-batch
-        to solver tolerance — with its own outputs and solver report."""
-        t0 = time.perf_counter()
+        """After the online pass: read the online estimate, run the final smoothing pass
+        (batch Gauss-Newton with one global (s, τd)) and assemble the Estimate."""
         pri = P.pri
+        has_baro = drive.baro is not None
         rot_i, pos_i, vel_i = init
         calib0 = np.zeros(P.n_kf, dtype=int)
+        t_online = time.perf_counter()
+        est = isam.calculateEstimate()
+        online_traj = self._online_trajectory(P, online)
+        extra_online = _extra_online(isam, est, ext)
+        # final smoothing pass: batch Gauss-Newton with one global (s, τd)
         if robust:
             # the online pass needed the retry: its estimate is a poor starting point (ski
             # holdout: 22 m withheld-height RMSE after 12 iterations), so the final pass
             # starts where graph-batch starts and therefore equals it
             graph, res_vals = build_batch_graph(P, rot_i, pos_i, vel_i,
-                                                pims_for(P, rot_i, pos_i), pri, calib0)
+                                                   pims_for(P, rot_i, pos_i), pri, calib0)
             if ext is not None:
                 ext.add_to_batch(graph, res_vals)
         else:
@@ -558,7 +514,7 @@ class GraphISAM2:
         res = gauss_newton(P, graph, res_vals, calib0, pri)
         restarted = False
         if not robust and not res.converged:
-            # the iSAM2 estimate can sit outside Gauss-Newton's basin after a long outage
+            # the online estimate can sit outside Gauss-Newton's basin after a long outage
             # with a MEMS IMU (long-outage seed 1: 100 iterations, 466 m horizontal RMSE, 202
             # fixes gated out): solve again from graph-batch's starting point and keep that
             # solution when it converges or ends at a lower cost
@@ -570,13 +526,24 @@ class GraphISAM2:
             restarted = True
             if res2.converged or res2.cost < res.cost:
                 res = res2
-        out = outputs(P, res, pri, K(0) if P.drive.baro is not None else None)
-        return {"trajectory": out["trajectory"], "cov": out["cov"], "t_cov": out["t_cov"],
-                "baro": out["baro"], "observability": out["observability"],
-                "extra_variables": out["extra"], "iterations": res.iterations,
-                "converged": res.converged, "stop": res.stop, "solver": res.solver,
-                "restarted": restarted, "time_s": time.perf_counter() - t0,
-                "warnings": solver_warnings(res, P.cfg, "final batch pass", self.name)}
+        t_final = time.perf_counter()
+        out = outputs(P, res, pri, K(0) if has_baro else None)
+        isam_k = None
+        if has_baro:
+            j_last = int(seg[-1])
+            isam_k = est.atVector(K(j_last)).tolist()
+        info = _info(P, cfg, res, out, upd_ms, brk, robust, fallback,
+                     {"online_s": t_online - t_start, "final_smoothing_s": t_final - t_online},
+                     isam_k, int(seg[-1]) + 1, self.name)
+        info["solver_final"] = res.solver
+        info["final_pass_restarted"] = restarted
+        info["isam2_relinearized"] = terms.relinearized
+        info["isam2_settle_rounds"] = terms.settle
+        info["extra_variables"] = out["extra"]
+        info["extra_variables_online"] = extra_online
+        return Estimate(self.name, out["trajectory"], provides(drive), out["cov"],
+                        out["t_cov"], out["baro"], time.perf_counter() - t_start,
+                        online=online_traj, info=info, config=self.config)
 
     @staticmethod
     def _online_trajectory(P: Any, online: Any) -> Trajectory:

@@ -33,7 +33,7 @@ from typing import Any
 
 import gtsam
 import numpy as np
-from gtsam.symbol_shorthand import B, C, K, V, X
+from gtsam.symbol_shorthand import B, C, K, X
 
 from . import factors as gf
 from .problem import gravity_delta
@@ -130,12 +130,6 @@ class IntervalTerms:
             self.thr = (rot, trans, ba)
         self.relinearized = 0  # swaps done
         self.pending: list[int] = []
-        self.settle: list[tuple[int, int]] = []  # final rounds: (terms built, iSAM2 relin.)
-        # filled by the caller at the end of the online pass: its end time, the last
-        # segment's K then, the extensions' variables then
-        self.t_loop = 0.0
-        self.k_last_online: list[float] | None = None
-        self.extra_online: dict[str, Any] = {}
 
     # -- building ------------------------------------------------------------------------
 
@@ -150,18 +144,6 @@ class IntervalTerms:
         sel = np.arange(self.baro_next, stop)
         self.baro_of[k] = sel[(self.bt[sel] - tau >= P.t_kf[0] - 1.0)]
         self.baro_next = max(stop, self.baro_next)
-
-    def reassign_all(self, cal_seg: np.ndarray) -> None:
-        """The batch's partition of the baro samples (``problem.interval_rows``): samples
-        with t_s inside the keyframe span, each in the interval of its delayed time t_s − τd
-        (τd of its segment now)."""
-        P, bt = self.P, self.bt
-        m = np.flatnonzero((bt >= P.t_kf[0]) & (bt <= P.t_kf[-1]))
-        tau = cal_seg[self.seg[gf.interval_of(P.t_kf, bt[m])], 1]
-        k = gf.interval_of(P.t_kf, np.clip(bt[m] - tau, P.t_kf[0], P.t_kf[-1]))
-        order = np.argsort(k, kind="stable")
-        bounds = np.searchsorted(k[order], np.arange(len(self.baro_of) + 1))
-        self.baro_of = [m[order[bounds[i]:bounds[i + 1]]] for i in range(len(self.baro_of))]
 
     def factors(self, ks: list[int], rot: Any, pos: Any, vel: Any, bias: Any, cb: Any,
                 cal_of: Any) -> list[Any]:
@@ -290,19 +272,3 @@ class IntervalTerms:
         """Intervals (of the first ``n_made``) touching a marked keyframe."""
         ks = np.unique(np.r_[marked, marked - 1])
         return ks[(ks >= 0) & (ks < n_made)]
-
-
-def read_states(est: Any, rot: Any, pos: Any, vel: Any, bias: Any, cb: Any, cal_seg: Any,
-              has_baro: bool) -> None:
-    """Every keyframe state and segment calibration of ``est`` into the running arrays."""
-    for k in range(rot.shape[0]):
-        pose = est.atPose3(X(k))
-        rot[k] = pose.rotation().matrix()
-        pos[k] = pose.translation()
-        vel[k] = est.atVector(V(k))
-        bias[k] = est.atConstantBias(B(k)).vector()
-        if has_baro:
-            cb[k] = est.atVector(C(k))[0]
-    if has_baro:
-        for j in range(cal_seg.shape[0]):
-            cal_seg[j] = est.atVector(K(j))

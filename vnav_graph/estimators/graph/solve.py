@@ -201,15 +201,3 @@ def gauss_newton(P: Problem, graph: Any, vals: Any, calib_of_kf: np.ndarray,
 
 
 
-
-
-def linearised_at(P: Problem, graph: Any, vals: Any, calib_of_kf: np.ndarray,
-                  pri: dict[str, float]) -> BatchResult:
-    """A BatchResult at ``vals`` without iterating (``batch.outputs`` then gives the
-    covariances of the problem linearised there; used for graph-isam2's own estimate)."""
-    lay = batch_layout(P, graph, vals)
-    st = states_from_values(P, vals, calib_of_kf)
-    lag = float(np.median(st.latency))
-    rows = interval_rows(P, st, pri, lag)
-    return BatchResult(vals, graph, graph.error(vals) + rows.cost, 0, calib_of_kf, lay, rows,
-                       None, lag, "converged")
