@@ -5,7 +5,7 @@
 Writes ``DIR/graph_perf.json`` with exactly the keys
 ``drive_duration_s, keyframes, batch_s, builtin_floor_s, batch_over_floor, isam2_s,
 isam2_realtime_factor, isam2_update_p99_ms, ekf_s, ekf_realtime_factor, peak_rss_mb,
-general_over_floor, isam2_relinearized``.
+general_over_floor``.
 
 - ``batch_s``: graph-batch graph construction + Gauss-Newton solve (all baro samples and
   GNSS fixes, custom terms linearised in numpy each iteration). Shared set-up (initial
@@ -21,10 +21,7 @@ general_over_floor, isam2_relinearized``.
   graph, the interval terms as HessianFactor pieces), over ``builtin_floor_s``.
 - ``isam2_s``: the whole ``graph-isam2`` run (online pass + final smoothing + outputs);
   ``isam2_update_p99_ms``: 99th percentile of the per-keyframe online update, including the
-  Python work of that keyframe (preintegration, interval linearisation and relinearisation);
-  ``isam2_relinearized``: how many times an interval term (the baro samples and GNSS fixes
-  of one keyframe interval, a ``LinearContainerFactor``) was relinearised and swapped into
-  iSAM2 (``graph.relin``), online and in the final rounds.
+  Python work of that keyframe (preintegration, interval linearisation).
 - Both estimators first run once on a 60 s drive (not timed) so that loading numba's cached
   kernels is not counted.
 - ``ekf_*``: from ``benchmarks/bench_ekf.py:bench_ekf(duration_s, imu_rate_hz)`` when that
@@ -46,7 +43,7 @@ import numpy as np
 
 KEYS = ("drive_duration_s", "keyframes", "batch_s", "builtin_floor_s", "batch_over_floor",
         "isam2_s", "isam2_realtime_factor", "isam2_update_p99_ms", "ekf_s",
-        "ekf_realtime_factor", "peak_rss_mb", "general_over_floor", "isam2_relinearized")
+        "ekf_realtime_factor", "peak_rss_mb", "general_over_floor")
 
 
 def builtin_floor(drive: Any) -> float:
@@ -151,7 +148,6 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         "ekf_realtime_factor": ekf_rf,
         "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
         "general_over_floor": general_s / floor_s,
-        "isam2_relinearized": int(ei.info["isam2_relinearized"]),
     }
     assert tuple(out) == KEYS
     a.out.mkdir(parents=True, exist_ok=True)

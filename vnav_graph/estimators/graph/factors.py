@@ -311,13 +311,9 @@ def _pos_jacobian(st: KeyframeStates, k: np.ndarray, ip: dict[str, FloatArray],
 
 def baro_rows(
     dense: DenseIncrements, st: KeyframeStates, t_s: FloatArray, z: FloatArray, sd: float,
-    h0: float, origin_lla: FloatArray, bias_lag: float, interval: np.ndarray | None = None,
+    h0: float, origin_lla: FloatArray, bias_lag: float,
 ) -> IntervalRows:
     """Whitened baro rows for samples at ``t_s`` (M,) with altitudes ``z`` (M,) [m].
-
-    ``interval`` (M,): the interval each sample is kept in (the incremental front end fixes a
-    sample's interval when it first linearises it); its delayed time is then clipped into
-    that interval and the calibration of that interval is used.
 
     The sample is assigned to the interval k containing its delayed time t_d = t_s − τd (τd
     of the linearisation point), where the height h(t_d) is interpolated.
@@ -332,14 +328,10 @@ def baro_rows(
     t_s; the chain estimated with a lag is that b shifted by ``bias_lag`` (< 1 cm for τ_b ≥
     minutes)."""
     t_kf = dense.t_kf
-    k_s = interval_of(t_kf, t_s) if interval is None else interval
+    k_s = interval_of(t_kf, t_s)
     lat_s = st.latency[k_s]
     t_d = np.clip(t_s - lat_s, t_kf[0], t_kf[-1])
-    if interval is None:
-        k = interval_of(t_kf, t_d)
-    else:
-        k = interval
-        t_d = np.clip(t_d, t_kf[k], t_kf[k + 1])
+    k = interval_of(t_kf, t_d)
     ip = interpolate(dense, st, t_d, k, with_rot=False)
     h, up = height_and_up(ip["p"], origin_lla)
     v_up = np.einsum("ni,ni->n", up, ip["v"])

@@ -7,14 +7,10 @@ global variable tied to every baro sample: the graph stays chain-structured, so 
 re-eliminates the cliques of the last keyframes (a global K sits in the root clique and every
 new baro term touches it — measured in ``docs/graph.md``).
 
-Baro samples and GNSS fixes between keyframes are linearised in numpy (``factors``) at the
-current estimate when their interval is complete (one keyframe later, so that every delayed
-sample t_s − τd of the interval has arrived) and inserted as one ``LinearContainerFactor``
-per interval — no Python callback ever runs inside iSAM2. ``relin.IntervalTerms`` keeps each
-one's linearisation point and factor index and swaps in a fresh linearisation (all 19
-columns) when its variables moved beyond the relinearisation thresholds
-(``info["isam2_relinearized"]`` counts the swaps); after the last keyframe, rounds of
-forced relinearisation run until nothing is left beyond the thresholds.
+Baro samples and GNSS fixes between keyframes are linearised once (numpy, ``factors``)
+at the current estimate when their interval is complete (one keyframe later, so that every
+delayed sample t_s − τd of the interval has arrived) and inserted as one
+``LinearContainerFactor`` per interval — no Python callback ever runs inside iSAM2.
 
 Per-update latency: the tail was iSAM2 relinearising ~1000 old variables at once (every
 ``relinearizeSkip`` = 10 updates, a scalar threshold of 0.05 in every unit) and the lazy
@@ -54,6 +50,7 @@ from ...types import Drive, Estimate, Trajectory
 from . import factors as gf
 from .batch import outputs, provides, solver_warnings, value_of
 from .extend import Collected, GraphExtension, check_extensions, collect, key_name, make_view
+from .general import hessian_pieces
 from .init import initial_states
 from .linalg import single_thread_blas
 from .problem import (
@@ -73,7 +70,7 @@ from .problem import (
     prior_factors,
     setup,
 )
-from .relin import IntervalTerms
+from .robust import reweight
 from .solve import gauss_newton
 
 # averaged low-rate IMU logs (median spacing ≥ LOW_RATE_DT, e.g. the 1 Hz phone logs): a
@@ -86,10 +83,7 @@ LOW_RATE_SETTINGS = {"keyframe_dt": LOW_RATE_KEYFRAME_DT, "relinearize_skip": 50
 # settings of the retry after a failed/diverged incremental pass (GraphISAM2.run)
 ROBUST_SETTINGS = {"relinearize_skip": 1, "relinearize_typed": None,
                    "relinearize_threshold": 0.01}
-DIVERGED_SPEED = 1e4
-# after the last keyframe: at most this many iSAM2 updates that relinearise every variable
-# and interval term beyond the thresholds (stops earlier when nothing is left to relinearise)
-SETTLE_ROUNDS = 5  # m/s: an online velocity above this means the solution diverged
+DIVERGED_SPEED = 1e4  # m/s: an online velocity above this means the solution diverged
 
 
 def update_error(P: Any, k: int, exc: BaseException | None, gap: bool) -> RuntimeError:
@@ -204,22 +198,6 @@ def _extra_online(isam: Any, est: Any, ext: Collected | None) -> dict[str, dict[
     return out
 
 
-def _read_all(est: Any, rot: Any, pos: Any, vel: Any, bias: Any, cb: Any, cal_seg: Any,
-              has_baro: bool) -> None:
-    """Every keyframe state and segment calibration of ``est`` into the running arrays."""
-    for k in range(rot.shape[0]):
-        pose = est.atPose3(X(k))
-        rot[k] = pose.rotation().matrix()
-        pos[k] = pose.translation()
-        vel[k] = est.atVector(V(k))
-        bias[k] = est.atConstantBias(B(k)).vector()
-        if has_baro:
-            cb[k] = est.atVector(C(k))[0]
-    if has_baro:
-        for j in range(cal_seg.shape[0]):
-            cal_seg[j] = est.atVector(K(j))
-
-
 def _first_keyframe(P: Any, r0: Any, p0: Any, v0: Any, k0: Any) -> tuple[Any, Any]:
     """Factors (priors, fixes) and values of keyframe 0 for the first iSAM2 update."""
     graph0 = prior_factors(P, r0, p0, v0, P.pri, K(0))
@@ -329,22 +307,23 @@ class GraphISAM2:
                 graph0.add(f)
             vals0.insert(nv_ext)
         isam.update(graph0, vals0)
-        terms = IntervalTerms(P, seg, cfg)
+        bt = drive.baro.t if has_baro else np.zeros(0)
+        bz = drive.baro.altitude if has_baro else np.zeros(0)
+        g_between = np.flatnonzero((P.g_kf == -1) & P.g_use)
+        gk = gf.interval_of(P.t_kf, P.g_t[g_between])
         pims: list[Any] = []
         imu_t = drive.imu.t
         gap = imu_gaps(imu_t, P.kf_idx)
         upd_ms = np.zeros(nk - 1)
-        # per update: preintegration, interval terms, isam.update, estimate read-back and
-        # relinearisation check [ms]; variables relinearised, variables re-eliminated,
-        # interval terms relinearised
-        brk = np.zeros((nk - 1, 7))
+        # per update: preintegration, interval term, isam.update, estimate read-back [ms];
+        # variables relinearised, variables re-eliminated
+        brk = np.zeros((nk - 1, 6))
         online = np.zeros((nk, 10))  # p(3), v(3), quat(4) in t frame
         online[0] = np.r_[pos[0], vel[0], mat_to_quat(rot[0])]
+        baro_next = 0
         calib_rw = np.asarray(cfg.calib_rw, float)
-        n_seg = int(seg[-1]) + 1
-        cal_seg = np.tile(cal[0], (n_seg, 1))
 
-        def refresh(keys_k: Any) -> None:
+        def refresh(keys_k: list[int]) -> None:
             est = isam.calculateEstimate(
                 gtsam.KeyVector([kk for k in keys_k for kk in
                                  ([X(k), V(k), B(k)] + ([C(k)] if has_baro else []))]))
@@ -357,37 +336,6 @@ class GraphISAM2:
                 if has_baro:
                     cb[k] = est.atVector(C(k))[0]
 
-        def swap_in(nf: Any, ks: list[int]) -> tuple[list[int], list[int]]:
-            """Add fresh LCFs of intervals ``ks`` to the front of ``nf``; returns the
-            intervals added (in order) and the factor indices they replace."""
-            made, removed = [], []
-            for kk, f in zip(ks, terms.factors(ks, rot, pos, vel, bias, cb,
-                                               lambda j: cal_seg[j]), strict=True):
-                if f is None:
-                    continue
-                nf.add(f)
-                made.append(kk)
-                if terms.index[kk] >= 0:
-                    removed.append(int(terms.index[kk]))
-            return made, removed
-
-        def after_update(ures: Any, made: list[int], n_made: int, k_new: int) -> None:
-            """Record the new factor indices; pick the intervals to relinearise next."""
-            new_idx = list(ures.getNewFactorsIndices())
-            for i, kk in enumerate(made):
-                terms.index[kk] = new_idx[i]
-            if has_baro:
-                for j in range(int(seg[k_new]) + 1):
-                    cal_seg[j] = isam.calculateEstimateVector(K(j))
-            marked = terms.marked_keyframes(ures.getMarkedKeys())
-            cands = terms.candidates(marked, n_made)
-            calib = terms.calib_due(n_made, cal_seg)
-            read = np.unique(np.r_[cands, cands + 1, calib, calib + 1, k_new - 2, k_new - 1,
-                                   k_new]).astype(int)
-            refresh(read[(read >= 0) & (read <= k_new)])
-            due = np.union1d(terms.due(cands, rot, pos, bias, cal_seg), calib)
-            terms.pending = [int(i) for i in due]
-
         for k in range(nk - 1):
             tu = time.perf_counter()
             dg = gravity_delta(P, pos[k:k + 1])[0]
@@ -397,15 +345,6 @@ class GraphISAM2:
             t_pre = time.perf_counter()
             nf = gtsam.NonlinearFactorGraph()
             nv = gtsam.Values()
-            # interval terms first (their new factor indices come first): the relinearised
-            # ones, then interval k-1, complete now (every delayed baro sample has arrived)
-            ks = list(terms.pending)
-            if k >= 1:
-                terms.assign_baro(k - 1, float(cal_seg[seg[k - 1], 1]), last=False)
-                ks.append(k - 1)
-            made, removed = swap_in(nf, ks)
-            n_swap = len(removed)
-            terms.relinearized += n_swap
             if gap[k]:
                 x1, v1, gap_f = gap_factors(P, k, rot, pos, vel)
                 nv.insert(X(k + 1), x1)
@@ -427,8 +366,8 @@ class GraphISAM2:
                 nf.add(gm_factor(k, dt, pri))
                 if seg[k + 1] != seg[k]:
                     j = int(seg[k + 1])
-                    cal_seg[j] = cal_seg[j - 1]
-                    nv.insert(K(j), cal_seg[j].copy())
+                    cal[j] = cal[j - 1].copy()
+                    nv.insert(K(j), cal[j])
                     span = _segment_span(P, seg, j)
                     nf.add(gtsam.BetweenFactorVector(K(j - 1), K(j), np.zeros(2),
                                                      noise(calib_rw * np.sqrt(span))))
@@ -437,57 +376,47 @@ class GraphISAM2:
                 for f in fs:
                     nf.add(f)
                 nv.insert(nv_ext)
+            if k >= 1:
+                lcf, baro_next = self._interval_factor(
+                    P, k - 1, rot, pos, vel, bias, cb, cal, seg, bt, bz, baro_next,
+                    g_between[gk == k - 1], pri)
+                if lcf is not None:
+                    nf.add(lcf)
             t_lcf = time.perf_counter()
             try:
-                # the keys of the new factors go last in the ordering (iSAM2's default),
-                # but not those of the relinearised intervals: with them a large swap
-                # left a root clique of hundreds of variables
-                last = gtsam.KeyGroupMap()
-                for i in range(n_swap, nf.size()):
-                    for key in nf.at(i).keys():
-                        last.insert2(key, 1)
-                ures = isam.update(nf, nv, removed, last)
+                ures = isam.update(nf, nv)
                 t_upd = time.perf_counter()
-                after_update(ures, made, k, k + 1)
+                refresh([k + 1] if k < 1 else [k - 1, k, k + 1])
             except RuntimeError as exc:
                 raise update_error(P, k, exc, bool(gap[k])) from exc
             if not (np.all(np.isfinite(rot[k + 1])) and np.all(np.isfinite(pos[k + 1]))
                     and np.linalg.norm(vel[k + 1]) < DIVERGED_SPEED):
                 raise update_error(P, k, None, bool(gap[k]))
+            if has_baro:
+                j = int(seg[k + 1])
+                cal[j] = isam.calculateEstimateVector(K(j))
             online[k + 1] = np.r_[pos[k + 1], vel[k + 1], mat_to_quat(rot[k + 1])]
             t_end = time.perf_counter()
             upd_ms[k] = 1e3 * (t_end - tu)
             brk[k] = (1e3 * (t_pre - tu), 1e3 * (t_lcf - t_pre), 1e3 * (t_upd - t_lcf),
                       1e3 * (t_end - t_upd), ures.getVariablesRelinearized(),
-                      ures.getVariablesReeliminated(), n_swap)
-        # the last interval's terms, then relinearisation rounds until nothing is due
-        ks = list(terms.pending)
+                      ures.getVariablesReeliminated())
+        # last interval's terms
         if nk >= 2:
-            terms.assign_baro(nk - 2, float(cal_seg[seg[nk - 2], 1]), last=True)
-            ks.append(nk - 2)
-        settle = []
-        for _ in range(SETTLE_ROUNDS):
-            nf = gtsam.NonlinearFactorGraph()
-            made, removed = swap_in(nf, ks)
-            terms.relinearized += len(removed)
-            ures = isam.update(nf, gtsam.Values(), removed, force_relinearize=True)
-            new_idx = list(ures.getNewFactorsIndices())
-            for i, kk in enumerate(made):
-                terms.index[kk] = new_idx[i]
-            est = isam.calculateBestEstimate()
-            _read_all(est, rot, pos, vel, bias, cb, cal_seg, has_baro)
-            ks = [int(i) for i in terms.due(np.arange(nk - 1), rot, pos, bias, cal_seg)]
-            settle.append((len(removed), ures.getVariablesRelinearized()))
-            if not ks and ures.getVariablesRelinearized() == 0:
-                break
-        terms.settle = settle
+            lcf, baro_next = self._interval_factor(
+                P, nk - 2, rot, pos, vel, bias, cb, cal, seg, bt, bz, baro_next,
+                g_between[gk == nk - 2], pri, last=True)
+            if lcf is not None:
+                nf = gtsam.NonlinearFactorGraph()
+                nf.add(lcf)
+                isam.update(nf, gtsam.Values())
         return self._finish(drive, P, cfg, isam, online, ext, robust, fallback, t_start,
-                            (rot_i, pos_i, vel_i), pims, seg, upd_ms, brk, terms)
+                            (rot_i, pos_i, vel_i), pims, seg, upd_ms, brk)
 
     def _finish(self, drive: Drive, P: Any, cfg: GraphConfig, isam: Any, online: Any,
                 ext: Any, robust: bool, fallback: str | None, t_start: float,
                 init: tuple[Any, Any, Any], pims: list[Any], seg: Any, upd_ms: Any,
-                brk: Any, terms: IntervalTerms) -> Estimate:
+                brk: Any) -> Estimate:
         """After the online pass: read the online estimate, run the final smoothing pass
         (batch Gauss-Newton with one global (s, τd)) and assemble the Estimate."""
         pri = P.pri
@@ -537,13 +466,82 @@ class GraphISAM2:
                      isam_k, int(seg[-1]) + 1, self.name)
         info["solver_final"] = res.solver
         info["final_pass_restarted"] = restarted
-        info["isam2_relinearized"] = terms.relinearized
-        info["isam2_settle_rounds"] = terms.settle
         info["extra_variables"] = out["extra"]
         info["extra_variables_online"] = extra_online
         return Estimate(self.name, out["trajectory"], provides(drive), out["cov"],
                         out["t_cov"], out["baro"], time.perf_counter() - t_start,
                         online=online_traj, info=info, config=self.config)
+
+    @staticmethod
+    def _interval_factor(P: Any, k: int, rot: Any, pos: Any, vel: Any, bias: Any, cb: Any,
+                         cal: dict[int, Any], seg: Any, bt: Any, bz: Any, baro_next: int,
+                         g_idx: Any, pri: dict[str, float], last: bool = False
+                         ) -> tuple[Any, int]:
+        """One LinearContainerFactor with all baro samples whose delayed time falls in
+        interval k and all GNSS fixes strictly inside it, linearised at the current
+        estimate."""
+        has_baro = P.drive.baro is not None
+        cfg, ks = P.cfg, P.cfg.loss_threshold_sd
+        j = int(seg[k])
+        s_k, tau_k = (cal[j][0], cal[j][1]) if has_baro else (0.0, 0.0)
+        parts = []
+        if has_baro:
+            t_end = P.t_kf[k + 1] if not last else np.inf
+            stop = int(np.searchsorted(bt - tau_k, t_end, side="left"))
+            sel = np.arange(baro_next, stop)
+            sel = sel[(bt[sel] - tau_k >= P.t_kf[0] - 1.0)]
+            baro_next = max(stop, baro_next)
+        nk = P.n_kf
+        st = gf.KeyframeStates(
+            rot, pos, vel, bias[:, 0:3], cb, np.full(nk, s_k), np.full(nk, tau_k),
+            np.tile(np.array([0.0, 0.0, P.g0]), (nk, 1)))
+        acc = (np.array([0.0, 0.0, P.g0]) + gravity_delta(P, pos[k:k + 1])[0]
+               - 2 * np.cross(P.omega_t, vel[k]))
+        st.accel_t[k] = acc
+        if has_baro and sel.size:
+            # bias read at t_s − τd of this linearisation, as in the batch solve
+            rows = gf.baro_rows(P.dense, st, bt[sel], bz[sel], pri["noise"], P.h0, P.origin,
+                                bias_lag=float(tau_k))
+            # samples whose delayed time is outside [t_k, t_k+1) are clipped into interval k;
+            # robust losses: IRLS weights at this (only) linearisation
+            rw, jw, _, _ = reweight(rows.r, rows.jac, 1, cfg.loss_baro, ks[2])
+            parts.append(gf.IntervalRows(np.full(rows.k.size, k), rw, jw))
+        if g_idx.size:
+            rows = gf.gnss_rows(
+                P.dense, st, P.g_t[g_idx], P.g_pos[g_idx], P.g_pos_sd[g_idx],
+                None if P.g_vel is None else P.g_vel[g_idx],
+                None if P.g_vel_sd is None else P.g_vel_sd[g_idx], P.lever)
+            n = 3 * g_idx.size  # position rows, then velocity rows
+            for sl, loss, kk in ((slice(0, n), cfg.loss_gnss_pos, ks[0]),
+                                 (slice(n, None), cfg.loss_gnss_vel, ks[1])):
+                if rows.r[sl].size:
+                    rw, jw, _, _ = reweight(rows.r[sl], rows.jac[sl], 3, loss, kk)
+                    parts.append(gf.IntervalRows(rows.k[sl], rw, jw))
+        if not parts:
+            return None, baro_next
+        rows = gf.concat_rows(*parts)
+        _, lam, eta, _ = gf.group_information(rows, 1)
+        # the five core key blocks only: the accel-bias columns would add a sixth key to the
+        # pair cover; their effect (≤ ½τ(T−τ)·b_a, mm over a 1 s interval) is left to the
+        # relinearisation and the final batch pass
+        lam, eta = lam[:, :gf.N_CORE, :gf.N_CORE], eta[:, :gf.N_CORE]
+        # 1e-9 information (σ ≈ 3e4 in any unit) makes the block positive definite so it can
+        # be turned into a Jacobian for QR; it is far below any real information.
+        lam[0] += 1e-9 * np.eye(gf.N_CORE)
+        keys = [X(k), X(k + 1), C(k), C(k + 1), K(j)]
+        active = (0, 1, 2, 3, 4) if has_baro else (0, 1)
+        gfg = gtsam.GaussianFactorGraph()
+        for f in hessian_pieces(keys, lam[0], eta[0], active):
+            gfg.push_back(f)
+        lin = gtsam.Values()
+        lin.insert(X(k), gtsam.Pose3(gtsam.Rot3(rot[k]), pos[k]))
+        lin.insert(X(k + 1), gtsam.Pose3(gtsam.Rot3(rot[k + 1]), pos[k + 1]))
+        if has_baro:
+            lin.insert(C(k), np.array([cb[k]]))
+            lin.insert(C(k + 1), np.array([cb[k + 1]]))
+            lin.insert(K(j), np.asarray(cal[j], float))
+        jf = gtsam.JacobianFactor(gtsam.HessianFactor(gfg))
+        return gtsam.LinearContainerFactor(jf, lin), baro_next
 
     @staticmethod
     def _online_trajectory(P: Any, online: Any) -> Trajectory:
