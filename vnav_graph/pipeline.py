@@ -139,7 +139,6 @@ def run_estimators(drive: Drive, names: Sequence[str], progress: bool | Mode = T
         # drive); the results keep the requested order
         order = ([i for i, n in enumerate(names) if family_of(n) not in pre.families]
                  + [i for i, n in enumerate(names) if family_of(n) in pre.families])
-        pre.local = []  # those families are compiled here before the first wait anyway
     results: dict[int, RunResult] = {}
     try:
         for i in steps(order, desc, mode, label=lambda i: names[i]):

@@ -284,6 +284,9 @@ class BaroStream:
         )
 
 
+AT_MEMO = 2  # Trajectory.at results kept per trajectory
+
+
 @dataclass(frozen=True)
 class Trajectory:
     """A navigation trajectory (truth or estimate).
@@ -341,8 +344,33 @@ class Trajectory:
         return lla_to_ned(self.lla, origin_lla)
 
     def at(self, t_query: FloatArray) -> Trajectory:
-        """Interpolate to ``t_query`` (linear; slerp for attitude). Queries must lie inside."""
+        """Interpolate to ``t_query`` (linear; slerp for attitude). Queries must lie inside.
+
+        The last ``AT_MEMO`` results are kept (evaluating ten estimators interpolates the
+        truth to the same epochs again and again; the slerp costs ~0.1 s per 24,000 epochs);
+        their arrays are read-only."""
         tq = np.asarray(t_query, dtype=float)
+        import hashlib
+
+        key = (tq.shape, hashlib.blake2b(np.ascontiguousarray(tq).tobytes(),
+                                         digest_size=16).digest())
+        memo: dict[Any, Trajectory] = self.__dict__.setdefault("_at_memo", {})
+        hit = memo.get(key)
+        if hit is None:
+            hit = self._interp(tq)
+            for a in (hit.t, hit.lla, hit.vel_n, hit.q_nb, hit.bias_gyro, hit.bias_accel,
+                      hit.bias_baro):
+                if a is not None:
+                    a.flags.writeable = False
+            while len(memo) >= AT_MEMO:
+                memo.pop(next(iter(memo)))
+            memo[key] = hit
+        return hit
+
+    def __getstate__(self) -> dict[str, Any]:
+        return {k: v for k, v in self.__dict__.items() if k != "_at_memo"}
+
+    def _interp(self, tq: FloatArray) -> Trajectory:
         if tq.size and (tq[0] < self.t[0] - 1e-9 or tq[-1] > self.t[-1] + 1e-9):
             raise ValueError("trajectory.at: query times outside the trajectory span")
         tq = np.clip(tq, self.t[0], self.t[-1])  # absorb round-off at the ends

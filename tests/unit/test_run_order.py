@@ -3,14 +3,13 @@ requested order."""
 
 from __future__ import annotations
 
-from vnav_graph import pipeline
+from vnav_graph import jit, pipeline
 
 
 class _FakePrewarm:
     families = ["ekf"]
 
     def __init__(self) -> None:
-        self.local = ["graph"]
         self.waited: list[str] = []
         self.closed = False
 
@@ -35,7 +34,41 @@ def test_child_families_run_last_and_results_keep_the_order(monkeypatch) -> None
     out = pipeline.run_estimators(None, names, progress=False, prewarm=pre)
     assert ran == ["loop2", "graph-batch", "vkf4", "ekf", "ekf-rts"]
     assert [r.name for r in out] == names
-    assert pre.local == [] and pre.closed  # nothing left to compile while waiting
+    assert pre.waited == ["loop2", "graph-batch", "vkf4", "ekf", "ekf-rts"] and pre.closed
+
+
+class _Proc:
+    def poll(self) -> int:
+        return 0  # the child has exited
+
+
+def test_wait_compiles_the_local_warm_ups_once_while_the_child_works(monkeypatch) -> None:
+    warmed: list[str] = []
+    monkeypatch.setattr(jit, "_local_warm_up", warmed.append)
+    monkeypatch.setattr(jit, "is_warm", lambda family, key=None: False)
+    pre = object.__new__(jit.Prewarm)
+    pre.families, pre.key, pre._warmed, pre.proc = ["ekf"], "k", set(), _Proc()
+    assert pre.wait("loop2") == 0.0  # not the child's family: no wait, no warm-up
+    pre.wait("ekf")
+    pre.wait("ekf-rts")
+    assert warmed == ["ekf"]
+    assert jit.CHILD_RUNS["ekf"] == ("ekf",)  # the child leaves the RTS kernel to this side
+
+
+def test_rts_warm_up_compiles_the_signature_ekf_rts_uses() -> None:
+    """The first-run prewarm compiles ``rts_smooth`` on a toy problem while the forward filter
+    compiles elsewhere: wasted unless ekf-rts then calls it with the same argument types."""
+    import warnings
+
+    from vnav_graph.estimators.base import create
+    from vnav_graph.estimators.ekf import rts
+    from vnav_graph.simulation import simulate
+
+    rts.warm_up()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        create("ekf-rts").run(simulate("default", 0, duration_s=20.0))
+    assert len(rts.rts_smooth.signatures) == 1, rts.rts_smooth.signatures
 
 
 def test_without_a_second_process_the_order_is_the_requested_one(monkeypatch) -> None:

@@ -22,6 +22,7 @@ from .model import (
     IKA,
     ISC,
     ITD,
+    NING,
     NPACK,
     NX,
     PBA,
@@ -73,6 +74,19 @@ def rts_smooth(rts_p, rts_ing, rts_q, corr, reset_at, tau_g, tau_a, tau_b, cov_o
         if cov_out_of[k] >= 0:
             pack(ps, cov_s[cov_out_of[k]])
     return es, cov_s
+
+
+def warm_up() -> None:
+    """Compile ``rts_smooth`` for the argument types ``EKFRTS.run`` passes, on a two-epoch
+    problem (identity covariances, no process noise, no reset). The first-run prewarm
+    (``vnav_graph.jit.LOCAL_WARMUPS``) calls it while the forward filter compiles in another
+    process."""
+    k = 2
+    p = np.zeros((k, NPACK))
+    for row in p:
+        pack(np.eye(NX), row)
+    rts_smooth(p, np.zeros((k, NING)), np.zeros((k, NX)), np.zeros((k, NX)),
+               np.full(k, np.nan), 1.0, 1.0, 1.0, np.arange(k, dtype=np.int64), k)
 
 
 def smooth_corrections(grid_t: FloatArray, t_out: FloatArray, corr: FloatArray,
