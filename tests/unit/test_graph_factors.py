@@ -216,3 +216,51 @@ def test_nearest_fix_gap_equals_the_brute_force_distance():
         q = rng.uniform(-10.0, 110.0, rng.integers(1, 90))
         brute = np.min(np.abs(fixes[None, :] - q[:, None]), axis=1)
         np.testing.assert_array_equal(_nearest_gap(fixes, q), brute)
+
+
+def test_gap_interval_is_interpolated_linearly_and_its_jacobians_match():
+    """An interval holding an IMU logging gap (``DenseIncrements.gap``) has no inertial motion
+    to follow: a baro sample or fix there sees the straight line between the keyframes, the
+    attitude of keyframe k and no accelerometer-bias dependence, whatever the one IMU
+    "sample" spanning the gap says (on Loiter_RTL the crash transient: integrated over 24 s
+    it put the first baro sample after the gap tens of metres off and pulled the graph's baro
+    scale to −56 %)."""
+    from dataclasses import replace
+
+    dense, st, rng = _setup(3)
+    dense_gap = replace(dense, gap=np.array([False, True, False]))
+    # a transient inside interval 1 changes nothing there once it is marked as a gap
+    g2 = 0.2 * rng.normal(size=(dense.t.size, 3))
+    a2 = np.array([0.5, -0.3, -9.8]) + rng.normal(size=(dense.t.size, 3))
+    a2[150] += 300.0
+    crash = replace(gf.dense_preintegration(dense.t, g2, a2, dense.kf_idx),
+                    gap=dense_gap.gap)
+    tq = np.array([1.0, 1.3, 1.77, 1.99])
+    k = np.ones(tq.size, dtype=int)
+    for d in (dense_gap, crash):
+        ip = gf.interpolate(d, st, tq, k)
+        al = (tq - 1.0)[:, None]
+        np.testing.assert_allclose(ip["p"], (1 - al) * st.pos[1] + al * st.pos[2], atol=1e-9)
+        np.testing.assert_allclose(ip["v"], np.tile(st.pos[2] - st.pos[1], (tq.size, 1)),
+                                   atol=1e-9)
+        np.testing.assert_allclose(ip["rot"], np.tile(st.rot[1], (tq.size, 1, 1)), atol=0)
+    # the other intervals keep the inertial interpolant
+    np.testing.assert_allclose(gf.interpolate(dense_gap, st, np.array([0.4]), np.array([0]))["p"],
+                               gf.interpolate(dense, st, np.array([0.4]), np.array([0]))["p"])
+    t_s = np.array([0.43, 1.31, 1.58, 2.22])
+    z = 500.0 + rng.normal(size=t_s.size)
+
+    def baro(s):
+        return gf.baro_rows(crash, s, t_s, z, 0.5, 500.0, ORIGIN, bias_lag=0.15)
+
+    rows = baro(st)
+    assert np.all(rows.jac[rows.k == 1][:, gf.COL_BA] == 0.0)
+    _fd_check(baro, st, 2e-3)
+    t_g = np.array([0.3, 1.45, 2.05])
+
+    def gnss(s):
+        return gf.gnss_rows(crash, s, t_g, st.pos[[0, 1, 2]] + 2.0,
+                            np.full((3, 3), 1.5), st.vel[[0, 1, 2]], np.full((3, 3), 0.1),
+                            np.zeros(3))
+
+    _fd_check_strict(gnss, st, exclude=(), tol=1e-4)

@@ -160,6 +160,7 @@ class DenseIncrements:
     dr_end: FloatArray
     dv_end: FloatArray
     dp_end: FloatArray
+    gap: np.ndarray | None = None  # (K−1,) bool: interval holds an IMU logging gap
 
     @property
     def t_kf(self) -> FloatArray:
@@ -281,14 +282,48 @@ def interpolate(
     d = dp_c - alpha * dp_end_c
     rk = st.rot[k]
     a = st.accel_t[k]
+    dvel = dv_c - dp_end_c / big_t
+    imu = np.ones(k.size)
+    if dense.gap is not None and dense.gap[k].any():
+        # an interval holding an IMU logging gap has no inertial motion to follow (its one
+        # "sample" across the gap is a transient: on Loiter_RTL the crash, whose integral
+        # put the first baro sample after the gap tens of metres off and pulled the baro
+        # scale to −56 %): the linear interpolant between the keyframes, attitude R_k, no
+        # accelerometer-bias dependence (the gap factors link the keyframes loosely)
+        g = dense.gap[k]
+        imu[g] = 0.0
+        d = np.where(g[:, None], 0.0, d)
+        dvel = np.where(g[:, None], 0.0, dvel)
+        a = np.where(g[:, None], 0.0, a)
+        dr = np.where(g[:, None, None], np.eye(3), dr)
     p = ((1 - alpha) * st.pos[k] + alpha * st.pos[k + 1] + 0.5 * a * (tau**2 - tau * big_t)
          + np.einsum("nij,nj->ni", rk, d))
-    dvel = dv_c - dp_end_c / big_t
     v = ((st.pos[k + 1] - st.pos[k]) / big_t + a * (tau - 0.5 * big_t)
          + np.einsum("nij,nj->ni", rk, dvel))
     rot = rk @ dr if with_rot else None
     return {"p": p, "v": v, "rot": rot, "alpha": alpha[:, 0], "d": d, "dvel": dvel,
-            "T": big_t[:, 0], "tau": tau[:, 0]}
+            "T": big_t[:, 0], "tau": tau[:, 0], "imu": imu}
+
+
+GAP_ACCEL_LEVEL = 2.0  # m/s²: unknown acceleration over an IMU logging gap (problem.gap_factors)
+
+
+def bridge_sd(dense: DenseIncrements, t: FloatArray, k: np.ndarray
+              ) -> tuple[FloatArray, FloatArray]:
+    """σ of the straight-line interpolant inside an interval holding an IMU logging gap, at
+    times ``t`` (M,) in intervals ``k``: an unknown acceleration A ~ N(0, a²) over the interval
+    moves p(t) off the line by ½A·τ(T − τ) and v(t) by A·(τ − T/2) (a = ``GAP_ACCEL_LEVEL``).
+    Zero outside gap intervals. Returns (position σ (M,) [m], velocity σ (M,) [m/s]); they
+    depend on the times only, so the rows stay linear in the state."""
+    z = np.zeros(t.size)
+    if dense.gap is None or not dense.gap[k].any():
+        return z, z
+    t_kf = dense.t_kf
+    big_t = t_kf[k + 1] - t_kf[k]
+    tau = np.clip(t - t_kf[k], 0.0, big_t)
+    g = dense.gap[k]
+    return (np.where(g, 0.5 * GAP_ACCEL_LEVEL * tau * (big_t - tau), 0.0),
+            np.where(g, GAP_ACCEL_LEVEL * np.abs(tau - 0.5 * big_t), 0.0))
 
 
 def _pos_jacobian(st: KeyframeStates, k: np.ndarray, ip: dict[str, FloatArray],
@@ -354,8 +389,11 @@ def baro_rows(
     jac[:, COL_B1] = alpha * jb[:, 4]
     jac[:, COL_S] = jb[:, 2]
     jac[:, COL_TAU] = jb[:, 0] * dh_dtau  # b is read at t_s − bias_lag: no τd dependence
-    jac[:, COL_BA] = (jb[:, 0] * 0.5 * ip["tau"] * (ip["T"] - ip["tau"]))[:, None] * u_k
-    return IntervalRows(k, (pred - z) / sd, jac / sd)
+    jac[:, COL_BA] = (jb[:, 0] * 0.5 * ip["tau"] * (ip["T"] - ip["tau"])
+                      * ip["imu"])[:, None] * u_k
+    # inside an IMU-gap interval the line's own σ, at t_s (not t_d: no τd dependence)
+    sd_r = np.sqrt(sd**2 + bridge_sd(dense, np.clip(t_s, t_kf[0], t_kf[-1]), k)[0] ** 2)
+    return IntervalRows(k, (pred - z) / sd_r, jac / sd_r[:, None])
 
 
 def gnss_rows(
@@ -372,13 +410,19 @@ def gnss_rows(
     lever = None if not np.any(lever_b) else np.asarray(lever_b, float)
     ip = interpolate(dense, st, t_g, k, incr, with_rot=lever is not None)
     m = t_g.size
+    bp, bv = bridge_sd(dense, t_g, k)
+    if bp.any():  # inside an IMU-gap interval: the straight line's own σ (bridge_sd)
+        pos_sd = np.sqrt(pos_sd**2 + bp[:, None] ** 2)
+        if vel_sd is not None:
+            vel_sd = np.sqrt(vel_sd**2 + bv[:, None] ** 2)
     p_ant = ip["p"] + (0.0 if lever is None else np.einsum("nij,j->ni", ip["rot"], lever))
     jp = _pos_jacobian(st, k, ip, lever)
     rows_r = [((p_ant - pos_t) / pos_sd).reshape(-1)]
     jac = np.zeros((m, 3, N_COLS))
     jac[:, :, 0:12] = jp / pos_sd[:, :, None]
     rk_all = st.rot[k]
-    jac[:, :, COL_BA] = (0.5 * ip["tau"] * (ip["T"] - ip["tau"]))[:, None, None] * rk_all \
+    jac[:, :, COL_BA] = (0.5 * ip["tau"] * (ip["T"] - ip["tau"]) * ip["imu"])[:, None, None] \
+        * rk_all \
         / pos_sd[:, :, None]
     rows_j = [jac.reshape(-1, N_COLS)]
     ks = [np.repeat(k, 3)]
@@ -389,7 +433,7 @@ def gnss_rows(
         jv[:, :, 0:3] = -rk @ skew(ip["dvel"])
         jv[:, :, 3:6] = -rk / big_t
         jv[:, :, 9:12] = st.rot[k + 1] / big_t
-        jv[:, :, COL_BA] = (0.5 * ip["T"] - ip["tau"])[:, None, None] * rk
+        jv[:, :, COL_BA] = ((0.5 * ip["T"] - ip["tau"]) * ip["imu"])[:, None, None] * rk
         rows_r.append(((ip["v"] - vel_t) / vel_sd).reshape(-1))
         rows_j.append((jv / vel_sd[:, :, None]).reshape(-1, N_COLS))
         ks.append(np.repeat(k, 3))

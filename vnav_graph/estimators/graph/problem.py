@@ -30,7 +30,7 @@ from .robust import check_loss, reweight, robust_noise
 # model (nav.gaps, σ_v = √(qT), 12 m/s over 150 s) is too tight for a vehicle on a winding
 # road: with it graph-isam2's altitude RMSE across a 150 s IMU gap rose from 0.77 to 0.94 m
 # (graph-batch 0.69 m). The gap *rule* is the shared one.
-GAP_ACCEL_LEVEL = 2.0  # m/s², white acceleration level over the gap
+GAP_ACCEL_LEVEL = gf.GAP_ACCEL_LEVEL  # m/s², white acceleration level over the gap
 GAP_VEL_SD = 5.0  # m/s, unknown velocity change folded into the position random walk
 GAP_TILT_SD = 0.2  # rad, roll/pitch of the re-levelling prior after a gap
 GAP_YAW_SD = 0.5  # rad, yaw after a gap: kept from before it, loosely
@@ -206,6 +206,9 @@ def setup(drive: Drive, cfg: GraphConfig) -> Problem:
     bspec = model.baro
     kf_idx = gf.keyframe_indices(imu.t, cfg.keyframe_dt)
     dense = gf.dense_preintegration(imu.t, imu.gyro_b, imu.accel_b, kf_idx)
+    gaps = imu_gaps(imu.t, kf_idx)
+    if gaps.any():
+        dense = replace(dense, gap=gaps)
     omega_t = gf.earth_rate_t(origin) if cfg.coriolis else np.zeros(3)
     p = gtsam.PreintegrationCombinedParams.MakeSharedD(g0)
     # continuous-time densities (STYLE.md pitfall 3); floors keep noiseless drives regular
