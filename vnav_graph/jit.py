@@ -119,10 +119,10 @@ class CompileTimer:
 # each: 64.4 s with the EKF in the middle of the run order (the main process waited for the
 # child half-way), 52.4 s with it last; warm 16.9 s. With the RTS kernel compiled here
 # (``LOCAL_WARMUPS``), side by side on a slower hour: 74.7/73.3 s before, 70.3/70.6 s after;
-# later, on a quieter hour, 57.1–64.0 s over seven cold runs. Tried and dropped: running the
+# later, on a quieter hour, 58.9–64.0 s over five cold runs. Tried and dropped: running the
 # vertical family after the graph's so that it loads the strapdown kernels the child has
 # cached (its compile fell 17 → 11 s, the graph's rose 4 → 8.5 s; wall 59.6–67.5 s against
-# 57.1–64.0 s).
+# 58.9–64.0 s).
 
 FAMILIES = {  # estimators that share kernels: compiled together, by one process
     "vertical": ("observer1d", "loop2", "loop3", "loop3-adaptive", "vkf4", "vekf7"),
