@@ -132,6 +132,11 @@ FAMILIES = {  # estimators that share kernels: compiled together, by one process
 PREWARM_DRIVE = ("default", 0, 30.0)  # scenario, seed, duration [s] of the compile drive
 
 
+def package_parent() -> str:
+    """The directory holding the ``vnav_graph`` package this process imported."""
+    return str(Path(__file__).resolve().parent.parent)
+
+
 def family_of(name: str) -> str | None:
     return next((f for f, names in FAMILIES.items() if name in names), None)
 
@@ -177,8 +182,14 @@ class Prewarm:
 
         self.families, self.key = families, key
         self._warmed: set[str] = set()
+        # ``python -m`` puts the working directory first on sys.path: run from a clone after
+        # ``pip install .`` (the README's first command), the child imported the clone's
+        # sources while this process used the installed copy, compiled kernels that numba
+        # caches per source path, and this process compiled them all again (fresh-clone CI:
+        # 89 s of compilation in a 104 s run). The child starts in the directory that holds
+        # the package this process imported.
         self.proc = subprocess.Popen(
-            [sys.executable, "-m", "vnav_graph.jit", key, *families],
+            [sys.executable, "-m", "vnav_graph.jit", key, *families], cwd=package_parent(),
             stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
 
     @classmethod

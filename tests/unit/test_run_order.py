@@ -82,3 +82,27 @@ def test_without_a_second_process_the_order_is_the_requested_one(monkeypatch) ->
     names = ["ekf", "loop2", "graph-batch"]
     out = pipeline.run_estimators(None, names, progress=False, prewarm=None)
     assert ran == names and [r.name for r in out] == names
+
+
+def test_child_imports_the_package_this_process_imported(monkeypatch, tmp_path) -> None:
+    """``python -m`` puts the working directory first on sys.path: from a clone after ``pip
+    install .`` the child imported the clone's sources, whose kernels numba caches under
+    another path, so the parent compiled everything again (fresh-clone CI: 104 s run). The
+    child starts in the directory holding the package the parent imported."""
+    import subprocess
+    from pathlib import Path
+
+    import vnav_graph
+
+    seen: dict = {}
+
+    class _Popen:
+        def __init__(self, args, **kw) -> None:
+            seen.update(kw, args=args)
+
+    monkeypatch.setattr(subprocess, "Popen", _Popen)
+    monkeypatch.chdir(tmp_path)
+    jit.Prewarm(["ekf"], "k")
+    assert seen["args"][1:4] == ["-m", "vnav_graph.jit", "k"]
+    assert (Path(seen["cwd"]) / "vnav_graph" / "__init__.py").resolve() == \
+        Path(vnav_graph.__file__).resolve()
