@@ -3,7 +3,22 @@ requested order."""
 
 from __future__ import annotations
 
+import pytest
+
 from vnav_graph import jit, pipeline
+
+
+@pytest.fixture
+def ran(monkeypatch) -> list[str]:
+    """The names ``pipeline.run_one`` is called with, in call order (nothing is run)."""
+    calls: list[str] = []
+
+    def fake_run_one(name, drive, config=None, waited_s=0.0):
+        calls.append(name)
+        return pipeline.RunResult(name, None, "not run", 0.0, waited_s)
+
+    monkeypatch.setattr(pipeline, "run_one", fake_run_one)
+    return calls
 
 
 class _FakePrewarm:
@@ -21,14 +36,7 @@ class _FakePrewarm:
         self.closed = True
 
 
-def test_child_families_run_last_and_results_keep_the_order(monkeypatch) -> None:
-    ran: list[str] = []
-
-    def fake_run_one(name, drive, config=None, waited_s=0.0):
-        ran.append(name)
-        return pipeline.RunResult(name, None, "not run", 0.0, waited_s)
-
-    monkeypatch.setattr(pipeline, "run_one", fake_run_one)
+def test_child_families_run_last_and_results_keep_the_order(ran) -> None:
     pre = _FakePrewarm()
     names = ["loop2", "ekf", "ekf-rts", "graph-batch", "vkf4"]
     out = pipeline.run_estimators(None, names, progress=False, prewarm=pre)
@@ -71,14 +79,7 @@ def test_rts_warm_up_compiles_the_signature_ekf_rts_uses() -> None:
     assert len(rts.rts_smooth.signatures) == 1, rts.rts_smooth.signatures
 
 
-def test_without_a_second_process_the_order_is_the_requested_one(monkeypatch) -> None:
-    ran: list[str] = []
-
-    def fake_run_one(name, drive, config=None, waited_s=0.0):
-        ran.append(name)
-        return pipeline.RunResult(name, None, "not run", 0.0, waited_s)
-
-    monkeypatch.setattr(pipeline, "run_one", fake_run_one)
+def test_without_a_second_process_the_order_is_the_requested_one(ran) -> None:
     names = ["ekf", "loop2", "graph-batch"]
     out = pipeline.run_estimators(None, names, progress=False, prewarm=None)
     assert ran == names and [r.name for r in out] == names
