@@ -25,6 +25,7 @@ from .evaluation.metrics import evaluate
 from .io.jsonout import dumps_strict
 from .jit import CompileTimer, Prewarm, family_of, mark_warm
 from .progress import Mode, mode_for, say, steps
+from .sharing import Shared, sharing
 from .types import Drive, Estimate
 
 SUMMARY_SCHEMA = "vnav_graph.summary/1"
@@ -85,11 +86,13 @@ def interrupt_flag(what: str = "estimator") -> Iterator[list[int]]:
         signal.signal(signal.SIGINT, old)
 
 
-def run_one(name: str, drive: Drive, config: Any = None, waited_s: float = 0.0) -> RunResult:
+def run_one(name: str, drive: Drive, config: Any = None, waited_s: float = 0.0,
+            shared: Shared | None = None) -> RunResult:
     """Run one estimator; its failure is returned as data, never raised (except interrupts).
 
     ``waited_s``: time already spent waiting for this estimator's kernels to be compiled by
-    another process (counted in ``jit_s``).
+    another process (counted in ``jit_s``). ``shared``: the run's ``sharing`` block; the
+    seconds of the shared results this estimator reused are added to its ``runtime_s``.
     """
     t0 = time.perf_counter()
     with interrupt_flag() as interrupted, CompileTimer() as jit:
@@ -107,10 +110,11 @@ def run_one(name: str, drive: Drive, config: Any = None, waited_s: float = 0.0) 
             raise KeyboardInterrupt
     wall = time.perf_counter() - t0
     jit_s = jit.seconds + waited_s
+    reused = shared.take() if shared is not None else 0.0
     if est is None:
-        return RunResult(name, None, err, max(wall - jit.seconds, 0.0), jit_s)
+        return RunResult(name, None, err, max(wall - jit.seconds, 0.0) + reused, jit_s)
     runtime = est.runtime_s if est.runtime_s > 0 else wall
-    est = est.replace(runtime_s=max(runtime - jit.seconds, 0.0))
+    est = est.replace(runtime_s=max(runtime - jit.seconds, 0.0) + reused)
     return RunResult(name, est, None, est.runtime_s, jit_s)
 
 
@@ -141,10 +145,11 @@ def run_estimators(drive: Drive, names: Sequence[str], progress: bool | Mode = T
                  + [i for i, n in enumerate(names) if family_of(n) in pre.families])
     results: dict[int, RunResult] = {}
     try:
-        for i in steps(order, desc, mode, label=lambda i: names[i]):
-            name = names[i]
-            waited = pre.wait(name) if pre is not None else 0.0
-            results[i] = run_one(name, drive, configs.get(name), waited)
+        with sharing() as shared:  # the vertical filters' AHRS once (vnav_graph.sharing)
+            for i in steps(order, desc, mode, label=lambda i: names[i]):
+                name = names[i]
+                waited = pre.wait(name) if pre is not None else 0.0
+                results[i] = run_one(name, drive, configs.get(name), waited, shared)
     finally:
         if pre is not None:
             pre.close()

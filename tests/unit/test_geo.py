@@ -5,7 +5,7 @@ import pytest
 
 from vnav_graph.geo import atmosphere as atm
 from vnav_graph.geo import earth
-from vnav_graph.geo.frames import lla_to_ned, ned_to_lla, quat_to_rph, rph_to_quat
+from vnav_graph.geo.frames import lla_to_ned, ned_to_lla, quat_to_rph, rph_to_quat, slerp_quat
 
 # ICAO/ISO 2533 standard atmosphere table (pressure in Pa at geopotential altitude in m);
 # the tables print 5-6 significant digits, hence the relative tolerance 2e-5.
@@ -83,3 +83,21 @@ def test_euler_quaternion_round_trip(rng):
     rph = np.column_stack([rng.uniform(-3, 3, 20), rng.uniform(-1.5, 1.5, 20),
                            rng.uniform(-3, 3, 20)])
     np.testing.assert_allclose(quat_to_rph(rph_to_quat(rph)), rph, atol=1e-12)
+
+
+def test_slerp_on_knots_and_between(rng):
+    # knots: the normalised input quaternion (no Slerp built); between knots: the closed-form
+    # slerp q0 (q0⁻¹ q1)^a of a rotation about one axis
+    t = np.arange(6.0)
+    ang = np.array([0.0, 0.3, 0.5, 0.4, -0.2, 0.1])
+    q = np.column_stack([np.cos(ang / 2), np.zeros(6), np.zeros(6), np.sin(ang / 2)])
+    q[2] *= -3.0  # unnormalised and of the other sign: same rotation
+    tq = np.array([0.0, 0.25, 2.0, 3.5, 5.0])
+    out = slerp_quat(t, q, tq)
+    a = np.array([0.0, 0.25 * 0.3, 0.5, 0.5 * (0.4 - 0.2), 0.1])
+    np.testing.assert_allclose(out, np.column_stack([np.cos(a / 2), np.zeros(5), np.zeros(5),
+                                                     np.sin(a / 2)]), atol=1e-12)
+    np.testing.assert_allclose(slerp_quat(t, q, 3.5), out[3], atol=1e-15)
+    only_knots = slerp_quat(t, q, t)
+    np.testing.assert_allclose(np.linalg.norm(only_knots, axis=1), 1.0, atol=1e-15)
+    assert np.all(only_knots[:, 0] >= 0)

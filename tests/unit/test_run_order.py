@@ -13,7 +13,7 @@ def ran(monkeypatch) -> list[str]:
     """The names ``pipeline.run_one`` is called with, in call order (nothing is run)."""
     calls: list[str] = []
 
-    def fake_run_one(name, drive, config=None, waited_s=0.0):
+    def fake_run_one(name, drive, config=None, waited_s=0.0, shared=None):
         calls.append(name)
         return pipeline.RunResult(name, None, "not run", 0.0, waited_s)
 

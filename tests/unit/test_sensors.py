@@ -5,8 +5,9 @@ import pytest
 
 from vnav_graph.config import IMU_PRESETS, BaroSpec
 from vnav_graph.geo.earth import OMEGA_IE, gravity
+from vnav_graph.sensors import noise
 from vnav_graph.sensors.baro import baro_jacobian, measure_baro, simulate_baro
-from vnav_graph.sensors.noise import gauss_markov, random_walk, white_sd
+from vnav_graph.sensors.noise import gauss_markov, linear_recurrence, random_walk, white_sd
 from vnav_graph.simulation import simulate
 
 
@@ -18,6 +19,32 @@ def test_gauss_markov_is_stationary_with_right_correlation(rng):
     # lag-50 autocorrelation of a GM process is exp(-1)
     r = np.mean(x[50:] * x[:-50]) / np.var(x)
     assert r == pytest.approx(np.exp(-1), abs=0.04)
+
+
+@pytest.mark.parametrize("m, const", [(0, False), (1, False), (2, False), (7, False),
+                                      (64, False), (1000, False), (700, True)])
+def test_linear_recurrence_equals_the_sequential_loop(rng, monkeypatch, m, const):
+    if const:  # the long-series path (scipy.signal.lfilter), forced on a short series
+        monkeypatch.setattr(noise, "SCAN_MAX_ROWS", 10)
+        a = np.full(m, 0.97)
+    else:
+        a = rng.uniform(0.0, 1.0, m)
+        a[::5] = 1.0  # random-walk steps
+    w = rng.normal(size=(m, 3))
+    ref = np.zeros((m, 3))
+    prev = np.zeros(3)
+    for k in range(m):
+        prev = a[k] * prev + w[k]
+        ref[k] = prev
+    np.testing.assert_allclose(linear_recurrence(a, w), ref, rtol=1e-12, atol=1e-12)
+
+
+def test_gauss_markov_irregular_steps_and_start_value(rng):
+    # non-uniform Δt: same recursion as the uniform case, x0 carried by the first step
+    t = np.cumsum(rng.uniform(0.05, 0.15, 2001))
+    x = gauss_markov(t, tau=5.0, sd=0.0, rng=rng, size=2, x0=np.array([1.0, -2.0]))
+    np.testing.assert_allclose(x[:, 0], np.exp(-(t - t[0]) / 5.0), rtol=1e-12)
+    np.testing.assert_allclose(x[:, 1], -2.0 * np.exp(-(t - t[0]) / 5.0), rtol=1e-12)
 
 
 def test_random_walk_and_white_noise_scale(rng):

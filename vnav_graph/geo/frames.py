@@ -72,9 +72,22 @@ def mat_to_quat(mat_nb: ArrayLike) -> FloatArray:
 
 
 def slerp_quat(t: ArrayLike, q: ArrayLike, t_query: ArrayLike) -> FloatArray:
-    """Spherical linear interpolation of q (N, 4) given at t (N,) to t_query (M,)."""
-    rot = Rotation.from_quat(np.asarray(q), scalar_first=True)
-    return _canon(Slerp(np.asarray(t), rot)(np.asarray(t_query)).as_quat(scalar_first=True))
+    """Spherical linear interpolation of q (N, 4) given at t (N,) to t_query (M,).
+
+    Queries that fall on a knot take its (normalised) quaternion directly: evaluating ten
+    estimates at the truth's own epochs then builds no ``Slerp`` (~0.1 s per 24,000 knots)."""
+    t, q = np.asarray(t, dtype=float), np.asarray(q, dtype=float)
+    tq0 = np.asarray(t_query, dtype=float)
+    tq = np.atleast_1d(tq0)
+    k = np.clip(np.searchsorted(t, tq), 0, max(t.size - 1, 0))
+    on_knot = t[k] == tq if t.size else np.zeros(tq.shape, dtype=bool)
+    out = np.empty((tq.size, 4))
+    qk = q[k[on_knot]]
+    out[on_knot] = qk / np.linalg.norm(qk, axis=1, keepdims=True)
+    if not on_knot.all():
+        rot = Rotation.from_quat(q, scalar_first=True)
+        out[~on_knot] = Slerp(t, rot)(tq[~on_knot]).as_quat(scalar_first=True)
+    return _canon(out[0] if tq0.ndim == 0 else out)
 
 
 def attitude_error_n(q_est: ArrayLike, q_true: ArrayLike) -> FloatArray:

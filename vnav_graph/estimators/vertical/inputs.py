@@ -122,6 +122,7 @@ import numpy as np
 
 from ...geo.earth import OMEGA_IE, gravity, radii
 from ...nav.gaps import gap_threshold
+from ...sharing import shared_call
 from ...types import Drive, FloatArray
 from .ahrs import ahrs_kernel, poly_velocity
 
@@ -418,8 +419,15 @@ def vertical_inputs(drive: Drive, config: AhrsConfig | None = None) -> VerticalI
     -------
     VerticalInputs
         arrays of shape (N,) (``q_nb`` (N, 4), ``bias_gyro`` (N, 3)) at ``drive.imu.t``.
+        Inside ``pipeline.run_estimators`` it is computed once per drive and config and
+        shared, read-only, by the vertical estimators (``vnav_graph.sharing``).
     """
     cfg = config or AhrsConfig()
+    # computed once per run for all vertical estimators, time charged to each (sharing.py)
+    return shared_call("vertical_inputs", drive, cfg, lambda: _vertical_inputs(drive, cfg))
+
+
+def _vertical_inputs(drive: Drive, cfg: AhrsConfig) -> VerticalInputs:
     t0 = time.perf_counter()
     imu = drive.imu
     t = imu.t
