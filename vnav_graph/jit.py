@@ -118,7 +118,7 @@ class CompileTimer:
 # loads the kernels from the cache. Default drive, empty cache, idle 2-core machine, one run
 # each: 64.4 s with the EKF in the middle of the run order (the main process waited for the
 # child half-way), 52.4 s with it last; warm 16.9 s. With the RTS kernel compiled here
-# (``LOCAL_WARMUPS``), side by side on a slower hour: 74.7/73.3 s before, 70.3/70.6 s after;
+# (``WARMUPS``), side by side on a slower hour: 74.7/73.3 s before, 70.3/70.6 s after;
 # later, on a quieter hour, 58.9–64.0 s over five cold runs. Tried and dropped: running the
 # vertical family after the graph's so that it loads the strapdown kernels the child has
 # cached (its compile fell 17 → 11 s, the graph's rose 4 → 8.5 s; wall 59.6–67.5 s against
@@ -164,14 +164,14 @@ def is_warm(family: str, key: str | None = None) -> bool:
     return stamp(family, key).exists()
 
 
-# What the child runs to compile a family (default: every estimator of it), and what this
-# process compiles itself while it waits for that family: the child's work is the critical
-# path of a cold run (it starts later and compiles the largest kernels), so a kernel that can
-# be compiled on its own moves here. The EKF's RTS kernel (about 5 s of its 41 s) is compiled
-# by ``ekf.rts.warm_up`` while this process waits; the child compiles the forward filter
-# (``ekf``), which ``ekf-rts`` shares.
+# What the child runs to compile a family (default: every estimator of it), and the warm-ups:
+# kernels an estimator needs that can be compiled on their own (the EKF's RTS kernel, about
+# 5 s of the family's 41 s; ``ekf.rts.warm_up``). Whichever process is free first compiles
+# them: this process, when it reaches the family before the child has compiled it (it then
+# waits anyway), else the child, right after stamping the family (this process then runs
+# ``ekf`` from the cache meanwhile and waits for the warm-up's stamp before ``ekf-rts``).
 CHILD_RUNS = {"ekf": ("ekf",)}
-LOCAL_WARMUPS = {"ekf": ("vnav_graph.estimators.ekf.rts", "warm_up")}
+WARMUPS = {"ekf-rts": ("vnav_graph.estimators.ekf.rts", "warm_up")}
 
 
 class Prewarm:
@@ -181,7 +181,7 @@ class Prewarm:
         import subprocess
 
         self.families, self.key = families, key
-        self._warmed: set[str] = set()
+        self._warmed: set[str] = set()  # warm-ups compiled here
         # ``python -m`` puts the working directory first on sys.path: run from a clone after
         # ``pip install .`` (the README's first command), the child imported the clone's
         # sources while this process used the installed copy, compiled kernels that numba
@@ -214,22 +214,32 @@ class Prewarm:
             return None
 
     def wait(self, name: str, timeout_s: float = 600.0) -> float:
-        """Before running ``name``: wait until the child has compiled its family (or died),
-        compiling the family's ``LOCAL_WARMUPS`` here meanwhile. Returns the seconds spent."""
+        """Before running ``name``: wait until its kernels are compiled (by the child, or the
+        child has died), compiling the family's ``WARMUPS`` here while the child still works
+        on the family (see ``WARMUPS``). Returns the seconds spent."""
         import time
 
         f = family_of(name)
         if f not in self.families:
             return 0.0
         t0 = time.perf_counter()
-        if f not in self._warmed:
-            self._warmed.add(f)
-            if not is_warm(f, self.key):
-                _local_warm_up(f)
-        while (not is_warm(f, self.key) and self.proc.poll() is None
+        if not is_warm(f, self.key) and self.proc.poll() is None:
+            for member in FAMILIES[f]:
+                if member in WARMUPS and member not in self._warmed:
+                    self._warmed.add(member)
+                    _run_warm_up(member)
+        self._until(stamp(f, self.key), t0, timeout_s)
+        if name in WARMUPS and name not in self._warmed:
+            self._until(stamp(f"warmup.{name}", self.key), t0, timeout_s)
+        return time.perf_counter() - t0
+
+    def _until(self, path: Path, t0: float, timeout_s: float) -> None:
+        """Sleep until ``path`` exists, the child has exited or ``timeout_s`` has passed."""
+        import time
+
+        while (not path.exists() and self.proc.poll() is None
                and time.perf_counter() - t0 < timeout_s):
             time.sleep(0.05)
-        return time.perf_counter() - t0
 
     def close(self) -> None:
         if self.proc.poll() is None:
@@ -237,9 +247,9 @@ class Prewarm:
         self.proc.wait()
 
 
-def _local_warm_up(family: str) -> None:
-    """Run the family's ``LOCAL_WARMUPS`` hook (errors ignored: the real run reports them)."""
-    hook = LOCAL_WARMUPS.get(family)
+def _run_warm_up(name: str) -> None:
+    """Run estimator ``name``'s ``WARMUPS`` hook (errors ignored: the real run reports them)."""
+    hook = WARMUPS.get(name)
     if hook is None:
         return
     import importlib
@@ -255,7 +265,7 @@ def _local_warm_up(family: str) -> None:
 
 def _compile_families(key: str, families: list[str]) -> None:
     """In the child: run each family's ``CHILD_RUNS`` estimators on a short drive (compiling
-    their kernels into the cache), then stamp the family."""
+    their kernels into the cache), stamp the family, then compile its ``WARMUPS``."""
     import warnings
 
     from .estimators.base import create
@@ -276,6 +286,10 @@ def _compile_families(key: str, families: list[str]) -> None:
         p = stamp(fam, key)
         p.parent.mkdir(parents=True, exist_ok=True)
         p.touch()
+        for name in FAMILIES[fam]:  # the warm-ups the parent has not taken (WARMUPS)
+            if name in WARMUPS:
+                _run_warm_up(name)
+                stamp(f"warmup.{name}", key).touch()
 
 
 def mark_warm(names: list[str]) -> None:

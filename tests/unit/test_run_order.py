@@ -46,21 +46,49 @@ def test_child_families_run_last_and_results_keep_the_order(ran) -> None:
 
 
 class _Proc:
-    def poll(self) -> int:
-        return 0  # the child has exited
+    def __init__(self, alive: bool) -> None:
+        self.alive = alive
+
+    def poll(self) -> int | None:
+        return None if self.alive else 0
 
 
-def test_wait_compiles_the_local_warm_ups_once_while_the_child_works(monkeypatch) -> None:
-    warmed: list[str] = []
-    monkeypatch.setattr(jit, "_local_warm_up", warmed.append)
-    monkeypatch.setattr(jit, "is_warm", lambda family, key=None: False)
+def _prewarm(alive: bool) -> jit.Prewarm:
     pre = object.__new__(jit.Prewarm)
-    pre.families, pre.key, pre._warmed, pre.proc = ["ekf"], "k", set(), _Proc()
+    pre.families, pre.key, pre._warmed, pre.proc = ["ekf"], "k", set(), _Proc(alive)
+    return pre
+
+
+def test_warm_ups_run_here_when_the_child_is_still_compiling(monkeypatch) -> None:
+    warmed: list[str] = []
+    monkeypatch.setattr(jit, "_run_warm_up", warmed.append)
+    pre = _prewarm(alive=True)
+    done = {"ekf": False}
+
+    def is_warm(family: str, key: str | None = None) -> bool:
+        return done.get(family, False)
+
+    monkeypatch.setattr(jit, "is_warm", is_warm)
+    # the child stamps the family while this process is busy with its warm-up
+    monkeypatch.setattr(pre, "_until", lambda path, t0, timeout_s: done.update(ekf=True))
     assert pre.wait("loop2") == 0.0  # not the child's family: no wait, no warm-up
     pre.wait("ekf")
     pre.wait("ekf-rts")
-    assert warmed == ["ekf"]
-    assert jit.CHILD_RUNS["ekf"] == ("ekf",)  # the child leaves the RTS kernel to this side
+    assert warmed == ["ekf-rts"]  # once, here, before the family's first estimator
+    assert jit.CHILD_RUNS["ekf"] == ("ekf",)
+
+
+def test_warm_ups_are_left_to_the_child_once_it_has_the_family(monkeypatch) -> None:
+    warmed: list[str] = []
+    waited_for: list[str] = []
+    monkeypatch.setattr(jit, "_run_warm_up", warmed.append)
+    monkeypatch.setattr(jit, "is_warm", lambda family, key=None: True)
+    pre = _prewarm(alive=True)
+    monkeypatch.setattr(pre, "_until", lambda path, t0, timeout_s: waited_for.append(path.name))
+    pre.wait("ekf")
+    pre.wait("ekf-rts")
+    assert warmed == []
+    assert waited_for == ["ekf-k", "ekf-k", "warmup.ekf-rts-k"]
 
 
 def test_rts_warm_up_compiles_the_signature_ekf_rts_uses() -> None:

@@ -291,7 +291,9 @@ def _initial_state(drive: Drive, cfg: EkfConfig, model: SensorModel, bp: BaroPri
     yaw0 = float(cfg.initial_heading) if heading_known else 0.0
     q0 = rph_to_quat([roll, pitch, yaw0])[0]
     c0 = quat_to_mat(q0)
-    lever = np.zeros(3) if gnss is None else np.asarray(gnss.lever_arm_b, dtype=float)
+    # a writable copy: a read-only lever arm compiles a second specialisation of every
+    # helper it reaches in the kernel (skew3, the products; ~1 s of a first run)
+    lever = np.zeros(3) if gnss is None else np.array(gnss.lever_arm_b, dtype=float)
     p0 = np.zeros((km.NX, km.NX))
     v0 = np.zeros(3)
     g_latency = 0.0

@@ -79,8 +79,7 @@ def rts_smooth(rts_p, rts_ing, rts_q, corr, reset_at, tau_g, tau_a, tau_b, cov_o
 def warm_up() -> None:
     """Compile ``rts_smooth`` for the argument types ``EKFRTS.run`` passes, on a two-epoch
     problem (identity covariances, no process noise, no reset). The first-run prewarm
-    (``vnav_graph.jit.LOCAL_WARMUPS``) calls it while the forward filter compiles in another
-    process."""
+    (``vnav_graph.jit.WARMUPS``) calls it in whichever process is free first."""
     k = 2
     p = np.zeros((k, NPACK))
     for row in p:
