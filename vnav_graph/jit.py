@@ -122,7 +122,13 @@ class CompileTimer:
 # later, on a quieter hour, 58.9–64.0 s over five cold runs. Tried and dropped: running the
 # vertical family after the graph's so that it loads the strapdown kernels the child has
 # cached (its compile fell 17 → 11 s, the graph's rose 4 → 8.5 s; wall 59.6–67.5 s against
-# 58.9–64.0 s).
+# 58.9–64.0 s). Then the EKF kernel lost three needless specialisations (np.cross, a read-only
+# lever arm, a literal bool: its compile alone 48.5–49.6 → 41.8–42.8 s), the RTS warm-up went
+# to whichever process is free first (``WARMUPS``), and the run path lost shared work (one
+# AHRS for the vertical filters, no scipy.signal import, no interpreter teardown):
+# ``bench_first_run.py`` in a fresh non-editable install, idle, 50.4–53.0 s cold over four
+# runs against 60.5 and 62.3 s for the code before, interleaved; warm 10.4–12.8 s against
+# 16.1–16.4 s. Two processes on this machine's two vCPUs each compile ~25 % slower than alone.
 
 FAMILIES = {  # estimators that share kernels: compiled together, by one process
     "vertical": ("observer1d", "loop2", "loop3", "loop3-adaptive", "vkf4", "vekf7"),
