@@ -64,8 +64,7 @@ def render(docs: dict[str, dict[str, Any]]) -> str:
         ra = gb["alt_rmse_m"] / er["alt_rmse_m"]
         rh = (gb["horiz_rmse_m"] / er["horiz_rmse_m"]
               if gb.get("horiz_rmse_m") and er.get("horiz_rmse_m") else float("nan"))
-        warn = len([w for w in (gb.get("warnings") or []) + (gi.get("warnings") or [])
-                    if "ResourceWarning" not in w])
+        warn = len((gb.get("warnings") or []) + (gi.get("warnings") or []))
         sb, si, se = _scale(gb), _scale(gi), _scale(er)
 
         def f(s: tuple[float, float] | None) -> str:
