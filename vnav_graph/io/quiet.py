@@ -63,6 +63,7 @@ def _fd_capture() -> Iterator[Any]:
     _flush_c_stdio()
     tmp = tempfile.TemporaryFile()
     saved = {}
+    done = False
     try:
         for fd in (1, 2):
             try:
@@ -71,11 +72,17 @@ def _fd_capture() -> Iterator[Any]:
                 continue
             os.dup2(tmp.fileno(), fd)
         yield tmp
+        done = True
     finally:
         _flush_c_stdio()
         for fd, old in saved.items():
             os.dup2(old, fd)
             os.close(old)
+        if not done:
+            # the caller reads and closes it on success; after an exception nobody would, and
+            # the garbage collector's "ResourceWarning: unclosed file" then landed in the
+            # warnings of whatever ran next (an estimator's info["warnings"])
+            tmp.close()
 
 
 def quietly(fn: Callable[..., T], *args: Any, **kwargs: Any) -> tuple[T, Captured]:
