@@ -21,15 +21,12 @@ def test_gauss_markov_is_stationary_with_right_correlation(rng):
     assert r == pytest.approx(np.exp(-1), abs=0.04)
 
 
-@pytest.mark.parametrize("m, const", [(0, False), (1, False), (2, False), (7, False),
-                                      (64, False), (1000, False), (700, True)])
-def test_linear_recurrence_equals_the_sequential_loop(rng, monkeypatch, m, const):
-    if const:  # the long-series path (scipy.signal.lfilter), forced on a short series
-        monkeypatch.setattr(noise, "SCAN_MAX_ROWS", 10)
-        a = np.full(m, 0.97)
-    else:
-        a = rng.uniform(0.0, 1.0, m)
-        a[::5] = 1.0  # random-walk steps
+@pytest.mark.parametrize("m, block", [(0, 4096), (1, 4096), (2, 4096), (7, 4096),
+                                      (64, 4096), (1000, 4096), (1000, 64), (1000, 7)])
+def test_linear_recurrence_equals_the_sequential_loop(rng, monkeypatch, m, block):
+    monkeypatch.setattr(noise, "SCAN_BLOCK", block)  # several blocks: the carry between them
+    a = rng.uniform(0.0, 1.0, m)
+    a[::5] = 1.0  # random-walk steps
     w = rng.normal(size=(m, 3))
     ref = np.zeros((m, 3))
     prev = np.zeros(3)
@@ -37,6 +34,15 @@ def test_linear_recurrence_equals_the_sequential_loop(rng, monkeypatch, m, const
         prev = a[k] * prev + w[k]
         ref[k] = prev
     np.testing.assert_allclose(linear_recurrence(a, w), ref, rtol=1e-12, atol=1e-12)
+
+
+def test_gauss_markov_long_uniform_series_path_equals_the_scan(monkeypatch):
+    # the scipy.signal.lfilter path of long uniform series, forced on a short one
+    t = np.arange(700) * 0.01
+    ref = gauss_markov(t, tau=5.0, sd=1.0, rng=np.random.default_rng(3), size=3)
+    monkeypatch.setattr(noise, "LFILTER_MIN_ROWS", 10)
+    long = gauss_markov(t, tau=5.0, sd=1.0, rng=np.random.default_rng(3), size=3)
+    np.testing.assert_allclose(long, ref, rtol=1e-12, atol=1e-12)
 
 
 def test_gauss_markov_irregular_steps_and_start_value(rng):

@@ -51,45 +51,50 @@ def gauss_markov(
         w[0] += phi[0] * x0
     out = np.empty((n, size))
     out[0] = x0
-    out[1:] = linear_recurrence(phi, w)
+    if n - 1 > LFILTER_MIN_ROWS and np.allclose(dt, dt[0]):
+        # long uniform series: scipy.signal's IIR filter (a C loop, ~0.05 s for an hour at
+        # 400 Hz against ~0.5 s for the scan); its 1.5 s import is small beside such a drive
+        from scipy.signal import lfilter
+
+        out[1:] = lfilter([1.0], [1.0, -phi[0]], w, axis=0)
+    else:
+        out[1:] = linear_recurrence(phi, w)
     return out
 
 
-SCAN_MAX_ROWS = 200_000  # longer series go through scipy.signal.lfilter (see below)
+LFILTER_MIN_ROWS = 200_000  # uniform series longer than this go through scipy.signal.lfilter
+SCAN_BLOCK = 4096  # rows per block of linear_recurrence's scan
 
 
 def linear_recurrence(a: FloatArray, w: FloatArray) -> FloatArray:
     """x_k = a_k x_{k−1} + w_k with x_{−1} = 0, for (M,) ``a`` and (M, S) ``w``: (M, S).
 
-    Up to ``SCAN_MAX_ROWS`` rows: a parallel-prefix scan (log₂ M vectorised numpy passes).
-    scipy.signal's IIR filter needs a 1.5 s import, a twentieth of a whole first run, and a
-    numba loop spends ~3 s initialising numba's compiler when it is the first kernel of the
-    process (both measured on the default drive). After the pass with shift s, x_k holds
-    Σ_{j<2s} (a_k ⋯ a_{k−j+1}) w_{k−j} and the coefficient the product a_k ⋯ a_{k−2s+1}.
-    Longer series (an hour at 100 Hz) go through ``scipy.signal.lfilter`` (a C loop; the scan
-    would cost ~1 s per call there): constant ``a`` only, else a Python loop. All three equal
-    the plain recursion to rounding (tests/unit/test_sensors.py).
+    A parallel-prefix scan instead of scipy.signal's IIR filter, whose import alone costs
+    1.5 s, a twentieth of a whole first run (a numba loop was tried: as the first kernel of
+    the process it paid ~3 s of numba start-up). Within blocks of ``SCAN_BLOCK`` rows,
+    log₂(block) vectorised passes: after the pass with shift s, x_k holds
+    Σ_{j<2s} (a_k ⋯ a_{k−j+1}) w_{k−j} and the coefficient the product a_k ⋯ a_{k−2s+1}; then
+    each block adds its running product of a times the previous block's last row. Equal to the
+    plain recursion to rounding (tests/unit/test_sensors.py).
     """
     a = np.asarray(a, dtype=float)
     x = np.array(w, dtype=float)
-    m = x.shape[0]
+    m, cols = x.shape
     if m == 0:
         return x
-    if m > SCAN_MAX_ROWS:
-        if np.all(a == a[0]):
-            from scipy.signal import lfilter
-
-            return np.asarray(lfilter([1.0], [1.0, -a[0]], x, axis=0))
-        for k in range(1, m):
-            x[k] += a[k] * x[k - 1]
-        return x
-    coef = a[:, None] * np.ones((1, x.shape[1]))
+    block = min(SCAN_BLOCK, m)
+    nb = -(-m // block)
+    pad = nb * block - m
+    xb = np.concatenate([x, np.zeros((pad, cols))]).reshape(nb, block, cols)
+    cb = np.concatenate([a, np.ones(pad)]).reshape(nb, block)
     s = 1
-    while s < m:
-        x[s:] = x[s:] + coef[s:] * x[:-s]
-        coef[s:] = coef[s:] * coef[:-s]
+    while s < block:
+        xb[:, s:] = xb[:, s:] + cb[:, s:, None] * xb[:, :-s]
+        cb[:, s:] = cb[:, s:] * cb[:, :-s]
         s *= 2
-    return x
+    for b in range(1, nb):  # cb[b, j] is now a_{b,0} ⋯ a_{b,j}
+        xb[b] += cb[b][:, None] * xb[b - 1, -1]
+    return xb.reshape(-1, cols)[:m]
 
 
 def random_walk(
