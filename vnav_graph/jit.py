@@ -180,6 +180,11 @@ CHILD_RUNS = {"ekf": ("ekf",)}
 WARMUPS = {"ekf-rts": ("vnav_graph.estimators.ekf.rts", "warm_up")}
 
 
+def warm_ups_of(family: str) -> list[str]:
+    """The estimators of ``family`` that have a ``WARMUPS`` hook."""
+    return [name for name in FAMILIES[family] if name in WARMUPS]
+
+
 class Prewarm:
     """Compile the kernels of some estimator families in a child process (see above)."""
 
@@ -230,8 +235,8 @@ class Prewarm:
             return 0.0
         t0 = time.perf_counter()
         if not is_warm(f, self.key) and self.proc.poll() is None:
-            for member in FAMILIES[f]:
-                if member in WARMUPS and member not in self._warmed:
+            for member in warm_ups_of(f):
+                if member not in self._warmed:
                     self._warmed.add(member)
                     _run_warm_up(member)
         self._until(stamp(f, self.key), t0, timeout_s)
@@ -292,10 +297,9 @@ def _compile_families(key: str, families: list[str]) -> None:
         p = stamp(fam, key)
         p.parent.mkdir(parents=True, exist_ok=True)
         p.touch()
-        for name in FAMILIES[fam]:  # the warm-ups the parent has not taken (WARMUPS)
-            if name in WARMUPS:
-                _run_warm_up(name)
-                stamp(f"warmup.{name}", key).touch()
+        for name in warm_ups_of(fam):  # whether or not the parent has taken them (WARMUPS)
+            _run_warm_up(name)
+            stamp(f"warmup.{name}", key).touch()
 
 
 def mark_warm(names: list[str]) -> None:
