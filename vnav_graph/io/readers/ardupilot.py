@@ -125,11 +125,15 @@ def _collect(path: Path) -> tuple[dict[str, list[dict[str, Any]]], Any]:
         # the reader keeps the file and a memory map open; left to the garbage collector,
         # "ResourceWarning: unclosed file" landed in whichever estimator's warnings of the
         # report ran when it was collected. Its record formats stay readable after close.
+        # what close() does in recent pymavlink; 2.4.37 (our floor) has no close().
         if reader is not None:
-            try:
-                reader.close()
-            except (OSError, ValueError, AttributeError):
-                pass
+            for name in ("data_map", "filehandle"):
+                handle = getattr(reader, name, None)
+                if handle is not None:
+                    try:
+                        handle.close()
+                    except (OSError, ValueError, BufferError):
+                        pass
     return out, reader
 
 
