@@ -284,6 +284,45 @@ class BaroStream:
         )
 
 
+_MAX_FIELD_UT = 1000.0  # µT: the Earth's field is 22–67 µT; larger means nT or mG passed
+
+
+@dataclass(frozen=True)
+class MagStream:
+    """Three-axis magnetometer samples in body axes (forward-right-down, as the IMU).
+
+    Parameters
+    ----------
+    t : (N,) [s], on the drive's clock
+    field_b : (N, 3) magnetic flux density in b [µT]; calibration the log applied (offsets)
+        stays applied, what is left is the estimators' hard-iron bias state
+    sd_ut : white noise σ per axis [µT] (sensor noise plus unmodelled interference)
+    """
+
+    t: FloatArray
+    field_b: FloatArray
+    sd_ut: float = 1.0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "t", _arr(self.t))
+        _check_time("mag", self.t)
+        object.__setattr__(self, "field_b", _arr(self.field_b))
+        _check_shape("mag.field_b", self.field_b, (self.t.size, 3))
+        _check_finite("mag.field_b", self.field_b)
+        if np.any(np.abs(self.field_b) > _MAX_FIELD_UT):
+            raise ValueError(f"mag.field_b: |component| above {_MAX_FIELD_UT:g} µT "
+                             "(nT or milligauss passed as µT?)")
+        if not (np.isfinite(self.sd_ut) and self.sd_ut > 0):
+            raise ValueError(f"mag.sd_ut: must be a positive number of µT, got {self.sd_ut!r}")
+        object.__setattr__(self, "sd_ut", float(self.sd_ut))
+
+    def __len__(self) -> int:
+        return int(self.t.size)
+
+    def select(self, mask: NDArray[np.bool_]) -> MagStream:
+        return MagStream(self.t[mask], self.field_b[mask], self.sd_ut)
+
+
 AT_MEMO = 2  # Trajectory.at results kept per trajectory
 
 
@@ -440,6 +479,7 @@ class Drive:
     truth: Trajectory | None = None
     baro_truth: BaroTruth | None = None
     meta: MappingProxyType[str, Any] = field(default_factory=lambda: MappingProxyType({}))
+    mag: MagStream | None = None  # magnetometer, when the log or simulation has one
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "origin_lla", _arr(self.origin_lla))
@@ -448,7 +488,7 @@ class Drive:
         if not isinstance(self.meta, MappingProxyType):
             object.__setattr__(self, "meta", MappingProxyType(dict(self.meta)))
         t0, t1 = self.imu.t[0], self.imu.t[-1]
-        for name, s in (("gnss", self.gnss), ("baro", self.baro)):
+        for name, s in (("gnss", self.gnss), ("baro", self.baro), ("mag", self.mag)):
             if s is not None and (s.t[-1] < t0 or s.t[0] > t1):
                 raise ValueError(f"drive.{name}: stream does not overlap the IMU time span "
                                  "(time stamps in different units or clocks?)")
