@@ -24,9 +24,12 @@ IMU presets (datasheet values, typical, 1σ; converted to SI below):
 from __future__ import annotations
 
 from dataclasses import dataclass, field, fields
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from .sensors.magnetometer import MagSpec
 
 DEG = np.pi / 180.0
 DEG_PER_HR = DEG / 3600.0
@@ -296,6 +299,8 @@ class ScenarioConfig:
     origin_alt_m: float = 500.0
     params: dict[str, Any] = field(default_factory=dict)  # kind-specific trajectory params
     description: str = ""
+    # opt-in: a simulated magnetometer (TOML section [magnetometer]); None = no mag stream
+    magnetometer: MagSpec | None = None
 
     def __post_init__(self) -> None:
         if self.kind not in ("hill-drive", "sortie", "vertical"):

@@ -35,10 +35,12 @@ offset rotates with the vehicle in n, a heading error does not.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from numba import njit
 
-from ..types import FloatArray
+from ..types import FloatArray, MagStream, Trajectory
 
 MIN_HORIZONTAL_UT = 3.0  # weaker horizontal fields give no usable heading (near the poles) [µT]
 
@@ -104,3 +106,57 @@ def mag_heading_row(field_b, bias_b, c_nb, declination):  # pragma: no cover - n
     r = np.arctan2(me, mn) - declination
     r = (r + np.pi) % (2.0 * np.pi) - np.pi
     return r, h_psi, h_bias, np.sqrt(h2)
+
+
+# --- simulation ---
+
+
+@dataclass(frozen=True)
+class MagSpec:
+    """Simulated three-axis magnetometer (scenario TOML section ``[magnetometer]``).
+
+    rate_hz : sample rate [Hz]; samples at 0, 1/rate_hz, … over the truth span
+    sd_ut : white noise σ per axis [µT] (also the stream's ``sd_ut``)
+    hard_iron_ut : (3,) hard-iron bias in body axes forward-right-down [µT], constant
+    year : decimal year of the drive, picks the World Magnetic Model epoch and its secular
+        variation (:func:`vnav_graph.geo.magfield.earth_field`)
+    """
+
+    rate_hz: float = 10.0
+    sd_ut: float = 0.5
+    hard_iron_ut: tuple[float, float, float] = (4.0, -3.0, 2.0)
+    year: float = 2025.5
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "hard_iron_ut", tuple(float(x) for x in self.hard_iron_ut))
+        if len(self.hard_iron_ut) != 3 or not all(np.isfinite(self.hard_iron_ut)):
+            raise ValueError(f"MagSpec.hard_iron_ut: need 3 finite µT values, got "
+                             f"{self.hard_iron_ut!r}")
+        if not (np.isfinite(self.rate_hz) and self.rate_hz > 0):
+            raise ValueError(f"MagSpec.rate_hz: must be > 0, got {self.rate_hz!r}")
+        if not (np.isfinite(self.sd_ut) and self.sd_ut > 0):
+            raise ValueError(f"MagSpec.sd_ut: must be > 0 µT, got {self.sd_ut!r}")
+        if not np.isfinite(self.year):
+            raise ValueError(f"MagSpec.year: must be a decimal year, got {self.year!r}")
+
+
+def simulate_mag(truth: Trajectory, spec: MagSpec, field_ned_ut: FloatArray,
+                 rng: np.random.Generator) -> MagStream:
+    """Magnetometer samples z = C_nbᵀ m_n + b_hi + n at ``spec.rate_hz`` over the truth span.
+
+    ``truth`` must carry the attitude q_nb (body → NED, slerped to the sample times);
+    ``field_ned_ut`` (3,) is m_n [µT], north-east-down, taken constant over the drive (the
+    main field changes by ~5 nT/km: nothing over a drive of tens of km); b_hi is
+    ``spec.hard_iron_ut`` and n white, σ ``spec.sd_ut`` per axis, drawn from ``rng`` (one
+    (N, 3) normal draw). Returns the stream in body axes forward-right-down [µT].
+    """
+    from ..geo.frames import quat_to_mat
+
+    if truth.q_nb is None:
+        raise ValueError("simulate_mag: the truth trajectory has no attitude (q_nb)")
+    m_n = np.asarray(field_ned_ut, dtype=float).reshape(3)
+    t = np.arange(truth.t[0], truth.t[-1] + 1e-9, 1.0 / spec.rate_hz)
+    c_nb = quat_to_mat(truth.at(t).q_nb)
+    field_b = np.einsum("nji,j->ni", c_nb, m_n)  # C_nbᵀ m_n
+    field_b += np.asarray(spec.hard_iron_ut) + rng.normal(0.0, spec.sd_ut, (t.size, 3))
+    return MagStream(t, field_b, spec.sd_ut)

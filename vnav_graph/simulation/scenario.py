@@ -3,8 +3,9 @@
 Scenario files live in ``vnav_graph/scenarios/*.toml`` (``benchmarks/scenarios`` links there).
 A scenario picks a trajectory kind, a duration, sensor rates and the error models; every
 random draw comes from ``np.random.default_rng(seed)`` (the trajectory from
-``default_rng([seed, 1])``, the urban GNSS errors from ``default_rng([seed, 2])``) so a
-(scenario, seed) pair always gives the same drive.
+``default_rng([seed, 1])``, the urban GNSS errors from ``default_rng([seed, 2])``, the
+optional magnetometer's noise from ``default_rng([seed, 3])``) so a (scenario, seed) pair
+always gives the same drive, and switching the magnetometer on changes no other stream.
 """
 
 from __future__ import annotations
@@ -57,9 +58,18 @@ def scenario_from_dict(d: dict[str, Any]) -> ScenarioConfig:
     if "latency_range_s" in baro_d:
         baro_d["latency_range_s"] = tuple(float(x) for x in baro_d["latency_range_s"])
     baro: BaroSpec = replace_fields(BaroSpec(), **baro_d)
+    mag = None
+    if "magnetometer" in d:
+        from ..sensors.magnetometer import MagSpec
+
+        mag_d = dict(d.pop("magnetometer"))
+        if "hard_iron_ut" in mag_d:
+            mag_d["hard_iron_ut"] = tuple(float(x) for x in mag_d["hard_iron_ut"])
+        mag = replace_fields(MagSpec(), **mag_d)
     params = dict(d.pop("params", {}))
     try:
-        return ScenarioConfig(imu=imu, gnss=gnss, baro=baro, params=params, **d)
+        return ScenarioConfig(imu=imu, gnss=gnss, baro=baro, params=params, magnetometer=mag,
+                              **d)
     except TypeError as exc:
         raise ValueError(f"scenario: {exc}") from None
 
@@ -88,7 +98,11 @@ def simulate(scenario: ScenarioConfig | str, seed: int = 0, **overrides: Any) ->
     """Simulate one drive. Deterministic given ``(scenario, seed)``.
 
     The truth (``Drive.truth``) is sampled at the IMU epochs and carries the realised IMU
-    biases and the baro Gauss-Markov bias (interpolated to IMU epochs).
+    biases and the baro Gauss-Markov bias (interpolated to IMU epochs). A scenario with a
+    ``[magnetometer]`` section also gives ``Drive.mag`` and ``meta["mag_truth"]``: the
+    hard-iron bias ``hard_iron_ut`` (3,) in b [µT] and the World Magnetic Model field at the
+    origin (``field_ned_ut`` (3,) µT north-east-down, ``declination_rad``,
+    ``inclination_rad``, ``model``, ``year``).
     """
     cfg = load_scenario(scenario, **overrides) if isinstance(scenario, str) else (
         replace(scenario, **overrides) if overrides else scenario
@@ -127,6 +141,10 @@ def simulate(scenario: ScenarioConfig | str, seed: int = 0, **overrides: Any) ->
         t, kin.truth.lla, kin.truth.vel_n, kin.truth.q_nb, imu_err.bias_gyro,
         imu_err.bias_accel, np.interp(t, t_baro, bias_b),
     )
+    mag, mag_truth = None, None
+    if cfg.magnetometer is not None:
+        mag, mag_truth = _simulate_mag(kin.truth, origin, cfg.magnetometer,
+                                       np.random.default_rng([seed, 3]))
     meta = {
         "name": f"{cfg.name}-seed{seed}",
         "scenario": cfg.name,
@@ -142,4 +160,29 @@ def simulate(scenario: ScenarioConfig | str, seed: int = 0, **overrides: Any) ->
         "gnss_outliers": int(gnss_log.outlier.sum()),
         "accel_scale_true": imu_err.accel_scale.tolist(),
     }
-    return Drive(imu, gnss, baro, origin, truth, baro_truth, MappingProxyType(meta))
+    if mag_truth is not None:
+        meta["mag_truth"] = mag_truth
+    return Drive(imu, gnss, baro, origin, truth, baro_truth, MappingProxyType(meta), mag=mag)
+
+
+def _simulate_mag(truth: Trajectory, origin: np.ndarray, spec: Any,
+                  rng: np.random.Generator) -> tuple[Any, dict[str, Any]]:
+    """The magnetometer stream and its truth record (``meta["mag_truth"]``, JSON-ready).
+    The field is the WMM's at the drive origin (lat, lon [rad], height [m]) in ``spec.year``.
+    """
+    from ..geo.magfield import earth_field
+    from ..sensors.magnetometer import simulate_mag
+
+    f = earth_field(float(origin[0]), float(origin[1]), float(origin[2]), spec.year)
+    stream = simulate_mag(truth, spec, f.ned_ut, rng)
+    record = {
+        "hard_iron_ut": list(spec.hard_iron_ut),
+        "field_ned_ut": f.ned_ut.tolist(),
+        "declination_rad": f.declination_rad,
+        "inclination_rad": f.inclination_rad,
+        "model": f.model,
+        "year": float(spec.year),
+    }
+    if f.note:
+        record["note"] = f.note
+    return stream, record
