@@ -109,7 +109,15 @@ class EkfConfig:
     forgetting time [s] and the σ [rad] below which the heading is accepted (also the course
     of the GNSS track);
     gap_heading_forget_s: IMU gaps at least this long [s] make the heading unknown again
-    (``ekf.model`` docstring).
+    (``ekf.model`` docstring);
+    use_mag: use the drive's magnetometer heading when it has one (``sensors.magnetometer``;
+    the first sample acquires an unknown heading); mag_interval_s: at most one magnetometer
+    heading per this many seconds (its errors — interference, soft iron — are correlated
+    over seconds, so 10 Hz of them would be trusted 10× too much); mag_heading_floor [rad]:
+    heading σ floor for declination and soft-iron errors, added to σ_m/H; mag_bias_sd [µT]:
+    prior σ of each hard-iron component left after the log's own calibration; mag_bias_rw
+    [µT/√s]: its random walk; mag_reaccept_s: after this long of refused headings the next is
+    forced in.
     """
 
     cov_rate_hz: float = 10.0
@@ -135,6 +143,12 @@ class EkfConfig:
     align_forget_s: float = 30.0
     align_sd_max: float = 15.0 * DEG
     gap_heading_forget_s: float = 5.0
+    use_mag: bool = True
+    mag_interval_s: float = 1.0
+    mag_heading_floor: float = 2.0 * DEG
+    mag_bias_sd: float = 3.0
+    mag_bias_rw: float = 0.01
+    mag_reaccept_s: float = 20.0
 
     def __post_init__(self) -> None:
         if not (self.cov_rate_hz > 0 and self.cov_output_hz > 0):
@@ -233,6 +247,7 @@ def _process_noise(t: FloatArray, grid_idx: NDArrayInt, gaps: NDArrayInt, ispec:
     qd[:, km.IBA:km.IBA + 3] = (gm_process_var(dtg, ispec.accel_bias_tau, ispec.accel_bias_sd)
                                 + _white_var(ispec.accel_bias_rw, dtg))[:, None]
     qd[:, km.IBB] = gm_process_var(dtg, bp.bias_tau, bp.bias_sd)
+    qd[:, km.IMB:km.IMB + 3] = _white_var(cfg.mag_bias_rw, dtg)[:, None]
     # IMU gaps: the grid interval ending at gap end i+1 is exactly the gap (ekf.model docstring)
     kg = np.searchsorted(grid_idx, gaps + 1)
     dg = dtg[kg]
@@ -336,7 +351,8 @@ def _initial_state(drive: Drive, cfg: EkfConfig, model: SensorModel, bp: BaroPri
     p0[12:15, 12:15] = p_ba
     ka_sd = max(ispec.accel_scale_sd, 1e-3 if not isinstance(imu.spec, ImuSpec) else 0.0)
     p0[18:21, 18:21] = (ka_sd if est_scale else 1e-7) ** 2 * np.eye(3)
-    par0 = np.zeros(12)
+    p0[km.IMB:km.IMB + 3, km.IMB:km.IMB + 3] = cfg.mag_bias_sd**2 * np.eye(3)
+    par0 = np.zeros(km.NPAR)
     par0[km.PTD] = bp.latency_mean
     if baro is not None and not isinstance(baro.spec, BaroSpec):
         # real log: baro bias prior centred on the first sample (relative altimeters)
@@ -356,7 +372,7 @@ class _Events:
     arrays the kernel reads (empty without the stream)."""
 
     ev_t: FloatArray
-    ev_type: NDArrayInt  # 0 GNSS fix, 1 baro sample
+    ev_type: NDArrayInt  # 0 GNSS fix, 1 baro sample, 2 magnetometer sample
     ev_idx: NDArrayInt  # index into the stream
     max_pending: int  # most events inside one grid interval, + 1
     g_lla: FloatArray
@@ -368,6 +384,15 @@ class _Events:
     tr_speed: FloatArray
     tr_sd: FloatArray
     b_alt: FloatArray
+    m_field: FloatArray
+
+
+def _mag_samples(drive: Drive, cfg: EkfConfig) -> NDArrayInt:
+    """Indices of the magnetometer samples used: the first of every ``mag_interval_s``."""
+    if drive.mag is None or not cfg.use_mag:
+        return np.zeros(0, dtype=np.int64)
+    slot = np.floor((drive.mag.t - drive.mag.t[0]) / cfg.mag_interval_s).astype(np.int64)
+    return np.flatnonzero(np.r_[True, np.diff(slot) > 0])
 
 
 def _events(drive: Drive, model: SensorModel, grid_idx: NDArrayInt, g_latency: float,
@@ -397,6 +422,15 @@ def _events(drive: Drive, model: SensorModel, grid_idx: NDArrayInt, g_latency: f
         b_alt = np.asarray(baro.altitude, dtype=float)
     else:
         b_alt = np.zeros(0)
+    im = _mag_samples(drive, cfg)
+    if im.size:
+        assert drive.mag is not None
+        ev_t_l.append(drive.mag.t[im])
+        ev_type_l.append(np.full(im.size, 2, dtype=np.int64))
+        ev_idx_l.append(np.arange(im.size))
+        m_field = np.ascontiguousarray(drive.mag.field_b[im])
+    else:
+        m_field = np.zeros((0, 3))
     if ev_t_l:
         ev_t = np.concatenate(ev_t_l)
         order = np.argsort(ev_t, kind="stable")
@@ -415,7 +449,31 @@ def _events(drive: Drive, model: SensorModel, grid_idx: NDArrayInt, g_latency: f
     max_pending = int(counts.max()) + 1 if counts.size else 1
     return _Events(ev_t, ev_type, ev_idx, max_pending, np.ascontiguousarray(g_lla),
                    np.ascontiguousarray(g_psd), np.ascontiguousarray(g_vel),
-                   np.ascontiguousarray(g_vsd), bool(has_vel), tr_yaw, tr_speed, tr_sd, b_alt)
+                   np.ascontiguousarray(g_vsd), bool(has_vel), tr_yaw, tr_speed, tr_sd, b_alt,
+                   m_field)
+
+
+def _mag_data(drive: Drive, ev: _Events, ini: _Initial,
+              cfg: EkfConfig) -> tuple[kernel.MagData, dict[str, Any]]:
+    """The kernel's magnetometer record: the declination at the start position from the
+    World Magnetic Model for the drive's year (``meta["decimal_year"]``, else the newest
+    model's epoch, noted in info)."""
+    if not ev.m_field.shape[0]:
+        return kernel.MagData(ev.m_field, 1.0, 0.0, 0.0, 1.0, 1), {}
+    from ...geo.magfield import earth_field
+
+    assert drive.mag is not None
+    year = drive.meta.get("decimal_year")
+    fm = earth_field(float(ini.lla0[0]), float(ini.lla0[1]), float(ini.lla0[2]),
+                     float(year) if year is not None else 2025.0)
+    gate1 = float(chi2.ppf(cfg.gate_prob, 1))
+    max_consec = max(3, round(cfg.mag_reaccept_s / cfg.mag_interval_s))
+    info: dict[str, Any] = {"mag_declination_deg": float(np.degrees(fm.declination_rad)),
+                            "mag_field_model": fm.model}
+    if year is None:
+        info["mag_note"] = "drive has no date: declination of the 2025.0 field"
+    return kernel.MagData(ev.m_field, float(drive.mag.sd_ut), float(fm.declination_rad),
+                          float(cfg.mag_heading_floor**2), gate1, int(max_consec)), info
 
 
 def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
@@ -445,6 +503,7 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
     tilt_rate_sd = np.sqrt(2.0) * OMEGA_IE * np.cos(ini.lla0[0])
     tau = (ispec.gyro_bias_tau, ispec.accel_bias_tau, bp.bias_tau)
     heading_accel = ev.has_vel and cfg.heading_source in ("auto", "accel")
+    mag_data, mag_info = _mag_data(drive, ev, ini, cfg)
 
     # scalars coerced to one numba type each (float64, int64, bool): one compiled kernel
     res = kernel.run_filter(
@@ -459,6 +518,7 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
                         ev.tr_yaw, ev.tr_speed, ev.tr_sd),
         kernel.BaroData(ev.b_alt, float(bp.noise_sd), float(drive.origin_lla[2]),
                         baro is not None),
+        mag_data,
         kernel.Settings(
             gate_pos=gate2, gate_vel=gate2, gate_v=gate1, gate_baro=gate1,
             max_consec=int(cfg.max_consecutive_rejects), max_consec_baro=int(max_consec_baro),
@@ -470,6 +530,15 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
             gap_forget_s=float(cfg.gap_heading_forget_s), store_rts=bool(store_rts)),
     )
     innov, info = _report(drive, res, gr, gaps, ini, cfg, heading_accel, est_scale, ev.has_vel)
+    info.update(mag_info)
+    if ev.m_field.shape[0]:
+        inn_mag, rej_mag = res[18], res[19]
+        innov["mag"] = inn_mag[np.isfinite(inn_mag) & ~rej_mag]
+        sd_mb = np.sqrt(np.clip(np.diag(km.unpack(res[4][-1]))[km.IMB:km.IMB + 3], 0, None))
+        info.update(mag_used=int(np.isfinite(inn_mag).sum() - rej_mag.sum()),
+                    mag_rejected=int(rej_mag.sum()),
+                    mag_bias_ut={"est": res[3][-1, km.PMB:km.PMB + 3].tolist(),
+                                 "sd": sd_mb.tolist()})
     prior = {"scale": bp.scale_sd, "latency": bp.latency_sd, "bias": bp.bias_sd}
     rts = tuple(res[5:10]) if store_rts else None
     return _Run(t[gr.out_idx], *res[:4], t[gr.grid_idx], gr.grid_idx, gr.out_idx,
@@ -481,7 +550,7 @@ def _report(drive: Drive, res: tuple[Any, ...], gr: _Grids, gaps: NDArrayInt, in
             has_vel: bool) -> tuple[dict[str, FloatArray], dict[str, Any]]:
     """Innovations of the accepted measurements and ``Estimate.info`` (module docstring)."""
     (o_lla, o_v, o_q, o_par, cov_p, rts_p, rts_ing, rts_q, corr, reset_at,
-     inn_pos, inn_vel, inn_baro, rej_pos, rej_vel, rej_baro, t_heading, rej_v) = res
+     inn_pos, inn_vel, inn_baro, rej_pos, rej_vel, rej_baro, t_heading, rej_v) = res[:18]
     t = drive.imu.t
     gnss = drive.gnss
     innov: dict[str, FloatArray] = {}
@@ -506,13 +575,14 @@ def _report(drive: Drive, res: tuple[Any, ...], gr: _Grids, gaps: NDArrayInt, in
         "accel_scale": o_par[-1, km.PKA:km.PKA + 3].copy(),
         "static_align_s": float(t[ini.i_static - 1] - t[0]),
         "heading_source": ("given" if ini.heading_known else
+                           "magnetometer" if res[18].size and cfg.use_mag else
                            "accel-matching" if heading_accel else "gnss-track"),
     }
     return innov, info
 
 
 def _unpack_cov(packed: FloatArray, has_baro: bool) -> FloatArray:
-    """Packed (M, 231) 21-state covariances → (M, 18, 18) in the ERROR_STATE layout."""
+    """Packed (M, NPACK) NX-state covariances → (M, 18, 18) in the ERROR_STATE layout."""
     iu, ju = np.triu_indices(km.NX)
     full = np.empty((packed.shape[0], km.NX, km.NX))
     full[:, iu, ju] = packed

@@ -4,11 +4,12 @@ The error-state model, its measurement rows and the update steps it calls are in
 ``ekf.model`` (whose docstring describes the filter); this module holds only the loop that
 strings them together, a documented numba kernel kept whole so that it compiles once.
 
-Its inputs are seven typed records (``NamedTuple``s of arrays and scalars, which numba passes
+Its inputs are eight typed records (``NamedTuple``s of arrays and scalars, which numba passes
 as tuples: a field read is resolved at compile time and costs nothing): :class:`Grids`,
-:class:`Initial`, :class:`Noise`, :class:`Events`, :class:`GnssData`, :class:`BaroData` and
-:class:`Settings`, built by ``ekf.filter``. Every field keeps one numba type (float64
-arrays, C-contiguous; int64 counts; float scalars; bools) so that the kernel compiles once.
+:class:`Initial`, :class:`Noise`, :class:`Events`, :class:`GnssData`, :class:`BaroData`,
+:class:`MagData` and :class:`Settings`, built by ``ekf.filter``. Every field keeps one numba
+type (float64 arrays, C-contiguous; int64 counts; float scalars; bools) so that the kernel
+compiles once.
 """
 
 from __future__ import annotations
@@ -25,21 +26,25 @@ from ...nav.gnss_gate import REFUSE, USE_INFLATE, height_gate
 from ...nav.rotations import cross3, quat_mul, quat_to_dcm, rpy_quat, skew3
 from ...nav.rotations import yaw_of as _yaw
 from ...nav.strapdown import nav_rates, strapdown_step
+from ...sensors.magnetometer import MIN_HORIZONTAL_UT, mag_heading_row
 from .model import (
     IATT,
     IBB,
     IBG,
+    IMB,
     IPOS,
     ISC,
     ITD,
     IVEL,
     NING,
     NPACK,
+    NPAR,
     NX,
     PBA,
     PBB,
     PBG,
     PKA,
+    PMB,
     PSC,
     PTD,
     apply_correction,
@@ -80,7 +85,7 @@ class Initial(NamedTuple):
     lla0: FloatArray  # (3,) latitude, longitude [rad], height [m]
     v0: FloatArray  # (3,) velocity in n [m/s]
     q0: FloatArray  # (4,) attitude q_nb
-    par0: FloatArray  # (12,) biases, baro scale / latency / bias, accel scale (ekf.model P*)
+    par0: FloatArray  # (NPAR,) biases, baro, accel scale, mag hard iron (ekf.model P*)
     p0: FloatArray  # (NX, NX) error covariance
     heading_known: bool  # the heading is given (else acquired in flight)
 
@@ -101,7 +106,7 @@ class Events(NamedTuple):
     """GNSS fixes and baro samples merged and sorted by time."""
 
     t: FloatArray  # (E,) event stamps [s]
-    kind: IntArray  # (E,) 0 GNSS fix, 1 baro sample
+    kind: IntArray  # (E,) 0 GNSS fix, 1 baro sample, 2 magnetometer sample
     idx: IntArray  # (E,) index into the GNSS or baro arrays
     max_pending: int  # most events inside one grid interval, + 1
 
@@ -129,6 +134,17 @@ class BaroData(NamedTuple):
     has_baro: bool
 
 
+class MagData(NamedTuple):
+    """Magnetometer samples (M; zero rows without one), heading model ``sensors.magnetometer``."""
+
+    field: FloatArray  # (M, 3) field in b [µT]
+    sd_ut: float  # white noise per axis [µT]
+    declination: float  # of the Earth's field at the origin [rad]
+    floor_var: float  # heading variance floor (declination, soft iron) [rad²]
+    gate: float  # χ²₁ gate of the heading innovation
+    max_consec: int  # refusals after which a heading is forced in
+
+
 class Settings(NamedTuple):
     """Gates, re-acceptance and heading-acquisition settings (``EkfConfig``)."""
 
@@ -151,7 +167,7 @@ class Settings(NamedTuple):
 
 
 @njit(cache=True)
-def run_filter(grids, init, noise, events, gnss, baro, settings):
+def run_filter(grids, init, noise, events, gnss, baro, mag, settings):
     """Forward error-state EKF over the whole drive (see module docstring).
 
     The records are described by their classes (:class:`Grids` ... :class:`Settings`).
@@ -173,6 +189,8 @@ def run_filter(grids, init, noise, events, gnss, baro, settings):
     has_vel, lever = gnss.has_vel, gnss.lever
     tr_yaw, tr_speed, tr_sd = gnss.track_yaw, gnss.track_speed, gnss.track_sd
     b_alt, b_sd, h0, has_baro = baro.alt, baro.sd, baro.h0, baro.has_baro
+    m_field, m_sd, m_decl, m_floor_var = mag.field, mag.sd_ut, mag.declination, mag.floor_var
+    gate_mag, max_consec_mag = mag.gate, mag.max_consec
     gate_pos, gate_vel, gate_v, gate_baro = (settings.gate_pos, settings.gate_vel,
                                              settings.gate_v, settings.gate_baro)
     max_consec, max_consec_baro = settings.max_consec, settings.max_consec_baro
@@ -189,7 +207,7 @@ def run_filter(grids, init, noise, events, gnss, baro, settings):
     out_lla = np.empty((n_out, 3))
     out_v = np.empty((n_out, 3))
     out_q = np.empty((n_out, 4))
-    out_par = np.empty((n_out, 12))
+    out_par = np.empty((n_out, NPAR))
     cov_out = np.empty((n_cov_out, NPACK))
     ks = n_grid if store_rts else 1
     rts_p = np.zeros((ks, NPACK))
@@ -205,6 +223,10 @@ def run_filter(grids, init, noise, events, gnss, baro, settings):
     rej_pos = np.zeros(ng, dtype=np.bool_)
     rej_vel = np.zeros(ng, dtype=np.bool_)
     rej_baro = np.zeros(nb, dtype=np.bool_)
+    nm = m_field.shape[0]
+    inn_mag = np.full(nm, np.nan)
+    rej_mag = np.zeros(nm, dtype=np.bool_)
+    consec_mag = 0
 
     lla = lla0.copy()
     v = v0.copy()
@@ -394,7 +416,7 @@ def run_filter(grids, init, noise, events, gnss, baro, settings):
                         dlt = tr_yaw[idx] - _yaw(qm)
                         reset_delta = np.arctan2(np.sin(dlt), np.cos(dlt))
                         reset_sd = tr_sd[idx]
-            else:
+            elif ev_type[je] == 1:
                 hb = lm[2]
                 vup = -vm[2]
                 y = np.zeros(6)
@@ -409,7 +431,34 @@ def run_filter(grids, init, noise, events, gnss, baro, settings):
                 hm[0, IBB] = jb[4]
                 r[0] = b_sd * b_sd
                 mm = 1
-            if n_pend < max_pending:
+            else:
+                # magnetometer heading (sensors.magnetometer): azimuth of the bias-corrected
+                # field in n minus the declination; it acquires an unknown heading directly
+                y = np.zeros(6)
+                hm = np.zeros((6, NX))
+                r = np.zeros(6)
+                mm = 0
+                res_m, h_psi, h_bias, hor = mag_heading_row(
+                    m_field[idx], par[PMB:PMB + 3].copy(), cm, m_decl)
+                if hor >= MIN_HORIZONTAL_UT:
+                    r[0] = (m_sd / hor) ** 2 + m_floor_var
+                    if heading_ok:
+                        y[0] = res_m
+                        for a in range(3):
+                            hm[0, IATT + a] = h_psi[a]
+                            hm[0, IMB + a] = h_bias[a]
+                        mm = 1
+                    elif np.isnan(reset_delta):
+                        # σ of the acquired heading: noise, the hard-iron prior and the tilt
+                        var = r[0]
+                        for a in range(3):
+                            var += h_bias[a] ** 2 * p[IMB + a, IMB + a]
+                        for a in range(2):
+                            for b in range(2):
+                                var += h_psi[a] * p[IATT + a, IATT + b] * h_psi[b]
+                        reset_delta = -res_m
+                        reset_sd = np.sqrt(var)
+            if mm > 0 and n_pend < max_pending:
                 pend_type[n_pend] = ev_type[je]
                 pend_idx[n_pend] = idx
                 pend_t[n_pend] = tm
@@ -528,13 +577,20 @@ def run_filter(grids, init, noise, events, gnss, baro, settings):
                             rej_vel[idx] = rej_vel[idx] or not ok
                         else:
                             rej_vel[idx] = True
-                else:
+                elif pend_type[e] == 1:
                     ok, nis, nrm = vector_update(
                         p, dx, heff[:1].copy(), pend_y[e, :1].copy(), pend_r[e, :1].copy(),
                         gate_baro, consec_baro >= max_consec_baro)
                     inn_baro[idx] = nrm[0]
                     rej_baro[idx] = not ok
                     consec_baro = 0 if nis <= gate_baro else consec_baro + 1
+                else:
+                    ok, nis, nrm = vector_update(
+                        p, dx, heff[:1].copy(), pend_y[e, :1].copy(), pend_r[e, :1].copy(),
+                        gate_mag, consec_mag >= max_consec_mag)
+                    inn_mag[idx] = nrm[0]
+                    rej_mag[idx] = not ok
+                    consec_mag = 0 if nis <= gate_mag else consec_mag + 1
             n_pend = 0
             apply_correction(lla, v, q, par, dx)
             if store_rts:
@@ -555,4 +611,5 @@ def run_filter(grids, init, noise, events, gnss, baro, settings):
             put(out_par[o], par)
 
     return (out_lla, out_v, out_q, out_par, cov_out, rts_p, rts_ing, rts_q, corr, reset_at,
-            inn_pos, inn_vel, inn_baro, rej_pos, rej_vel, rej_baro, t_heading, rej_v)
+            inn_pos, inn_vel, inn_baro, rej_pos, rej_vel, rej_baro, t_heading, rej_v,
+            inn_mag, rej_mag)

@@ -1,11 +1,12 @@
 """Numba kernels of the INS/GNSS/baro error-state EKF and its RTS smoother.
 
-Error state δx (21), every component "estimated minus true" (types.ERROR_STATE convention;
+Error state δx (24), every component "estimated minus true" (types.ERROR_STATE convention;
 the first 18 are exactly the shared layout):
 
     0:3 δr (NED position [m]), 3:6 δv (NED [m/s]), 6:9 ψ (tilt in n [rad], C̃ = (I+[ψ×]) C),
     9:12 δb_g [rad/s], 12:15 δb_a [m/s²], 15 δs (baro scale), 16 δτ_d [s], 17 δb (baro bias
-    [m]), 18:21 δk_a (accelerometer scale factors, f̃ = (1+k_a)∘f + b_a + n).
+    [m]), 18:21 δk_a (accelerometer scale factors, f̃ = (1+k_a)∘f + b_a + n), 21:24 δb_m
+    (magnetometer hard-iron bias in b [µT], a random walk; ``sensors.magnetometer``).
 
 Error dynamics (Groves, 2nd ed., eqs. 14.64-14.65 reduced to local-level NED; Titterton &
 Weston §12.3), with f_n the specific force in n and ω_in = ω_ie + ω_en:
@@ -13,7 +14,8 @@ Weston §12.3), with f_n the specific force in n and ω_in = ω_ie + ω_en:
     δṙ = δv
     δv̇ = −[f_n×] ψ − C δb_a − C diag(f_b) δk_a − [(2ω_ie + ω_en)×] δv + (2g/R) δr_D e_D
     ψ̇  = −[ω_in×] ψ − C δb_g − (∂ω_en/∂v) δv − (∂ω_ie/∂L) δr_N/(R_N+h)
-    δḃ_g = −δb_g/τ_g + w,  δḃ_a = −δb_a/τ_a + w,  δḃ = −δb/τ_b + w,  δṡ = δτ̇ = δk̇_a = 0.
+    δḃ_g = −δb_g/τ_g + w,  δḃ_a = −δb_a/τ_a + w,  δḃ = −δb/τ_b + w,  δṡ = δτ̇ = δk̇_a = 0,
+    δḃ_m = w.
 
 The nominal state runs at the IMU rate through the shared ``strapdown.strapdown_step``. The
 covariance is propagated on a coarser grid (every M IMU samples, ≈ 10 Hz): Φ = I + FΔt +
@@ -101,6 +103,13 @@ rows are zero there (``step_phi``) and Q gives them the levelling variance, so t
 sees the reset exactly. The next GNSS/baro updates then re-anchor position and velocity with
 the inflated covariance.
 
+Magnetometer heading (``sensors.magnetometer``, shared with the graph): at most one sample per
+``mag_interval_s`` (its errors are correlated over seconds), y = wrap(azimuth of C̃ (z − b̂_m)
+in n − declination), row ∂y/∂ψ (yaw component 1, tilt components through the dip) and
+∂y/∂δb_m, χ²₁-gated and forced in after ``mag_reaccept_s`` of refusals. While the heading is
+unknown the first sample acquires it (a heading reset like the track's, σ² = the heading noise
+plus the hard-iron prior and tilt variances projected on it).
+
 The baro prediction/Jacobian ``baro_predict`` / ``baro_row`` are scalar njit twins of
 ``vnav_graph.sensors.baro.measure_baro`` / ``baro_jacobian`` (the shared model; tested equal in
 tests/unit/test_ekf_model.py).
@@ -116,12 +125,13 @@ from ...nav.arrays import put, solve
 from ...nav.rotations import quat_exp, quat_mul, skew3
 from ...nav.strapdown import nav_rates
 
-NX = 21  # internal error-state dimension
+NX = 24  # internal error-state dimension
 NPACK = NX * (NX + 1) // 2
 NING = 23  # ingredients of F per grid interval (22: IMU-gap flag)
-IPOS, IVEL, IATT, IBG, IBA, ISC, ITD, IBB, IKA = 0, 3, 6, 9, 12, 15, 16, 17, 18
-# indices of the nominal parameter vector ``par`` (12,)
-PBG, PBA, PKA, PSC, PTD, PBB = 0, 3, 6, 9, 10, 11
+IPOS, IVEL, IATT, IBG, IBA, ISC, ITD, IBB, IKA, IMB = 0, 3, 6, 9, 12, 15, 16, 17, 18, 21
+# indices of the nominal parameter vector ``par`` (NPAR,)
+PBG, PBA, PKA, PSC, PTD, PBB, PMB = 0, 3, 6, 9, 10, 11, 12
+NPAR = 15
 
 
 @njit(cache=True)
@@ -160,7 +170,7 @@ def unpack(v):
 
 @njit(cache=True)
 def build_f(ing, tau_g, tau_a, tau_b):
-    """Continuous error-dynamics matrix F (21, 21) of one grid interval (module docstring)."""
+    """Continuous error-dynamics matrix F (NX, NX) of one grid interval (module docstring)."""
     f = np.zeros((NX, NX))
     c = ing[0:9].copy().reshape(3, 3)
     fn = ing[9:12]
@@ -305,6 +315,7 @@ def apply_correction(lla, v, q, par, dx):
         par[PBG + i] -= dx[IBG + i]
         par[PBA + i] -= dx[IBA + i]
         par[PKA + i] -= dx[IKA + i]
+        par[PMB + i] -= dx[IMB + i]
     par[PSC] -= dx[ISC]
     par[PTD] -= dx[ITD]
     par[PBB] -= dx[IBB]

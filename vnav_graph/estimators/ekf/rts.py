@@ -20,6 +20,7 @@ from .model import (
     IBB,
     IBG,
     IKA,
+    IMB,
     ISC,
     ITD,
     NING,
@@ -29,6 +30,7 @@ from .model import (
     PBB,
     PBG,
     PKA,
+    PMB,
     PSC,
     PTD,
     pack,
@@ -109,7 +111,7 @@ def smooth_corrections(grid_t: FloatArray, t_out: FloatArray, corr: FloatArray,
 
 def apply_error(lla: FloatArray, vel: FloatArray, q: FloatArray, par: FloatArray,
                 e: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-    """Remove estimated errors e (N, 21) (estimated minus true) from nominal states."""
+    """Remove estimated errors e (N, NX) (estimated minus true) from nominal states."""
     rn, re = radii(lla[:, 0])
     lla2 = lla.copy()
     lla2[:, 0] -= e[:, 0] / (rn + lla[:, 2])
@@ -122,6 +124,7 @@ def apply_error(lla: FloatArray, vel: FloatArray, q: FloatArray, par: FloatArray
     par2[:, PBG:PBG + 3] -= e[:, IBG:IBG + 3]
     par2[:, PBA:PBA + 3] -= e[:, IBA:IBA + 3]
     par2[:, PKA:PKA + 3] -= e[:, IKA:IKA + 3]
+    par2[:, PMB:PMB + 3] -= e[:, IMB:IMB + 3]
     par2[:, PSC] -= e[:, ISC]
     par2[:, PTD] -= e[:, ITD]
     par2[:, PBB] -= e[:, IBB]
