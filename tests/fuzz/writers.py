@@ -35,6 +35,8 @@ class Raw:
     press: np.ndarray  # Pa
     baro_alt: np.ndarray  # m (ISA altitude of press)
     epoch_s: float = 1.75e9  # wall-clock start for formats that carry one
+    # optional keys: "truth", "shuffle_records"; "mag" = (t [s], (K, 3) field [µT, FRD]),
+    # written by write_dataflash (MAG, mG) and write_ulog (vehicle_magnetometer, Gauss)
     extra: dict[str, Any] = field(default_factory=dict)
 
     def copy(self) -> Raw:
@@ -203,6 +205,7 @@ DF_MSGS = {
     "IMU": (130, "QffffffB", "TimeUS,GyrX,GyrY,GyrZ,AccX,AccY,AccZ,I"),
     "GPS": (131, "QBIHBfLLffffB", "TimeUS,Status,GMS,GWk,NSats,HDop,Lat,Lng,Alt,Spd,GCrs,VZ,I"),
     "BARO": (132, "QffffB", "TimeUS,Alt,Press,Temp,CRt,I"),
+    "MAG": (133, "QhhhhhhhhhB", "TimeUS,MagX,MagY,MagZ,OfsX,OfsY,OfsZ,MOfsX,MOfsY,MOfsZ,I"),
 }
 
 
@@ -218,7 +221,8 @@ def write_dataflash(raw: Raw, path: Path, names: dict[str, str] | None = None) -
     names = names or {}
     out = [_df_fmt(128, "FMT", "BBnNZ", "Type,Length,Name,Format,Columns")]
     for name, (tid, fmt, cols) in DF_MSGS.items():
-        out.append(_df_fmt(tid, names.get(name, name), fmt, cols))
+        if name != "MAG" or "mag" in raw.extra:  # the corpus files keep their 4 FMT records
+            out.append(_df_fmt(tid, names.get(name, name), fmt, cols))
     recs: list[tuple[float, bytes]] = []
 
     def pack(name: str, *vals: Any) -> bytes:
@@ -244,6 +248,11 @@ def write_dataflash(raw: Raw, path: Path, names: dict[str, str] | None = None) -
         t = raw.t_baro[k]
         recs.append((t, pack("BARO", us(t), raw.baro_alt[k] - raw.baro_alt[0], raw.press[k],
                              20.0, 0.0, 0)))
+    if "mag" in raw.extra:  # µT → int16 milligauss, offsets already applied (as ArduPilot)
+        t_mag, b_ut = raw.extra["mag"]
+        for k in range(len(t_mag)):
+            mg = [int(np.clip(round(x * 10.0), -32768, 32767)) for x in b_ut[k]]
+            recs.append((t_mag[k], pack("MAG", us(t_mag[k]), *mg, -36, 1, -56, 0, 0, 0, 0)))
     order = sorted(range(len(recs)), key=lambda j: (recs[j][0] if np.isfinite(recs[j][0])
                                                    else 0.0, j))
     if raw.extra.get("shuffle_records"):
@@ -280,6 +289,11 @@ def write_ulog(raw: Raw, path: Path, omit: tuple[str, ...] = ()) -> Path:
         "vehicle_air_data": ("uint64_t timestamp;float baro_pressure_pa;",
                              [(us(raw.t_baro[k]), raw.press[k]) for k in range(raw.t_baro.size)]),
     }
+    if "mag" in raw.extra:  # µT → Gauss
+        t_mag, b_ut = raw.extra["mag"]
+        topics["vehicle_magnetometer"] = (
+            "uint64_t timestamp;float[3] magnetometer_ga;",
+            [(us(t_mag[k]), *(np.asarray(b_ut[k]) / 100.0)) for k in range(len(t_mag))])
     topics = {k: v for k, v in topics.items() if k not in omit}
     out = b"ULog\x01\x12\x35\x01" + struct.pack("<Q", 0)
     out += msg(b"B", bytes(16) + struct.pack("<3Q", 0, 0, 0))

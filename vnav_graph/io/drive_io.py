@@ -1,4 +1,10 @@
-"""Lossless save/load of a Drive as a compressed ``.npz`` (arrays + one JSON header)."""
+"""Lossless save/load of a Drive as a compressed ``.npz`` (arrays + one JSON header).
+
+Arrays per stream: ``imu_*``, ``gnss_*``, ``baro_*``, ``truth_*`` and, when the drive has a
+magnetometer, ``mag_t`` [s] and ``mag_field_b`` (N, 3) [µT, body FRD] with the header field
+``mag_sd_ut`` [µT]. A file without ``mag_t`` (all files written before the magnetometer)
+reads with ``Drive.mag = None``.
+"""
 
 from __future__ import annotations
 
@@ -12,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from ..config import BaroSpec, GnssSpec, ImuSpec
-from ..types import BaroStream, BaroTruth, Drive, GnssStream, ImuStream, Trajectory
+from ..types import BaroStream, BaroTruth, Drive, GnssStream, ImuStream, MagStream, Trajectory
 
 FORMAT = "vnav_graph.drive/1"
 _SPECS = {"ImuSpec": ImuSpec, "GnssSpec": GnssSpec, "BaroSpec": BaroSpec}
@@ -63,6 +69,9 @@ def save_npz(drive: Drive, path: str | Path) -> Path:
         if b.alt is not None:
             arrays["baro_alt"] = b.alt
         header["baro_spec"] = _spec_to_json(b.spec)
+    if drive.mag is not None:
+        arrays.update(mag_t=drive.mag.t, mag_field_b=drive.mag.field_b)
+        header["mag_sd_ut"] = drive.mag.sd_ut
     if drive.truth is not None:
         tr = drive.truth
         for f in ("t", "lla", "vel_n", "q_nb", "bias_gyro", "bias_accel", "bias_baro"):
@@ -90,9 +99,9 @@ _ARRAY_KEYS_FLOAT = {
     "imu_t", "imu_gyro_b", "imu_accel_b", "origin_lla", "gnss_t", "gnss_lla", "gnss_pos_sd",
     "gnss_lever_arm_b", "gnss_vel_n", "gnss_vel_sd", "baro_t", "baro_pressure", "baro_alt",
     "truth_t", "truth_lla", "truth_vel_n", "truth_q_nb", "truth_bias_gyro", "truth_bias_accel",
-    "truth_bias_baro",
+    "truth_bias_baro", "mag_t", "mag_field_b",
 }
-_TIME_KEYS = {"imu_t", "gnss_t", "baro_t", "truth_t"}
+_TIME_KEYS = {"imu_t", "gnss_t", "baro_t", "truth_t", "mag_t"}
 
 
 def _check_zip_directory(p: Path) -> None:
@@ -158,6 +167,19 @@ def _spec_checked(d: Any, key: str, fname: str) -> Any:
         raise ValueError(f"{fname}: header {key!r} has an invalid field ({msg})") from None
 
 
+def _mag_checked(a: dict[str, np.ndarray], header: dict[str, Any],
+                 fname: str) -> MagStream | None:
+    """Magnetometer from ``mag_t`` [s], ``mag_field_b`` [µT] and header ``mag_sd_ut`` [µT]
+    (absent: MagStream's default); None when the file has no ``mag_t``."""
+    if "mag_t" not in a:
+        return None
+    sd = header.get("mag_sd_ut", 1.0)
+    if isinstance(sd, bool) or not isinstance(sd, (int, float)):
+        raise ValueError(f"{fname}: header 'mag_sd_ut' is {type(sd).__name__} {sd!r}, "
+                         "expected a number of µT")
+    return MagStream(a["mag_t"], a["mag_field_b"], float(sd))
+
+
 def load_npz(path: str | Path) -> Drive:
     """Read a Drive written by ``save_npz``. ValueError on a corrupt or foreign file.
 
@@ -199,6 +221,7 @@ def load_npz(path: str | Path) -> Drive:
         if "baro_t" in a:
             baro = BaroStream(a["baro_t"], a.get("baro_pressure"), a.get("baro_alt"),
                               _spec_checked(header.get("baro_spec"), "baro_spec", p.name))
+        mag = _mag_checked(a, header, p.name)
         truth = None
         truth_keys = sorted(k for k in raw if k.startswith("truth_"))
         if truth_keys:
@@ -221,6 +244,6 @@ def load_npz(path: str | Path) -> Drive:
             except (KeyError, TypeError, ValueError):
                 raise ValueError(f"{p.name}: header 'baro_truth' needs numeric 'scale' and "
                                  "'latency_s'") from None
-        return Drive(imu, gnss, baro, a["origin_lla"], truth, baro_truth, meta)
+        return Drive(imu, gnss, baro, a["origin_lla"], truth, baro_truth, meta, mag)
     except KeyError as exc:
         raise ValueError(f"{p.name}: missing array {exc.args[0]!r}") from None

@@ -30,6 +30,9 @@ Checks, with the evidence each uses
   isolated fixes jumping faster than ``GNSS_JUMP_SPEED`` → dropped.
 - coverage: a missing GNSS or baro stream, logging gaps (``GAP_WARN_S``) and a stream that
   ends well before the others (a truncated file) are reported.
+- magnetometer (optional): reader drops, the time-unit comparison with the IMU, gaps and a
+  stream cut short, as for baro. Its absence is not reported (most drives have none; the
+  reader's notes say why).
 """
 
 from __future__ import annotations
@@ -52,7 +55,7 @@ REFUSE_DROP_FRACTION = 0.90
 MAX_IMU_DT_S = 2.0  # a median IMU interval above this: ms stamps read as s
 MIN_IMU_DT_S = 5e-5  # below this (> 20 kHz): µs stamps read as ns
 SLOW_IMU_DT_S = 0.2  # under 5 Hz without averaged_1s: reported
-GAP_WARN_S = {"imu": 1.0, "gnss": 10.0, "baro": 5.0}  # gaps reported above these [s]
+GAP_WARN_S = {"imu": 1.0, "gnss": 10.0, "baro": 5.0, "mag": 5.0}  # gaps reported above [s]
 BARO_STEP_M = 30.0
 BARO_STEP_RATE = 30.0  # m/s: vertical speed no vehicle of this package exceeds
 FEET = 0.3048
@@ -85,6 +88,8 @@ def _check_drops(drive: Drive, f: Findings) -> None:
             "gnss": 0 if drive.gnss is None else len(drive.gnss),
             "baro": 0 if drive.baro is None else len(drive.baro),
             "rows": len(drive.imu)}
+    if drive.mag is not None:  # no MagStream (e.g. an all-zero MAG log): the notes say why
+        kept["mag"] = len(drive.mag)
     for stream, reasons in _dropped_counts(f.meta).items():
         n = sum(reasons.values())
         if not n:
@@ -120,7 +125,7 @@ def _check_time_units(drive: Drive, f: Findings) -> None:
     if dt > SLOW_IMU_DT_S and not f.meta.get("averaged_1s"):
         f.warn(f"imu: {1 / dt:.2f} Hz sample rate is too slow for strapdown inertial navigation "
                "(time stamps in the wrong unit, or averaged data?)")
-    for name, s in (("gnss", drive.gnss), ("baro", drive.baro)):
+    for name, s in (("gnss", drive.gnss), ("baro", drive.baro), ("mag", drive.mag)):
         if s is None or len(s) < 3:
             continue
         sdt = float(np.median(np.diff(s.t)))
@@ -135,8 +140,9 @@ def _check_coverage(drive: Drive, f: Findings) -> None:
         if getattr(drive, name) is None:
             f.warn(f"{name}: no usable {name} data in the input (absent from the file, or "
                    "every record rejected): estimators run without it")
-    spans = {n: (s.t[0], s.t[-1]) for n, s in (("imu", drive.imu), ("gnss", drive.gnss),
-                                              ("baro", drive.baro)) if s is not None}
+    streams = (("imu", drive.imu), ("gnss", drive.gnss), ("baro", drive.baro),
+               ("mag", drive.mag))
+    spans = {n: (s.t[0], s.t[-1]) for n, s in streams if s is not None}
     t0 = min(a for a, _ in spans.values())
     t1 = max(b for _, b in spans.values())
     total = t1 - t0
@@ -145,7 +151,7 @@ def _check_coverage(drive: Drive, f: Findings) -> None:
         if total > 0 and missing > max(GAP_WARN_S[n], 0.1 * total):
             f.warn(f"{n}: covers {a - t0:.0f}..{b - t0:.0f} s of the drive's {total:.0f} s "
                    "(stream cut short: file truncated or a logger stopped?)")
-    for n, s in (("imu", drive.imu), ("gnss", drive.gnss), ("baro", drive.baro)):
+    for n, s in streams:
         if s is None or len(s) < 3:
             continue
         dt = np.diff(s.t)

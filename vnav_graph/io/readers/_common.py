@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ...geo.atmosphere import isa_altitude
+from ...types import MagStream
 
 FloatArray = NDArray[np.float64]
 
@@ -205,3 +206,46 @@ def local_to_gps_seconds(t_local: FloatArray, ratio: float, t_ref: float) -> Flo
     exactly GPS time up to one constant.
     """
     return t_ref + (np.asarray(t_local, dtype=float) - t_ref) / ratio
+
+
+# Largest plausible |component| of a magnetometer sample [µT] (``MagStream``'s own limit).
+MAG_MAX_UT = 1000.0
+
+
+def mag_stream(t: FloatArray, field_ut: FloatArray, sd_ut: float, report: Report,
+               t_imu: FloatArray, source: str) -> MagStream | None:
+    """Cleaned :class:`~vnav_graph.types.MagStream`, or None when nothing usable is left.
+
+    Parameters
+    ----------
+    t : (N,) stamps already on the drive's clock [s]
+    field_ut : (N, 3) flux density in body FRD [µT]
+    sd_ut : white-noise σ per axis [µT] (the reader's documented default)
+    t_imu : the IMU stamps [s]; a stream that does not overlap them is not used
+    source : what the samples are (for the notes), e.g. ``"MAG"``
+
+    Dropped and counted under ``meta["dropped"]["mag"]``: non-finite samples, samples that
+    are exactly (0, 0, 0) (a logger writing a compass that is absent or not yet started),
+    components above ``MAG_MAX_UT``, duplicated or backward stamps.
+    """
+    t = np.asarray(t, dtype=float)
+    f = np.asarray(field_ut, dtype=float).reshape(-1, 3)
+    ok = finite_rows(f) & np.isfinite(t)
+    report.drop("mag", "non-finite sample", int((~ok).sum()))
+    zero = ok & np.all(f == 0.0, axis=1)
+    report.drop("mag", "all-zero sample (no compass)", int(zero.sum()))
+    ok &= ~zero
+    big = ok & (np.max(np.abs(np.nan_to_num(f)), axis=1) > MAG_MAX_UT)
+    report.drop("mag", f"outside physical range (> {MAG_MAX_UT:g} µT)", int(big.sum()))
+    ok &= ~big
+    t, f = t[ok], f[ok]
+    keep = monotonic_mask(t, "mag", report)
+    t, f = t[keep], f[keep]
+    if t.size < 2 or t[-1] < t_imu[0] or t[0] > t_imu[-1]:
+        why = "does not overlap the IMU" if t.size >= 2 else f"{t.size} valid samples"
+        report.notes.append(f"{source}: {why}: drive has no magnetometer")
+        return None
+    find_gaps(t, "mag", report)
+    report.notes.append(f"magnetometer from {source}: {t.size} samples, body FRD [µT], "
+                        f"sd {sd_ut:g} µT per axis (reader default)")
+    return MagStream(t, f, sd_ut)

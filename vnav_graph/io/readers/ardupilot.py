@@ -15,6 +15,17 @@ Messages used
   per-fix sigmas when present.
   Old logs carry the same receiver accuracies in ``UBX3`` ``hAcc``/``vAcc``/``sAcc``.
 - ``BARO`` (instance 0): ``Press`` [Pa] and ``Alt`` [m relative to the ground calibration].
+- ``MAG`` (instance 0; later compasses are ``MAG2``/``MAG3`` or ``I`` > 0 and not read):
+  ``MagX/Y/Z`` [milligauss = 0.1 µT]. ArduPilot logs the field already rotated into the body
+  frame (forward-right-down, ``COMPASS_ORIENT`` applied) with its calibration offsets
+  ``OfsX/Y/Z`` (and motor compensation ``MOfs*``) applied, so only the unit changes
+  (× 0.1 → µT). Samples that are exactly (0, 0, 0) (the logger writes a MAG record even
+  without a compass: Loiter_RTL.bin is all zeros) and non-finite ones are dropped and
+  counted; none left → ``Drive.mag`` is None. σ = ``MAG_SD_UT`` (1.0 µT per axis): the
+  logged values are quantised to 1 mG = 0.1 µT and their sample-to-sample noise is
+  0.15 µT on 218.BIN (0.6 µT on 181.BIN), but on a multirotor the motor-current
+  interference and the residual hard/soft iron dominate (tilt-compensated heading vs
+  ``ATT.Yaw`` scatters by 5° on 218.BIN, i.e. ~2 µT of the 26 µT horizontal field).
 - Onboard estimate: ``CTUN.Alt`` (inertial-nav altitude) when ``AHRS_EKF_USE`` = 0, otherwise
   the EKF's ``PD`` from ``XKF1``/``NKF1``/``EKF1`` (first core).
 
@@ -28,8 +39,8 @@ the Erle PXF logs r = 0.9232 (the boot clock runs 7.7 % slow: gyro yaw integrate
 time matches the magnetometer heading to 0.2 %, on boot time it is 7.9 % short; see
 docs/real_logs.md). With ``clock="auto"`` (default) and |r − 1| > 0.1 % every stream is
 re-stamped ``t = t_ref + (t_boot − t_ref)/r`` (:func:`._common.local_to_gps_seconds`,
-``t_ref`` = first IMU stamp), so IMU intervals are GPS-time intervals; ``meta["clock"]``
-records the basis, r, the fit and the evidence.
+``t_ref`` = first IMU stamp; IMU, baro, MAG and onboard alike), so IMU intervals are GPS-time
+intervals; ``meta["clock"]`` records the basis, r, the fit and the evidence.
 
 Heights
 -------
@@ -58,7 +69,7 @@ from typing import Any
 
 import numpy as np
 
-from ...types import BaroStream, Drive, GnssStream, ImuStream
+from ...types import BaroStream, Drive, GnssStream, ImuStream, MagStream
 from ._common import (
     CLOCK_RATIO_TOL,
     ClockFit,
@@ -68,6 +79,7 @@ from ._common import (
     finite_rows,
     fit_clock,
     local_to_gps_seconds,
+    mag_stream,
     monotonic_mask,
     onboard_block,
     pressure_altitude,
@@ -80,9 +92,12 @@ VDOP_OVER_HDOP = 1.5
 SD_FLOOR_H_M = 0.5
 SD_FLOOR_V_M = 1.0
 DEFAULT_VEL_SD = (0.3, 0.3, 0.5)  # m/s, when the log has no speed accuracy
+MILLIGAUSS_UT = 0.1  # µT per milligauss (MAG.MagX/Y/Z)
+MAG_SD_UT = 1.0  # magnetometer white-noise σ per axis [µT] (module docstring)
 HEAD = b"\xa3\x95"
 
-_TYPES = ["IMU", "GPS", "GPA", "UBX3", "BARO", "CTUN", "EKF1", "NKF1", "XKF1", "PARM", "MSG"]
+_TYPES = ["IMU", "GPS", "GPA", "UBX3", "BARO", "MAG", "CTUN", "EKF1", "NKF1", "XKF1", "PARM",
+          "MSG"]
 
 
 def is_dataflash(head: bytes) -> bool:
@@ -281,6 +296,7 @@ def read_dataflash(path: str | Path, clock: str = "auto") -> Drive:
     gnss = GnssStream(t_gnss, fixes.lla, fixes.pos_sd, fixes.vel_n, fixes.vel_sd)
     baro, baro_offset = _read_baro(msgs["BARO"], gnss, report, tmap)
     onboard = _onboard(msgs, params, gnss, report, tmap)
+    mag = _read_mag(msgs["MAG"], report, tmap, t_imu)
 
     meta: dict[str, Any] = {
         "source": "log",
@@ -299,7 +315,22 @@ def read_dataflash(path: str | Path, clock: str = "auto") -> Drive:
     }
     if onboard is not None:
         meta["onboard"] = onboard
-    return Drive(ImuStream(t_imu, gyro, acc), gnss, baro, fixes.lla[0].copy(), meta=meta)
+    return Drive(ImuStream(t_imu, gyro, acc), gnss, baro, fixes.lla[0].copy(), meta=meta,
+                 mag=mag)
+
+
+def _read_mag(rows: list[dict[str, Any]], report: Report, tmap: Any,
+              t_imu: np.ndarray) -> MagStream | None:
+    """``MAG`` instance 0 → MagStream: stamps on the drive's clock (``tmap`` of the boot
+    stamps [s], as IMU and BARO), ``MagX/Y/Z`` [mG] × 0.1 → µT, body FRD as logged; all-zero,
+    non-finite and out-of-range samples dropped (:func:`._common.mag_stream`)."""
+    rows = [r for r in rows if _instance0(r)]
+    if not rows:
+        report.notes.append("no MAG records: drive has no magnetometer")
+        return None
+    t = tmap(np.array([_time_s(r) for r in rows]))
+    field = np.column_stack([_col(rows, f"Mag{a}") for a in "XYZ"]) * MILLIGAUSS_UT
+    return mag_stream(t, field, MAG_SD_UT, report, t_imu, "MAG (instance 0)")
 
 
 def _read_imu(rows: list[dict[str, Any]], name: str,

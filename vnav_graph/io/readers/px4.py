@@ -14,6 +14,14 @@ Topics used (first instance, ``multi_id`` 0)
 - ``vehicle_air_data``: ``baro_pressure_pa`` [Pa] (``timestamp_sample`` when present);
   fallback ``sensor_baro`` ``pressure`` (hPa in old firmware, Pa in new — told apart by size).
 - Onboard estimate: ``vehicle_local_position`` ``z`` [m, down, relative to ``ref_alt``].
+- Magnetometer: ``vehicle_magnetometer`` ``magnetometer_ga[0..2]`` (the calibrated, selected
+  compass) preferred, else ``sensor_mag`` ``x, y, z`` (old firmware); both in Gauss, × 100 →
+  µT, body frame FRD (PX4 applies the compass rotation and calibration before logging).
+  Stamp ``timestamp_sample`` when present, else ``timestamp``. Non-finite, exactly (0, 0, 0)
+  and out-of-range samples are dropped and counted; none left → ``Drive.mag`` is None.
+  σ = ``MAG_SD_UT`` (1.0 µT per axis: sensor noise of a few 0.1 µT plus multirotor motor
+  interference; PX4's own EKF2 assumes 5 µT, ``EKF2_MAG_NOISE`` = 0.05 Ga, as a gate-friendly
+  upper bound).
 
 Clock: PX4 boot time in seconds. Baro ``alt`` is the ISA pressure altitude shifted to the GNSS
 height over the first 10 s of fixes; the onboard altitude −z gets the same kind of offset.
@@ -26,12 +34,13 @@ from typing import Any
 
 import numpy as np
 
-from ...types import BaroStream, Drive, GnssStream, ImuStream
+from ...types import BaroStream, Drive, GnssStream, ImuStream, MagStream
 from ._common import (
     Report,
     baro_alt_aligned,
     find_gaps,
     finite_rows,
+    mag_stream,
     monotonic_mask,
     onboard_block,
     pressure_altitude,
@@ -43,8 +52,10 @@ DEG = np.pi / 180.0
 SD_FLOOR_H_M = 0.5
 SD_FLOOR_V_M = 1.0
 DEFAULT_VEL_SD = 0.3  # m/s
+GAUSS_UT = 100.0  # µT per Gauss
+MAG_SD_UT = 1.0  # magnetometer white-noise σ per axis [µT] (module docstring)
 _TOPICS = ["sensor_combined", "sensor_gps", "vehicle_gps_position", "vehicle_air_data",
-           "sensor_baro", "vehicle_local_position"]
+           "sensor_baro", "vehicle_local_position", "vehicle_magnetometer", "sensor_mag"]
 
 
 def is_ulog(head: bytes) -> bool:
@@ -105,6 +116,7 @@ def read_ulog(path: str | Path) -> Drive:
 
     gnss, href = _read_gps(ulog, path, report)
     baro, off = _read_baro(ulog, gnss, report)
+    mag = _read_mag(ulog, report, t_imu)
     meta: dict[str, Any] = {
         "source": "log", "name": path.stem, "format": "px4-ulog",
         "clock": "PX4 boot time [s]",
@@ -126,7 +138,21 @@ def read_ulog(path: str | Path) -> Drive:
                 t[k], alt, "vehicle_local_position (PX4 EKF)", o,
                 "-z + offset matching the GNSS height over the first 10 s of fixes")
     meta.update(report.as_meta())
-    return Drive(ImuStream(t_imu, gyro, acc), gnss, baro, gnss.lla[0].copy(), meta=meta)
+    return Drive(ImuStream(t_imu, gyro, acc), gnss, baro, gnss.lla[0].copy(), meta=meta,
+                 mag=mag)
+
+
+def _read_mag(ulog: Any, report: Report, t_imu: np.ndarray) -> MagStream | None:
+    """``vehicle_magnetometer`` (else ``sensor_mag``) → MagStream: boot-clock stamps [s],
+    field [Gauss] × 100 → µT in body FRD (module docstring)."""
+    for name, cols in (("vehicle_magnetometer", [f"magnetometer_ga[{i}]" for i in range(3)]),
+                       ("sensor_mag", ["x", "y", "z"])):
+        d = _topic(ulog, name)
+        if d is not None and all(c in d for c in cols) and len(d.get("timestamp", [])):
+            field = np.column_stack([np.asarray(d[c], dtype=float) for c in cols]) * GAUSS_UT
+            return mag_stream(_stamp(d), field, MAG_SD_UT, report, t_imu, name)
+    report.notes.append("no vehicle_magnetometer / sensor_mag topic: drive has no magnetometer")
+    return None
 
 
 def _read_gps(ulog: Any, path: Path, report: Report) -> tuple[GnssStream, str]:

@@ -8,11 +8,13 @@ Two layouts are read:
    The clock is ``seconds_elapsed``. IMU: ``AccelerometerUncalibrated`` (else
    ``Accelerometer`` + ``Gravity``) and ``GyroscopeUncalibrated`` (else ``Gyroscope``), about
    100 Hz; the gyro is linearly interpolated onto the accelerometer stamps. Baro:
-   ``Barometer`` ``pressure`` [hPa → Pa]. GNSS: ``Location``.
+   ``Barometer`` ``pressure`` [hPa → Pa]. GNSS: ``Location``. Magnetometer (optional):
+   ``Magnetometer`` (else ``MagnetometerUncalibrated``) ``x, y, z`` [µT].
 2. **Merged 1 Hz CSV** (e.g. resampled by a user pipeline): one row per second, ``time`` as ISO
    UTC (or epoch ns), GNSS ``latitude, longitude, altitude``, ``horizontalAccuracy``,
    ``verticalAccuracy``; IMU ``acc_x/y/z`` [m/s², gravity included], ``gyro_x/y/z`` [rad/s];
-   ``pressure`` [hPa]. Every row is a **1 s mean** (IMU included), so the drive metadata says
+   ``pressure`` [hPa]; optional magnetometer ``mag_x/y/z`` [µT]. Every row is a **1 s mean**
+   (IMU included), so the drive metadata says
    ``averaged_1s = True``; stamps are put at the bin centre (label + 0.5 s).
 
 Phone axes and conventions (https://github.com/tszheichoi/awesome-sensor-logger, UNITS.md,
@@ -43,6 +45,18 @@ A phone has no vehicle axes, so b is defined by a constant *mounting alignment*
 A phone lying flat, screen up, gets exactly x_b = y_d, y_b = x_d, z_b = −z_d; R_bd is in
 ``Drive.meta["imu_mounting"]["mat_bd"]`` and a static phone reads about (0, 0, −g).
 
+Magnetometer
+------------
+Sensor Logger reports the field in µT in the same device axes on both platforms (no sign
+difference, unlike the accelerometer, whose iOS sign is the inertial force). It is mapped
+to b with exactly the accelerometer's mounting matrix, ``B_b = R_bd B_d``, so it shares the
+IMU's axes. Non-finite and exactly-zero samples are dropped and counted; a folder without a
+magnetometer file (the ski log) or a merged CSV without ``mag_*`` columns gives
+``Drive.mag = None``. σ = ``MAG_SD_UT`` = 3 µT per axis: a phone magnetometer is noisier
+than an autopilot's (≈ 0.5 µT) and in a car the engine, speakers, phone mount and the car's
+steel body add hard/soft-iron and time-varying fields of several µT (the merged car log's
+|B| is 84 µT against a 52 µT Earth field).
+
 Heights and sigmas
 ------------------
 GNSS ``altitude`` is WGS-84 ellipsoidal height (UNITS.md). σ_N = σ_E = horizontalAccuracy /
@@ -63,12 +77,13 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from ...types import BaroStream, Drive, GnssStream, ImuStream
+from ...types import BaroStream, Drive, GnssStream, ImuStream, MagStream
 from ._common import (
     Report,
     baro_alt_aligned,
     find_gaps,
     finite_rows,
+    mag_stream,
     monotonic_mask,
     pressure_altitude,
     valid_pressure,
@@ -79,6 +94,7 @@ DEG = np.pi / 180.0
 SD_FLOOR_H_M = 0.5
 SD_FLOOR_V_M = 1.0
 R68_OVER_SIGMA_2D = 1.5
+MAG_SD_UT = 3.0  # phone magnetometer white-noise σ per axis [µT] (module docstring)
 _FOLDER_HEADER = ("time", "seconds_elapsed")
 
 
@@ -143,6 +159,14 @@ def _aligned_imu(t: np.ndarray, f_d: np.ndarray, w_d: np.ndarray,
              "method": "z_b = -mean specific force; x_b = horizontal part of the phone's top "
                        "(or back) axis; device axes x right, y top, z out of screen"}
     return ImuStream(t, w_d @ r_bd.T, f_d @ r_bd.T), mount
+
+
+def _mag(t: np.ndarray, mag_d: np.ndarray, mount: dict[str, Any], imu: ImuStream,
+         report: Report, source: str) -> MagStream | None:
+    """Phone magnetometer [µT, device axes] → MagStream in b with the IMU's mounting matrix
+    (``B_b = R_bd B_d``); cleaning by :func:`._common.mag_stream`."""
+    r_bd = np.asarray(mount["mat_bd"], dtype=float)
+    return mag_stream(t, mag_d @ r_bd.T, MAG_SD_UT, report, imu.t, source)
 
 
 # ------------------------------------------------------------------------------- GNSS
@@ -353,6 +377,20 @@ def read_sensorlogger_folder(path: str | Path) -> Drive:
         baro, off = _baro(stamped(bar), _num(bar, "pressure"), gnss, report)
     else:
         report.notes.append("no Barometer.csv: drive has no barometer")
+    mag = None
+    for name in ("Magnetometer", "MagnetometerUncalibrated"):
+        mag_df = load(name)
+        if mag_df is None:
+            continue
+        if {"x", "y", "z"} <= set(mag_df.columns):
+            mag = _mag(stamped(mag_df), _xyz(mag_df, folder / f"{name}.csv"), mount, imu,
+                       report, f"{name}.csv")
+        else:
+            report.notes.append(f"{name}.csv has no x, y, z columns: drive has no "
+                                "magnetometer")
+        break
+    else:
+        report.notes.append("no Magnetometer.csv: drive has no magnetometer")
     report.notes.append(f"IMU from {acc_src} and {gyro_src}; clock = seconds_elapsed")
     report.notes.append("phone GNSS has no vertical velocity: vel_n not provided")
     meta = {
@@ -363,7 +401,7 @@ def read_sensorlogger_folder(path: str | Path) -> Drive:
         "height_reference": "ellipsoid", "baro_alt_offset_m": off, "averaged_1s": False,
         **report.as_meta(),
     }
-    return Drive(imu, gnss, baro, gnss.lla[0].copy(), meta=meta)
+    return Drive(imu, gnss, baro, gnss.lla[0].copy(), meta=meta, mag=mag)
 
 
 # ---------------------------------------------------------------------- the merged CSV
@@ -396,6 +434,12 @@ def read_merged_csv(path: str | Path) -> Drive:
         baro, off = _baro(t, _num(df, "pressure"), gnss, report)
     else:
         report.notes.append("no pressure column: drive has no barometer")
+    mag = None
+    if {"mag_x", "mag_y", "mag_z"} <= set(df.columns):
+        mag_d = np.column_stack([_num(df, c) for c in ("mag_x", "mag_y", "mag_z")])
+        mag = _mag(t, mag_d, mount, imu, report, "mag_x/y/z columns (1 s means)")
+    else:
+        report.notes.append("no mag_x/y/z columns: drive has no magnetometer")
     report.notes.append("every row is a 1 s mean (IMU, GNSS and baro averaged over the bin); "
                         "stamps at bin centres; Android sign convention assumed for acc")
     report.notes.append("phone GNSS has no vertical velocity: vel_n not provided")
@@ -410,7 +454,7 @@ def read_merged_csv(path: str | Path) -> Drive:
                           "point-sampled, so it cannot resolve motion faster than 0.5 Hz",
         **report.as_meta(),
     }
-    return Drive(imu, gnss, baro, gnss.lla[0].copy(), meta=meta)
+    return Drive(imu, gnss, baro, gnss.lla[0].copy(), meta=meta, mag=mag)
 
 
 def _read_csv_text(text: str, path: Path) -> pd.DataFrame:
