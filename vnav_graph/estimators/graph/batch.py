@@ -47,6 +47,7 @@ from . import factors as gf
 from .extend import GraphExtension, check_extensions, collect, make_view
 from .init import initial_states
 from .linalg import single_thread_blas
+from .magnetometer import builtin_extensions
 from .problem import (
     GraphConfig,
     Problem,
@@ -272,8 +273,9 @@ class GraphBatch:
         t2 = time.perf_counter()
         calib = np.zeros(P.n_kf, dtype=int)
         graph, vals = build_batch_graph(P, rot, pos, vel, pims, pri, calib)
-        if self.extensions:
-            collect(self.extensions, make_view(P, vals)).add_to_batch(graph, vals)
+        extensions = (*self.extensions, *builtin_extensions(drive, self.config))
+        if extensions:
+            collect(extensions, make_view(P, vals)).add_to_batch(graph, vals)
         res = gauss_newton(P, graph, vals, calib, pri)
         t3 = time.perf_counter()
         out = outputs(P, res, pri, K(0) if drive.baro is not None else None)

@@ -53,6 +53,7 @@ from .extend import Collected, GraphExtension, check_extensions, collect, key_na
 from .general import hessian_pieces
 from .init import initial_states
 from .linalg import single_thread_blas
+from .magnetometer import builtin_extensions
 from .problem import (
     LOW_RATE_DT,
     LOW_RATE_KEYFRAME_DT,
@@ -287,10 +288,11 @@ class GraphISAM2:
         seg = _segments(P)
         calib0 = np.zeros(nk, dtype=int)
         ext = None
-        if self.extensions:
+        extensions = (*self.extensions, *builtin_extensions(drive, cfg))
+        if extensions:
             # the view is the batch's: the same initial values (no IMU factors needed)
             vals_i = build_batch_graph(P, rot_i, pos_i, vel_i, None, pri, calib0)[1]
-            ext = collect(self.extensions, make_view(P, vals_i))
+            ext = collect(extensions, make_view(P, vals_i))
         isam = gtsam.ISAM2(_isam2_params(cfg, robust, ext))
         # running linearisation arrays (keyframe states as last estimated)
         rot = np.zeros((nk, 3, 3))

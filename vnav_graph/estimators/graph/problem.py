@@ -86,6 +86,10 @@ class GraphConfig:
     "huber" or "cauchy" (``robust``), with the thresholds ``loss_threshold_sd`` [σ] in that
     order (GNSS position, GNSS velocity, baro); a GNSS fix's loss is of the Mahalanobis norm
     of its 3-vector residual. The final weights are in ``Estimate.info["robust_weights"]``.
+    use_mag: heading factors from the drive's magnetometer when it has one, with a hard-iron
+    bias variable H(0) (``graph.magnetometer``; the model is the EKF's); mag_interval_s: at
+    most one per this many seconds; mag_heading_floor [rad]: heading σ floor; mag_bias_sd
+    [µT]: prior σ of each hard-iron component; mag_loss_sd: Huber threshold [σ].
     gnss_gate_prob: probability of the χ² gates on GNSS fixes (0 switches gating off):
     a causal pre-gate of the GNSS height against the barometer and a post-solve gate of
     each fix's normalised position (+ velocity) residual, repeated ≤ ``gate_rounds`` times.
@@ -118,6 +122,11 @@ class GraphConfig:
     loss_gnss_vel: str = "none"
     loss_baro: str = "none"
     loss_threshold_sd: tuple[float, float, float] = (2.0, 2.0, 2.0)
+    use_mag: bool = True
+    mag_interval_s: float = 1.0
+    mag_heading_floor: float = float(np.radians(2.0))
+    mag_bias_sd: float = 3.0
+    mag_loss_sd: float = 3.0
 
     def __post_init__(self) -> None:
         if self.solver not in ("auto", "banded", "general"):

@@ -1,0 +1,104 @@
+"""The graph smoothers' magnetometer: heading factors with a hard-iron bias variable.
+
+Built on the public extension point (``extend``), switched on by ``GraphConfig.use_mag``
+whenever the drive has a magnetometer. The measurement model is the one the EKF uses
+(``sensors.magnetometer``): the azimuth of the bias-corrected field rotated into the graph's
+frame by the keyframe attitude R_k (body → tangent frame),
+
+    e_k = wrap(atan2(m̂_E, m̂_N) − D_k),   m̂ = R_k (z − b_m),
+
+one scalar ``gtsam.CustomFactor`` on X(k) and the hard-iron bias H(0) (3-vector [µT], prior
+N(0, ``mag_bias_sd``² I)) per keyframe that has a sample within half a sample spacing, at
+most one per ``mag_interval_s`` (the errors are correlated over seconds). D_k is the
+azimuth, in the tangent frame, of the World Magnetic Model's field at the start
+(``geo.magfield``; it is the declination up to the tangent frame's convergence, < 0.05°
+over a few km). Jacobians: ∂e/∂ω_k = g · (−R_k [(z − b_m)×]) for the Pose3 retraction
+R Exp(ω), ∂e/∂b_m = −g R_k, g = (−m̂_E, m̂_N, 0)/H² (module ``sensors.magnetometer``).
+σ = √((σ_m/H)² + floor²); a Huber loss at ``mag_loss_sd`` σ stands in for the EKF's gate
+(motor-current and soft-iron bursts).
+
+Key: H(0) (``gtsam.symbol_shorthand.H``), reported as ``info["extra_variables"]["h0"]``;
+a user extension must not declare H(0) as well.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gtsam
+import numpy as np
+from gtsam.symbol_shorthand import H
+
+from ...nav.rotations import skew3
+from ...sensors.magnetometer import MIN_HORIZONTAL_UT, heading_sd
+from ...types import FloatArray
+from .extend import GraphView, Terms, Variable, X
+
+KEY = H(0)
+
+
+def _heading_factor(k: int, z_b: FloatArray, d_ref: float, sd: float, loss_sd: float) -> Any:
+    base = gtsam.noiseModel.Isotropic.Sigma(1, sd)
+    noise = gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Huber.Create(loss_sd),
+                                           base)
+
+    def error(this: Any, values: Any, jac: Any) -> FloatArray:
+        r_k = values.atPose3(this.keys()[0]).rotation().matrix()
+        d = z_b - values.atVector(this.keys()[1])
+        m = r_k @ d
+        h2 = m[0] * m[0] + m[1] * m[1]
+        e = (np.arctan2(m[1], m[0]) - d_ref + np.pi) % (2.0 * np.pi) - np.pi
+        if jac is not None:
+            g = np.array([-m[1], m[0], 0.0]) / h2
+            jac[0] = np.hstack([g @ (-r_k @ skew3(d)), np.zeros(3)])[None, :]
+            jac[1] = (-g @ r_k)[None, :]
+        return np.array([e])
+
+    return gtsam.CustomFactor(noise, [X(k), KEY], error)
+
+
+class MagnetometerExtension:
+    """The built-in extension (module docstring); ``config`` is the ``GraphConfig``."""
+
+    name = "magnetometer"
+
+    def __init__(self, config: Any) -> None:
+        self.config = config
+
+    def __call__(self, view: GraphView) -> Terms:
+        from ...geo.magfield import earth_field
+
+        cfg, mag = self.config, view.drive.mag
+        assert mag is not None
+        year = view.drive.meta.get("decimal_year")
+        fm = earth_field(float(view.origin_lla[0]), float(view.origin_lla[1]),
+                         float(view.origin_lla[2]), float(year) if year is not None else 2025.0)
+        # field reference in the tangent frame at each keyframe (initial position)
+        i = np.clip(np.searchsorted(mag.t, view.t_kf), 1, mag.t.size - 1)
+        i = np.where(np.abs(mag.t[i - 1] - view.t_kf) < np.abs(mag.t[i] - view.t_kf), i - 1, i)
+        spacing = float(np.median(np.diff(mag.t))) if mag.t.size > 1 else np.inf
+        near = np.abs(mag.t[i] - view.t_kf) <= 0.5 * spacing
+        slot = np.floor((view.t_kf - view.t_kf[0]) / cfg.mag_interval_s).astype(np.int64)
+        factors = []
+        last = -1
+        for k in np.flatnonzero(near):
+            if slot[k] == last:
+                continue
+            z = np.asarray(mag.field_b[i[k]], float)
+            m_t = view.rotation(k) @ z  # only for the strength of the horizontal field
+            hor = float(np.hypot(m_t[0], m_t[1]))
+            if hor < MIN_HORIZONTAL_UT:
+                continue
+            last = slot[k]
+            ref = fm.ned_ut  # tangent ≈ local level at the start (module docstring)
+            sd = float(heading_sd(mag.sd_ut, hor, cfg.mag_heading_floor))
+            factors.append(_heading_factor(int(k), z, float(np.arctan2(ref[1], ref[0])), sd,
+                                           cfg.mag_loss_sd))
+        return Terms(factors, [Variable(KEY, np.zeros(3), cfg.mag_bias_sd)])
+
+
+def builtin_extensions(drive: Any, config: Any) -> list[Any]:
+    """The smoother's own extensions for this drive (the magnetometer when it has one)."""
+    if drive.mag is not None and config.use_mag and len(drive.mag) >= 2:
+        return [MagnetometerExtension(config)]
+    return []
