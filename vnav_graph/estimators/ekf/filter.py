@@ -57,6 +57,7 @@ from ...geo.earth import OMEGA_IE, gravity
 from ...geo.frames import quat_to_mat, rph_to_quat
 from ...nav.gaps import GAP_ACCEL_SD
 from ...nav.levelling import coarse_level
+from ...sensors.magnetometer import usable
 from ...sensors.model import BaroPrior, SensorModel, baro_prior, sensor_model
 from ...sensors.noise import gm_process_var, white_sd
 from ...types import (
@@ -389,7 +390,7 @@ class _Events:
 
 def _mag_samples(drive: Drive, cfg: EkfConfig) -> NDArrayInt:
     """Indices of the magnetometer samples used: the first of every ``mag_interval_s``."""
-    if drive.mag is None or not cfg.use_mag:
+    if drive.mag is None or not cfg.use_mag or not usable(drive.mag)[0]:
         return np.zeros(0, dtype=np.int64)
     slot = np.floor((drive.mag.t - drive.mag.t[0]) / cfg.mag_interval_s).astype(np.int64)
     return np.flatnonzero(np.r_[True, np.diff(slot) > 0])
@@ -459,7 +460,9 @@ def _mag_data(drive: Drive, ev: _Events, ini: _Initial,
     World Magnetic Model for the drive's year (``meta["decimal_year"]``, else the newest
     model's epoch, noted in info)."""
     if not ev.m_field.shape[0]:
-        return kernel.MagData(ev.m_field, 1.0, 0.0, 0.0, 1.0, 1), {}
+        why = usable(drive.mag)[1] if cfg.use_mag else ""
+        return kernel.MagData(ev.m_field, 1.0, 0.0, 0.0, 1.0, 1), (
+            {"mag_note": why} if why else {})
     from ...geo.magfield import earth_field
 
     assert drive.mag is not None

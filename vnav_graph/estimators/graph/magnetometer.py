@@ -30,7 +30,7 @@ import numpy as np
 from gtsam.symbol_shorthand import H
 
 from ...nav.rotations import skew3
-from ...sensors.magnetometer import MIN_HORIZONTAL_UT, heading_sd
+from ...sensors.magnetometer import MIN_HORIZONTAL_UT, heading_sd, usable
 from ...types import FloatArray
 from .extend import GraphView, Terms, Variable, X
 
@@ -99,6 +99,6 @@ class MagnetometerExtension:
 
 def builtin_extensions(drive: Any, config: Any) -> list[Any]:
     """The smoother's own extensions for this drive (the magnetometer when it has one)."""
-    if drive.mag is not None and config.use_mag and len(drive.mag) >= 2:
+    if config.use_mag and usable(drive.mag)[0]:
         return [MagnetometerExtension(config)]
     return []

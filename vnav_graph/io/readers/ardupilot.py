@@ -313,6 +313,9 @@ def read_dataflash(path: str | Path, clock: str = "auto") -> Drive:
         "boot_clock_per_gps_second": report.clock_rate,
         **report.as_meta(),
     }
+    year = _decimal_year(fixes.gps_time)
+    if year is not None:
+        meta["decimal_year"] = year  # the date of the Earth's field (geo.magfield)
     if onboard is not None:
         meta["onboard"] = onboard
     return Drive(ImuStream(t_imu, gyro, acc), gnss, baro, fixes.lla[0].copy(), meta=meta,
@@ -358,6 +361,15 @@ def _read_imu(rows: list[dict[str, Any]], name: str,
                          f"usable ({why or 'fields missing'}; corrupt FMT records or NaN "
                          "samples?)")
     return t_imu, gyro, acc
+
+
+def _decimal_year(gps_time: np.ndarray) -> float | None:
+    """Decimal year of the first fix from its GPS week and time of week (None without a
+    plausible week: logs before the receiver had the week number)."""
+    from ...geo.magfield import decimal_year_from_gps
+
+    ok = gps_time[np.isfinite(gps_time) & (gps_time > 1500 * 604800.0)]  # after 2008
+    return None if ok.size == 0 else round(float(decimal_year_from_gps(float(ok[0]))), 4)
 
 
 @dataclass(frozen=True)
