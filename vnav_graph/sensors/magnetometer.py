@@ -43,6 +43,10 @@ from numba import njit
 from ..types import FloatArray, MagStream, Trajectory
 
 MIN_HORIZONTAL_UT = 3.0  # weaker horizontal fields give no usable heading (near the poles) [µT]
+# Defaults shared by ekf/ekf-rts (EkfConfig) and both graphs (GraphConfig):
+MAG_INTERVAL_S = 1.0  # at most one heading per this many seconds (errors correlated over s)
+MAG_HEADING_FLOOR = float(np.radians(2.0))  # heading σ floor: declination, soft iron [rad]
+MAG_BIAS_SD_UT = 3.0  # prior σ of each hard-iron component after the log's calibration [µT]
 # The Earth's field strength is constant over a drive; a hard-iron offset comparable to it
 # makes |z| swing as the vehicle turns. When the interquartile range of |z| exceeds this
 # fraction of its median the disturbance is beyond the hard-iron prior (≈ 5 µT of a 50 µT

@@ -57,7 +57,7 @@ from ...geo.earth import OMEGA_IE, gravity
 from ...geo.frames import quat_to_mat, rph_to_quat
 from ...nav.gaps import GAP_ACCEL_SD
 from ...nav.levelling import coarse_level
-from ...sensors.magnetometer import usable
+from ...sensors.magnetometer import MAG_BIAS_SD_UT, MAG_HEADING_FLOOR, MAG_INTERVAL_S, usable
 from ...sensors.model import BaroPrior, SensorModel, baro_prior, sensor_model
 from ...sensors.noise import gm_process_var, white_sd
 from ...types import (
@@ -145,9 +145,9 @@ class EkfConfig:
     align_sd_max: float = 15.0 * DEG
     gap_heading_forget_s: float = 5.0
     use_mag: bool = True
-    mag_interval_s: float = 1.0
-    mag_heading_floor: float = 2.0 * DEG
-    mag_bias_sd: float = 3.0
+    mag_interval_s: float = MAG_INTERVAL_S
+    mag_heading_floor: float = MAG_HEADING_FLOOR
+    mag_bias_sd: float = MAG_BIAS_SD_UT
     mag_bias_rw: float = 0.01
     mag_reaccept_s: float = 20.0
 

@@ -15,6 +15,7 @@ from ...config import REAL_LOG_BARO, BaroSpec, ImuSpec
 from ...geo.earth import gravity
 from ...nav.gaps import imu_gaps as nav_imu_gaps
 from ...nav.levelling import coarse_level
+from ...sensors.magnetometer import MAG_BIAS_SD_UT, MAG_HEADING_FLOOR, MAG_INTERVAL_S
 from ...sensors.model import BaroPrior, baro_prior, sensor_model
 from ...sensors.noise import gm_process_var, gm_transition
 from ...types import (
@@ -123,9 +124,9 @@ class GraphConfig:
     loss_baro: str = "none"
     loss_threshold_sd: tuple[float, float, float] = (2.0, 2.0, 2.0)
     use_mag: bool = True
-    mag_interval_s: float = 1.0
-    mag_heading_floor: float = float(np.radians(2.0))
-    mag_bias_sd: float = 3.0
+    mag_interval_s: float = MAG_INTERVAL_S
+    mag_heading_floor: float = MAG_HEADING_FLOOR
+    mag_bias_sd: float = MAG_BIAS_SD_UT
     mag_loss_sd: float = 3.0
 
     def __post_init__(self) -> None:
