@@ -308,7 +308,7 @@ def test_ski_full_and_car_full(data_dir: Path) -> None:
     assert len(car.imu) == 5563 and car.meta["averaged_1s"] is True
     # mag_x/y/z on the same 1 s rows; a phone in a car: |B| 88 µT (hard iron of the car and
     # mount on top of the 52 µT Earth field), σ default 3 µT
-    assert len(car.mag) == 5563 and car.mag.sd_ut == 3.0
+    assert len(car.mag) == 5563 and car.mag.sd_ut == 5.0
     np.testing.assert_array_equal(car.mag.t, car.imu.t)
     assert np.median(np.linalg.norm(car.mag.field_b, axis=1)) == pytest.approx(88.0, abs=1.0)
 
@@ -357,7 +357,7 @@ def test_ardupilot_218_mag_heading_matches_att_yaw(data_dir: Path) -> None:
     p = _log(data_dir, "erle_pxf_218/218.BIN")
     d = read_log(p)
     m = d.mag
-    assert len(m) == 3350 and m.sd_ut == 1.0 and "mag" not in d.meta["dropped"]
+    assert len(m) == 3350 and m.sd_ut == 5.0 and "mag" not in d.meta["dropped"]
     # first record MagX/Y/Z = (−142, 45, 258) mG → µT; |B| = 30.86 µT (Earth field, offsets
     # applied by ArduPilot: the magnitude stays within 2 µT while the copter turns)
     np.testing.assert_allclose(m.field_b[0], [-14.2, 4.5, 25.8], atol=1e-12)
@@ -389,7 +389,7 @@ def test_px4_real_mag_heading_matches_attitude(data_dir: Path) -> None:
 
     p = _log(data_dir, "px4_ulog_samples/sample_px4_events.ulg")
     d = read_log(p)
-    assert len(d.mag) == 459 and d.mag.sd_ut == 1.0  # vehicle_magnetometer, not sensor_mag
+    assert len(d.mag) == 459 and d.mag.sd_ut == 5.0  # vehicle_magnetometer, not sensor_mag
     # Gauss → µT: Zurich's field is 48 µT
     assert np.median(np.linalg.norm(d.mag.field_b, axis=1)) == pytest.approx(48.07, abs=0.05)
     a = ULog(str(p), ["vehicle_attitude"]).data_list[0].data
@@ -485,7 +485,7 @@ def test_px4_ulog_synthetic_mag(tmp_path: Path) -> None:
                                         "all-zero sample (no compass)": 1}
     np.testing.assert_allclose(d.mag.t, t_mag[keep], atol=1e-9)
     np.testing.assert_allclose(d.mag.field_b, _turning_field(t_mag)[keep], rtol=1e-6)
-    assert d.mag.sd_ut == 1.0
+    assert d.mag.sd_ut == 5.0
     p.write_bytes(_ulog_bytes({**base, "sensor_mag": sm}))  # old firmware: sensor_mag only
     d = read_log(p)
     np.testing.assert_allclose(d.mag.field_b, np.tile([30.0, 0.0, 40.0], (100, 1)), rtol=1e-6)
@@ -527,7 +527,7 @@ def test_sensorlogger_folder_mag_uses_the_imu_mounting(tmp_path: Path) -> None:
     assert d.meta["dropped"]["mag"] == {"non-finite sample": 1, "all-zero sample (no compass)": 1}
     np.testing.assert_allclose(d.mag.t, grav["seconds_elapsed"].to_numpy()[keep])
     np.testing.assert_allclose(d.mag.field_b, b_d[keep] @ r_bd.T, atol=1e-12)
-    assert d.mag.sd_ut == 3.0
+    assert d.mag.sd_ut == 5.0
     np.testing.assert_allclose(np.linalg.norm(d.mag.field_b, axis=1), 40.0)
     # z_b is the mean gravity direction: the mean field points down in b (the skier's phone
     # tumbles, so the mean of the unit vectors is shorter than 1: measured (0.8, 0.7, 24.1))
@@ -552,7 +552,7 @@ def test_merged_csv_mag_mapped_like_the_accelerometer(tmp_path: Path) -> None:
     mag_d = df[["mag_x", "mag_y", "mag_z"]].to_numpy()
     np.testing.assert_allclose(d.mag.field_b, mag_d @ r_bd.T, atol=1e-12)
     np.testing.assert_array_equal(d.mag.t, d.imu.t)  # the same 1 s rows, bin centres
-    assert d.mag.sd_ut == 3.0
+    assert d.mag.sd_ut == 5.0
     assert np.median(np.linalg.norm(d.mag.field_b, axis=1)) == pytest.approx(76.0, abs=1.0)
     no_mag = tmp_path / "nomag.csv"
     df.drop(columns=["mag_x", "mag_y", "mag_z"]).to_csv(no_mag, index=False)

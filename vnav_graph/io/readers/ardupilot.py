@@ -21,11 +21,13 @@ Messages used
   ``OfsX/Y/Z`` (and motor compensation ``MOfs*``) applied, so only the unit changes
   (× 0.1 → µT). Samples that are exactly (0, 0, 0) (the logger writes a MAG record even
   without a compass: Loiter_RTL.bin is all zeros) and non-finite ones are dropped and
-  counted; none left → ``Drive.mag`` is None. σ = ``MAG_SD_UT`` (1.0 µT per axis): the
-  logged values are quantised to 1 mG = 0.1 µT and their sample-to-sample noise is
-  0.15 µT on 218.BIN (0.6 µT on 181.BIN), but on a multirotor the motor-current
-  interference and the residual hard/soft iron dominate (tilt-compensated heading vs
-  ``ATT.Yaw`` scatters by 5° on 218.BIN, i.e. ~2 µT of the 26 µT horizontal field).
+  counted; none left → ``Drive.mag`` is None. σ = ``MAG_SD_UT`` (5 µT per axis, the noise
+  ArduPilot's own EKF assumes, ``EK3_MAG_M_NSE`` = 0.05 Ga): the logged values are quantised
+  to 1 mG = 0.1 µT and their sample-to-sample noise is 0.15 µT on 218.BIN (0.6 µT on
+  181.BIN), but on a multirotor the motor-current interference (correlated with throttle,
+  so with the climbs) and the residual hard/soft iron dominate (tilt-compensated heading vs
+  ``ATT.Yaw`` scatters by 5° on 218.BIN, 18° on 181.BIN). With 1 µT the heading factors
+  pulled the tilt, and through it the baro scale, on 181.BIN.
 - Onboard estimate: ``CTUN.Alt`` (inertial-nav altitude) when ``AHRS_EKF_USE`` = 0, otherwise
   the EKF's ``PD`` from ``XKF1``/``NKF1``/``EKF1`` (first core).
 
@@ -93,7 +95,7 @@ SD_FLOOR_H_M = 0.5
 SD_FLOOR_V_M = 1.0
 DEFAULT_VEL_SD = (0.3, 0.3, 0.5)  # m/s, when the log has no speed accuracy
 MILLIGAUSS_UT = 0.1  # µT per milligauss (MAG.MagX/Y/Z)
-MAG_SD_UT = 1.0  # magnetometer white-noise σ per axis [µT] (module docstring)
+MAG_SD_UT = 5.0  # magnetometer white-noise σ per axis [µT] (module docstring)
 HEAD = b"\xa3\x95"
 
 _TYPES = ["IMU", "GPS", "GPA", "UBX3", "BARO", "MAG", "CTUN", "EKF1", "NKF1", "XKF1", "PARM",

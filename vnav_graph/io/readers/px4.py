@@ -19,9 +19,8 @@ Topics used (first instance, ``multi_id`` 0)
   µT, body frame FRD (PX4 applies the compass rotation and calibration before logging).
   Stamp ``timestamp_sample`` when present, else ``timestamp``. Non-finite, exactly (0, 0, 0)
   and out-of-range samples are dropped and counted; none left → ``Drive.mag`` is None.
-  σ = ``MAG_SD_UT`` (1.0 µT per axis: sensor noise of a few 0.1 µT plus multirotor motor
-  interference; PX4's own EKF2 assumes 5 µT, ``EKF2_MAG_NOISE`` = 0.05 Ga, as a gate-friendly
-  upper bound).
+  σ = ``MAG_SD_UT`` (5 µT per axis, what PX4's own EKF2 assumes, ``EKF2_MAG_NOISE`` = 0.05 Ga:
+  sensor noise of a few 0.1 µT plus multirotor motor interference and residual iron).
 
 Clock: PX4 boot time in seconds. Baro ``alt`` is the ISA pressure altitude shifted to the GNSS
 height over the first 10 s of fixes; the onboard altitude −z gets the same kind of offset.
@@ -53,7 +52,7 @@ SD_FLOOR_H_M = 0.5
 SD_FLOOR_V_M = 1.0
 DEFAULT_VEL_SD = 0.3  # m/s
 GAUSS_UT = 100.0  # µT per Gauss
-MAG_SD_UT = 1.0  # magnetometer white-noise σ per axis [µT] (module docstring)
+MAG_SD_UT = 5.0  # magnetometer white-noise σ per axis [µT] (module docstring)
 _TOPICS = ["sensor_combined", "sensor_gps", "vehicle_gps_position", "vehicle_air_data",
            "sensor_baro", "vehicle_local_position", "vehicle_magnetometer", "sensor_mag"]
 

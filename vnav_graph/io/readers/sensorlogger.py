@@ -52,7 +52,8 @@ difference, unlike the accelerometer, whose iOS sign is the inertial force). It 
 to b with exactly the accelerometer's mounting matrix, ``B_b = R_bd B_d``, so it shares the
 IMU's axes. Non-finite and exactly-zero samples are dropped and counted; a folder without a
 magnetometer file (the ski log) or a merged CSV without ``mag_*`` columns gives
-``Drive.mag = None``. σ = ``MAG_SD_UT`` = 3 µT per axis: a phone magnetometer is noisier
+``Drive.mag = None``. σ = ``MAG_SD_UT`` = 5 µT per axis (the autopilots' EKF default, as in
+the other readers): a phone magnetometer is noisier
 than an autopilot's (≈ 0.5 µT) and in a car the engine, speakers, phone mount and the car's
 steel body add hard/soft-iron and time-varying fields of several µT (the merged car log's
 |B| is 84 µT against a 52 µT Earth field).
@@ -94,7 +95,7 @@ DEG = np.pi / 180.0
 SD_FLOOR_H_M = 0.5
 SD_FLOOR_V_M = 1.0
 R68_OVER_SIGMA_2D = 1.5
-MAG_SD_UT = 3.0  # phone magnetometer white-noise σ per axis [µT] (module docstring)
+MAG_SD_UT = 5.0  # phone magnetometer white-noise σ per axis [µT] (module docstring)
 _FOLDER_HEADER = ("time", "seconds_elapsed")
 
 
