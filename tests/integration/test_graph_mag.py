@@ -37,7 +37,7 @@ def test_graph_batch_uses_the_magnetometer(drive) -> None:
     # measured (seed 2): smoothed yaw RMS after 30 s 0.200° → 0.133°
     assert _yaw_rms_deg(with_mag, drive) < 0.8 * _yaw_rms_deg(without, drive)
     # the same model as ekf-rts: both smoothers agree on the hard iron within their σ
-    e = EKFRTS().run(drive).info["mag_bias_ut"]
+    e = EKFRTS().run(drive).info["extra_variables"]["h0"]
     assert np.all(np.abs(np.array(e["est"][:2]) - est[:2]) <= 2 * sd[:2])
 
 
