@@ -57,7 +57,14 @@ from ...geo.earth import OMEGA_IE, gravity
 from ...geo.frames import quat_to_mat, rph_to_quat
 from ...nav.gaps import GAP_ACCEL_SD
 from ...nav.levelling import coarse_level
-from ...sensors.magnetometer import MAG_BIAS_SD_UT, MAG_HEADING_FLOOR, MAG_INTERVAL_S, usable
+from ...sensors.magnetometer import (
+    MAG_BIAS_SD_UT,
+    MAG_HEADING_FLOOR,
+    MAG_INTERVAL_S,
+    MIN_HORIZONTAL_UT,
+    usable,
+    wrap_pi,
+)
 from ...sensors.model import BaroPrior, SensorModel, baro_prior, sensor_model
 from ...sensors.noise import gm_process_var, white_sd
 from ...types import (
@@ -284,10 +291,50 @@ class _Initial:
     i_static: int  # end of the static levelling window (IMU samples)
     g_latency: float  # GNSS latency [s] subtracted from the fix stamps
     lever: FloatArray  # GNSS antenna lever arm in b [m]
+    heading_from_mag: bool  # the initial heading is the magnetometer's
+
+
+def _mag_field(drive: Drive, cfg: EkfConfig) -> Any:
+    """The World Magnetic Model's field at the origin for the drive's year
+    (``meta["decimal_year"]``, else 2025.0), or None when the magnetometer is not used."""
+    if not cfg.use_mag or not usable(drive.mag)[0]:
+        return None
+    from ...geo.magfield import earth_field
+
+    year = drive.meta.get("decimal_year")
+    lat, lon, h = (float(x) for x in drive.origin_lla)
+    return earth_field(lat, lon, h, float(year) if year is not None else 2025.0)
+
+
+def _mag_heading(drive: Drive, t_end: float, roll: float, pitch: float, fm: Any,
+                 cfg: EkfConfig) -> tuple[float, float] | None:
+    """Initial heading [rad] and its σ from the magnetometer samples up to ``t_end`` (the
+    levelling window; at least the first sample) with the levelled roll and pitch: the
+    field's azimuth is yaw + that of the levelled field, and must equal the declination.
+    σ² = floor² + (σ_m²/N + 2 σ_b²)/H² (noise, the two horizontal hard-iron components)."""
+    mag = drive.mag
+    assert mag is not None
+    t0 = drive.imu.t[0]
+    sel = (mag.t >= t0) & (mag.t <= max(t_end, t0))
+    if not sel.any():
+        j = int(np.searchsorted(mag.t, t0))
+        if j >= mag.t.size or mag.t[j] - t0 > 1.0:
+            return None
+        sel = np.zeros(mag.t.size, bool)
+        sel[j] = True
+    c_tilt = quat_to_mat(rph_to_quat([roll, pitch, 0.0])[0])
+    m_h = c_tilt @ mag.field_b[sel].mean(axis=0)
+    hor = float(np.hypot(m_h[0], m_h[1]))
+    if hor < MIN_HORIZONTAL_UT:
+        return None
+    yaw = float(wrap_pi(fm.declination_rad - np.arctan2(m_h[1], m_h[0])))
+    var = cfg.mag_heading_floor**2 + (mag.sd_ut**2 / sel.sum()
+                                      + 2.0 * cfg.mag_bias_sd**2) / hor**2
+    return yaw, float(np.sqrt(var))
 
 
 def _initial_state(drive: Drive, cfg: EkfConfig, model: SensorModel, bp: BaroPrior,
-                   est_scale: bool) -> _Initial:
+                   est_scale: bool, fm: Any = None) -> _Initial:
     """Coarse levelling over the static start, position and velocity from the first fixes
     (heading given or unknown; variances from the shared model's floored GNSS sigmas), and
     the prior covariance of every state."""
@@ -305,6 +352,13 @@ def _initial_state(drive: Drive, cfg: EkfConfig, model: SensorModel, bp: BaroPri
         tilt_extra_var = (mv.accel_sd / 9.81) ** 2
     heading_known = cfg.initial_heading is not None
     yaw0 = float(cfg.initial_heading) if heading_known else 0.0
+    heading_sd = cfg.initial_heading_sd
+    mag_yaw = None
+    if not heading_known and fm is not None:
+        mag_yaw = _mag_heading(drive, float(t[i_static - 1]), roll, pitch, fm, cfg)
+        if mag_yaw is not None:  # compass alignment
+            heading_known = True
+            yaw0, heading_sd = mag_yaw
     q0 = rph_to_quat([roll, pitch, yaw0])[0]
     c0 = quat_to_mat(q0)
     # a writable copy: a read-only lever arm compiles a second specialisation of every
@@ -345,7 +399,7 @@ def _initial_state(drive: Drive, cfg: EkfConfig, model: SensorModel, bp: BaroPri
     p0[6:9, 6:9] = m_tilt @ p_ba @ m_tilt.T + (cfg.min_tilt_sd**2 + tilt_extra_var) * np.diag(
         [1.0, 1.0, 0.0])
     yaw_unknown_var = np.pi**2 / 3.0
-    p0[8, 8] = cfg.initial_heading_sd**2 if heading_known else yaw_unknown_var
+    p0[8, 8] = heading_sd**2 if heading_known else yaw_unknown_var
     p0[6:9, 12:15] = m_tilt @ p_ba
     p0[12:15, 6:9] = (m_tilt @ p_ba).T
     p0[9:12, 9:12] = ispec.gyro_bias_sd**2 * np.eye(3)
@@ -364,7 +418,7 @@ def _initial_state(drive: Drive, cfg: EkfConfig, model: SensorModel, bp: BaroPri
     p0[16, 16] = bp.latency_sd**2
     p0[17, 17] = bp.bias_sd**2
     return _Initial(lla0, v0, q0, par0, p0, heading_known, yaw_unknown_var, i_static,
-                    g_latency, lever)
+                    g_latency, lever, mag_yaw is not None)
 
 
 @dataclass(frozen=True)
@@ -454,21 +508,15 @@ def _events(drive: Drive, model: SensorModel, grid_idx: NDArrayInt, g_latency: f
                    m_field)
 
 
-def _mag_data(drive: Drive, ev: _Events, ini: _Initial,
+def _mag_data(drive: Drive, ev: _Events, fm: Any,
               cfg: EkfConfig) -> tuple[kernel.MagData, dict[str, Any]]:
-    """The kernel's magnetometer record: the declination at the start position from the
-    World Magnetic Model for the drive's year (``meta["decimal_year"]``, else the newest
-    model's epoch, noted in info)."""
-    if not ev.m_field.shape[0]:
+    """The kernel's magnetometer record (declination of ``_mag_field``) and its info."""
+    if fm is None or not ev.m_field.shape[0]:
         why = usable(drive.mag)[1] if cfg.use_mag else ""
-        return kernel.MagData(ev.m_field, 1.0, 0.0, 0.0, 1.0, 1), (
+        return kernel.MagData(np.zeros((0, 3)), 1.0, 0.0, 0.0, 1.0, 1), (
             {"mag_note": why} if why else {})
-    from ...geo.magfield import earth_field
-
     assert drive.mag is not None
     year = drive.meta.get("decimal_year")
-    fm = earth_field(float(ini.lla0[0]), float(ini.lla0[1]), float(ini.lla0[2]),
-                     float(year) if year is not None else 2025.0)
     gate1 = float(chi2.ppf(cfg.gate_prob, 1))
     max_consec = max(3, round(cfg.mag_reaccept_s / cfg.mag_interval_s))
     info: dict[str, Any] = {"mag_declination_deg": float(np.degrees(fm.declination_rad)),
@@ -495,7 +543,8 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
     gaps = model.gaps
     gr = _grids(t, gaps, imu.rate_hz, cfg)
     qd = _process_noise(t, gr.grid_idx, gaps, ispec, bp, cfg)
-    ini = _initial_state(drive, cfg, model, bp, est_scale)
+    fm = _mag_field(drive, cfg)
+    ini = _initial_state(drive, cfg, model, bp, est_scale, fm)
     ev = _events(drive, model, gr.grid_idx, ini.g_latency, cfg)
     baro = drive.baro
     max_consec_baro = 1
@@ -506,7 +555,7 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
     tilt_rate_sd = np.sqrt(2.0) * OMEGA_IE * np.cos(ini.lla0[0])
     tau = (ispec.gyro_bias_tau, ispec.accel_bias_tau, bp.bias_tau)
     heading_accel = ev.has_vel and cfg.heading_source in ("auto", "accel")
-    mag_data, mag_info = _mag_data(drive, ev, ini, cfg)
+    mag_data, mag_info = _mag_data(drive, ev, fm, cfg)
 
     # scalars coerced to one numba type each (float64, int64, bool): one compiled kernel
     res = kernel.run_filter(
@@ -579,8 +628,8 @@ def _report(drive: Drive, res: tuple[Any, ...], gr: _Grids, gaps: NDArrayInt, in
         "accel_scale_estimated": bool(est_scale),
         "accel_scale": o_par[-1, km.PKA:km.PKA + 3].copy(),
         "static_align_s": float(t[ini.i_static - 1] - t[0]),
-        "heading_source": ("given" if ini.heading_known else
-                           "magnetometer" if res[18].size and cfg.use_mag else
+        "heading_source": ("magnetometer" if ini.heading_from_mag else
+                           "given" if ini.heading_known else
                            "accel-matching" if heading_accel else "gnss-track"),
     }
     return innov, info
