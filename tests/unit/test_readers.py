@@ -558,3 +558,22 @@ def test_merged_csv_mag_mapped_like_the_accelerometer(tmp_path: Path) -> None:
     df.drop(columns=["mag_x", "mag_y", "mag_z"]).to_csv(no_mag, index=False)
     d2 = read_log(no_mag)
     assert d2.mag is None and any("no mag_x/y/z" in n for n in d2.meta["notes"])
+
+
+@pytest.mark.parametrize(("rel", "year"), [
+    ("erle_pxf_218/218.BIN", 2014.93),  # GPS week of the first fix
+    ("px4_ulog_samples/sample_px4_events.ulg", 2024.21),  # sensor_gps time_utc_usec
+    ("car_phone_1hz_2025-07-18/2025-07-18_23-13-43.csv", 2025.545),  # ISO time, 18 July
+    ("ski_iphone_100hz", 2025.916),  # Location.csv Unix ns, 1 December
+])
+def test_logs_carry_their_date(data_dir: Path, rel: str, year: float) -> None:
+    """The date of the Earth's field (World Magnetic Model epoch) comes from the log."""
+    d = read_log(_log(data_dir, rel))
+    assert d.meta["decimal_year"] == pytest.approx(year, abs=0.005)
+
+
+def test_decimal_year_unix() -> None:
+    from vnav_graph.io.readers._common import decimal_year_unix
+
+    assert decimal_year_unix([np.nan, 0.0, 1735689600.0]) == pytest.approx(2025.0)  # 2025-01-01
+    assert decimal_year_unix([12.5, 300.0]) is None  # boot seconds, not a date

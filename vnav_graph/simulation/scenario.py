@@ -162,6 +162,7 @@ def simulate(scenario: ScenarioConfig | str, seed: int = 0, **overrides: Any) ->
     }
     if mag_truth is not None:
         meta["mag_truth"] = mag_truth
+        meta["decimal_year"] = mag_truth["year"]  # the drive's date, as a log reader gives it
     return Drive(imu, gnss, baro, origin, truth, baro_truth, MappingProxyType(meta), mag=mag)
 
 

@@ -47,7 +47,7 @@ from . import factors as gf
 from .extend import GraphExtension, check_extensions, collect, make_view
 from .init import initial_states
 from .linalg import single_thread_blas
-from .magnetometer import builtin_extensions
+from .magnetometer import builtin_extensions, mag_info
 from .problem import (
     GraphConfig,
     Problem,
@@ -291,6 +291,7 @@ class GraphBatch:
                 "observability": out["observability"],
                 "timing_s": {"init": t1 - t0, "preintegration": t2 - t1, "solve": t3 - t2,
                              "outputs": t4 - t3},
+                **mag_info(drive, self.config),
                 "frame": "tangent-plane NED at origin; gravity-difference and Coriolis "
                          "corrections" if self.config.gravity_correction else "tangent-plane"}
         return Estimate(self.name, out["trajectory"], provides(drive), out["cov"],

@@ -53,7 +53,7 @@ from .extend import Collected, GraphExtension, check_extensions, collect, key_na
 from .general import hessian_pieces
 from .init import initial_states
 from .linalg import single_thread_blas
-from .magnetometer import builtin_extensions
+from .magnetometer import builtin_extensions, mag_info
 from .problem import (
     LOW_RATE_DT,
     LOW_RATE_KEYFRAME_DT,
@@ -470,6 +470,7 @@ class GraphISAM2:
         info["final_pass_restarted"] = restarted
         info["extra_variables"] = out["extra"]
         info["extra_variables_online"] = extra_online
+        info.update(mag_info(drive, cfg))
         return Estimate(self.name, out["trajectory"], provides(drive), out["cov"],
                         out["t_cov"], out["baro"], time.perf_counter() - t_start,
                         online=online_traj, info=info, config=self.config)

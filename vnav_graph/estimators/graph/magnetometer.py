@@ -102,3 +102,10 @@ def builtin_extensions(drive: Any, config: Any) -> list[Any]:
     if config.use_mag and usable(drive.mag)[0]:
         return [MagnetometerExtension(config)]
     return []
+
+
+def mag_info(drive: Any, config: Any) -> dict[str, str]:
+    """``{"mag_note": why}`` when the drive has a magnetometer the smoother leaves out."""
+    why = usable(drive.mag)[1] if config.use_mag else ""
+    return {"mag_note": why} if why else {}
+

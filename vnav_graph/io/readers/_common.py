@@ -249,3 +249,23 @@ def mag_stream(t: FloatArray, field_ut: FloatArray, sd_ut: float, report: Report
     report.notes.append(f"magnetometer from {source}: {t.size} samples, body FRD [µT], "
                         f"sd {sd_ut:g} µT per axis (reader default)")
     return MagStream(t, f, sd_ut)
+
+
+def decimal_year_unix(seconds: Any) -> float | None:
+    """Decimal year of the first plausible Unix time (2000–2100) in ``seconds``, or None: the
+    date of the Earth's field for ``geo.magfield`` (``meta["decimal_year"]``)."""
+    from datetime import UTC, datetime
+
+    from ...geo.magfield import decimal_year_from_datetime
+
+    v = np.asarray(seconds, dtype=float).ravel()
+    ok = v[np.isfinite(v) & (v > 946684800.0) & (v < 4102444800.0)]
+    if ok.size == 0:
+        return None
+    return round(float(decimal_year_from_datetime(datetime.fromtimestamp(float(ok[0]), UTC))), 4)
+
+
+def year_meta(year: float | None) -> dict[str, float]:
+    """``{"decimal_year": year}``, or {} when the log has no date."""
+    return {} if year is None else {"decimal_year": year}
+

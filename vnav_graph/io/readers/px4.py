@@ -37,6 +37,7 @@ from ...types import BaroStream, Drive, GnssStream, ImuStream, MagStream
 from ._common import (
     Report,
     baro_alt_aligned,
+    decimal_year_unix,
     find_gaps,
     finite_rows,
     mag_stream,
@@ -44,6 +45,7 @@ from ._common import (
     onboard_block,
     pressure_altitude,
     valid_pressure,
+    year_meta,
 )
 
 MAGIC = b"ULog\x01\x12\x35"
@@ -117,6 +119,7 @@ def read_ulog(path: str | Path) -> Drive:
     baro, off = _read_baro(ulog, gnss, report)
     mag = _read_mag(ulog, report, t_imu)
     meta: dict[str, Any] = {
+        **year_meta(_gps_year(ulog)),
         "source": "log", "name": path.stem, "format": "px4-ulog",
         "clock": "PX4 boot time [s]",
         "imu_frame": "PX4 body frame (forward-right-down), used as logged",
@@ -152,6 +155,14 @@ def _read_mag(ulog: Any, report: Report, t_imu: np.ndarray) -> MagStream | None:
             return mag_stream(_stamp(d), field, MAG_SD_UT, report, t_imu, name)
     report.notes.append("no vehicle_magnetometer / sensor_mag topic: drive has no magnetometer")
     return None
+
+
+def _gps_year(ulog: Any) -> float | None:
+    """Decimal year from the receiver's UTC time (``time_utc_usec``), for the WMM epoch."""
+    g = _topic(ulog, "sensor_gps") or _topic(ulog, "vehicle_gps_position")
+    if g is None or "time_utc_usec" not in g:
+        return None
+    return decimal_year_unix(np.asarray(g["time_utc_usec"], dtype=float) * 1e-6)
 
 
 def _read_gps(ulog: Any, path: Path, report: Report) -> tuple[GnssStream, str]:

@@ -82,12 +82,14 @@ from ...types import BaroStream, Drive, GnssStream, ImuStream, MagStream
 from ._common import (
     Report,
     baro_alt_aligned,
+    decimal_year_unix,
     find_gaps,
     finite_rows,
     mag_stream,
     monotonic_mask,
     pressure_altitude,
     valid_pressure,
+    year_meta,
 )
 
 G0 = 9.80665
@@ -395,6 +397,7 @@ def read_sensorlogger_folder(path: str | Path) -> Drive:
     report.notes.append(f"IMU from {acc_src} and {gyro_src}; clock = seconds_elapsed")
     report.notes.append("phone GNSS has no vertical velocity: vel_n not provided")
     meta = {
+        **year_meta(_year_of(loc["time"] if "time" in loc.columns else None, folder)),
         "source": "log", "name": folder.name, "format": "sensorlogger-folder",
         "device": meta_csv.get("device name"), "platform": platform or None,
         "clock": "Sensor Logger seconds_elapsed [s]",
@@ -445,6 +448,7 @@ def read_merged_csv(path: str | Path) -> Drive:
                         "stamps at bin centres; Android sign convention assumed for acc")
     report.notes.append("phone GNSS has no vertical velocity: vel_n not provided")
     meta = {
+        **year_meta(_year_of(df["time"] if "time" in df.columns else None, path)),
         "source": "log", "name": path.stem, "format": "sensorlogger-merged-1hz",
         "clock": "seconds since the first row's time + 0.5 s (bin centre)",
         "row_period_s": float(np.median(dt)) if dt.size else None,
@@ -482,6 +486,22 @@ def _epoch_scale(median: float, path: Path) -> float:
             return scale
     raise ValueError(f"{path.name}: numeric time column (median {median:.6g}) is not a Unix "
                      "epoch in s, ms, µs or ns")
+
+
+def _year_of(col: pd.Series | None, path: Path) -> float | None:
+    """Decimal year of the first time stamp of a Unix-epoch or ISO time column (None if it
+    has none): the date of the Earth's field for the magnetometer."""
+    if col is None:
+        return None
+    num = pd.to_numeric(col, errors="coerce")
+    if num.notna().mean() > 0.9:
+        v = num.to_numpy(dtype=float)
+        try:
+            return decimal_year_unix(v * _epoch_scale(float(np.nanmedian(v)), path))
+        except ValueError:
+            return None
+    ts = pd.to_datetime(col, errors="coerce", utc=True).dropna()
+    return None if ts.empty else decimal_year_unix([ts.iloc[0].timestamp()])
 
 
 def _merged_time(df: pd.DataFrame, path: Path) -> np.ndarray:
