@@ -10,7 +10,7 @@ state of the estimators) and σ_m the noise per axis [µT].
 
 Only the **heading** is used. The field's strength on a vehicle is unreliable (soft iron,
 motor currents, a logger's unknown scale: ArduPilot 218.BIN reads 30.8 µT where the model
-says 43 µT), and its vertical component would pull roll and pitch, which the vertical
+(WMM2010) says 45.7 µT), and its vertical component would pull roll and pitch, which the vertical
 channel depends on. The bias-corrected body field is rotated into n with the *estimated*
 attitude; its horizontal azimuth
 
