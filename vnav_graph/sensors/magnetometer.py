@@ -36,11 +36,15 @@ offset rotates with the vehicle in n, a heading error does not.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numba import njit
 
-from ..types import FloatArray, MagStream, Trajectory
+if TYPE_CHECKING:
+    from ..geo.magfield import FieldModel
+
+from ..types import Drive, FloatArray, MagStream, Trajectory
 
 MIN_HORIZONTAL_UT = 3.0  # weaker horizontal fields give no usable heading (near the poles) [µT]
 # Defaults shared by ekf/ekf-rts (EkfConfig) and both graphs (GraphConfig):
@@ -75,6 +79,23 @@ def usable(mag: MagStream | None) -> tuple[bool, str]:
                        f"(interquartile range over median; > {MAX_FIELD_SPREAD:.0%} means "
                        "vehicle interference beyond the hard-iron model)")
     return True, ""
+
+
+DEFAULT_YEAR = 2025.0  # date of the field for a drive without one (noted in info)
+
+
+def drive_field(drive: Drive) -> tuple[FieldModel, str]:
+    """The World Magnetic Model's field at the drive's origin on its date
+    (``meta["decimal_year"]``), and a note when the drive has no date (``DEFAULT_YEAR``
+    used). The one field reference of every estimator that uses the magnetometer."""
+    from ..geo.magfield import earth_field
+
+    year = drive.meta.get("decimal_year")
+    lat, lon, h = (float(x) for x in drive.origin_lla)
+    fm = earth_field(lat, lon, h, float(year) if year is not None else DEFAULT_YEAR)
+    note = "" if year is not None else (
+        f"drive has no date: declination of the {DEFAULT_YEAR:.1f} field")
+    return fm, note
 
 
 def field_azimuth(field_b: FloatArray, bias_b: FloatArray,

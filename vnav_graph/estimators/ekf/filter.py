@@ -62,6 +62,7 @@ from ...sensors.magnetometer import (
     MAG_HEADING_FLOOR,
     MAG_INTERVAL_S,
     MIN_HORIZONTAL_UT,
+    drive_field,
     usable,
     wrap_pi,
 )
@@ -294,16 +295,13 @@ class _Initial:
     heading_from_mag: bool  # the initial heading is the magnetometer's
 
 
-def _mag_field(drive: Drive, cfg: EkfConfig) -> Any:
-    """The World Magnetic Model's field at the origin for the drive's year
-    (``meta["decimal_year"]``, else 2025.0), or None when the magnetometer is not used."""
-    if not cfg.use_mag or not usable(drive.mag)[0]:
-        return None
-    from ...geo.magfield import earth_field
-
-    year = drive.meta.get("decimal_year")
-    lat, lon, h = (float(x) for x in drive.origin_lla)
-    return earth_field(lat, lon, h, float(year) if year is not None else 2025.0)
+def _mag_field(drive: Drive, cfg: EkfConfig) -> tuple[Any, str]:
+    """The field reference (``sensors.magnetometer.drive_field``: WMM at the origin on the
+    drive's date) and the note for info; (None, why) when the magnetometer is not used."""
+    ok, why = usable(drive.mag)
+    if not cfg.use_mag or not ok:
+        return None, why if cfg.use_mag else ""
+    return drive_field(drive)
 
 
 def _mag_heading(drive: Drive, t_end: float, roll: float, pitch: float, fm: Any,
@@ -442,16 +440,14 @@ class _Events:
     m_field: FloatArray
 
 
-def _mag_samples(drive: Drive, cfg: EkfConfig) -> NDArrayInt:
-    """Indices of the magnetometer samples used: the first of every ``mag_interval_s``."""
-    if drive.mag is None or not cfg.use_mag or not usable(drive.mag)[0]:
-        return np.zeros(0, dtype=np.int64)
-    slot = np.floor((drive.mag.t - drive.mag.t[0]) / cfg.mag_interval_s).astype(np.int64)
+def _mag_samples(t: FloatArray, interval_s: float) -> NDArrayInt:
+    """Indices of the magnetometer samples used: the first of every ``interval_s``."""
+    slot = np.floor((t - t[0]) / interval_s).astype(np.int64)
     return np.flatnonzero(np.r_[True, np.diff(slot) > 0])
 
 
 def _events(drive: Drive, model: SensorModel, grid_idx: NDArrayInt, g_latency: float,
-            cfg: EkfConfig) -> _Events:
+            cfg: EkfConfig, use_mag: bool) -> _Events:
     t = drive.imu.t
     n = t.size
     gnss, baro = drive.gnss, drive.baro
@@ -477,9 +473,9 @@ def _events(drive: Drive, model: SensorModel, grid_idx: NDArrayInt, g_latency: f
         b_alt = np.asarray(baro.altitude, dtype=float)
     else:
         b_alt = np.zeros(0)
-    im = _mag_samples(drive, cfg)
-    if im.size:
+    if use_mag:
         assert drive.mag is not None
+        im = _mag_samples(drive.mag.t, cfg.mag_interval_s)
         ev_t_l.append(drive.mag.t[im])
         ev_type_l.append(np.full(im.size, 2, dtype=np.int64))
         ev_idx_l.append(np.arange(im.size))
@@ -508,21 +504,17 @@ def _events(drive: Drive, model: SensorModel, grid_idx: NDArrayInt, g_latency: f
                    m_field)
 
 
-def _mag_data(drive: Drive, ev: _Events, fm: Any,
+def _mag_data(drive: Drive, ev: _Events, fm: Any, note: str,
               cfg: EkfConfig) -> tuple[kernel.MagData, dict[str, Any]]:
     """The kernel's magnetometer record (declination of ``_mag_field``) and its info."""
-    if fm is None or not ev.m_field.shape[0]:
-        why = usable(drive.mag)[1] if cfg.use_mag else ""
-        return kernel.MagData(np.zeros((0, 3)), 1.0, 0.0, 0.0, 1.0, 1), (
-            {"mag_note": why} if why else {})
+    info: dict[str, Any] = {"mag_note": note} if note else {}
+    if fm is None:
+        return kernel.MagData(np.zeros((0, 3)), 1.0, 0.0, 0.0, 1.0, 1), info
     assert drive.mag is not None
-    year = drive.meta.get("decimal_year")
     gate1 = float(chi2.ppf(cfg.gate_prob, 1))
     max_consec = max(3, round(cfg.mag_reaccept_s / cfg.mag_interval_s))
-    info: dict[str, Any] = {"mag_declination_deg": float(np.degrees(fm.declination_rad)),
-                            "mag_field_model": fm.model}
-    if year is None:
-        info["mag_note"] = "drive has no date: declination of the 2025.0 field"
+    info.update(mag_declination_deg=float(np.degrees(fm.declination_rad)),
+                mag_field_model=fm.model)
     return kernel.MagData(ev.m_field, float(drive.mag.sd_ut), float(fm.declination_rad),
                           float(cfg.mag_heading_floor**2), gate1, int(max_consec)), info
 
@@ -543,9 +535,9 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
     gaps = model.gaps
     gr = _grids(t, gaps, imu.rate_hz, cfg)
     qd = _process_noise(t, gr.grid_idx, gaps, ispec, bp, cfg)
-    fm = _mag_field(drive, cfg)
+    fm, mag_note = _mag_field(drive, cfg)
     ini = _initial_state(drive, cfg, model, bp, est_scale, fm)
-    ev = _events(drive, model, gr.grid_idx, ini.g_latency, cfg)
+    ev = _events(drive, model, gr.grid_idx, ini.g_latency, cfg, fm is not None)
     baro = drive.baro
     max_consec_baro = 1
     if baro is not None and baro.t.size > 1:
@@ -555,7 +547,7 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
     tilt_rate_sd = np.sqrt(2.0) * OMEGA_IE * np.cos(ini.lla0[0])
     tau = (ispec.gyro_bias_tau, ispec.accel_bias_tau, bp.bias_tau)
     heading_accel = ev.has_vel and cfg.heading_source in ("auto", "accel")
-    mag_data, mag_info = _mag_data(drive, ev, fm, cfg)
+    mag_data, mag_info = _mag_data(drive, ev, fm, mag_note, cfg)
 
     # scalars coerced to one numba type each (float64, int64, bool): one compiled kernel
     res = kernel.run_filter(

@@ -30,7 +30,13 @@ import numpy as np
 from gtsam.symbol_shorthand import H
 
 from ...nav.rotations import skew3
-from ...sensors.magnetometer import MIN_HORIZONTAL_UT, heading_sd, usable
+from ...sensors.magnetometer import (
+    MIN_HORIZONTAL_UT,
+    drive_field,
+    heading_sd,
+    usable,
+    wrap_pi,
+)
 from ...types import FloatArray
 from .extend import GraphView, Terms, Variable, X
 
@@ -47,7 +53,7 @@ def _heading_factor(k: int, z_b: FloatArray, d_ref: float, sd: float, loss_sd: f
         d = z_b - values.atVector(this.keys()[1])
         m = r_k @ d
         h2 = m[0] * m[0] + m[1] * m[1]
-        e = (np.arctan2(m[1], m[0]) - d_ref + np.pi) % (2.0 * np.pi) - np.pi
+        e = wrap_pi(np.arctan2(m[1], m[0]) - d_ref)
         if jac is not None:
             g = np.array([-m[1], m[0], 0.0]) / h2
             jac[0] = np.hstack([g @ (-r_k @ skew3(d)), np.zeros(3)])[None, :]
@@ -66,13 +72,9 @@ class MagnetometerExtension:
         self.config = config
 
     def __call__(self, view: GraphView) -> Terms:
-        from ...geo.magfield import earth_field
-
         cfg, mag = self.config, view.drive.mag
         assert mag is not None
-        year = view.drive.meta.get("decimal_year")
-        fm = earth_field(float(view.origin_lla[0]), float(view.origin_lla[1]),
-                         float(view.origin_lla[2]), float(year) if year is not None else 2025.0)
+        fm = drive_field(view.drive)[0]  # the origin is view.origin_lla
         # field reference in the tangent frame at each keyframe (initial position)
         i = np.clip(np.searchsorted(mag.t, view.t_kf), 1, mag.t.size - 1)
         i = np.where(np.abs(mag.t[i - 1] - view.t_kf) < np.abs(mag.t[i] - view.t_kf), i - 1, i)
