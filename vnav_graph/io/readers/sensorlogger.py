@@ -488,32 +488,38 @@ def _epoch_scale(median: float, path: Path) -> float:
                      "epoch in s, ms, µs or ns")
 
 
+def _time_column(col: pd.Series, path: Path) -> tuple[np.ndarray, float] | None:
+    """Stamps [s] of a time column and the Unix time [s] of their zero: a numeric epoch in
+    s, ms, µs or ns (Sensor Logger: ns; absolute, zero 0; ``ValueError`` when its magnitude
+    is none of these) or ISO UTC text (seconds since its first stamp, exact; None when more
+    than half of it does not parse)."""
+    num = pd.to_numeric(col, errors="coerce")
+    if num.notna().mean() > 0.9:
+        v = num.to_numpy(dtype=float)
+        return v * _epoch_scale(float(np.nanmedian(v)), path), 0.0
+    ts = pd.to_datetime(col, errors="coerce", utc=True)
+    if ts.isna().mean() > 0.5:
+        return None
+    first = ts.dropna().iloc[0]
+    return (ts - first).dt.total_seconds().to_numpy(dtype=float), float(first.timestamp())
+
+
 def _year_of(col: pd.Series | None, path: Path) -> float | None:
     """Decimal year of the first time stamp of a Unix-epoch or ISO time column (None if it
     has none): the date of the Earth's field for the magnetometer."""
     if col is None:
         return None
-    num = pd.to_numeric(col, errors="coerce")
-    if num.notna().mean() > 0.9:
-        v = num.to_numpy(dtype=float)
-        try:
-            return decimal_year_unix(v * _epoch_scale(float(np.nanmedian(v)), path))
-        except ValueError:
-            return None
-    ts = pd.to_datetime(col, errors="coerce", utc=True).dropna()
-    return None if ts.empty else decimal_year_unix([ts.iloc[0].timestamp()])
+    try:
+        tc = _time_column(col, path)
+    except ValueError:
+        return None
+    return None if tc is None else decimal_year_unix(tc[0] + tc[1])
 
 
 def _merged_time(df: pd.DataFrame, path: Path) -> np.ndarray:
     if "seconds_elapsed" in df.columns:
         return _num(df, "seconds_elapsed")
-    col = df["time"]
-    num = pd.to_numeric(col, errors="coerce")
-    if num.notna().mean() > 0.9:  # a Unix epoch in s, ms, µs or ns (Sensor Logger: ns)
-        v = num.to_numpy(dtype=float)
-        return v * _epoch_scale(float(np.nanmedian(v)), path)
-    ts = pd.to_datetime(col, errors="coerce", utc=True)
-    if ts.isna().mean() > 0.5:
+    tc = _time_column(df["time"], path)
+    if tc is None:
         raise ValueError(f"{path.name}: cannot parse the time column")
-    out = (ts - ts.dropna().iloc[0]).dt.total_seconds().to_numpy(dtype=float)
-    return out
+    return tc[0]  # the caller shifts the stamps to the first row
