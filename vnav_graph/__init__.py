@@ -31,8 +31,10 @@ from typing import Any as _Any
 __version__ = "0.1.0"
 
 from .jit import configure_cache as _configure_cache  # noqa: E402
+from .jit import configure_opt as _configure_opt  # noqa: E402
 
 _configure_cache()  # numba's cache in the user cache dir, never inside the installed package
+_configure_opt()  # LLVM level 2 unless NUMBA_OPT is set (jit.NUMBA_OPT_LEVEL: faster compile)
 
 # The public API, imported on first access (PEP 562) so that ``import vnav_graph`` (and with it
 # ``vnav-graph --help``) does not load numpy's heavy friends: scipy, numba, gtsam.

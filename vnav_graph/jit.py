@@ -12,9 +12,10 @@ cache goes to the user's cache directory instead:
   ``<user cache dir>/vnav_graph`` part.
 
 ``configure_cache()`` is called by ``vnav_graph/__init__.py`` before any module imports numba;
-it is cheap (no numba import). ``CompileTimer`` measures the time numba spends compiling (not
-loading from the cache) inside a block, so that a run can report ``jit_s`` apart from
-``runtime_s``.
+it is cheap (no numba import). So is ``configure_opt()``, called there too: LLVM level 2
+instead of numba's 3 unless ``NUMBA_OPT`` is set (the kernels run as fast, compile a tenth
+faster). ``CompileTimer`` measures the time numba spends compiling (not loading from the
+cache) inside a block, so that a run can report ``jit_s`` apart from ``runtime_s``.
 """
 
 from __future__ import annotations
@@ -59,6 +60,27 @@ def configure_cache() -> str:
     if cfg is not None and not getattr(cfg, "CACHE_DIR", ""):
         cfg.CACHE_DIR = path
     return path
+
+
+# LLVM optimisation level for the package's kernels. numba's default is 3; level 2 compiles
+# the first run's kernels ~10 % faster with the same run time (side by side, one process each,
+# all ten estimators: compile 79.5 → 71.2 s of CPU, hill-drive run times equal to ±5 %; default
+# run, empty cache, interleaved: 55.7 / 55.7 s wall at level 3 against 50.3 / 51.0 s at level
+# 2). The kernels are scalar loops over small matrices, which level 3's extra passes (loop
+# and SLP vectorisation) do not speed up.
+NUMBA_OPT_LEVEL = "2"
+
+
+def configure_opt() -> str | None:
+    """Set numba's LLVM optimisation level (``NUMBA_OPT``) to ``NUMBA_OPT_LEVEL`` unless the
+    user set it or numba is already imported (its config is then left alone: it applies to
+    code outside this package too). Returns the level this process will use when known."""
+    if "NUMBA_OPT" in os.environ:
+        return os.environ["NUMBA_OPT"]
+    if "numba" in sys.modules:
+        return None
+    os.environ["NUMBA_OPT"] = NUMBA_OPT_LEVEL
+    return NUMBA_OPT_LEVEL
 
 
 def _prune(base: Path, current: Path) -> None:

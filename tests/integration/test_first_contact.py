@@ -162,6 +162,22 @@ def test_numba_cache_goes_to_the_user_cache_dir(tmp_path: Path) -> None:
     assert r.stdout.split() == [str(tmp_path / "mine")] * 2
 
 
+def test_numba_opt_level_is_two_unless_the_user_chose() -> None:
+    """``import vnav_graph`` before numba: LLVM level 2 (jit.NUMBA_OPT_LEVEL); the user's
+    ``NUMBA_OPT`` wins; numba imported first: its config is not touched."""
+    code = "import {first}, numba.core.config as c\nprint(int(c.OPT))"
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_OPT"}
+
+    def opt(first: str, **extra: str) -> str:
+        r = subprocess.run([sys.executable, "-c", code.format(first=first)],
+                           capture_output=True, text=True, env={**env, **extra}, check=True)
+        return r.stdout.strip()
+
+    assert opt("vnav_graph, numba") == "2" == jit.NUMBA_OPT_LEVEL
+    assert opt("vnav_graph, numba", NUMBA_OPT="1") == "1"
+    assert opt("numba, vnav_graph") == "3"  # numba's own default, left alone
+
+
 def test_old_source_versions_are_pruned(tmp_path: Path) -> None:
     base = tmp_path / "numba"
     old = []
