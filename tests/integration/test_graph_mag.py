@@ -59,3 +59,22 @@ def test_an_unsteady_magnetometer_is_left_out_by_both_families() -> None:
     for est in (EKF().run(d), GraphBatch().run(d)):
         assert "magnetometer not used" in est.info["mag_note"]
         assert "h0" not in (est.info.get("extra_variables") or {})
+
+
+def test_both_families_report_the_same_field_and_a_missing_date() -> None:
+    """ekf and graph-batch report the same declination and field model, and both say when
+    the drive has no date (the graph used to say nothing)."""
+    from vnav_graph.estimators.ekf.filter import EKF
+    from vnav_graph.sensors.magnetometer import DEFAULT_YEAR
+
+    d = simulate(shorten_scenario("hill-drive-mag", 60.0), 1)
+    meta = {k: v for k, v in d.meta.items() if k != "decimal_year"}
+    for drive, dated in ((d, True), (d.replace(meta=meta), False)):
+        infos = [EKF().run(drive).info, GraphBatch().run(drive).info]
+        keys = ("mag_declination_deg", "mag_field_model", "mag_note")
+        assert [{k: i.get(k) for k in keys} for i in infos].count(
+            {k: infos[0].get(k) for k in keys}) == 2
+        assert np.isfinite(infos[0]["mag_declination_deg"])
+        assert ("mag_note" in infos[0]) is not dated
+        if not dated:
+            assert f"{DEFAULT_YEAR:.1f}" in infos[1]["mag_note"]

@@ -36,7 +36,7 @@ offset rotates with the vehicle in n, a heading error does not.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numba import njit
@@ -96,6 +96,25 @@ def drive_field(drive: Drive) -> tuple[FieldModel, str]:
     note = "" if year is not None else (
         f"drive has no date: declination of the {DEFAULT_YEAR:.1f} field")
     return fm, note
+
+
+def field_and_info(drive: Drive, use: bool) -> tuple[FieldModel | None, dict[str, Any]]:
+    """The field reference an estimator uses (None when it leaves the magnetometer out: not
+    wanted, none, or not ``usable``) and what it reports in ``info``: ``mag_note`` (why the
+    magnetometer is left out, or that the drive has no date), ``mag_declination_deg`` and
+    ``mag_field_model`` when it is used. One function for both families, so ekf and the
+    graph say the same thing about the same drive."""
+    if not use:
+        return None, {}
+    ok, why = usable(drive.mag)
+    if not ok:
+        return None, ({"mag_note": why} if why else {})
+    fm, note = drive_field(drive)
+    info: dict[str, Any] = {"mag_declination_deg": float(np.degrees(fm.declination_rad)),
+                            "mag_field_model": fm.model}
+    if note:
+        info["mag_note"] = note
+    return fm, info
 
 
 def field_azimuth(field_b: FloatArray, bias_b: FloatArray,

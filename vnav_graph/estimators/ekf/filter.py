@@ -62,8 +62,7 @@ from ...sensors.magnetometer import (
     MAG_HEADING_FLOOR,
     MAG_INTERVAL_S,
     MIN_HORIZONTAL_UT,
-    drive_field,
-    usable,
+    field_and_info,
     wrap_pi,
 )
 from ...sensors.model import BaroPrior, SensorModel, baro_prior, sensor_model
@@ -295,15 +294,6 @@ class _Initial:
     heading_from_mag: bool  # the initial heading is the magnetometer's
 
 
-def _mag_field(drive: Drive, cfg: EkfConfig) -> tuple[Any, str]:
-    """The field reference (``sensors.magnetometer.drive_field``: WMM at the origin on the
-    drive's date) and the note for info; (None, why) when the magnetometer is not used."""
-    ok, why = usable(drive.mag)
-    if not cfg.use_mag or not ok:
-        return None, why if cfg.use_mag else ""
-    return drive_field(drive)
-
-
 def _mag_heading(drive: Drive, t_end: float, roll: float, pitch: float, fm: Any,
                  cfg: EkfConfig) -> tuple[float, float] | None:
     """Initial heading [rad] and its σ from the magnetometer samples up to ``t_end`` (the
@@ -504,19 +494,15 @@ def _events(drive: Drive, model: SensorModel, grid_idx: NDArrayInt, g_latency: f
                    m_field)
 
 
-def _mag_data(drive: Drive, ev: _Events, fm: Any, note: str,
-              cfg: EkfConfig) -> tuple[kernel.MagData, dict[str, Any]]:
-    """The kernel's magnetometer record (declination of ``_mag_field``) and its info."""
-    info: dict[str, Any] = {"mag_note": note} if note else {}
+def _mag_data(drive: Drive, ev: _Events, fm: Any, cfg: EkfConfig) -> kernel.MagData:
+    """The kernel's magnetometer record (declination of the field reference ``fm``)."""
     if fm is None:
-        return kernel.MagData(np.zeros((0, 3)), 1.0, 0.0, 0.0, 1.0, 1), info
+        return kernel.MagData(np.zeros((0, 3)), 1.0, 0.0, 0.0, 1.0, 1)
     assert drive.mag is not None
     gate1 = float(chi2.ppf(cfg.gate_prob, 1))
     max_consec = max(3, round(cfg.mag_reaccept_s / cfg.mag_interval_s))
-    info.update(mag_declination_deg=float(np.degrees(fm.declination_rad)),
-                mag_field_model=fm.model)
     return kernel.MagData(ev.m_field, float(drive.mag.sd_ut), float(fm.declination_rad),
-                          float(cfg.mag_heading_floor**2), gate1, int(max_consec)), info
+                          float(cfg.mag_heading_floor**2), gate1, int(max_consec))
 
 
 def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
@@ -535,7 +521,7 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
     gaps = model.gaps
     gr = _grids(t, gaps, imu.rate_hz, cfg)
     qd = _process_noise(t, gr.grid_idx, gaps, ispec, bp, cfg)
-    fm, mag_note = _mag_field(drive, cfg)
+    fm, mag_info = field_and_info(drive, cfg.use_mag)  # WMM on the drive's date, or None
     ini = _initial_state(drive, cfg, model, bp, est_scale, fm)
     ev = _events(drive, model, gr.grid_idx, ini.g_latency, cfg, fm is not None)
     baro = drive.baro
@@ -547,7 +533,7 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
     tilt_rate_sd = np.sqrt(2.0) * OMEGA_IE * np.cos(ini.lla0[0])
     tau = (ispec.gyro_bias_tau, ispec.accel_bias_tau, bp.bias_tau)
     heading_accel = ev.has_vel and cfg.heading_source in ("auto", "accel")
-    mag_data, mag_info = _mag_data(drive, ev, fm, mag_note, cfg)
+    mag_data = _mag_data(drive, ev, fm, cfg)
 
     # scalars coerced to one numba type each (float64, int64, bool): one compiled kernel
     res = kernel.run_filter(

@@ -33,6 +33,7 @@ from ...nav.rotations import skew3
 from ...sensors.magnetometer import (
     MIN_HORIZONTAL_UT,
     drive_field,
+    field_and_info,
     heading_sd,
     usable,
     wrap_pi,
@@ -106,8 +107,9 @@ def builtin_extensions(drive: Any, config: Any) -> list[Any]:
     return []
 
 
-def mag_info(drive: Any, config: Any) -> dict[str, str]:
-    """``{"mag_note": why}`` when the drive has a magnetometer the smoother leaves out."""
-    why = usable(drive.mag)[1] if config.use_mag else ""
-    return {"mag_note": why} if why else {}
+def mag_info(drive: Any, config: Any) -> dict[str, Any]:
+    """What the smoother reports about the magnetometer: the EKF's ``info`` keys
+    (``sensors.magnetometer.field_and_info``: why it is left out, or that the drive has no
+    date; declination and field model when used)."""
+    return field_and_info(drive, config.use_mag)[1]
 
