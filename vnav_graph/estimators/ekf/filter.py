@@ -61,9 +61,7 @@ from ...sensors.magnetometer import (
     MAG_BIAS_SD_UT,
     MAG_HEADING_FLOOR,
     MAG_INTERVAL_S,
-    MIN_HORIZONTAL_UT,
     field_and_info,
-    wrap_pi,
 )
 from ...sensors.model import BaroPrior, SensorModel, baro_prior, sensor_model
 from ...sensors.noise import gm_process_var, white_sd
@@ -85,6 +83,7 @@ from .alignment import (
     static_window_end,
     track_heading,
 )
+from .magnetometer import initial_heading, kernel_record, one_per_interval
 
 NDArrayInt = Any
 PROVIDES = frozenset({"alt", "vel_d", "pos_h", "vel_h", "att", "baro", "cov"})
@@ -294,33 +293,6 @@ class _Initial:
     heading_from_mag: bool  # the initial heading is the magnetometer's
 
 
-def _mag_heading(drive: Drive, t_end: float, roll: float, pitch: float, fm: Any,
-                 cfg: EkfConfig) -> tuple[float, float] | None:
-    """Initial heading [rad] and its σ from the magnetometer samples up to ``t_end`` (the
-    levelling window; at least the first sample) with the levelled roll and pitch: the
-    field's azimuth is yaw + that of the levelled field, and must equal the declination.
-    σ² = floor² + (σ_m²/N + 2 σ_b²)/H² (noise, the two horizontal hard-iron components)."""
-    mag = drive.mag
-    assert mag is not None
-    t0 = drive.imu.t[0]
-    sel = (mag.t >= t0) & (mag.t <= max(t_end, t0))
-    if not sel.any():
-        j = int(np.searchsorted(mag.t, t0))
-        if j >= mag.t.size or mag.t[j] - t0 > 1.0:
-            return None
-        sel = np.zeros(mag.t.size, bool)
-        sel[j] = True
-    c_tilt = quat_to_mat(rph_to_quat([roll, pitch, 0.0])[0])
-    m_h = c_tilt @ mag.field_b[sel].mean(axis=0)
-    hor = float(np.hypot(m_h[0], m_h[1]))
-    if hor < MIN_HORIZONTAL_UT:
-        return None
-    yaw = float(wrap_pi(fm.declination_rad - np.arctan2(m_h[1], m_h[0])))
-    var = cfg.mag_heading_floor**2 + (mag.sd_ut**2 / sel.sum()
-                                      + 2.0 * cfg.mag_bias_sd**2) / hor**2
-    return yaw, float(np.sqrt(var))
-
-
 def _initial_state(drive: Drive, cfg: EkfConfig, model: SensorModel, bp: BaroPrior,
                    est_scale: bool, fm: Any = None) -> _Initial:
     """Coarse levelling over the static start, position and velocity from the first fixes
@@ -343,7 +315,8 @@ def _initial_state(drive: Drive, cfg: EkfConfig, model: SensorModel, bp: BaroPri
     heading_sd = cfg.initial_heading_sd
     mag_yaw = None
     if not heading_known and fm is not None:
-        mag_yaw = _mag_heading(drive, float(t[i_static - 1]), roll, pitch, fm, cfg)
+        mag_yaw = initial_heading(drive, float(t[i_static - 1]), roll, pitch, fm,
+                                  cfg.mag_heading_floor, cfg.mag_bias_sd)
         if mag_yaw is not None:  # compass alignment
             heading_known = True
             yaw0, heading_sd = mag_yaw
@@ -430,12 +403,6 @@ class _Events:
     m_field: FloatArray
 
 
-def _mag_samples(t: FloatArray, interval_s: float) -> NDArrayInt:
-    """Indices of the magnetometer samples used: the first of every ``interval_s``."""
-    slot = np.floor((t - t[0]) / interval_s).astype(np.int64)
-    return np.flatnonzero(np.r_[True, np.diff(slot) > 0])
-
-
 def _events(drive: Drive, model: SensorModel, grid_idx: NDArrayInt, g_latency: float,
             cfg: EkfConfig, use_mag: bool) -> _Events:
     t = drive.imu.t
@@ -465,7 +432,7 @@ def _events(drive: Drive, model: SensorModel, grid_idx: NDArrayInt, g_latency: f
         b_alt = np.zeros(0)
     if use_mag:
         assert drive.mag is not None
-        im = _mag_samples(drive.mag.t, cfg.mag_interval_s)
+        im = one_per_interval(drive.mag.t, cfg.mag_interval_s)
         ev_t_l.append(drive.mag.t[im])
         ev_type_l.append(np.full(im.size, 2, dtype=np.int64))
         ev_idx_l.append(np.arange(im.size))
@@ -492,17 +459,6 @@ def _events(drive: Drive, model: SensorModel, grid_idx: NDArrayInt, g_latency: f
                    np.ascontiguousarray(g_psd), np.ascontiguousarray(g_vel),
                    np.ascontiguousarray(g_vsd), bool(has_vel), tr_yaw, tr_speed, tr_sd, b_alt,
                    m_field)
-
-
-def _mag_data(drive: Drive, ev: _Events, fm: Any, cfg: EkfConfig) -> kernel.MagData:
-    """The kernel's magnetometer record (declination of the field reference ``fm``)."""
-    if fm is None:
-        return kernel.MagData(np.zeros((0, 3)), 1.0, 0.0, 0.0, 1.0, 1)
-    assert drive.mag is not None
-    gate1 = float(chi2.ppf(cfg.gate_prob, 1))
-    max_consec = max(3, round(cfg.mag_reaccept_s / cfg.mag_interval_s))
-    return kernel.MagData(ev.m_field, float(drive.mag.sd_ut), float(fm.declination_rad),
-                          float(cfg.mag_heading_floor**2), gate1, int(max_consec))
 
 
 def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
@@ -533,7 +489,8 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
     tilt_rate_sd = np.sqrt(2.0) * OMEGA_IE * np.cos(ini.lla0[0])
     tau = (ispec.gyro_bias_tau, ispec.accel_bias_tau, bp.bias_tau)
     heading_accel = ev.has_vel and cfg.heading_source in ("auto", "accel")
-    mag_data = _mag_data(drive, ev, fm, cfg)
+    mag_data = kernel_record(drive, ev.m_field, fm, cfg.gate_prob, cfg.mag_reaccept_s,
+                             cfg.mag_interval_s, cfg.mag_heading_floor)
 
     # scalars coerced to one numba type each (float64, int64, bool): one compiled kernel
     res = kernel.run_filter(
