@@ -105,3 +105,18 @@ def test_magstream_validates() -> None:
         MagStream(np.arange(3.0), np.ones((3, 2)))
     with pytest.raises(ValueError, match="sd_ut"):
         MagStream(np.arange(3.0), np.ones((3, 3)), 0.0)
+
+
+def test_hard_iron_note_is_the_chi2_3_gate() -> None:
+    """Closed form: χ²₃ at 0.999 is 16.27, i.e. 4.03σ along one axis."""
+    from vnav_graph.sensors.magnetometer import hard_iron_note
+
+    def info(b):
+        return {"extra_variables": {"h0": {"est": list(b), "sd": [1.0, 1.0, 1.0]}}}
+
+    assert hard_iron_note(info([4.0 * 3.0, 0.0, 0.0]), 3.0) == ""  # χ² 16.0
+    note = hard_iron_note(info([4.1 * 3.0, 0.0, 0.0]), 3.0)  # χ² 16.8
+    assert note.startswith("magnetometer not used") and "4.1σ" in note
+    assert hard_iron_note(info([0.0, 2.4 * 3.0, 3.3 * 3.0]), 3.0) != ""  # χ² 16.65
+    assert hard_iron_note({"extra_variables": {}}, 3.0) == ""
+    assert hard_iron_note({}, 3.0) == ""

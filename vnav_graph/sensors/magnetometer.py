@@ -81,6 +81,34 @@ def usable(mag: MagStream | None) -> tuple[bool, str]:
     return True, ""
 
 
+HARD_IRON_GATE_PROB = 0.999  # χ²₃ probability of the post-solve hard-iron check
+
+
+def hard_iron_note(info: dict[str, Any], prior_sd_ut: float) -> str:
+    """Post-solve check of an estimate that used the magnetometer: '' when its hard iron
+    (``info["extra_variables"]["h0"]["est"]``) is plausible under its prior N(0, σ² I)
+    (χ²₃ at ``HARD_IRON_GATE_PROB``: 4.0σ in 3 dof), else the note of an estimator that
+    drops the magnetometer and solves again. A hard iron far outside its prior means the
+    compass contradicts the heading of GNSS and IMU (interference beyond the model): on
+    181.BIN a batch smoother fitted (17, −18, 2) µT, which cancels most of the horizontal
+    field, so that any heading fits (the corrected horizontal field's median fell from 26 to
+    5 µT, its σ of the bias to 1e-5 µT). Same rule for both families."""
+    h = (info.get("extra_variables") or {}).get("h0")
+    if h is None:
+        return ""
+    from scipy.stats import chi2
+
+    b = np.asarray(h["est"], float)
+    d2 = float(np.sum((b / prior_sd_ut) ** 2))
+    lim = float(chi2.ppf(HARD_IRON_GATE_PROB, 3))
+    if not d2 > lim:
+        return ""
+    return (f"magnetometer not used: with it the hard iron came out at ({b[0]:.1f}, "
+            f"{b[1]:.1f}, {b[2]:.1f}) µT, {np.sqrt(d2):.1f}σ of its {prior_sd_ut:g} µT prior "
+            f"(χ²₃ {d2:.0f} > {lim:.1f}): the compass contradicts the heading of GNSS and "
+            "IMU (interference beyond the hard-iron model); solved again without it")
+
+
 DEFAULT_YEAR = 2025.0  # date of the field for a drive without one (noted in info)
 
 
