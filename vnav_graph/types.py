@@ -67,6 +67,12 @@ _ALT_RANGE = (-1000.0, 60000.0)  # m
 
 
 def _arr(x: Any, dtype: Any = np.float64) -> FloatArray:
+    # an array that is already read-only, of this dtype and owns its memory (another record's
+    # field, e.g. a drive rebuilt with ``Drive.replace``) cannot change: shared, not copied
+    # (the copies doubled the truth arrays while a simulated drive was assembled)
+    if (isinstance(x, np.ndarray) and x.dtype == dtype and x.base is None
+            and not x.flags.writeable and x.flags.c_contiguous):
+        return x
     a = np.array(x, dtype=dtype, copy=True)
     a.setflags(write=False)
     return a

@@ -86,23 +86,20 @@ def kinematics(
     """Evaluate the trajectory defined by speed, heading and flight-path-angle profiles."""
     v, vd, _ = speed.eval(t)
     psi, psid, psidd = heading.eval(t)
-    gam, gamd, gamdd = fpa.eval(t)
-    cg, sg, cp, sp = np.cos(gam), np.sin(gam), np.cos(psi), np.sin(psi)
-    vel_n = np.column_stack([v * cg * cp, v * cg * sp, -v * sg])
-    acc_n = np.column_stack(
-        [
-            vd * cg * cp - v * sg * gamd * cp - v * cg * sp * psid,
-            vd * cg * sp - v * sg * gamd * sp + v * cg * cp * psid,
-            -vd * sg - v * cg * gamd,
-        ]
-    )
+    gam, gamd, _ = fpa.eval(t)
+    n = t.size
+    vel_n = np.empty((n, 3))
+    for a, b in _chunks(n):
+        vv, cg, sg = v[a:b], np.cos(gam[a:b]), np.sin(gam[a:b])
+        ps = psi[a:b]
+        vel_n[a:b] = np.column_stack([vv * cg * np.cos(ps), vv * cg * np.sin(ps), -vv * sg])
     # position: integrate NED velocity on the dense grid (trapezoid), lat/lon via radii
     dt = np.diff(t)
     dh = np.cumsum(0.5 * (vel_n[1:, 2] + vel_n[:-1, 2]) * dt)
     h = origin_lla[2] - np.concatenate([[0.0], dh])
+    del dh
     lat = np.empty_like(t)
-    lon = np.empty_like(t)
-    lat[0], lon[0] = origin_lla[0], origin_lla[1]
+    lat[0] = origin_lla[0]
     # sequential in latitude only through R_N(lat), which varies by 1e-9 per metre: a first
     # pass with the origin radii, then one fixed-point refinement with the pass's latitudes.
     for _ in range(2):
@@ -111,35 +108,65 @@ def kinematics(
         lat = origin_lla[0] + np.concatenate([[0.0], np.cumsum(0.5 * (fn[1:] + fn[:-1]) * dt)])
     rn, re = radii(lat)
     fe = vel_n[:, 1] / ((re + h) * np.cos(lat))
+    del rn, re, fn
     lon = origin_lla[1] + np.concatenate([[0.0], np.cumsum(0.5 * (fe[1:] + fe[:-1]) * dt)])
+    del fe, dt
     lla = np.column_stack([lat, lon, h])
+    del lat, lon, h
 
-    # attitude
-    if coordinated_turns:
-        k = v * psid / G0
-        roll = np.arctan(k)
-        rolld = (vd * psid + v * psidd) / G0 / (1 + k**2)
-    else:
-        roll = np.zeros_like(t)
-        rolld = np.zeros_like(t)
-    pitch, pitchd = gam + alpha, gamd
-    yaw, yawd = psi, psid
-    del gamdd
-    sr, cr, sth, cth = np.sin(roll), np.cos(roll), np.sin(pitch), np.cos(pitch)
-    omega_nb_b = np.column_stack(
-        [rolld - yawd * sth, pitchd * cr + yawd * sr * cth, -pitchd * sr + yawd * cr * cth]
-    )
-    q_nb = rph_to_quat(np.column_stack([roll, pitch, yaw]))
-    # C_nb = Rz(yaw) Ry(pitch) Rx(roll)
-    c_nb = _rph_to_mat(roll, pitch, yaw)
-    w_ie = earth_rate_n(lat)
-    w_en = transport_rate_n(lat, h, vel_n)
-    f_n = acc_n + np.cross(2 * w_ie + w_en, vel_n)
-    f_n[:, 2] -= gravity(lat, h)
-    accel_b = np.einsum("nji,nj->ni", c_nb, f_n)
-    gyro_b = omega_nb_b + np.einsum("nji,nj->ni", c_nb, w_ie + w_en)
+    # attitude and IMU readings, sample by sample: evaluated in chunks of KIN_CHUNK samples
+    # (the same elementwise formulas; the whole drive at once held ~30 temporaries of the
+    # drive's length: 440 MB of peak on a 1-hour 200 Hz drive)
+    q_nb = np.empty((n, 4))
+    omega_nb_b = np.empty((n, 3))
+    accel_b = np.empty((n, 3))
+    gyro_b = np.empty((n, 3))
+    for a, b in _chunks(n):
+        vv, vdd, cg, sg = v[a:b], vd[a:b], np.cos(gam[a:b]), np.sin(gam[a:b])
+        cp, sp = np.cos(psi[a:b]), np.sin(psi[a:b])
+        pd, gd = psid[a:b], gamd[a:b]
+        vn = vel_n[a:b]
+        acc_n = np.column_stack(
+            [
+                vdd * cg * cp - vv * sg * gd * cp - vv * cg * sp * pd,
+                vdd * cg * sp - vv * sg * gd * sp + vv * cg * cp * pd,
+                -vdd * sg - vv * cg * gd,
+            ]
+        )
+        if coordinated_turns:
+            k = vv * pd / G0
+            roll = np.arctan(k)
+            rolld = (vdd * pd + vv * psidd[a:b]) / G0 / (1 + k**2)
+        else:
+            roll = np.zeros(b - a)
+            rolld = np.zeros(b - a)
+        pitch, pitchd = gam[a:b] + alpha, gd
+        yaw, yawd = psi[a:b], pd
+        sr, cr, sth, cth = np.sin(roll), np.cos(roll), np.sin(pitch), np.cos(pitch)
+        omega_nb_b[a:b] = np.column_stack(
+            [rolld - yawd * sth, pitchd * cr + yawd * sr * cth, -pitchd * sr + yawd * cr * cth]
+        )
+        q_nb[a:b] = rph_to_quat(np.column_stack([roll, pitch, yaw]))
+        # C_nb = Rz(yaw) Ry(pitch) Rx(roll)
+        c_nb = _rph_to_mat(roll, pitch, yaw)
+        la, hh = lla[a:b, 0], lla[a:b, 2]
+        w_ie = earth_rate_n(la)
+        w_en = transport_rate_n(la, hh, vn)
+        f_n = acc_n + np.cross(2 * w_ie + w_en, vn)
+        f_n[:, 2] -= gravity(la, hh)
+        accel_b[a:b] = np.einsum("nji,nj->ni", c_nb, f_n)
+        gyro_b[a:b] = omega_nb_b[a:b] + np.einsum("nji,nj->ni", c_nb, w_ie + w_en)
+    for a in (lla, vel_n, q_nb):
+        a.setflags(write=False)  # shared with the Trajectory instead of copied (types._arr)
     truth = Trajectory(t, lla, vel_n, q_nb)
     return Kinematics(truth, gyro_b, accel_b, omega_nb_b)
+
+
+KIN_CHUNK = 1 << 16  # samples per chunk of ``kinematics``
+
+
+def _chunks(n: int) -> list[tuple[int, int]]:
+    return [(a, min(a + KIN_CHUNK, n)) for a in range(0, n, KIN_CHUNK)]
 
 
 def _rph_to_mat(roll: FloatArray, pitch: FloatArray, yaw: FloatArray) -> FloatArray:
