@@ -211,8 +211,9 @@ def dense_preintegration(
     kf_idx : (K,) int, increasing IMU sample indices of the keyframes
     bias_gyro, bias_accel : (3,) or (N, 3) biases removed before integration
     """
-    g = gyro_b - (0.0 if bias_gyro is None else bias_gyro)
-    a = accel_b - (0.0 if bias_accel is None else bias_accel)
+    # no bias: the samples themselves (x − 0.0 would be a copy of the same values)
+    g = gyro_b if bias_gyro is None else gyro_b - bias_gyro
+    a = accel_b if bias_accel is None else accel_b - bias_accel
     out = _dense(np.ascontiguousarray(t), np.ascontiguousarray(g), np.ascontiguousarray(a),
                  np.ascontiguousarray(kf_idx.astype(np.int64)))
     return DenseIncrements(t, kf_idx, *out)
@@ -252,6 +253,11 @@ class IntervalRows:
     def cost(self) -> float:
         """The terms' cost: Σρ under robust losses, else ½‖r‖²."""
         return self.loss if self.loss is not None else 0.5 * float(self.r @ self.r)
+
+    def without_jac(self) -> IntervalRows:
+        """The same rows with an empty (0, N_COLS) Jacobian: for rows whose linear system is
+        already built (the Jacobian is ~46 MB on a 1-hour drive)."""
+        return IntervalRows(self.k, self.r, np.zeros((0, N_COLS)), self.loss, self.weights)
 
 
 def interval_of(t_kf: FloatArray, t: FloatArray) -> np.ndarray:
@@ -346,9 +352,11 @@ def _pos_jacobian(st: KeyframeStates, k: np.ndarray, ip: dict[str, FloatArray],
 
 def baro_rows(
     dense: DenseIncrements, st: KeyframeStates, t_s: FloatArray, z: FloatArray, sd: float,
-    h0: float, origin_lla: FloatArray, bias_lag: float,
+    h0: float, origin_lla: FloatArray, bias_lag: float, out: FloatArray | None = None,
 ) -> IntervalRows:
     """Whitened baro rows for samples at ``t_s`` (M,) with altitudes ``z`` (M,) [m].
+    ``out``: an (M, N_COLS) array to hold the Jacobian (overwritten; the caller's share of
+    one array for all rows, ``problem.interval_rows``), else a new one.
 
     The sample is assigned to the interval k containing its delayed time t_d = t_s − τd (τd
     of the linearisation point), where the height h(t_d) is interpolated.
@@ -376,7 +384,11 @@ def baro_rows(
     pred = measure_baro(h, v_up, s, 0.0, b, h0)
     jb = baro_jacobian(h, v_up, s, 0.0, h0)  # ∂/∂(h, v_up, s, τd, b) at zero residual delay
     dh_dtau = -v_up  # h(t_s − τd): ∂h/∂τd = −v_up(t_s − τd)
-    jac = np.zeros((t_s.size, N_COLS))
+    if out is None:
+        jac = np.zeros((t_s.size, N_COLS))
+    else:
+        jac = out
+        jac[...] = 0.0
     # upᵀ·_pos_jacobian without the (M, 3, 12) intermediate: with u = R_kᵀ·up,
     # upᵀ(−R_k[d×])ω = (d × u)·ω; translations (1−α)·u and α·R_{k+1}ᵀ·up
     u_k = np.einsum("nji,nj->ni", st.rot[k], up)
@@ -393,18 +405,23 @@ def baro_rows(
                       * ip["imu"])[:, None] * u_k
     # inside an IMU-gap interval the line's own σ, at t_s (not t_d: no τd dependence)
     sd_r = np.sqrt(sd**2 + bridge_sd(dense, np.clip(t_s, t_kf[0], t_kf[-1]), k)[0] ** 2)
-    return IntervalRows(k, (pred - z) / sd_r, jac / sd_r[:, None])
+    jac /= sd_r[:, None]
+    return IntervalRows(k, (pred - z) / sd_r, jac)
 
 
 def gnss_rows(
     dense: DenseIncrements, st: KeyframeStates, t_g: FloatArray, pos_t: FloatArray,
     pos_sd: FloatArray, vel_t: FloatArray | None, vel_sd: FloatArray | None,
     lever_b: FloatArray, incr: tuple[FloatArray, FloatArray, FloatArray] | None = None,
+    out: FloatArray | None = None,
 ) -> IntervalRows:
     """Whitened GNSS position (and velocity) rows for fixes at ``t_g`` (M,) strictly inside
     intervals: antenna p(t) + R(t)·l against ``pos_t`` (M, 3) in t [m]; velocity v(t) (the
     lever-arm rotation term is omitted) against ``vel_t`` (M, 3) [m/s]. ``incr``: the
-    increments ``dense.at`` at the fixes (cached by the caller; they do not change)."""
+    increments ``dense.at`` at the fixes (cached by the caller; they do not change);
+    ``out``: an (n_rows, N_COLS) array to hold the Jacobian (overwritten), else a new one.
+    The Jacobian is written in place (position rows, then velocity rows): building the
+    pieces and stacking them held three copies of it (~100 MB on a 1-hour drive)."""
     t_kf = dense.t_kf
     k = interval_of(t_kf, t_g)
     lever = None if not np.any(lever_b) else np.asarray(lever_b, float)
@@ -416,28 +433,35 @@ def gnss_rows(
         if vel_sd is not None:
             vel_sd = np.sqrt(vel_sd**2 + bv[:, None] ** 2)
     p_ant = ip["p"] + (0.0 if lever is None else np.einsum("nij,j->ni", ip["rot"], lever))
-    jp = _pos_jacobian(st, k, ip, lever)
+    with_vel = vel_t is not None and vel_sd is not None
+    n_blk = 2 if with_vel else 1
+    if out is None:
+        out = np.zeros((n_blk * 3 * m, N_COLS))
+    else:
+        out[...] = 0.0
+    jac_all = out.reshape(n_blk * m, 3, N_COLS)  # a view: fix-major rows of each block
+    jac = jac_all[:m]
+    jac[:, :, 0:12] = _pos_jacobian(st, k, ip, lever)
+    jac[:, :, 0:12] /= pos_sd[:, :, None]
     rows_r = [((p_ant - pos_t) / pos_sd).reshape(-1)]
-    jac = np.zeros((m, 3, N_COLS))
-    jac[:, :, 0:12] = jp / pos_sd[:, :, None]
     rk_all = st.rot[k]
     jac[:, :, COL_BA] = (0.5 * ip["tau"] * (ip["T"] - ip["tau"]) * ip["imu"])[:, None, None] \
         * rk_all \
         / pos_sd[:, :, None]
-    rows_j = [jac.reshape(-1, N_COLS)]
     ks = [np.repeat(k, 3)]
-    if vel_t is not None and vel_sd is not None:
+    if with_vel:
+        assert vel_t is not None and vel_sd is not None
         big_t = ip["T"][:, None, None]
         rk = st.rot[k]
-        jv = np.zeros((m, 3, N_COLS))
+        jv = jac_all[m:]
         jv[:, :, 0:3] = -rk @ skew(ip["dvel"])
         jv[:, :, 3:6] = -rk / big_t
         jv[:, :, 9:12] = st.rot[k + 1] / big_t
         jv[:, :, COL_BA] = ((0.5 * ip["T"] - ip["tau"]) * ip["imu"])[:, None, None] * rk
+        jv /= vel_sd[:, :, None]
         rows_r.append(((ip["v"] - vel_t) / vel_sd).reshape(-1))
-        rows_j.append((jv / vel_sd[:, :, None]).reshape(-1, N_COLS))
         ks.append(np.repeat(k, 3))
-    return IntervalRows(np.concatenate(ks), np.concatenate(rows_r), np.vstack(rows_j))
+    return IntervalRows(np.concatenate(ks), np.concatenate(rows_r), out)
 
 
 def concat_rows(*rows: IntervalRows) -> IntervalRows:

@@ -498,7 +498,8 @@ def gnss_batch_idx(P: Problem) -> np.ndarray:
     return np.flatnonzero(P.g_use & (P.g_kf >= -1))
 
 
-def gnss_rows_of(P: Problem, st: gf.KeyframeStates, idx: np.ndarray) -> gf.IntervalRows:
+def gnss_rows_of(P: Problem, st: gf.KeyframeStates, idx: np.ndarray,
+                 out: FloatArray | None = None) -> gf.IntervalRows:
     t_g = P.g_t[idx]
     # the IMU increments at the fixes depend on the fix times only: cached per fix set
     if P.g_incr is None or not np.array_equal(P.g_incr[0], idx):
@@ -507,44 +508,66 @@ def gnss_rows_of(P: Problem, st: gf.KeyframeStates, idx: np.ndarray) -> gf.Inter
     return gf.gnss_rows(
         P.dense, st, t_g, P.g_pos[idx], P.g_pos_sd[idx],
         None if P.g_vel is None else P.g_vel[idx],
-        None if P.g_vel_sd is None else P.g_vel_sd[idx], P.lever, incr=P.g_incr[1])
+        None if P.g_vel_sd is None else P.g_vel_sd[idx], P.lever, incr=P.g_incr[1], out=out)
 
 
 def interval_rows(P: Problem, st: gf.KeyframeStates, pri: dict[str, float],
                   bias_lag: float) -> gf.IntervalRows:
     """Baro and GNSS interval rows; ``bias_lag``: see ``factors.baro_rows``. Under robust
     losses (``GraphConfig.loss_*``) the rows are reweighted (IRLS, ``robust.reweight``),
-    ``loss`` holds Σρ and ``weights`` the weight of every sample and fix."""
+    ``loss`` holds Σρ and ``weights`` the weight of every sample and fix. The Jacobians of
+    all rows are written into one array (no per-type pieces concatenated: that held the
+    rows twice, ~46 MB each on a 1-hour drive)."""
     cfg = P.cfg
     k_baro, k_pos, k_vel = (cfg.loss_threshold_sd[2], cfg.loss_threshold_sd[0],
                             cfg.loss_threshold_sd[1])
-    parts = []
+    ks, rs = [], []
     loss = 0.0
     weights: dict[str, Any] = {}
-    if P.drive.baro is not None:
+    has_baro = P.drive.baro is not None
+    if has_baro:
         bt = P.drive.baro.t
         m = (bt >= P.t_kf[0]) & (bt <= P.t_kf[-1])
+    n_baro = int(np.count_nonzero(m)) if has_baro else 0
+    idx = gnss_batch_idx(P)
+    n = 3 * idx.size  # position rows (fix-major, 3 per fix), then velocity rows
+    with_vel = P.g_vel is not None and P.g_vel_sd is not None
+    jac = np.empty((n_baro + (2 * n if with_vel else n), gf.N_COLS))
+
+    def put(part: FloatArray, j: FloatArray) -> None:
+        if j is not part:  # reweighted (robust loss): a new array
+            part[...] = j
+
+    if has_baro:
         rows = gf.baro_rows(P.dense, st, bt[m], P.drive.baro.altitude[m], pri["noise"],
-                            P.h0, P.origin, bias_lag=bias_lag)
+                            P.h0, P.origin, bias_lag=bias_lag, out=jac[:n_baro])
         r, j, w, rho = reweight(rows.r, rows.jac, 1, cfg.loss_baro, k_baro)
-        parts.append(gf.IntervalRows(rows.k, r, j))
+        put(rows.jac, j)
+        ks.append(rows.k)
+        rs.append(r)
         loss += rho
         weights.update(baro_t=bt[m], baro=w)
-    idx = gnss_batch_idx(P)
     if idx.size:
-        rows = gnss_rows_of(P, st, idx)
-        n = 3 * idx.size  # position rows (fix-major, 3 per fix), then velocity rows
-        r, j, w, rho = reweight(rows.r[:n], rows.jac[:n], 3, cfg.loss_gnss_pos, k_pos)
-        parts.append(gf.IntervalRows(rows.k[:n], r, j))
+        rows = gnss_rows_of(P, st, idx, out=jac[n_baro:])
+        jp = rows.jac[:n]
+        r, j, w, rho = reweight(rows.r[:n], jp, 3, cfg.loss_gnss_pos, k_pos)
+        put(jp, j)
+        ks.append(rows.k[:n])
+        rs.append(r)
         loss += rho
         weights.update(gnss_t=P.g_t[idx], gnss_pos=w, gnss_vel=None)
         if rows.r.size > n:
-            r, j, w, rho = reweight(rows.r[n:], rows.jac[n:], 3, cfg.loss_gnss_vel, k_vel)
-            parts.append(gf.IntervalRows(rows.k[n:], r, j))
+            jv = rows.jac[n:]
+            r, j, w, rho = reweight(rows.r[n:], jv, 3, cfg.loss_gnss_vel, k_vel)
+            put(jv, j)
+            ks.append(rows.k[n:])
+            rs.append(r)
             loss += rho
             weights["gnss_vel"] = w
-    out = gf.concat_rows(*parts)
-    return gf.IntervalRows(out.k, out.r, out.jac, loss, weights)
+    if not ks:
+        return gf.IntervalRows(np.zeros(0, dtype=np.intp), np.zeros(0),
+                               np.zeros((0, gf.N_COLS)), loss, weights)
+    return gf.IntervalRows(np.concatenate(ks), np.concatenate(rs), jac, loss, weights)
 
 
 def gnss_chi2(P: Problem, st: gf.KeyframeStates, idx: np.ndarray) -> tuple[FloatArray, int]:

@@ -69,6 +69,7 @@ def linear_system(P: Problem, lay: Layout, graph: Any, vals: Any,
     """The Gauss-Newton system at ``vals``: the C++ factors linearised by GTSAM plus the
     interval terms (per-interval information blocks). The first call decides the path
     (``GraphConfig.solver``; "auto": banded when the structure fits, ``Layout.fits_band``)."""
+    assert rows.jac.shape[0] == rows.r.size, "interval rows without their Jacobian"
     info = interval_info(lay, rows, P.n_kf)
     if lay.banded is None:
         solver = P.cfg.solver
@@ -111,6 +112,10 @@ def gn_core(P: Problem, lay: Layout, graph: Any, vals: Any, calib_of_kf: np.ndar
     for it in range(1, P.cfg.max_iterations + 1):
         converged = False
         system = linear_system(P, lay, graph, vals, rows)
+        # the system holds the rows' information: their Jacobian is not needed again (the
+        # result keeps either this system or a candidate's full rows), and dropping it keeps
+        # one set of rows, not two, alive while the candidate's are evaluated
+        rows = rows.without_jac()
         delta, dec = system.step()  # dec: decrease predicted by the quadratic model
         if P.cfg.verbose:
             print(f"GN it {it}: predicted decrease {dec:.3g}")
@@ -157,6 +162,7 @@ def gn_core(P: Problem, lay: Layout, graph: Any, vals: Any, calib_of_kf: np.ndar
         cost_prev = cost
         vals, st, rows, cost = cand, st_c, rows_c, new_cost
         system = None
+        del rows_c  # ``rows`` is the only reference: its Jacobian goes with without_jac()
         if lag_c != lag:
             lag = lag_c  # a new cost function: no convergence test on this step
             continue
