@@ -259,29 +259,25 @@ class BaroSpec:
 
 # Prior baro model of a real log that carries no spec — ONE definition, used by every
 # estimator (the comparison must run on the same sensor models). Wide on purpose: MEMS and
-# phone barometers are aligned to GNSS only at the start, have ±2 % scale errors
-# (temperature: a day 6 K off the ISA alone makes 2 %, ≈ 0.35 %/K; seed 001), 0.5 m of
-# noise, and an unknown latency N(0.1 s, 0.1 s) — expressed as a uniform range of that mean
-# and σ (σ = width/√12), which is how every estimator reads a latency prior.
-# Bias b: Gauss-Markov σ 10 m, τ 4 h (issue 13, item 5b; docs/real_logs.md "Default
-# real-log baro prior"). σ is the datasheet absolute accuracy of consumer MEMS barometers
-# (BMP280 ±1 hPa, MS5611 ±1.5 hPa, LPS22HH/BMP388 ±0.5 hPa; 1 hPa ≈ 8.3 m). For drives
-# shorter than τ, what acts is the drift rate q = 2σ²/τ: 0.014 m²/s here, i.e. an rms change
-# of 2.9 m in 10 min and 7 m in 1 h — weather tendencies of ≤ 1.5 hPa / 3 h ("rising /
-# falling slowly" in the Met Office's terms) and the shared 1.5-hour phone car logs, whose
-# baro − GNSS height residual after a scale fit changes by 3.6–5.9 m rms in 10 min and
-# spans 20–24 m in all, GNSS vertical error included (an upper bound on the bias drift).
-# The former τ of 1 h (q = 0.056 m²/s, 5.6 m in 10 min) overstated the drift: on the
-# simulated scenarios every estimator's σ came out too wide (rms z 0.5–0.6 on the sortie).
-# A fast thermal drift (the hot-baro scenario's τ 300 s) is not covered by a default: such
-# a log needs its own spec.
+# phone barometers are aligned to GNSS only at the start, drift with weather, airflow and
+# temperature over minutes to hours (b: σ 10 m, the datasheet absolute accuracy of consumer
+# MEMS barometers, ±0.5–1.5 hPa ≈ 4–12 m; τ 1 h), have ±2 % scale errors (temperature: a day
+# 6 K off the ISA alone makes 2 %; seed 001), 0.5 m of noise, and an unknown latency
+# N(0.1 s, 0.1 s) — expressed as a uniform range of that mean and σ (σ = width/√12), which
+# is how every estimator reads a latency prior.
+# Checked by benchmarks/prior_study.py (issue 13, 5b; docs/real_logs.md "Default real-log
+# baro prior"): on the simulated scenarios, whose biases drift 4–6× slower (q = 2σ²/τ
+# 0.010–0.014 m²/s against 0.056 here), the σ come out too wide (sortie rms z 0.5–0.6). A
+# slower default (τ 4 h) fixed that but made every shared log's withheld-GNSS altitude
+# worse (218: 0.67 → 1.06 m), and a faster one (τ 15 min) made them better (218: 0.30 m):
+# the shared logs' baro errors drift faster than the scenarios', so τ stays 1 h.
 REAL_LOG_LATENCY_S = 0.1
 REAL_LOG_LATENCY_SD = 0.1
 REAL_LOG_BARO = BaroSpec(
     scale_sd=0.02, latency_s=REAL_LOG_LATENCY_S,
     latency_range_s=(REAL_LOG_LATENCY_S - np.sqrt(3.0) * REAL_LOG_LATENCY_SD,
                      REAL_LOG_LATENCY_S + np.sqrt(3.0) * REAL_LOG_LATENCY_SD),
-    bias_sd=10.0, bias_tau=4.0 * 3600.0, noise_sd=0.5)
+    bias_sd=10.0, bias_tau=3600.0, noise_sd=0.5)
 
 
 def replace_fields(obj: Any, **changes: Any) -> Any:
