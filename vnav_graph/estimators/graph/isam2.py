@@ -52,7 +52,7 @@ from .batch import outputs, provides, solver_warnings, value_of
 from .extend import Collected, GraphExtension, check_extensions, collect, key_name, make_view
 from .general import hessian_pieces
 from .init import initial_states
-from .linalg import single_thread_blas
+from .linalg import single_thread_blas, trim_heap
 from .magnetometer import builtin_extensions, mag_info
 from .problem import (
     LOW_RATE_DT,
@@ -415,9 +415,10 @@ class GraphISAM2:
         t_online = time.perf_counter()
         est = isam.calculateEstimate()
         extra_online = _extra_online(isam, est, ext)
-        # the Bayes tree is not needed by the final pass: released before it (≈ 200 MB of
+        # the Bayes tree is not needed by the final pass: released before it (≈ 210 MB of
         # C++ memory on a 1-hour drive, otherwise alive under the final pass's peak)
         isam = None  # the closure ``refresh`` shares this name: it is not called again
+        trim_heap()  # its freed nodes are scattered over the heap: hand them back
         return self._finish(drive, P, cfg, est, extra_online, t_online, online, ext, robust,
                             fallback, t_start, (rot_i, pos_i, vel_i), pims, seg, upd_ms, brk)
 

@@ -227,3 +227,24 @@ def single_thread_blas() -> Any:
     from threadpoolctl import threadpool_limits
 
     return threadpool_limits(limits=1, user_api="blas")
+
+
+_MALLOC_TRIM: Any = None  # glibc's malloc_trim, False where there is none
+
+
+def trim_heap() -> None:
+    """Give the C heap's free pages back to the operating system (glibc ``malloc_trim(0)``;
+    a no-op elsewhere). Freed small C++ objects (GTSAM's) stay resident otherwise: releasing
+    graph-isam2's Bayes tree before its final batch pass left RSS at 671 MB on a 1-hour drive,
+    trimmed 446 MB, and the pass's peak fell 866 → 700 MB (``docs/graph.md``, memory)."""
+    global _MALLOC_TRIM
+    if _MALLOC_TRIM is None:
+        import ctypes
+
+        try:
+            _MALLOC_TRIM = ctypes.CDLL(None).malloc_trim
+            _MALLOC_TRIM.argtypes = [ctypes.c_size_t]
+        except (OSError, AttributeError):
+            _MALLOC_TRIM = False
+    if _MALLOC_TRIM:
+        _MALLOC_TRIM(0)
