@@ -22,12 +22,16 @@ from vnav_graph.simulation.scenario import simulate
 
 
 def bench_ekf(duration_s: float = 3600.0, imu_rate_hz: float = 200.0, seed: int = 0,
-              with_rts: bool = True) -> dict[str, Any]:
-    """Time ``ekf`` (and ``ekf-rts``) on a simulated hill-drive; returns a JSON-able dict."""
+              with_rts: bool = True, drive: Any = None) -> dict[str, Any]:
+    """Time ``ekf`` (and ``ekf-rts``) on a simulated hill-drive; returns a JSON-able dict.
+    ``drive``: that hill-drive when the caller already has it (``bench_graph.py``), else it
+    is simulated here."""
     warm = simulate("hill-drive", seed, duration_s=60.0, imu_rate_hz=imu_rate_hz)
     EKF().run(warm)
     EKFRTS().run(warm)
-    drive = simulate("hill-drive", seed, duration_s=duration_s, imu_rate_hz=imu_rate_hz)
+    del warm
+    if drive is None:
+        drive = simulate("hill-drive", seed, duration_s=duration_s, imu_rate_hz=imu_rate_hz)
     t0 = time.perf_counter()
     est = EKF().run(drive)
     ekf_s = time.perf_counter() - t0

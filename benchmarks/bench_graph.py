@@ -1,11 +1,11 @@
 """Performance of the GTSAM smoothers on a long hill-drive (docs/design.md ``graph_perf.json``).
 
-    python benchmarks/bench_graph.py [--quick] --out DIR
+    python benchmarks/bench_graph.py [--quick | --hours H] --out DIR
 
-Writes ``DIR/graph_perf.json`` with exactly the keys
+Writes ``DIR/graph_perf.json`` with the keys
 ``drive_duration_s, keyframes, batch_s, builtin_floor_s, batch_over_floor, isam2_s,
 isam2_realtime_factor, isam2_update_p99_ms, ekf_s, ekf_realtime_factor, peak_rss_mb,
-general_over_floor``.
+general_over_floor`` and (additive) ``peak_rss_mb_by_stage``.
 
 - ``batch_s``: graph-batch graph construction + Gauss-Newton solve (all baro samples and
   GNSS fixes, custom terms linearised in numpy each iteration). Shared set-up (initial
@@ -24,13 +24,23 @@ general_over_floor``.
   Python work of that keyframe (preintegration, interval linearisation).
 - Both estimators first run once on a 60 s drive (not timed) so that loading numba's cached
   kernels is not counted.
-- ``ekf_*``: from ``benchmarks/bench_ekf.py:bench_ekf(duration_s, imu_rate_hz)`` when that
-  file exists, else null.
+- ``ekf_*``: from ``benchmarks/bench_ekf.py:bench_ekf(duration_s, imu_rate_hz, seed,
+  with_rts=False, drive=drive)`` when that file exists, else null: the EKF on the same
+  drive (ekf-rts is not reported here and not run); the graph estimates are released first.
+- ``peak_rss_mb``: peak resident memory of the whole process (``ru_maxrss``, which the
+  per-stage reset also resets: the maximum of it and the stage peaks);
+  ``peak_rss_mb_by_stage``: the peak within each stage (``warm-up``, ``simulate``,
+  ``graph-batch``, ``graph-batch-general``, ``builtin-floor``, ``graph-isam2``, ``ekf``), the
+  kernel's high-water mark reset at the start of each stage (Linux ``/proc/self/clear_refs``;
+  elsewhere the running maximum; the C heap is trimmed first, ``linalg.trim_heap``). A
+  stage's peak includes what earlier stages left alive (the drive, the interpreter and the
+  loaded numba kernels: ≈ 260 MB before the drive).
 """
 
 from __future__ import annotations
 
 import argparse
+import gc
 import importlib.util
 import json
 import resource
@@ -44,6 +54,39 @@ import numpy as np
 KEYS = ("drive_duration_s", "keyframes", "batch_s", "builtin_floor_s", "batch_over_floor",
         "isam2_s", "isam2_realtime_factor", "isam2_update_p99_ms", "ekf_s",
         "ekf_realtime_factor", "peak_rss_mb", "general_over_floor")
+
+
+class StagePeaks:
+    """Peak resident memory [MB] of each stage of the benchmark (``peak_rss_mb_by_stage``)."""
+
+    def __init__(self) -> None:
+        self.peaks: dict[str, float] = {}
+        self._reset = Path("/proc/self/clear_refs")
+
+    @staticmethod
+    def _hwm_mb() -> float | None:
+        try:
+            for line in Path("/proc/self/status").read_text().splitlines():
+                if line.startswith("VmHWM:"):
+                    return float(line.split()[1]) / 1024.0
+        except OSError:
+            pass
+        return None
+
+    def start(self) -> None:
+        from vnav_graph.estimators.graph.linalg import trim_heap
+
+        gc.collect()
+        trim_heap()  # what earlier stages freed goes back to the OS, not into this stage's peak
+        try:  # "5": reset the peak RSS (VmHWM) to the current RSS (Linux ≥ 4.0)
+            self._reset.write_text("5")
+        except OSError:
+            pass
+
+    def end(self, stage: str) -> None:
+        hwm = self._hwm_mb()
+        self.peaks[stage] = (hwm if hwm is not None else
+                             resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0)
 
 
 def builtin_floor(drive: Any) -> float:
@@ -97,7 +140,8 @@ def builtin_floor(drive: Any) -> float:
     return time.perf_counter() - t0
 
 
-def ekf_timing(duration_s: float, imu_rate_hz: float) -> tuple[float | None, float | None]:
+def ekf_timing(duration_s: float, imu_rate_hz: float, drive: Any = None, seed: int = 0
+               ) -> tuple[float | None, float | None]:
     path = Path(__file__).resolve().parent / "bench_ekf.py"
     if not path.exists():
         print("bench_ekf.py not found: ekf_s / ekf_realtime_factor are null", file=sys.stderr)
@@ -106,7 +150,11 @@ def ekf_timing(duration_s: float, imu_rate_hz: float) -> tuple[float | None, flo
     assert spec is not None and spec.loader is not None
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
-    res = mod.bench_ekf(duration_s, imu_rate_hz)
+    try:  # on the graph stages' drive (a second simulation was the process's memory peak);
+        # ekf-rts is not reported here: not run
+        res = mod.bench_ekf(duration_s, imu_rate_hz, seed, with_rts=False, drive=drive)
+    except TypeError:  # an older bench_ekf without these options
+        res = mod.bench_ekf(duration_s, imu_rate_hz)
     ekf_s = float(res["ekf_s"]) if isinstance(res, dict) else float(res)
     return ekf_s, duration_s / ekf_s if ekf_s > 0 else None
 
@@ -114,51 +162,84 @@ def ekf_timing(duration_s: float, imu_rate_hz: float) -> tuple[float | None, flo
 def main(argv: list[str] | None = None) -> dict[str, Any]:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="10-minute drive instead of 1 hour")
+    ap.add_argument("--hours", type=float, default=None,
+                    help="drive length in hours (default 1; --quick: 10 minutes)")
     ap.add_argument("--out", required=True, type=Path)
     ap.add_argument("--seed", type=int, default=0)
     a = ap.parse_args(argv)
     from vnav_graph.estimators.graph import GraphBatch, GraphConfig, GraphISAM2
     from vnav_graph.simulation.scenario import simulate
 
-    duration = 600.0 if a.quick else 3600.0
+    if a.hours is not None and not a.hours > 0:
+        ap.error("--hours must be positive")
+    duration = 3600.0 * a.hours if a.hours is not None else (600.0 if a.quick else 3600.0)
+    stages = StagePeaks()
     # warm-up on a 60 s drive: numba's cached kernels are loaded on first call (~0.5 s),
     # a one-off cost that the C++-only floor does not have
+    stages.start()
     warm = simulate("hill-drive", a.seed, duration_s=60.0, imu_rate_hz=200.0)
     GraphBatch().run(warm)
     GraphBatch(GraphConfig(solver="general")).run(warm)
     GraphISAM2().run(warm)
-    drive = simulate("hill-drive", a.seed, duration_s=duration, imu_rate_hz=200.0)
+    del warm
+    stages.end("warm-up")
+    stages.start()
+    # the estimators never read the truth: the bench keeps the drive without it (103 of the
+    # 142 MB of a 1-hour 200 Hz drive; the arrays of the other streams are shared, not copied)
+    drive = simulate("hill-drive", a.seed, duration_s=duration,
+                     imu_rate_hz=200.0).replace(truth=None, baro_truth=None)
+    stages.end("simulate")
+    stages.start()
     eb = GraphBatch().run(drive)
+    stages.end("graph-batch")
     batch_s = float(eb.info["timing_s"]["solve"])
+    stages.start()
     eg = GraphBatch(GraphConfig(solver="general")).run(drive)
+    stages.end("graph-batch-general")
     general_s = float(eg.info["timing_s"]["solve"])
+    stages.start()
     floor_s = builtin_floor(drive)
+    stages.end("builtin-floor")
+    stages.start()
     ei = GraphISAM2().run(drive)
-    ekf_s, ekf_rf = ekf_timing(duration, 200.0)
+    stages.end("graph-isam2")
+    drive_s = float(drive.duration_s)
+    note = (f"graph-batch full run {eb.runtime_s:.1f} s (timing {eb.info['timing_s']}), "
+            f"GN iterations {eb.info['iterations']}; general path: solve {general_s:.2f} s, "
+            f"full run {eg.runtime_s:.1f} s, {eg.info['iterations']} iterations; "
+            f"isam2 online {ei.info['online_s']:.1f} s, "
+            f"final smoothing {ei.info['final_smoothing_s']:.1f} s, "
+            f"p50 {ei.info['update_p50_ms']:.1f} ms")
+    keyframes = int(eb.info["keyframes"])
+    isam2_s = float(ei.runtime_s)
+    isam2_p99 = float(ei.info["update_p99_ms"])
+    del eb, eg, ei
+    stages.start()
+    ekf_s, ekf_rf = ekf_timing(duration, 200.0, drive, a.seed)
+    del drive
+    stages.end("ekf")
     out = {
-        "drive_duration_s": float(drive.duration_s),
-        "keyframes": int(eb.info["keyframes"]),
+        "drive_duration_s": drive_s,
+        "keyframes": keyframes,
         "batch_s": batch_s,
         "builtin_floor_s": float(floor_s),
         "batch_over_floor": batch_s / floor_s,
-        "isam2_s": float(ei.runtime_s),
-        "isam2_realtime_factor": float(drive.duration_s / ei.runtime_s),
-        "isam2_update_p99_ms": float(ei.info["update_p99_ms"]),
+        "isam2_s": isam2_s,
+        "isam2_realtime_factor": drive_s / isam2_s,
+        "isam2_update_p99_ms": isam2_p99,
         "ekf_s": ekf_s,
         "ekf_realtime_factor": ekf_rf,
-        "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+        # resetting the high-water mark also resets ru_maxrss: the maximum of the stages'
+        "peak_rss_mb": max(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+                           *stages.peaks.values()),
         "general_over_floor": general_s / floor_s,
     }
     assert tuple(out) == KEYS
+    out["peak_rss_mb_by_stage"] = stages.peaks  # additive (docs/design.md)
     a.out.mkdir(parents=True, exist_ok=True)
     (a.out / "graph_perf.json").write_text(json.dumps(out, indent=2) + "\n")
     print(json.dumps(out, indent=2))
-    print(f"graph-batch full run {eb.runtime_s:.1f} s (timing {eb.info['timing_s']}), "
-          f"GN iterations {eb.info['iterations']}; general path: solve {general_s:.2f} s, "
-          f"full run {eg.runtime_s:.1f} s, {eg.info['iterations']} iterations; "
-          f"isam2 online {ei.info['online_s']:.1f} s, "
-          f"final smoothing {ei.info['final_smoothing_s']:.1f} s, "
-          f"p50 {ei.info['update_p50_ms']:.1f} ms", file=sys.stderr)
+    print(note, file=sys.stderr)
     return out
 
 

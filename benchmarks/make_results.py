@@ -263,6 +263,8 @@ def reproductions_section(rep: dict[str, Any]) -> list[str]:
 def perf_section(perf: dict[str, Any]) -> list[str]:
     lines = ["| quantity | value |", "| --- | --- |"]
     for k, v in perf.items():
+        if isinstance(v, dict):  # peak_rss_mb_by_stage: stage → MB
+            v = ", ".join(f"{name} {x:.0f}" for name, x in v.items())
         lines.append(f"| `{k}` | {v:.4g} |" if isinstance(v, float) else f"| `{k}` | {v} |")
     return lines
 
