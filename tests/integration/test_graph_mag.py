@@ -101,3 +101,16 @@ def test_a_compass_that_contradicts_the_heading_is_dropped_by_both_families(driv
         np.testing.assert_array_equal(est.trajectory.alt, ref.trajectory.alt)
     # the consistent compass of the same drive is kept
     assert "mag_note" not in GraphBatch().run(drive).info
+
+
+def test_graph_isam2_drops_a_contradicting_compass_too(drive) -> None:
+    """graph-isam2 applies the same post-solve hard-iron check (``hard_iron_note``)."""
+    from vnav_graph.types import MagStream
+
+    a = np.radians(60.0)
+    rot = np.array([[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]])
+    m = drive.mag
+    bad = drive.replace(mag=MagStream(m.t, m.field_b @ rot.T, m.sd_ut))
+    est = GraphISAM2().run(bad)
+    assert "contradicts the heading" in est.info["mag_note"]
+    assert "h0" not in est.info["extra_variables"]
