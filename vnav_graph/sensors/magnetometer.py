@@ -35,6 +35,7 @@ offset rotates with the vehicle in n, a heading error does not.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -44,7 +45,7 @@ from numba import njit
 if TYPE_CHECKING:
     from ..geo.magfield import FieldModel
 
-from ..types import Drive, FloatArray, MagStream, Trajectory
+from ..types import Drive, Estimate, FloatArray, MagStream, Trajectory
 
 MIN_HORIZONTAL_UT = 3.0  # weaker horizontal fields give no usable heading (near the poles) [µT]
 # Defaults shared by ekf/ekf-rts (EkfConfig) and both graphs (GraphConfig):
@@ -107,6 +108,23 @@ def hard_iron_note(info: dict[str, Any], prior_sd_ut: float) -> str:
             f"{b[1]:.1f}, {b[2]:.1f}) µT, {np.sqrt(d2):.1f}σ of its {prior_sd_ut:g} µT prior "
             f"(χ²₃ {d2:.0f} > {lim:.1f}): the compass contradicts the heading of GNSS and "
             "IMU (interference beyond the hard-iron model); solved again without it")
+
+
+def without_contradicting_mag(result: Estimate, config: Any,
+                              rerun: Callable[[Any], Estimate]) -> Estimate:
+    """The post-solve hard-iron check of every estimator that uses the magnetometer (ekf,
+    ekf-rts, graph-batch, graph-isam2): ``result`` when it passes (:func:`hard_iron_note`;
+    ``config`` has ``use_mag`` and ``mag_bias_sd``), else ``rerun(config without the
+    magnetometer)`` with the reason in ``info["mag_note"]``, the config asked for and the
+    time of both runs."""
+    why = hard_iron_note(result.info, config.mag_bias_sd) if config.use_mag else ""
+    if not why:
+        return result
+    from dataclasses import replace
+
+    again = rerun(replace(config, use_mag=False))
+    return again.replace(info={**again.info, "mag_note": why}, config=config,
+                         runtime_s=result.runtime_s + again.runtime_s)
 
 
 DEFAULT_YEAR = 2025.0  # date of the field for a drive without one (noted in info)

@@ -46,7 +46,7 @@ seed 001 (baro error model); Rauch, Tung & Striebel, AIAA J. 3(8), 1965.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -62,7 +62,7 @@ from ...sensors.magnetometer import (
     MAG_HEADING_FLOOR,
     MAG_INTERVAL_S,
     field_and_info,
-    hard_iron_note,
+    without_contradicting_mag,
 )
 from ...sensors.model import BaroPrior, SensorModel, baro_prior, sensor_model
 from ...sensors.noise import gm_process_var, white_sd
@@ -612,19 +612,6 @@ def _trajectory(run: _Run, lla: FloatArray, vel: FloatArray, q: FloatArray,
                       par[:, km.PBA:km.PBA + 3].copy(), par[:, km.PBB].copy())
 
 
-def _mag_checked(est: Any, drive: Drive, result: Estimate) -> Estimate:
-    """``result``, or, when its hard iron fails the post-solve check
-    (``sensors.magnetometer.hard_iron_note``, the graph's rule), the same estimator run
-    again without the magnetometer with the reason in ``info["mag_note"]``."""
-    cfg = est.config
-    why = hard_iron_note(result.info, cfg.mag_bias_sd) if cfg.use_mag else ""
-    if not why:
-        return result
-    again = type(est)(replace(cfg, use_mag=False))._run(drive)
-    return again.replace(info={**again.info, "mag_note": why}, config=cfg,
-                         runtime_s=result.runtime_s + again.runtime_s)
-
-
 class EKF:
     """Full INS/GNSS/baro error-state EKF (forward filter). ``run(drive) -> Estimate``."""
 
@@ -634,7 +621,8 @@ class EKF:
         self.config = config or EkfConfig()
 
     def run(self, drive: Drive) -> Estimate:
-        return _mag_checked(self, drive, self._run(drive))
+        return without_contradicting_mag(self._run(drive), self.config,
+                                         lambda cfg: type(self)(cfg)._run(drive))
 
     def _run(self, drive: Drive) -> Estimate:
         t0 = time.perf_counter()
@@ -653,7 +641,8 @@ class EKFRTS:
         self.config = config or EkfConfig()
 
     def run(self, drive: Drive) -> Estimate:
-        return _mag_checked(self, drive, self._run(drive))
+        return without_contradicting_mag(self._run(drive), self.config,
+                                         lambda cfg: type(self)(cfg)._run(drive))
 
     def _run(self, drive: Drive) -> Estimate:
         t0 = time.perf_counter()

@@ -26,7 +26,6 @@ References: Forster et al., "On-Manifold Preintegration", IEEE T-RO 2017; Kaess 
 
 from __future__ import annotations
 
-import dataclasses
 import time
 from collections.abc import Sequence
 from typing import Any
@@ -36,7 +35,7 @@ import numpy as np
 from gtsam.symbol_shorthand import B, C, K, V, X
 
 from ...geo.frames import mat_to_quat, ned_to_lla
-from ...sensors.magnetometer import hard_iron_note
+from ...sensors.magnetometer import without_contradicting_mag
 from ...types import (
     BaroEstimate,
     Drive,
@@ -267,13 +266,8 @@ class GraphBatch:
         ``info["mag_note"]``."""
         with single_thread_blas():
             est = self._run(drive)
-        why = hard_iron_note(est.info, self.config.mag_bias_sd) if self.config.use_mag else ""
-        if not why:
-            return est
-        again = GraphBatch(dataclasses.replace(self.config, use_mag=False),
-                           self.extensions).run(drive)
-        return again.replace(info={**again.info, "mag_note": why}, config=self.config,
-                             runtime_s=est.runtime_s + again.runtime_s)
+        return without_contradicting_mag(est, self.config,
+                                         lambda cfg: GraphBatch(cfg, self.extensions).run(drive))
 
     def _run(self, drive: Drive) -> Estimate:
         t0 = time.perf_counter()

@@ -46,7 +46,7 @@ import numpy as np
 from gtsam.symbol_shorthand import B, C, K, V, X
 
 from ...geo.frames import mat_to_quat, ned_to_lla
-from ...sensors.magnetometer import hard_iron_note
+from ...sensors.magnetometer import without_contradicting_mag
 from ...types import Drive, Estimate, Trajectory
 from . import factors as gf
 from .batch import outputs, provides, solver_warnings, value_of
@@ -274,13 +274,8 @@ class GraphISAM2:
             cfg = dataclasses.replace(cfg0, **ROBUST_SETTINGS)
             est = self._run(drive, cfg, True, t_start, str(exc))
         # the post-solve hard-iron check of both families (graph-batch, ekf)
-        why = hard_iron_note(est.info, self.config.mag_bias_sd) if self.config.use_mag else ""
-        if not why:
-            return est
-        again = GraphISAM2(dataclasses.replace(self.config, use_mag=False),
-                           self.extensions).run(drive)
-        return again.replace(info={**again.info, "mag_note": why}, config=self.config,
-                             runtime_s=est.runtime_s + again.runtime_s)
+        return without_contradicting_mag(
+            est, self.config, lambda cfg: GraphISAM2(cfg, self.extensions).run(drive))
 
     def _run(self, drive: Drive, cfg: GraphConfig, robust: bool, t_start: float,
              fallback: str | None) -> Estimate:
