@@ -56,7 +56,7 @@ def test_transition_second_order_matches_expm():
     ing[9:12] = [1.0, -0.5, -9.8]
     ing[12:15] = [0.5, 0.3, -9.8]
     ing[15], ing[16], ing[17:20] = 0.8, 500.0, [20.0, 5.0, -1.0]
-    f = km.build_f(ing, 600.0, 600.0, 1800.0)
+    f = km.build_f(ing, 600.0, 600.0, 1800.0, 300.0)
     dt = 0.1
     # Φ = I + FΔt + ½(FΔt)² has a truncation error of (‖F‖Δt)³/6 ≈ 1e-3 relative to the
     # biggest entries (‖F‖ ≈ 10 from the specific force), here below 2e-3 absolute
@@ -92,7 +92,7 @@ def test_heading_decoupling_and_reset_jacobian():
     ing[9:12] = [2.0, 1.0, -9.8]
     ing[15], ing[16] = 0.8, 0.0
     ing[20] = 1.0  # heading unknown
-    f = km.build_f(ing, np.inf, np.inf, np.inf)
+    f = km.build_f(ing, np.inf, np.inf, np.inf, np.inf)
     # yaw error decoupled: exactly zero row and column
     assert np.all(f[8] == 0.0) and np.all(f[:, 8] == 0.0)
     j = km.reset_jacobian(0.3)

@@ -64,7 +64,14 @@ from ...sensors.magnetometer import (
     field_and_info,
     without_contradicting_mag,
 )
-from ...sensors.model import BaroPrior, SensorModel, baro_prior, sensor_model
+from ...sensors.model import (
+    BaroPrior,
+    GnssHeightGM,
+    SensorModel,
+    baro_prior,
+    gnss_gm,
+    sensor_model,
+)
 from ...sensors.noise import gm_process_var, white_sd
 from ...types import (
     ERROR_STATE_DIM,
@@ -125,7 +132,11 @@ class EkfConfig:
     heading σ floor for declination and soft-iron errors, added to σ_m/H; mag_bias_sd [µT]:
     prior σ of each hard-iron component left after the log's own calibration; mag_bias_rw
     [µT/√s]: its random walk; mag_reaccept_s: after this long of refused headings the next is
-    forced in.
+    forced in;
+    gnss_gm_sd_v [m] / gnss_gm_tau_s [s]: the time-correlated GNSS height error as a
+    first-order Gauss-Markov state of that σ and τ (``sensors.model.GnssHeightGM``, the same
+    model as ``GraphConfig``'s); 0 = off (the default; ``docs/real_logs.md`` has the holdout
+    comparison).
     """
 
     cov_rate_hz: float = 10.0
@@ -157,8 +168,15 @@ class EkfConfig:
     mag_bias_sd: float = MAG_BIAS_SD_UT
     mag_bias_rw: float = 0.01
     mag_reaccept_s: float = 20.0
+    gnss_gm_sd_v: float = 0.0
+    gnss_gm_tau_s: float = 300.0
+
+    @property
+    def gnss_gm(self) -> GnssHeightGM | None:
+        return gnss_gm(self.gnss_gm_sd_v, self.gnss_gm_tau_s, "EkfConfig")
 
     def __post_init__(self) -> None:
+        self.gnss_gm  # noqa: B018 -- validates the Gauss-Markov GNSS height settings
         if not (self.cov_rate_hz > 0 and self.cov_output_hz > 0):
             raise ValueError("EkfConfig.cov_rate_hz / cov_output_hz: must be > 0")
         if not 0.5 < self.gate_prob < 1.0:
@@ -183,7 +201,7 @@ class _Run:
     innovations: dict[str, FloatArray]
     info: dict[str, Any]
     prior_sd: dict[str, float]
-    tau: tuple[float, float, float]
+    tau: tuple[float, float, float, float]
     has_baro: bool
 
 
@@ -255,6 +273,9 @@ def _process_noise(t: FloatArray, grid_idx: NDArrayInt, gaps: NDArrayInt, ispec:
     qd[:, km.IBA:km.IBA + 3] = (gm_process_var(dtg, ispec.accel_bias_tau, ispec.accel_bias_sd)
                                 + _white_var(ispec.accel_bias_rw, dtg))[:, None]
     qd[:, km.IBB] = gm_process_var(dtg, bp.bias_tau, bp.bias_sd)
+    gm = cfg.gnss_gm
+    if gm is not None:
+        qd[:, km.IGH] = gm_process_var(dtg, gm.tau_s, gm.sd_m)
     qd[:, km.IMB:km.IMB + 3] = _white_var(cfg.mag_bias_rw, dtg)[:, None]
     # IMU gaps: the grid interval ending at gap end i+1 is exactly the gap (ekf.model docstring)
     kg = np.searchsorted(grid_idx, gaps + 1)
@@ -379,6 +400,13 @@ def _initial_state(drive: Drive, cfg: EkfConfig, model: SensorModel, bp: BaroPri
     p0[15, 15] = bp.scale_sd**2
     p0[16, 16] = bp.latency_sd**2
     p0[17, 17] = bp.bias_sd**2
+    gm = cfg.gnss_gm
+    if gm is not None:
+        p0[km.IGH, km.IGH] = gm.sd_m**2
+        if gnss is not None:
+            # the first fixes carry the correlated error g (down): δr_D = g + w, δg = −g
+            p0[2, 2] += gm.sd_m**2
+            p0[2, km.IGH] = p0[km.IGH, 2] = -gm.sd_m**2
     return _Initial(lla0, v0, q0, par0, p0, heading_known, yaw_unknown_var, i_static,
                     g_latency, lever, mag_yaw is not None)
 
@@ -470,7 +498,8 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
         raise ValueError("ekf: the IMU stream needs at least 3 samples")
     if cfg.heading_source not in ("auto", "track", "accel"):
         raise ValueError("EkfConfig.heading_source: 'auto', 'track' or 'accel'")
-    model = sensor_model(drive)  # the noise model every estimator shares (sensors.model)
+    # the noise model every estimator shares (sensors.model)
+    model = sensor_model(drive, cfg.gnss_gm)
     ispec: ImuSpec = model.imu
     est_scale = cfg.accel_scale if cfg.accel_scale is not None else (
         not isinstance(imu.spec, ImuSpec) or ispec.accel_scale_sd > 0)
@@ -488,7 +517,9 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
     gate2 = float(chi2.ppf(cfg.gate_prob, 2))
     gate1 = float(chi2.ppf(cfg.gate_prob, 1))
     tilt_rate_sd = np.sqrt(2.0) * OMEGA_IE * np.cos(ini.lla0[0])
-    tau = (ispec.gyro_bias_tau, ispec.accel_bias_tau, bp.bias_tau)
+    gm = cfg.gnss_gm
+    tau = (ispec.gyro_bias_tau, ispec.accel_bias_tau, bp.bias_tau,
+           np.inf if gm is None else gm.tau_s)
     heading_accel = ev.has_vel and cfg.heading_source in ("auto", "accel")
     mag_data = kernel_record(drive, ev.m_field, fm, cfg.gate_prob, cfg.mag_reaccept_s,
                              cfg.mag_interval_s, cfg.mag_heading_floor)
@@ -529,6 +560,8 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
                     # summary.json shows both families' estimates side by side
                     extra_variables={"h0": {"est": res[3][-1, km.PMB:km.PMB + 3].tolist(),
                                             "sd": sd_mb.tolist()}})
+    if gm is not None:
+        info["gnss_height_gm"] = {"sd_m": gm.sd_m, "tau_s": gm.tau_s}
     prior = {"scale": bp.scale_sd, "latency": bp.latency_sd, "bias": bp.bias_sd}
     rts = tuple(res[5:10]) if store_rts else None
     return _Run(t[gr.out_idx], *res[:4], t[gr.grid_idx], gr.grid_idx, gr.out_idx,

@@ -31,6 +31,7 @@ from .model import (
     IATT,
     IBB,
     IBG,
+    IGH,
     IMB,
     IPOS,
     ISC,
@@ -43,6 +44,7 @@ from .model import (
     PBA,
     PBB,
     PBG,
+    PGH,
     PKA,
     PMB,
     PSC,
@@ -97,6 +99,7 @@ class Noise(NamedTuple):
     tau_g: float  # gyro bias correlation time [s]
     tau_a: float  # accel bias correlation time [s]
     tau_b: float  # baro bias correlation time [s]
+    tau_h: float  # GNSS height error correlation time [s] (inf: the state is off)
     yaw_unknown_var: float  # yaw variance while the heading is unknown [rad²]
     tilt_rate_sd: float  # tilt growth while the heading is unknown [rad/s]
     b_prior_var: float  # baro-bias prior variance [m²] (GNSS-height gate widening)
@@ -182,6 +185,7 @@ def run_filter(grids, init, noise, events, gnss, baro, mag, settings):
     lla0, v0, q0, par0, p0 = init.lla0, init.v0, init.q0, init.par0, init.p0
     heading_known = init.heading_known
     q_diag, tau_g, tau_a, tau_b = noise.q_diag, noise.tau_g, noise.tau_a, noise.tau_b
+    tau_h = noise.tau_h
     yaw_unknown_var, tilt_rate_sd = noise.yaw_unknown_var, noise.tilt_rate_sd
     b_prior_var = noise.b_prior_var
     ev_t, ev_type, ev_idx, max_pending = events.t, events.kind, events.idx, events.max_pending
@@ -345,7 +349,8 @@ def run_filter(grids, init, noise, events, gnss, baro, mag, settings):
                 r = np.zeros(6)
                 y[0] = -(g_lla[idx, 0] - lm[0]) * (rn + lm[2]) + d[0]
                 y[1] = -(g_lla[idx, 1] - lm[1]) * (re + lm[2]) * np.cos(lm[0]) + d[1]
-                y[2] = (g_lla[idx, 2] - lm[2]) + d[2]
+                # down: −h + (C l)_D + ĝ (GNSS height error state, zero variance when off)
+                y[2] = (g_lla[idx, 2] - lm[2]) + d[2] + par[PGH]
                 sk = skew3(d)
                 lev2 = 0.0 if heading_ok else lever @ lever
                 for a in range(3):
@@ -353,6 +358,7 @@ def run_filter(grids, init, noise, events, gnss, baro, mag, settings):
                     for b in range(3):
                         hm[a, IATT + b] = -sk[a, b]
                     r[a] = g_pos_sd[idx, a] ** 2 + lev2
+                hm[2, IGH] = 1.0
                 mm = 3
                 if has_vel:
                     w_ie, w_en = nav_rates(lm[0], lm[2], vm)
@@ -482,8 +488,8 @@ def run_filter(grids, init, noise, events, gnss, baro, mag, settings):
             ing[20] = 0.0 if heading_ok else 1.0
             ing[21] = dtg
             ing[22] = 1.0 if gap_step[i] else 0.0
-            fmat = build_f(ing, tau_g, tau_a, tau_b)
-            phi = step_phi(ing, tau_g, tau_a, tau_b)
+            fmat = build_f(ing, tau_g, tau_a, tau_b, tau_h)
+            phi = step_phi(ing, tau_g, tau_a, tau_b, tau_h)
             qd = q_diag[k].copy()
             if gap_step[i] and not heading_ok:
                 qd[IATT + 2] = yaw_unknown_var

@@ -1,12 +1,14 @@
 """Numba kernels of the INS/GNSS/baro error-state EKF and its RTS smoother.
 
-Error state δx (24), every component "estimated minus true" (types.ERROR_STATE convention;
+Error state δx (25), every component "estimated minus true" (types.ERROR_STATE convention;
 the first 18 are exactly the shared layout):
 
     0:3 δr (NED position [m]), 3:6 δv (NED [m/s]), 6:9 ψ (tilt in n [rad], C̃ = (I+[ψ×]) C),
     9:12 δb_g [rad/s], 12:15 δb_a [m/s²], 15 δs (baro scale), 16 δτ_d [s], 17 δb (baro bias
     [m]), 18:21 δk_a (accelerometer scale factors, f̃ = (1+k_a)∘f + b_a + n), 21:24 δb_m
-    (magnetometer hard-iron bias in b [µT], a random walk; ``sensors.magnetometer``).
+    (magnetometer hard-iron bias in b [µT], a random walk; ``sensors.magnetometer``), 24 δg
+    (time-correlated GNSS height error [m, down], first-order Gauss-Markov; zero variance
+    unless ``EkfConfig.gnss_gm_sd_v`` > 0: ``sensors.model.gnss_gm_split``).
 
 Error dynamics (Groves, 2nd ed., eqs. 14.64-14.65 reduced to local-level NED; Titterton &
 Weston §12.3), with f_n the specific force in n and ω_in = ω_ie + ω_en:
@@ -15,7 +17,11 @@ Weston §12.3), with f_n the specific force in n and ω_in = ω_ie + ω_en:
     δv̇ = −[f_n×] ψ − C δb_a − C diag(f_b) δk_a − [(2ω_ie + ω_en)×] δv + (2g/R) δr_D e_D
     ψ̇  = −[ω_in×] ψ − C δb_g − (∂ω_en/∂v) δv − (∂ω_ie/∂L) δr_N/(R_N+h)
     δḃ_g = −δb_g/τ_g + w,  δḃ_a = −δb_a/τ_a + w,  δḃ = −δb/τ_b + w,  δṡ = δτ̇ = δk̇_a = 0,
-    δḃ_m = w.
+    δḃ_m = w,  δġ = −δg/τ_h + w.
+
+GNSS height with the Gauss-Markov error state: the antenna's down coordinate is predicted as
+−h + (C l)_D + ĝ, so the height row carries ∂/∂δg = 1; the fix's own σ_v is then split into
+that state's σ and the white rest (``sensors.model.gnss_gm_split``, shared with the graph).
 
 The nominal state runs at the IMU rate through the shared ``strapdown.strapdown_step``. The
 covariance is propagated on a coarser grid (every M IMU samples, ≈ 10 Hz): Φ = I + FΔt +
@@ -125,13 +131,14 @@ from ...nav.arrays import put, solve
 from ...nav.rotations import quat_exp, quat_mul, skew3
 from ...nav.strapdown import nav_rates
 
-NX = 24  # internal error-state dimension
+NX = 25  # internal error-state dimension
 NPACK = NX * (NX + 1) // 2
 NING = 23  # ingredients of F per grid interval (22: IMU-gap flag)
-IPOS, IVEL, IATT, IBG, IBA, ISC, ITD, IBB, IKA, IMB = 0, 3, 6, 9, 12, 15, 16, 17, 18, 21
+IPOS, IVEL, IATT, IBG, IBA, ISC, ITD, IBB, IKA, IMB, IGH = (0, 3, 6, 9, 12, 15, 16, 17, 18,
+                                                            21, 24)
 # indices of the nominal parameter vector ``par`` (NPAR,)
-PBG, PBA, PKA, PSC, PTD, PBB, PMB = 0, 3, 6, 9, 10, 11, 12
-NPAR = 15
+PBG, PBA, PKA, PSC, PTD, PBB, PMB, PGH = 0, 3, 6, 9, 10, 11, 12, 15
+NPAR = 16
 
 
 @njit(cache=True)
@@ -169,7 +176,7 @@ def unpack(v):
 
 
 @njit(cache=True)
-def build_f(ing, tau_g, tau_a, tau_b):
+def build_f(ing, tau_g, tau_a, tau_b, tau_h):
     """Continuous error-dynamics matrix F (NX, NX) of one grid interval (module docstring)."""
     f = np.zeros((NX, NX))
     c = ing[0:9].copy().reshape(3, 3)
@@ -205,6 +212,8 @@ def build_f(ing, tau_g, tau_a, tau_b):
             f[IBA + i, IBA + i] = -1.0 / tau_a
     if np.isfinite(tau_b):
         f[IBB, IBB] = -1.0 / tau_b
+    if np.isfinite(tau_h):
+        f[IGH, IGH] = -1.0 / tau_h
     if ing[22] > 0.5:
         # IMU gap (module docstring): no inertial data, constant-velocity nominal; only
         # δṙ = δv and the Gauss-Markov decays remain
@@ -214,6 +223,7 @@ def build_f(ing, tau_g, tau_a, tau_b):
             g2[IBG + i, IBG + i] = f[IBG + i, IBG + i]
             g2[IBA + i, IBA + i] = f[IBA + i, IBA + i]
         g2[IBB, IBB] = f[IBB, IBB]
+        g2[IGH, IGH] = f[IGH, IGH]
         f = g2
     if ing[20] > 0.5:  # heading unknown: decouple the yaw error
         for j in range(NX):
@@ -229,13 +239,13 @@ def transition(f, dt):
 
 
 @njit(cache=True)
-def step_phi(ing, tau_g, tau_a, tau_b):
+def step_phi(ing, tau_g, tau_a, tau_b, tau_h):
     """Φ of one grid interval: ``transition(build_f(ing), Δt)``; across an IMU gap the
     roll/pitch error rows are zero (the tilt is re-levelled after the gap, its new error is
     independent of the old one and enters through Q), and so is the yaw row when the heading
     is forgotten over the gap (ing[20] set: the yaw error restarts with the uniform variance
     in Q)."""
-    phi = transition(build_f(ing, tau_g, tau_a, tau_b), ing[21])
+    phi = transition(build_f(ing, tau_g, tau_a, tau_b, tau_h), ing[21])
     if ing[22] > 0.5:
         for j in range(NX):
             phi[IATT, j] = 0.0
@@ -319,3 +329,4 @@ def apply_correction(lla, v, q, par, dx):
     par[PSC] -= dx[ISC]
     par[PTD] -= dx[ITD]
     par[PBB] -= dx[IBB]
+    par[PGH] -= dx[IGH]

@@ -19,6 +19,7 @@ from .model import (
     IBA,
     IBB,
     IBG,
+    IGH,
     IKA,
     IMB,
     ISC,
@@ -29,6 +30,7 @@ from .model import (
     PBA,
     PBB,
     PBG,
+    PGH,
     PKA,
     PMB,
     PSC,
@@ -41,11 +43,11 @@ from .model import (
 
 
 @njit(cache=True)
-def rts_smooth(rts_p, rts_ing, rts_q, corr, reset_at, tau_g, tau_a, tau_b, cov_out_of,
+def rts_smooth(rts_p, rts_ing, rts_q, corr, reset_at, tau_g, tau_a, tau_b, tau_h, cov_out_of,
                n_cov_out):
     """Backward RTS pass on the covariance grid (module docstring).
 
-    Returns ê^s (K, 21) — the smoothed estimate of the error of the filtered (post-update)
+    Returns ê^s (K, NX) — the smoothed estimate of the error of the filtered (post-update)
     nominal state at each grid epoch, estimated minus true — and the packed smoothed
     covariances at the covariance-output epochs.
     """
@@ -58,15 +60,24 @@ def rts_smooth(rts_p, rts_ing, rts_q, corr, reset_at, tau_g, tau_a, tau_b, cov_o
     for k in range(kk - 2, -1, -1):
         pk = unpack(rts_p[k])
         ing = rts_ing[k + 1]
-        phi = step_phi(ing, tau_g, tau_a, tau_b)
+        phi = step_phi(ing, tau_g, tau_a, tau_b, tau_h)
         if not np.isnan(reset_at[k + 1]):
             phi = reset_jacobian(reset_at[k + 1]) @ phi
         pm = phi @ pk @ phi.T
         for a in range(NX):
             pm[a, a] += rts_q[k + 1, a]
-        # G = P⁺ Φᵀ (P⁻)⁻¹ through the correlation matrix (scales differ by ~1e12)
-        dinv = 1.0 / np.sqrt(np.diag(pm))
+        # G = P⁺ Φᵀ (P⁻)⁻¹ through the correlation matrix (scales differ by ~1e12); a state
+        # switched off (zero variance: the GNSS height error state by default) keeps G's
+        # row and column zero
+        dgm = np.diag(pm)
+        dinv = np.zeros(NX)
+        for a in range(NX):
+            if dgm[a] > 0.0:
+                dinv[a] = 1.0 / np.sqrt(dgm[a])
         corr_m = pm * outer(dinv, dinv)
+        for a in range(NX):
+            if dgm[a] <= 0.0:
+                corr_m[a, a] = 1.0
         rhs = (phi @ pk) * dinv.reshape(NX, 1)
         gt = solve(corr_m, rhs) * dinv.reshape(NX, 1)
         g = gt.T
@@ -87,7 +98,7 @@ def warm_up() -> None:
     for row in p:
         pack(np.eye(NX), row)
     rts_smooth(p, np.zeros((k, NING)), np.zeros((k, NX)), np.zeros((k, NX)),
-               np.full(k, np.nan), 1.0, 1.0, 1.0, np.arange(k, dtype=np.int64), k)
+               np.full(k, np.nan), 1.0, 1.0, 1.0, 1.0, np.arange(k, dtype=np.int64), k)
 
 
 def smooth_corrections(grid_t: FloatArray, t_out: FloatArray, corr: FloatArray,
@@ -128,4 +139,5 @@ def apply_error(lla: FloatArray, vel: FloatArray, q: FloatArray, par: FloatArray
     par2[:, PSC] -= e[:, ISC]
     par2[:, PTD] -= e[:, ITD]
     par2[:, PBB] -= e[:, IBB]
+    par2[:, PGH] -= e[:, IGH]
     return lla2, vel2, q2, par2
