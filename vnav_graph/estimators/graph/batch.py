@@ -10,8 +10,9 @@ Only the modules of this subpackage import gtsam. Design (details and measuremen
   the specific force fed to the preintegration, rotated with the keyframe attitude estimate.
   Outputs are converted to geodetic lla (ellipsoidal heights) and local-level NED.
 - Variables per keyframe k: X(k) Pose3, V(k) velocity, B(k) IMU bias, C(k) baro
-  Gauss-Markov bias; K(j) = (s, τd) baro calibration (one for the batch, one per segment in
-  the incremental front end).
+  Gauss-Markov bias, G(k) GNSS height Gauss-Markov error (optional,
+  ``GraphConfig.gnss_gm_sd_v``, the EKF's model; a linear chain like C); K(j) = (s, τd) baro
+  calibration (one for the batch, one per segment in the incremental front end).
 - C++ factors: CombinedImuFactor (Forster et al. 2017), GPSFactorArm and velocity priors for
   fixes at keyframe epochs, priors, and the exact Gauss-Markov chain
   b_{k+1} = e^{−Δt/τ} b_k + w, var w = σ²(1 − e^{−2Δt/τ}) as linear factors.
@@ -240,6 +241,14 @@ def outputs(P: Problem, res: BatchResult, pri: dict[str, float],
 # Estimators
 
 
+def gnss_gm_info(P: Problem) -> dict[str, Any]:
+    """``info["gnss_height_gm"]`` (σ, τ of the GNSS height state, as the EKF reports it) when
+    the solve carried it, else nothing."""
+    if P.gm is None:
+        return {}
+    return {"gnss_height_gm": {"sd_m": P.gm.sd_m, "tau_s": P.gm.tau_s}}
+
+
 def provides(drive: Drive) -> frozenset[str]:
     q = {"alt", "vel_d", "pos_h", "vel_h", "att", "cov"}
     if drive.baro is not None:
@@ -298,6 +307,7 @@ class GraphBatch:
                 "timing_s": {"init": t1 - t0, "preintegration": t2 - t1, "solve": t3 - t2,
                              "outputs": t4 - t3},
                 **mag_info(drive, self.config),
+                **gnss_gm_info(P),
                 "frame": "tangent-plane NED at origin; gravity-difference and Coriolis "
                          "corrections" if self.config.gravity_correction else "tangent-plane"}
         return Estimate(self.name, out["trajectory"], provides(drive), out["cov"],

@@ -28,7 +28,8 @@ Keys: the keyframe variables are ``X(k)`` (Pose3, body → tangent frame, the Po
 ordered (rotation, translation)), ``V(k)`` (velocity in the tangent frame [m/s]) and ``B(k)``
 (``imuBias.ConstantBias``, (accel, gyro)), plus ``C(k)`` (baro Gauss-Markov bias [m]) when the
 drive has a barometer, for k = 0 … ``view.n_keyframes`` − 1 (``gtsam.symbol_shorthand``).
-The letters ``RESERVED`` (x, v, b, c, k) belong to the smoother: new variables take another
+The letters ``RESERVED`` (x, v, b, c, k, g) belong to the smoother (g: the optional GNSS
+height Gauss-Markov error ``G(k)``, ``GraphConfig.gnss_gm_sd_v``): new variables take another
 letter, and factors may not touch ``K`` (the baro calibration, one variable in the batch but
 one per segment in iSAM2).
 
@@ -64,7 +65,7 @@ from .factors import rot_t_n
 
 __all__ = ["RESERVED", "GraphExtension", "GraphView", "Terms", "Variable", "B", "C", "V", "X"]
 
-RESERVED = "xvbck"  # key letters of the smoother's own variables
+RESERVED = "xvbckg"  # key letters of the smoother's own variables
 
 
 @dataclass(frozen=True)

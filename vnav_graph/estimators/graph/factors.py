@@ -30,6 +30,10 @@ calibration (s, τd) — the 16 "core" columns — and the accelerometer bias of
 (Δp(τ) − ½τ²b_a), so ∂p(t)/∂b_a = ½τ(T − τ)·R_k and ∂v(t)/∂b_a = (½T − τ)·R_k; leaving these
 columns out makes the Jacobian disagree with the cost and Gauss-Newton converge only linearly.
 The gyro-bias dependence of the interpolant (second order over one interval) is not modelled.
+With the optional Gauss-Markov GNSS height error (``GraphConfig.gnss_gm_sd_v``) the rows have
+two more columns, that error at keyframes k and k+1 (``COL_G0``, ``COL_G1``; linear in time
+between them, like the baro bias): the GNSS down coordinate is predicted as
+p_D(t) + (C l)_D + g(t) (the EKF's model, ``ekf.model``).
 """
 
 from __future__ import annotations
@@ -55,6 +59,9 @@ COL_B1 = 13
 COL_S = 14
 COL_TAU = 15
 COL_BA = slice(16, 19)
+N_COLS_GM = 21  # with the GNSS height Gauss-Markov error at keyframes k, k+1 (last)
+COL_G0 = 19
+COL_G1 = 20
 # key blocks of a group: (first column, width)
 BLOCKS = ((0, 6), (6, 6), (12, 1), (13, 1), (14, 2))
 # Cover of all block pairs of 5 blocks by 3-block triples; each pair (and diagonal) is owned
@@ -226,7 +233,8 @@ class KeyframeStates:
     rot (K, 3, 3) R_tb; pos (K, 3) tangent NED [m]; vel (K, 3) [m/s]; bias_accel (K, 3)
     [m/s²]; baro_bias (K,) [m]; scale, latency (K,) baro calibration per keyframe (constant
     for the batch graph, per segment for the incremental front end); accel_t (K, 3): the
-    unmeasured nav-frame acceleration g + δg − 2Ω×v over each interval [m/s²]."""
+    unmeasured nav-frame acceleration g + δg − 2Ω×v over each interval [m/s²]; gnss_gm (K,)
+    the GNSS height Gauss-Markov error (down) [m], None when the graph has no such state."""
 
     rot: FloatArray
     pos: FloatArray
@@ -236,12 +244,14 @@ class KeyframeStates:
     scale: FloatArray
     latency: FloatArray
     accel_t: FloatArray
+    gnss_gm: FloatArray | None = None
 
 
 @dataclass(frozen=True)
 class IntervalRows:
     """Whitened rows ``r + J δ`` of the interval terms: interval index ``k`` (M,), residual
-    ``r`` (M,) and Jacobian ``jac`` (M, 19) in the column order of this module."""
+    ``r`` (M,) and Jacobian ``jac`` (M, 19, or 21 with the GNSS height Gauss-Markov error) in
+    the column order of this module."""
 
     k: np.ndarray
     r: FloatArray
@@ -257,7 +267,8 @@ class IntervalRows:
     def without_jac(self) -> IntervalRows:
         """The same rows with an empty (0, N_COLS) Jacobian: for rows whose linear system is
         already built (the Jacobian is ~46 MB on a 1-hour drive)."""
-        return IntervalRows(self.k, self.r, np.zeros((0, N_COLS)), self.loss, self.weights)
+        return IntervalRows(self.k, self.r, np.zeros((0, self.jac.shape[1])), self.loss,
+                            self.weights)
 
 
 def interval_of(t_kf: FloatArray, t: FloatArray) -> np.ndarray:
@@ -419,7 +430,8 @@ def gnss_rows(
     intervals: antenna p(t) + R(t)·l against ``pos_t`` (M, 3) in t [m]; velocity v(t) (the
     lever-arm rotation term is omitted) against ``vel_t`` (M, 3) [m/s]. ``incr``: the
     increments ``dense.at`` at the fixes (cached by the caller; they do not change);
-    ``out``: an (n_rows, N_COLS) array to hold the Jacobian (overwritten), else a new one.
+    ``out``: an (n_rows, n_cols) array to hold the Jacobian (overwritten), else a new one
+    (n_cols: ``N_COLS_GM`` when ``st.gnss_gm`` is set, else ``N_COLS``).
     The Jacobian is written in place (position rows, then velocity rows): building the
     pieces and stacking them held three copies of it (~100 MB on a 1-hour drive)."""
     t_kf = dense.t_kf
@@ -435,14 +447,20 @@ def gnss_rows(
     p_ant = ip["p"] + (0.0 if lever is None else np.einsum("nij,j->ni", ip["rot"], lever))
     with_vel = vel_t is not None and vel_sd is not None
     n_blk = 2 if with_vel else 1
+    n_cols = N_COLS if st.gnss_gm is None else N_COLS_GM
     if out is None:
-        out = np.zeros((n_blk * 3 * m, N_COLS))
+        out = np.zeros((n_blk * 3 * m, n_cols))
     else:
         out[...] = 0.0
-    jac_all = out.reshape(n_blk * m, 3, N_COLS)  # a view: fix-major rows of each block
+    jac_all = out.reshape(n_blk * m, 3, n_cols)  # a view: fix-major rows of each block
     jac = jac_all[:m]
     jac[:, :, 0:12] = _pos_jacobian(st, k, ip, lever)
     jac[:, :, 0:12] /= pos_sd[:, :, None]
+    if st.gnss_gm is not None:  # GNSS height error g(t), linear between the keyframes
+        a_g = ip["alpha"]
+        p_ant[:, 2] += (1 - a_g) * st.gnss_gm[k] + a_g * st.gnss_gm[k + 1]
+        jac[:, 2, COL_G0] = (1 - a_g) / pos_sd[:, 2]
+        jac[:, 2, COL_G1] = a_g / pos_sd[:, 2]
     rows_r = [((p_ant - pos_t) / pos_sd).reshape(-1)]
     rk_all = st.rot[k]
     jac[:, :, COL_BA] = (0.5 * ip["tau"] * (ip["T"] - ip["tau"]) * ip["imu"])[:, None, None] \
@@ -482,8 +500,9 @@ def group_information(rows: IntervalRows, n_groups: int) -> tuple[np.ndarray, Fl
     order = None if np.all(k_all[1:] >= k_all[:-1]) else np.argsort(k_all, kind="stable")
     k = k_all if order is None else k_all[order]
     groups, start, count = np.unique(k, return_index=True, return_counts=True)
-    lam = np.empty((groups.size, N_COLS, N_COLS))
-    eta = np.empty((groups.size, N_COLS))
+    n_cols = rows.jac.shape[1]
+    lam = np.empty((groups.size, n_cols, n_cols))
+    eta = np.empty((groups.size, n_cols))
     for g0 in range(0, groups.size, GROUP_CHUNK):
         g1 = min(g0 + GROUP_CHUNK, groups.size)
         a, b = int(start[g0]), int(start[g1 - 1] + count[g1 - 1])
@@ -492,7 +511,7 @@ def group_information(rows: IntervalRows, n_groups: int) -> tuple[np.ndarray, Fl
         cnt = count[g0:g1]
         pos = np.arange(b - a) - np.repeat(start[g0:g1] - a, cnt)
         gi = np.repeat(np.arange(g1 - g0), cnt)
-        pad_j = np.zeros((g1 - g0, int(cnt.max()), N_COLS))
+        pad_j = np.zeros((g1 - g0, int(cnt.max()), n_cols))
         pad_r = np.zeros((g1 - g0, int(cnt.max())))
         pad_j[gi, pos] = jac
         pad_r[gi, pos] = r

@@ -12,12 +12,13 @@ Dellaert & Kaess 2017 §3–4 for the elimination).
 
 from __future__ import annotations
 
+from functools import cache
 from itertools import combinations
 from typing import Any
 
 import gtsam
 import numpy as np
-from gtsam.symbol_shorthand import B, C, K, X
+from gtsam.symbol_shorthand import B, C, G, K, X
 
 from ...types import FloatArray
 from . import factors as gf
@@ -44,6 +45,11 @@ def pair_cover(n: int) -> tuple[tuple[int, ...], ...]:
 _BLOCKS_BARO = ((0, 6), (6, 6), (12, 1), (13, 1), (14, 2), (16, 6))
 _BLOCKS_NO_BARO = ((0, 6), (6, 6), (12, 6))
 _COVER_BARO = pair_cover(6)
+
+
+@cache
+def _cover(n: int) -> tuple[tuple[int, ...], ...]:
+    return pair_cover(n)
 
 
 def _plan(blocks: tuple[tuple[int, int], ...], cover: tuple[tuple[int, ...], ...]
@@ -78,12 +84,17 @@ def group_pieces(lay: Layout, info: IntervalInfo) -> list[Any]:
     groups, lam, eta = info.groups, info.lam, info.eta
     g_n, c = lam.shape[0], lam.shape[1]
     n = c + 3  # + the zero gyro-bias columns of B_k
+    n_gm = 2 if lay.has_gm else 0  # G_k, G_k+1: after B_k's zero gyro columns
+    n_main = c - n_gm
+    idx = np.r_[np.arange(n_main), n_main + 3 + np.arange(n_gm)]
     lam_p = np.zeros((g_n, n, n))
     eta_p = np.zeros((g_n, n))
-    lam_p[:, :c, :c] = lam
-    eta_p[:, :c] = eta
+    lam_p[:, idx[:, None], idx[None, :]] = lam
+    eta_p[:, idx] = eta
     blocks = _BLOCKS_BARO if lay.has_baro else _BLOCKS_NO_BARO
-    cover = _COVER_BARO if lay.has_baro else pair_cover(3)
+    if lay.has_gm:
+        blocks = (*blocks, (n_main + 3, 1), (n_main + 4, 1))
+    cover = _cover(len(blocks))
     sl = [slice(a, a + w) for a, w in blocks]
     plan = _plan(blocks, cover)
     # per triple: the (G, ·, ·) arrays of its constructor arguments
@@ -105,6 +116,8 @@ def group_pieces(lay: Layout, info: IntervalInfo) -> list[Any]:
     for gi, k in enumerate(np.asarray(groups).tolist()):
         keys = ([X(k), X(k + 1), C(k), C(k + 1), K(0), B(k)] if lay.has_baro
                 else [X(k), X(k + 1), B(k)])
+        if lay.has_gm:
+            keys += [G(k), G(k + 1)]
         for (tr, _), arrs in zip(plan, arg_arrays, strict=True):
             a = [x[gi] for x in arrs]
             if len(tr) == 3:

@@ -49,7 +49,7 @@ from ...geo.frames import mat_to_quat, ned_to_lla
 from ...sensors.magnetometer import without_contradicting_mag
 from ...types import Drive, Estimate, Trajectory
 from . import factors as gf
-from .batch import outputs, provides, solver_warnings, value_of
+from .batch import gnss_gm_info, outputs, provides, solver_warnings, value_of
 from .extend import Collected, GraphExtension, check_extensions, collect, key_name, make_view
 from .general import hessian_pieces
 from .init import initial_states
@@ -284,7 +284,10 @@ class GraphISAM2:
 
     def _run_pass(self, drive: Drive, cfg: GraphConfig, robust: bool, t_start: float,
                   fallback: str | None) -> Estimate:
-        P = setup(drive, cfg)
+        P_final = setup(drive, cfg)
+        # the online pass carries no GNSS height state (the receiver's whole σ on its fixes;
+        # GraphConfig.gnss_gm_sd_v); the final pass does. Both share the gate masks.
+        P = P_final.without_gm()
         pri = P.pri
         has_baro = drive.baro is not None
         rot_i, pos_i, vel_i = initial_states(P)
@@ -423,7 +426,7 @@ class GraphISAM2:
         # C++ memory on a 1-hour drive, otherwise alive under the final pass's peak)
         isam = None  # the closure ``refresh`` shares this name: it is not called again
         trim_heap()  # its freed nodes are scattered over the heap: hand them back
-        return self._finish(drive, P, cfg, est, extra_online, t_online, online, ext, robust,
+        return self._finish(drive, P_final, cfg, est, extra_online, t_online, online, ext, robust,
                             fallback, t_start, (rot_i, pos_i, vel_i), pims, seg, upd_ms, brk)
 
     def _finish(self, drive: Drive, P: Any, cfg: GraphConfig, est: Any, extra_online: Any,
@@ -480,6 +483,7 @@ class GraphISAM2:
         info["extra_variables"] = out["extra"]
         info["extra_variables_online"] = extra_online
         info.update(mag_info(drive, cfg))
+        info.update(gnss_gm_info(P))
         return Estimate(self.name, out["trajectory"], provides(drive), out["cov"],
                         out["t_cov"], out["baro"], time.perf_counter() - t_start,
                         online=online_traj, info=info, config=self.config)

@@ -9,14 +9,21 @@ from typing import Any
 
 import gtsam
 import numpy as np
-from gtsam.symbol_shorthand import B, C, K, V, X
+from gtsam.symbol_shorthand import B, C, G, K, V, X
 
 from ...config import REAL_LOG_BARO, BaroSpec, ImuSpec
 from ...geo.earth import gravity
 from ...nav.gaps import imu_gaps as nav_imu_gaps
 from ...nav.levelling import coarse_level
 from ...sensors.magnetometer import MAG_BIAS_SD_UT, MAG_HEADING_FLOOR, MAG_INTERVAL_S
-from ...sensors.model import BaroPrior, baro_prior, sensor_model
+from ...sensors.model import (
+    BaroPrior,
+    GnssHeightGM,
+    baro_prior,
+    gnss_gm,
+    gnss_gm_split,
+    sensor_model,
+)
 from ...sensors.noise import gm_process_var, gm_transition
 from ...types import (
     Drive,
@@ -128,8 +135,15 @@ class GraphConfig:
     mag_heading_floor: float = MAG_HEADING_FLOOR
     mag_bias_sd: float = MAG_BIAS_SD_UT
     mag_loss_sd: float = 3.0
+    gnss_gm_sd_v: float = 0.0
+    gnss_gm_tau_s: float = 300.0
+
+    @property
+    def gnss_gm(self) -> GnssHeightGM | None:
+        return gnss_gm(self.gnss_gm_sd_v, self.gnss_gm_tau_s, "GraphConfig")
 
     def __post_init__(self) -> None:
+        self.gnss_gm  # noqa: B018 -- validates the Gauss-Markov GNSS height settings
         if self.solver not in ("auto", "banded", "general"):
             raise ValueError(f"GraphConfig.solver must be 'auto', 'banded' or 'general', not "
                              f"{self.solver!r}")
@@ -192,6 +206,19 @@ class Problem:
     g_rej_post: int = 0  # rejected by the post-solve residual gate
     g_incr: Any = None  # (fix indices, dense increments at them), see gnss_rows_of
     pri: dict[str, float] = field(default_factory=dict)  # baro priors (_baro_priors)
+    gm: GnssHeightGM | None = None  # the GNSS height Gauss-Markov state G(k), if carried
+    g_pos_sd_rx: FloatArray | None = None  # the receiver's σ (g_pos_sd: its white rest)
+
+    @property
+    def has_gm(self) -> bool:
+        return self.gm is not None
+
+    def without_gm(self) -> Problem:
+        """The same problem without the GNSS height state: the receiver's whole σ on the
+        fixes (graph-isam2's online pass). Shares the gate masks with ``self``."""
+        if self.gm is None:
+            return self
+        return replace(self, gm=None, g_pos_sd=self.g_pos_sd_rx, g_incr=None)
 
     @property
     def gnss_rejected(self) -> int:
@@ -253,6 +280,12 @@ def setup(drive: Drive, cfg: GraphConfig) -> Problem:
                  g_kf, use)
     P.g_rej_pre = P.gnss_rejected
     P.pri = _baro_priors(bspec)
+    gm = cfg.gnss_gm
+    if gm is not None:
+        # the pre-gate above used the receiver's whole σ (it models no GNSS error state)
+        P.gm, P.g_pos_sd_rx = gm, P.g_pos_sd
+        P.g_pos_sd = P.g_pos_sd.copy()
+        P.g_pos_sd[:, 2] = gnss_gm_split(P.g_pos_sd[:, 2], gm)
     if not np.any(use & inside):
         raise ValueError("graph: every GNSS fix inside the IMU span was rejected by the "
                          "baro-consistency gate")
@@ -375,6 +408,8 @@ def prior_factors(P: Problem, r0: FloatArray, p0: FloatArray, v0: FloatArray,
         g.add(gtsam.PriorFactorVector(C(0), np.zeros(1), noise([pri["b_sd"]])))
         g.add(gtsam.PriorFactorVector(calib_key, np.array([0.0, pri["tau0"]]),
                                       noise([pri["s_sd"], pri["tau_sd"]])))
+    if P.gm is not None:  # the stationary Gauss-Markov prior of the GNSS height error
+        g.add(gtsam.PriorFactorVector(G(0), np.zeros(1), noise([P.gm.sd_m])))
     return g
 
 
@@ -390,16 +425,27 @@ def keyframe_fix_factors(P: Problem, k: int) -> list[Any]:
     return out
 
 
-def gm_factor(k: int, dt: float, pri: dict[str, float]) -> Any:
-    """Exact discrete Gauss-Markov link b_{k+1} − φ b_k = w as a (linear) C++ factor."""
-    phi = float(gm_transition(dt, pri["b_tau"]))
-    sd = float(np.sqrt(max(gm_process_var(dt, pri["b_tau"], pri["b_sd"]), 1e-12)))
-    jf = gtsam.JacobianFactor(C(k), np.array([[-phi]]), C(k + 1), np.array([[1.0]]),
-                              np.zeros(1), noise([sd]))
+def gm_link(key0: int, key1: int, dt: float, tau: float, sd: float) -> Any:
+    """Exact discrete Gauss-Markov link x_1 − φ x_0 = w, φ = e^{−Δt/τ}, var w = σ²(1 − φ²),
+    between two scalar variables, as a (linear) C++ factor."""
+    phi = float(gm_transition(dt, tau))
+    sd_w = float(np.sqrt(max(gm_process_var(dt, tau, sd), 1e-12)))
+    jf = gtsam.JacobianFactor(key0, np.array([[-phi]]), key1, np.array([[1.0]]),
+                              np.zeros(1), noise([sd_w]))
     lin = gtsam.Values()
-    lin.insert(C(k), np.zeros(1))
-    lin.insert(C(k + 1), np.zeros(1))
+    lin.insert(key0, np.zeros(1))
+    lin.insert(key1, np.zeros(1))
     return gtsam.LinearContainerFactor(jf, lin)
+
+
+def gm_factor(k: int, dt: float, pri: dict[str, float]) -> Any:
+    """The baro bias's Gauss-Markov link C(k) → C(k+1)."""
+    return gm_link(C(k), C(k + 1), dt, pri["b_tau"], pri["b_sd"])
+
+
+def gnss_gm_factor(k: int, dt: float, gm: GnssHeightGM) -> Any:
+    """The GNSS height error's Gauss-Markov link G(k) → G(k+1)."""
+    return gm_link(G(k), G(k + 1), dt, gm.tau_s, gm.sd_m)
 
 
 
@@ -489,7 +535,8 @@ def states_from_values(P: Problem, vals: Any, calib_of_kf: np.ndarray) -> gf.Key
         tau = np.zeros(nk)
     dg = gravity_delta(P, pos)
     acc = np.array([0.0, 0.0, P.g0]) + dg - 2 * np.cross(P.omega_t, vel)
-    return gf.KeyframeStates(rot, pos, vel, ba, cb, s, tau, acc)
+    g_gm = gtsam.utilities.extractVectors(vals, "g")[:, 0] if P.gm is not None else None
+    return gf.KeyframeStates(rot, pos, vel, ba, cb, s, tau, acc, g_gm)
 
 
 def gnss_batch_idx(P: Problem) -> np.ndarray:
@@ -532,7 +579,8 @@ def interval_rows(P: Problem, st: gf.KeyframeStates, pri: dict[str, float],
     idx = gnss_batch_idx(P)
     n = 3 * idx.size  # position rows (fix-major, 3 per fix), then velocity rows
     with_vel = P.g_vel is not None and P.g_vel_sd is not None
-    jac = np.empty((n_baro + (2 * n if with_vel else n), gf.N_COLS))
+    n_cols = gf.N_COLS_GM if P.gm is not None else gf.N_COLS
+    jac = np.empty((n_baro + (2 * n if with_vel else n), n_cols))
 
     def put(part: FloatArray, j: FloatArray) -> None:
         if j is not part:  # reweighted (robust loss): a new array
@@ -566,7 +614,7 @@ def interval_rows(P: Problem, st: gf.KeyframeStates, pri: dict[str, float],
             weights["gnss_vel"] = w
     if not ks:
         return gf.IntervalRows(np.zeros(0, dtype=np.intp), np.zeros(0),
-                               np.zeros((0, gf.N_COLS)), loss, weights)
+                               np.zeros((0, n_cols)), loss, weights)
     return gf.IntervalRows(np.concatenate(ks), np.concatenate(rs), jac, loss, weights)
 
 
@@ -598,6 +646,8 @@ def build_batch_graph(P: Problem, rot: FloatArray, pos: FloatArray, vel: FloatAr
         vals.insert(B(k), gtsam.imuBias.ConstantBias())
         if P.drive.baro is not None:
             vals.insert(C(k), np.zeros(1))
+        if P.gm is not None:
+            vals.insert(G(k), np.zeros(1))
         if k + 1 < nk:
             if gap[k]:
                 x1, v1, fs = gap_factors(P, k, rot, pos, vel)
@@ -609,6 +659,8 @@ def build_batch_graph(P: Problem, rot: FloatArray, pos: FloatArray, vel: FloatAr
                                                   B(k + 1), pims[k]))
             if P.drive.baro is not None:
                 graph.add(gm_factor(k, float(P.t_kf[k + 1] - P.t_kf[k]), pri))
+            if P.gm is not None:
+                graph.add(gnss_gm_factor(k, float(P.t_kf[k + 1] - P.t_kf[k]), P.gm))
     if P.drive.baro is not None:
         for j in np.unique(calib_of_kf):
             vals.insert(K(int(j)), np.array([0.0, pri["tau0"]]))
