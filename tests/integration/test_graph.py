@@ -153,3 +153,30 @@ def test_imu_logging_gap_is_bridged_not_preintegrated(monkeypatch):
     across = rmse(GraphBatch().run(dg))
     assert with_gap < 0.2
     assert across > 2.0 * with_gap
+
+
+def test_isam2_online_takes_gnss_back_at_once_after_an_outage():
+    """The online (filter-like) estimate uses every fix that has arrived: at the first
+    keyframe after hill-drive's 60 s GNSS outage it is back at GNSS accuracy, as the forward
+    ekf is (measured 2.2 m, ekf 1.8 m; before session 25 it was still 84 m off there, and 88 m
+    one keyframe later, because fixes waited one or two keyframes)."""
+    from vnav_graph.estimators.ekf.filter import EKF
+    from vnav_graph.estimators.graph import GraphISAM2
+    from vnav_graph.estimators.graph.problem import setup
+    from vnav_graph.geo.frames import lla_to_ned
+
+    d = simulate("hill-drive", 0, duration_s=400.0)
+    (a, b), = d.gnss.spec.outages
+    # fixes on keyframe epochs are keyframe fixes, whichever side of the fix the (float)
+    # keyframe stamp lies
+    P = setup(d, GraphConfig())
+    on_kf = np.isin(np.round(P.g_t, 6), np.round(P.t_kf, 6)) & (P.g_kf != -2)  # -2: outside
+    assert on_kf.sum() > 300 and np.all(P.g_kf[on_kf] >= 0)
+    online = GraphISAM2().run(d).online
+    ekf = EKF().run(d).trajectory
+    t = online.t[(online.t >= b) & (online.t <= b + 2.0)]
+    errs = []
+    for tr in (online.at(t), ekf.at(t)):
+        e = lla_to_ned(tr.lla, d.origin_lla) - lla_to_ned(d.truth.at(t).lla, d.origin_lla)
+        errs.append(np.hypot(e[:, 0], e[:, 1]))
+    assert np.all(errs[0] < 2.0 * errs[1] + 1.0), errs

@@ -229,16 +229,32 @@ class GeneralCovariance:
         return self.lay.solve_by_key(self.lu.solve, u, out)
 
 
+# one interval's key blocks in ``isam2``: the five of ``factors.BLOCKS`` and B_k (accel part
+# of the rows, zero gyro part), over the 22 padded columns of ``interval_blocks``
+ISAM2_BLOCKS = (*gf.BLOCKS, (16, 6))
+
+
+def interval_blocks(lam: FloatArray, eta: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """One group's information in ``factors`` column order (19 columns) padded to the 22 of
+    ``ISAM2_BLOCKS`` (B_k's gyro columns zero)."""
+    n = gf.N_COLS + 3
+    lp = np.zeros((n, n))
+    ep = np.zeros(n)
+    lp[:gf.N_COLS, :gf.N_COLS] = lam[:gf.N_COLS, :gf.N_COLS]
+    ep[:gf.N_COLS] = eta[:gf.N_COLS]
+    return lp, ep
+
+
 def hessian_pieces(keys: list[int], lam: FloatArray, eta: FloatArray,
-                   active: tuple[int, ...]) -> list[Any]:
-    """Split one group's information (16×16, η over the blocks ``factors.BLOCKS``) into ≤3-key
-    HessianFactors (``factors.PAIR_COVER``; used by ``isam2``)."""
-    blocks = gf.BLOCKS
+                   active: tuple[int, ...], blocks: tuple[tuple[int, int], ...] = gf.BLOCKS
+                   ) -> list[Any]:
+    """Split one group's information (η over ``blocks``, default ``factors.BLOCKS``) into
+    ≤3-key HessianFactors (a pair cover of the blocks; used by ``isam2``)."""
     sl = [slice(a, a + n) for a, n in blocks]
     if len(active) <= 3:
         trip = [tuple(active)]
     else:
-        trip = [tr for tr in gf.PAIR_COVER]
+        trip = [tr for tr in (gf.PAIR_COVER if blocks == gf.BLOCKS else _cover(len(blocks)))]
     owned_pair: set[tuple[int, int]] = set()
     owned_diag: set[int] = set()
     out = []

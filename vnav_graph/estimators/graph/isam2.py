@@ -7,10 +7,13 @@ global variable tied to every baro sample: the graph stays chain-structured, so 
 re-eliminates the cliques of the last keyframes (a global K sits in the root clique and every
 new baro term touches it — measured in ``docs/graph.md``).
 
-Baro samples and GNSS fixes between keyframes are linearised once (numpy, ``factors``)
-at the current estimate when their interval is complete (one keyframe later, so that every
-delayed sample t_s − τd of the interval has arrived) and inserted as one
-``LinearContainerFactor`` per interval — no Python callback ever runs inside iSAM2.
+Baro samples and GNSS fixes between keyframes are linearised once (numpy, ``factors``) at
+the current estimate as soon as they have arrived — in the update that creates keyframe k+1:
+the fixes inside interval k, and the baro samples stamped up to t_{k+1}, one factor per
+interval of their delayed time — and inserted as ``LinearContainerFactor``s with the
+accelerometer-bias columns on B(k) (``_gnss_factor``, ``_baro_factors``); no Python callback
+ever runs inside iSAM2. They are not relinearised later (the final pass relinearises
+everything).
 
 Per-update latency: the tail was iSAM2 relinearising ~1000 old variables at once (every
 ``relinearizeSkip`` = 10 updates, a scalar threshold of 0.05 in every unit) and the lazy
@@ -51,7 +54,7 @@ from ...types import Drive, Estimate, Trajectory
 from . import factors as gf
 from .batch import gnss_gm_info, outputs, provides, solver_warnings, value_of
 from .extend import Collected, GraphExtension, check_extensions, collect, key_name, make_view
-from .general import hessian_pieces
+from .general import ISAM2_BLOCKS, hessian_pieces, interval_blocks
 from .init import initial_states
 from .linalg import single_thread_blas, trim_heap
 from .magnetometer import builtin_extensions, mag_info
@@ -367,8 +370,17 @@ class GraphISAM2:
                 nf.add(gtsam.CombinedImuFactor(X(k), V(k), X(k + 1), V(k + 1), B(k), B(k + 1),
                                                pim))
             nv.insert(B(k + 1), b_k)
+            # the new keyframe's linearisation point: its prediction
+            x_new = nv.atPose3(X(k + 1))
+            rot[k + 1], pos[k + 1] = x_new.rotation().matrix(), x_new.translation()
+            vel[k + 1], bias[k + 1] = nv.atVector(V(k + 1)), bias[k]
+            cb[k + 1] = cb[k]
             for f in keyframe_fix_factors(P, k + 1):
                 nf.add(f)
+            # GNSS fixes inside interval k enter with its end keyframe (no delay to wait for)
+            gcf = self._gnss_factor(P, k, rot, pos, vel, bias, g_between[gk == k])
+            if gcf is not None:
+                nf.add(gcf)
             if has_baro:
                 dt = float(P.t_kf[k + 1] - P.t_kf[k])
                 nv.insert(C(k + 1), np.array([cb[k]]))
@@ -385,12 +397,12 @@ class GraphISAM2:
                 for f in fs:
                     nf.add(f)
                 nv.insert(nv_ext)
-            if k >= 1:
-                lcf, baro_next = self._interval_factor(
-                    P, k - 1, rot, pos, vel, bias, cb, cal, seg, bt, bz, baro_next,
-                    g_between[gk == k - 1], pri)
-                if lcf is not None:
-                    nf.add(lcf)
+            # baro samples stamped up to the new keyframe (each to the interval of its
+            # delayed time t_s − τd: interval k, or k − 1 for the first τd of interval k)
+            lcfs, baro_next = self._baro_factors(
+                P, k, rot, pos, vel, bias, cb, cal, seg, bt, bz, baro_next, pri)
+            for lcf in lcfs:
+                nf.add(lcf)
             t_lcf = time.perf_counter()
             try:
                 ures = isam.update(nf, nv)
@@ -410,14 +422,15 @@ class GraphISAM2:
             brk[k] = (1e3 * (t_pre - tu), 1e3 * (t_lcf - t_pre), 1e3 * (t_upd - t_lcf),
                       1e3 * (t_end - t_upd), ures.getVariablesRelinearized(),
                       ures.getVariablesReeliminated())
-        # last interval's terms
+        # baro samples stamped after the last keyframe whose delayed time is inside the span
         if nk >= 2:
-            lcf, baro_next = self._interval_factor(
-                P, nk - 2, rot, pos, vel, bias, cb, cal, seg, bt, bz, baro_next,
-                g_between[gk == nk - 2], pri, last=True)
-            if lcf is not None:
+            lcfs, baro_next = self._baro_factors(
+                P, nk - 2, rot, pos, vel, bias, cb, cal, seg, bt, bz, baro_next, pri,
+                last=True)
+            if lcfs:
                 nf = gtsam.NonlinearFactorGraph()
-                nf.add(lcf)
+                for lcf in lcfs:
+                    nf.add(lcf)
                 isam.update(nf, gtsam.Values())
         t_online = time.perf_counter()
         est = isam.calculateEstimate()
@@ -489,75 +502,119 @@ class GraphISAM2:
                         online=online_traj, info=info, config=self.config)
 
     @staticmethod
-    def _interval_factor(P: Any, k: int, rot: Any, pos: Any, vel: Any, bias: Any, cb: Any,
-                         cal: dict[int, Any], seg: Any, bt: Any, bz: Any, baro_next: int,
-                         g_idx: Any, pri: dict[str, float], last: bool = False
-                         ) -> tuple[Any, int]:
-        """One LinearContainerFactor with all baro samples whose delayed time falls in
-        interval k and all GNSS fixes strictly inside it, linearised at the current
-        estimate."""
-        has_baro = P.drive.baro is not None
-        cfg, ks = P.cfg, P.cfg.loss_threshold_sd
-        j = int(seg[k])
-        s_k, tau_k = (cal[j][0], cal[j][1]) if has_baro else (0.0, 0.0)
-        parts = []
-        if has_baro:
-            t_end = P.t_kf[k + 1] if not last else np.inf
-            stop = int(np.searchsorted(bt - tau_k, t_end, side="left"))
-            sel = np.arange(baro_next, stop)
-            sel = sel[(bt[sel] - tau_k >= P.t_kf[0] - 1.0)]
-            baro_next = max(stop, baro_next)
+    def _states(P: Any, k: int, rot: Any, pos: Any, vel: Any, bias: Any, cb: Any,
+                s_k: float, tau_k: float) -> gf.KeyframeStates:
+        """Keyframe states of the running arrays for the rows of interval k (its nav-frame
+        acceleration a_k at the current estimate)."""
         nk = P.n_kf
         st = gf.KeyframeStates(
             rot, pos, vel, bias[:, 0:3], cb, np.full(nk, s_k), np.full(nk, tau_k),
             np.tile(np.array([0.0, 0.0, P.g0]), (nk, 1)))
-        acc = (np.array([0.0, 0.0, P.g0]) + gravity_delta(P, pos[k:k + 1])[0]
-               - 2 * np.cross(P.omega_t, vel[k]))
-        st.accel_t[k] = acc
-        if has_baro and sel.size:
-            # bias read at t_s − τd of this linearisation, as in the batch solve
-            rows = gf.baro_rows(P.dense, st, bt[sel], bz[sel], pri["noise"], P.h0, P.origin,
-                                bias_lag=float(tau_k))
-            # samples whose delayed time is outside [t_k, t_k+1) are clipped into interval k;
-            # robust losses: IRLS weights at this (only) linearisation
-            rw, jw, _, _ = reweight(rows.r, rows.jac, 1, cfg.loss_baro, ks[2])
-            parts.append(gf.IntervalRows(np.full(rows.k.size, k), rw, jw))
-        if g_idx.size:
-            rows = gf.gnss_rows(
-                P.dense, st, P.g_t[g_idx], P.g_pos[g_idx], P.g_pos_sd[g_idx],
-                None if P.g_vel is None else P.g_vel[g_idx],
-                None if P.g_vel_sd is None else P.g_vel_sd[g_idx], P.lever)
-            n = 3 * g_idx.size  # position rows, then velocity rows
-            for sl, loss, kk in ((slice(0, n), cfg.loss_gnss_pos, ks[0]),
-                                 (slice(n, None), cfg.loss_gnss_vel, ks[1])):
-                if rows.r[sl].size:
-                    rw, jw, _, _ = reweight(rows.r[sl], rows.jac[sl], 3, loss, kk)
-                    parts.append(gf.IntervalRows(rows.k[sl], rw, jw))
-        if not parts:
-            return None, baro_next
-        rows = gf.concat_rows(*parts)
-        _, lam, eta, _ = gf.group_information(rows, 1)
-        # the five core key blocks only: the accel-bias columns would add a sixth key to the
-        # pair cover; their effect (≤ ½τ(T−τ)·b_a, mm over a 1 s interval) is left to the
-        # relinearisation and the final batch pass
-        lam, eta = lam[:, :gf.N_CORE, :gf.N_CORE], eta[:, :gf.N_CORE]
-        # 1e-9 information (σ ≈ 3e4 in any unit) makes the block positive definite so it can
-        # be turned into a Jacobian for QR; it is far below any real information.
-        lam[0] += 1e-9 * np.eye(gf.N_CORE)
-        keys = [X(k), X(k + 1), C(k), C(k + 1), K(j)]
-        active = (0, 1, 2, 3, 4) if has_baro else (0, 1)
-        gfg = gtsam.GaussianFactorGraph()
-        for f in hessian_pieces(keys, lam[0], eta[0], active):
-            gfg.push_back(f)
+        kk = slice(max(k - 3, 0), k + 1)  # intervals k − 3 … k (where a baro sample's t_d lies)
+        st.accel_t[kk] = (np.array([0.0, 0.0, P.g0]) + gravity_delta(P, pos[kk])
+                          - 2 * np.cross(P.omega_t, vel[kk]))
+        return st
+
+    @staticmethod
+    def _lin_values(k: int, rot: Any, pos: Any, bias: Any) -> Any:
         lin = gtsam.Values()
         lin.insert(X(k), gtsam.Pose3(gtsam.Rot3(rot[k]), pos[k]))
         lin.insert(X(k + 1), gtsam.Pose3(gtsam.Rot3(rot[k + 1]), pos[k + 1]))
-        if has_baro:
-            lin.insert(C(k), np.array([cb[k]]))
-            lin.insert(C(k + 1), np.array([cb[k + 1]]))
-            lin.insert(K(j), np.asarray(cal[j], float))
+        lin.insert(B(k), gtsam.imuBias.ConstantBias(bias[k, 0:3], bias[k, 3:6]))
+        return lin
+
+    @staticmethod
+    def _gnss_factor(P: Any, k: int, rot: Any, pos: Any, vel: Any, bias: Any, g_idx: Any
+                     ) -> Any:
+        """The GNSS fixes strictly inside interval k as one LinearContainerFactor on X(k),
+        X(k+1) and B(k) (the accelerometer-bias columns of the interpolant included),
+        linearised at the current estimate (X(k+1): its prediction)."""
+        if not g_idx.size:
+            return None
+        cfg, ks = P.cfg, P.cfg.loss_threshold_sd
+        st = GraphISAM2._states(P, k, rot, pos, vel, bias, np.zeros(P.n_kf), 0.0, 0.0)
+        rows = gf.gnss_rows(
+            P.dense, st, P.g_t[g_idx], P.g_pos[g_idx], P.g_pos_sd[g_idx],
+            None if P.g_vel is None else P.g_vel[g_idx],
+            None if P.g_vel_sd is None else P.g_vel_sd[g_idx], P.lever)
+        n = 3 * g_idx.size  # position rows, then velocity rows
+        r_parts, j_parts = [], []
+        for sl, loss, kk in ((slice(0, n), cfg.loss_gnss_pos, ks[0]),
+                             (slice(n, None), cfg.loss_gnss_vel, ks[1])):
+            if rows.r[sl].size:
+                rw, jw, _, _ = reweight(rows.r[sl], rows.jac[sl], 3, loss, kk)
+                r_parts.append(rw)
+                j_parts.append(jw)
+        r, jac = np.concatenate(r_parts), np.vstack(j_parts)
+        j_b = np.hstack([jac[:, gf.COL_BA], np.zeros((r.size, 3))])  # (accel, gyro)
+        jf = gtsam.JacobianFactor(X(k), jac[:, gf.COL_X0], X(k + 1), jac[:, gf.COL_X1], B(k),
+                                  j_b, -r, gtsam.noiseModel.Unit.Create(r.size))
+        return gtsam.LinearContainerFactor(jf, GraphISAM2._lin_values(k, rot, pos, bias))
+
+    @staticmethod
+    def _baro_factors(P: Any, k: int, rot: Any, pos: Any, vel: Any, bias: Any, cb: Any,
+                      cal: dict[int, Any], seg: Any, bt: Any, bz: Any, baro_next: int,
+                      pri: dict[str, float], last: bool = False) -> tuple[list[Any], int]:
+        """The baro samples stamped since the last update, up to t_{k+1} (all of them when
+        ``last``), as one LinearContainerFactor per interval of their delayed time
+        t_s − τd, linearised at the current estimate (X(k+1): its prediction) on X(m),
+        X(m+1), C(m), C(m+1), K(j) and B(m) (accelerometer-bias columns included). A sample
+        stamped by t_{k+1} has its delayed time before it, so it never waits: the online
+        estimate of keyframe k+1 has every sample that has arrived."""
+        if P.drive.baro is None:
+            return [], baro_next
+        cfg, ks = P.cfg, P.cfg.loss_threshold_sd
+        j_now = int(seg[k])
+        tau_now = float(cal[j_now][1])
+        # arrived (t_s ≤ t_{k+1}) and delayed into an existing interval (t_s − τd < t_{k+1}:
+        # with a negative τd a sample waits for its keyframe)
+        stop = bt.size if last else min(
+            int(np.searchsorted(bt, P.t_kf[k + 1], side="right")),
+            int(np.searchsorted(bt - tau_now, P.t_kf[k + 1], side="left")))
+        sel = np.arange(baro_next, stop)
+        baro_next = max(stop, baro_next)
+        sel = sel[bt[sel] - tau_now >= P.t_kf[0] - 1.0]
+        if not sel.size:
+            return [], baro_next
+        # each keyframe's (s, τd): its segment's current estimate (later ones: the newest)
+        seg_c = np.minimum(seg, j_now)
+        s_kf = np.array([cal[int(j)][0] for j in range(j_now + 1)])[seg_c]
+        tau_kf = np.array([cal[int(j)][1] for j in range(j_now + 1)])[seg_c]
+        st = GraphISAM2._states(P, k, rot, pos, vel, bias, cb, 0.0, 0.0)
+        st = dataclasses.replace(st, scale=s_kf, latency=tau_kf)
+        # bias read at t_s − τd of this linearisation, as in the batch solve
+        rows = gf.baro_rows(P.dense, st, bt[sel], bz[sel], pri["noise"], P.h0, P.origin,
+                            bias_lag=tau_now)
+        # delayed times past the newest keyframe (none but at the end) are clipped into it
+        m_of = np.minimum(rows.k, k)
+        out = []
+        for m in np.unique(m_of):
+            mm = m_of == m
+            # robust losses: IRLS weights at this (only) linearisation
+            rw, jw, _, _ = reweight(rows.r[mm], rows.jac[mm], 1, cfg.loss_baro, ks[2])
+            out.append(GraphISAM2._baro_lcf(P, int(m), gf.IntervalRows(
+                np.zeros(rw.size, dtype=np.intp), rw, jw), rot, pos, bias, cb, cal, seg))
+        return out, baro_next
+
+    @staticmethod
+    def _baro_lcf(P: Any, m: int, rows: gf.IntervalRows, rot: Any, pos: Any, bias: Any,
+                  cb: Any, cal: dict[int, Any], seg: Any) -> Any:
+        j = int(seg[m])
+        _, lam, eta, _ = gf.group_information(rows, 1)
+        lam_p, eta_p = interval_blocks(lam[0], eta[0])
+        # 1e-9 information (σ ≈ 3e4 in any unit) makes the block positive definite so it can
+        # be turned into a Jacobian for QR; it is far below any real information.
+        lam_p += 1e-9 * np.eye(lam_p.shape[0])
+        keys = [X(m), X(m + 1), C(m), C(m + 1), K(j), B(m)]
+        gfg = gtsam.GaussianFactorGraph()
+        for f in hessian_pieces(keys, lam_p, eta_p, tuple(range(6)), ISAM2_BLOCKS):
+            gfg.push_back(f)
+        lin = GraphISAM2._lin_values(m, rot, pos, bias)
+        lin.insert(C(m), np.array([cb[m]]))
+        lin.insert(C(m + 1), np.array([cb[m + 1]]))
+        lin.insert(K(j), np.asarray(cal[j], float))
         jf = gtsam.JacobianFactor(gtsam.HessianFactor(gfg))
-        return gtsam.LinearContainerFactor(jf, lin), baro_next
+        return gtsam.LinearContainerFactor(jf, lin)
 
     @staticmethod
     def _online_trajectory(P: Any, online: Any) -> Trajectory:
