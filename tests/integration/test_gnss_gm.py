@@ -149,20 +149,35 @@ def test_gm_link_is_the_exact_discrete_process():
     assert f.error(vals) == pytest.approx(0.5 * (-0.4 - phi * 1.3) ** 2 / var_w, rel=1e-12)
 
 
-def test_graph_isam2_final_pass_carries_the_state(runs, graph_runs):
-    """graph-isam2: the online pass keeps the receiver's σ without the state (unchanged by
-    the setting); the final pass — what it returns — solves graph-batch's problem with G(k)."""
+def test_graph_isam2_carries_the_state_online_and_in_its_final_pass(runs, graph_runs):
+    """graph-isam2: the online pass carries G(k) too (keyframe fixes then enter as rows of the
+    interval they end), and the final pass solves graph-batch's problem."""
+    from vnav_graph.estimators.ekf.filter import EKF
     from vnav_graph.estimators.graph import GraphISAM2
 
-    d = runs[0][0]
     gm = GraphConfig(gnss_gm_sd_v=GM_SD, gnss_gm_tau_s=GM_TAU)
-    on, off = GraphISAM2(gm).run(d), GraphISAM2().run(d)
-    np.testing.assert_array_equal(on.online.alt, off.online.alt)
-    assert on.info["gnss_height_gm"] == {"sd_m": GM_SD, "tau_s": GM_TAU}
-    assert "gnss_height_gm" not in off.info
-    gb = graph_runs[0][2]
-    # to solver tolerance: the two solves start apart (iSAM2's estimate, the batch's initial
-    # values) and stop when a step would lower ½χ² by < 0.05; along the weakly determined
-    # height offset (σ 1.64 m) that leaves 3.8 cm (measured), a χ² change of ~1e-3
-    sd = float(np.sqrt(np.mean(gb.cov[:, 2, 2])))
-    np.testing.assert_allclose(on.trajectory.alt, gb.trajectory.alt, rtol=0, atol=0.05 * sd)
+    e_on, e_off, e_ekf = [], [], []
+    for i, (d, _, _) in enumerate(runs):
+        on, off = GraphISAM2(gm).run(d), GraphISAM2().run(d)
+        ekf = EKF(EkfConfig(gnss_gm_sd_v=GM_SD, gnss_gm_tau_s=GM_TAU)).run(d).trajectory
+        t = on.online.t[on.online.t > 5.0]
+        for out, tr in ((e_on, on.online), (e_off, off.online), (e_ekf, ekf)):
+            out.append(tr.at(t).alt - d.truth.at(t).alt)
+        if i == 0:
+            assert on.info["gnss_height_gm"] == {"sd_m": GM_SD, "tau_s": GM_TAU}
+            assert "gnss_height_gm" not in off.info
+            gb = graph_runs[0][2]
+            # to solver tolerance: the two solves start apart (iSAM2's estimate, the batch's
+            # initial values) and stop when a step would lower ½χ² by < 0.05; along the
+            # weakly determined height offset (σ 1.64 m) that leaves centimetres
+            sd = float(np.sqrt(np.mean(gb.cov[:, 2, 2])))
+            np.testing.assert_allclose(on.trajectory.alt, gb.trajectory.alt, rtol=0,
+                                       atol=0.05 * sd)
+    rms = [float(np.sqrt(np.mean(np.concatenate(e) ** 2))) for e in (e_on, e_off, e_ekf)]
+    # measured over the 6 drives: online with G(k) 2.48 m, without 2.21 m, forward ekf with
+    # the state 1.91 m. The state does not make the *online* height better here (its gain is
+    # in smoothing and in honest σ, above), and iSAM2's online pass trails the ekf by 30 %:
+    # the bounds catch a broken online state (a wrong interval for the keyframe fixes gave
+    # 38–64 m) without claiming more than was measured
+    assert rms[0] < 1.25 * rms[1], rms
+    assert rms[0] < 1.5 * rms[2], rms

@@ -424,18 +424,20 @@ def gnss_rows(
     dense: DenseIncrements, st: KeyframeStates, t_g: FloatArray, pos_t: FloatArray,
     pos_sd: FloatArray, vel_t: FloatArray | None, vel_sd: FloatArray | None,
     lever_b: FloatArray, incr: tuple[FloatArray, FloatArray, FloatArray] | None = None,
-    out: FloatArray | None = None,
+    out: FloatArray | None = None, k: np.ndarray | None = None,
 ) -> IntervalRows:
     """Whitened GNSS position (and velocity) rows for fixes at ``t_g`` (M,) strictly inside
     intervals: antenna p(t) + R(t)·l against ``pos_t`` (M, 3) in t [m]; velocity v(t) (the
     lever-arm rotation term is omitted) against ``vel_t`` (M, 3) [m/s]. ``incr``: the
     increments ``dense.at`` at the fixes (cached by the caller; they do not change);
     ``out``: an (n_rows, n_cols) array to hold the Jacobian (overwritten), else a new one
-    (n_cols: ``N_COLS_GM`` when ``st.gnss_gm`` is set, else ``N_COLS``).
+    (n_cols: ``N_COLS_GM`` when ``st.gnss_gm`` is set, else ``N_COLS``); ``k``: the interval
+    of each fix (default: the one holding it; a fix on keyframe k+1 can be given interval k,
+    where the interpolant at τ = T is exactly that keyframe).
     The Jacobian is written in place (position rows, then velocity rows): building the
     pieces and stacking them held three copies of it (~100 MB on a 1-hour drive)."""
     t_kf = dense.t_kf
-    k = interval_of(t_kf, t_g)
+    k = interval_of(t_kf, t_g) if k is None else np.asarray(k, dtype=np.intp)
     lever = None if not np.any(lever_b) else np.asarray(lever_b, float)
     ip = interpolate(dense, st, t_g, k, incr, with_rot=lever is not None)
     m = t_g.size

@@ -46,7 +46,7 @@ from typing import Any
 
 import gtsam
 import numpy as np
-from gtsam.symbol_shorthand import B, C, K, V, X
+from gtsam.symbol_shorthand import B, C, G, K, V, X
 
 from ...geo.frames import mat_to_quat, ned_to_lla
 from ...sensors.magnetometer import without_contradicting_mag
@@ -65,6 +65,7 @@ from .problem import (
     build_batch_graph,
     gap_factors,
     gm_factor,
+    gnss_gm_factor,
     gravity_delta,
     imu_gaps,
     keyframe_fix_factors,
@@ -88,6 +89,9 @@ LOW_RATE_SETTINGS = {"keyframe_dt": LOW_RATE_KEYFRAME_DT, "relinearize_skip": 50
 # settings of the retry after a failed/diverged incremental pass (GraphISAM2.run)
 ROBUST_SETTINGS = {"relinearize_skip": 1, "relinearize_typed": None,
                    "relinearize_threshold": 0.01}
+# the key blocks of an interval's GNSS factor with the GNSS height state, in the padded
+# columns of ``GraphISAM2._gnss_factor``: X(k), X(k+1), B(k) (accel, zero gyro), G(k), G(k+1)
+GNSS_GM_BLOCKS = ((0, 6), (6, 6), (12, 6), (18, 1), (19, 1))
 DIVERGED_SPEED = 1e4  # m/s: an online velocity above this means the solution diverged
 
 
@@ -155,6 +159,7 @@ def _threshold_map(cfg: GraphConfig, ext: Collected | None = None) -> Any:
     m.insert(("b", np.array([ba] * 3 + [bg] * 3)))
     m.insert(("c", np.full(1, 1e9)))
     m.insert(("k", np.full(2, 1e9)))
+    m.insert(("g", np.full(1, 1e9)))  # the GNSS height error G(k): linear factors only
     if ext is not None:
         for ch, thr in ext.threshold_entries(cfg.relinearize_threshold).items():
             m.insert((ch, thr))
@@ -213,8 +218,11 @@ def _first_keyframe(P: Any, r0: Any, p0: Any, v0: Any, k0: Any) -> tuple[Any, An
     if P.drive.baro is not None:
         vals0.insert(C(0), np.zeros(1))
         vals0.insert(K(0), k0)
-    for f in keyframe_fix_factors(P, 0):
-        graph0.add(f)
+    if P.gm is not None:
+        vals0.insert(G(0), np.zeros(1))
+    else:  # with G(k), keyframe fixes enter as rows of the interval they end (_gnss_factor)
+        for f in keyframe_fix_factors(P, 0):
+            graph0.add(f)
     return graph0, vals0
 
 
@@ -287,10 +295,7 @@ class GraphISAM2:
 
     def _run_pass(self, drive: Drive, cfg: GraphConfig, robust: bool, t_start: float,
                   fallback: str | None) -> Estimate:
-        P_final = setup(drive, cfg)
-        # the online pass carries no GNSS height state (the receiver's whole σ on its fixes;
-        # GraphConfig.gnss_gm_sd_v); the final pass does. Both share the gate masks.
-        P = P_final.without_gm()
+        P = setup(drive, cfg)
         pri = P.pri
         has_baro = drive.baro is not None
         rot_i, pos_i, vel_i = initial_states(P)
@@ -310,6 +315,7 @@ class GraphISAM2:
         vel = np.zeros((nk, 3))
         bias = np.zeros((nk, 6))
         cb = np.zeros(nk)
+        gg = np.zeros(nk)  # the GNSS height error G(k) (GraphConfig.gnss_gm_sd_v), if carried
         cal = {0: np.array([0.0, pri["tau0"]])}
         rot[0], pos[0], vel[0] = rot_i[0], pos_i[0], vel_i[0]
         graph0, vals0 = _first_keyframe(P, rot[0], pos[0], vel[0], cal[0])
@@ -338,7 +344,8 @@ class GraphISAM2:
         def refresh(keys_k: list[int]) -> None:
             est = isam.calculateEstimate(
                 gtsam.KeyVector([kk for k in keys_k for kk in
-                                 ([X(k), V(k), B(k)] + ([C(k)] if has_baro else []))]))
+                                 ([X(k), V(k), B(k)] + ([C(k)] if has_baro else [])
+                                  + ([G(k)] if P.gm is not None else []))]))
             for k in keys_k:
                 pose = est.atPose3(X(k))
                 rot[k] = pose.rotation().matrix()
@@ -347,6 +354,8 @@ class GraphISAM2:
                 bias[k] = est.atConstantBias(B(k)).vector()
                 if has_baro:
                     cb[k] = est.atVector(C(k))[0]
+                if P.gm is not None:
+                    gg[k] = est.atVector(G(k))[0]
 
         for k in range(nk - 1):
             tu = time.perf_counter()
@@ -375,10 +384,19 @@ class GraphISAM2:
             rot[k + 1], pos[k + 1] = x_new.rotation().matrix(), x_new.translation()
             vel[k + 1], bias[k + 1] = nv.atVector(V(k + 1)), bias[k]
             cb[k + 1] = cb[k]
-            for f in keyframe_fix_factors(P, k + 1):
-                nf.add(f)
+            if P.gm is None:
+                for f in keyframe_fix_factors(P, k + 1):
+                    nf.add(f)
+                g_k = g_between[gk == k]
+            else:  # G(k+1) and its link; the fix on keyframe k+1 ends interval k's rows
+                dt = float(P.t_kf[k + 1] - P.t_kf[k])
+                gg[k + 1] = gg[k] * np.exp(-dt / P.gm.tau_s)
+                nv.insert(G(k + 1), np.array([gg[k + 1]]))
+                nf.add(gnss_gm_factor(k, dt, P.gm))
+                on_kf = (P.g_kf == k + 1) | ((P.g_kf == 0) if k == 0 else False)
+                g_k = np.r_[g_between[gk == k], np.flatnonzero(on_kf & P.g_use)]
             # GNSS fixes inside interval k enter with its end keyframe (no delay to wait for)
-            gcf = self._gnss_factor(P, k, rot, pos, vel, bias, g_between[gk == k])
+            gcf = self._gnss_factor(P, k, rot, pos, vel, bias, g_k, gg)
             if gcf is not None:
                 nf.add(gcf)
             if has_baro:
@@ -439,7 +457,7 @@ class GraphISAM2:
         # C++ memory on a 1-hour drive, otherwise alive under the final pass's peak)
         isam = None  # the closure ``refresh`` shares this name: it is not called again
         trim_heap()  # its freed nodes are scattered over the heap: hand them back
-        return self._finish(drive, P_final, cfg, est, extra_online, t_online, online, ext, robust,
+        return self._finish(drive, P, cfg, est, extra_online, t_online, online, ext, robust,
                             fallback, t_start, (rot_i, pos_i, vel_i), pims, seg, upd_ms, brk)
 
     def _finish(self, drive: Drive, P: Any, cfg: GraphConfig, est: Any, extra_online: Any,
@@ -524,19 +542,24 @@ class GraphISAM2:
         return lin
 
     @staticmethod
-    def _gnss_factor(P: Any, k: int, rot: Any, pos: Any, vel: Any, bias: Any, g_idx: Any
-                     ) -> Any:
-        """The GNSS fixes strictly inside interval k as one LinearContainerFactor on X(k),
-        X(k+1) and B(k) (the accelerometer-bias columns of the interpolant included),
-        linearised at the current estimate (X(k+1): its prediction)."""
+    def _gnss_factor(P: Any, k: int, rot: Any, pos: Any, vel: Any, bias: Any, g_idx: Any,
+                     gg: Any) -> Any:
+        """The GNSS fixes ``g_idx`` of interval k (strictly inside it; with the GNSS height
+        state also the one on keyframe k+1) as one LinearContainerFactor on X(k), X(k+1) and
+        B(k) (the accelerometer-bias columns of the interpolant included), and G(k), G(k+1)
+        with the GNSS height state (``gg``: its running estimate), linearised at the current
+        estimate (X(k+1): its prediction)."""
         if not g_idx.size:
             return None
         cfg, ks = P.cfg, P.cfg.loss_threshold_sd
         st = GraphISAM2._states(P, k, rot, pos, vel, bias, np.zeros(P.n_kf), 0.0, 0.0)
+        if P.gm is not None:
+            st = dataclasses.replace(st, gnss_gm=gg)
         rows = gf.gnss_rows(
             P.dense, st, P.g_t[g_idx], P.g_pos[g_idx], P.g_pos_sd[g_idx],
             None if P.g_vel is None else P.g_vel[g_idx],
-            None if P.g_vel_sd is None else P.g_vel_sd[g_idx], P.lever)
+            None if P.g_vel_sd is None else P.g_vel_sd[g_idx], P.lever,
+            k=np.full(g_idx.size, k))
         n = 3 * g_idx.size  # position rows, then velocity rows
         r_parts, j_parts = [], []
         for sl, loss, kk in ((slice(0, n), cfg.loss_gnss_pos, ks[0]),
@@ -546,6 +569,25 @@ class GraphISAM2:
                 r_parts.append(rw)
                 j_parts.append(jw)
         r, jac = np.concatenate(r_parts), np.vstack(j_parts)
+        lin = GraphISAM2._lin_values(k, rot, pos, bias)
+        if P.gm is not None:  # five keys: a Hessian of ≤ 3-key pieces, as the baro terms
+            rows_g = gf.IntervalRows(np.zeros(r.size, dtype=np.intp), r, jac)
+            _, lam, eta, _ = gf.group_information(rows_g, 1)
+            cols = np.r_[0:12, 16:19, gf.COL_G0, gf.COL_G1]
+            lam_p = np.zeros((20, 20))
+            eta_p = np.zeros(20)
+            idx = np.r_[0:15, 18, 19]  # X_k, X_k+1, b_a (+ 3 zero gyro columns), G_k, G_k+1
+            lam_p[np.ix_(idx, idx)] = lam[0][np.ix_(cols, cols)]
+            eta_p[idx] = eta[0][cols]
+            lam_p += 1e-9 * np.eye(20)
+            keys = [X(k), X(k + 1), B(k), G(k), G(k + 1)]
+            gfg = gtsam.GaussianFactorGraph()
+            for f in hessian_pieces(keys, lam_p, eta_p, tuple(range(5)), GNSS_GM_BLOCKS):
+                gfg.push_back(f)
+            lin.insert(G(k), np.array([gg[k]]))
+            lin.insert(G(k + 1), np.array([gg[k + 1]]))
+            return gtsam.LinearContainerFactor(gtsam.JacobianFactor(gtsam.HessianFactor(gfg)),
+                                               lin)
         # the same information in ≤ 16 rows (QR of [J | r] over X(k), X(k+1), b_a): 9 fixes
         # with velocity are 54 rows; kept whole they held ~200 MB more on a 1-hour drive
         a_r = np.hstack([jac[:, gf.COL_X0], jac[:, gf.COL_X1], jac[:, gf.COL_BA], r[:, None]])
@@ -555,7 +597,7 @@ class GraphISAM2:
         j_b = np.hstack([a_r[:, 12:15], np.zeros((n_r, 3))])  # (accel, gyro)
         jf = gtsam.JacobianFactor(X(k), a_r[:, 0:6], X(k + 1), a_r[:, 6:12], B(k), j_b,
                                   -a_r[:, 15], gtsam.noiseModel.Unit.Create(n_r))
-        return gtsam.LinearContainerFactor(jf, GraphISAM2._lin_values(k, rot, pos, bias))
+        return gtsam.LinearContainerFactor(jf, lin)
 
     @staticmethod
     def _baro_factors(P: Any, k: int, rot: Any, pos: Any, vel: Any, bias: Any, cb: Any,
@@ -644,6 +686,8 @@ class GraphISAM2:
             vals.update(B(k), est.atConstantBias(B(k)))
             if P.drive.baro is not None:
                 vals.update(C(k), est.atVector(C(k)))
+            if P.gm is not None:
+                vals.update(G(k), est.atVector(G(k)))
         if P.drive.baro is not None:
             vals.update(K(0), est.atVector(K(int(seg[-1]))))
         return vals, graph

@@ -210,17 +210,6 @@ class Problem:
     g_pos_sd_rx: FloatArray | None = None  # the receiver's σ (g_pos_sd: its white rest)
 
     @property
-    def has_gm(self) -> bool:
-        return self.gm is not None
-
-    def without_gm(self) -> Problem:
-        """The same problem without the GNSS height state: the receiver's whole σ on the
-        fixes (graph-isam2's online pass). Shares the gate masks with ``self``."""
-        if self.gm is None:
-            return self
-        return replace(self, gm=None, g_pos_sd=self.g_pos_sd_rx, g_incr=None)
-
-    @property
     def gnss_rejected(self) -> int:
         return int(np.sum(~self.g_use & (self.g_kf >= -1)))
 
