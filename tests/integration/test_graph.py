@@ -158,7 +158,7 @@ def test_imu_logging_gap_is_bridged_not_preintegrated(monkeypatch):
 def test_isam2_online_takes_gnss_back_at_once_after_an_outage():
     """The online (filter-like) estimate uses every fix that has arrived: at the first
     keyframe after hill-drive's 60 s GNSS outage it is back at GNSS accuracy, as the forward
-    ekf is (measured 2.2 m, ekf 1.8 m; before session 25 it was still 84 m off there, and 88 m
+    ekf is (measured 1.7 m, ekf 1.8 m; before session 25 it was still 84 m off there, and 88 m
     one keyframe later, because fixes waited one or two keyframes)."""
     from vnav_graph.estimators.ekf.filter import EKF
     from vnav_graph.estimators.graph import GraphISAM2
