@@ -11,9 +11,9 @@ Baro samples and GNSS fixes between keyframes are linearised once (numpy, ``fact
 the current estimate as soon as they have arrived — in the update that creates keyframe k+1:
 the fixes inside interval k, and the baro samples stamped up to t_{k+1}, one factor per
 interval of their delayed time — and inserted as ``LinearContainerFactor``s with the
-accelerometer-bias columns on B(k) (``_gnss_factor``, ``_baro_factors``); no Python callback
-ever runs inside iSAM2. They are not relinearised later (the final pass relinearises
-everything).
+accelerometer-bias columns on B(k) (``terms.gnss_factor``, ``terms.baro_factors``); no
+Python callback ever runs inside iSAM2. They are not relinearised later (the final pass
+relinearises everything).
 
 Per-update latency: the tail was iSAM2 relinearising ~1000 old variables at once (every
 ``relinearizeSkip`` = 10 updates, a scalar threshold of 0.05 in every unit) and the lazy
@@ -52,9 +52,9 @@ from ...geo.frames import mat_to_quat, ned_to_lla
 from ...sensors.magnetometer import without_contradicting_mag
 from ...types import Drive, Estimate, Trajectory
 from . import factors as gf
+from . import terms
 from .batch import gnss_gm_info, outputs, provides, solver_warnings, value_of
 from .extend import Collected, GraphExtension, check_extensions, collect, key_name, make_view
-from .general import ISAM2_BLOCKS, hessian_pieces, interval_blocks
 from .init import initial_states
 from .linalg import single_thread_blas, trim_heap
 from .magnetometer import builtin_extensions, mag_info
@@ -76,7 +76,6 @@ from .problem import (
     prior_factors,
     setup,
 )
-from .robust import reweight
 from .solve import gauss_newton
 
 # averaged low-rate IMU logs (median spacing ≥ LOW_RATE_DT, e.g. the 1 Hz phone logs): a
@@ -89,9 +88,6 @@ LOW_RATE_SETTINGS = {"keyframe_dt": LOW_RATE_KEYFRAME_DT, "relinearize_skip": 50
 # settings of the retry after a failed/diverged incremental pass (GraphISAM2.run)
 ROBUST_SETTINGS = {"relinearize_skip": 1, "relinearize_typed": None,
                    "relinearize_threshold": 0.01}
-# the key blocks of an interval's GNSS factor with the GNSS height state, in the padded
-# columns of ``GraphISAM2._gnss_factor``: X(k), X(k+1), B(k) (accel, zero gyro), G(k), G(k+1)
-GNSS_GM_BLOCKS = ((0, 6), (6, 6), (12, 6), (18, 1), (19, 1))
 DIVERGED_SPEED = 1e4  # m/s: an online velocity above this means the solution diverged
 
 
@@ -220,7 +216,7 @@ def _first_keyframe(P: Any, r0: Any, p0: Any, v0: Any, k0: Any) -> tuple[Any, An
         vals0.insert(K(0), k0)
     if P.gm is not None:
         vals0.insert(G(0), np.zeros(1))
-    else:  # with G(k), keyframe fixes enter as rows of the interval they end (_gnss_factor)
+    else:  # with G(k), keyframe fixes enter as rows of the interval they end (terms)
         for f in keyframe_fix_factors(P, 0):
             graph0.add(f)
     return graph0, vals0
@@ -396,7 +392,7 @@ class GraphISAM2:
                 on_kf = (P.g_kf == k + 1) | ((P.g_kf == 0) if k == 0 else False)
                 g_k = np.r_[g_between[gk == k], np.flatnonzero(on_kf & P.g_use)]
             # GNSS fixes inside interval k enter with its end keyframe (no delay to wait for)
-            gcf = self._gnss_factor(P, k, rot, pos, vel, bias, g_k, gg)
+            gcf = terms.gnss_factor(P, k, rot, pos, vel, bias, g_k, gg)
             if gcf is not None:
                 nf.add(gcf)
             if has_baro:
@@ -417,7 +413,7 @@ class GraphISAM2:
                 nv.insert(nv_ext)
             # baro samples stamped up to the new keyframe (each to the interval of its
             # delayed time t_s − τd: interval k, or k − 1 for the first τd of interval k)
-            lcfs, baro_next = self._baro_factors(
+            lcfs, baro_next = terms.baro_factors(
                 P, k, rot, pos, vel, bias, cb, cal, seg, bt, bz, baro_next, pri)
             for lcf in lcfs:
                 nf.add(lcf)
@@ -442,7 +438,7 @@ class GraphISAM2:
                       ures.getVariablesReeliminated())
         # baro samples stamped after the last keyframe whose delayed time is inside the span
         if nk >= 2:
-            lcfs, baro_next = self._baro_factors(
+            lcfs, baro_next = terms.baro_factors(
                 P, nk - 2, rot, pos, vel, bias, cb, cal, seg, bt, bz, baro_next, pri,
                 last=True)
             if lcfs:
@@ -518,151 +514,6 @@ class GraphISAM2:
         return Estimate(self.name, out["trajectory"], provides(drive), out["cov"],
                         out["t_cov"], out["baro"], time.perf_counter() - t_start,
                         online=online_traj, info=info, config=self.config)
-
-    @staticmethod
-    def _states(P: Any, k: int, rot: Any, pos: Any, vel: Any, bias: Any, cb: Any,
-                s_k: float, tau_k: float) -> gf.KeyframeStates:
-        """Keyframe states of the running arrays for the rows of interval k (its nav-frame
-        acceleration a_k at the current estimate)."""
-        nk = P.n_kf
-        st = gf.KeyframeStates(
-            rot, pos, vel, bias[:, 0:3], cb, np.full(nk, s_k), np.full(nk, tau_k),
-            np.tile(np.array([0.0, 0.0, P.g0]), (nk, 1)))
-        kk = slice(max(k - 3, 0), k + 1)  # intervals k − 3 … k (where a baro sample's t_d lies)
-        st.accel_t[kk] = (np.array([0.0, 0.0, P.g0]) + gravity_delta(P, pos[kk])
-                          - 2 * np.cross(P.omega_t, vel[kk]))
-        return st
-
-    @staticmethod
-    def _lin_values(k: int, rot: Any, pos: Any, bias: Any) -> Any:
-        lin = gtsam.Values()
-        lin.insert(X(k), gtsam.Pose3(gtsam.Rot3(rot[k]), pos[k]))
-        lin.insert(X(k + 1), gtsam.Pose3(gtsam.Rot3(rot[k + 1]), pos[k + 1]))
-        lin.insert(B(k), gtsam.imuBias.ConstantBias(bias[k, 0:3], bias[k, 3:6]))
-        return lin
-
-    @staticmethod
-    def _gnss_factor(P: Any, k: int, rot: Any, pos: Any, vel: Any, bias: Any, g_idx: Any,
-                     gg: Any) -> Any:
-        """The GNSS fixes ``g_idx`` of interval k (strictly inside it; with the GNSS height
-        state also the one on keyframe k+1) as one LinearContainerFactor on X(k), X(k+1) and
-        B(k) (the accelerometer-bias columns of the interpolant included), and G(k), G(k+1)
-        with the GNSS height state (``gg``: its running estimate), linearised at the current
-        estimate (X(k+1): its prediction)."""
-        if not g_idx.size:
-            return None
-        cfg, ks = P.cfg, P.cfg.loss_threshold_sd
-        st = GraphISAM2._states(P, k, rot, pos, vel, bias, np.zeros(P.n_kf), 0.0, 0.0)
-        if P.gm is not None:
-            st = dataclasses.replace(st, gnss_gm=gg)
-        rows = gf.gnss_rows(
-            P.dense, st, P.g_t[g_idx], P.g_pos[g_idx], P.g_pos_sd[g_idx],
-            None if P.g_vel is None else P.g_vel[g_idx],
-            None if P.g_vel_sd is None else P.g_vel_sd[g_idx], P.lever,
-            k=np.full(g_idx.size, k))
-        n = 3 * g_idx.size  # position rows, then velocity rows
-        r_parts, j_parts = [], []
-        for sl, loss, kk in ((slice(0, n), cfg.loss_gnss_pos, ks[0]),
-                             (slice(n, None), cfg.loss_gnss_vel, ks[1])):
-            if rows.r[sl].size:
-                rw, jw, _, _ = reweight(rows.r[sl], rows.jac[sl], 3, loss, kk)
-                r_parts.append(rw)
-                j_parts.append(jw)
-        r, jac = np.concatenate(r_parts), np.vstack(j_parts)
-        lin = GraphISAM2._lin_values(k, rot, pos, bias)
-        if P.gm is not None:  # five keys: a Hessian of ≤ 3-key pieces, as the baro terms
-            rows_g = gf.IntervalRows(np.zeros(r.size, dtype=np.intp), r, jac)
-            _, lam, eta, _ = gf.group_information(rows_g, 1)
-            cols = np.r_[0:12, 16:19, gf.COL_G0, gf.COL_G1]
-            lam_p = np.zeros((20, 20))
-            eta_p = np.zeros(20)
-            idx = np.r_[0:15, 18, 19]  # X_k, X_k+1, b_a (+ 3 zero gyro columns), G_k, G_k+1
-            lam_p[np.ix_(idx, idx)] = lam[0][np.ix_(cols, cols)]
-            eta_p[idx] = eta[0][cols]
-            lam_p += 1e-9 * np.eye(20)
-            keys = [X(k), X(k + 1), B(k), G(k), G(k + 1)]
-            gfg = gtsam.GaussianFactorGraph()
-            for f in hessian_pieces(keys, lam_p, eta_p, tuple(range(5)), GNSS_GM_BLOCKS):
-                gfg.push_back(f)
-            lin.insert(G(k), np.array([gg[k]]))
-            lin.insert(G(k + 1), np.array([gg[k + 1]]))
-            return gtsam.LinearContainerFactor(gtsam.JacobianFactor(gtsam.HessianFactor(gfg)),
-                                               lin)
-        # the same information in ≤ 16 rows (QR of [J | r] over X(k), X(k+1), b_a): 9 fixes
-        # with velocity are 54 rows; kept whole they held ~200 MB more on a 1-hour drive
-        a_r = np.hstack([jac[:, gf.COL_X0], jac[:, gf.COL_X1], jac[:, gf.COL_BA], r[:, None]])
-        if a_r.shape[0] > a_r.shape[1]:
-            a_r = np.linalg.qr(a_r, mode="r")
-        n_r = a_r.shape[0]
-        j_b = np.hstack([a_r[:, 12:15], np.zeros((n_r, 3))])  # (accel, gyro)
-        jf = gtsam.JacobianFactor(X(k), a_r[:, 0:6], X(k + 1), a_r[:, 6:12], B(k), j_b,
-                                  -a_r[:, 15], gtsam.noiseModel.Unit.Create(n_r))
-        return gtsam.LinearContainerFactor(jf, lin)
-
-    @staticmethod
-    def _baro_factors(P: Any, k: int, rot: Any, pos: Any, vel: Any, bias: Any, cb: Any,
-                      cal: dict[int, Any], seg: Any, bt: Any, bz: Any, baro_next: int,
-                      pri: dict[str, float], last: bool = False) -> tuple[list[Any], int]:
-        """The baro samples stamped since the last update, up to t_{k+1} (all of them when
-        ``last``), as one LinearContainerFactor per interval of their delayed time
-        t_s − τd, linearised at the current estimate (X(k+1): its prediction) on X(m),
-        X(m+1), C(m), C(m+1), K(j) and B(m) (accelerometer-bias columns included). A sample
-        stamped by t_{k+1} has its delayed time before it, so it never waits: the online
-        estimate of keyframe k+1 has every sample that has arrived."""
-        if P.drive.baro is None:
-            return [], baro_next
-        cfg, ks = P.cfg, P.cfg.loss_threshold_sd
-        j_now = int(seg[k])
-        tau_now = float(cal[j_now][1])
-        # arrived (t_s ≤ t_{k+1}) and delayed into an existing interval (t_s − τd < t_{k+1}:
-        # with a negative τd a sample waits for its keyframe)
-        stop = bt.size if last else min(
-            int(np.searchsorted(bt, P.t_kf[k + 1], side="right")),
-            int(np.searchsorted(bt - tau_now, P.t_kf[k + 1], side="left")))
-        sel = np.arange(baro_next, stop)
-        baro_next = max(stop, baro_next)
-        sel = sel[bt[sel] - tau_now >= P.t_kf[0] - 1.0]
-        if not sel.size:
-            return [], baro_next
-        # each keyframe's (s, τd): its segment's current estimate (later ones: the newest)
-        seg_c = np.minimum(seg, j_now)
-        s_kf = np.array([cal[int(j)][0] for j in range(j_now + 1)])[seg_c]
-        tau_kf = np.array([cal[int(j)][1] for j in range(j_now + 1)])[seg_c]
-        st = GraphISAM2._states(P, k, rot, pos, vel, bias, cb, 0.0, 0.0)
-        st = dataclasses.replace(st, scale=s_kf, latency=tau_kf)
-        # bias read at t_s − τd of this linearisation, as in the batch solve
-        rows = gf.baro_rows(P.dense, st, bt[sel], bz[sel], pri["noise"], P.h0, P.origin,
-                            bias_lag=tau_now)
-        # delayed times past the newest keyframe (none but at the end) are clipped into it
-        m_of = np.minimum(rows.k, k)
-        out = []
-        for m in np.unique(m_of):
-            mm = m_of == m
-            # robust losses: IRLS weights at this (only) linearisation
-            rw, jw, _, _ = reweight(rows.r[mm], rows.jac[mm], 1, cfg.loss_baro, ks[2])
-            out.append(GraphISAM2._baro_lcf(P, int(m), gf.IntervalRows(
-                np.zeros(rw.size, dtype=np.intp), rw, jw), rot, pos, bias, cb, cal, seg))
-        return out, baro_next
-
-    @staticmethod
-    def _baro_lcf(P: Any, m: int, rows: gf.IntervalRows, rot: Any, pos: Any, bias: Any,
-                  cb: Any, cal: dict[int, Any], seg: Any) -> Any:
-        j = int(seg[m])
-        _, lam, eta, _ = gf.group_information(rows, 1)
-        lam_p, eta_p = interval_blocks(lam[0], eta[0])
-        # 1e-9 information (σ ≈ 3e4 in any unit) makes the block positive definite so it can
-        # be turned into a Jacobian for QR; it is far below any real information.
-        lam_p += 1e-9 * np.eye(lam_p.shape[0])
-        keys = [X(m), X(m + 1), C(m), C(m + 1), K(j), B(m)]
-        gfg = gtsam.GaussianFactorGraph()
-        for f in hessian_pieces(keys, lam_p, eta_p, tuple(range(6)), ISAM2_BLOCKS):
-            gfg.push_back(f)
-        lin = GraphISAM2._lin_values(m, rot, pos, bias)
-        lin.insert(C(m), np.array([cb[m]]))
-        lin.insert(C(m + 1), np.array([cb[m + 1]]))
-        lin.insert(K(j), np.asarray(cal[j], float))
-        jf = gtsam.JacobianFactor(gtsam.HessianFactor(gfg))
-        return gtsam.LinearContainerFactor(jf, lin)
 
     @staticmethod
     def _online_trajectory(P: Any, online: Any) -> Trajectory:

@@ -1,0 +1,172 @@
+"""Custom terms of ``graph-isam2``'s online pass: the baro samples and GNSS fixes between
+keyframes as ``LinearContainerFactor``s, linearised once (numpy, ``factors``) at the current
+estimate as soon as they have arrived, with the accelerometer-bias columns on B(k) and,
+when carried, the GNSS height error G(k) (``docs/graph.md``). No Python callback runs inside
+iSAM2."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import gtsam
+import numpy as np
+from gtsam.symbol_shorthand import B, C, G, K, X
+
+from . import factors as gf
+from .general import ISAM2_BLOCKS, hessian_pieces, interval_blocks
+from .problem import gravity_delta
+from .robust import reweight
+
+# the key blocks of an interval's GNSS factor with the GNSS height state, in the padded
+# columns of ``gnss_factor``: X(k), X(k+1), B(k) (accel, zero gyro), G(k), G(k+1)
+GNSS_GM_BLOCKS = ((0, 6), (6, 6), (12, 6), (18, 1), (19, 1))
+
+
+def keyframe_states(P: Any, k: int, rot: Any, pos: Any, vel: Any, bias: Any, cb: Any,
+                    s_k: float, tau_k: float) -> gf.KeyframeStates:
+    """Keyframe states of the running arrays for the rows of interval k (its nav-frame
+    acceleration a_k at the current estimate)."""
+    nk = P.n_kf
+    st = gf.KeyframeStates(
+        rot, pos, vel, bias[:, 0:3], cb, np.full(nk, s_k), np.full(nk, tau_k),
+        np.tile(np.array([0.0, 0.0, P.g0]), (nk, 1)))
+    kk = slice(max(k - 3, 0), k + 1)  # intervals k − 3 … k (where a baro sample's t_d lies)
+    st.accel_t[kk] = (np.array([0.0, 0.0, P.g0]) + gravity_delta(P, pos[kk])
+                      - 2 * np.cross(P.omega_t, vel[kk]))
+    return st
+
+
+def lin_values(k: int, rot: Any, pos: Any, bias: Any) -> Any:
+    """Linearisation point of X(k), X(k+1) and B(k) from the running arrays."""
+    lin = gtsam.Values()
+    lin.insert(X(k), gtsam.Pose3(gtsam.Rot3(rot[k]), pos[k]))
+    lin.insert(X(k + 1), gtsam.Pose3(gtsam.Rot3(rot[k + 1]), pos[k + 1]))
+    lin.insert(B(k), gtsam.imuBias.ConstantBias(bias[k, 0:3], bias[k, 3:6]))
+    return lin
+
+
+def gnss_factor(P: Any, k: int, rot: Any, pos: Any, vel: Any, bias: Any, g_idx: Any,
+                gg: Any) -> Any:
+    """The GNSS fixes ``g_idx`` of interval k (strictly inside it; with the GNSS height
+    state also the one on keyframe k+1) as one LinearContainerFactor on X(k), X(k+1) and
+    B(k) (the accelerometer-bias columns of the interpolant included), and G(k), G(k+1)
+    with the GNSS height state (``gg``: its running estimate), linearised at the current
+    estimate (X(k+1): its prediction)."""
+    if not g_idx.size:
+        return None
+    cfg, ks = P.cfg, P.cfg.loss_threshold_sd
+    st = keyframe_states(P, k, rot, pos, vel, bias, np.zeros(P.n_kf), 0.0, 0.0)
+    if P.gm is not None:
+        st = dataclasses.replace(st, gnss_gm=gg)
+    rows = gf.gnss_rows(
+        P.dense, st, P.g_t[g_idx], P.g_pos[g_idx], P.g_pos_sd[g_idx],
+        None if P.g_vel is None else P.g_vel[g_idx],
+        None if P.g_vel_sd is None else P.g_vel_sd[g_idx], P.lever,
+        k=np.full(g_idx.size, k))
+    n = 3 * g_idx.size  # position rows, then velocity rows
+    r_parts, j_parts = [], []
+    for sl, loss, kk in ((slice(0, n), cfg.loss_gnss_pos, ks[0]),
+                         (slice(n, None), cfg.loss_gnss_vel, ks[1])):
+        if rows.r[sl].size:
+            rw, jw, _, _ = reweight(rows.r[sl], rows.jac[sl], 3, loss, kk)
+            r_parts.append(rw)
+            j_parts.append(jw)
+    r, jac = np.concatenate(r_parts), np.vstack(j_parts)
+    lin = lin_values(k, rot, pos, bias)
+    if P.gm is not None:  # five keys: a Hessian of ≤ 3-key pieces, as the baro terms
+        rows_g = gf.IntervalRows(np.zeros(r.size, dtype=np.intp), r, jac)
+        _, lam, eta, _ = gf.group_information(rows_g, 1)
+        cols = np.r_[0:12, 16:19, gf.COL_G0, gf.COL_G1]
+        lam_p = np.zeros((20, 20))
+        eta_p = np.zeros(20)
+        idx = np.r_[0:15, 18, 19]  # X_k, X_k+1, b_a (+ 3 zero gyro columns), G_k, G_k+1
+        lam_p[np.ix_(idx, idx)] = lam[0][np.ix_(cols, cols)]
+        eta_p[idx] = eta[0][cols]
+        lam_p += 1e-9 * np.eye(20)
+        keys = [X(k), X(k + 1), B(k), G(k), G(k + 1)]
+        gfg = gtsam.GaussianFactorGraph()
+        for f in hessian_pieces(keys, lam_p, eta_p, tuple(range(5)), GNSS_GM_BLOCKS):
+            gfg.push_back(f)
+        lin.insert(G(k), np.array([gg[k]]))
+        lin.insert(G(k + 1), np.array([gg[k + 1]]))
+        return gtsam.LinearContainerFactor(gtsam.JacobianFactor(gtsam.HessianFactor(gfg)),
+                                           lin)
+    # the same information in ≤ 16 rows (QR of [J | r] over X(k), X(k+1), b_a): 9 fixes
+    # with velocity are 54 rows; kept whole they held ~200 MB more on a 1-hour drive
+    a_r = np.hstack([jac[:, gf.COL_X0], jac[:, gf.COL_X1], jac[:, gf.COL_BA], r[:, None]])
+    if a_r.shape[0] > a_r.shape[1]:
+        a_r = np.linalg.qr(a_r, mode="r")
+    n_r = a_r.shape[0]
+    j_b = np.hstack([a_r[:, 12:15], np.zeros((n_r, 3))])  # (accel, gyro)
+    jf = gtsam.JacobianFactor(X(k), a_r[:, 0:6], X(k + 1), a_r[:, 6:12], B(k), j_b,
+                              -a_r[:, 15], gtsam.noiseModel.Unit.Create(n_r))
+    return gtsam.LinearContainerFactor(jf, lin)
+
+
+def baro_factors(P: Any, k: int, rot: Any, pos: Any, vel: Any, bias: Any, cb: Any,
+                  cal: dict[int, Any], seg: Any, bt: Any, bz: Any, baro_next: int,
+                  pri: dict[str, float], last: bool = False) -> tuple[list[Any], int]:
+    """The baro samples stamped since the last update, up to t_{k+1} (all of them when
+    ``last``), as one LinearContainerFactor per interval of their delayed time
+    t_s − τd, linearised at the current estimate (X(k+1): its prediction) on X(m),
+    X(m+1), C(m), C(m+1), K(j) and B(m) (accelerometer-bias columns included). A sample
+    stamped by t_{k+1} has its delayed time before it, so it never waits: the online
+    estimate of keyframe k+1 has every sample that has arrived."""
+    if P.drive.baro is None:
+        return [], baro_next
+    cfg, ks = P.cfg, P.cfg.loss_threshold_sd
+    j_now = int(seg[k])
+    tau_now = float(cal[j_now][1])
+    # arrived (t_s ≤ t_{k+1}) and delayed into an existing interval (t_s − τd < t_{k+1}:
+    # with a negative τd a sample waits for its keyframe)
+    stop = bt.size if last else min(
+        int(np.searchsorted(bt, P.t_kf[k + 1], side="right")),
+        int(np.searchsorted(bt - tau_now, P.t_kf[k + 1], side="left")))
+    sel = np.arange(baro_next, stop)
+    baro_next = max(stop, baro_next)
+    sel = sel[bt[sel] - tau_now >= P.t_kf[0] - 1.0]
+    if not sel.size:
+        return [], baro_next
+    # each keyframe's (s, τd): its segment's current estimate (later ones: the newest)
+    seg_c = np.minimum(seg, j_now)
+    s_kf = np.array([cal[int(j)][0] for j in range(j_now + 1)])[seg_c]
+    tau_kf = np.array([cal[int(j)][1] for j in range(j_now + 1)])[seg_c]
+    st = keyframe_states(P, k, rot, pos, vel, bias, cb, 0.0, 0.0)
+    st = dataclasses.replace(st, scale=s_kf, latency=tau_kf)
+    # bias read at t_s − τd of this linearisation, as in the batch solve
+    rows = gf.baro_rows(P.dense, st, bt[sel], bz[sel], pri["noise"], P.h0, P.origin,
+                        bias_lag=tau_now)
+    # delayed times past the newest keyframe (none but at the end) are clipped into it
+    m_of = np.minimum(rows.k, k)
+    out = []
+    for m in np.unique(m_of):
+        mm = m_of == m
+        # robust losses: IRLS weights at this (only) linearisation
+        rw, jw, _, _ = reweight(rows.r[mm], rows.jac[mm], 1, cfg.loss_baro, ks[2])
+        out.append(baro_factor(P, int(m), gf.IntervalRows(
+            np.zeros(rw.size, dtype=np.intp), rw, jw), rot, pos, bias, cb, cal, seg))
+    return out, baro_next
+
+
+def baro_factor(P: Any, m: int, rows: gf.IntervalRows, rot: Any, pos: Any, bias: Any,
+                cb: Any, cal: dict[int, Any], seg: Any) -> Any:
+    """One interval's baro rows (all of interval m) as a LinearContainerFactor on X(m),
+    X(m+1), C(m), C(m+1), K(j) and B(m)."""
+    j = int(seg[m])
+    _, lam, eta, _ = gf.group_information(rows, 1)
+    lam_p, eta_p = interval_blocks(lam[0], eta[0])
+    # 1e-9 information (σ ≈ 3e4 in any unit) makes the block positive definite so it can
+    # be turned into a Jacobian for QR; it is far below any real information.
+    lam_p += 1e-9 * np.eye(lam_p.shape[0])
+    keys = [X(m), X(m + 1), C(m), C(m + 1), K(j), B(m)]
+    gfg = gtsam.GaussianFactorGraph()
+    for f in hessian_pieces(keys, lam_p, eta_p, tuple(range(6)), ISAM2_BLOCKS):
+        gfg.push_back(f)
+    lin = lin_values(m, rot, pos, bias)
+    lin.insert(C(m), np.array([cb[m]]))
+    lin.insert(C(m + 1), np.array([cb[m + 1]]))
+    lin.insert(K(j), np.asarray(cal[j], float))
+    jf = gtsam.JacobianFactor(gtsam.HessianFactor(gfg))
+    return gtsam.LinearContainerFactor(jf, lin)
+
