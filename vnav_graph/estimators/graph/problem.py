@@ -207,7 +207,6 @@ class Problem:
     g_incr: Any = None  # (fix indices, dense increments at them), see gnss_rows_of
     pri: dict[str, float] = field(default_factory=dict)  # baro priors (_baro_priors)
     gm: GnssHeightGM | None = None  # the GNSS height Gauss-Markov state G(k), if carried
-    g_pos_sd_rx: FloatArray | None = None  # the receiver's σ (g_pos_sd: its white rest)
 
     @property
     def gnss_rejected(self) -> int:
@@ -277,7 +276,7 @@ def setup(drive: Drive, cfg: GraphConfig) -> Problem:
     gm = cfg.gnss_gm
     if gm is not None:
         # the pre-gate above used the receiver's whole σ (it models no GNSS error state)
-        P.gm, P.g_pos_sd_rx = gm, P.g_pos_sd
+        P.gm = gm  # g_pos_sd becomes the white rest of the receiver's σ
         P.g_pos_sd = P.g_pos_sd.copy()
         P.g_pos_sd[:, 2] = gnss_gm_split(P.g_pos_sd[:, 2], gm)
     if not np.any(use & inside):
