@@ -20,6 +20,21 @@ def shared_data_dir() -> Path | None:
     return None
 
 
+def pytest_configure(config: pytest.Config) -> None:
+    """Under pytest-xdist with several workers (``addopts``: one per core), each worker's BLAS
+    runs one thread, as do the processes the tests start: OpenBLAS's default of one thread
+    per core, in every worker, oversubscribes the cores (``estimators/graph/linalg.py``,
+    ``single_thread_blas``). Measured on the 2-core machine with its other core busy:
+    test_calibration's seed-001 table test (dense Cholesky) 24.9-29.2 s with OpenBLAS's two
+    threads, 2.6 s with one."""
+    if int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1")) > 1:
+        for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+            os.environ.setdefault(var, "1")
+        from threadpoolctl import threadpool_limits
+
+        threadpool_limits(limits=1, user_api="blas")
+
+
 @pytest.fixture
 def rng() -> np.random.Generator:
     return np.random.default_rng(12345)

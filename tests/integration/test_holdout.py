@@ -131,9 +131,25 @@ def test_cli_holdout_on_real_log(data_dir: Path, tmp_path: Path,
     assert main(["holdout", str(log), "--estimators", "nope", "--out", str(out)]) == 2
 
 
+@pytest.fixture(scope="module")
+def read_once():
+    """``read_log`` reading each path once for this module: the seven estimators below share
+    one read of the glitch log (1.4 s each time)."""
+    from vnav_graph.io.readers import read_log
+
+    drives: dict[Path, Drive] = {}
+
+    def read(path: Path) -> Drive:
+        if path not in drives:
+            drives[path] = read_log(path)
+        return drives[path]
+
+    return read
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("name", GNSS_USERS)
-def test_glitch_log_gnss_is_gated(name: str, data_dir: Path) -> None:
+def test_glitch_log_gnss_is_gated(name: str, data_dir: Path, read_once) -> None:
     """181.BIN: GNSS height swings 318–826 m with a 3-D fix while baro spans 48 m. An estimator
     using GNSS must refuse those fixes and follow baro + IMU."""
     log = data_dir / GLITCH
@@ -141,9 +157,7 @@ def test_glitch_log_gnss_is_gated(name: str, data_dir: Path) -> None:
         pytest.skip(f"{GLITCH} not present")
     if name not in base.available():
         pytest.skip(f"estimator {name} not implemented yet")
-    from vnav_graph.io.readers import read_log
-
-    drive = read_log(log)
+    drive = read_once(log)
     est = base.create(name).run(drive)
     rej = est.info.get("gnss_rejected")
     assert rej is not None, f"{name} does not report gnss_rejected"
