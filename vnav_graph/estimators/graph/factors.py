@@ -20,8 +20,8 @@ Contents
   time t_s − τd:  h_b = h0 + (1+s)(h(t_s−τd) − h0) + b(t_s−τd), with
   ∂/∂τd = −(1+s) v_up(t_s−τd) (docs/design.md; seed 001 eq. 2 is its first-order form).
 - ``group_information``: per-interval information (Λ, η) of all those rows, reduced in one
-  batched ``einsum``; ``PAIR_COVER`` splits a 5-key information matrix into ≤3-key blocks
-  (GTSAM's Python HessianFactor constructors take at most three keys).
+  batched ``einsum`` (``general`` splits it into ≤3-key HessianFactor pieces: GTSAM's Python
+  constructors take at most three keys).
 
 Variables of one interval group, in column order: pose X_k (rotation 3, translation 3, GTSAM
 Pose3 tangent: R ← R·Exp(ω), p ← p + R·v), pose X_{k+1}, baro bias b_k, b_{k+1}, the baro
@@ -51,7 +51,7 @@ from ...sensors.baro import baro_jacobian, measure_baro
 from ...types import FloatArray
 
 N_COLS = 19
-N_CORE = 16  # columns of the five key blocks below (the incremental front end uses these)
+N_CORE = 16  # columns of the five key blocks below (the baro-bias/calibration part)
 COL_X0 = slice(0, 6)
 COL_X1 = slice(6, 12)
 COL_B0 = 12
@@ -64,9 +64,6 @@ COL_G0 = 19
 COL_G1 = 20
 # key blocks of a group: (first column, width)
 BLOCKS = ((0, 6), (6, 6), (12, 1), (13, 1), (14, 2))
-# Cover of all block pairs of 5 blocks by 3-block triples; each pair (and diagonal) is owned
-# by exactly one triple (first listed owner), so the pieces sum to the full information.
-PAIR_COVER = ((0, 1, 2), (0, 3, 4), (1, 3, 4), (2, 3, 4))
 
 
 def rot_n_e(lat: FloatArray, lon: FloatArray) -> FloatArray:

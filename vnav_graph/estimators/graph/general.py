@@ -21,7 +21,6 @@ import numpy as np
 from gtsam.symbol_shorthand import B, C, G, K, X
 
 from ...types import FloatArray
-from . import factors as gf
 from .layout import IntervalInfo, Layout, SparsePattern, hessian_diagonal, sparse_pattern
 
 
@@ -44,12 +43,23 @@ def pair_cover(n: int) -> tuple[tuple[int, ...], ...]:
 # X_k, X_k+1, [C_k, C_k+1, K(0),] B_k (6: the accel part of the rows, zero gyro part)
 _BLOCKS_BARO = ((0, 6), (6, 6), (12, 1), (13, 1), (14, 2), (16, 6))
 _BLOCKS_NO_BARO = ((0, 6), (6, 6), (12, 6))
-_COVER_BARO = pair_cover(6)
 
 
 @cache
 def _cover(n: int) -> tuple[tuple[int, ...], ...]:
     return pair_cover(n)
+
+
+def pad_information(lam: FloatArray, eta: FloatArray, src: np.ndarray, dst: np.ndarray,
+                    n: int) -> tuple[FloatArray, FloatArray]:
+    """Λ (…, c, c) and η (…, c) restricted to the columns ``src`` and placed at the columns
+    ``dst`` of an n-column zero block: the key blocks' padded order (B_k's zero gyro-bias
+    columns after its accelerometer part)."""
+    lp = np.zeros(lam.shape[:-2] + (n, n))
+    ep = np.zeros(eta.shape[:-1] + (n,))
+    lp[..., dst[:, None], dst[None, :]] = lam[..., src[:, None], src[None, :]]
+    ep[..., dst] = eta[..., src]
+    return lp, ep
 
 
 def _plan(blocks: tuple[tuple[int, int], ...], cover: tuple[tuple[int, ...], ...]
@@ -87,10 +97,7 @@ def group_pieces(lay: Layout, info: IntervalInfo) -> list[Any]:
     n_gm = 2 if lay.has_gm else 0  # G_k, G_k+1: after B_k's zero gyro columns
     n_main = c - n_gm
     idx = np.r_[np.arange(n_main), n_main + 3 + np.arange(n_gm)]
-    lam_p = np.zeros((g_n, n, n))
-    eta_p = np.zeros((g_n, n))
-    lam_p[:, idx[:, None], idx[None, :]] = lam
-    eta_p[:, idx] = eta
+    lam_p, eta_p = pad_information(lam, eta, np.arange(c), idx, n)
     blocks = _BLOCKS_BARO if lay.has_baro else _BLOCKS_NO_BARO
     if lay.has_gm:
         blocks = (*blocks, (n_main + 3, 1), (n_main + 4, 1))
@@ -229,32 +236,15 @@ class GeneralCovariance:
         return self.lay.solve_by_key(self.lu.solve, u, out)
 
 
-# one interval's key blocks in ``isam2``: the five of ``factors.BLOCKS`` and B_k (accel part
-# of the rows, zero gyro part), over the 22 padded columns of ``interval_blocks``
-ISAM2_BLOCKS = (*gf.BLOCKS, (16, 6))
-
-
-def interval_blocks(lam: FloatArray, eta: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """One group's information in ``factors`` column order (19 columns) padded to the 22 of
-    ``ISAM2_BLOCKS`` (B_k's gyro columns zero)."""
-    n = gf.N_COLS + 3
-    lp = np.zeros((n, n))
-    ep = np.zeros(n)
-    lp[:gf.N_COLS, :gf.N_COLS] = lam[:gf.N_COLS, :gf.N_COLS]
-    ep[:gf.N_COLS] = eta[:gf.N_COLS]
-    return lp, ep
-
-
 def hessian_pieces(keys: list[int], lam: FloatArray, eta: FloatArray,
-                   active: tuple[int, ...], blocks: tuple[tuple[int, int], ...] = gf.BLOCKS
-                   ) -> list[Any]:
-    """Split one group's information (η over ``blocks``, default ``factors.BLOCKS``) into
-    ≤3-key HessianFactors (a pair cover of the blocks; used by ``isam2``)."""
+                   active: tuple[int, ...], blocks: tuple[tuple[int, int], ...]) -> list[Any]:
+    """Split one group's information (η over ``blocks``: (first column, width) per key) into
+    ≤3-key HessianFactors (a pair cover of the blocks; used by ``terms``)."""
     sl = [slice(a, a + n) for a, n in blocks]
     if len(active) <= 3:
         trip = [tuple(active)]
     else:
-        trip = [tr for tr in (gf.PAIR_COVER if blocks == gf.BLOCKS else _cover(len(blocks)))]
+        trip = list(_cover(len(blocks)))
     owned_pair: set[tuple[int, int]] = set()
     owned_diag: set[int] = set()
     out = []

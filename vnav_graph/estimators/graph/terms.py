@@ -13,14 +13,31 @@ import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import B, C, G, K, X
 
+from ...types import FloatArray
 from . import factors as gf
-from .general import ISAM2_BLOCKS, hessian_pieces, interval_blocks
+from .general import hessian_pieces, pad_information
 from .problem import gravity_delta
 from .robust import reweight
 
-# the key blocks of an interval's GNSS factor with the GNSS height state, in the padded
-# columns of ``gnss_factor``: X(k), X(k+1), B(k) (accel, zero gyro), G(k), G(k+1)
+# key blocks (first column, width) of the factors, in their padded columns (B's gyro part
+# zero): baro — X(m), X(m+1), C(m), C(m+1), K(j), B(m) over the 19 ``factors`` columns + 3;
+# GNSS with the height state — X(k), X(k+1), B(k), G(k), G(k+1)
+BARO_BLOCKS = (*gf.BLOCKS, (16, 6))
 GNSS_GM_BLOCKS = ((0, 6), (6, 6), (12, 6), (18, 1), (19, 1))
+
+
+def information_factor(keys: list[int], lam: FloatArray, eta: FloatArray,
+                       blocks: tuple[tuple[int, int], ...], lin: Any) -> Any:
+    """A LinearContainerFactor of the information (Λ, η) over ``keys`` (padded ``blocks``),
+    linearised at ``lin``: ≤ 3-key Hessian pieces, summed into one factor and converted to
+    a Jacobian (iSAM2 runs QR)."""
+    # 1e-9 information (σ ≈ 3e4 in any unit) makes the block positive definite so it can be
+    # turned into a Jacobian for QR; it is far below any real information.
+    lam = lam + 1e-9 * np.eye(lam.shape[0])
+    gfg = gtsam.GaussianFactorGraph()
+    for f in hessian_pieces(keys, lam, eta, tuple(range(len(keys))), blocks):
+        gfg.push_back(f)
+    return gtsam.LinearContainerFactor(gtsam.JacobianFactor(gtsam.HessianFactor(gfg)), lin)
 
 
 def keyframe_states(P: Any, k: int, rot: Any, pos: Any, vel: Any, bias: Any, cb: Any,
@@ -77,21 +94,14 @@ def gnss_factor(P: Any, k: int, rot: Any, pos: Any, vel: Any, bias: Any, g_idx: 
     if P.gm is not None:  # five keys: a Hessian of ≤ 3-key pieces, as the baro terms
         rows_g = gf.IntervalRows(np.zeros(r.size, dtype=np.intp), r, jac)
         _, lam, eta, _ = gf.group_information(rows_g, 1)
-        cols = np.r_[0:12, 16:19, gf.COL_G0, gf.COL_G1]
-        lam_p = np.zeros((20, 20))
-        eta_p = np.zeros(20)
-        idx = np.r_[0:15, 18, 19]  # X_k, X_k+1, b_a (+ 3 zero gyro columns), G_k, G_k+1
-        lam_p[np.ix_(idx, idx)] = lam[0][np.ix_(cols, cols)]
-        eta_p[idx] = eta[0][cols]
-        lam_p += 1e-9 * np.eye(20)
-        keys = [X(k), X(k + 1), B(k), G(k), G(k + 1)]
-        gfg = gtsam.GaussianFactorGraph()
-        for f in hessian_pieces(keys, lam_p, eta_p, tuple(range(5)), GNSS_GM_BLOCKS):
-            gfg.push_back(f)
+        # X_k, X_k+1, b_a (+ 3 zero gyro columns), G_k, G_k+1
+        lam_p, eta_p = pad_information(lam[0], eta[0],
+                                       np.r_[0:12, gf.COL_BA, gf.COL_G0, gf.COL_G1],
+                                       np.r_[0:15, 18, 19], 20)
         lin.insert(G(k), np.array([gg[k]]))
         lin.insert(G(k + 1), np.array([gg[k + 1]]))
-        return gtsam.LinearContainerFactor(gtsam.JacobianFactor(gtsam.HessianFactor(gfg)),
-                                           lin)
+        return information_factor([X(k), X(k + 1), B(k), G(k), G(k + 1)], lam_p, eta_p,
+                                  GNSS_GM_BLOCKS, lin)
     # the same information in ≤ 16 rows (QR of [J | r] over X(k), X(k+1), b_a): 9 fixes
     # with velocity are 54 rows; kept whole they held ~200 MB more on a 1-hour drive
     a_r = np.hstack([jac[:, gf.COL_X0], jac[:, gf.COL_X1], jac[:, gf.COL_BA], r[:, None]])
@@ -155,18 +165,12 @@ def baro_factor(P: Any, m: int, rows: gf.IntervalRows, rot: Any, pos: Any, bias:
     X(m+1), C(m), C(m+1), K(j) and B(m)."""
     j = int(seg[m])
     _, lam, eta, _ = gf.group_information(rows, 1)
-    lam_p, eta_p = interval_blocks(lam[0], eta[0])
-    # 1e-9 information (σ ≈ 3e4 in any unit) makes the block positive definite so it can
-    # be turned into a Jacobian for QR; it is far below any real information.
-    lam_p += 1e-9 * np.eye(lam_p.shape[0])
-    keys = [X(m), X(m + 1), C(m), C(m + 1), K(j), B(m)]
-    gfg = gtsam.GaussianFactorGraph()
-    for f in hessian_pieces(keys, lam_p, eta_p, tuple(range(6)), ISAM2_BLOCKS):
-        gfg.push_back(f)
+    cols = np.arange(gf.N_COLS)
+    lam_p, eta_p = pad_information(lam[0], eta[0], cols, cols, gf.N_COLS + 3)
     lin = lin_values(m, rot, pos, bias)
     lin.insert(C(m), np.array([cb[m]]))
     lin.insert(C(m + 1), np.array([cb[m + 1]]))
     lin.insert(K(j), np.asarray(cal[j], float))
-    jf = gtsam.JacobianFactor(gtsam.HessianFactor(gfg))
-    return gtsam.LinearContainerFactor(jf, lin)
+    return information_factor([X(m), X(m + 1), C(m), C(m + 1), K(j), B(m)], lam_p, eta_p,
+                              BARO_BLOCKS, lin)
 
