@@ -50,6 +50,7 @@ from gtsam.symbol_shorthand import B, C, G, K, V, X
 
 from ...geo.frames import mat_to_quat, ned_to_lla
 from ...sensors.magnetometer import without_contradicting_mag
+from ...sensors.noise import gm_transition
 from ...types import Drive, Estimate, Trajectory
 from . import factors as gf
 from . import terms
@@ -323,8 +324,17 @@ class GraphISAM2:
         isam.update(graph0, vals0)
         bt = drive.baro.t if has_baro else np.zeros(0)
         bz = drive.baro.altitude if has_baro else np.zeros(0)
+        # the fixes of each interval, once (fixes and keyframes are in time order): strictly
+        # inside it, and — with the GNSS height state — on the keyframe that ends it (the one
+        # on keyframe 0 goes with interval 0)
         g_between = np.flatnonzero((P.g_kf == -1) & P.g_use)
-        gk = gf.interval_of(P.t_kf, P.g_t[g_between])
+        cuts = np.arange(1, nk - 1)
+        fixes_of = np.split(g_between, np.searchsorted(
+            gf.interval_of(P.t_kf, P.g_t[g_between]), cuts))
+        if P.gm is not None:
+            on_kf = np.flatnonzero((P.g_kf >= 0) & P.g_use)
+            ends = np.split(on_kf, np.searchsorted(np.maximum(P.g_kf[on_kf] - 1, 0), cuts))
+            fixes_of = [np.r_[a, b] for a, b in zip(fixes_of, ends, strict=True)]
         pims: list[Any] = []
         imu_t = drive.imu.t
         gap = imu_gaps(imu_t, P.kf_idx)
@@ -380,23 +390,21 @@ class GraphISAM2:
             rot[k + 1], pos[k + 1] = x_new.rotation().matrix(), x_new.translation()
             vel[k + 1], bias[k + 1] = nv.atVector(V(k + 1)), bias[k]
             cb[k + 1] = cb[k]
+            dt = float(P.t_kf[k + 1] - P.t_kf[k])
             if P.gm is None:
                 for f in keyframe_fix_factors(P, k + 1):
                     nf.add(f)
-                g_k = g_between[gk == k]
             else:  # G(k+1) and its link; the fix on keyframe k+1 ends interval k's rows
-                dt = float(P.t_kf[k + 1] - P.t_kf[k])
-                gg[k + 1] = gg[k] * np.exp(-dt / P.gm.tau_s)
+                gg[k + 1] = gg[k] * gm_transition(dt, P.gm.tau_s)
                 nv.insert(G(k + 1), np.array([gg[k + 1]]))
                 nf.add(gnss_gm_factor(k, dt, P.gm))
-                on_kf = (P.g_kf == k + 1) | ((P.g_kf == 0) if k == 0 else False)
-                g_k = np.r_[g_between[gk == k], np.flatnonzero(on_kf & P.g_use)]
+            # the states of interval k at this linearisation, for its GNSS and baro factors
+            st = terms.keyframe_states(P, k, rot, pos, vel, bias, cb, gg)
             # GNSS fixes inside interval k enter with its end keyframe (no delay to wait for)
-            gcf = terms.gnss_factor(P, k, rot, pos, vel, bias, g_k, gg)
+            gcf = terms.gnss_factor(P, k, st, bias, fixes_of[k])
             if gcf is not None:
                 nf.add(gcf)
             if has_baro:
-                dt = float(P.t_kf[k + 1] - P.t_kf[k])
                 nv.insert(C(k + 1), np.array([cb[k]]))
                 nf.add(gm_factor(k, dt, pri))
                 if seg[k + 1] != seg[k]:
@@ -413,8 +421,8 @@ class GraphISAM2:
                 nv.insert(nv_ext)
             # baro samples stamped up to the new keyframe (each to the interval of its
             # delayed time t_s − τd: interval k, or k − 1 for the first τd of interval k)
-            lcfs, baro_next = terms.baro_factors(
-                P, k, rot, pos, vel, bias, cb, cal, seg, bt, bz, baro_next, pri)
+            lcfs, baro_next = terms.baro_factors(P, k, st, bias, cal, seg, bt, bz, baro_next,
+                                                 pri)
             for lcf in lcfs:
                 nf.add(lcf)
             t_lcf = time.perf_counter()
@@ -438,9 +446,9 @@ class GraphISAM2:
                       ures.getVariablesReeliminated())
         # baro samples stamped after the last keyframe whose delayed time is inside the span
         if nk >= 2:
-            lcfs, baro_next = terms.baro_factors(
-                P, nk - 2, rot, pos, vel, bias, cb, cal, seg, bt, bz, baro_next, pri,
-                last=True)
+            st = terms.keyframe_states(P, nk - 2, rot, pos, vel, bias, cb, gg)
+            lcfs, baro_next = terms.baro_factors(P, nk - 2, st, bias, cal, seg, bt, bz,
+                                                 baro_next, pri, last=True)
             if lcfs:
                 nf = gtsam.NonlinearFactorGraph()
                 for lcf in lcfs:

@@ -41,41 +41,38 @@ def information_factor(keys: list[int], lam: FloatArray, eta: FloatArray,
 
 
 def keyframe_states(P: Any, k: int, rot: Any, pos: Any, vel: Any, bias: Any, cb: Any,
-                    s_k: float, tau_k: float) -> gf.KeyframeStates:
-    """Keyframe states of the running arrays for the rows of interval k (its nav-frame
-    acceleration a_k at the current estimate)."""
+                    gg: Any) -> gf.KeyframeStates:
+    """Keyframe states of the running arrays (views, not copies) for the rows of interval k:
+    the nav-frame acceleration of intervals k − 3 … k at the current estimate, the GNSS
+    height error ``gg`` when carried; (s, τd) zero (``baro_factors`` sets them)."""
     nk = P.n_kf
     st = gf.KeyframeStates(
-        rot, pos, vel, bias[:, 0:3], cb, np.full(nk, s_k), np.full(nk, tau_k),
-        np.tile(np.array([0.0, 0.0, P.g0]), (nk, 1)))
+        rot, pos, vel, bias[:, 0:3], cb, np.zeros(nk), np.zeros(nk),
+        np.tile(np.array([0.0, 0.0, P.g0]), (nk, 1)), gg if P.gm is not None else None)
     kk = slice(max(k - 3, 0), k + 1)  # intervals k − 3 … k (where a baro sample's t_d lies)
     st.accel_t[kk] = (np.array([0.0, 0.0, P.g0]) + gravity_delta(P, pos[kk])
                       - 2 * np.cross(P.omega_t, vel[kk]))
     return st
 
 
-def lin_values(k: int, rot: Any, pos: Any, bias: Any) -> Any:
-    """Linearisation point of X(k), X(k+1) and B(k) from the running arrays."""
+def lin_values(k: int, st: gf.KeyframeStates, bias: Any) -> Any:
+    """Linearisation point of X(k), X(k+1) and B(k) (``bias``: accel and gyro)."""
     lin = gtsam.Values()
-    lin.insert(X(k), gtsam.Pose3(gtsam.Rot3(rot[k]), pos[k]))
-    lin.insert(X(k + 1), gtsam.Pose3(gtsam.Rot3(rot[k + 1]), pos[k + 1]))
+    lin.insert(X(k), gtsam.Pose3(gtsam.Rot3(st.rot[k]), st.pos[k]))
+    lin.insert(X(k + 1), gtsam.Pose3(gtsam.Rot3(st.rot[k + 1]), st.pos[k + 1]))
     lin.insert(B(k), gtsam.imuBias.ConstantBias(bias[k, 0:3], bias[k, 3:6]))
     return lin
 
 
-def gnss_factor(P: Any, k: int, rot: Any, pos: Any, vel: Any, bias: Any, g_idx: Any,
-                gg: Any) -> Any:
+def gnss_factor(P: Any, k: int, st: gf.KeyframeStates, bias: Any, g_idx: Any) -> Any:
     """The GNSS fixes ``g_idx`` of interval k (strictly inside it; with the GNSS height
     state also the one on keyframe k+1) as one LinearContainerFactor on X(k), X(k+1) and
     B(k) (the accelerometer-bias columns of the interpolant included), and G(k), G(k+1)
-    with the GNSS height state (``gg``: its running estimate), linearised at the current
-    estimate (X(k+1): its prediction)."""
+    with the GNSS height state, linearised at ``st`` (``keyframe_states``; X(k+1): its
+    prediction)."""
     if not g_idx.size:
         return None
     cfg, ks = P.cfg, P.cfg.loss_threshold_sd
-    st = keyframe_states(P, k, rot, pos, vel, bias, np.zeros(P.n_kf), 0.0, 0.0)
-    if P.gm is not None:
-        st = dataclasses.replace(st, gnss_gm=gg)
     rows = gf.gnss_rows(
         P.dense, st, P.g_t[g_idx], P.g_pos[g_idx], P.g_pos_sd[g_idx],
         None if P.g_vel is None else P.g_vel[g_idx],
@@ -90,7 +87,7 @@ def gnss_factor(P: Any, k: int, rot: Any, pos: Any, vel: Any, bias: Any, g_idx: 
             r_parts.append(rw)
             j_parts.append(jw)
     r, jac = np.concatenate(r_parts), np.vstack(j_parts)
-    lin = lin_values(k, rot, pos, bias)
+    lin = lin_values(k, st, bias)
     if P.gm is not None:  # five keys: a Hessian of ≤ 3-key pieces, as the baro terms
         rows_g = gf.IntervalRows(np.zeros(r.size, dtype=np.intp), r, jac)
         _, lam, eta, _ = gf.group_information(rows_g, 1)
@@ -98,8 +95,8 @@ def gnss_factor(P: Any, k: int, rot: Any, pos: Any, vel: Any, bias: Any, g_idx: 
         lam_p, eta_p = pad_information(lam[0], eta[0],
                                        np.r_[0:12, gf.COL_BA, gf.COL_G0, gf.COL_G1],
                                        np.r_[0:15, 18, 19], 20)
-        lin.insert(G(k), np.array([gg[k]]))
-        lin.insert(G(k + 1), np.array([gg[k + 1]]))
+        lin.insert(G(k), np.array([st.gnss_gm[k]]))
+        lin.insert(G(k + 1), np.array([st.gnss_gm[k + 1]]))
         return information_factor([X(k), X(k + 1), B(k), G(k), G(k + 1)], lam_p, eta_p,
                                   GNSS_GM_BLOCKS, lin)
     # the same information in ≤ 16 rows (QR of [J | r] over X(k), X(k+1), b_a): 9 fixes
@@ -114,9 +111,9 @@ def gnss_factor(P: Any, k: int, rot: Any, pos: Any, vel: Any, bias: Any, g_idx: 
     return gtsam.LinearContainerFactor(jf, lin)
 
 
-def baro_factors(P: Any, k: int, rot: Any, pos: Any, vel: Any, bias: Any, cb: Any,
-                  cal: dict[int, Any], seg: Any, bt: Any, bz: Any, baro_next: int,
-                  pri: dict[str, float], last: bool = False) -> tuple[list[Any], int]:
+def baro_factors(P: Any, k: int, st: gf.KeyframeStates, bias: Any, cal: dict[int, Any],
+                 seg: Any, bt: Any, bz: Any, baro_next: int, pri: dict[str, float],
+                 last: bool = False) -> tuple[list[Any], int]:
     """The baro samples stamped since the last update, up to t_{k+1} (all of them when
     ``last``), as one LinearContainerFactor per interval of their delayed time
     t_s − τd, linearised at the current estimate (X(k+1): its prediction) on X(m),
@@ -142,7 +139,6 @@ def baro_factors(P: Any, k: int, rot: Any, pos: Any, vel: Any, bias: Any, cb: An
     seg_c = np.minimum(seg, j_now)
     s_kf = np.array([cal[int(j)][0] for j in range(j_now + 1)])[seg_c]
     tau_kf = np.array([cal[int(j)][1] for j in range(j_now + 1)])[seg_c]
-    st = keyframe_states(P, k, rot, pos, vel, bias, cb, 0.0, 0.0)
     st = dataclasses.replace(st, scale=s_kf, latency=tau_kf)
     # bias read at t_s − τd of this linearisation, as in the batch solve
     rows = gf.baro_rows(P.dense, st, bt[sel], bz[sel], pri["noise"], P.h0, P.origin,
@@ -154,22 +150,22 @@ def baro_factors(P: Any, k: int, rot: Any, pos: Any, vel: Any, bias: Any, cb: An
         mm = m_of == m
         # robust losses: IRLS weights at this (only) linearisation
         rw, jw, _, _ = reweight(rows.r[mm], rows.jac[mm], 1, cfg.loss_baro, ks[2])
-        out.append(baro_factor(P, int(m), gf.IntervalRows(
-            np.zeros(rw.size, dtype=np.intp), rw, jw), rot, pos, bias, cb, cal, seg))
+        out.append(baro_factor(int(m), gf.IntervalRows(
+            np.zeros(rw.size, dtype=np.intp), rw, jw), st, bias, cal, seg))
     return out, baro_next
 
 
-def baro_factor(P: Any, m: int, rows: gf.IntervalRows, rot: Any, pos: Any, bias: Any,
-                cb: Any, cal: dict[int, Any], seg: Any) -> Any:
+def baro_factor(m: int, rows: gf.IntervalRows, st: gf.KeyframeStates, bias: Any,
+                cal: dict[int, Any], seg: Any) -> Any:
     """One interval's baro rows (all of interval m) as a LinearContainerFactor on X(m),
     X(m+1), C(m), C(m+1), K(j) and B(m)."""
     j = int(seg[m])
     _, lam, eta, _ = gf.group_information(rows, 1)
     cols = np.arange(gf.N_COLS)
     lam_p, eta_p = pad_information(lam[0], eta[0], cols, cols, gf.N_COLS + 3)
-    lin = lin_values(m, rot, pos, bias)
-    lin.insert(C(m), np.array([cb[m]]))
-    lin.insert(C(m + 1), np.array([cb[m + 1]]))
+    lin = lin_values(m, st, bias)
+    lin.insert(C(m), np.array([st.baro_bias[m]]))
+    lin.insert(C(m + 1), np.array([st.baro_bias[m + 1]]))
     lin.insert(K(j), np.asarray(cal[j], float))
     return information_factor([X(m), X(m + 1), C(m), C(m + 1), K(j), B(m)], lam_p, eta_p,
                               BARO_BLOCKS, lin)
