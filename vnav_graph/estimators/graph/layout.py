@@ -55,8 +55,8 @@ class Layout:
 
     @property
     def gm_col(self) -> int:
-        """Column of G(k) inside keyframe k's block (after C(k) when there is a baro)."""
-        return 16 if self.has_baro else 15
+        """Column of G(k) inside keyframe k's block: its last (``template_keys``)."""
+        return self.bs - 1
 
     @property
     def bandwidth(self) -> int:
