@@ -8,7 +8,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from vnav_graph.estimators.graph.isam2 import LOW_RATE_SETTINGS
-from vnav_graph.estimators.graph.problem import (
+from vnav_graph.estimators.graph.settings import (
     LOW_RATE_KEYFRAME_DT,
     GraphConfig,
     low_rate_config,

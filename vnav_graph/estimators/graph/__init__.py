@@ -31,7 +31,7 @@ __all__ = ["GraphBatch", "GraphConfig", "GraphISAM2"]
 
 def __getattr__(name: str) -> Any:
     if name == "GraphConfig":
-        from .problem import GraphConfig
+        from .settings import GraphConfig
 
         return GraphConfig
     if name == "GraphBatch":

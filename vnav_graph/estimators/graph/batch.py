@@ -51,14 +51,13 @@ from .init import initial_states
 from .linalg import single_thread_blas
 from .magnetometer import builtin_extensions, mag_info
 from .problem import (
-    GraphConfig,
     Problem,
     build_batch_graph,
-    low_rate_config,
     pims_for,
     setup,
     states_from_values,
 )
+from .settings import GraphConfig, low_rate_config
 from .solve import BatchResult, gauss_newton, linear_system
 
 

@@ -60,9 +60,6 @@ from .init import initial_states
 from .linalg import single_thread_blas, trim_heap
 from .magnetometer import builtin_extensions, mag_info
 from .problem import (
-    LOW_RATE_DT,
-    LOW_RATE_KEYFRAME_DT,
-    GraphConfig,
     build_batch_graph,
     gap_factors,
     gm_factor,
@@ -77,6 +74,7 @@ from .problem import (
     prior_factors,
     setup,
 )
+from .settings import LOW_RATE_DT, LOW_RATE_KEYFRAME_DT, GraphConfig
 from .solve import gauss_newton
 
 # averaged low-rate IMU logs (median spacing ≥ LOW_RATE_DT, e.g. the 1 Hz phone logs): a
