@@ -12,19 +12,19 @@ the current estimate as soon as they have arrived — in the update that creates
 the fixes inside interval k, and the baro samples stamped up to t_{k+1}, one factor per
 interval of their delayed time — and inserted as ``LinearContainerFactor``s with the
 accelerometer-bias columns on B(k) (``terms.gnss_factor``, ``terms.baro_factors``); no
-Python callback ever runs inside iSAM2. They are not relinearised later (the final pass
-relinearises everything).
+Python callback ever runs inside iSAM2. They are relinearised as iSAM2 relinearises its own
+factors (``relin.TermBook``): after each update the terms on the keyframes iSAM2 marked are
+checked against the rotation/translation thresholds (and their segment's (s, τd) against
+``relin.CALIB_THRESHOLD``); the due ones are rebuilt at the current estimate and swapped in
+at the next update (``removeFactorIndices``), counted in ``info["isam2_relinearized"]``.
 
-Per-update latency: the tail was iSAM2 relinearising ~1000 old variables at once (every
-``relinearizeSkip`` = 10 updates, a scalar threshold of 0.05 in every unit) and the lazy
-back-substitution (wildfire) descending into the whole tree after GNSS corrections. The
-thresholds are therefore per variable type (``GraphConfig.relinearize_typed``): only the
-rotation carries real nonlinearity into the IMU and lever-arm terms (0.02 rad); translation,
-velocity and the biases enter the IMU factor (first-order bias correction) almost linearly,
-and C/K only linear factors, so their thresholds are large. The wildfire threshold is 0.01:
-only deltas of *old* variables are left stale by it (the newest keyframes sit in the root
-clique and are always exact), and old variables are relinearised by the final batch pass
-anyway. Measurements in ``docs/graph.md``.
+Thresholds: per variable type (``GraphConfig.relinearize_typed``), C/K never (linear
+factors only), checked at every update (``relinearize_skip`` 1). With the looser thresholds
+of before (0.02 rad, 1 m, every 10 updates) the online estimate drifted 20–35 m from the
+filtering optimum inside a 60 s GNSS outage; with these it stays within ~1 m
+(``tests/integration/test_graph_isam2_online.py``). The wildfire threshold is 0.01: only
+deltas of *old* variables are left stale by it (the newest keyframes sit in the root clique
+and are always exact). Measurements in ``docs/graph.md``.
 
 User extensions (``extend``): each factor enters the update that creates the last keyframe it
 touches, each new variable (with its prior) the first update that uses it; the final pass has
@@ -53,7 +53,7 @@ from ...sensors.magnetometer import without_contradicting_mag
 from ...sensors.noise import gm_transition
 from ...types import Drive, Estimate, Trajectory
 from . import factors as gf
-from . import terms
+from . import relin, terms
 from .batch import gnss_gm_info, outputs, provides, solver_warnings, value_of
 from .extend import Collected, GraphExtension, check_extensions, collect, key_name, make_view
 from .init import initial_states
@@ -333,19 +333,21 @@ class GraphISAM2:
             on_kf = np.flatnonzero((P.g_kf >= 0) & P.g_use)
             ends = np.split(on_kf, np.searchsorted(np.maximum(P.g_kf[on_kf] - 1, 0), cuts))
             fixes_of = [np.r_[a, b] for a, b in zip(fixes_of, ends, strict=True)]
+        book = relin.TermBook(P, seg, fixes_of)
+        dg_kf = np.zeros((nk, 3))  # gravity anomaly at each keyframe, once (terms)
         pims: list[Any] = []
         imu_t = drive.imu.t
         gap = imu_gaps(imu_t, P.kf_idx)
         upd_ms = np.zeros(nk - 1)
         # per update: preintegration, interval term, isam.update, estimate read-back [ms];
-        # variables relinearised, variables re-eliminated
-        brk = np.zeros((nk - 1, 6))
+        # variables relinearised, variables re-eliminated, interval terms relinearised
+        brk = np.zeros((nk - 1, 7))
         online = np.zeros((nk, 10))  # p(3), v(3), quat(4) in t frame
         online[0] = np.r_[pos[0], vel[0], mat_to_quat(rot[0])]
         baro_next = 0
         calib_rw = np.asarray(cfg.calib_rw, float)
 
-        def refresh(keys_k: list[int]) -> None:
+        def refresh(keys_k: Any) -> None:
             est = isam.calculateEstimate(
                 gtsam.KeyVector([kk for k in keys_k for kk in
                                  ([X(k), V(k), B(k)] + ([C(k)] if has_baro else [])
@@ -364,6 +366,7 @@ class GraphISAM2:
         for k in range(nk - 1):
             tu = time.perf_counter()
             dg = gravity_delta(P, pos[k:k + 1])[0]
+            dg_kf[k] = dg
             b_k = gtsam.imuBias.ConstantBias(bias[k, 0:3], bias[k, 3:6])
             pim = preintegrate(P, k, rot[k], dg, b_k)
             pims.append(pim)
@@ -396,12 +399,16 @@ class GraphISAM2:
                 gg[k + 1] = gg[k] * gm_transition(dt, P.gm.tau_s)
                 nv.insert(G(k + 1), np.array([gg[k + 1]]))
                 nf.add(gnss_gm_factor(k, dt, P.gm))
-            # the states of interval k at this linearisation, for its GNSS and baro factors
-            st = terms.keyframe_states(P, k, rot, pos, vel, bias, cb, gg)
-            # GNSS fixes inside interval k enter with its end keyframe (no delay to wait for)
+            # the interval terms go first in the update (their factor indices come first):
+            # the ones due for relinearisation, rebuilt at the current estimate ...
+            nf_t = gtsam.NonlinearFactorGraph()
+            tags, removed = book.rebuild(nf_t, k, rot, pos, vel, bias, cb, gg,
+                                         cal if has_baro else None, bt, bz, pri, dg_kf)
+            n_swap = len(tags)
+            # ... then the new ones, at this linearisation: the GNSS fixes inside interval k
+            # enter with its end keyframe (no delay to wait for)
+            st = terms.keyframe_states(P, k, rot, pos, vel, bias, cb, gg, dg_kf)
             gcf = terms.gnss_factor(P, k, st, bias, fixes_of[k])
-            if gcf is not None:
-                nf.add(gcf)
             if has_baro:
                 nv.insert(C(k + 1), np.array([cb[k]]))
                 nf.add(gm_factor(k, dt, pri))
@@ -419,15 +426,30 @@ class GraphISAM2:
                 nv.insert(nv_ext)
             # baro samples stamped up to the new keyframe (each to the interval of its
             # delayed time t_s − τd: interval k, or k − 1 for the first τd of interval k)
-            lcfs, baro_next = terms.baro_factors(P, k, st, bias, cal, seg, bt, bz, baro_next,
-                                                 pri)
-            for lcf in lcfs:
-                nf.add(lcf)
+            new_baro, baro_next = terms.baro_factors(P, k, st, bias, cal, seg, bt, bz,
+                                                     baro_next, pri)
+            tags += book.new_terms(k, gcf, new_baro, st, cal if has_baro else None, nf_t)
+            last = None
+            if removed:
+                # the keys of the new factors go last in the ordering (iSAM2's default), not
+                # those of the rebuilt terms: with them a large swap leaves a root clique of
+                # hundreds of variables
+                last = gtsam.KeyGroupMap()
+                for i in range(n_swap, nf_t.size()):
+                    for key in nf_t.at(i).keys():
+                        last.insert2(key, 1)
+                for i in range(nf.size()):
+                    for key in nf.at(i).keys():
+                        last.insert2(key, 1)
+            nf_t.push_back(nf)
             t_lcf = time.perf_counter()
             try:
-                ures = isam.update(nf, nv)
+                ures = isam.update(nf_t, nv, removed, last)
                 t_upd = time.perf_counter()
-                refresh([k + 1] if k < 1 else [k - 1, k, k + 1])
+                book.record(tags, ures.getNewFactorsIndices())
+                marked = relin.marked_keyframes(ures.getMarkedKeys())
+                read = np.r_[np.arange(max(k - 1, 0), k + 2), marked - 1, marked, marked + 1]
+                refresh(np.unique(read[(read >= 0) & (read <= k + 1)]))
             except RuntimeError as exc:
                 raise update_error(P, k, exc, bool(gap[k])) from exc
             if not (np.all(np.isfinite(rot[k + 1])) and np.all(np.isfinite(pos[k + 1]))
@@ -435,23 +457,24 @@ class GraphISAM2:
                 raise update_error(P, k, None, bool(gap[k]))
             if has_baro:
                 j = int(seg[k + 1])
-                cal[j] = isam.calculateEstimateVector(K(j))
+                for jj in range(max(j - 1, 0), j + 1):
+                    cal[jj] = isam.calculateEstimateVector(K(jj))
+            book.pending = book.due(marked, k + 1, rot, pos, cal if has_baro else None)
             online[k + 1] = np.r_[pos[k + 1], vel[k + 1], mat_to_quat(rot[k + 1])]
             t_end = time.perf_counter()
             upd_ms[k] = 1e3 * (t_end - tu)
             brk[k] = (1e3 * (t_pre - tu), 1e3 * (t_lcf - t_pre), 1e3 * (t_upd - t_lcf),
                       1e3 * (t_end - t_upd), ures.getVariablesRelinearized(),
-                      ures.getVariablesReeliminated())
+                      ures.getVariablesReeliminated(), n_swap)
         # baro samples stamped after the last keyframe whose delayed time is inside the span
         if nk >= 2:
             st = terms.keyframe_states(P, nk - 2, rot, pos, vel, bias, cb, gg)
-            lcfs, baro_next = terms.baro_factors(P, nk - 2, st, bias, cal, seg, bt, bz,
-                                                 baro_next, pri, last=True)
-            if lcfs:
+            new_baro, baro_next = terms.baro_factors(P, nk - 2, st, bias, cal, seg, bt, bz,
+                                                     baro_next, pri, last=True)
+            if new_baro:
                 nf = gtsam.NonlinearFactorGraph()
-                for lcf in lcfs:
-                    nf.add(lcf)
-                isam.update(nf, gtsam.Values())
+                tags = book.new_terms(nk - 2, None, new_baro, st, cal if has_baro else None, nf)
+                book.record(tags, isam.update(nf, gtsam.Values()).getNewFactorsIndices())
         t_online = time.perf_counter()
         est = isam.calculateEstimate()
         extra_online = _extra_online(isam, est, ext)
@@ -460,12 +483,14 @@ class GraphISAM2:
         isam = None  # the closure ``refresh`` shares this name: it is not called again
         trim_heap()  # its freed nodes are scattered over the heap: hand them back
         return self._finish(drive, P, cfg, est, extra_online, t_online, online, ext, robust,
-                            fallback, t_start, (rot_i, pos_i, vel_i), pims, seg, upd_ms, brk)
+                            fallback, t_start, (rot_i, pos_i, vel_i), pims, seg, upd_ms, brk,
+                            {"isam2_relinearized": book.relinearized,
+                             "isam2_relinearized_factors": book.swapped_factors})
 
     def _finish(self, drive: Drive, P: Any, cfg: GraphConfig, est: Any, extra_online: Any,
                 t_online: float, online: Any, ext: Any, robust: bool, fallback: str | None,
                 t_start: float, init: tuple[Any, Any, Any], pims: list[Any], seg: Any,
-                upd_ms: Any, brk: Any) -> Estimate:
+                upd_ms: Any, brk: Any, relin_counts: dict[str, int]) -> Estimate:
         """After the online pass (``est``: iSAM2's estimate, ``extra_online``: its new
         variables, read at ``t_online``): read the online trajectory, run the final smoothing
         pass (batch Gauss-Newton with one global (s, τd)) and assemble the Estimate."""
@@ -511,6 +536,7 @@ class GraphISAM2:
         info = _info(P, cfg, res, out, upd_ms, brk, robust, fallback,
                      {"online_s": t_online - t_start, "final_smoothing_s": t_final - t_online},
                      isam_k, int(seg[-1]) + 1, self.name)
+        info.update(relin_counts)
         info["solver_final"] = res.solver
         info["final_pass_restarted"] = restarted
         info["extra_variables"] = out["extra"]

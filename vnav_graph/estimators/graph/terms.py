@@ -40,17 +40,25 @@ def information_factor(keys: list[int], lam: FloatArray, eta: FloatArray,
     return gtsam.LinearContainerFactor(gtsam.JacobianFactor(gtsam.HessianFactor(gfg)), lin)
 
 
-def keyframe_states(P: Any, k: int, rot: Any, pos: Any, vel: Any, bias: Any, cb: Any,
-                    gg: Any) -> gf.KeyframeStates:
-    """Keyframe states of the running arrays (views, not copies) for the rows of interval k:
-    the nav-frame acceleration of intervals k − 3 … k at the current estimate, the GNSS
-    height error ``gg`` when carried; (s, τd) zero (``baro_factors`` sets them)."""
+def keyframe_states(P: Any, k: int | list[int], rot: Any, pos: Any, vel: Any, bias: Any,
+                    cb: Any, gg: Any, dg: Any = None) -> gf.KeyframeStates:
+    """Keyframe states of the running arrays (views, not copies) for the rows of interval k
+    (or of each interval in a list): the nav-frame acceleration of intervals k − 3 … k + 1
+    at the current estimate, the GNSS height error ``gg`` when carried; (s, τd) zero
+    (``baro_terms`` sets them). ``dg``: the gravity anomaly of every keyframe (K, 3), if
+    known (it changes by ~3e-6 m/s² per metre: computed once per keyframe it saves the
+    geodetic conversion at every rebuild), else computed here."""
     nk = P.n_kf
     st = gf.KeyframeStates(
         rot, pos, vel, bias[:, 0:3], cb, np.zeros(nk), np.zeros(nk),
         np.tile(np.array([0.0, 0.0, P.g0]), (nk, 1)), gg if P.gm is not None else None)
-    kk = slice(max(k - 3, 0), k + 1)  # intervals k − 3 … k (where a baro sample's t_d lies)
-    st.accel_t[kk] = (np.array([0.0, 0.0, P.g0]) + gravity_delta(P, pos[kk])
+    if isinstance(k, (int, np.integer)):
+        kk: Any = slice(max(k - 3, 0), k + 1)  # intervals k − 3 … k (a sample's t_d)
+    else:  # rebuilt intervals (relin): their neighbours too (a sample's t_d may move)
+        ks = np.asarray(k, dtype=int)
+        kk = np.unique(np.clip((ks[:, None] + np.arange(-3, 2)).ravel(), 0, nk - 2))
+    st.accel_t[kk] = (np.array([0.0, 0.0, P.g0])
+                      + (gravity_delta(P, pos[kk]) if dg is None else dg[kk])
                       - 2 * np.cross(P.omega_t, vel[kk]))
     return st
 
@@ -70,23 +78,46 @@ def gnss_factor(P: Any, k: int, st: gf.KeyframeStates, bias: Any, g_idx: Any) ->
     B(k) (the accelerometer-bias columns of the interpolant included), and G(k), G(k+1)
     with the GNSS height state, linearised at ``st`` (``keyframe_states``; X(k+1): its
     prediction)."""
-    if not g_idx.size:
-        return None
-    cfg, ks = P.cfg, P.cfg.loss_threshold_sd
+    return gnss_factors(P, [k], st, bias, [g_idx])[0]
+
+
+def gnss_factors(P: Any, ks: list[int], st: gf.KeyframeStates, bias: Any,
+                 fixes: list[Any]) -> list[Any]:
+    """``gnss_factor`` of several intervals ``ks`` (fixes ``fixes[i]`` in interval
+    ``ks[i]``) with one row evaluation; None for an interval without fixes."""
+    n_of = np.array([f.size for f in fixes], dtype=int)
+    out: list[Any] = [None] * len(ks)
+    if not n_of.sum():
+        return out
+    g_idx = np.concatenate(fixes).astype(int)
+    cfg, thr = P.cfg, P.cfg.loss_threshold_sd
     rows = gf.gnss_rows(
         P.dense, st, P.g_t[g_idx], P.g_pos[g_idx], P.g_pos_sd[g_idx],
         None if P.g_vel is None else P.g_vel[g_idx],
         None if P.g_vel_sd is None else P.g_vel_sd[g_idx], P.lever,
-        k=np.full(g_idx.size, k))
+        k=np.repeat(np.asarray(ks, dtype=int), n_of))
     n = 3 * g_idx.size  # position rows, then velocity rows
+    # per fix (3 rows each, position then velocity): its reweighted rows
     r_parts, j_parts = [], []
-    for sl, loss, kk in ((slice(0, n), cfg.loss_gnss_pos, ks[0]),
-                         (slice(n, None), cfg.loss_gnss_vel, ks[1])):
+    for sl, loss, kk in ((slice(0, n), cfg.loss_gnss_pos, thr[0]),
+                         (slice(n, None), cfg.loss_gnss_vel, thr[1])):
         if rows.r[sl].size:
             rw, jw, _, _ = reweight(rows.r[sl], rows.jac[sl], 3, loss, kk)
-            r_parts.append(rw)
-            j_parts.append(jw)
-    r, jac = np.concatenate(r_parts), np.vstack(j_parts)
+            r_parts.append(rw.reshape(-1, 3))
+            j_parts.append(jw.reshape(-1, 3, jw.shape[1]))
+    ends = np.cumsum(n_of)
+    for i, k in enumerate(ks):
+        if not n_of[i]:
+            continue
+        f0, f1 = int(ends[i] - n_of[i]), int(ends[i])
+        r = np.concatenate([rp[f0:f1].ravel() for rp in r_parts])
+        jac = np.vstack([jp[f0:f1].reshape(-1, jp.shape[2]) for jp in j_parts])
+        out[i] = _gnss_lcf(P, int(k), st, bias, r, jac)
+    return out
+
+
+def _gnss_lcf(P: Any, k: int, st: gf.KeyframeStates, bias: Any, r: Any, jac: Any) -> Any:
+    """Interval k's whitened GNSS rows (r, J) as its LinearContainerFactor."""
     lin = lin_values(k, st, bias)
     if P.gm is not None:  # five keys: a Hessian of ≤ 3-key pieces, as the baro terms
         rows_g = gf.IntervalRows(np.zeros(r.size, dtype=np.intp), r, jac)
@@ -113,18 +144,15 @@ def gnss_factor(P: Any, k: int, st: gf.KeyframeStates, bias: Any, g_idx: Any) ->
 
 def baro_factors(P: Any, k: int, st: gf.KeyframeStates, bias: Any, cal: dict[int, Any],
                  seg: Any, bt: Any, bz: Any, baro_next: int, pri: dict[str, float],
-                 last: bool = False) -> tuple[list[Any], int]:
+                 last: bool = False) -> tuple[list[tuple[int, np.ndarray, Any]], int]:
     """The baro samples stamped since the last update, up to t_{k+1} (all of them when
     ``last``), as one LinearContainerFactor per interval of their delayed time
-    t_s − τd, linearised at the current estimate (X(k+1): its prediction) on X(m),
-    X(m+1), C(m), C(m+1), K(j) and B(m) (accelerometer-bias columns included). A sample
-    stamped by t_{k+1} has its delayed time before it, so it never waits: the online
-    estimate of keyframe k+1 has every sample that has arrived."""
+    t_s − τd (``baro_terms``), and the index of the next sample to take. A sample stamped
+    by t_{k+1} has its delayed time before it, so it never waits: the online estimate of
+    keyframe k+1 has every sample that has arrived."""
     if P.drive.baro is None:
         return [], baro_next
-    cfg, ks = P.cfg, P.cfg.loss_threshold_sd
-    j_now = int(seg[k])
-    tau_now = float(cal[j_now][1])
+    tau_now = float(cal[int(seg[k])][1])
     # arrived (t_s ≤ t_{k+1}) and delayed into an existing interval (t_s − τd < t_{k+1}:
     # with a negative τd a sample waits for its keyframe)
     stop = bt.size if last else min(
@@ -135,38 +163,47 @@ def baro_factors(P: Any, k: int, st: gf.KeyframeStates, bias: Any, cal: dict[int
     sel = sel[bt[sel] - tau_now >= P.t_kf[0] - 1.0]
     if not sel.size:
         return [], baro_next
+    return baro_terms(P, k, st, bias, cal, seg, bt, bz, sel, pri, lag=tau_now), baro_next
+
+
+def baro_terms(P: Any, k: int, st: gf.KeyframeStates, bias: Any, cal: dict[int, Any],
+               seg: Any, bt: Any, bz: Any, sel: np.ndarray, pri: dict[str, float],
+               lag: float | None = None) -> list[tuple[int, np.ndarray, Any]]:
+    """Baro samples ``sel`` linearised at ``st`` (keyframe k+1: its prediction) with each
+    keyframe's segment calibration (later segments: the newest, K(seg[k])): one
+    (interval m, its samples, LinearContainerFactor) per interval of their delayed time
+    t_s − τd, on X(m), X(m+1), C(m), C(m+1), K(j) and B(m) (accelerometer-bias columns
+    included). ``lag``: the time the bias is read before t_s (default: each sample's τd of
+    this linearisation, as in the batch solve)."""
+    cfg, ks = P.cfg, P.cfg.loss_threshold_sd
+    j_now = int(seg[k])
     # each keyframe's (s, τd): its segment's current estimate (later ones: the newest)
     seg_c = np.minimum(seg, j_now)
     s_kf = np.array([cal[int(j)][0] for j in range(j_now + 1)])[seg_c]
     tau_kf = np.array([cal[int(j)][1] for j in range(j_now + 1)])[seg_c]
     st = dataclasses.replace(st, scale=s_kf, latency=tau_kf)
-    # bias read at t_s − τd of this linearisation, as in the batch solve
+    bias_lag: Any = (tau_kf[gf.interval_of(P.t_kf, bt[sel])] if lag is None else lag)
     rows = gf.baro_rows(P.dense, st, bt[sel], bz[sel], pri["noise"], P.h0, P.origin,
-                        bias_lag=tau_now)
+                        bias_lag=bias_lag)
     # delayed times past the newest keyframe (none but at the end) are clipped into it
     m_of = np.minimum(rows.k, k)
-    out = []
-    for m in np.unique(m_of):
-        mm = m_of == m
-        # robust losses: IRLS weights at this (only) linearisation
-        rw, jw, _, _ = reweight(rows.r[mm], rows.jac[mm], 1, cfg.loss_baro, ks[2])
-        out.append(baro_factor(int(m), gf.IntervalRows(
-            np.zeros(rw.size, dtype=np.intp), rw, jw), st, bias, cal, seg))
-    return out, baro_next
+    # robust losses: IRLS weights at this linearisation (one per sample)
+    rw, jw, _, _ = reweight(rows.r, rows.jac, 1, cfg.loss_baro, ks[2])
+    groups, lam, eta, _ = gf.group_information(gf.IntervalRows(m_of, rw, jw), 1)
+    return [(int(m), sel[m_of == m], _baro_lcf(int(m), lam[i], eta[i], st, bias, cal, seg))
+            for i, m in enumerate(groups)]
 
 
-def baro_factor(m: int, rows: gf.IntervalRows, st: gf.KeyframeStates, bias: Any,
-                cal: dict[int, Any], seg: Any) -> Any:
-    """One interval's baro rows (all of interval m) as a LinearContainerFactor on X(m),
-    X(m+1), C(m), C(m+1), K(j) and B(m)."""
+def _baro_lcf(m: int, lam: Any, eta: Any, st: gf.KeyframeStates, bias: Any,
+              cal: dict[int, Any], seg: Any) -> Any:
+    """Interval m's baro information (Λ, η over the ``factors`` columns) as its
+    LinearContainerFactor."""
     j = int(seg[m])
-    _, lam, eta, _ = gf.group_information(rows, 1)
     cols = np.arange(gf.N_COLS)
-    lam_p, eta_p = pad_information(lam[0], eta[0], cols, cols, gf.N_COLS + 3)
+    lam_p, eta_p = pad_information(lam, eta, cols, cols, gf.N_COLS + 3)
     lin = lin_values(m, st, bias)
     lin.insert(C(m), np.array([st.baro_bias[m]]))
     lin.insert(C(m + 1), np.array([st.baro_bias[m + 1]]))
     lin.insert(K(j), np.asarray(cal[j], float))
     return information_factor([X(m), X(m + 1), C(m), C(m + 1), K(j), B(m)], lam_p, eta_p,
                               BARO_BLOCKS, lin)
-

@@ -1,0 +1,47 @@
+"""graph-isam2's online estimate is the filtering optimum (issue 14, item 4).
+
+The online estimate of keyframe k is what iSAM2 holds right after the update that created k.
+If every term is relinearised as it should be, that is the maximum a posteriori estimate of
+the same graph cut at t_k, which ``graph-batch`` computes directly (damped Gauss-Newton to
+convergence, every term relinearised) on the drive cut at t_k. Inside a 60 s GNSS outage the
+dead-reckoned trajectory is most sensitive to where the terms were linearised: before the
+custom baro/GNSS terms were relinearised (``graph.relin``) and with iSAM2's thresholds of
+then (rotation 0.02 rad, translation 1 m, relinearisation every 10 updates) the online
+estimate was 20–35 m from the optimum at these epochs on this drive (measured; never
+relinearising the custom terms at the tight thresholds: 89 m). Now it is within ~1 m.
+
+The optimum itself is 8–23 m from the truth here (dead reckoning with the consumer IMU), so the
+agreement below is not the truth being approached by both.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from vnav_graph.estimators.base import create
+from vnav_graph.geo.frames import lla_to_ned
+from vnav_graph.simulation.scenario import load_scenario, simulate
+
+
+def _cut(d, t1):
+    return d.replace(imu=d.imu.slice(d.imu.t[0], t1), gnss=d.gnss.select(d.gnss.t <= t1),
+                     baro=d.baro.select(d.baro.t <= t1))
+
+
+@pytest.mark.slow
+def test_online_estimate_is_the_filtering_optimum_in_an_outage():
+    drive = simulate(load_scenario("hill-drive", duration_s=600.0), seed=4)
+    o = drive.origin_lla
+    est = create("graph-isam2").run(drive)
+    assert est.info["isam2_relinearized"] > 0
+    for t_cut, tol in ((345.0, 1.5), (359.0, 2.0)):  # 45 s and 59 s into the outage
+        opt = create("graph-batch").run(_cut(drive, t_cut)).trajectory
+        tq = np.array([opt.t[-1]])
+        p_opt = lla_to_ned(opt.at(tq).lla, o)[0]
+        p_on = lla_to_ned(est.online.at(tq).lla, o)[0]
+        p_true = lla_to_ned(drive.truth.at(tq).lla, o)[0]
+        # measured: 0.33 / 0.57 m from the optimum, which is 8.1 / 22.8 m from the truth
+        assert np.linalg.norm((p_on - p_opt)[:2]) < tol
+        assert abs((p_on - p_opt)[2]) < 0.1
+        assert np.linalg.norm((p_opt - p_true)[:2]) > 3 * tol

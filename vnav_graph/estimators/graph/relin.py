@@ -1,0 +1,197 @@
+"""Relinearisation of ``graph-isam2``'s custom interval terms (issue 14, item 4).
+
+The baro samples and GNSS fixes between keyframes enter iSAM2 as ``LinearContainerFactor``s
+built in numpy (``terms``): a fixed quadratic around the point where they were built (the
+new keyframe at its IMU prediction). iSAM2 relinearises its own C++ factors but cannot
+relinearise these, so :class:`TermBook` does it the way iSAM2 does for its factors: it keeps
+every term's factor index and linearisation point, and after each update checks the terms
+whose variables iSAM2 has just marked (relinearised, or touched by new factors). A term is
+due when its keyframes moved beyond the rotation/translation thresholds iSAM2 uses
+(``GraphConfig.relinearize_typed``, or the scalar threshold), or its segment's baro
+calibration K = (s, τd) beyond ``CALIB_THRESHOLD`` since it was built. Due terms are rebuilt
+at the current estimate and swapped in at the next update (``removeFactorIndices``), all
+factors of an interval at once; robust losses get fresh IRLS weights there.
+
+Why only rotation, translation and K: the rows are linear in the accelerometer bias, the baro
+bias and the GNSS height error; the velocity only enters through the Coriolis term of the
+interpolant (2Ω×δv ≈ 7e-5 m/s² per m/s). Rotation turns the lever arm and the IMU increments;
+translation moves the robust weights; (1 + s)·h and h(t_s − τd) are bilinear / nonlinear in K
+(a linearisation error of δs·δh and ½·a_up·δτ²).
+
+A baro sample stays with the interval it was first assigned to unless a rebuild at a new τd
+puts its delayed time into another interval; it then moves to that interval's terms.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from . import factors as gf
+from . import terms
+
+# relinearisation thresholds of K = (s, τd) for the interval terms: the linearisation error
+# of (1 + s)·h is δs·δh (≤ 1 cm for δh ≤ 1 m at δs = 0.01), that of h(t_s − τd) is
+# ½·a_up·δτ² (≤ 1.3 mm at 1 m/s² for δτ = 0.05 s)
+CALIB_THRESHOLD = (1e-2, 0.05)
+_KEY_BITS = 56
+_IDX_MASK = (1 << _KEY_BITS) - 1
+_X, _B = ord("x"), ord("b")
+
+
+def marked_keyframes(keys: Any) -> np.ndarray:
+    """Keyframe indices of the X/B keys among an ``ISAM2Result``'s marked keys."""
+    arr = np.fromiter(keys, dtype=np.uint64)
+    if arr.size == 0:
+        return np.zeros(0, dtype=int)
+    ch = (arr >> np.uint64(_KEY_BITS)).astype(int)
+    idx = (arr & np.uint64(_IDX_MASK)).astype(int)
+    return np.unique(idx[(ch == _X) | (ch == _B)])
+
+
+class TermBook:
+    """Factor indices and linearisation points of one pass's interval terms; picks the due
+    ones and rebuilds them (module docstring)."""
+
+    def __init__(self, P: Any, seg: np.ndarray, fixes_of: list[np.ndarray]) -> None:
+        cfg = P.cfg
+        self.P = P
+        self.seg = seg
+        self.fixes_of = fixes_of
+        n = max(P.n_kf - 1, 0)
+        self.gnss_idx = np.full(n, -1, dtype=np.int64)
+        self.baro_idx: list[list[int]] = [[] for _ in range(n)]
+        self.baro_of: list[list[np.ndarray]] = [[] for _ in range(n)]
+        self.built = np.zeros(n, dtype=bool)
+        self.lin_rot = np.zeros((n, 2, 3, 3))
+        self.lin_pos = np.zeros((n, 2, 3))
+        self.lin_cal = np.full((n, 2), np.nan)  # K of the interval's baro terms when built
+        if cfg.relinearize_threshold <= 0:
+            self.thr: tuple[float, float] | None = None
+        elif cfg.relinearize_typed is None:
+            self.thr = (cfg.relinearize_threshold, cfg.relinearize_threshold)
+        else:
+            self.thr = (cfg.relinearize_typed[0], cfg.relinearize_typed[1])
+        self.pending = np.zeros(0, dtype=int)
+        self.relinearized = 0  # interval terms rebuilt and swapped in
+        self.swapped_factors = 0  # iSAM2 factors removed by those swaps
+
+    # -- bookkeeping -----------------------------------------------------------------------
+
+    def _note(self, m: int, st: gf.KeyframeStates, cal: dict[int, Any] | None) -> None:
+        """Interval m's linearisation point (kept from its first build until a rebuild; K
+        from its first baro term)."""
+        if not self.built[m]:
+            self.built[m] = True
+            self.lin_rot[m] = st.rot[m:m + 2]
+            self.lin_pos[m] = st.pos[m:m + 2]
+        if cal is not None and np.isnan(self.lin_cal[m, 0]):
+            self.lin_cal[m] = cal[int(self.seg[m])]
+
+    def record(self, tags: list[tuple[Any, ...]], new_idx: Any) -> None:
+        """Factor indices of the terms just added: ``tags[i]`` describes the i-th new factor
+        of the update (``("g", m)`` or ``("b", m, samples)``)."""
+        for tag, idx in zip(tags, new_idx, strict=False):
+            if tag[0] == "g":
+                self.gnss_idx[tag[1]] = int(idx)
+            else:
+                self.baro_idx[tag[1]].append(int(idx))
+                self.baro_of[tag[1]].append(tag[2])
+
+    def new_terms(self, m_g: int, gcf: Any, baro: list[tuple[int, np.ndarray, Any]],
+                  st: gf.KeyframeStates, cal: dict[int, Any] | None,
+                  nf: Any) -> list[tuple[Any, ...]]:
+        """Add the update's new terms to ``nf``; their tags, in order."""
+        tags: list[tuple[Any, ...]] = []
+        if gcf is not None:
+            nf.add(gcf)
+            tags.append(("g", m_g))
+            self._note(m_g, st, None)
+        for m, sel, f in baro:
+            nf.add(f)
+            tags.append(("b", m, sel))
+            self._note(m, st, cal)
+        return tags
+
+    # -- policy ----------------------------------------------------------------------------
+
+    def due(self, marked: np.ndarray, k_new: int, rot: Any, pos: Any,
+            cal: dict[int, Any] | None) -> np.ndarray:
+        """Intervals to rebuild: among those touching a marked keyframe (``marked``), the
+        ones whose keyframes (``rot``, ``pos``: current estimate there) moved beyond the
+        thresholds; and the baro intervals of the newest two segments whose K moved beyond
+        ``CALIB_THRESHOLD``. Only intervals ending at or before keyframe ``k_new``."""
+        if self.thr is None:
+            return np.zeros(0, dtype=int)
+        ks = np.unique(np.r_[marked, marked - 1]).astype(int)
+        ks = ks[(ks >= 0) & (ks < k_new)]
+        ks = ks[self.built[ks]]
+        out = [np.zeros(0, dtype=int)]
+        if ks.size:
+            rot_thr, trans_thr = self.thr
+            r_now = np.stack([rot[ks], rot[ks + 1]], axis=1)
+            d_r = np.einsum("nkji,nkjl->nkil", self.lin_rot[ks], r_now)
+            cosang = np.clip((np.einsum("nkii->nk", d_r) - 1.0) / 2.0, -1.0, 1.0)
+            p_now = np.stack([pos[ks], pos[ks + 1]], axis=1)
+            d_p = np.einsum("nkji,nkj->nki", self.lin_rot[ks], p_now - self.lin_pos[ks])
+            bad = (np.arccos(cosang) > rot_thr).any(1) | (np.abs(d_p) > trans_thr).any((1, 2))
+            out.append(ks[bad])
+        if cal is not None and k_new >= 1:
+            j_new = int(self.seg[k_new - 1])
+            lo = int(np.searchsorted(self.seg, max(j_new - 1, 0), side="left"))
+            m = np.arange(lo, k_new)
+            m = m[~np.isnan(self.lin_cal[m, 0])]
+            if m.size:
+                k_now = np.array([cal[int(j)] for j in self.seg[m]])
+                bad = (np.abs(k_now - self.lin_cal[m]) > np.asarray(CALIB_THRESHOLD)).any(1)
+                out.append(m[bad])
+        return np.unique(np.concatenate(out))
+
+    # -- rebuilding ------------------------------------------------------------------------
+
+    def rebuild(self, nf: Any, k: int, rot: Any, pos: Any, vel: Any, bias: Any, cb: Any,
+                gg: Any, cal: dict[int, Any] | None, bt: Any, bz: Any,
+                pri: dict[str, float], dg: Any = None
+                ) -> tuple[list[tuple[Any, ...]], list[int]]:
+        """Rebuild the pending intervals' terms at the running arrays (the current estimate;
+        keyframe k+1: its prediction) into ``nf``; returns their tags and the indices of
+        the factors they replace. Samples whose delayed time moved past keyframe k+1 are
+        clipped into interval k, as when they first entered."""
+        ks = [int(m) for m in self.pending if m < k + 1]
+        self.pending = np.zeros(0, dtype=int)
+        if not ks:
+            return [], []
+        P = self.P
+        st = terms.keyframe_states(P, ks, rot, pos, vel, bias, cb, gg, dg)
+        tags: list[tuple[Any, ...]] = []
+        removed: list[int] = []
+        samples = []
+        g_ks = [m for m in ks if self.gnss_idx[m] >= 0]
+        for m, f in zip(g_ks, terms.gnss_factors(P, g_ks, st, bias,
+                                                  [self.fixes_of[m] for m in g_ks]),
+                        strict=True):
+            removed.append(int(self.gnss_idx[m]))
+            self.gnss_idx[m] = -1
+            nf.add(f)
+            tags.append(("g", m))
+        for m in ks:
+            if self.baro_idx[m]:
+                removed.extend(self.baro_idx[m])
+                samples.extend(self.baro_of[m])
+                self.baro_idx[m], self.baro_of[m] = [], []
+            self.built[m] = False
+            self.lin_cal[m] = np.nan
+        baro_ms: set[int] = set()
+        if samples and cal is not None:
+            sel = np.sort(np.concatenate(samples))
+            for m, s_m, f in terms.baro_terms(P, k, st, bias, cal, self.seg, bt, bz, sel, pri):
+                nf.add(f)
+                tags.append(("b", m, s_m))
+                baro_ms.add(m)
+        for m in sorted(set(ks) | baro_ms):
+            # a sample that moved into an interval not rebuilt here leaves its point alone
+            self._note(m, st, cal if m in baro_ms else None)
+        self.relinearized += len(ks)
+        self.swapped_factors += len(removed)
+        return tags, removed
