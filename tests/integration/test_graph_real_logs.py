@@ -73,14 +73,15 @@ def test_car_1hz_holdout_isam2(data_dir: Path) -> None:
 
 
 @pytest.mark.slow
-def test_ski_holdout_fallback_equals_batch(data_dir: Path) -> None:
+def test_ski_holdout_isam2_matches_batch(data_dir: Path) -> None:
     d = _load(data_dir, "ski_iphone_100hz")
     r = run_holdout(d, ["graph-isam2", "graph-batch"])
     e = r.doc["estimators"]
     assert e["graph-isam2"]["status"] == "ok", e["graph-isam2"]["error"]
-    # phone IMU, GNSS without velocity: the fast online pass diverges when GNSS returns after
-    # a 60 s window; the dogleg retry succeeds and the final pass then starts from
-    # graph-batch's initial values, so both solve the same problem from the same start —
-    # equal to round-off (1e-6 relative)
+    # phone IMU, GNSS without velocity: until the online pass relinearised its custom terms
+    # (graph.relin) it diverged when GNSS returned after a 60 s window and needed the dogleg
+    # retry; now it does not, and its final pass (graph-batch's solver started from the
+    # iSAM2 estimate) ends 0.4 % from graph-batch's own solution (1.977 vs 1.969 m)
+    assert not [w for w in e["graph-isam2"]["warnings"] if "dogleg" in w]
     assert e["graph-isam2"]["alt_rmse_m"] == pytest.approx(e["graph-batch"]["alt_rmse_m"],
-                                                          rel=1e-6)
+                                                          rel=0.02)
