@@ -78,14 +78,17 @@ def test_robust_loss_recovers_outlier_free_accuracy(drives, loss, k):
 
 def test_isam2_takes_the_same_losses(drives):
     """graph-isam2: robust C++ GNSS factors (noiseModel.Robust) and weighted interval terms
-    online; its final smoothing pass is the robust batch solve, so it matches graph-batch."""
+    (IRLS weights at every rebuild, ``graph.relin``) online and in its final rounds, so its
+    own smoothed estimate matches the robust graph-batch."""
     from vnav_graph.estimators.graph import GraphISAM2
 
     d0, d1, _ = drives
     cfg = replace(NO_GATE, loss_gnss_pos="huber")
     eb = GraphBatch(cfg).run(d1)
     ei = GraphISAM2(cfg).run(d1)
-    # same cost function, different starting points: equal to the solver's tolerance
-    # (measured 0.6 mm; the clean-data test of iSAM2 against the batch uses 1 mm)
-    assert np.max(np.abs(ei.trajectory.alt - eb.trajectory.alt)) < 2e-3
+    # same cost function, different solvers: iSAM2's own estimate (returned, not the batch
+    # pass) stops relinearising below its thresholds and holds the IRLS weights of its last
+    # rebuild: measured 2.4 mm (the batch pass from iSAM2's estimate: 0.6 mm)
+    assert ei.info["trajectory_source"] == "isam2"
+    assert np.max(np.abs(ei.trajectory.alt - eb.trajectory.alt)) < 5e-3
     assert np.all(_rmse(ei, d1) <= 1.10 * _rmse(GraphBatch().run(d0), d0))

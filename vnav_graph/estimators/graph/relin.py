@@ -20,21 +20,30 @@ translation moves the robust weights; (1 + s)·h and h(t_s − τd) are bilinear
 
 A baro sample stays with the interval it was first assigned to unless a rebuild at a new τd
 puts its delayed time into another interval; it then moves to that interval's terms.
+
+``settle``: the final rounds after the last keyframe, which make iSAM2's own estimate the
+smoothed optimum of the batch's model (``isam2`` module docstring, ``docs/graph.md``).
 """
 
 from __future__ import annotations
 
 from typing import Any
 
+import gtsam
 import numpy as np
+from gtsam.symbol_shorthand import B, C, G, K, V, X
 
 from . import factors as gf
 from . import terms
+from .problem import noise
 
 # relinearisation thresholds of K = (s, τd) for the interval terms: the linearisation error
 # of (1 + s)·h is δs·δh (≤ 1 cm for δh ≤ 1 m at δs = 0.01), that of h(t_s − τd) is
 # ½·a_up·δτ² (≤ 1.3 mm at 1 m/s² for δτ = 0.05 s)
 CALIB_THRESHOLD = (1e-2, 0.05)
+# σ of (s, τd) between neighbouring segments in the final rounds: one calibration, the
+# batch's model (the random walks of the online pass are removed)
+TIE_SD = (1e-6, 1e-5)
 _KEY_BITS = 56
 _IDX_MASK = (1 << _KEY_BITS) - 1
 _X, _B = ord("x"), ord("b")
@@ -117,11 +126,12 @@ class TermBook:
     # -- policy ----------------------------------------------------------------------------
 
     def due(self, marked: np.ndarray, k_new: int, rot: Any, pos: Any,
-            cal: dict[int, Any] | None) -> np.ndarray:
+            cal: dict[int, Any] | None, all_segments: bool = False) -> np.ndarray:
         """Intervals to rebuild: among those touching a marked keyframe (``marked``), the
         ones whose keyframes (``rot``, ``pos``: current estimate there) moved beyond the
         thresholds; and the baro intervals of the newest two segments whose K moved beyond
-        ``CALIB_THRESHOLD``. Only intervals ending at or before keyframe ``k_new``."""
+        ``CALIB_THRESHOLD`` (of every segment with ``all_segments``). Only intervals ending
+        at or before keyframe ``k_new``."""
         if self.thr is None:
             return np.zeros(0, dtype=int)
         ks = np.unique(np.r_[marked, marked - 1]).astype(int)
@@ -139,7 +149,8 @@ class TermBook:
             out.append(ks[bad])
         if cal is not None and k_new >= 1:
             j_new = int(self.seg[k_new - 1])
-            lo = int(np.searchsorted(self.seg, max(j_new - 1, 0), side="left"))
+            lo = 0 if all_segments else int(np.searchsorted(self.seg, max(j_new - 1, 0),
+                                                            side="left"))
             m = np.arange(lo, k_new)
             m = m[~np.isnan(self.lin_cal[m, 0])]
             if m.size:
@@ -195,3 +206,62 @@ class TermBook:
         self.relinearized += len(ks)
         self.swapped_factors += len(removed)
         return tags, removed
+
+
+def read_all(est: Any, arrays: tuple[Any, ...], cal: dict[int, Any], n_seg: int, P: Any
+              ) -> None:
+    """Every keyframe state and segment calibration of ``est`` into the running arrays."""
+    rot, pos, vel, bias, cb, gg = arrays
+    for k in range(P.n_kf):
+        pose = est.atPose3(X(k))
+        rot[k] = pose.rotation().matrix()
+        pos[k] = pose.translation()
+        vel[k] = est.atVector(V(k))
+        bias[k] = est.atConstantBias(B(k)).vector()
+        if P.drive.baro is not None:
+            cb[k] = est.atVector(C(k))[0]
+        if P.gm is not None:
+            gg[k] = est.atVector(G(k))[0]
+    if P.drive.baro is not None:
+        for j in range(n_seg):
+            cal[j] = est.atVector(K(j))
+
+
+def settle(isam: Any, book: TermBook, P: Any, seg: Any, rw_idx: list[int],
+            arrays: tuple[Any, ...], cal: dict[int, Any], bt: Any, bz: Any,
+            dg: Any) -> list[list[int]]:
+    """Final rounds after the last keyframe, so that iSAM2's own estimate is the smoothed
+    optimum of the batch's model: the segments' (s, τd) are tied into one (their random
+    walks removed, ``TIE_SD`` between neighbours), then forced-relinearisation updates in
+    which every custom term beyond the thresholds is rebuilt, until nothing is (at most
+    ``cfg.final_rounds``). Returns per round [terms rebuilt, variables iSAM2 relinearised]."""
+    cfg = P.cfg
+    n_seg = int(seg[-1]) + 1
+    nf = gtsam.NonlinearFactorGraph()
+    removed: list[int] = []
+    if P.drive.baro is not None and n_seg > 1:
+        for j in range(1, n_seg):
+            nf.add(gtsam.BetweenFactorVector(K(j - 1), K(j), np.zeros(2), noise(TIE_SD)))
+        removed = list(rw_idx)
+    nk = P.n_kf
+    everything = np.arange(nk)
+    has_baro = P.drive.baro is not None
+    rot, pos, vel, bias, cb, gg = arrays
+    tags: list[tuple[Any, ...]] = []
+    out: list[list[int]] = []
+    for r in range(cfg.final_rounds):
+        # an empty constraint map: plain COLAMD for the re-elimination (iSAM2's default
+        # puts every key of the new factors, nearly all here, last: one huge root clique)
+        ures = isam.update(nf, gtsam.Values(), removed, gtsam.KeyGroupMap(), None, None, True)
+        book.record(tags, ures.getNewFactorsIndices())
+        n_relin = int(ures.getVariablesRelinearized())
+        read_all(isam.calculateBestEstimate(), arrays, cal, n_seg, P)
+        book.pending = book.due(everything, nk - 1, rot, pos, cal if has_baro else None,
+                                all_segments=True)
+        out.append([len(tags), n_relin])
+        if (not book.pending.size and n_relin == 0) or r == cfg.final_rounds - 1:
+            break
+        nf = gtsam.NonlinearFactorGraph()
+        tags, removed = book.rebuild(nf, nk - 2, rot, pos, vel, bias, cb, gg,
+                                     cal if has_baro else None, bt, bz, P.pri, dg)
+    return out

@@ -43,8 +43,10 @@ class GraphConfig:
     filtering optimum through a 60 s GNSS outage, ``docs/graph.md``);
     partial_relinearization_check: iSAM2 option of that name; wildfire_threshold: iSAM2
     back-substitution threshold (None: GTSAM's 1e-3); see ``docs/graph.md`` for the measured
-    per-update latencies; final_batch: run the batch solver after the incremental pass to
-    produce the smoothed trajectory.
+    per-update latencies; final_rounds: forced-relinearisation updates after the last
+    keyframe (at most; ``isam2._settle``) that make iSAM2's own estimate the smoothed optimum;
+    final_batch: also run the batch solver from iSAM2's estimate, as the check of it and as
+    the fallback when iSAM2's estimate is not at the optimum (``info["final_batch"]``).
     solver: linear algebra of the batch solve — "auto" (the banded-arrow fast path when every
     factor couples keyframes at most one apart and the added variables are few, else GTSAM's
     sparse elimination), "banded" (error when the graph does not fit) or "general" (GTSAM
@@ -80,6 +82,7 @@ class GraphConfig:
         0.002, 0.1, 0.05, 0.01, 0.0005)
     wildfire_threshold: float | None = 0.01
     final_batch: bool = True
+    final_rounds: int = 8
     observable_ratio: float = 0.8
     gnss_gate_prob: float = 0.9999
     gate_rounds: int = 3

@@ -174,6 +174,19 @@ def gn_core(P: Problem, lay: Layout, graph: Any, vals: Any, calib_of_kf: np.ndar
     return BatchResult(vals, graph, cost, it, calib_of_kf, lay, rows, system, lag, stop)
 
 
+def evaluate_at(P: Problem, graph: Any, vals: Any, calib_of_kf: np.ndarray,
+                pri: dict[str, float]) -> BatchResult:
+    """The batch problem at ``vals`` without a step: its cost and rows there (what
+    ``batch.outputs`` needs for the trajectory and the covariances at someone else's
+    estimate, e.g. iSAM2's own)."""
+    st = states_from_values(P, vals, calib_of_kf)
+    lag = float(np.median(st.latency))
+    rows = interval_rows(P, st, pri, lag)
+    cost = graph.error(vals) + rows.cost
+    return BatchResult(vals, graph, cost, 0, calib_of_kf, batch_layout(P, graph, vals), rows,
+                       None, lag, "converged")
+
+
 def gauss_newton(P: Problem, graph: Any, vals: Any, calib_of_kf: np.ndarray,
                   pri: dict[str, float]) -> BatchResult:
     """Gauss-Newton solve, then the post-solve GNSS gate: fixes whose whitened residual χ²
