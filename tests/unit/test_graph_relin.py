@@ -58,6 +58,18 @@ def _terms_of(P, a, cal, fixes_of, m, tau_sel=None):
     return seg, st, gcf, baro
 
 
+def _total(factors, lin, keys):
+    """Information and linear term of the sum of ``factors`` at ``lin`` over ``keys``."""
+    g = gtsam.GaussianFactorGraph()
+    for f in factors:
+        g.push_back(f.linearize(lin))
+    for key in keys:  # zero pieces: every key in the result, used or not
+        d = {"x": 6, "b": 6, "c": 1, "k": 2}[chr(gtsam.Symbol(key).chr())]
+        g.push_back(gtsam.HessianFactor(key, np.zeros((d, d)), np.zeros(d), 0.0))
+    lam, eta = g.hessian(gtsam.Ordering(keys))
+    return np.array(lam, copy=True), np.array(eta, copy=True)
+
+
 def _information(f, lin, keys=None):
     """Information and linear term of ``f`` at ``lin``, over ``keys`` (default: its own)."""
     g = gtsam.GaussianFactorGraph()
@@ -81,16 +93,22 @@ def test_rebuilt_terms_equal_the_originals_at_their_point(problem):
     tags2, removed = book.rebuild(nf2, M + 1, a["rot"], a["pos"], a["vel"], a["bias"], a["cb"],
                                   a["gg"], cal, P.drive.baro.t, P.drive.baro.altitude, P.pri)
     assert sorted(removed) == list(range(nf.size()))
-    assert [t[:2] for t in tags2] == [t[:2] for t in tags]
+    # rebuilt, the interval's GNSS rows go into its baro factor: one factor
+    assert [t[:2] for t in tags2] == [("gb", M)]
     assert book.relinearized == 1
+    assert book.gnss_idx[M] == -1 and book.baro_idx[M] == []
+    book.record(tags2, [7])
+    assert book.gnss_idx[M] == 7 and book.baro_idx[M] == [7]
     lin = _lin(P, a, cal, M)
-    for i in range(nf.size()):
-        lam0, eta0 = _information(nf.at(i), lin)
-        lam1, eta1 = _information(nf2.at(i), lin)
-        np.testing.assert_allclose(lam1, lam0, rtol=1e-9, atol=1e-9 * np.abs(lam0).max())
-        np.testing.assert_allclose(eta1, eta0, rtol=1e-9, atol=1e-9 * np.abs(eta0).max())
+    keys = [X(M), X(M + 1), C(M), C(M + 1), K(0), B(M)]
+    lam0, eta0 = _total([nf.at(i) for i in range(nf.size())], lin, keys)
+    lam1, eta1 = _total([nf2.at(0)], lin, keys)
+    # the 1e-9 regularisation of each information_factor (two before, one now) aside
+    np.testing.assert_allclose(lam1, lam0, rtol=1e-9, atol=1e-8)
+    np.testing.assert_allclose(eta1, eta0, rtol=1e-9, atol=1e-9 * np.abs(eta0).max())
+    assert np.abs(lam0).max() > 1e3  # not trivially equal
     # the samples went back to the interval they came from
-    np.testing.assert_array_equal(np.sort(np.concatenate([t[2] for t in tags2 if t[0] == "b"])),
+    np.testing.assert_array_equal(np.sort(np.concatenate([t[2] for t in tags2])),
                                   np.sort(np.concatenate([t[2] for t in tags if t[0] == "b"])))
 
 
@@ -117,14 +135,15 @@ def test_rebuilt_terms_follow_a_new_calibration(problem):
     _, _, _, baro1 = _terms_of(P, a, cal1, fixes_of, M, tau_sel=cal0[0][1])
     lin = _lin(P, a, cal1, M)
     i_b = [i for i, t in enumerate(tags2) if t[0] == "b"]
+    assert [t[0] for t in tags2 if t[1] == M] == ["gb"]
     keys = [X(M - 1), X(M), X(M + 1), C(M - 1), C(M), C(M + 1), K(0), B(M - 1), B(M)]
-    lam_r = sum(_information(nf2.at(i), lin, keys)[0] for i in i_b)
-    lam_d = sum(_information(f, lin, keys)[0] for _, _, f in baro1)
-    lam_o = sum(_information(nf.at(i), lin, keys)[0] for i in range(nf.size())
-                if tags[i][0] == "b")
-    np.testing.assert_allclose(lam_r, lam_d, rtol=1e-9, atol=1e-9 * np.abs(lam_d).max())
+    lam_r = _total([nf2.at(i) for i in range(nf2.size())], lin, keys)[0]
+    lam_d = _total([f for _, _, f in baro1] + [gcf], lin, keys)[0]  # GNSS: no K in it
+    lam_o = _total([nf.at(i) for i in range(nf.size())], lin, keys)[0]
+    np.testing.assert_allclose(lam_r, lam_d, rtol=1e-9, atol=1e-8)
     assert np.abs(lam_o - lam_d).max() > 1e-3 * np.abs(lam_d).max()
-    assert {t[1] for t in tags2 if t[0] == "b"} == {M - 1, M}  # τd 0.1 → 0.25 s
+    del i_b
+    assert {t[1] for t in tags2} == {M - 1, M}  # τd 0.1 → 0.25 s: samples moved to M − 1
 
 
 def test_due_picks_the_moved_intervals_only(problem):

@@ -236,45 +236,43 @@ class GeneralCovariance:
         return self.lay.solve_by_key(self.lu.solve, u, out)
 
 
+@cache
+def _pieces_plan(blocks: tuple[tuple[int, int], ...], active: tuple[int, ...]
+                 ) -> tuple[tuple[tuple[int, ...], tuple[Any, ...]], ...]:
+    """``_plan`` of ``hessian_pieces`` (one per block layout): the triples and, per
+    constructor argument, the slice of Λ or η it takes (None: a zero block of that shape)."""
+    cover = (tuple(active),) if len(active) <= 3 else _cover(len(blocks))
+    sl = [slice(a, a + n) for a, n in blocks]
+    out = []
+    for used, args in _plan(blocks, cover):
+        spec = []
+        for kind, a, b in args:
+            if kind == "G":
+                spec.append(("G", sl[a], sl[b]))
+            elif kind == "g":
+                spec.append(("g", sl[a], None))
+            elif kind == "0G":
+                spec.append(("0", (blocks[a][1], blocks[b][1]), None))
+            else:
+                spec.append(("0", (blocks[a][1],), None))
+        out.append((used, tuple(spec)))
+    return tuple(out)
+
+
 def hessian_pieces(keys: list[int], lam: FloatArray, eta: FloatArray,
                    active: tuple[int, ...], blocks: tuple[tuple[int, int], ...]) -> list[Any]:
     """Split one group's information (η over ``blocks``: (first column, width) per key) into
-    ≤3-key HessianFactors (a pair cover of the blocks; used by ``terms``)."""
-    sl = [slice(a, a + n) for a, n in blocks]
-    if len(active) <= 3:
-        trip = [tuple(active)]
-    else:
-        trip = list(_cover(len(blocks)))
-    owned_pair: set[tuple[int, int]] = set()
-    owned_diag: set[int] = set()
+    ≤3-key HessianFactors (a pair cover of the blocks, each pair and diagonal block owned by
+    one piece: they sum to the whole; used by ``terms``)."""
+    hf = gtsam.HessianFactor
     out = []
-    for tr in trip:
-        tr = tuple(b for b in tr if b in active)
-        gmat = {}
-        gvec = {}
-        for a_i, a in enumerate(tr):
-            gvec[a] = (eta[sl[a]] if a not in owned_diag else np.zeros(blocks[a][1]))
-            for b in tr[a_i:]:
-                if a == b:
-                    gmat[a, a] = lam[sl[a], sl[a]] if a not in owned_diag else \
-                        np.zeros((blocks[a][1],) * 2)
-                elif (a, b) in owned_pair:
-                    gmat[a, b] = np.zeros((blocks[a][1], blocks[b][1]))
-                else:
-                    gmat[a, b] = lam[sl[a], sl[b]]
-                    owned_pair.add((a, b))
-        owned_diag.update(tr)
-        kk = [keys[a] for a in tr]
-        if len(tr) == 3:
-            a, b, c = tr
-            out.append(gtsam.HessianFactor(kk[0], kk[1], kk[2], gmat[a, a], gmat[a, b],
-                                           gmat[a, c], gvec[a], gmat[b, b], gmat[b, c], gvec[b],
-                                           gmat[c, c], gvec[c], 0.0))
-        elif len(tr) == 2:
-            a, b = tr
-            out.append(gtsam.HessianFactor(kk[0], kk[1], gmat[a, a], gmat[a, b], gvec[a],
-                                           gmat[b, b], gvec[b], 0.0))
+    for used, spec in _pieces_plan(blocks, tuple(active)):
+        a = [lam[x, y] if k == "G" else eta[x] if k == "g" else np.zeros(x) for k, x, y in spec]
+        kk = [keys[b] for b in used]
+        if len(used) == 3:
+            out.append(hf(kk[0], kk[1], kk[2], *a, 0.0))
+        elif len(used) == 2:
+            out.append(hf(kk[0], kk[1], *a, 0.0))
         else:
-            (a,) = tr
-            out.append(gtsam.HessianFactor(kk[0], gmat[a, a], gvec[a], 0.0))
+            out.append(hf(kk[0], *a, 0.0))
     return out

@@ -102,9 +102,9 @@ class TermBook:
         """Factor indices of the terms just added: ``tags[i]`` describes the i-th new factor
         of the update (``("g", m)`` or ``("b", m, samples)``)."""
         for tag, idx in zip(tags, new_idx, strict=False):
-            if tag[0] == "g":
+            if tag[0] in ("g", "gb"):  # "gb": GNSS and baro of the interval in one factor
                 self.gnss_idx[tag[1]] = int(idx)
-            else:
+            if tag[0] in ("b", "gb"):
                 self.baro_idx[tag[1]].append(int(idx))
                 self.baro_of[tag[1]].append(tag[2])
 
@@ -179,13 +179,22 @@ class TermBook:
         removed: list[int] = []
         samples = []
         g_ks = [m for m in ks if self.gnss_idx[m] >= 0]
-        for m, f in zip(g_ks, terms.gnss_factors(P, g_ks, st, bias,
-                                                  [self.fixes_of[m] for m in g_ks]),
-                        strict=True):
+        # with a baro (and no GNSS height state: other keys) an interval's GNSS rows go
+        # into its baro factor: one factor per rebuilt interval
+        merge = cal is not None and P.gm is None
+        extra: dict[int, Any] = {}
+        if merge:
+            g_rows = terms.gnss_interval_rows(P, g_ks, st, [self.fixes_of[m] for m in g_ks])
+            extra = {m: r for m, r in zip(g_ks, g_rows, strict=True) if r is not None}
+        else:
+            for m, f in zip(g_ks, terms.gnss_factors(P, g_ks, st, bias,
+                                                      [self.fixes_of[m] for m in g_ks]),
+                            strict=True):
+                nf.add(f)
+                tags.append(("g", m))
+        for m in g_ks:
             removed.append(int(self.gnss_idx[m]))
             self.gnss_idx[m] = -1
-            nf.add(f)
-            tags.append(("g", m))
         for m in ks:
             if self.baro_idx[m]:
                 removed.extend(self.baro_idx[m])
@@ -194,15 +203,17 @@ class TermBook:
             self.built[m] = False
             self.lin_cal[m] = np.nan
         baro_ms: set[int] = set()
-        if samples and cal is not None:
-            sel = np.sort(np.concatenate(samples))
-            for m, s_m, f in terms.baro_terms(P, k, st, bias, cal, self.seg, bt, bz, sel, pri):
+        if (samples or extra) and cal is not None:
+            sel = np.sort(np.concatenate(samples)) if samples else np.zeros(0, dtype=int)
+            for m, s_m, f in terms.baro_terms(P, k, st, bias, cal, self.seg, bt, bz, sel, pri,
+                                              extra=extra):
                 nf.add(f)
-                tags.append(("b", m, s_m))
+                tags.append(("gb" if m in extra else "b", m, s_m))
                 baro_ms.add(m)
         for m in sorted(set(ks) | baro_ms):
             # a sample that moved into an interval not rebuilt here leaves its point alone
             self._note(m, st, cal if m in baro_ms else None)
+        removed = sorted(set(removed))  # a merged factor is both an interval's GNSS and baro
         self.relinearized += len(ks)
         self.swapped_factors += len(removed)
         return tags, removed

@@ -85,6 +85,15 @@ def gnss_factors(P: Any, ks: list[int], st: gf.KeyframeStates, bias: Any,
                  fixes: list[Any]) -> list[Any]:
     """``gnss_factor`` of several intervals ``ks`` (fixes ``fixes[i]`` in interval
     ``ks[i]``) with one row evaluation; None for an interval without fixes."""
+    return [None if rows is None else _gnss_lcf(P, int(k), st, bias, *rows)
+            for k, rows in zip(ks, gnss_interval_rows(P, ks, st, fixes), strict=True)]
+
+
+def gnss_interval_rows(P: Any, ks: list[int], st: gf.KeyframeStates,
+                       fixes: list[Any]) -> list[tuple[Any, Any] | None]:
+    """The whitened, reweighted GNSS rows (r, J) of each interval ``ks[i]`` (its fixes
+    ``fixes[i]``; position rows, then velocity rows) from one row evaluation; None for an
+    interval without fixes."""
     n_of = np.array([f.size for f in fixes], dtype=int)
     out: list[Any] = [None] * len(ks)
     if not n_of.sum():
@@ -106,13 +115,13 @@ def gnss_factors(P: Any, ks: list[int], st: gf.KeyframeStates, bias: Any,
             r_parts.append(rw.reshape(-1, 3))
             j_parts.append(jw.reshape(-1, 3, jw.shape[1]))
     ends = np.cumsum(n_of)
-    for i, k in enumerate(ks):
+    for i in range(len(ks)):
         if not n_of[i]:
             continue
         f0, f1 = int(ends[i] - n_of[i]), int(ends[i])
         r = np.concatenate([rp[f0:f1].ravel() for rp in r_parts])
         jac = np.vstack([jp[f0:f1].reshape(-1, jp.shape[2]) for jp in j_parts])
-        out[i] = _gnss_lcf(P, int(k), st, bias, r, jac)
+        out[i] = (r, jac)
     return out
 
 
@@ -168,13 +177,16 @@ def baro_factors(P: Any, k: int, st: gf.KeyframeStates, bias: Any, cal: dict[int
 
 def baro_terms(P: Any, k: int, st: gf.KeyframeStates, bias: Any, cal: dict[int, Any],
                seg: Any, bt: Any, bz: Any, sel: np.ndarray, pri: dict[str, float],
-               lag: float | None = None) -> list[tuple[int, np.ndarray, Any]]:
+               lag: float | None = None, extra: dict[int, Any] | None = None
+               ) -> list[tuple[int, np.ndarray, Any]]:
     """Baro samples ``sel`` linearised at ``st`` (keyframe k+1: its prediction) with each
     keyframe's segment calibration (later segments: the newest, K(seg[k])): one
     (interval m, its samples, LinearContainerFactor) per interval of their delayed time
     t_s − τd, on X(m), X(m+1), C(m), C(m+1), K(j) and B(m) (accelerometer-bias columns
     included). ``lag``: the time the bias is read before t_s (default: each sample's τd of
-    this linearisation, as in the batch solve)."""
+    this linearisation, as in the batch solve). ``extra``: more rows (r, J) in the same
+    columns by interval (the GNSS rows of a rebuilt interval, ``relin``), summed into that
+    interval's factor (one without baro samples if it has none)."""
     cfg, ks = P.cfg, P.cfg.loss_threshold_sd
     j_now = int(seg[k])
     # each keyframe's (s, τd): its segment's current estimate (later ones: the newest)
@@ -189,7 +201,13 @@ def baro_terms(P: Any, k: int, st: gf.KeyframeStates, bias: Any, cal: dict[int, 
     m_of = np.minimum(rows.k, k)
     # robust losses: IRLS weights at this linearisation (one per sample)
     rw, jw, _, _ = reweight(rows.r, rows.jac, 1, cfg.loss_baro, ks[2])
-    groups, lam, eta, _ = gf.group_information(gf.IntervalRows(m_of, rw, jw), 1)
+    m_all = m_of
+    if extra:
+        m_all = np.concatenate([m_of] + [np.full(r.size, m, dtype=m_of.dtype)
+                                         for m, (r, _) in extra.items()])
+        rw = np.concatenate([rw] + [r for r, _ in extra.values()])
+        jw = np.vstack([jw] + [j for _, j in extra.values()])
+    groups, lam, eta, _ = gf.group_information(gf.IntervalRows(m_all, rw, jw), 1)
     return [(int(m), sel[m_of == m], _baro_lcf(int(m), lam[i], eta[i], st, bias, cal, seg))
             for i, m in enumerate(groups)]
 
