@@ -58,9 +58,18 @@ from ...sensors.noise import gm_transition
 from ...types import Drive, Estimate, Trajectory
 from . import factors as gf
 from . import relin, terms
-from .batch import gnss_gm_info, outputs, provides, solver_warnings, value_of
-from .extend import Collected, GraphExtension, check_extensions, collect, key_name, make_view
+from .batch import gnss_gm_info, outputs, provides
+from .extend import GraphExtension, check_extensions, collect, make_view
 from .init import initial_states
+from .isam2_setup import (
+    estimate_info,
+    extra_online_of,
+    first_keyframe,
+    isam2_params,
+    segment_span,
+    segments,
+    update_error,
+)
 from .linalg import single_thread_blas, trim_heap
 from .magnetometer import builtin_extensions, mag_info
 from .problem import (
@@ -75,7 +84,6 @@ from .problem import (
     noise,
     pims_for,
     preintegrate,
-    prior_factors,
     setup,
     states_from_values,
 )
@@ -100,159 +108,6 @@ DIVERGED_SPEED = 1e4  # m/s: an online velocity above this means the solution di
 # spread (RMS over the variables). Measured on simulated drives: 2·gap ≈ 1–13 against
 # n ≈ 5 000–10 000 with keyframe positions 2–4 mm apart; a diverged front end gives 10⁴–10⁶.
 OWN_GAP_FRACTION = 0.01
-
-
-def update_error(P: Any, k: int, exc: BaseException | None, gap: bool) -> RuntimeError:
-    """A RuntimeError naming the keyframe, its time and the likely cause of a failed update.
-
-    GTSAM's IndeterminantLinearSystemException reaches Python with an empty or generic
-    message; this replaces it (and a diverged, non-finite estimate) with one that says where.
-    """
-    t0, t1 = float(P.t_kf[k]), float(P.t_kf[k + 1])
-    imu_t = P.drive.imu.t
-    j0, j1 = int(P.kf_idx[k]), int(P.kf_idx[k + 1])
-    max_dt = float(np.max(np.diff(imu_t[j0:j1 + 1]))) if j1 > j0 else float("nan")
-    n_fix = int(np.sum(P.g_use & (P.g_t >= t0 - 5.0) & (P.g_t <= t1)))
-    causes = []
-    if gap:
-        causes.append(f"an IMU logging gap of {max_dt:.1f} s in this interval")
-    if n_fix == 0:
-        causes.append("no usable GNSS fix in the last 5 s (position/velocity unconstrained)")
-    if P.g_vel is None:
-        causes.append("GNSS without velocity (attitude/velocity weakly observable)")
-    if not causes:
-        causes.append("a linearisation point far from the solution (diverged prediction)")
-    what = ("iSAM2 update raised " + (str(exc).strip().splitlines()[0] if str(exc).strip()
-                                      else type(exc).__name__ + " with an empty message")
-            if exc is not None else "the online estimate became non-finite or diverged")
-    return RuntimeError(
-        f"graph-isam2: {what} at keyframe {k + 1} (t = {t1:.2f} s, interval "
-        f"[{t0:.2f}, {t1:.2f}] s, largest IMU spacing {max_dt:.3g} s); likely cause: "
-        + "; ".join(causes) + ". graph-batch (damped batch solver) may still work.")
-
-
-def _segments(P: Any) -> np.ndarray:
-    """Calibration segment index of every keyframe, numbered densely (0, 1, 2, ...).
-
-    Segments are ``segment_s`` long in time; one with no keyframe (a logging gap longer than
-    a segment) gets no index, so consecutive keyframes differ by at most one segment and the
-    random walk between K(j-1) and K(j) spans the real time between them
-    (:func:`_segment_span`).
-    """
-    seg = P.cfg.segment_s
-    if not np.isfinite(seg):
-        return np.zeros(P.n_kf, dtype=int)
-    raw = np.floor((P.t_kf - P.t_kf[0]) / seg + 1e-9).astype(int)
-    return np.unique(raw, return_inverse=True)[1].astype(int)
-
-
-def _segment_span(P: Any, seg: np.ndarray, j: int) -> float:
-    """Time [s] from the start of segment j-1 to the start of segment j (≥ segment_s when a
-    gap swallowed whole segments): the length of the K(j-1) → K(j) random walk."""
-    t0 = float(P.t_kf[np.argmax(seg == j - 1)])
-    t1 = float(P.t_kf[np.argmax(seg == j)])
-    return max(float(P.cfg.segment_s), t1 - t0)
-
-
-def _threshold_map(cfg: GraphConfig, ext: Collected | None = None) -> Any:
-    """Per-variable-type relinearisation thresholds (tangent-space components); the letters
-    of the extensions' variables get theirs (``Variable.relinearize_threshold``)."""
-    if cfg.relinearize_typed is None:
-        return cfg.relinearize_threshold
-    rot, trans, vel, ba, bg = cfg.relinearize_typed
-    m = gtsam.ISAM2ThresholdMap()
-    m.insert(("x", np.array([rot] * 3 + [trans] * 3)))
-    m.insert(("v", np.full(3, vel)))
-    m.insert(("b", np.array([ba] * 3 + [bg] * 3)))
-    m.insert(("c", np.full(1, 1e9)))
-    m.insert(("k", np.full(2, 1e9)))
-    m.insert(("g", np.full(1, 1e9)))  # the GNSS height error G(k): linear factors only
-    if ext is not None:
-        for ch, thr in ext.threshold_entries(cfg.relinearize_threshold).items():
-            m.insert((ch, thr))
-    return m
-
-
-def _info(P: Any, cfg: GraphConfig, res: Any, out: dict[str, Any], upd_ms: Any, brk: Any,
-          robust: bool, fallback: str | None, times: dict[str, float],
-          isam_k: list[float] | None, n_seg: int, name: str) -> dict[str, Any]:
-    """``Estimate.info`` of graph-isam2."""
-    return {
-        "keyframes": P.n_kf, "iterations_final": res.iterations,
-        "converged_final": res.converged, "stop_final": res.stop,
-        "gnss_rejected": P.gnss_rejected, "gnss_rejected_pregate": P.g_rej_pre,
-        "gnss_rejected_postsolve": P.g_rej_post,
-        "observability": out["observability"],
-        "update_ms": upd_ms,
-        "update_breakdown": brk,
-        "update_p50_ms": float(np.percentile(upd_ms, 50)) if upd_ms.size else 0.0,
-        "update_p99_ms": float(np.percentile(upd_ms, 99)) if upd_ms.size else 0.0,
-        **times,
-        "isam2_last_segment_calibration": isam_k,
-        "segments": n_seg,
-        "isam2_fallback": fallback,
-        "warnings": solver_warnings(res, cfg, "final smoothing pass", name)
-        + ([] if fallback is None else [
-            f"iSAM2 update failed and was retried with dogleg ({fallback})"]),
-        "isam2_settings": {"keyframe_dt": cfg.keyframe_dt, "dogleg": robust,
-                           "relinearize_skip": cfg.relinearize_skip,
-                           "relinearize_typed": cfg.relinearize_typed,
-                           "relinearize_threshold": cfg.relinearize_threshold},
-    }
-
-
-def _extra_online(isam: Any, est: Any, ext: Collected | None) -> dict[str, dict[str, Any]]:
-    """The extensions' variables as iSAM2 holds them after the last update (value, σ and
-    covariance from ``ISAM2.marginalCovariance``), by key name; {} without extensions."""
-    out: dict[str, dict[str, Any]] = {}
-    if ext is None:
-        return out
-    for key in ext.variables:
-        cov = np.atleast_2d(isam.marginalCovariance(key))
-        out[key_name(key)] = {"est": value_of(est, key),
-                              "sd": np.sqrt(np.clip(np.diag(cov), 0, None)).tolist(),
-                              "cov": cov.tolist()}
-    return out
-
-
-def _first_keyframe(P: Any, r0: Any, p0: Any, v0: Any, k0: Any) -> tuple[Any, Any]:
-    """Factors (priors, fixes) and values of keyframe 0 for the first iSAM2 update."""
-    graph0 = prior_factors(P, r0, p0, v0, P.pri, K(0))
-    vals0 = gtsam.Values()
-    vals0.insert(X(0), gtsam.Pose3(gtsam.Rot3(r0), p0))
-    vals0.insert(V(0), v0)
-    vals0.insert(B(0), gtsam.imuBias.ConstantBias())
-    if P.drive.baro is not None:
-        vals0.insert(C(0), np.zeros(1))
-        vals0.insert(K(0), k0)
-    if P.gm is not None:
-        vals0.insert(G(0), np.zeros(1))
-    else:  # with G(k), keyframe fixes enter as rows of the interval they end (terms)
-        for f in keyframe_fix_factors(P, 0):
-            graph0.add(f)
-    return graph0, vals0
-
-
-def _isam2_params(cfg: GraphConfig, robust: bool, ext: Collected | None = None) -> Any:
-    """ISAM2Params of one pass: typed relinearisation thresholds, Gauss-Newton (or, for the
-    robust retry, dogleg) with the configured wildfire threshold, QR factorisation."""
-    params = gtsam.ISAM2Params()
-    params.setRelinearizeThreshold(_threshold_map(cfg, ext))
-    params.relinearizeSkip = cfg.relinearize_skip
-    params.enableRelinearization = cfg.relinearize_threshold > 0
-    params.enablePartialRelinearizationCheck = cfg.partial_relinearization_check
-    if robust:
-        dl = gtsam.ISAM2DoglegParams()
-        if cfg.wildfire_threshold is not None:
-            dl.setWildfireThreshold(cfg.wildfire_threshold)
-        params.setOptimizationParams(dl)
-    elif cfg.wildfire_threshold is not None:
-        params.setOptimizationParams(gtsam.ISAM2GaussNewtonParams(cfg.wildfire_threshold))
-    # QR: Cholesky of the squared information failed ("indeterminate system") on
-    # hill-drives with the consumer IMU (whitened gyro-bias rows ~1e4 next to metre-level
-    # position rows); QR keeps the conditioning of the Jacobian.
-    params.setFactorization("QR")
-    return params
 
 
 class GraphISAM2:
@@ -307,7 +162,7 @@ class GraphISAM2:
         has_baro = drive.baro is not None
         rot_i, pos_i, vel_i = initial_states(P)
         nk = P.n_kf
-        seg = _segments(P)
+        seg = segments(P)
         calib0 = np.zeros(nk, dtype=int)
         ext = None
         extensions = (*self.extensions, *builtin_extensions(drive, cfg))
@@ -315,7 +170,7 @@ class GraphISAM2:
             # the view is the batch's: the same initial values (no IMU factors needed)
             vals_i = build_batch_graph(P, rot_i, pos_i, vel_i, None, pri, calib0)[1]
             ext = collect(extensions, make_view(P, vals_i))
-        isam = gtsam.ISAM2(_isam2_params(cfg, robust, ext))
+        isam = gtsam.ISAM2(isam2_params(cfg, robust, ext))
         # running linearisation arrays (keyframe states as last estimated)
         rot = np.zeros((nk, 3, 3))
         pos = np.zeros((nk, 3))
@@ -325,7 +180,7 @@ class GraphISAM2:
         gg = np.zeros(nk)  # the GNSS height error G(k) (GraphConfig.gnss_gm_sd_v), if carried
         cal = {0: np.array([0.0, pri["tau0"]])}
         rot[0], pos[0], vel[0] = rot_i[0], pos_i[0], vel_i[0]
-        graph0, vals0 = _first_keyframe(P, rot[0], pos[0], vel[0], cal[0])
+        graph0, vals0 = first_keyframe(P, rot[0], pos[0], vel[0], cal[0])
         if ext is not None:
             fs, nv_ext = ext.at_keyframe(0)
             for f in fs:
@@ -430,7 +285,7 @@ class GraphISAM2:
                     j = int(seg[k + 1])
                     cal[j] = cal[j - 1].copy()
                     nv.insert(K(j), cal[j])
-                    span = _segment_span(P, seg, j)
+                    span = segment_span(P, seg, j)
                     rw_at = nf.size()  # its index is recorded: the final rounds remove it
                     nf.add(gtsam.BetweenFactorVector(K(j - 1), K(j), np.zeros(2),
                                                      noise(calib_rw * np.sqrt(span))))
@@ -495,7 +350,7 @@ class GraphISAM2:
                 tags = book.new_terms(nk - 2, None, new_baro, st, cal if has_baro else None, nf)
                 book.record(tags, isam.update(nf, gtsam.Values()).getNewFactorsIndices())
         t_online = time.perf_counter()
-        extra_online = _extra_online(isam, isam.calculateEstimate(), ext)
+        extra_online = extra_online_of(isam, isam.calculateEstimate(), ext)
         rounds = relin.settle(isam, book, P, seg, rw_idx, (rot, pos, vel, bias, cb, gg), cal,
                               bt, bz, dg_kf) if cfg.final_rounds > 0 else []
         est = isam.calculateBestEstimate()  # full back-substitution (no wildfire)
@@ -600,10 +455,9 @@ class GraphISAM2:
         if has_baro:
             j_last = int(seg[-1])
             isam_k = est.atVector(K(j_last)).tolist()
-        info = _info(P, cfg, res if res is not None else chosen, out, upd_ms, brk, robust,
-                     fallback, {"online_s": t_online - t_start,
-                                "final_smoothing_s": t_final - t_online},
-                     isam_k, int(seg[-1]) + 1, self.name)
+        times = {"online_s": t_online - t_start, "final_smoothing_s": t_final - t_online}
+        info = estimate_info(P, cfg, res if res is not None else chosen, out, upd_ms, brk,
+                             robust, fallback, times, isam_k, int(seg[-1]) + 1, self.name)
         info["warnings"] += warn
         info.update(relin_counts)
         info["trajectory_source"] = source

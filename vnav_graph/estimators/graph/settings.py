@@ -44,7 +44,7 @@ class GraphConfig:
     partial_relinearization_check: iSAM2 option of that name; wildfire_threshold: iSAM2
     back-substitution threshold (None: GTSAM's 1e-3); see ``docs/graph.md`` for the measured
     per-update latencies; final_rounds: forced-relinearisation updates after the last
-    keyframe (at most; ``isam2._settle``) that make iSAM2's own estimate the smoothed optimum;
+    keyframe (at most; ``relin.settle``) that make iSAM2's own estimate the smoothed optimum;
     final_batch: also run the batch solver from iSAM2's estimate, as the check of it and as
     the fallback when iSAM2's estimate is not at the optimum (``info["final_batch"]``).
     solver: linear algebra of the batch solve — "auto" (the banded-arrow fast path when every
