@@ -216,21 +216,11 @@ class GraphISAM2:
         baro_next = 0
         calib_rw = np.asarray(cfg.calib_rw, float)
 
+        arrays = (rot, pos, vel, bias, cb, gg)
+
         def refresh(keys_k: Any) -> None:
-            est = isam.calculateEstimate(
-                gtsam.KeyVector([kk for k in keys_k for kk in
-                                 ([X(k), V(k), B(k)] + ([C(k)] if has_baro else [])
-                                  + ([G(k)] if P.gm is not None else []))]))
-            for k in keys_k:
-                pose = est.atPose3(X(k))
-                rot[k] = pose.rotation().matrix()
-                pos[k] = pose.translation()
-                vel[k] = est.atVector(V(k))
-                bias[k] = est.atConstantBias(B(k)).vector()
-                if has_baro:
-                    cb[k] = est.atVector(C(k))[0]
-                if P.gm is not None:
-                    gg[k] = est.atVector(G(k))[0]
+            relin.read_states(isam.calculateEstimate(relin.state_keys(keys_k, P)), keys_k,
+                              arrays, P)
 
         for k in range(nk - 1):
             tu = time.perf_counter()
@@ -342,7 +332,7 @@ class GraphISAM2:
                       ures.getVariablesReeliminated(), n_swap)
         # baro samples stamped after the last keyframe whose delayed time is inside the span
         if nk >= 2:
-            st = terms.keyframe_states(P, nk - 2, rot, pos, vel, bias, cb, gg)
+            st = terms.keyframe_states(P, nk - 2, rot, pos, vel, bias, cb, gg, dg_kf)
             new_baro, baro_next = terms.baro_factors(P, nk - 2, st, bias, cal, seg, bt, bz,
                                                      baro_next, pri, last=True)
             if new_baro:
@@ -351,8 +341,8 @@ class GraphISAM2:
                 book.record(tags, isam.update(nf, gtsam.Values()).getNewFactorsIndices())
         t_online = time.perf_counter()
         extra_online = extra_online_of(isam, isam.calculateEstimate(), ext)
-        rounds = relin.settle(isam, book, P, seg, rw_idx, (rot, pos, vel, bias, cb, gg), cal,
-                              bt, bz, dg_kf) if cfg.final_rounds > 0 else []
+        rounds = relin.settle(isam, book, P, seg, rw_idx, arrays, cal, bt, bz,
+                              dg_kf) if cfg.final_rounds > 0 else []
         est = isam.calculateBestEstimate()  # full back-substitution (no wildfire)
         # the Bayes tree is not needed by the final pass: released before it (≈ 210 MB of
         # C++ memory on a 1-hour drive, otherwise alive under the final pass's peak)
@@ -403,13 +393,8 @@ class GraphISAM2:
                 # outage with a MEMS IMU (long-outage seed 1: 100 iterations, 466 m
                 # horizontal RMSE, 202 fixes gated out): solve again from graph-batch's
                 # starting point and keep that solution when it converges or ends lower
-                gate1 = (P.g_use.copy(), P.g_rej_post)
-                res2 = self._from_batch_start(P, init, ext, gate0)
+                res = self._restart(P, init, ext, gate0, res, take_converged=True)
                 restarted = True
-                if res2.converged or res2.cost < res.cost:
-                    res = res2
-                else:
-                    P.g_use[:], P.g_rej_post = gate1
         # iSAM2's own estimate under the batch's cost (after its post-solve GNSS gate: the
         # same fixes), and the choice: iSAM2's own unless the batch pass found a point
         # significantly lower (OWN_GAP_FRACTION)
@@ -433,15 +418,10 @@ class GraphISAM2:
                     # iSAM2's estimate is not the optimum, so it was a poor start too:
                     # the batch pass from graph-batch's start, when it ends lower
                     # (loiter_rtl: 11 m horizontal against 22 m from iSAM2's estimate)
-                    gate1 = (P.g_use.copy(), P.g_rej_post)
-                    res2 = self._from_batch_start(P, init, ext, gate0)
+                    res = self._restart(P, init, ext, gate0, res, take_converged=False)
                     restarted = final_batch["restarted"] = True
-                    if res2.cost < res.cost:
-                        res = res2
-                    else:  # the first pass's gate decisions go with its solution
-                        P.g_use[:], P.g_rej_post = gate1
-                        final_batch.update(cost=float(res.cost), iterations=int(res.iterations),
-                                           stop=res.stop, cost_gap=float(own.cost - res.cost))
+                    final_batch.update(cost=float(res.cost), iterations=int(res.iterations),
+                                       stop=res.stop, cost_gap=float(own.cost - res.cost))
                 chosen, source = res, "final_batch"
                 warn = [f"{self.name}: iSAM2's own smoothed estimate is not at the optimum "
                         f"(cost {own.cost:.1f} against {res.cost:.1f} for the final batch "
@@ -471,6 +451,19 @@ class GraphISAM2:
         return Estimate(self.name, out["trajectory"], provides(drive), out["cov"],
                         out["t_cov"], out["baro"], time.perf_counter() - t_start,
                         online=online_traj, info=info, config=self.config)
+
+    @classmethod
+    def _restart(cls, P: Any, init: tuple[Any, Any, Any], ext: Any, gate0: tuple[Any, int],
+                 res: Any, take_converged: bool) -> Any:
+        """The batch pass again from graph-batch's starting point (``_from_batch_start``);
+        its solution when it ends lower than ``res`` (or, with ``take_converged``, when it
+        converged), else ``res`` with the GNSS gate decisions that went with it."""
+        gate1 = (P.g_use.copy(), P.g_rej_post)
+        res2 = cls._from_batch_start(P, init, ext, gate0)
+        if res2.cost < res.cost or (take_converged and res2.converged):
+            return res2
+        P.g_use[:], P.g_rej_post = gate1
+        return res
 
     @staticmethod
     def _from_batch_start(P: Any, init: tuple[Any, Any, Any], ext: Any,

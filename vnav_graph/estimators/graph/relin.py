@@ -219,23 +219,29 @@ class TermBook:
         return tags, removed
 
 
-def read_all(est: Any, arrays: tuple[Any, ...], cal: dict[int, Any], n_seg: int, P: Any
-              ) -> None:
-    """Every keyframe state and segment calibration of ``est`` into the running arrays."""
+def read_states(est: Any, keys_k: Any, arrays: tuple[Any, ...], P: Any) -> None:
+    """The states of keyframes ``keys_k`` in ``est`` (X, V, B, and C / G when the problem has
+    them) into the running arrays (rot, pos, vel, bias, cb, gg)."""
     rot, pos, vel, bias, cb, gg = arrays
-    for k in range(P.n_kf):
+    has_baro, has_gm = P.drive.baro is not None, P.gm is not None
+    for k in keys_k:
         pose = est.atPose3(X(k))
         rot[k] = pose.rotation().matrix()
         pos[k] = pose.translation()
         vel[k] = est.atVector(V(k))
         bias[k] = est.atConstantBias(B(k)).vector()
-        if P.drive.baro is not None:
+        if has_baro:
             cb[k] = est.atVector(C(k))[0]
-        if P.gm is not None:
+        if has_gm:
             gg[k] = est.atVector(G(k))[0]
-    if P.drive.baro is not None:
-        for j in range(n_seg):
-            cal[j] = est.atVector(K(j))
+
+
+def state_keys(keys_k: Any, P: Any) -> Any:
+    """The keys ``read_states`` reads for keyframes ``keys_k``."""
+    has_baro, has_gm = P.drive.baro is not None, P.gm is not None
+    return gtsam.KeyVector([kk for k in keys_k for kk in
+                            ([X(k), V(k), B(k)] + ([C(k)] if has_baro else [])
+                             + ([G(k)] if has_gm else []))])
 
 
 def settle(isam: Any, book: TermBook, P: Any, seg: Any, rw_idx: list[int],
@@ -266,7 +272,11 @@ def settle(isam: Any, book: TermBook, P: Any, seg: Any, rw_idx: list[int],
         ures = isam.update(nf, gtsam.Values(), removed, gtsam.KeyGroupMap(), None, None, True)
         book.record(tags, ures.getNewFactorsIndices())
         n_relin = int(ures.getVariablesRelinearized())
-        read_all(isam.calculateBestEstimate(), arrays, cal, n_seg, P)
+        est = isam.calculateBestEstimate()
+        read_states(est, everything, arrays, P)
+        if has_baro:
+            for j in range(n_seg):
+                cal[j] = est.atVector(K(j))
         book.pending = book.due(everything, nk - 1, rot, pos, cal if has_baro else None,
                                 all_segments=True)
         out.append([len(tags), n_relin])
