@@ -74,3 +74,18 @@ def test_graph_bridges_an_all_stream_gap_as_well_as_ekf_rts(gap: float) -> None:
         err[name] = (abs(float(dn[2])), float(np.hypot(dn[0], dn[1])))
     assert err["graph-batch"][1] <= err["ekf-rts"][1]
     assert err["graph-batch"][0] <= err["ekf-rts"][0] + 0.02  # the GNSS-free height: a tie
+
+
+@pytest.mark.slow
+def test_isam2_own_estimate_is_checked_at_its_own_states_across_an_imu_gap():
+    """iSAM2's own smoothed estimate is checked under the batch's cost at its own states.
+    ``build_batch_graph`` starts the keyframe after an IMU logging gap at its gap prior; the
+    check took that start instead of iSAM2's estimate there, so every drive with an IMU gap
+    showed a false cost gap and fell back to the batch pass (this drive: 17.5e6 against
+    7285; Loiter_RTL holdout: 6141 against 370). Measured after the fix: 7311 against 7285
+    (n = 2674); Loiter_RTL 370.7 against 370.3, its own estimate kept. The 26 left here is
+    real: iSAM2's estimate is up to 0.5 m from the batch optimum around this 15 s gap (not
+    explained; the fallback still catches it)."""
+    _, d = _with_imu_gap(180.0, 80.0, 95.0)
+    fb = GraphISAM2().run(d).info["final_batch"]
+    assert fb["cost_gap"] < 0.02 * fb["dimension"], fb

@@ -95,6 +95,10 @@ from .magnetometer import initial_heading, kernel_record, one_per_interval
 
 NDArrayInt = Any
 PROVIDES = frozenset({"alt", "vel_d", "pos_h", "vel_h", "att", "baro", "cov"})
+# the initial position is the median of the first START_FIXES fixes, so the filter's
+# estimate before the last of them is not causal (benchmarks/online_accuracy.py scores
+# online estimates from there on)
+START_FIXES = 9
 
 
 @dataclass(frozen=True)
@@ -355,10 +359,10 @@ def _initial_state(drive: Drive, cfg: EkfConfig, model: SensorModel, bp: BaroPri
     if gnss is not None:
         tg = gnss.t - g_latency
         j0 = int(min(np.searchsorted(tg, t[0]), tg.size - 1))
-        # robust start: component-wise median of the first (up to) 9 fixes, so that one
+        # robust start: component-wise median of the first (up to) START_FIXES fixes, so that one
         # outlier cannot become the initial position (the vehicle may move meanwhile: the
         # spread of these fixes is added to the variance below)
-        j9 = min(j0 + 9, tg.size)
+        j9 = min(j0 + START_FIXES, tg.size)
         lla0 = np.median(gnss.lla[j0:j9], axis=0)
         d_n = c0 @ lever
         lla0[2] += d_n[2]  # antenna → IMU, vertical part (heading may be unknown)
