@@ -246,7 +246,7 @@ def state_keys(keys_k: Any, P: Any) -> Any:
 
 def settle(isam: Any, book: TermBook, P: Any, seg: Any, rw_idx: list[int],
             arrays: tuple[Any, ...], cal: dict[int, Any], bt: Any, bz: Any,
-            dg: Any) -> list[list[int]]:
+            dg: Any, tie: bool = True, removed: list[int] | None = None) -> list[list[int]]:
     """Final rounds after the last keyframe, so that iSAM2's own estimate is the smoothed
     optimum of the batch's model: the segments' (s, τd) are tied into one (their random
     walks removed, ``TIE_SD`` between neighbours), then forced-relinearisation updates in
@@ -255,16 +255,21 @@ def settle(isam: Any, book: TermBook, P: Any, seg: Any, rw_idx: list[int],
     cfg = P.cfg
     n_seg = int(seg[-1]) + 1
     nf = gtsam.NonlinearFactorGraph()
-    removed: list[int] = []
-    if P.drive.baro is not None and n_seg > 1:
-        for j in range(1, n_seg):
-            nf.add(gtsam.BetweenFactorVector(K(j - 1), K(j), np.zeros(2), noise(TIE_SD)))
-        removed = list(rw_idx)
+    removed = list(removed or [])
     nk = P.n_kf
     everything = np.arange(nk)
     has_baro = P.drive.baro is not None
     rot, pos, vel, bias, cb, gg = arrays
     tags: list[tuple[Any, ...]] = []
+    if book.pending.size:  # due intervals (the post-solve gate's) rebuilt in the first round
+        # (first in the update: ``record`` pairs the tags with the first new indices)
+        tags, more = book.rebuild(nf, nk - 2, rot, pos, vel, bias, cb, gg,
+                                  cal if has_baro else None, bt, bz, P.pri, dg)
+        removed = sorted(set(removed) | set(more))
+    if tie and has_baro and n_seg > 1:
+        for j in range(1, n_seg):
+            nf.add(gtsam.BetweenFactorVector(K(j - 1), K(j), np.zeros(2), noise(TIE_SD)))
+        removed = sorted(set(removed) | set(rw_idx))
     out: list[list[int]] = []
     for r in range(cfg.final_rounds):
         # an empty constraint map: plain COLAMD for the re-elimination (iSAM2's default
@@ -286,3 +291,57 @@ def settle(isam: Any, book: TermBook, P: Any, seg: Any, rw_idx: list[int],
         tags, removed = book.rebuild(nf, nk - 2, rot, pos, vel, bias, cb, gg,
                                      cal if has_baro else None, bt, bz, P.pri, dg)
     return out
+
+
+def keyframe_fix_factor_indices(isam: Any, P: Any, fixes: np.ndarray) -> list[int]:
+    """iSAM2 factor indices of the keyframe fixes ``fixes`` (without the GNSS height state
+    they enter as ``GPSFactorArm`` on X(k) and a velocity prior on V(k): ``problem.
+    keyframe_fix_factors``; V(k)'s prior is told from another prior by its mean)."""
+    want_x = {int(X(int(P.g_kf[i]))): i for i in fixes}
+    want_v = {int(V(int(P.g_kf[i]))): i for i in fixes}
+    fg = isam.getFactorsUnsafe()
+    out = []
+    for j in range(fg.size()):
+        f = fg.at(j)
+        if f is None or f.size() != 1:
+            continue
+        key = int(f.keys()[0])
+        if key in want_x and isinstance(f, gtsam.GPSFactorArm):
+            out.append(j)
+        elif (key in want_v and P.g_vel is not None and isinstance(f, gtsam.PriorFactorVector)
+              and np.allclose(f.prior(), P.g_vel[want_v[key]])):
+            out.append(j)
+    return out
+
+
+def post_solve_gate(isam: Any, book: TermBook, P: Any, states: Any) -> list[int]:
+    """The batch's post-solve GNSS gate (``solve.gauss_newton``) at iSAM2's estimate, so
+    that its own smoothed estimate uses the fixes the batch would keep: fixes whose χ² at
+    ``states`` (``KeyframeStates`` of the estimate) exceeds the gate are marked unused
+    (``P.g_use``, ``P.g_rej_post``), their intervals are set due (``book.pending``) so the
+    next final rounds rebuild them without the fix; returns the iSAM2 factor indices of the
+    rejected keyframe fixes (to be removed). Empty when nothing (or everything) fails."""
+    from scipy.stats import chi2
+
+    from .problem import gnss_batch_idx, gnss_chi2
+
+    idx = gnss_batch_idx(P)
+    if idx.size == 0 or P.cfg.gnss_gate_prob <= 0:
+        return []
+    c2, dof = gnss_chi2(P, states, idx)
+    bad = c2 > chi2.ppf(1.0 - (1.0 - P.cfg.gnss_gate_prob) ** 2, dof)
+    if not np.any(bad) or np.all(bad):
+        return []
+    rej = idx[bad]
+    P.g_use[rej] = False
+    P.g_rej_post += int(rej.size)
+    pend = []
+    for m, f in enumerate(book.fixes_of):
+        if f.size and np.isin(f, rej).any():
+            book.fixes_of[m] = f[~np.isin(f, rej)]
+            pend.append(m)
+    book.pending = np.unique(np.r_[book.pending, pend]).astype(int)
+    on_kf = rej[P.g_kf[rej] >= 0]
+    if P.gm is None and on_kf.size:
+        return keyframe_fix_factor_indices(isam, P, on_kf)
+    return []
