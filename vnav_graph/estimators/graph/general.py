@@ -5,7 +5,8 @@ keyframes ≥ 2 apart, many extra variables), or when forced (``GraphConfig.solv
 "general"``). The linear system is the ``GaussianFactorGraph`` that ``graph.linearize`` returns
 (every C++ factor, built-in or user-added), plus the interval terms of the custom baro/GNSS
 rows as ≤3-key ``HessianFactor`` pieces of their per-interval information (``hessian_pieces``).
-``GaussianFactorGraph.optimize`` eliminates it (COLAMD ordering, multifrontal Cholesky);
+``GaussianFactorGraph.optimize`` eliminates it (multifrontal Cholesky) in a nested-dissection
+ordering of the keyframe chain built once per solve (``elimination_ordering``);
 the covariances from a sparse LU of the same normal equations (``GeneralCovariance``;
 Dellaert & Kaess 2017 §3–4 for the elimination).
 """
@@ -21,7 +22,14 @@ import numpy as np
 from gtsam.symbol_shorthand import B, C, G, K, X
 
 from ...types import FloatArray
-from .layout import IntervalInfo, Layout, SparsePattern, hessian_diagonal, sparse_pattern
+from .layout import (
+    IntervalInfo,
+    Layout,
+    SparsePattern,
+    hessian_diagonal,
+    sparse_pattern,
+    template_keys,
+)
 
 
 def pair_cover(n: int) -> tuple[tuple[int, ...], ...]:
@@ -137,6 +145,41 @@ def group_pieces(lay: Layout, info: IntervalInfo) -> list[Any]:
     return out
 
 
+ND_LEAF = 8  # keyframes per leaf of the nested dissection (4–16 measured alike)
+
+
+def _dissect(a: int, b: int) -> list[int]:
+    """Keyframes a … b−1 in nested-dissection order: both halves, then the middle one."""
+    if b - a <= ND_LEAF:
+        return list(range(a, b))
+    m = (a + b) // 2
+    return _dissect(a, m) + _dissect(m + 1, b) + [m]
+
+
+def elimination_ordering(lay: Layout) -> Any:
+    """Elimination ordering of the general path: nested dissection of the keyframe chain
+    (the variables of one keyframe separate the intervals before it from those after it:
+    every built-in factor links keyframes k and k+1), then every other variable (the
+    globals, extensions' variables) in column order. Any ordering is exact; a factor that
+    links distant keyframes only adds fill. The keys are the same at every Gauss-Newton
+    iteration, so it is built once per solve (``Layout.ordering``). Measured on the 1-hour
+    hill-drive (3601 keyframes, 32 405 factors), one solve: ``optimize()`` (COLAMD at every
+    call) 0.36 s, METIS ordering 0.17 s (and METIS crashed on an extension's graph), this
+    ordering 0.13 s; steps equal to 1.5e-9."""
+    tmpl = template_keys(lay.nk, lay.has_baro, lay.has_gm)
+    per_kf = len(tmpl) // max(lay.nk, 1)
+    o = gtsam.Ordering()
+    for k in _dissect(0, lay.nk):
+        for key, _, _ in tmpl[k * per_kf:(k + 1) * per_kf]:
+            if key in lay.key_cols:
+                o.push_back(key)
+    chain = {key for key, _, _ in tmpl}
+    for key in sorted((key for key in lay.key_cols if key not in chain),
+                      key=lambda key: lay.key_cols[key][0]):
+        o.push_back(key)
+    return o
+
+
 class GeneralSystem:
     """The linearised graph plus the interval pieces, solved by GTSAM elimination."""
 
@@ -147,6 +190,8 @@ class GeneralSystem:
         for f in group_pieces(lay, info):
             full.push_back(f)
         self.gfg = full
+        if lay.ordering is None:
+            lay.ordering = elimination_ordering(lay)
         self.delta: Any = None
 
     def _diag(self) -> FloatArray:
@@ -165,14 +210,14 @@ class GeneralSystem:
                 unit[n] = gtsam.noiseModel.Unit.Create(n)
             g2.push_back(gtsam.JacobianFactor(key, np.diag(np.sqrt(d[c:c + n])), np.zeros(n),
                                               unit[n]))
-        return g2.optimize()
+        return g2.optimize(self.lay.ordering)
 
     def step(self) -> tuple[Any, float]:
         """Gauss-Newton step (VectorValues) and the decrease ½ δᵀg it predicts (g = −∇ at 0);
         a numerically singular system is retried with growing Marquardt damping, as in the
         banded path."""
         try:
-            delta = self.gfg.optimize()
+            delta = self.gfg.optimize(self.lay.ordering)
         except RuntimeError:
             delta = None
             for mu in (1e-9, 1e-7, 1e-5, 1e-3, 1e-1):

@@ -51,6 +51,7 @@ class Layout:
     globals_: list[int]
     pattern: Any = None  # SparsePattern of the graph last linearised with this layout
     banded: bool | None = None  # path of the solver, decided at the first linearisation
+    ordering: Any = None  # elimination ordering of the general path, computed once
     has_gm: bool = False  # G(k), the GNSS height Gauss-Markov error, in the template
 
     @property
