@@ -349,11 +349,10 @@ class GraphISAM2:
             # without the rejected fixes: its own estimate keeps the fixes the batch keeps
             # (a 15 s IMU gap on hill-drive: 7 fixes the batch gated, a cost gap of 26
             # against the batch pass with them in iSAM2)
-            calib0 = np.zeros(P.n_kf, dtype=int)
             for _ in range(cfg.gate_rounds):
-                vals_g = self._batch_from(P, isam.calculateBestEstimate(), None, pri, seg)[0]
+                k_cal = cal[int(seg[-1])] if has_baro else None
                 kf_rm = relin.post_solve_gate(isam, book, P,
-                                              states_from_values(P, vals_g, calib0))
+                                              relin.estimate_states(P, arrays, k_cal))
                 if not book.pending.size and not kf_rm:
                     break
                 rounds += relin.settle(isam, book, P, seg, rw_idx, arrays, cal, bt, bz,

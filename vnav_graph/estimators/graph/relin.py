@@ -345,3 +345,20 @@ def post_solve_gate(isam: Any, book: TermBook, P: Any, states: Any) -> list[int]
     if P.gm is None and on_kf.size:
         return keyframe_fix_factor_indices(isam, P, on_kf)
     return []
+
+
+def estimate_states(P: Any, arrays: tuple[Any, ...], k_cal: Any) -> gf.KeyframeStates:
+    """``KeyframeStates`` of the running arrays (iSAM2's estimate as ``settle`` last read it)
+    with one (s, τd) ``k_cal``: what ``problem.states_from_values`` gives for the batch's
+    values at that estimate, without building them."""
+    from .problem import gravity_delta
+
+    rot, pos, vel, bias, cb, gg = arrays
+    nk = P.n_kf
+    has_baro = P.drive.baro is not None
+    acc = (np.array([0.0, 0.0, P.g0]) + gravity_delta(P, pos)
+           - 2 * np.cross(P.omega_t, vel))
+    s, tau = ((np.full(nk, float(k_cal[0])), np.full(nk, float(k_cal[1]))) if has_baro
+              else (np.zeros(nk), np.zeros(nk)))
+    return gf.KeyframeStates(rot, pos, vel, bias[:, 0:3], cb if has_baro else np.zeros(nk),
+                             s, tau, acc, gg if P.gm is not None else None)
