@@ -208,20 +208,33 @@ def baro_terms(P: Any, k: int, st: gf.KeyframeStates, bias: Any, cal: dict[int, 
         rw = np.concatenate([rw] + [r for r, _ in extra.values()])
         jw = np.vstack([jw] + [j for _, j in extra.values()])
     groups, lam, eta, _ = gf.group_information(gf.IntervalRows(m_all, rw, jw), 1)
-    return [(int(m), sel[m_of == m], _baro_lcf(int(m), lam[i], eta[i], st, bias, cal, seg))
-            for i, m in enumerate(groups)]
+    ms = [int(m) for m in groups]
+    lin = _baro_lin(ms, st, bias, cal, seg)
+    return [(m, sel[m_of == m], _baro_lcf(m, lam[i], eta[i], lin, seg))
+            for i, m in enumerate(ms)]
 
 
-def _baro_lcf(m: int, lam: Any, eta: Any, st: gf.KeyframeStates, bias: Any,
-              cal: dict[int, Any], seg: Any) -> Any:
+def _baro_lin(ms: list[int], st: gf.KeyframeStates, bias: Any, cal: dict[int, Any],
+              seg: Any) -> Any:
+    """One linearisation point holding the keys of the baro factors of intervals ``ms``
+    (a LinearContainerFactor copies only its own keys from it): each shared keyframe's
+    pose built once instead of once per factor."""
+    lin = gtsam.Values()
+    for k in sorted(set(ms) | {m + 1 for m in ms}):
+        lin.insert(X(k), gtsam.Pose3(gtsam.Rot3(st.rot[k]), st.pos[k]))
+        lin.insert(C(k), np.array([st.baro_bias[k]]))
+    for m in ms:
+        lin.insert(B(m), gtsam.imuBias.ConstantBias(bias[m, 0:3], bias[m, 3:6]))
+    for j in sorted({int(seg[m]) for m in ms}):
+        lin.insert(K(j), np.asarray(cal[j], float))
+    return lin
+
+
+def _baro_lcf(m: int, lam: Any, eta: Any, lin: Any, seg: Any) -> Any:
     """Interval m's baro information (Λ, η over the ``factors`` columns) as its
-    LinearContainerFactor."""
+    LinearContainerFactor, linearised at ``lin`` (``_baro_lin``)."""
     j = int(seg[m])
     cols = np.arange(gf.N_COLS)
     lam_p, eta_p = pad_information(lam, eta, cols, cols, gf.N_COLS + 3)
-    lin = lin_values(m, st, bias)
-    lin.insert(C(m), np.array([st.baro_bias[m]]))
-    lin.insert(C(m + 1), np.array([st.baro_bias[m + 1]]))
-    lin.insert(K(j), np.asarray(cal[j], float))
     return information_factor([X(m), X(m + 1), C(m), C(m + 1), K(j), B(m)], lam_p, eta_p,
                               BARO_BLOCKS, lin)
