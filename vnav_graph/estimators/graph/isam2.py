@@ -79,7 +79,7 @@ from .problem import (
     gnss_gm_factor,
     gravity_delta,
     imu_gaps,
-    keyframe_fix_factors,
+    keyframe_fixes,
     keyframe_poses,
     noise,
     pims_for,
@@ -180,13 +180,13 @@ class GraphISAM2:
         gg = np.zeros(nk)  # the GNSS height error G(k) (GraphConfig.gnss_gm_sd_v), if carried
         cal = {0: np.array([0.0, pri["tau0"]])}
         rot[0], pos[0], vel[0] = rot_i[0], pos_i[0], vel_i[0]
-        graph0, vals0 = first_keyframe(P, rot[0], pos[0], vel[0], cal[0])
+        graph0, vals0, fix_at0 = first_keyframe(P, rot[0], pos[0], vel[0], cal[0])
         if ext is not None:
             fs, nv_ext = ext.at_keyframe(0)
             for f in fs:
                 graph0.add(f)
             vals0.insert(nv_ext)
-        isam.update(graph0, vals0)
+        new0 = isam.update(graph0, vals0).getNewFactorsIndices()
         bt = drive.baro.t if has_baro else np.zeros(0)
         bz = drive.baro.altitude if has_baro else np.zeros(0)
         # the fixes of each interval, once (fixes and keyframes are in time order): strictly
@@ -201,6 +201,7 @@ class GraphISAM2:
             ends = np.split(on_kf, np.searchsorted(np.maximum(P.g_kf[on_kf] - 1, 0), cuts))
             fixes_of = [np.r_[a, b] for a, b in zip(fixes_of, ends, strict=True)]
         book = relin.TermBook(P, seg, fixes_of)
+        book.record_fixes(fix_at0, new0, 0)
         rw_idx: list[int] = []  # iSAM2 indices of the K(j-1) -> K(j) random walks
         rw_at = -1
         dg_kf = np.zeros((nk, 3))  # gravity anomaly at each keyframe, once (terms)
@@ -253,8 +254,10 @@ class GraphISAM2:
             vel[k + 1], bias[k + 1] = nv.atVector(V(k + 1)), bias[k]
             cb[k + 1] = cb[k]
             dt = float(P.t_kf[k + 1] - P.t_kf[k])
+            fix_at: list[tuple[int, int]] = []
             if P.gm is None:
-                for f in keyframe_fix_factors(P, k + 1):
+                for i, f in keyframe_fixes(P, k + 1):
+                    fix_at.append((i, nf.size()))
                     nf.add(f)
             else:  # G(k+1) and its link; the fix on keyframe k+1 ends interval k's rows
                 gg[k + 1] = gg[k] * gm_transition(dt, P.gm.tau_s)
@@ -313,6 +316,7 @@ class GraphISAM2:
                 if rw_at >= 0:
                     rw_idx.append(int(new_idx[len(tags) + rw_at]))
                     rw_at = -1
+                book.record_fixes(fix_at, new_idx, len(tags))
                 marked = relin.marked_keyframes(ures.getMarkedKeys())
                 read = np.r_[np.arange(max(k - 1, 0), k + 2), marked - 1, marked, marked + 1]
                 refresh(np.unique(read[(read >= 0) & (read <= k + 1)]))
@@ -355,7 +359,7 @@ class GraphISAM2:
             # against the batch pass with them in iSAM2)
             for _ in range(cfg.gate_rounds):
                 k_cal = cal[int(seg[-1])] if has_baro else None
-                kf_rm = relin.post_solve_gate(isam, book, P,
+                kf_rm = relin.post_solve_gate(book, P,
                                               relin.estimate_states(P, arrays, k_cal))
                 if not book.pending.size and not kf_rm:
                     break

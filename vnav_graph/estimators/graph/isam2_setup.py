@@ -12,7 +12,7 @@ from gtsam.symbol_shorthand import B, C, G, K, V, X
 
 from .batch import solver_warnings, value_of
 from .extend import Collected, key_name
-from .problem import keyframe_fix_factors, prior_factors
+from .problem import keyframe_fixes, prior_factors
 from .settings import GraphConfig
 
 
@@ -129,8 +129,10 @@ def extra_online_of(isam: Any, est: Any, ext: Collected | None) -> dict[str, dic
     return out
 
 
-def first_keyframe(P: Any, r0: Any, p0: Any, v0: Any, k0: Any) -> tuple[Any, Any]:
-    """Factors (priors, fixes) and values of keyframe 0 for the first iSAM2 update."""
+def first_keyframe(P: Any, r0: Any, p0: Any, v0: Any, k0: Any
+                   ) -> tuple[Any, Any, list[tuple[int, int]]]:
+    """Factors (priors, fixes) and values of keyframe 0 for the first iSAM2 update, and
+    (fix index, position in that graph) of its keyframe-fix factors."""
     graph0 = prior_factors(P, r0, p0, v0, P.pri, K(0))
     vals0 = gtsam.Values()
     vals0.insert(X(0), gtsam.Pose3(gtsam.Rot3(r0), p0))
@@ -141,10 +143,12 @@ def first_keyframe(P: Any, r0: Any, p0: Any, v0: Any, k0: Any) -> tuple[Any, Any
         vals0.insert(K(0), k0)
     if P.gm is not None:
         vals0.insert(G(0), np.zeros(1))
-    else:  # with G(k), keyframe fixes enter as rows of the interval they end (terms)
-        for f in keyframe_fix_factors(P, 0):
+    fix_at: list[tuple[int, int]] = []
+    if P.gm is None:  # with G(k), keyframe fixes enter as rows of the interval they end
+        for i, f in keyframe_fixes(P, 0):
+            fix_at.append((i, graph0.size()))
             graph0.add(f)
-    return graph0, vals0
+    return graph0, vals0, fix_at
 
 
 def isam2_params(cfg: GraphConfig, robust: bool, ext: Collected | None = None) -> Any:

@@ -289,15 +289,17 @@ def prior_factors(P: Problem, r0: FloatArray, p0: FloatArray, v0: FloatArray,
     return g
 
 
-def keyframe_fix_factors(P: Problem, k: int) -> list[Any]:
+def keyframe_fixes(P: Problem, k: int) -> list[tuple[int, Any]]:
+    """The used fixes on keyframe k's epoch as C++ factors, each with its fix index:
+    ``GPSFactorArm`` on X(k) and, with GNSS velocity and no lever arm, a prior on V(k)."""
     out = []
+    cfg = P.cfg
     for i in np.flatnonzero((P.g_kf == k) & P.g_use):
-        cfg = P.cfg
-        out.append(gtsam.GPSFactorArm(X(k), P.g_pos[i], P.lever, robust_noise(
-            noise(P.g_pos_sd[i]), cfg.loss_gnss_pos, cfg.loss_threshold_sd[0])))
+        out.append((int(i), gtsam.GPSFactorArm(X(k), P.g_pos[i], P.lever, robust_noise(
+            noise(P.g_pos_sd[i]), cfg.loss_gnss_pos, cfg.loss_threshold_sd[0]))))
         if P.g_vel is not None and P.g_vel_sd is not None and not np.any(P.lever):
-            out.append(gtsam.PriorFactorVector(V(k), P.g_vel[i], robust_noise(
-                noise(P.g_vel_sd[i]), cfg.loss_gnss_vel, cfg.loss_threshold_sd[1])))
+            out.append((int(i), gtsam.PriorFactorVector(V(k), P.g_vel[i], robust_noise(
+                noise(P.g_vel_sd[i]), cfg.loss_gnss_vel, cfg.loss_threshold_sd[1]))))
     return out
 
 
@@ -409,10 +411,37 @@ def states_from_values(P: Problem, vals: Any, calib_of_kf: np.ndarray) -> gf.Key
         cb = np.zeros(nk)
         s = np.zeros(nk)
         tau = np.zeros(nk)
-    dg = gravity_delta(P, pos)
-    acc = np.array([0.0, 0.0, P.g0]) + dg - 2 * np.cross(P.omega_t, vel)
     g_gm = gtsam.utilities.extractVectors(vals, "g")[:, 0] if P.gm is not None else None
-    return gf.KeyframeStates(rot, pos, vel, ba, cb, s, tau, acc, g_gm)
+    return gf.KeyframeStates(rot, pos, vel, ba, cb, s, tau, nav_accel(P, pos, vel), g_gm)
+
+
+def nav_accel(P: Problem, pos: FloatArray, vel: FloatArray,
+              dg: FloatArray | None = None) -> FloatArray:
+    """The kinematic acceleration the interval terms expect at rest in the tangent frame:
+    gravity (γ(origin) plus the anomaly ``dg`` at ``pos``, computed when not given) minus
+    the Coriolis term 2Ω×v, per keyframe."""
+    g = gravity_delta(P, pos) if dg is None else dg
+    return np.array([0.0, 0.0, P.g0]) + g - 2 * np.cross(P.omega_t, vel)
+
+
+def post_solve_rejections(P: Problem, st: gf.KeyframeStates) -> np.ndarray:
+    """The post-solve GNSS gate at the states ``st``: the used fixes whose whitened residual
+    χ² exceeds the squared tail probability of ``gnss_gate_prob`` (a false rejection costs a
+    whole re-solve, a glitch has χ² in the thousands either way). They are marked unused
+    (``P.g_use``) and counted (``P.g_rej_post``); returns them, empty when none or every one
+    fails (or gating is off)."""
+    from scipy.stats import chi2
+
+    idx = gnss_batch_idx(P)
+    if idx.size == 0 or P.cfg.gnss_gate_prob <= 0:
+        return idx[:0]
+    c2, dof = gnss_chi2(P, st, idx)
+    bad = c2 > chi2.ppf(1.0 - (1.0 - P.cfg.gnss_gate_prob) ** 2, dof)
+    if not np.any(bad) or np.all(bad):
+        return idx[:0]
+    P.g_use[idx[bad]] = False
+    P.g_rej_post += int(bad.sum())
+    return idx[bad]
 
 
 def gnss_batch_idx(P: Problem) -> np.ndarray:

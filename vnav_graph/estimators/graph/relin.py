@@ -35,7 +35,7 @@ from gtsam.symbol_shorthand import B, C, G, K, V, X
 
 from . import factors as gf
 from . import terms
-from .problem import noise
+from .problem import nav_accel, noise, post_solve_rejections
 
 # relinearisation thresholds of K = (s, τd) for the interval terms: the linearisation error
 # of (1 + s)·h is δs·δh (≤ 1 cm for δh ≤ 1 m at δs = 0.01), that of h(t_s − τd) is
@@ -83,6 +83,8 @@ class TermBook:
         else:
             self.thr = (cfg.relinearize_typed[0], cfg.relinearize_typed[1])
         self.pending = np.zeros(0, dtype=int)
+        # iSAM2 indices of each keyframe fix's factors (fix index → indices; ``record_fixes``)
+        self.kf_fix_idx: dict[int, list[int]] = {}
         self.relinearized = 0  # interval terms rebuilt and swapped in
         self.swapped_factors = 0  # iSAM2 factors removed by those swaps
 
@@ -107,6 +109,12 @@ class TermBook:
             if tag[0] in ("b", "gb"):
                 self.baro_idx[tag[1]].append(int(idx))
                 self.baro_of[tag[1]].append(tag[2])
+
+    def record_fixes(self, fix_at: list[tuple[int, int]], new_idx: Any, offset: int) -> None:
+        """Factor indices of keyframe fixes just added: ``fix_at`` holds (fix index, position
+        in the update's graph after its first ``offset`` factors)."""
+        for i, at in fix_at:
+            self.kf_fix_idx.setdefault(i, []).append(int(new_idx[offset + at]))
 
     def new_terms(self, m_g: int, gcf: Any, baro: list[tuple[int, np.ndarray, Any]],
                   st: gf.KeyframeStates, cal: dict[int, Any] | None,
@@ -293,71 +301,34 @@ def settle(isam: Any, book: TermBook, P: Any, seg: Any, rw_idx: list[int],
     return out
 
 
-def keyframe_fix_factor_indices(isam: Any, P: Any, fixes: np.ndarray) -> list[int]:
-    """iSAM2 factor indices of the keyframe fixes ``fixes`` (without the GNSS height state
-    they enter as ``GPSFactorArm`` on X(k) and a velocity prior on V(k): ``problem.
-    keyframe_fix_factors``; V(k)'s prior is told from another prior by its mean)."""
-    want_x = {int(X(int(P.g_kf[i]))): i for i in fixes}
-    want_v = {int(V(int(P.g_kf[i]))): i for i in fixes}
-    fg = isam.getFactorsUnsafe()
-    out = []
-    for j in range(fg.size()):
-        f = fg.at(j)
-        if f is None or f.size() != 1:
-            continue
-        key = int(f.keys()[0])
-        if key in want_x and isinstance(f, gtsam.GPSFactorArm):
-            out.append(j)
-        elif (key in want_v and P.g_vel is not None and isinstance(f, gtsam.PriorFactorVector)
-              and np.allclose(f.prior(), P.g_vel[want_v[key]])):
-            out.append(j)
-    return out
-
-
-def post_solve_gate(isam: Any, book: TermBook, P: Any, states: Any) -> list[int]:
+def post_solve_gate(book: TermBook, P: Any, states: Any) -> list[int]:
     """The batch's post-solve GNSS gate (``solve.gauss_newton``) at iSAM2's estimate, so
     that its own smoothed estimate uses the fixes the batch would keep: fixes whose χ² at
     ``states`` (``KeyframeStates`` of the estimate) exceeds the gate are marked unused
     (``P.g_use``, ``P.g_rej_post``), their intervals are set due (``book.pending``) so the
     next final rounds rebuild them without the fix; returns the iSAM2 factor indices of the
-    rejected keyframe fixes (to be removed). Empty when nothing (or everything) fails."""
-    from scipy.stats import chi2
-
-    from .problem import gnss_batch_idx, gnss_chi2
-
-    idx = gnss_batch_idx(P)
-    if idx.size == 0 or P.cfg.gnss_gate_prob <= 0:
+    rejected keyframe fixes (``TermBook.kf_fix_idx``), to be removed. Empty when nothing (or
+    everything) fails."""
+    rej = post_solve_rejections(P, states)
+    if not rej.size:
         return []
-    c2, dof = gnss_chi2(P, states, idx)
-    bad = c2 > chi2.ppf(1.0 - (1.0 - P.cfg.gnss_gate_prob) ** 2, dof)
-    if not np.any(bad) or np.all(bad):
-        return []
-    rej = idx[bad]
-    P.g_use[rej] = False
-    P.g_rej_post += int(rej.size)
     pend = []
     for m, f in enumerate(book.fixes_of):
         if f.size and np.isin(f, rej).any():
             book.fixes_of[m] = f[~np.isin(f, rej)]
             pend.append(m)
     book.pending = np.unique(np.r_[book.pending, pend]).astype(int)
-    on_kf = rej[P.g_kf[rej] >= 0]
-    if P.gm is None and on_kf.size:
-        return keyframe_fix_factor_indices(isam, P, on_kf)
-    return []
+    return [j for i in rej[P.g_kf[rej] >= 0] for j in book.kf_fix_idx.pop(int(i), [])]
 
 
 def estimate_states(P: Any, arrays: tuple[Any, ...], k_cal: Any) -> gf.KeyframeStates:
     """``KeyframeStates`` of the running arrays (iSAM2's estimate as ``settle`` last read it)
     with one (s, τd) ``k_cal``: what ``problem.states_from_values`` gives for the batch's
     values at that estimate, without building them."""
-    from .problem import gravity_delta
-
     rot, pos, vel, bias, cb, gg = arrays
     nk = P.n_kf
     has_baro = P.drive.baro is not None
-    acc = (np.array([0.0, 0.0, P.g0]) + gravity_delta(P, pos)
-           - 2 * np.cross(P.omega_t, vel))
+    acc = nav_accel(P, pos, vel)
     s, tau = ((np.full(nk, float(k_cal[0])), np.full(nk, float(k_cal[1]))) if has_baro
               else (np.zeros(nk), np.zeros(nk)))
     return gf.KeyframeStates(rot, pos, vel, bias[:, 0:3], cb if has_baro else np.zeros(nk),

@@ -23,9 +23,8 @@ from .layout import (
 )
 from .problem import (
     Problem,
-    gnss_batch_idx,
-    gnss_chi2,
     interval_rows,
+    post_solve_rejections,
     states_from_values,
 )
 
@@ -198,22 +197,10 @@ def gauss_newton(P: Problem, graph: Any, vals: Any, calib_of_kf: np.ndarray,
     res = gn_core(P, lay, graph, vals, calib_of_kf, pri)
     if P.cfg.gnss_gate_prob <= 0:
         return res
-    from scipy.stats import chi2
-
     iters = res.iterations
     for _ in range(P.cfg.gate_rounds):
-        idx = gnss_batch_idx(P)
-        if idx.size == 0:
+        if not post_solve_rejections(P, states_from_values(P, res.values, calib_of_kf)).size:
             break
-        st = states_from_values(P, res.values, calib_of_kf)
-        c2, dof = gnss_chi2(P, st, idx)
-        # post-solve gate at the squared tail probability: a false rejection costs a whole
-        # re-solve, a glitch has χ² in the thousands either way
-        bad = c2 > chi2.ppf(1.0 - (1.0 - P.cfg.gnss_gate_prob) ** 2, dof)
-        if not np.any(bad) or np.all(bad):
-            break
-        P.g_use[idx[bad]] = False
-        P.g_rej_post += int(bad.sum())
         res = gn_core(P, lay, graph, res.values, calib_of_kf, pri)
         iters += res.iterations
     res.iterations = iters

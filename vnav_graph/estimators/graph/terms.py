@@ -16,7 +16,7 @@ from gtsam.symbol_shorthand import B, C, G, K, X
 from ...types import FloatArray
 from . import factors as gf
 from .general import hessian_pieces, pad_information
-from .problem import gravity_delta
+from .problem import nav_accel
 from .robust import reweight
 
 # key blocks (first column, width) of the factors, in their padded columns (B's gyro part
@@ -57,9 +57,7 @@ def keyframe_states(P: Any, k: int | list[int], rot: Any, pos: Any, vel: Any, bi
     else:  # rebuilt intervals (relin): their neighbours too (a sample's t_d may move)
         ks = np.asarray(k, dtype=int)
         kk = np.unique(np.clip((ks[:, None] + np.arange(-3, 2)).ravel(), 0, nk - 2))
-    st.accel_t[kk] = (np.array([0.0, 0.0, P.g0])
-                      + (gravity_delta(P, pos[kk]) if dg is None else dg[kk])
-                      - 2 * np.cross(P.omega_t, vel[kk]))
+    st.accel_t[kk] = nav_accel(P, pos[kk], vel[kk], None if dg is None else dg[kk])
     return st
 
 
