@@ -382,11 +382,13 @@ class GraphISAM2:
                 t_online: float, online: Any, ext: Any, robust: bool, fallback: str | None,
                 t_start: float, init: tuple[Any, Any, Any], pims: list[Any], seg: Any,
                 upd_ms: Any, brk: Any, relin_counts: dict[str, Any],
-                gate0: tuple[Any, int] | None = None) -> Estimate:
+                gate0: tuple[Any, int]) -> Estimate:
         """After the online pass and the final rounds (``est``: iSAM2's estimate,
         ``extra_online``: its new variables after the last keyframe, read at ``t_online``):
         the online trajectory, iSAM2's own smoothed estimate with its covariances and, with
-        ``final_batch``, the batch pass started from it as its check; the Estimate."""
+        ``final_batch``, the batch pass started from it as its check; the Estimate.
+        ``gate0``: ``P.g_use`` and ``P.g_rej_post`` before iSAM2's own post-solve gate, where
+        a restart from graph-batch's start begins."""
         pri = P.pri
         has_baro = drive.baro is not None
         rot_i, pos_i, vel_i = init
@@ -410,8 +412,6 @@ class GraphISAM2:
                     ext.add_to_batch(graph, res_vals)
             else:
                 graph, res_vals = own_graph, own_vals
-            if gate0 is None:
-                gate0 = (P.g_use.copy(), P.g_rej_post)
             res = gauss_newton(P, graph, res_vals, calib0, pri)
             if not robust and not res.converged:
                 # the online estimate can sit outside Gauss-Newton's basin after a long
@@ -517,7 +517,7 @@ class GraphISAM2:
         return Trajectory(P.t_kf, lla, vel_n, q)
 
     @staticmethod
-    def _batch_from(P: Any, est: Any, pims: list[Any] | None, pri: dict[str, float],
+    def _batch_from(P: Any, est: Any, pims: list[Any], pri: dict[str, float],
                     seg: Any) -> tuple[Any, Any]:
         nk = P.n_kf
         rot, pos = keyframe_poses(est, nk)
