@@ -127,7 +127,7 @@ def builtin_floor(drive: Any) -> float:
         vals.insert(V(k), vel[k])
         vals.insert(B(k), gtsam.imuBias.ConstantBias())
         vals.insert(C(k), 0.0)
-        for f in problem.keyframe_fix_factors(P, k):
+        for _, f in problem.keyframe_fixes(P, k):
             graph.add(f)
         graph.add(gtsam.BarometricFactor(X(k), C(k), float(p_kpa[k]), baro_noise))
         if k + 1 < P.n_kf:
