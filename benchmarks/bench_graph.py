@@ -11,7 +11,8 @@ general_over_floor`` and (additive) ``peak_rss_mb_by_stage``, ``isam2_relineariz
   GNSS fixes, custom terms linearised in numpy each iteration). Shared set-up (initial
   values, IMU preintegration) and the marginal covariances are not included in either
   timing.
-- ``builtin_floor_s``: the same keyframes, the same preintegrated IMU factors, GPS factors
+- ``builtin_floor_s``: the same keyframes, the same preintegrated IMU factors (``ImuFactor``
+  and the biases' random walk as ``BetweenFactorConstantBias``), GPS factors
   at keyframe epochs and GTSAM's ``BarometricFactor`` (pressure in kPa, +z up: the altitude
   is fed mirrored because the graph is NED; bias only, one baro sample per keyframe, bias
   random walk as ``BetweenFactorDouble``) — only C++ factors — solved with GTSAM's
@@ -120,6 +121,8 @@ def builtin_floor(drive: Any) -> float:
     graph.add(gtsam.PriorFactorDouble(C(0), 0.0, problem.noise([pri["b_sd"]])))
     vals = gtsam.Values()
     baro_noise = problem.noise([pri["noise"]])
+    q_b = np.r_[np.diag(P.params.getBiasAccCovariance()),
+                np.diag(P.params.getBiasOmegaCovariance())]
     # NED graph, +z-up factor: feed the pressure of the mirrored height −(h − h0)
     p_kpa = isa_pressure(-(alt[j] - P.h0)) / 1000.0
     for k in range(P.n_kf):
@@ -131,9 +134,11 @@ def builtin_floor(drive: Any) -> float:
             graph.add(f)
         graph.add(gtsam.BarometricFactor(X(k), C(k), float(p_kpa[k]), baro_noise))
         if k + 1 < P.n_kf:
-            graph.add(gtsam.CombinedImuFactor(X(k), V(k), X(k + 1), V(k + 1), B(k), B(k + 1),
-                                              pims[k]))
             dt = float(P.t_kf[k + 1] - P.t_kf[k])
+            # the graph's IMU factor and the biases' random walk (without the scale factors)
+            graph.add(gtsam.ImuFactor(X(k), V(k), X(k + 1), V(k + 1), B(k), pims[k]))
+            graph.add(gtsam.BetweenFactorConstantBias(
+                B(k), B(k + 1), gtsam.imuBias.ConstantBias(), problem.noise(np.sqrt(q_b * dt))))
             graph.add(gtsam.BetweenFactorDouble(
                 C(k), C(k + 1), 0.0, problem.noise([pri["b_sd"] * np.sqrt(2 * dt / pri["b_tau"])])))
     params = gtsam.LevenbergMarquardtParams()

@@ -16,19 +16,24 @@ latency and a Gauss-Markov bias. The consumer IMU is used with its gyro noise (t
 ideal gyro made ``graph-batch`` fail at commit f1679ea, see the last-but-one test).
 
 The vertical state per keyframe k is x_k = (p_k down [m], v_k down [m/s], a_k accel bias z
-[m/s²], b_k baro bias [m]) plus the constants (s, τd). The Kalman filter written here runs on
+[m/s²], b_k baro bias [m]) plus the constants (s, τd, κ) — κ the z accelerometer scale
+factor, which the graph carries (the consumer IMU has a 0.1 % scale σ, ``problem.AccelScale``):
+a_k is then the graph's effective bias of interval k, b_a + ā_k·κ with ā_k the interval's mean
+measured specific force (z). The Kalman filter written here runs on
 the keyframe grid with the augmented state (x_k, s, τd, p_{k−1}, b_{k−1}, a_{k−1}) so that a
 baro sample between keyframes k−1 and k — which the graph predicts from both keyframes
 through its IMU-shaped interpolant — is an ordinary measurement of the state. Its factors:
 
 - priors on the first keyframe as the graph documents them: height σ 10 m and vertical
-  velocity σ 2 m/s around the GNSS-initialised state, accel bias N(0, σ_a²) from the IMU spec,
-  b_0 ~ N(0, σ_b²), (s, τd) ~ N((0, τ0), diag(σ_s², σ_τ²)) from the baro spec;
-- the process x_k → x_{k+1}: the vertical rows (pos z, vel z, accel-bias z) of GTSAM's
-  ``CombinedImuFactor``, rebuilt here from the drive with the documented preintegration
-  policy (a C++ factor, not project code: its residual and its exactly linear
-  dependence on the vertical variables are read off by central differences, its noise is the
-  (pos z, vel z, bias z) block of the factor's noise model), and the Gauss-Markov link
+  velocity σ 2 m/s around the GNSS-initialised state, the true accel bias a_0 − ā_0·κ ~
+  N(0, σ_a²) and κ ~ N(0, σ_κ²) from the IMU spec, b_0 ~ N(0, σ_b²), (s, τd) ~ N((0, τ0),
+  diag(σ_s², σ_τ²)) from the baro spec;
+- the process x_k → x_{k+1}: the vertical rows (pos z, vel z) of GTSAM's ``ImuFactor``,
+  rebuilt here from the drive with the documented preintegration policy (a C++ factor, not
+  project code: its residual and its exactly linear dependence on the vertical variables are
+  read off by central differences, its noise is the (pos z, vel z) block of the factor's
+  noise model), the bias random walk a_{k+1} − a_k − (ā_{k+1} − ā_k)·κ = w, var w = q_a T,
+  q_a = 2σ_a²/τ_a + rw_a² (written here from the spec), and the Gauss-Markov link
   b_{k+1} = φ b_k + w, φ = e^{−T/τ_b}, var w = σ_b²(1 − e^{−2T/τ_b}), written here from
   ``sensors.noise``;
 - GNSS heights: vertical row of the GNSS factor on the keyframe;
@@ -81,10 +86,10 @@ from vnav_graph.simulation.scenario import load_scenario, simulate
 DURATION_S = 90.0
 SEED = 4
 # augmented KF state
-IP, IV, IA, IB, IS, IT, IPP, IBP, IAP = range(9)
-NS = 9
-# rows of CombinedImuFactor's 15-vector error / preintMeasCov: (rot, pos, vel, bias acc, gyro)
-ROW_PZ, ROW_VZ, ROW_AZ = 5, 8, 11
+IP, IV, IA, IB, IS, IT, IPP, IBP, IAP, IK = range(10)
+NS = 10
+# rows of ImuFactor's 9-vector error / preintMeasCov: (rot, pos, vel)
+ROW_PZ, ROW_VZ = 5, 8
 
 
 def _scenario(imu=None):
@@ -163,6 +168,18 @@ class VerticalProblem:
         self.R = np.einsum("kij,kjl->kil", c_tn, quat_to_mat(tr.q_nb[on]))
         vel = np.einsum("kij,kj->ki", c_tn, tr.vel_n[on])
         ba, bg = tr.bias_accel[on], tr.bias_gyro[on]
+        # the graph's accelerometer scale factors: B(k) holds b_a + diag(ā_k)·k_a (the
+        # trajectory reports b_a)
+        self.scale = bool(est.info["accel_scale_estimated"])
+        self.ka = np.asarray(est.info["accel_scale"]) if self.scale else np.zeros(3)
+        self.f_mean = np.zeros((nk, 3))
+        dt = np.diff(imu.t)
+        fm_all = 0.5 * (imu.accel_b[:-1] + imu.accel_b[1:])
+        for k in range(nk - 1):
+            j0, j1 = int(kf_idx[k]), int(kf_idx[k + 1])
+            self.f_mean[k] = (fm_all[j0:j1] * dt[j0:j1, None]).sum(0) / dt[j0:j1].sum()
+        self.f_mean[-1] = self.f_mean[-2]
+        ba = ba + self.f_mean * self.ka
         self.b_hat = tr.bias_baro[on]
         self.s_hat, self.tau_hat = est.baro.scale.est, est.baro.latency_s.est
         self.bias_lag = float(est.info["baro_bias_lag_s"])
@@ -184,34 +201,42 @@ class VerticalProblem:
         sp = imu.spec
         g_ned = lla_to_ned(drive.gnss.lla, origin)
         self.prior = {"p": (float(np.interp(t_kf[0], drive.gnss.t, g_ned[:, 2])), 10.0),
-                      "v": (0.0, 2.0), "a": (0.0, sp.accel_bias_sd)}
-        # process: vertical rows of CombinedImuFactor
-        par = gtsam.PreintegrationCombinedParams.MakeSharedD(g0)
+                      "v": (0.0, 2.0), "a": (0.0, sp.accel_bias_sd),
+                      "k": (0.0, sp.accel_scale_sd if self.scale else 0.0)}
+        # process: vertical rows of ImuFactor and the bias random walk
+        par = gtsam.PreintegrationParams.MakeSharedD(g0)
         par.setAccelerometerCovariance(np.eye(3) * sp.accel_noise_density**2)
         par.setGyroscopeCovariance(np.eye(3) * sp.gyro_noise_density**2)
         par.setIntegrationCovariance(np.eye(3) * 1e-8)
-        par.setBiasAccCovariance(np.eye(3) * (2 * sp.accel_bias_sd**2 / sp.accel_bias_tau
-                                              + sp.accel_bias_rw**2))
-        par.setBiasOmegaCovariance(np.eye(3) * (2 * sp.gyro_bias_sd**2 / sp.gyro_bias_tau
-                                                + sp.gyro_bias_rw**2))
         par.setOmegaCoriolis(omega_t)
-        idx = [ROW_PZ, ROW_VZ, ROW_AZ]
+        q_a = 2 * sp.accel_bias_sd**2 / sp.accel_bias_tau + sp.accel_bias_rw**2
+        idx = [ROW_PZ, ROW_VZ]
         self.imu = []
         for k in range(nk - 1):
             j0, j1 = int(kf_idx[k]), int(kf_idx[k + 1])
             fm = 0.5 * (imu.accel_b[j0:j1] + imu.accel_b[j0 + 1:j1 + 1])
             fm = fm + np.einsum("nji,j->ni", self.dense.dr[j0:j1], self.R[k].T @ dg[k])
             wm = 0.5 * (imu.gyro_b[j0:j1] + imu.gyro_b[j0 + 1:j1 + 1])
-            pim = gtsam.PreintegratedCombinedMeasurements(par, gtsam.imuBias.ConstantBias())
+            pim = gtsam.PreintegratedImuMeasurements(par, gtsam.imuBias.ConstantBias())
             for a, w, dt in zip(fm, wm, np.diff(imu.t[j0:j1 + 1]), strict=True):
                 pim.integrateMeasurement(a, w, dt)
-            f = gtsam.CombinedImuFactor(X(k), V(k), X(k + 1), V(k + 1), B(k), B(k + 1), pim)
-            var = [("p", k), ("v", k), ("a", k), ("p", k + 1), ("v", k + 1), ("a", k + 1)]
-            e0, jac = _vertical_rows(f, vals, idx, var)
-            # the factor's own noise model: its nav/bias cross-covariance has the opposite sign
-            # of pim.preintMeasCov() (the factor's bias error is b_i − b_j)
-            cov = f.noiseModel().covariance()[np.ix_(idx, idx)]
-            self.imu.append((e0, jac[:, :3], jac[:, 3:], cov))
+            f = gtsam.ImuFactor(X(k), V(k), X(k + 1), V(k + 1), B(k), pim)
+            var = [("p", k), ("v", k), ("a", k), ("p", k + 1), ("v", k + 1)]
+            e_i, j_i = _vertical_rows(f, vals, idx, var)
+            # rows (pos z, vel z, bias link z) on x_k = (p, v, a)_k, x_k+1 and κ
+            e0 = np.r_[e_i, ba[k + 1, 2] - ba[k, 2]
+                       - (self.f_mean[k + 1, 2] - self.f_mean[k, 2]) * self.ka[2]]
+            jk = np.zeros((3, 3))
+            jk[:2] = j_i[:, :3]
+            jk[2, 2] = -1.0
+            jk1 = np.zeros((3, 3))
+            jk1[:2, :2] = j_i[:, 3:]
+            jk1[2, 2] = 1.0
+            j_kappa = np.array([0.0, 0.0, -(self.f_mean[k + 1, 2] - self.f_mean[k, 2])])
+            cov = np.zeros((3, 3))
+            cov[:2, :2] = f.noiseModel().covariance()[np.ix_(idx, idx)]
+            cov[2, 2] = q_a * self.T[k]
+            self.imu.append((e0, jk, jk1, cov, j_kappa))
         # GNSS heights: all fixes sit on keyframe epochs (asserted in a test)
         gt = drive.gnss.t
         kg = np.searchsorted(t_kf, gt)
@@ -271,11 +296,17 @@ def kf_rts(vp: VerticalProblem, gm_var_factor: float = 1.0, baro_accel_bias: boo
     m = np.zeros(NS)
     cov = np.diag([1.0] * NS)
     # priors of the first keyframe, as corrections δ to the linearisation point
-    x0 = {"p": vp.st.pos[0, 2], "v": vp.st.vel[0, 2], "a": vp.st.bias_accel[0, 2]}
-    for kind, i in (("p", IP), ("v", IV), ("a", IA)):
+    x0 = {"p": vp.st.pos[0, 2], "v": vp.st.vel[0, 2], "a": vp.st.bias_accel[0, 2],
+          "k": vp.ka[2]}
+    for kind, i in (("p", IP), ("v", IV), ("a", IA), ("k", IK)):
         mean, sd = vp.prior[kind]
         m[i] = mean - x0[kind]
         cov[i, i] = sd**2
+    # the prior is on the true bias a_0 − ā_0·κ: a_0 = ā_0·κ + n
+    f0 = vp.f_mean[0, 2]
+    m[IA] = f0 * (m[IK] + x0["k"]) - x0["a"]
+    cov[IA, IA] += f0**2 * cov[IK, IK]
+    cov[IA, IK] = cov[IK, IA] = f0 * cov[IK, IK]
     m[IB] = 0.0 - vp.b_hat[0]
     cov[IB, IB] = pri["b_sd"] ** 2
     m[IS] = 0.0 - vp.s_hat
@@ -304,13 +335,15 @@ def kf_rts(vp: VerticalProblem, gm_var_factor: float = 1.0, baro_accel_bias: boo
     sd_b = pri["noise"]
     mf, pf, mp, pp, fs = [m], [cov], [None], [None], [None]
     for k in range(nk - 1):
-        e0, jk, jk1, q = vp.imu[k]
+        e0, jk, jk1, q, j_kappa = vp.imu[k]
         inv = np.linalg.inv(jk1)
         f = np.zeros((NS, NS))
         u = np.zeros(NS)
         qq = np.zeros((NS, NS))
         sl = [IP, IV, IA]
         f[np.ix_(sl, sl)] = -inv @ jk
+        f[sl, IK] = -inv @ j_kappa
+        f[IK, IK] = 1.0
         u[sl] = -inv @ e0
         qq[np.ix_(sl, sl)] = inv @ q @ inv.T
         phi = float(gm_transition(vp.T[k], pri["b_tau"]))
@@ -346,6 +379,7 @@ def problem():
     drive = simulate(_scenario(), SEED)
     est = g.GraphBatch().run(drive)
     vp = VerticalProblem(drive, est)
+    assert vp.scale  # the consumer IMU's scale σ: the graph carries κ (the KF needs σ_κ > 0)
     return drive, est, vp, kf_rts(vp)
 
 
@@ -356,17 +390,19 @@ def _cov_keyframes(est, vp):
 
 
 def test_graph_mean_equals_kf_rts(problem):
-    """δ = x_KF/RTS − x_graph is zero to 2 % of σ for heights, velocities, biases, s, τd."""
+    """δ = x_KF/RTS − x_graph is zero to 2 % of σ for heights, velocities, biases, s, τd and
+    the z accelerometer scale factor κ."""
     _, _, vp, (ms, ps) = problem
     sd = np.sqrt(np.einsum("kii->ki", ps))
-    z = np.abs(ms[:, :6]) / sd[:, :6]
+    z = np.abs(ms[:, [*range(6), IK]]) / sd[:, [*range(6), IK]]
     # GN stopping tolerance bounds the remaining step by ≈ 0.014 σ (module docstring)
     assert z.max() < 0.02, (np.unravel_index(z.argmax(), z.shape), z.max())
 
 
 def test_graph_covariance_equals_kf_rts(problem):
-    """Posterior σ of height, baro bias (per keyframe), scale and latency: graph marginals
-    (Estimate.cov / Estimate.baro) equal the RTS covariances to 0.1 %."""
+    """Posterior σ of height, baro bias (per keyframe), scale, latency and κ: graph marginals
+    (Estimate.cov / Estimate.baro / info["accel_scale_sd"]) equal the RTS covariances to
+    0.1 %."""
     _, est, vp, (_, ps) = problem
     k = _cov_keyframes(est, vp)
     sd_kf = np.sqrt(ps[k][:, [IP, IB], [IP, IB]])
@@ -375,6 +411,8 @@ def test_graph_covariance_equals_kf_rts(problem):
     np.testing.assert_allclose(sd_gr, sd_kf, rtol=1e-3)
     np.testing.assert_allclose(est.baro.scale.sd, np.sqrt(ps[-1, IS, IS]), rtol=1e-3)
     np.testing.assert_allclose(est.baro.latency_s.sd, np.sqrt(ps[-1, IT, IT]), rtol=1e-3)
+    # the z accelerometer scale factor (measured: equal to 5e-7 relative)
+    np.testing.assert_allclose(est.info["accel_scale_sd"][2], np.sqrt(ps[-1, IK, IK]), rtol=1e-3)
     # the constants have one posterior: the RTS returns the same σ at every keyframe
     np.testing.assert_allclose(np.sqrt(ps[:, IS, IS]), np.sqrt(ps[-1, IS, IS]), rtol=1e-6)
 

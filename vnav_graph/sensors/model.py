@@ -288,3 +288,23 @@ def sensor_model(drive: Any, gnss_gm: GnssHeightGM | None = None) -> SensorModel
         gnss_pos_sd=pos_sd,
         gnss_vel_sd=None if gn is None else _gnss_sd(gn.vel_sd),
         gaps=imu_gaps(imu.t))
+
+
+# Prior σ of the accelerometer scale factors when the IMU model is inferred from a real log
+# whose spec gives none (0.1 %, a calibrated MEMS accelerometer).
+MIN_INFERRED_ACCEL_SCALE_SD = 1e-3
+
+
+def accel_scale_sd(model: SensorModel, enabled: bool | None = None) -> float:
+    """Prior σ [-] of the three accelerometer scale-factor states (random constants,
+    f_meas = (1 + k_a)·f + b_a), 0 when they are not carried. The one rule of ekf, ekf-rts
+    and both graph smoothers: carried when ``enabled`` says so or, when it is None, on a
+    real log (inferred IMU model) and on a simulated drive whose spec has
+    ``accel_scale_sd`` > 0; σ is the spec's, at least ``MIN_INFERRED_ACCEL_SCALE_SD`` on a
+    real log."""
+    on = enabled if enabled is not None else (model.imu_inferred
+                                              or model.imu.accel_scale_sd > 0)
+    if not on:
+        return 0.0
+    return float(max(model.imu.accel_scale_sd,
+                     MIN_INFERRED_ACCEL_SCALE_SD if model.imu_inferred else 0.0))

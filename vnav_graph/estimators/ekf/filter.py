@@ -68,6 +68,7 @@ from ...sensors.model import (
     BaroPrior,
     GnssHeightGM,
     SensorModel,
+    accel_scale_sd,
     baro_prior,
     gnss_gm,
     sensor_model,
@@ -122,7 +123,8 @@ class EkfConfig:
     static levelling window; initial_heading / initial_heading_sd: given heading [rad] (None =
     from the GNSS track once moving faster than heading_speed_min [m/s], σ from the velocity
     noise and sideslip_sd); accel_scale: estimate accelerometer scale factors (None = when the
-    IMU spec has accel_scale_sd > 0 or there is no spec); heading_source: "auto" (acceleration
+    IMU spec has accel_scale_sd > 0 or there is no spec: sensors.model.accel_scale_sd, the
+    rule the graph smoothers share); heading_source: "auto" (acceleration
     matching when the GNSS stream has velocity, else the track), "accel" or "track";
     align_chunk_s, align_forget_s, align_sd_max: acceleration-matching chunk length [s],
     forgetting time [s] and the σ [rad] below which the heading is accepted (also the course
@@ -320,7 +322,7 @@ class _Initial:
 
 
 def _initial_state(drive: Drive, cfg: EkfConfig, model: SensorModel, bp: BaroPrior,
-                   est_scale: bool, fm: Any = None) -> _Initial:
+                   ka_sd: float, fm: Any = None) -> _Initial:
     """Coarse levelling over the static start, position and velocity from the first fixes
     (heading given or unknown; variances from the shared model's floored GNSS sigmas), and
     the prior covariance of every state."""
@@ -391,8 +393,7 @@ def _initial_state(drive: Drive, cfg: EkfConfig, model: SensorModel, bp: BaroPri
     p0[12:15, 6:9] = (m_tilt @ p_ba).T
     p0[9:12, 9:12] = ispec.gyro_bias_sd**2 * np.eye(3)
     p0[12:15, 12:15] = p_ba
-    ka_sd = max(ispec.accel_scale_sd, 1e-3 if not isinstance(imu.spec, ImuSpec) else 0.0)
-    p0[18:21, 18:21] = (ka_sd if est_scale else 1e-7) ** 2 * np.eye(3)
+    p0[18:21, 18:21] = (ka_sd if ka_sd > 0 else 1e-7) ** 2 * np.eye(3)
     p0[km.IMB:km.IMB + 3, km.IMB:km.IMB + 3] = cfg.mag_bias_sd**2 * np.eye(3)
     par0 = np.zeros(km.NPAR)
     par0[km.PTD] = bp.latency_mean
@@ -505,14 +506,14 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
     # the noise model every estimator shares (sensors.model)
     model = sensor_model(drive, cfg.gnss_gm)
     ispec: ImuSpec = model.imu
-    est_scale = cfg.accel_scale if cfg.accel_scale is not None else (
-        not isinstance(imu.spec, ImuSpec) or ispec.accel_scale_sd > 0)
+    ka_sd = accel_scale_sd(model, cfg.accel_scale)  # the shared rule (sensors.model)
+    est_scale = ka_sd > 0
     bp = model.baro if model.baro is not None else baro_prior(REAL_LOG_BARO)
     gaps = model.gaps
     gr = _grids(t, gaps, imu.rate_hz, cfg)
     qd = _process_noise(t, gr.grid_idx, gaps, ispec, bp, cfg)
     fm, mag_info = field_and_info(drive, cfg.use_mag)  # WMM on the drive's date, or None
-    ini = _initial_state(drive, cfg, model, bp, est_scale, fm)
+    ini = _initial_state(drive, cfg, model, bp, ka_sd, fm)
     ev = _events(drive, model, gr.grid_idx, ini.g_latency, cfg, fm is not None)
     baro = drive.baro
     max_consec_baro = 1

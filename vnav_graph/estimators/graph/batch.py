@@ -33,7 +33,7 @@ from typing import Any
 
 import gtsam
 import numpy as np
-from gtsam.symbol_shorthand import B, C, K, V, X
+from gtsam.symbol_shorthand import A, B, C, K, V, X
 
 from ...geo.frames import mat_to_quat, ned_to_lla
 from ...sensors.magnetometer import without_contradicting_mag
@@ -106,6 +106,8 @@ def trajectory(P: Problem, st: gf.KeyframeStates, vals: Any, t_q: FloatArray) ->
     alpha = ip["alpha"]
     bg = bias[k, 3:6]
     ba = bias[k, 0:3]
+    if P.ka is not None:  # B holds the effective bias b_a + diag(ā_k)·k_a: report b_a
+        ba = P.ka.true_bias(ba, vals.atVector(A(0)), k)
     bb = (1 - alpha) * st.baro_bias[k] + alpha * st.baro_bias[k + 1]
     return Trajectory(t_q, lla, vel_n, q, bg, ba, bb if P.drive.baro is not None else None)
 
@@ -116,8 +118,11 @@ def cov_18(P: Problem, cov_of: Any, vals: Any, k: int) -> FloatArray:
     ``cov_of``: ``layout.BandedCovariance`` or ``general.GeneralCovariance``).
 
     Pose3 tangent (ω_b, v_b): att_t = R ω_b, δp_t = R v_b; then t → local NED with C_nt.
-    ConstantBias (accel, gyro) → bias_gyro 9:12, bias_accel 12:15 (body frame)."""
+    ConstantBias (accel, gyro) → bias_gyro 9:12, bias_accel 12:15 (body frame); with the
+    accelerometer scale factors, b_a = B_a(k) − diag(ā_k)·k_a (A(0) joins the marginal)."""
     keys = [X(k), V(k), B(k)] + ([C(k), K(0)] if P.drive.baro is not None else [])
+    if P.ka is not None:
+        keys.append(A(0))
     full = cov_of.joint(keys)
     n = full.shape[0]
     r = vals.atPose3(X(k)).rotation().matrix()
@@ -129,6 +134,8 @@ def cov_18(P: Problem, cov_of: Any, vals: Any, k: int) -> FloatArray:
     tmat[3:6, 6:9] = c_nt
     tmat[12:15, 9:12] = np.eye(3)
     tmat[9:12, 12:15] = np.eye(3)
+    if P.ka is not None:
+        tmat[12:15, n - 3:n] = -np.diag(P.ka.f_mean[min(k, P.n_kf - 1)])
     if P.drive.baro is not None:
         tmat[17, 15] = 1.0
         tmat[15, 16] = 1.0
@@ -191,7 +198,8 @@ def outputs(P: Problem, res: BatchResult, pri: dict[str, float],
     sel = np.unique(np.linspace(0, nk - 1, min(P.cfg.cov_epochs, nk)).astype(int))
     cov = np.array([cov_18(P, cov_of, vals, int(k)) for k in sel])
     out: dict[str, Any] = {"trajectory": traj, "cov": cov, "t_cov": P.t_kf[sel],
-                           "extra": extra_variables(lay, cov_of, vals)}
+                           "extra": extra_variables(lay, cov_of, vals),
+                           "accel_scale": accel_scale_info(P, vals, cov_of)}
     if P.drive.baro is None or calib_key is None:
         out["baro"] = None
         out["observability"] = {}
@@ -238,6 +246,15 @@ def outputs(P: Problem, res: BatchResult, pri: dict[str, float],
 
 # ----------------------------------------------------------------------------------------
 # Estimators
+
+
+def accel_scale_info(P: Problem, vals: Any, cov_of: Any) -> dict[str, Any]:
+    """``info["accel_scale_estimated"]``, and with it ``accel_scale`` / ``accel_scale_sd``
+    (k_a, 3 components [-]), the EKF's keys."""
+    if P.ka is None:
+        return {"accel_scale_estimated": False}
+    return {"accel_scale_estimated": True, "accel_scale": vals.atVector(A(0)).tolist(),
+            "accel_scale_sd": np.sqrt(np.clip(np.diag(cov_of.joint([A(0)])), 0, None)).tolist()}
 
 
 def gnss_gm_info(P: Problem) -> dict[str, Any]:
@@ -300,6 +317,7 @@ class GraphBatch:
                 "baro_bias_lag_s": res.bias_lag, "solver": res.solver,
                 "robust_weights": res.rows.weights,
                 "extra_variables": out["extra"],
+                **out["accel_scale"],
                 "gnss_rejected": P.gnss_rejected, "gnss_rejected_pregate": P.g_rej_pre,
                 "gnss_rejected_postsolve": P.g_rej_post,
                 "observability": out["observability"],

@@ -26,12 +26,14 @@ value, σ of every tangent component and covariance of each new variable are rep
 
 Keys: the keyframe variables are ``X(k)`` (Pose3, body → tangent frame, the Pose3 tangent
 ordered (rotation, translation)), ``V(k)`` (velocity in the tangent frame [m/s]) and ``B(k)``
-(``imuBias.ConstantBias``, (accel, gyro)), plus ``C(k)`` (baro Gauss-Markov bias [m]) when the
+(``imuBias.ConstantBias``, (accel, gyro); the bias of interval k → k+1 — with the
+accelerometer scale factors ``A(0)`` (``GraphConfig.accel_scale``) its accelerometer part is
+the effective bias b_a + diag(ā_k)·k_a), plus ``C(k)`` (baro Gauss-Markov bias [m]) when the
 drive has a barometer, for k = 0 … ``view.n_keyframes`` − 1 (``gtsam.symbol_shorthand``).
-The letters ``RESERVED`` (x, v, b, c, k, g) belong to the smoother (g: the optional GNSS
-height Gauss-Markov error ``G(k)``, ``GraphConfig.gnss_gm_sd_v``): new variables take another
-letter, and factors may not touch ``K`` (the baro calibration, one variable in the batch but
-one per segment in iSAM2).
+The letters ``RESERVED`` (x, v, b, c, k, g, a) belong to the smoother (g: the optional GNSS
+height Gauss-Markov error ``G(k)``, ``GraphConfig.gnss_gm_sd_v``; a: ``A(0)``): new variables
+take another letter, and factors may not touch ``K`` (the baro calibration, one variable in
+the batch but one per segment in iSAM2).
 
 Cost: a ``CustomFactor`` is linearised from Python by ``graph-batch`` (``graph.linearize``,
 ≈ 0.1 ms per factor), but inside iSAM2's C++ relinearisation each callback copies the whole
@@ -65,7 +67,7 @@ from .factors import rot_t_n
 
 __all__ = ["RESERVED", "GraphExtension", "GraphView", "Terms", "Variable", "B", "C", "V", "X"]
 
-RESERVED = "xvbckg"  # key letters of the smoother's own variables
+RESERVED = "xvbckga"  # key letters of the smoother's own variables
 
 
 @dataclass(frozen=True)

@@ -50,7 +50,7 @@ from typing import Any
 
 import gtsam
 import numpy as np
-from gtsam.symbol_shorthand import B, C, G, K, V, X
+from gtsam.symbol_shorthand import A, B, C, G, K, V, X
 
 from ...geo.frames import mat_to_quat, ned_to_lla
 from ...sensors.magnetometer import without_contradicting_mag
@@ -73,11 +73,13 @@ from .isam2_setup import (
 from .linalg import single_thread_blas, trim_heap
 from .magnetometer import builtin_extensions, mag_info
 from .problem import (
+    bias_link,
     build_batch_graph,
     gap_factors,
     gm_factor,
     gnss_gm_factor,
     gravity_delta,
+    imu_factor,
     imu_gaps,
     keyframe_fixes,
     keyframe_poses,
@@ -221,33 +223,48 @@ class GraphISAM2:
 
         arrays = (rot, pos, vel, bias, cb, gg)
 
+        b_last = 0  # the last B(k) in iSAM2: B(k), interval k's bias, enters with it
+        ka = np.zeros(3)  # the accelerometer scale factors as last estimated (P.ka)
+
         def refresh(keys_k: Any) -> None:
-            relin.read_states(isam.calculateEstimate(relin.state_keys(keys_k, P)), keys_k,
-                              arrays, P)
+            relin.read_states(isam.calculateEstimate(relin.state_keys(keys_k, P, b_last)),
+                              keys_k, arrays, P, b_last)
+
+        def new_bias(nv: Any, nf: Any, k: int) -> None:
+            """B(k) and its link from B(k−1) (``bias_link``: with the scale factors it needs
+            ā_k, known once interval k is preintegrated), predicted from B(k−1)."""
+            bias[k] = bias[k - 1]
+            if P.ka is not None:
+                bias[k, 0:3] += (P.ka.f_mean[k] - P.ka.f_mean[k - 1]) * ka
+            nv.insert(B(k), gtsam.imuBias.ConstantBias(bias[k, 0:3], bias[k, 3:6]))
+            nf.add(bias_link(P, k - 1, float(P.t_kf[k] - P.t_kf[k - 1])))
 
         for k in range(nk - 1):
             tu = time.perf_counter()
             dg = gravity_delta(P, pos[k:k + 1])[0]
             dg_kf[k] = dg
+            nf = gtsam.NonlinearFactorGraph()
+            nv = gtsam.Values()
+            if b_last < k:
+                new_bias(nv, nf, k)
+                b_last = k
             b_k = gtsam.imuBias.ConstantBias(bias[k, 0:3], bias[k, 3:6])
             pim = preintegrate(P, k, rot[k], dg, b_k)
             pims.append(pim)
             t_pre = time.perf_counter()
-            nf = gtsam.NonlinearFactorGraph()
-            nv = gtsam.Values()
-            if gap[k]:
+            if gap[k]:  # its factors link B(k) to B(k+1): B(k+1) enters now
                 x1, v1, gap_f = gap_factors(P, k, rot, pos, vel)
                 nv.insert(X(k + 1), x1)
                 nv.insert(V(k + 1), v1)
+                nv.insert(B(k + 1), b_k)
+                b_last = k + 1
                 for f in gap_f:
                     nf.add(f)
             else:
                 nav = pim.predict(gtsam.NavState(gtsam.Rot3(rot[k]), pos[k], vel[k]), b_k)
                 nv.insert(X(k + 1), nav.pose())
                 nv.insert(V(k + 1), nav.velocity())
-                nf.add(gtsam.CombinedImuFactor(X(k), V(k), X(k + 1), V(k + 1), B(k), B(k + 1),
-                                               pim))
-            nv.insert(B(k + 1), b_k)
+                nf.add(imu_factor(k, pim))
             # the new keyframe's linearisation point: its prediction
             x_new = nv.atPose3(X(k + 1))
             rot[k + 1], pos[k + 1] = x_new.rotation().matrix(), x_new.translation()
@@ -329,6 +346,8 @@ class GraphISAM2:
                 j = int(seg[k + 1])
                 for jj in range(max(j - 1, 0), j + 1):
                     cal[jj] = isam.calculateEstimateVector(K(jj))
+            if P.ka is not None:
+                ka = isam.calculateEstimateVector(A(0))
             book.pending = book.due(marked, k + 1, rot, pos, cal if has_baro else None)
             online[k + 1, 0:6] = np.r_[pos[k + 1], vel[k + 1]]
             online_rot[k + 1] = rot[k + 1]
@@ -337,15 +356,21 @@ class GraphISAM2:
             brk[k] = (1e3 * (t_pre - tu), 1e3 * (t_lcf - t_pre), 1e3 * (t_upd - t_lcf),
                       1e3 * (t_end - t_upd), ures.getVariablesRelinearized(),
                       ures.getVariablesReeliminated(), n_swap)
-        # baro samples stamped after the last keyframe whose delayed time is inside the span
+        # baro samples stamped after the last keyframe whose delayed time is inside the span,
+        # and the last keyframe's B (a continuation of the last interval's: no IMU factor)
         if nk >= 2:
             st = terms.keyframe_states(P, nk - 2, rot, pos, vel, bias, cb, gg, dg_kf)
             new_baro, baro_next = terms.baro_factors(P, nk - 2, st, bias, cal, seg, bt, bz,
                                                      baro_next, pri, last=True)
-            if new_baro:
-                nf = gtsam.NonlinearFactorGraph()
-                tags = book.new_terms(nk - 2, None, new_baro, st, cal if has_baro else None, nf)
-                book.record(tags, isam.update(nf, gtsam.Values()).getNewFactorsIndices())
+            nf = gtsam.NonlinearFactorGraph()
+            nv = gtsam.Values()
+            tags = book.new_terms(nk - 2, None, new_baro, st, cal if has_baro else None,
+                                  nf) if new_baro else []
+            if b_last < nk - 1:
+                new_bias(nv, nf, nk - 1)
+                b_last = nk - 1
+            if nf.size():
+                book.record(tags, isam.update(nf, nv).getNewFactorsIndices())
         online[:, 6:10] = mat_to_quat(online_rot)  # one call (0.4 ms each, per keyframe)
         t_online = time.perf_counter()
         extra_online = extra_online_of(isam, isam.calculateEstimate(), ext)
@@ -470,6 +495,7 @@ class GraphISAM2:
         info["solver_final"] = chosen.solver
         info["final_pass_restarted"] = restarted
         info["extra_variables"] = out["extra"]
+        info.update(out["accel_scale"])
         info["extra_variables_online"] = extra_online
         info.update(mag_info(drive, cfg))
         info.update(gnss_gm_info(P))
@@ -537,4 +563,6 @@ class GraphISAM2:
                 vals.update(G(k), est.atVector(G(k)))
         if P.drive.baro is not None:
             vals.update(K(0), est.atVector(K(int(seg[-1]))))
+        if P.ka is not None:
+            vals.update(A(0), est.atVector(A(0)))
         return vals, graph

@@ -8,7 +8,7 @@ from typing import Any
 
 import gtsam
 import numpy as np
-from gtsam.symbol_shorthand import B, C, G, K, V, X
+from gtsam.symbol_shorthand import A, B, C, G, K, V, X
 
 from .batch import solver_warnings, value_of
 from .extend import Collected, key_name
@@ -81,6 +81,7 @@ def threshold_map(cfg: GraphConfig, ext: Collected | None = None) -> Any:
     m.insert(("c", np.full(1, 1e9)))
     m.insert(("k", np.full(2, 1e9)))
     m.insert(("g", np.full(1, 1e9)))  # the GNSS height error G(k): linear factors only
+    m.insert(("a", np.full(3, 1e9)))  # the accelerometer scale factors: linear factors only
     if ext is not None:
         for ch, thr in ext.threshold_entries(cfg.relinearize_threshold).items():
             m.insert((ch, thr))
@@ -143,6 +144,8 @@ def first_keyframe(P: Any, r0: Any, p0: Any, v0: Any, k0: Any
         vals0.insert(K(0), k0)
     if P.gm is not None:
         vals0.insert(G(0), np.zeros(1))
+    if P.ka is not None:
+        vals0.insert(A(0), np.zeros(3))
     fix_at: list[tuple[int, int]] = []
     if P.gm is None:  # with G(k), keyframe fixes enter as rows of the interval they end
         for i, f in keyframe_fixes(P, 0):

@@ -25,7 +25,7 @@ from typing import Any
 
 import gtsam
 import numpy as np
-from gtsam.symbol_shorthand import B, C, G, K, V, X
+from gtsam.symbol_shorthand import A, B, C, G, K, V, X
 
 from ...types import FloatArray
 from . import factors as gf
@@ -65,8 +65,9 @@ class Layout:
 
     @property
     def extra_keys(self) -> list[int]:
-        """Variables outside the keyframe template and the baro calibration K(0)."""
-        return [k for k in self.globals_ if k != K(0)]
+        """Variables outside the keyframe template, the baro calibration K(0) and the
+        accelerometer scale factors A(0) (reported as ``info["accel_scale"]``)."""
+        return [k for k in self.globals_ if k not in (K(0), A(0))]
 
     @property
     def term_cols(self) -> np.ndarray:

@@ -10,7 +10,7 @@ from typing import Any
 
 import gtsam
 import numpy as np
-from gtsam.symbol_shorthand import B, C, G, K, V, X
+from gtsam.symbol_shorthand import A, B, C, G, K, V, X
 
 from ...config import REAL_LOG_BARO, BaroSpec, ImuSpec
 from ...geo.earth import gravity
@@ -19,6 +19,7 @@ from ...nav.levelling import coarse_level
 from ...sensors.model import (
     BaroPrior,
     GnssHeightGM,
+    accel_scale_sd,
     baro_prior,
     gnss_gm_split,
     sensor_model,
@@ -62,6 +63,38 @@ def imu_gaps(t: np.ndarray, kf_idx: np.ndarray) -> np.ndarray:
 # Problem set-up shared by both estimators
 
 
+@dataclass(frozen=True)
+class AccelScale:
+    """The accelerometer scale-factor variable A(0) (3, random constant k_a, prior N(0, sd²)):
+    ``f_mean`` (K, 3) is the mean measured specific force ā_k [m/s²] of interval k (body
+    frame; the last keyframe's is its interval's, a gap interval's its predecessor's), so
+    that B(k) is the effective accelerometer bias b_a + diag(ā_k)·k_a of interval k."""
+
+    sd: float
+    f_mean: FloatArray
+
+    def true_bias(self, ba_eff: FloatArray, ka: FloatArray, k: np.ndarray) -> FloatArray:
+        """b_a at intervals ``k`` from the effective biases ``ba_eff`` (len(k), 3)."""
+        return ba_eff - self.f_mean[k] * ka
+
+
+def interval_mean_force(t: FloatArray, accel: FloatArray, kf_idx: np.ndarray,
+                        gap: np.ndarray) -> FloatArray:
+    """ā_k (K, 3): the time average of the midpoint specific force the preintegration uses
+    over each interval (``AccelScale``)."""
+    dt = np.diff(t)
+    fm = 0.5 * (accel[:-1] + accel[1:]) * dt[:, None]
+    cs = np.vstack([np.zeros((1, 3)), np.cumsum(fm, axis=0)])
+    ct = np.r_[0.0, np.cumsum(dt)]
+    j0, j1 = kf_idx[:-1], kf_idx[1:]
+    out = np.empty((kf_idx.size, 3))
+    out[:-1] = (cs[j1] - cs[j0]) / np.maximum(ct[j1] - ct[j0], 1e-12)[:, None]
+    for k in np.flatnonzero(gap):  # no inertial information across a logging gap
+        out[k] = out[k - 1] if k > 0 else out[min(k + 1, out.shape[0] - 2)]
+    out[-1] = out[-2] if kf_idx.size > 1 else 0.0
+    return out
+
+
 @dataclass
 class Problem:
     drive: Drive
@@ -90,6 +123,7 @@ class Problem:
     g_incr: Any = None  # (fix indices, dense increments at them), see gnss_rows_of
     pri: dict[str, float] = field(default_factory=dict)  # baro priors (_baro_priors)
     gm: GnssHeightGM | None = None  # the GNSS height Gauss-Markov state G(k), if carried
+    ka: AccelScale | None = None  # the accelerometer scale factors A(0), if carried
 
     @property
     def gnss_rejected(self) -> int:
@@ -162,6 +196,9 @@ def setup(drive: Drive, cfg: GraphConfig) -> Problem:
         P.gm = gm  # g_pos_sd becomes the white rest of the receiver's σ
         P.g_pos_sd = P.g_pos_sd.copy()
         P.g_pos_sd[:, 2] = gnss_gm_split(P.g_pos_sd[:, 2], gm)
+    ka_sd = accel_scale_sd(model, cfg.accel_scale)  # the rule every estimator shares
+    if ka_sd > 0:
+        P.ka = AccelScale(ka_sd, interval_mean_force(imu.t, imu.accel_b, kf_idx, gaps))
     if not np.any(use & inside):
         raise ValueError("graph: every GNSS fix inside the IMU span was rejected by the "
                          "baro-consistency gate")
@@ -259,7 +296,7 @@ def preintegrate(P: Problem, k: int, r_k: FloatArray, dg_k: FloatArray,
     if np.any(dg_k):
         fm = fm + np.einsum("nji,j->ni", P.dense.dr[j0:j1], r_k.T @ dg_k)
     dts = np.diff(imu.t[j0:j1 + 1])
-    pim = gtsam.PreintegratedCombinedMeasurements(P.params, bias)
+    pim = gtsam.PreintegratedImuMeasurements(P.params, bias)
     integ = pim.integrateMeasurement
     for a, w, dt in zip(fm, wm, dts, strict=True):
         integ(a, w, dt)
@@ -277,9 +314,15 @@ def prior_factors(P: Problem, r0: FloatArray, p0: FloatArray, v0: FloatArray,
     g.add(gtsam.PriorFactorPose3(X(0), gtsam.Pose3(gtsam.Rot3(r0), p0),
                                  noise([0.05, 0.05, 0.5, 10.0, 10.0, 10.0])))
     g.add(gtsam.PriorFactorVector(V(0), v0, noise([2.0, 2.0, 2.0])))
-    g.add(gtsam.PriorFactorConstantBias(
-        B(0), gtsam.imuBias.ConstantBias(),
-        noise([_floor(s.accel_bias_sd, 1e-4)] * 3 + [_floor(s.gyro_bias_sd, 1e-6)] * 3)))
+    sd_b = noise([_floor(s.accel_bias_sd, 1e-4)] * 3 + [_floor(s.gyro_bias_sd, 1e-6)] * 3)
+    if P.ka is None:
+        g.add(gtsam.PriorFactorConstantBias(B(0), gtsam.imuBias.ConstantBias(), sd_b))
+    else:  # the prior is on b_a = B_a(0) − diag(ā_0)·k_a, and k_a ~ N(0, σ_ka²)
+        ja = np.zeros((6, 3))
+        ja[0:3] = -np.diag(P.ka.f_mean[0])
+        g.add(_linear(gtsam.JacobianFactor(B(0), np.eye(6), A(0), ja, np.zeros(6), sd_b),
+                      [(B(0), 6), (A(0), 3)]))
+        g.add(gtsam.PriorFactorVector(A(0), np.zeros(3), noise([P.ka.sd] * 3)))
     if P.drive.baro is not None:
         g.add(gtsam.PriorFactorVector(C(0), np.zeros(1), noise([pri["b_sd"]])))
         g.add(gtsam.PriorFactorVector(calib_key, np.array([0.0, pri["tau0"]]),
@@ -301,6 +344,41 @@ def keyframe_fixes(P: Problem, k: int) -> list[tuple[int, Any]]:
             out.append((int(i), gtsam.PriorFactorVector(V(k), P.g_vel[i], robust_noise(
                 noise(P.g_vel_sd[i]), cfg.loss_gnss_vel, cfg.loss_threshold_sd[1]))))
     return out
+
+
+def _linear(jf: Any, keys: list[tuple[int, int]]) -> Any:
+    """A linear factor on vector-space variables as a nonlinear one (exact at any point)."""
+    lin = gtsam.Values()
+    for key, n in keys:
+        if n == 6:
+            lin.insert(key, gtsam.imuBias.ConstantBias())
+        else:
+            lin.insert(key, np.zeros(n))
+    return gtsam.LinearContainerFactor(jf, lin)
+
+
+def bias_link(P: Problem, k: int, dt: float) -> Any:
+    """B(k) → B(k+1): the IMU biases' random walk (PSD of the preintegration parameters,
+    Forster et al. 2017, Eq. 48; the one CombinedImuFactor carries), as a linear factor.
+    With the accelerometer scale factors (``AccelScale``) B holds effective biases and the
+    link is B_a(k+1) − B_a(k) − diag(ā_k+1 − ā_k)·k_a = w on B(k), B(k+1), A(0)."""
+    bp = P.params
+    q_b = np.r_[np.diag(bp.getBiasAccCovariance()), np.diag(bp.getBiasOmegaCovariance())]
+    sd = noise(np.sqrt(q_b * max(dt, 1e-9)))
+    eye = np.eye(6)
+    if P.ka is None:
+        return _linear(gtsam.JacobianFactor(B(k), -eye, B(k + 1), eye, np.zeros(6), sd),
+                       [(B(k), 6), (B(k + 1), 6)])
+    ja = np.zeros((6, 3))
+    ja[0:3] = -np.diag(P.ka.f_mean[k + 1] - P.ka.f_mean[k])
+    return _linear(gtsam.JacobianFactor(B(k), -eye, B(k + 1), eye, A(0), ja, np.zeros(6), sd),
+                   [(B(k), 6), (B(k + 1), 6), (A(0), 3)])
+
+
+def imu_factor(k: int, pim: Any) -> Any:
+    """Interval k's IMU factor on X(k), V(k), X(k+1), V(k+1) and its bias B(k) (the biases'
+    random walk is ``bias_link``)."""
+    return gtsam.ImuFactor(X(k), V(k), X(k + 1), V(k + 1), B(k), pim)
 
 
 def gm_link(key0: int, key1: int, dt: float, tau: float, sd: float) -> Any:
@@ -370,14 +448,11 @@ def gap_factors(P: Problem, k: int, rot: FloatArray, pos: FloatArray, vel: Float
     yaw = gtsam.Rot3(rot[k]).ypr()[0]
     x1 = gtsam.Pose3(gtsam.Rot3.Ypr(yaw, lev[1], lev[2]), p1)
     sd_p = GAP_VEL_SD * T + 0.5 * GAP_ACCEL_LEVEL * T * T
-    bp = P.params
-    q_b = np.r_[np.diag(bp.getBiasAccCovariance()), np.diag(bp.getBiasOmegaCovariance())]
     fs = [
         gtsam.PriorFactorPose3(X(k + 1), x1,
                                noise([GAP_TILT_SD, GAP_TILT_SD, GAP_YAW_SD] + [sd_p] * 3)),
         gtsam.BetweenFactorVector(V(k), V(k + 1), np.zeros(3), noise([GAP_ACCEL_LEVEL * T] * 3)),
-        gtsam.BetweenFactorConstantBias(B(k), B(k + 1), gtsam.imuBias.ConstantBias(),
-                                        noise(np.sqrt(q_b * T))),
+        bias_link(P, k, T),
     ]
     return x1, v1, fs
 
@@ -535,9 +610,9 @@ def gnss_chi2(P: Problem, st: gf.KeyframeStates, idx: np.ndarray) -> tuple[Float
 def build_batch_graph(P: Problem, rot: FloatArray, pos: FloatArray, vel: FloatArray,
                        pims: list[Any] | None, pri: dict[str, float],
                        calib_of_kf: np.ndarray) -> tuple[Any, Any]:
-    """C++ part of the batch graph: priors, CombinedImuFactors (``gap_factors`` over IMU
-    logging gaps) and the Gauss-Markov links. Every GNSS fix (on keyframe epochs too) enters
-    as an interval term so that the gates can drop it without rebuilding the graph.
+    """C++ part of the batch graph: priors, IMU factors and the biases' links (``gap_factors``
+    over IMU logging gaps) and the Gauss-Markov links. Every GNSS fix (on keyframe epochs
+    too) enters as an interval term so that the gates can drop it without rebuilding the graph.
     ``pims`` None: no IMU factors (only the initial values are wanted)."""
     graph = prior_factors(P, rot[0], pos[0], vel[0], pri, K(0))
     vals = gtsam.Values()
@@ -560,8 +635,8 @@ def build_batch_graph(P: Problem, rot: FloatArray, pos: FloatArray, vel: FloatAr
                     graph.add(f)
                 rot[k + 1], pos[k + 1], vel[k + 1] = x1.rotation().matrix(), x1.translation(), v1
             elif pims is not None:
-                graph.add(gtsam.CombinedImuFactor(X(k), V(k), X(k + 1), V(k + 1), B(k),
-                                                  B(k + 1), pims[k]))
+                graph.add(imu_factor(k, pims[k]))
+                graph.add(bias_link(P, k, float(P.t_kf[k + 1] - P.t_kf[k])))
             if P.drive.baro is not None:
                 graph.add(gm_factor(k, float(P.t_kf[k + 1] - P.t_kf[k]), pri))
             if P.gm is not None:
@@ -569,6 +644,8 @@ def build_batch_graph(P: Problem, rot: FloatArray, pos: FloatArray, vel: FloatAr
     if P.drive.baro is not None:
         for j in np.unique(calib_of_kf):
             vals.insert(K(int(j)), np.array([0.0, pri["tau0"]]))
+    if P.ka is not None:
+        vals.insert(A(0), np.zeros(3))
     return graph, vals
 
 

@@ -227,9 +227,11 @@ class TermBook:
         return tags, removed
 
 
-def read_states(est: Any, keys_k: Any, arrays: tuple[Any, ...], P: Any) -> None:
+def read_states(est: Any, keys_k: Any, arrays: tuple[Any, ...], P: Any,
+                b_last: int | None = None) -> None:
     """The states of keyframes ``keys_k`` in ``est`` (X, V, B, and C / G when the problem has
-    them) into the running arrays (rot, pos, vel, bias, cb, gg)."""
+    them) into the running arrays (rot, pos, vel, bias, cb, gg). ``b_last``: the last B(k)
+    iSAM2 holds (B(k) enters with interval k); a later keyframe's bias is B(b_last)'s."""
     rot, pos, vel, bias, cb, gg = arrays
     has_baro, has_gm = P.drive.baro is not None, P.gm is not None
     for k in keys_k:
@@ -237,19 +239,22 @@ def read_states(est: Any, keys_k: Any, arrays: tuple[Any, ...], P: Any) -> None:
         rot[k] = pose.rotation().matrix()
         pos[k] = pose.translation()
         vel[k] = est.atVector(V(k))
-        bias[k] = est.atConstantBias(B(k)).vector()
+        if b_last is None or k <= b_last:
+            bias[k] = est.atConstantBias(B(k)).vector()
+        else:
+            bias[k] = bias[b_last]
         if has_baro:
             cb[k] = est.atVector(C(k))[0]
         if has_gm:
             gg[k] = est.atVector(G(k))[0]
 
 
-def state_keys(keys_k: Any, P: Any) -> Any:
-    """The keys ``read_states`` reads for keyframes ``keys_k``."""
+def state_keys(keys_k: Any, P: Any, b_last: int | None = None) -> Any:
+    """The keys ``read_states`` reads for keyframes ``keys_k`` (``b_last``: see there)."""
     has_baro, has_gm = P.drive.baro is not None, P.gm is not None
     return gtsam.KeyVector([kk for k in keys_k for kk in
-                            ([X(k), V(k), B(k)] + ([C(k)] if has_baro else [])
-                             + ([G(k)] if has_gm else []))])
+                            ([X(k), V(k)] + ([B(k)] if b_last is None or k <= b_last else [])
+                             + ([C(k)] if has_baro else []) + ([G(k)] if has_gm else []))])
 
 
 def settle(isam: Any, book: TermBook, P: Any, seg: Any, rw_idx: list[int],

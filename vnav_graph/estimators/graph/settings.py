@@ -59,6 +59,12 @@ class GraphConfig:
     bias variable H(0) (``graph.magnetometer``; the model is the EKF's); mag_interval_s: at
     most one per this many seconds; mag_heading_floor [rad]: heading σ floor; mag_bias_sd
     [µT]: prior σ of each hard-iron component; mag_loss_sd: Huber threshold [σ].
+    accel_scale: carry the accelerometer scale factors k_a as one variable A(0) (3, random
+    constant) — None: by the rule every estimator shares (``sensors.model.accel_scale_sd``:
+    real logs, and simulated IMUs whose spec has a scale error). B(k) then holds the
+    effective accelerometer bias of interval k, b_a + diag(ā_k)·k_a (ā_k the mean measured
+    specific force over it), and the bias chain carries diag(ā_k+1 − ā_k)·k_a
+    (``problem.bias_link``); the reported accelerometer bias is b_a.
     gnss_gate_prob: probability of the χ² gates on GNSS fixes (0 switches gating off):
     a causal pre-gate of the GNSS height against the barometer and a post-solve gate of
     each fix's normalised position (+ velocity) residual, repeated ≤ ``gate_rounds`` times.
@@ -99,6 +105,7 @@ class GraphConfig:
     mag_loss_sd: float = 3.0
     gnss_gm_sd_v: float = 0.0
     gnss_gm_tau_s: float = 300.0
+    accel_scale: bool | None = None
 
     @property
     def gnss_gm(self) -> GnssHeightGM | None:
