@@ -399,6 +399,7 @@ class GraphISAM2:
                             fallback, t_start, (rot_i, pos_i, vel_i), pims, seg, upd_ms, brk,
                             {"isam2_relinearized": book.relinearized,
                              "isam2_relinearized_factors": book.swapped_factors,
+                             "isam2_calibration_steps_halved": book.damped,
                              "isam2_final_rounds": rounds,
                              "isam2_gnss_rejected_postsolve": P.g_rej_post - gate0[1],
                              "final_rounds_s": time.perf_counter() - t_online}, gate0)
