@@ -43,5 +43,8 @@ def test_aggregate_counts_seeds_and_goal():
     assert abs(a["horiz_rmse_m"]["ratio"] - 1.0) < 1e-12  # means 2.0 / 2.0
     assert abs(a["vert_rmse_m"]["ratio"] - 0.35 / 0.4) < 1e-12
     assert a["goal_met"]
+    # paired differences −1 and +1: mean 0, standard error sd/√n = √2/√2 = 1
+    assert abs(a["horiz_rmse_m"]["diff_mean"]) < 1e-12
+    assert abs(a["horiz_rmse_m"]["diff_se"] - 1.0) < 1e-12
     runs[1]["graph-isam2"]["vert_rmse_m"] = 0.5
     assert not oa.aggregate(runs)["x"]["goal_met"]  # vertical mean 0.5 > 0.4
