@@ -204,8 +204,8 @@ class GraphISAM2:
             fixes_of = [np.r_[a, b] for a, b in zip(fixes_of, ends, strict=True)]
         book = relin.TermBook(P, seg, fixes_of)
         book.record_fixes(fix_at0, new0, 0)
-        rw_idx: list[int] = []  # iSAM2 indices of the K(j-1) -> K(j) random walks
-        rw_at = -1
+        rw_idx: list[int] = []  # iSAM2 indices of the K / A segment random walks
+        rw_at: list[int] = []
         dg_kf = np.zeros((nk, 3))  # gravity anomaly at each keyframe, once (terms)
         pims: list[Any] = []
         imu_t = drive.imu.t
@@ -225,6 +225,13 @@ class GraphISAM2:
 
         b_last = 0  # the last B(k) in iSAM2: B(k), interval k's bias, enters with it
         ka = np.zeros(3)  # the accelerometer scale factors as last estimated (P.ka)
+        # k_a, like (s, τd), is one variable per segment, A(j), linked by a random walk of
+        # root PSD accel_scale_rw·σ_ka (a global A in every bias link put it in every
+        # clique: 1800 s hill-drive online pass 35 → 47 s)
+        ka_rw = cfg.accel_scale_rw * (P.ka.sd if P.ka is not None else 0.0)
+
+        def a_keys(m: int) -> tuple[int, int]:
+            return A(int(seg[m])), A(int(seg[m + 1]))
 
         def refresh(keys_k: Any) -> None:
             relin.read_states(isam.calculateEstimate(relin.state_keys(keys_k, P, b_last)),
@@ -237,7 +244,7 @@ class GraphISAM2:
             if P.ka is not None:
                 bias[k, 0:3] += (P.ka.f_mean[k] - P.ka.f_mean[k - 1]) * ka
             nv.insert(B(k), gtsam.imuBias.ConstantBias(bias[k, 0:3], bias[k, 3:6]))
-            nf.add(bias_link(P, k - 1, float(P.t_kf[k] - P.t_kf[k - 1])))
+            nf.add(bias_link(P, k - 1, float(P.t_kf[k] - P.t_kf[k - 1]), a_keys(k - 1)))
 
         for k in range(nk - 1):
             tu = time.perf_counter()
@@ -253,7 +260,7 @@ class GraphISAM2:
             pims.append(pim)
             t_pre = time.perf_counter()
             if gap[k]:  # its factors link B(k) to B(k+1): B(k+1) enters now
-                x1, v1, gap_f = gap_factors(P, k, rot, pos, vel)
+                x1, v1, gap_f = gap_factors(P, k, rot, pos, vel, a_keys(k))
                 nv.insert(X(k + 1), x1)
                 nv.insert(V(k + 1), v1)
                 nv.insert(B(k + 1), b_k)
@@ -298,9 +305,15 @@ class GraphISAM2:
                     cal[j] = cal[j - 1].copy()
                     nv.insert(K(j), cal[j])
                     span = segment_span(P, seg, j)
-                    rw_at = nf.size()  # its index is recorded: the final rounds remove it
-                    nf.add(gtsam.BetweenFactorVector(K(j - 1), K(j), np.zeros(2),
+                    rw_at.append(nf.size())  # its index is recorded: the final rounds
+                    nf.add(gtsam.BetweenFactorVector(K(j - 1), K(j), np.zeros(2),  # remove it
                                                      noise(calib_rw * np.sqrt(span))))
+            if P.ka is not None and seg[k + 1] != seg[k]:
+                j = int(seg[k + 1])
+                nv.insert(A(j), ka)
+                rw_at.append(nf.size())
+                nf.add(gtsam.BetweenFactorVector(A(j - 1), A(j), np.zeros(3), noise(
+                    [ka_rw * np.sqrt(segment_span(P, seg, j))] * 3)))
             if ext is not None:
                 fs, nv_ext = ext.at_keyframe(k + 1)
                 for f in fs:
@@ -330,9 +343,8 @@ class GraphISAM2:
                 t_upd = time.perf_counter()
                 new_idx = ures.getNewFactorsIndices()
                 book.record(tags, new_idx)
-                if rw_at >= 0:
-                    rw_idx.append(int(new_idx[len(tags) + rw_at]))
-                    rw_at = -1
+                rw_idx += [int(new_idx[len(tags) + i]) for i in rw_at]
+                rw_at = []
                 book.record_fixes(fix_at, new_idx, len(tags))
                 marked = relin.marked_keyframes(ures.getMarkedKeys())
                 read = np.r_[np.arange(max(k - 1, 0), k + 2), marked - 1, marked, marked + 1]
@@ -347,7 +359,7 @@ class GraphISAM2:
                 for jj in range(max(j - 1, 0), j + 1):
                     cal[jj] = isam.calculateEstimateVector(K(jj))
             if P.ka is not None:
-                ka = isam.calculateEstimateVector(A(0))
+                ka = isam.calculateEstimateVector(A(int(seg[k + 1])))
             book.pending = book.due(marked, k + 1, rot, pos, cal if has_baro else None)
             online[k + 1, 0:6] = np.r_[pos[k + 1], vel[k + 1]]
             online_rot[k + 1] = rot[k + 1]
@@ -564,6 +576,6 @@ class GraphISAM2:
                 vals.update(G(k), est.atVector(G(k)))
         if P.drive.baro is not None:
             vals.update(K(0), est.atVector(K(int(seg[-1]))))
-        if P.ka is not None:
-            vals.update(A(0), est.atVector(A(0)))
+        if P.ka is not None:  # tied by the final rounds, like K
+            vals.update(A(0), est.atVector(A(int(seg[-1]))))
         return vals, graph

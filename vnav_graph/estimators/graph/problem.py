@@ -357,11 +357,13 @@ def _linear(jf: Any, keys: list[tuple[int, int]]) -> Any:
     return gtsam.LinearContainerFactor(jf, lin)
 
 
-def bias_link(P: Problem, k: int, dt: float) -> Any:
+def bias_link(P: Problem, k: int, dt: float, a_keys: tuple[int, int] | None = None) -> Any:
     """B(k) → B(k+1): the IMU biases' random walk (PSD of the preintegration parameters,
     Forster et al. 2017, Eq. 48; the one CombinedImuFactor carries), as a linear factor.
     With the accelerometer scale factors (``AccelScale``) B holds effective biases and the
-    link is B_a(k+1) − B_a(k) − diag(ā_k+1 − ā_k)·k_a = w on B(k), B(k+1), A(0)."""
+    link is B_a(k+1) − B_a(k) − diag(ā_k+1)·k_a' + diag(ā_k)·k_a = w, k_a and k_a' the scale
+    variables of intervals k and k+1 (``a_keys``; default A(0) for both, the batch's; the
+    incremental front end has one per segment)."""
     bp = P.params
     q_b = np.r_[np.diag(bp.getBiasAccCovariance()), np.diag(bp.getBiasOmegaCovariance())]
     sd = noise(np.sqrt(q_b * max(dt, 1e-9)))
@@ -369,10 +371,30 @@ def bias_link(P: Problem, k: int, dt: float) -> Any:
     if P.ka is None:
         return _linear(gtsam.JacobianFactor(B(k), -eye, B(k + 1), eye, np.zeros(6), sd),
                        [(B(k), 6), (B(k + 1), 6)])
-    ja = np.zeros((6, 3))
-    ja[0:3] = -np.diag(P.ka.f_mean[k + 1] - P.ka.f_mean[k])
-    return _linear(gtsam.JacobianFactor(B(k), -eye, B(k + 1), eye, A(0), ja, np.zeros(6), sd),
-                   [(B(k), 6), (B(k + 1), 6), (A(0), 3)])
+    a0, a1 = a_keys if a_keys is not None else (A(0), A(0))
+    f0, f1 = P.ka.f_mean[k], P.ka.f_mean[k + 1]
+    if a0 == a1:
+        ja = np.zeros((6, 3))
+        ja[0:3] = -np.diag(f1 - f0)
+        return _linear(gtsam.JacobianFactor(B(k), -eye, B(k + 1), eye, a0, ja, np.zeros(6),
+                                            sd), [(B(k), 6), (B(k + 1), 6), (a0, 3)])
+    # four keys (a segment boundary): GTSAM's Python JacobianFactor takes ≤ 3, so the
+    # information JᵀΣ⁻¹J goes in as ≤ 3-key Hessian pieces (+1e-9·I, σ ≈ 3e4: positive
+    # definite, so that it converts to a Jacobian for iSAM2's QR)
+    from .general import hessian_pieces
+
+    jac = np.zeros((6, 18))
+    jac[:, 0:6], jac[:, 6:12] = -eye, eye
+    jac[0:3, 12:15], jac[0:3, 15:18] = np.diag(f0), -np.diag(f1)
+    jw = jac / np.sqrt(q_b * max(dt, 1e-9))[:, None]
+    lam = jw.T @ jw + 1e-9 * np.eye(18)
+    keys = [B(k), B(k + 1), a0, a1]
+    gfg = gtsam.GaussianFactorGraph()
+    for f in hessian_pieces(keys, lam, np.zeros(18), (0, 1, 2, 3),
+                            ((0, 6), (6, 6), (12, 3), (15, 3))):
+        gfg.push_back(f)
+    return _linear(gtsam.JacobianFactor(gtsam.HessianFactor(gfg)),
+                   [(B(k), 6), (B(k + 1), 6), (a0, 3), (a1, 3)])
 
 
 def imu_factor(k: int, pim: Any) -> Any:
@@ -411,8 +433,8 @@ def level(f_b: FloatArray) -> FloatArray:
     return gtsam.Rot3.Ypr(0.0, pitch, roll).matrix()
 
 
-def gap_factors(P: Problem, k: int, rot: FloatArray, pos: FloatArray, vel: FloatArray
-                ) -> tuple[Any, FloatArray, list[Any]]:
+def gap_factors(P: Problem, k: int, rot: FloatArray, pos: FloatArray, vel: FloatArray,
+                a_keys: tuple[int, int] | None = None) -> tuple[Any, FloatArray, list[Any]]:
     """Weak factors replacing the IMU factor over a logging gap in interval k (both smoothers).
 
     A gap of T seconds with no IMU samples carries no inertial information (one "sample"
@@ -452,7 +474,7 @@ def gap_factors(P: Problem, k: int, rot: FloatArray, pos: FloatArray, vel: Float
         gtsam.PriorFactorPose3(X(k + 1), x1,
                                noise([GAP_TILT_SD, GAP_TILT_SD, GAP_YAW_SD] + [sd_p] * 3)),
         gtsam.BetweenFactorVector(V(k), V(k + 1), np.zeros(3), noise([GAP_ACCEL_LEVEL * T] * 3)),
-        bias_link(P, k, T),
+        bias_link(P, k, T, a_keys),
     ]
     return x1, v1, fs
 

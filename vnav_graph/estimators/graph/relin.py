@@ -31,7 +31,7 @@ from typing import Any
 
 import gtsam
 import numpy as np
-from gtsam.symbol_shorthand import B, C, G, K, V, X
+from gtsam.symbol_shorthand import A, B, C, G, K, V, X
 
 from . import factors as gf
 from . import terms
@@ -298,9 +298,10 @@ def settle(isam: Any, book: TermBook, P: Any, seg: Any, rw_idx: list[int],
             arrays: tuple[Any, ...], cal: dict[int, Any], bt: Any, bz: Any,
             dg: Any, tie: bool = True, removed: list[int] | None = None) -> list[list[int]]:
     """Final rounds after the last keyframe, so that iSAM2's own estimate is the smoothed
-    optimum of the batch's model: the segments' (s, τd) are tied into one (their random
-    walks removed, ``TIE_SD`` between neighbours), then forced-relinearisation updates in
-    which every custom term beyond the thresholds is rebuilt, until nothing is (at most
+    optimum of the batch's model: the segments' (s, τd) and accelerometer scale factors are
+    tied into one (their random walks removed, ``TIE_SD`` between neighbours), then
+    forced-relinearisation updates in which every custom term beyond the thresholds is
+    rebuilt, until nothing is (at most
     ``cfg.final_rounds``). Returns per round [terms rebuilt, variables iSAM2 relinearised]."""
     cfg = P.cfg
     n_seg = int(seg[-1]) + 1
@@ -316,9 +317,13 @@ def settle(isam: Any, book: TermBook, P: Any, seg: Any, rw_idx: list[int],
         tags, more = book.rebuild(nf, nk - 2, rot, pos, vel, bias, cb, gg,
                                   cal if has_baro else None, bt, bz, P.pri, dg)
         removed = sorted(set(removed) | set(more))
-    if tie and has_baro and n_seg > 1:
+    if tie and n_seg > 1 and (has_baro or P.ka is not None):
         for j in range(1, n_seg):
-            nf.add(gtsam.BetweenFactorVector(K(j - 1), K(j), np.zeros(2), noise(TIE_SD)))
+            if has_baro:
+                nf.add(gtsam.BetweenFactorVector(K(j - 1), K(j), np.zeros(2), noise(TIE_SD)))
+            if P.ka is not None:  # the segments' accelerometer scale factors A(j) too
+                nf.add(gtsam.BetweenFactorVector(A(j - 1), A(j), np.zeros(3),
+                                                 noise([TIE_SD[0]] * 3)))
         removed = sorted(set(removed) | set(rw_idx))
     out: list[list[int]] = []
     for r in range(cfg.final_rounds):

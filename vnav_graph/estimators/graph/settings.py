@@ -64,7 +64,10 @@ class GraphConfig:
     real logs, and simulated IMUs whose spec has a scale error). B(k) then holds the
     effective accelerometer bias of interval k, b_a + diag(ā_k)·k_a (ā_k the mean measured
     specific force over it), and the bias chain carries diag(ā_k+1 − ā_k)·k_a
-    (``problem.bias_link``); the reported accelerometer bias is b_a.
+    (``problem.bias_link``); the reported accelerometer bias is b_a. accel_scale_rw [1/√s]:
+    graph-isam2's online pass carries k_a per segment, like (s, τd), linked by a random walk
+    of root PSD accel_scale_rw times k_a's prior σ (the relative freedom calib_rw gives s
+    under its 1 % prior); the final rounds tie them into the batch's one constant.
     gnss_gate_prob: probability of the χ² gates on GNSS fixes (0 switches gating off):
     a causal pre-gate of the GNSS height against the barometer and a post-solve gate of
     each fix's normalised position (+ velocity) residual, repeated ≤ ``gate_rounds`` times.
@@ -106,6 +109,7 @@ class GraphConfig:
     gnss_gm_sd_v: float = 0.0
     gnss_gm_tau_s: float = 300.0
     accel_scale: bool | None = None
+    accel_scale_rw: float = 2e-3
 
     @property
     def gnss_gm(self) -> GnssHeightGM | None:
