@@ -1,0 +1,102 @@
+"""The accelerometer scale factors of the graph smoothers (``problem.AccelScale``,
+``problem.bias_link``) and the rule every estimator shares (``sensors.model.accel_scale_sd``):
+closed forms for the interval mean force, the effective bias and the bias link's residual."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import gtsam
+import numpy as np
+import pytest
+from gtsam.symbol_shorthand import A, B
+
+from vnav_graph.config import IMU_PRESETS
+from vnav_graph.estimators.graph import GraphConfig
+from vnav_graph.estimators.graph import problem as gp
+from vnav_graph.sensors.model import MIN_INFERRED_ACCEL_SCALE_SD, accel_scale_sd, sensor_model
+from vnav_graph.simulation.scenario import load_scenario, simulate
+
+
+@pytest.fixture(scope="module")
+def P():
+    return gp.setup(simulate(load_scenario("hill-drive", duration_s=30.0), seed=0), GraphConfig())
+
+
+def test_the_rule_real_log_simulated_and_forced():
+    drive = simulate(load_scenario("hill-drive", duration_s=10.0), seed=0)
+    m = sensor_model(drive)
+    assert accel_scale_sd(m) == m.imu.accel_scale_sd > 0  # the spec's σ
+    assert accel_scale_sd(m, False) == 0.0
+    zero = replace(m, imu=replace(m.imu, accel_scale_sd=0.0))
+    assert accel_scale_sd(zero) == 0.0  # no scale error in the spec: not carried
+    real = replace(zero, imu_inferred=True)
+    assert accel_scale_sd(real) == MIN_INFERRED_ACCEL_SCALE_SD  # a real log: carried, floored
+
+
+def test_interval_mean_force_closed_form():
+    """ā_k is the time average of the midpoint samples; a gap interval takes its
+    predecessor's, the last keyframe its interval's."""
+    t = np.r_[0.0, 0.5, 1.0, 1.5, 2.0, 12.0, 12.5, 13.0]
+    acc = np.zeros((t.size, 3))
+    acc[:, 0] = np.r_[0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0]
+    kf = np.array([0, 2, 4, 5, 7])
+    gap = np.array([False, False, True, False])
+    f = gp.interval_mean_force(t, acc, kf, gap)
+    np.testing.assert_allclose(f[:, 0], [1.0, 3.0, 3.0, 6.0, 6.0])
+
+
+def test_true_bias_removes_the_scale_term(P):
+    assert P.ka is not None and P.ka.sd == IMU_PRESETS[P.imu_spec.name].accel_scale_sd
+    ka = np.array([1e-3, -2e-3, 5e-4])
+    k = np.arange(4)
+    b_a = np.array([[0.01, 0.02, -0.03]] * 4)
+    eff = b_a + P.ka.f_mean[k] * ka
+    np.testing.assert_allclose(P.ka.true_bias(eff, ka, k), b_a, atol=1e-15)
+
+
+def _values(b0, b1, keys_a):
+    v = gtsam.Values()
+    v.insert(B(5), gtsam.imuBias.ConstantBias(b0[:3], b0[3:]))
+    v.insert(B(6), gtsam.imuBias.ConstantBias(b1[:3], b1[3:]))
+    for key, a in keys_a:
+        v.insert(key, a)
+    return v
+
+
+def test_bias_link_is_the_random_walk_of_the_effective_bias(P):
+    """½‖r‖²_Σ with r = B(k+1) − B(k) − [diag(ā_k+1)·k_a' − diag(ā_k)·k_a; 0], Σ = q_b·Δt:
+    the 3-key link (one A) and the 4-key link across a segment boundary (A(0), A(1))."""
+    rng = np.random.default_rng(1)
+    a0, a1 = 1e-2 * rng.normal(size=3), 1e-2 * rng.normal(size=3)
+    f0, f1 = P.ka.f_mean[5], P.ka.f_mean[6]
+    q = np.r_[np.diag(P.params.getBiasAccCovariance()),
+              np.diag(P.params.getBiasOmegaCovariance())] * 0.7
+    # B(k+1) as the model with (k_a, k_a') = (a0, a1) predicts it, plus 1σ of walk
+    b0 = 1e-2 * rng.normal(size=6)
+    b1 = b0 + np.sqrt(q) * rng.normal(size=6)
+    b1[:3] += f1 * a1 - f0 * a0
+
+    def closed(a_k, a_k1):
+        r = b1 - b0
+        r[:3] -= f1 * a_k1 - f0 * a_k
+        return 0.5 * float(np.sum(r**2 / q))
+
+    e3 = gp.bias_link(P, 5, 0.7).error(_values(b0, b1, [(A(0), a0)]))
+    assert e3 == pytest.approx(closed(a0, a0), rel=1e-12)
+    e4 = gp.bias_link(P, 5, 0.7, (A(0), A(1))).error(_values(b0, b1, [(A(0), a0), (A(1), a1)]))
+    # the 4-key form carries 1e-9 information per component (positive definite for QR)
+    assert e4 == pytest.approx(closed(a0, a1), rel=1e-9)
+    assert closed(a0, a0) > 10 * closed(a0, a1)  # the scale terms matter here: it can fail
+
+
+def test_without_the_scale_factors_the_link_is_a_plain_random_walk():
+    drive = simulate(load_scenario("hill-drive", duration_s=10.0), seed=0)
+    P0 = gp.setup(drive, GraphConfig(accel_scale=False))
+    assert P0.ka is None
+    rng = np.random.default_rng(2)
+    b0, b1 = 1e-2 * rng.normal(size=6), 1e-2 * rng.normal(size=6)
+    q = np.r_[np.diag(P0.params.getBiasAccCovariance()),
+              np.diag(P0.params.getBiasOmegaCovariance())]
+    e = gp.bias_link(P0, 5, 1.0).error(_values(b0, b1, []))
+    assert e == pytest.approx(0.5 * float(np.sum((b1 - b0) ** 2 / q)), rel=1e-12)
