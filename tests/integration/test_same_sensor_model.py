@@ -68,6 +68,8 @@ def _ekf_used(drive, name: str, monkeypatch: pytest.MonkeyPatch) -> dict:
         "gyro_nd": float(np.sqrt(qd[ok[0], km.IATT] / dtg[ok[0] - 1])),
         "gyro_bias_sd": float(np.sqrt(p0[9, 9])),
         "accel_bias_sd": float(np.sqrt(p0[12, 12])),
+        # the accelerometer scale factors' prior σ (1e-7: not estimated)
+        "accel_scale_sd": float(np.sqrt(p0[18, 18])),
         "bias_tau": (float(noise.tau_g), float(noise.tau_a), float(noise.tau_b)),
         "baro": (float(np.sqrt(p0[15, 15])), float(init.par0[km.PTD]),
                  float(np.sqrt(p0[16, 16])), float(np.sqrt(p0[17, 17])),
@@ -97,6 +99,7 @@ def _graph_used(drive, name: str, monkeypatch: pytest.MonkeyPatch) -> dict:
         "accel_nd": float(np.sqrt(P.params.getAccelerometerCovariance()[0, 0])),
         "gyro_nd": float(np.sqrt(P.params.getGyroscopeCovariance()[0, 0])),
         "gyro_bias_sd": spec.gyro_bias_sd, "accel_bias_sd": spec.accel_bias_sd,
+        "accel_scale_sd": P.ka.sd if P.ka is not None else 1e-7,
         "bias_tau": (spec.gyro_bias_tau, spec.accel_bias_tau, pri["b_tau"]),
         "baro": (pri["s_sd"], pri["tau0"], pri["tau_sd"], pri["b_sd"], pri["noise"]),
         "gnss_pos_sd": P.g_pos_sd, "gnss_vel_sd": P.g_vel_sd,
@@ -149,7 +152,7 @@ def _check_same(drive, monkeypatch: pytest.MonkeyPatch) -> None:
                                       np.asarray(rts[k], dtype=object), err_msg=k)
     for name in ("graph-batch", "graph-isam2"):
         g = _graph_used(drive, name, monkeypatch)
-        for k in ("accel_nd", "gyro_nd", "gyro_bias_sd", "accel_bias_sd"):
+        for k in ("accel_nd", "gyro_nd", "gyro_bias_sd", "accel_bias_sd", "accel_scale_sd"):
             assert g[k] == pytest.approx(ekf[k], rel=REL), (name, k)
         assert g["bias_tau"] == pytest.approx(ekf["bias_tau"], rel=REL), name
         assert g["baro"] == pytest.approx(ekf["baro"], rel=REL), name

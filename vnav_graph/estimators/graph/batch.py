@@ -13,9 +13,11 @@ Only the modules of this subpackage import gtsam. Design (details and measuremen
   Gauss-Markov bias, G(k) GNSS height Gauss-Markov error (optional,
   ``GraphConfig.gnss_gm_sd_v``, the EKF's model; a linear chain like C); K(j) = (s, τd) baro
   calibration (one for the batch, one per segment in the incremental front end).
-- C++ factors: CombinedImuFactor (Forster et al. 2017), GPSFactorArm and velocity priors for
-  fixes at keyframe epochs, priors, and the exact Gauss-Markov chain
-  b_{k+1} = e^{−Δt/τ} b_k + w, var w = σ²(1 − e^{−2Δt/τ}) as linear factors.
+- C++ factors: ImuFactor (Forster et al. 2017) on B(k), GPSFactorArm and velocity priors for
+  fixes at keyframe epochs, priors, and as linear factors the IMU biases' random walk
+  (``problem.bias_link``, with the accelerometer scale factors A(0) when carried:
+  ``problem.AccelScale``) and the exact Gauss-Markov chain b_{k+1} = e^{−Δt/τ} b_k + w,
+  var w = σ²(1 − e^{−2Δt/τ}).
 - Baro samples and GNSS fixes between keyframes: linearised in numpy, vectorised over all
   samples (``factors``), reduced to one information block per interval and added to the
   linearised C++ graph inside our own Gauss-Newton loop (batch), or wrapped once as
