@@ -121,8 +121,7 @@ def builtin_floor(drive: Any) -> float:
     graph.add(gtsam.PriorFactorDouble(C(0), 0.0, problem.noise([pri["b_sd"]])))
     vals = gtsam.Values()
     baro_noise = problem.noise([pri["noise"]])
-    q_b = np.r_[np.diag(P.params.getBiasAccCovariance()),
-                np.diag(P.params.getBiasOmegaCovariance())]
+    q_b = problem.bias_walk_psd(P.params)
     # NED graph, +z-up factor: feed the pressure of the mirrored height −(h − h0)
     p_kpa = isa_pressure(-(alt[j] - P.h0)) / 1000.0
     for k in range(P.n_kf):

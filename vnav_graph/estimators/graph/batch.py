@@ -137,7 +137,7 @@ def cov_18(P: Problem, cov_of: Any, vals: Any, k: int) -> FloatArray:
     tmat[12:15, 9:12] = np.eye(3)
     tmat[9:12, 12:15] = np.eye(3)
     if P.ka is not None:
-        tmat[12:15, n - 3:n] = -np.diag(P.ka.f_mean[min(k, P.n_kf - 1)])
+        tmat[12:15, n - 3:n] = -np.diag(P.ka.f_mean[k])
     if P.drive.baro is not None:
         tmat[17, 15] = 1.0
         tmat[15, 16] = 1.0

@@ -321,3 +321,17 @@ def hessian_pieces(keys: list[int], lam: FloatArray, eta: FloatArray,
         else:
             out.append(hf(kk[0], *a, 0.0))
     return out
+
+
+def information_factor(keys: list[int], lam: FloatArray, eta: FloatArray,
+                       blocks: tuple[tuple[int, int], ...], lin: Any) -> Any:
+    """A LinearContainerFactor of the information (Λ, η) over ``keys`` (padded ``blocks``),
+    linearised at ``lin``: ≤ 3-key Hessian pieces, summed into one factor and converted to
+    a Jacobian (iSAM2 runs QR)."""
+    # 1e-9 information (σ ≈ 3e4 in any unit) makes the block positive definite so it can be
+    # turned into a Jacobian for QR; it is far below any real information.
+    lam = lam + 1e-9 * np.eye(lam.shape[0])
+    gfg = gtsam.GaussianFactorGraph()
+    for f in hessian_pieces(keys, lam, eta, tuple(range(len(keys))), blocks):
+        gfg.push_back(f)
+    return gtsam.LinearContainerFactor(gtsam.JacobianFactor(gtsam.HessianFactor(gfg)), lin)

@@ -376,8 +376,7 @@ class GraphISAM2:
                                                      baro_next, pri, last=True)
             nf = gtsam.NonlinearFactorGraph()
             nv = gtsam.Values()
-            tags = book.new_terms(nk - 2, None, new_baro, st, cal if has_baro else None,
-                                  nf) if new_baro else []
+            tags = book.new_terms(nk - 2, None, new_baro, st, cal if has_baro else None, nf)
             if b_last < nk - 1:
                 new_bias(nv, nf, nk - 1)
                 b_last = nk - 1

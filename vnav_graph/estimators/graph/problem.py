@@ -30,6 +30,7 @@ from ...types import (
     FloatArray,
 )
 from . import factors as gf
+from .general import information_factor
 from .robust import reweight, robust_noise
 from .settings import GraphConfig
 
@@ -346,15 +347,29 @@ def keyframe_fixes(P: Problem, k: int) -> list[tuple[int, Any]]:
     return out
 
 
-def _linear(jf: Any, keys: list[tuple[int, int]]) -> Any:
-    """A linear factor on vector-space variables as a nonlinear one (exact at any point)."""
+def _zeros(keys: list[tuple[int, int]]) -> Any:
+    """Values of zero for vector-space variables (``keys``: key, dimension); B keys are
+    ``ConstantBias``."""
     lin = gtsam.Values()
     for key, n in keys:
-        if n == 6:
+        if gtsam.Symbol(key).chr() == ord("b"):
             lin.insert(key, gtsam.imuBias.ConstantBias())
         else:
             lin.insert(key, np.zeros(n))
-    return gtsam.LinearContainerFactor(jf, lin)
+    return lin
+
+
+def _linear(jf: Any, keys: list[tuple[int, int]]) -> Any:
+    """A linear factor on vector-space variables as a nonlinear one, linearised at zero
+    (exact at any point)."""
+    return gtsam.LinearContainerFactor(jf, _zeros(keys))
+
+
+def bias_walk_psd(params: Any) -> FloatArray:
+    """PSD (6,) of the IMU biases' random walk (accel, gyro) in the preintegration
+    parameters ``params`` (``Problem.params``)."""
+    return np.r_[np.diag(params.getBiasAccCovariance()),
+                 np.diag(params.getBiasOmegaCovariance())]
 
 
 def bias_link(P: Problem, k: int, dt: float, a_keys: tuple[int, int] | None = None) -> Any:
@@ -364,8 +379,7 @@ def bias_link(P: Problem, k: int, dt: float, a_keys: tuple[int, int] | None = No
     link is B_a(k+1) − B_a(k) − diag(ā_k+1)·k_a' + diag(ā_k)·k_a = w, k_a and k_a' the scale
     variables of intervals k and k+1 (``a_keys``; default A(0) for both, the batch's; the
     incremental front end has one per segment)."""
-    bp = P.params
-    q_b = np.r_[np.diag(bp.getBiasAccCovariance()), np.diag(bp.getBiasOmegaCovariance())]
+    q_b = bias_walk_psd(P.params)
     sd = noise(np.sqrt(q_b * max(dt, 1e-9)))
     eye = np.eye(6)
     if P.ka is None:
@@ -379,22 +393,14 @@ def bias_link(P: Problem, k: int, dt: float, a_keys: tuple[int, int] | None = No
         return _linear(gtsam.JacobianFactor(B(k), -eye, B(k + 1), eye, a0, ja, np.zeros(6),
                                             sd), [(B(k), 6), (B(k + 1), 6), (a0, 3)])
     # four keys (a segment boundary): GTSAM's Python JacobianFactor takes ≤ 3, so the
-    # information JᵀΣ⁻¹J goes in as ≤ 3-key Hessian pieces (+1e-9·I, σ ≈ 3e4: positive
-    # definite, so that it converts to a Jacobian for iSAM2's QR)
-    from .general import hessian_pieces
-
+    # information JᵀΣ⁻¹J goes in as ≤ 3-key Hessian pieces (``general.information_factor``)
     jac = np.zeros((6, 18))
     jac[:, 0:6], jac[:, 6:12] = -eye, eye
     jac[0:3, 12:15], jac[0:3, 15:18] = np.diag(f0), -np.diag(f1)
     jw = jac / np.sqrt(q_b * max(dt, 1e-9))[:, None]
-    lam = jw.T @ jw + 1e-9 * np.eye(18)
-    keys = [B(k), B(k + 1), a0, a1]
-    gfg = gtsam.GaussianFactorGraph()
-    for f in hessian_pieces(keys, lam, np.zeros(18), (0, 1, 2, 3),
-                            ((0, 6), (6, 6), (12, 3), (15, 3))):
-        gfg.push_back(f)
-    return _linear(gtsam.JacobianFactor(gtsam.HessianFactor(gfg)),
-                   [(B(k), 6), (B(k + 1), 6), (a0, 3), (a1, 3)])
+    keys = [(B(k), 6), (B(k + 1), 6), (a0, 3), (a1, 3)]
+    return information_factor([key for key, _ in keys], jw.T @ jw, np.zeros(18),
+                              ((0, 6), (6, 6), (12, 3), (15, 3)), _zeros(keys))
 
 
 def imu_factor(k: int, pim: Any) -> Any:
@@ -408,12 +414,8 @@ def gm_link(key0: int, key1: int, dt: float, tau: float, sd: float) -> Any:
     between two scalar variables, as a (linear) C++ factor."""
     phi = float(gm_transition(dt, tau))
     sd_w = float(np.sqrt(max(gm_process_var(dt, tau, sd), 1e-12)))
-    jf = gtsam.JacobianFactor(key0, np.array([[-phi]]), key1, np.array([[1.0]]),
-                              np.zeros(1), noise([sd_w]))
-    lin = gtsam.Values()
-    lin.insert(key0, np.zeros(1))
-    lin.insert(key1, np.zeros(1))
-    return gtsam.LinearContainerFactor(jf, lin)
+    return _linear(gtsam.JacobianFactor(key0, np.array([[-phi]]), key1, np.array([[1.0]]),
+                                        np.zeros(1), noise([sd_w])), [(key0, 1), (key1, 1)])
 
 
 def gm_factor(k: int, dt: float, pri: dict[str, float]) -> Any:

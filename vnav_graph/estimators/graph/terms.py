@@ -13,9 +13,8 @@ import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import B, C, G, K, X
 
-from ...types import FloatArray
 from . import factors as gf
-from .general import hessian_pieces, pad_information
+from .general import information_factor, pad_information
 from .problem import nav_accel
 from .robust import reweight
 
@@ -24,20 +23,6 @@ from .robust import reweight
 # GNSS with the height state — X(k), X(k+1), B(k), G(k), G(k+1)
 BARO_BLOCKS = (*gf.BLOCKS, (16, 6))
 GNSS_GM_BLOCKS = ((0, 6), (6, 6), (12, 6), (18, 1), (19, 1))
-
-
-def information_factor(keys: list[int], lam: FloatArray, eta: FloatArray,
-                       blocks: tuple[tuple[int, int], ...], lin: Any) -> Any:
-    """A LinearContainerFactor of the information (Λ, η) over ``keys`` (padded ``blocks``),
-    linearised at ``lin``: ≤ 3-key Hessian pieces, summed into one factor and converted to
-    a Jacobian (iSAM2 runs QR)."""
-    # 1e-9 information (σ ≈ 3e4 in any unit) makes the block positive definite so it can be
-    # turned into a Jacobian for QR; it is far below any real information.
-    lam = lam + 1e-9 * np.eye(lam.shape[0])
-    gfg = gtsam.GaussianFactorGraph()
-    for f in hessian_pieces(keys, lam, eta, tuple(range(len(keys))), blocks):
-        gfg.push_back(f)
-    return gtsam.LinearContainerFactor(gtsam.JacobianFactor(gtsam.HessianFactor(gfg)), lin)
 
 
 def keyframe_states(P: Any, k: int | list[int], rot: Any, pos: Any, vel: Any, bias: Any,
