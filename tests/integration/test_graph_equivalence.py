@@ -32,8 +32,9 @@ through its IMU-shaped interpolant — is an ordinary measurement of the state. 
   rebuilt here from the drive with the documented preintegration policy (a C++ factor, not
   project code: its residual and its exactly linear dependence on the vertical variables are
   read off by central differences, its noise is the (pos z, vel z) block of the factor's
-  noise model), the bias random walk a_{k+1} − a_k − (ā_{k+1} − ā_k)·κ = w, var w = q_a T,
-  q_a = 2σ_a²/τ_a + rw_a² (written here from the spec), and the Gauss-Markov link
+  noise model), the bias's Gauss-Markov step a_{k+1} − φ_a a_k − (ā_{k+1} − φ_a ā_k)·κ = w,
+  φ_a = e^{−T/τ_a}, var w = σ_a²(1 − e^{−2T/τ_a}) + rw_a² T (written here from the spec),
+  and the Gauss-Markov link
   b_{k+1} = φ b_k + w, φ = e^{−T/τ_b}, var w = σ_b²(1 − e^{−2T/τ_b}), written here from
   ``sensors.noise``;
 - GNSS heights: vertical row of the GNSS factor on the keyframe;
@@ -147,7 +148,7 @@ class VerticalProblem:
     attitude, biases there are the solution's keyframe states), so the test does not depend
     on the solver's internals. The IMU factors are rebuilt here with GTSAM from the drive and
     the documented preintegration policy (docs/graph.md): MakeSharedD(γ(origin)), noise
-    densities squared, Gauss-Markov IMU bias as a random walk of PSD 2σ²/τ + rw², integration
+    densities squared, the Gauss-Markov step of the IMU bias (σ, τ, rw of the spec), integration
     covariance 1e-8, omegaCoriolis = Ω_ie in t, midpoint samples, and the gravity difference
     δg(p_k) folded into the specific force."""
 
@@ -203,13 +204,12 @@ class VerticalProblem:
         self.prior = {"p": (float(np.interp(t_kf[0], drive.gnss.t, g_ned[:, 2])), 10.0),
                       "v": (0.0, 2.0), "a": (0.0, sp.accel_bias_sd),
                       "k": (0.0, sp.accel_scale_sd if self.scale else 0.0)}
-        # process: vertical rows of ImuFactor and the bias random walk
+        # process: vertical rows of ImuFactor and the bias's Gauss-Markov step
         par = gtsam.PreintegrationParams.MakeSharedD(g0)
         par.setAccelerometerCovariance(np.eye(3) * sp.accel_noise_density**2)
         par.setGyroscopeCovariance(np.eye(3) * sp.gyro_noise_density**2)
         par.setIntegrationCovariance(np.eye(3) * 1e-8)
         par.setOmegaCoriolis(omega_t)
-        q_a = 2 * sp.accel_bias_sd**2 / sp.accel_bias_tau + sp.accel_bias_rw**2
         idx = [ROW_PZ, ROW_VZ]
         self.imu = []
         for k in range(nk - 1):
@@ -224,18 +224,21 @@ class VerticalProblem:
             var = [("p", k), ("v", k), ("a", k), ("p", k + 1), ("v", k + 1)]
             e_i, j_i = _vertical_rows(f, vals, idx, var)
             # rows (pos z, vel z, bias link z) on x_k = (p, v, a)_k, x_k+1 and κ
-            e0 = np.r_[e_i, ba[k + 1, 2] - ba[k, 2]
-                       - (self.f_mean[k + 1, 2] - self.f_mean[k, 2]) * self.ka[2]]
+            phi_a = np.exp(-self.T[k] / sp.accel_bias_tau)
+            e0 = np.r_[e_i, ba[k + 1, 2] - phi_a * ba[k, 2]
+                       - (self.f_mean[k + 1, 2] - phi_a * self.f_mean[k, 2]) * self.ka[2]]
             jk = np.zeros((3, 3))
             jk[:2] = j_i[:, :3]
-            jk[2, 2] = -1.0
+            jk[2, 2] = -phi_a
             jk1 = np.zeros((3, 3))
             jk1[:2, :2] = j_i[:, 3:]
             jk1[2, 2] = 1.0
-            j_kappa = np.array([0.0, 0.0, -(self.f_mean[k + 1, 2] - self.f_mean[k, 2])])
+            j_kappa = np.array([0.0, 0.0, -(self.f_mean[k + 1, 2]
+                                            - phi_a * self.f_mean[k, 2])])
             cov = np.zeros((3, 3))
             cov[:2, :2] = f.noiseModel().covariance()[np.ix_(idx, idx)]
-            cov[2, 2] = q_a * self.T[k]
+            cov[2, 2] = (sp.accel_bias_sd**2 * (1 - np.exp(-2 * self.T[k] / sp.accel_bias_tau))
+                         + sp.accel_bias_rw**2 * self.T[k])
             self.imu.append((e0, jk, jk1, cov, j_kappa))
         # GNSS heights: all fixes sit on keyframe epochs (asserted in a test)
         gt = drive.gnss.t

@@ -64,22 +64,35 @@ def _values(b0, b1, keys_a):
     return v
 
 
-def test_bias_link_is_the_random_walk_of_the_effective_bias(P):
-    """½‖r‖²_Σ with r = B(k+1) − B(k) − [diag(ā_k+1)·k_a' − diag(ā_k)·k_a; 0], Σ = q_b·Δt:
-    the 3-key link (one A) and the 4-key link across a segment boundary (A(0), A(1))."""
+def _gm_step(spec, dt):
+    """φ and var w of the IMU biases' Gauss-Markov step, written here from the spec: φ =
+    exp(−Δt/τ), var w = σ²(1 − exp(−2Δt/τ)) + rw²·Δt (accel ×3, gyro ×3)."""
+    phi, var = [], []
+    for sd, tau, rw in ((spec.accel_bias_sd, spec.accel_bias_tau, spec.accel_bias_rw),
+                        (spec.gyro_bias_sd, spec.gyro_bias_tau, spec.gyro_bias_rw)):
+        phi += [np.exp(-dt / tau)] * 3
+        var += [sd**2 * (1 - np.exp(-2 * dt / tau)) + rw**2 * dt] * 3
+    return np.array(phi), np.array(var)
+
+
+def test_bias_link_is_the_gauss_markov_step_of_the_effective_bias(P):
+    """½‖r‖²_Σ with r = B(k+1) − φ·B(k) − [diag(ā_k+1)·k_a' − φ_a·diag(ā_k)·k_a; 0], i.e.
+    b(k+1) − φ·b(k) for the true biases b = B − [diag(ā)·k_a; 0], Σ = var w of the ekf's
+    discretisation: the 3-key link (one A) and the 4-key link across a segment boundary
+    (A(0), A(1))."""
     rng = np.random.default_rng(1)
     a0, a1 = 1e-2 * rng.normal(size=3), 1e-2 * rng.normal(size=3)
     f0, f1 = P.ka.f_mean[5], P.ka.f_mean[6]
-    q = np.r_[np.diag(P.params.getBiasAccCovariance()),
-              np.diag(P.params.getBiasOmegaCovariance())] * 0.7
-    # B(k+1) as the model with (k_a, k_a') = (a0, a1) predicts it, plus 1σ of walk
+    phi, q = _gm_step(P.imu_spec, 0.7)
+    assert np.all(phi < 1.0)  # a finite τ: the decay is tested, not only the walk
+    # B(k+1) as the model with (k_a, k_a') = (a0, a1) predicts it, plus 1σ of noise
     b0 = 1e-2 * rng.normal(size=6)
-    b1 = b0 + np.sqrt(q) * rng.normal(size=6)
-    b1[:3] += f1 * a1 - f0 * a0
+    b1 = phi * b0 + np.sqrt(q) * rng.normal(size=6)
+    b1[:3] += f1 * a1 - phi[:3] * f0 * a0
 
     def closed(a_k, a_k1):
-        r = b1 - b0
-        r[:3] -= f1 * a_k1 - f0 * a_k
+        r = b1 - phi * b0
+        r[:3] -= f1 * a_k1 - phi[:3] * f0 * a_k
         return 0.5 * float(np.sum(r**2 / q))
 
     e3 = gp.bias_link(P, 5, 0.7).error(_values(b0, b1, [(A(0), a0)]))
@@ -90,13 +103,18 @@ def test_bias_link_is_the_random_walk_of_the_effective_bias(P):
     assert closed(a0, a0) > 10 * closed(a0, a1)  # the scale terms matter here: it can fail
 
 
-def test_without_the_scale_factors_the_link_is_a_plain_random_walk():
+def test_without_the_scale_factors_the_link_is_the_plain_gauss_markov_step():
     drive = simulate(load_scenario("hill-drive", duration_s=10.0), seed=0)
     P0 = gp.setup(drive, GraphConfig(accel_scale=False))
     assert P0.ka is None
     rng = np.random.default_rng(2)
     b0, b1 = 1e-2 * rng.normal(size=6), 1e-2 * rng.normal(size=6)
-    q = np.r_[np.diag(P0.params.getBiasAccCovariance()),
-              np.diag(P0.params.getBiasOmegaCovariance())]
+    phi, q = _gm_step(P0.imu_spec, 1.0)
     e = gp.bias_link(P0, 5, 1.0).error(_values(b0, b1, []))
-    assert e == pytest.approx(0.5 * float(np.sum((b1 - b0) ** 2 / q)), rel=1e-12)
+    assert e == pytest.approx(0.5 * float(np.sum((b1 - phi * b0) ** 2 / q)), rel=1e-12)
+    # a random-constant bias (τ = inf) is a pure random walk of rw²·Δt
+    spec = P0.imu_spec
+    rc = replace(spec, accel_bias_tau=np.inf, gyro_bias_tau=np.inf)
+    e_rc = gp.bias_link(replace(P0, imu_spec=rc), 5, 1.0).error(_values(b0, b1, []))
+    q_rc = np.r_[[spec.accel_bias_rw**2] * 3, [spec.gyro_bias_rw**2] * 3]
+    assert e_rc == pytest.approx(0.5 * float(np.sum((b1 - b0) ** 2 / q_rc)), rel=1e-12)

@@ -28,6 +28,17 @@ def gm_process_var(dt: float | FloatArray, tau: float, sd: float) -> FloatArray:
     return sd**2 * (1.0 - np.exp(-2.0 * dt / tau))
 
 
+def imu_bias_step(dt: float | FloatArray, tau: float, sd: float, rw: float
+                  ) -> tuple[FloatArray, FloatArray]:
+    """One step ``dt`` of an IMU bias modelled as one first-order Gauss-Markov state (σ
+    ``sd``, correlation time ``tau``) plus a random walk of root PSD ``rw`` (``ImuSpec``):
+    b(t + dt) = φ·b(t) + w, φ = exp(−dt/τ), var w = σ²(1 − φ²) + rw²·dt. Returns (φ, var w).
+    Both families discretise the IMU biases with it: the ekf's transition and process noise,
+    the graph's bias link (``graph.problem.bias_link``)."""
+    dt = np.asarray(dt, dtype=float)
+    return gm_transition(dt, tau), gm_process_var(dt, tau, sd) + rw**2 * dt
+
+
 def gauss_markov(
     t: FloatArray, tau: float, sd: float, rng: np.random.Generator, size: int = 1,
     x0: FloatArray | None = None,

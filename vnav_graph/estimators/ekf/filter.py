@@ -73,7 +73,7 @@ from ...sensors.model import (
     gnss_gm,
     sensor_model,
 )
-from ...sensors.noise import gm_process_var, white_sd
+from ...sensors.noise import gm_process_var, imu_bias_step, white_sd
 from ...types import (
     ERROR_STATE_DIM,
     BaroEstimate,
@@ -274,10 +274,11 @@ def _process_noise(t: FloatArray, grid_idx: NDArrayInt, gaps: NDArrayInt, ispec:
     qd = np.zeros((grid_idx.size, km.NX))
     qd[:, km.IVEL:km.IVEL + 3] = _white_var(ispec.accel_noise_density, dtg)[:, None]
     qd[:, km.IATT:km.IATT + 3] = _white_var(ispec.gyro_noise_density, dtg)[:, None]
-    qd[:, km.IBG:km.IBG + 3] = (gm_process_var(dtg, ispec.gyro_bias_tau, ispec.gyro_bias_sd)
-                                + _white_var(ispec.gyro_bias_rw, dtg))[:, None]
-    qd[:, km.IBA:km.IBA + 3] = (gm_process_var(dtg, ispec.accel_bias_tau, ispec.accel_bias_sd)
-                                + _white_var(ispec.accel_bias_rw, dtg))[:, None]
+    # the IMU biases' step (φ, var w) of both families (sensors.noise.imu_bias_step)
+    qd[:, km.IBG:km.IBG + 3] = imu_bias_step(dtg, ispec.gyro_bias_tau, ispec.gyro_bias_sd,
+                                             ispec.gyro_bias_rw)[1][:, None]
+    qd[:, km.IBA:km.IBA + 3] = imu_bias_step(dtg, ispec.accel_bias_tau, ispec.accel_bias_sd,
+                                             ispec.accel_bias_rw)[1][:, None]
     qd[:, km.IBB] = gm_process_var(dtg, bp.bias_tau, bp.bias_sd)
     gm = cfg.gnss_gm
     if gm is not None:

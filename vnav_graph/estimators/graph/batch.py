@@ -14,8 +14,9 @@ Only the modules of this subpackage import gtsam. Design (details and measuremen
   ``GraphConfig.gnss_gm_sd_v``, the EKF's model; a linear chain like C); K(j) = (s, τd) baro
   calibration (one for the batch, one per segment in the incremental front end).
 - C++ factors: ImuFactor (Forster et al. 2017) on B(k), GPSFactorArm and velocity priors for
-  fixes at keyframe epochs, priors, and as linear factors the IMU biases' random walk
-  (``problem.bias_link``, with the accelerometer scale factors A(0) when carried:
+  fixes at keyframe epochs, priors, and as linear factors the IMU biases' Gauss-Markov step
+  (``problem.bias_link``, the ekf's discretisation, with the accelerometer scale factors A(0)
+  when carried:
   ``problem.AccelScale``) and the exact Gauss-Markov chain b_{k+1} = e^{−Δt/τ} b_k + w,
   var w = σ²(1 − e^{−2Δt/τ}).
 - Baro samples and GNSS fixes between keyframes: linearised in numpy, vectorised over all
@@ -106,10 +107,13 @@ def trajectory(P: Problem, st: gf.KeyframeStates, vals: Any, t_q: FloatArray) ->
     nk = P.n_kf
     bias = np.array([vals.atConstantBias(B(j)).vector() for j in range(nk)])
     alpha = ip["alpha"]
-    bg = bias[k, 3:6]
-    ba = bias[k, 0:3]
+    # the bias of the interval containing t_q; at the last keyframe epoch the last keyframe's
+    # own B (the bias link's Gauss-Markov step has decayed it from the last interval's)
+    kb = np.where(t_q >= P.t_kf[-1], nk - 1, k)
+    bg = bias[kb, 3:6]
+    ba = bias[kb, 0:3]
     if P.ka is not None:  # B holds the effective bias b_a + diag(ā_k)·k_a: report b_a
-        ba = P.ka.true_bias(ba, vals.atVector(A(0)), k)
+        ba = P.ka.true_bias(ba, vals.atVector(A(0)), kb)
     bb = (1 - alpha) * st.baro_bias[k] + alpha * st.baro_bias[k + 1]
     return Trajectory(t_q, lla, vel_n, q, bg, ba, bb if P.drive.baro is not None else None)
 

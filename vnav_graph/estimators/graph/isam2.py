@@ -74,6 +74,7 @@ from .linalg import single_thread_blas, trim_heap
 from .magnetometer import builtin_extensions, mag_info
 from .problem import (
     bias_link,
+    bias_step,
     build_batch_graph,
     gap_factors,
     gm_factor,
@@ -240,11 +241,13 @@ class GraphISAM2:
         def new_bias(nv: Any, nf: Any, k: int) -> None:
             """B(k) and its link from B(k−1) (``bias_link``: with the scale factors it needs
             ā_k, known once interval k is preintegrated), predicted from B(k−1)."""
-            bias[k] = bias[k - 1]
+            dt_b = float(P.t_kf[k] - P.t_kf[k - 1])
+            phi = bias_step(P.imu_spec, dt_b)[0]  # the link's mean: b(k) = φ·b(k−1)
+            bias[k] = phi * bias[k - 1]
             if P.ka is not None:
-                bias[k, 0:3] += (P.ka.f_mean[k] - P.ka.f_mean[k - 1]) * ka
+                bias[k, 0:3] += (P.ka.f_mean[k] - phi[0:3] * P.ka.f_mean[k - 1]) * ka
             nv.insert(B(k), gtsam.imuBias.ConstantBias(bias[k, 0:3], bias[k, 3:6]))
-            nf.add(bias_link(P, k - 1, float(P.t_kf[k] - P.t_kf[k - 1]), a_keys(k - 1)))
+            nf.add(bias_link(P, k - 1, dt_b, a_keys(k - 1)))
 
         for k in range(nk - 1):
             tu = time.perf_counter()

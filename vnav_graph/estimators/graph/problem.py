@@ -24,7 +24,7 @@ from ...sensors.model import (
     gnss_gm_split,
     sensor_model,
 )
-from ...sensors.noise import gm_process_var, gm_transition
+from ...sensors.noise import gm_process_var, gm_transition, imu_bias_step
 from ...types import (
     Drive,
     FloatArray,
@@ -158,7 +158,8 @@ def setup(drive: Drive, cfg: GraphConfig) -> Problem:
     p.setAccelerometerCovariance(np.eye(3) * spec.accel_noise_density**2)
     p.setGyroscopeCovariance(np.eye(3) * spec.gyro_noise_density**2)
     p.setIntegrationCovariance(np.eye(3) * 1e-8)
-    # Gauss-Markov bias approximated by a random walk of PSD 2σ²/τ + rw²
+    # the biases' random walk of PSD 2σ²/τ + rw² (only the bench's C++-only floor uses it:
+    # the graph's own bias link is the Gauss-Markov step of ``bias_step``)
     qa = 2 * spec.accel_bias_sd**2 / spec.accel_bias_tau + spec.accel_bias_rw**2
     qg = 2 * spec.gyro_bias_sd**2 / spec.gyro_bias_tau + spec.gyro_bias_rw**2
     p.setBiasAccCovariance(np.eye(3) * max(qa, 1e-12))
@@ -367,37 +368,52 @@ def _linear(jf: Any, keys: list[tuple[int, int]]) -> Any:
 
 def bias_walk_psd(params: Any) -> FloatArray:
     """PSD (6,) of the IMU biases' random walk (accel, gyro) in the preintegration
-    parameters ``params`` (``Problem.params``)."""
+    parameters ``params`` (``Problem.params``): the bench's C++-only floor uses it."""
     return np.r_[np.diag(params.getBiasAccCovariance()),
                  np.diag(params.getBiasOmegaCovariance())]
 
 
+def bias_step(spec: ImuSpec, dt: float) -> tuple[FloatArray, FloatArray]:
+    """(φ, var w), each (6,) in ``ConstantBias`` order (accel, gyro), of the IMU biases over
+    ``dt``: the ekf's discretisation (``sensors.noise.imu_bias_step``), with the floors of
+    the preintegration parameters (a noiseless spec stays regular)."""
+    dt = max(dt, 1e-9)
+    pa, va = imu_bias_step(dt, spec.accel_bias_tau, spec.accel_bias_sd, spec.accel_bias_rw)
+    pg, vg = imu_bias_step(dt, spec.gyro_bias_tau, spec.gyro_bias_sd, spec.gyro_bias_rw)
+    return (np.r_[[float(pa)] * 3, [float(pg)] * 3],
+            np.r_[[max(float(va), 1e-12 * dt)] * 3, [max(float(vg), 1e-16 * dt)] * 3])
+
+
 def bias_link(P: Problem, k: int, dt: float, a_keys: tuple[int, int] | None = None) -> Any:
-    """B(k) → B(k+1): the IMU biases' random walk (PSD of the preintegration parameters,
-    Forster et al. 2017, Eq. 48; the one CombinedImuFactor carries), as a linear factor.
-    With the accelerometer scale factors (``AccelScale``) B holds effective biases and the
-    link is B_a(k+1) − B_a(k) − diag(ā_k+1)·k_a' + diag(ā_k)·k_a = w, k_a and k_a' the scale
+    """B(k) → B(k+1): the IMU biases' Gauss-Markov step b(k+1) = φ·b(k) + w (``bias_step``:
+    φ = exp(−Δt/τ), var w = σ²(1 − φ²) + rw²·Δt per component, the ekf's model of the
+    ``ImuSpec``), as a linear factor. With the accelerometer scale factors (``AccelScale``)
+    B holds effective biases b_a + diag(ā)·k_a and the link is
+    B_a(k+1) − diag(ā_k+1)·k_a' − φ_a·(B_a(k) − diag(ā_k)·k_a) = w, k_a and k_a' the scale
     variables of intervals k and k+1 (``a_keys``; default A(0) for both, the batch's; the
-    incremental front end has one per segment)."""
-    q_b = bias_walk_psd(P.params)
-    sd = noise(np.sqrt(q_b * max(dt, 1e-9)))
+    incremental front end has one per segment). Until session 29 the graph carried the
+    biases as random walks of PSD 2σ²/τ + rw² (no decay of the mean; docs/graph.md)."""
+    phi, var = bias_step(P.imu_spec, dt)
+    sd = noise(np.sqrt(var))
+    minus_phi = -np.diag(phi)
     eye = np.eye(6)
     if P.ka is None:
-        return _linear(gtsam.JacobianFactor(B(k), -eye, B(k + 1), eye, np.zeros(6), sd),
+        return _linear(gtsam.JacobianFactor(B(k), minus_phi, B(k + 1), eye, np.zeros(6), sd),
                        [(B(k), 6), (B(k + 1), 6)])
     a0, a1 = a_keys if a_keys is not None else (A(0), A(0))
-    f0, f1 = P.ka.f_mean[k], P.ka.f_mean[k + 1]
+    f0, f1 = phi[0:3] * P.ka.f_mean[k], P.ka.f_mean[k + 1]
     if a0 == a1:
         ja = np.zeros((6, 3))
-        ja[0:3] = -np.diag(f1 - f0)
-        return _linear(gtsam.JacobianFactor(B(k), -eye, B(k + 1), eye, a0, ja, np.zeros(6),
-                                            sd), [(B(k), 6), (B(k + 1), 6), (a0, 3)])
+        ja[0:3] = np.diag(f0 - f1)
+        return _linear(gtsam.JacobianFactor(B(k), minus_phi, B(k + 1), eye, a0, ja,
+                                            np.zeros(6), sd),
+                       [(B(k), 6), (B(k + 1), 6), (a0, 3)])
     # four keys (a segment boundary): GTSAM's Python JacobianFactor takes ≤ 3, so the
     # information JᵀΣ⁻¹J goes in as ≤ 3-key Hessian pieces (``general.information_factor``)
     jac = np.zeros((6, 18))
-    jac[:, 0:6], jac[:, 6:12] = -eye, eye
+    jac[:, 0:6], jac[:, 6:12] = minus_phi, eye
     jac[0:3, 12:15], jac[0:3, 15:18] = np.diag(f0), -np.diag(f1)
-    jw = jac / np.sqrt(q_b * max(dt, 1e-9))[:, None]
+    jw = jac / np.sqrt(var)[:, None]
     keys = [(B(k), 6), (B(k + 1), 6), (a0, 3), (a1, 3)]
     return information_factor([key for key, _ in keys], jw.T @ jw, np.zeros(18),
                               ((0, 6), (6, 6), (12, 3), (15, 3)), _zeros(keys))
