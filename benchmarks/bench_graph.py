@@ -98,14 +98,14 @@ def builtin_floor(drive: Any) -> float:
     import gtsam
     from gtsam.symbol_shorthand import B, C, V, X
 
-    from vnav_graph.estimators.graph import init, problem
+    from vnav_graph.estimators.graph import builders, init, problem
     from vnav_graph.geo.atmosphere import isa_pressure
 
     cfg = problem.GraphConfig()
     P = problem.setup(drive, cfg)
     pri = P.pri
     rot, pos, vel = init.initial_states(P)
-    pims = problem.pims_for(P, rot, pos)
+    pims = builders.pims_for(P, rot, pos)
     bt = drive.baro.t
     alt = drive.baro.altitude
     j = np.clip(np.searchsorted(bt, P.t_kf), 0, bt.size - 1)
@@ -121,7 +121,7 @@ def builtin_floor(drive: Any) -> float:
     graph.add(gtsam.PriorFactorDouble(C(0), 0.0, problem.noise([pri["b_sd"]])))
     vals = gtsam.Values()
     baro_noise = problem.noise([pri["noise"]])
-    q_b = problem.bias_walk_psd(P.params)
+    q_b = builders.bias_walk_psd(P.params)
     # NED graph, +z-up factor: feed the pressure of the mirrored height −(h − h0)
     p_kpa = isa_pressure(-(alt[j] - P.h0)) / 1000.0
     for k in range(P.n_kf):
@@ -129,7 +129,7 @@ def builtin_floor(drive: Any) -> float:
         vals.insert(V(k), vel[k])
         vals.insert(B(k), gtsam.imuBias.ConstantBias())
         vals.insert(C(k), 0.0)
-        for _, f in problem.keyframe_fixes(P, k):
+        for _, f in builders.keyframe_fixes(P, k):
             graph.add(f)
         graph.add(gtsam.BarometricFactor(X(k), C(k), float(p_kpa[k]), baro_noise))
         if k + 1 < P.n_kf:

@@ -11,6 +11,7 @@ import pytest
 from gtsam.symbol_shorthand import M, X
 
 from vnav_graph.estimators.graph import GraphBatch, GraphConfig
+from vnav_graph.estimators.graph import builders as gb
 from vnav_graph.estimators.graph import init as gi
 from vnav_graph.estimators.graph import problem as gp
 from vnav_graph.estimators.graph.extend import Terms, Variable
@@ -112,7 +113,7 @@ def span_case():
     # the optimum without the extra factor, from the solver's public pieces
     P = gp.setup(d, TIGHT)
     rot, pos, vel = gi.initial_states(P)
-    graph, vals = gp.build_batch_graph(P, rot, pos, vel, gp.pims_for(P, rot, pos), P.pri,
+    graph, vals = gb.build_batch_graph(P, rot, pos, vel, gb.pims_for(P, rot, pos), P.pri,
                                        np.zeros(P.n_kf, dtype=int))
     res = gauss_newton(P, graph, vals, np.zeros(P.n_kf, dtype=int), P.pri)
     rel = res.values.atPose3(X(0)).between(res.values.atPose3(X(SPAN)))

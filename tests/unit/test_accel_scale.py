@@ -1,5 +1,5 @@
 """The accelerometer scale factors of the graph smoothers (``problem.AccelScale``,
-``problem.bias_link``) and the rule every estimator shares (``sensors.model.accel_scale_sd``):
+``builders.bias_link``) and the rule every estimator shares (``sensors.model.accel_scale_sd``):
 closed forms for the interval mean force, the effective bias and the bias link's residual."""
 
 from __future__ import annotations
@@ -13,6 +13,7 @@ from gtsam.symbol_shorthand import A, B
 
 from vnav_graph.config import IMU_PRESETS
 from vnav_graph.estimators.graph import GraphConfig
+from vnav_graph.estimators.graph import builders as gb
 from vnav_graph.estimators.graph import problem as gp
 from vnav_graph.sensors.model import MIN_INFERRED_ACCEL_SCALE_SD, accel_scale_sd, sensor_model
 from vnav_graph.simulation.scenario import load_scenario, simulate
@@ -95,9 +96,9 @@ def test_bias_link_is_the_gauss_markov_step_of_the_effective_bias(P):
         r[:3] -= f1 * a_k1 - phi[:3] * f0 * a_k
         return 0.5 * float(np.sum(r**2 / q))
 
-    e3 = gp.bias_link(P, 5, 0.7).error(_values(b0, b1, [(A(0), a0)]))
+    e3 = gb.bias_link(P, 5, 0.7).error(_values(b0, b1, [(A(0), a0)]))
     assert e3 == pytest.approx(closed(a0, a0), rel=1e-12)
-    e4 = gp.bias_link(P, 5, 0.7, (A(0), A(1))).error(_values(b0, b1, [(A(0), a0), (A(1), a1)]))
+    e4 = gb.bias_link(P, 5, 0.7, (A(0), A(1))).error(_values(b0, b1, [(A(0), a0), (A(1), a1)]))
     # the 4-key form carries 1e-9 information per component (positive definite for QR)
     assert e4 == pytest.approx(closed(a0, a1), rel=1e-9)
     assert closed(a0, a0) > 10 * closed(a0, a1)  # the scale terms matter here: it can fail
@@ -110,11 +111,11 @@ def test_without_the_scale_factors_the_link_is_the_plain_gauss_markov_step():
     rng = np.random.default_rng(2)
     b0, b1 = 1e-2 * rng.normal(size=6), 1e-2 * rng.normal(size=6)
     phi, q = _gm_step(P0.imu_spec, 1.0)
-    e = gp.bias_link(P0, 5, 1.0).error(_values(b0, b1, []))
+    e = gb.bias_link(P0, 5, 1.0).error(_values(b0, b1, []))
     assert e == pytest.approx(0.5 * float(np.sum((b1 - phi * b0) ** 2 / q)), rel=1e-12)
     # a random-constant bias (τ = inf) is a pure random walk of rw²·Δt
     spec = P0.imu_spec
     rc = replace(spec, accel_bias_tau=np.inf, gyro_bias_tau=np.inf)
-    e_rc = gp.bias_link(replace(P0, imu_spec=rc), 5, 1.0).error(_values(b0, b1, []))
+    e_rc = gb.bias_link(replace(P0, imu_spec=rc), 5, 1.0).error(_values(b0, b1, []))
     q_rc = np.r_[[spec.accel_bias_rw**2] * 3, [spec.gyro_bias_rw**2] * 3]
     assert e_rc == pytest.approx(0.5 * float(np.sum((b1 - b0) ** 2 / q_rc)), rel=1e-12)

@@ -3,8 +3,11 @@
 Public surface: ``GraphConfig``, ``GraphBatch``, ``GraphISAM2`` (imported on first use, so that
 importing a submodule such as ``factors`` does not load the estimators). Modules:
 
-- ``problem``: configuration, problem set-up (GNSS pre-gate, priors), the C++ factors and the
-  interval rows of the custom baro/GNSS terms at a linearisation point;
+- ``problem``: problem set-up (GNSS pre-gate, baro priors, IMU gaps, accelerometer scale
+  factors), preintegration and the interval rows of the custom baro/GNSS terms at a
+  linearisation point;
+- ``builders``: the C++ factors (priors, keyframe fixes, IMU factor and the biases'
+  Gauss-Markov link, Gauss-Markov chains, IMU-gap factors, the batch's C++ graph);
 - ``factors``: the custom baro/GNSS terms, linearised in vectorised numpy, and frame helpers;
 - ``init``: initial keyframe states from GNSS and the IMU;
 - ``solve``: batch Gauss-Newton / Levenberg-Marquardt with the post-solve GNSS gate;

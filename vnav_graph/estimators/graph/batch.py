@@ -15,7 +15,7 @@ Only the modules of this subpackage import gtsam. Design (details and measuremen
   calibration (one for the batch, one per segment in the incremental front end).
 - C++ factors: ImuFactor (Forster et al. 2017) on B(k), GPSFactorArm and velocity priors for
   fixes at keyframe epochs, priors, and as linear factors the IMU biases' Gauss-Markov step
-  (``problem.bias_link``, the ekf's discretisation, with the accelerometer scale factors A(0)
+  (``builders.bias_link``, the ekf's discretisation, with the accelerometer scale factors A(0)
   when carried:
   ``problem.AccelScale``) and the exact Gauss-Markov chain b_{k+1} = e^{−Δt/τ} b_k + w,
   var w = σ²(1 − e^{−2Δt/τ}).
@@ -49,14 +49,13 @@ from ...types import (
     Trajectory,
 )
 from . import factors as gf
+from .builders import build_batch_graph, pims_for
 from .extend import GraphExtension, check_extensions, collect, make_view
 from .init import initial_states
 from .linalg import single_thread_blas
 from .magnetometer import builtin_extensions, mag_info
 from .problem import (
     Problem,
-    build_batch_graph,
-    pims_for,
     setup,
     states_from_values,
 )

@@ -319,7 +319,7 @@ def interpolate(
             "T": big_t[:, 0], "tau": tau[:, 0], "imu": imu}
 
 
-GAP_ACCEL_LEVEL = 2.0  # m/s²: unknown acceleration over an IMU logging gap (problem.gap_factors)
+GAP_ACCEL_LEVEL = 2.0  # m/s²: unknown acceleration over an IMU logging gap (builders.gap_factors)
 
 
 def bridge_sd(dense: DenseIncrements, t: FloatArray, k: np.ndarray

@@ -11,7 +11,8 @@ from ...types import (
     FloatArray,
 )
 from . import factors as gf
-from .problem import Problem, level
+from .builders import level
+from .problem import Problem
 
 # TRIAD (specific force + course) needs a clear course: moving faster than this [m/s]
 TRIAD_SPEED = 3.0

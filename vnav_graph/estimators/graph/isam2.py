@@ -59,6 +59,17 @@ from ...types import Drive, Estimate, Trajectory
 from . import factors as gf
 from . import relin, terms
 from .batch import gnss_gm_info, outputs, provides
+from .builders import (
+    bias_link,
+    bias_step,
+    build_batch_graph,
+    gap_factors,
+    gm_factor,
+    gnss_gm_factor,
+    imu_factor,
+    keyframe_fixes,
+    pims_for,
+)
 from .extend import GraphExtension, check_extensions, collect, make_view
 from .init import initial_states
 from .isam2_setup import (
@@ -73,19 +84,9 @@ from .isam2_setup import (
 from .linalg import single_thread_blas, trim_heap
 from .magnetometer import builtin_extensions, mag_info
 from .problem import (
-    bias_link,
-    bias_step,
-    build_batch_graph,
-    gap_factors,
-    gm_factor,
-    gnss_gm_factor,
     gravity_delta,
-    imu_factor,
-    imu_gaps,
-    keyframe_fixes,
     keyframe_poses,
     noise,
-    pims_for,
     preintegrate,
     setup,
     states_from_values,
@@ -209,8 +210,7 @@ class GraphISAM2:
         rw_at: list[int] = []
         dg_kf = np.zeros((nk, 3))  # gravity anomaly at each keyframe, once (terms)
         pims: list[Any] = []
-        imu_t = drive.imu.t
-        gap = imu_gaps(imu_t, P.kf_idx)
+        gap = P.gap
         upd_ms = np.zeros(nk - 1)
         # per update: preintegration, interval term, isam.update, estimate read-back [ms];
         # variables relinearised, variables re-eliminated, interval terms relinearised

@@ -11,8 +11,8 @@ import numpy as np
 from gtsam.symbol_shorthand import A, B, C, G, K, V, X
 
 from .batch import solver_warnings, value_of
+from .builders import keyframe_fixes, prior_factors
 from .extend import Collected, key_name
-from .problem import keyframe_fixes, prior_factors
 from .settings import GraphConfig
 
 

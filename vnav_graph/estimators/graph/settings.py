@@ -64,7 +64,7 @@ class GraphConfig:
     real logs, and simulated IMUs whose spec has a scale error). B(k) then holds the
     effective accelerometer bias of interval k, b_a + diag(ā_k)·k_a (ā_k the mean measured
     specific force over it), and the bias chain carries diag(ā_k+1 − ā_k)·k_a
-    (``problem.bias_link``); the reported accelerometer bias is b_a. accel_scale_rw [1/√s]:
+    (``builders.bias_link``); the reported accelerometer bias is b_a. accel_scale_rw [1/√s]:
     graph-isam2's online pass carries k_a per segment, like (s, τd), linked by a random walk
     of root PSD accel_scale_rw times k_a's prior σ (the relative freedom calib_rw gives s
     under its 1 % prior); the final rounds tie them into the batch's one constant.
