@@ -54,7 +54,7 @@ def _rmse(e: np.ndarray) -> tuple[float, float]:
 def run_one(job: tuple[str, int, float]) -> dict[str, Any]:
     """Score the online estimates of graph-isam2 and ekf on ``scenario`` / ``seed``."""
     from vnav_graph.estimators.base import create
-    from vnav_graph.estimators.ekf.filter import START_FIXES
+    from vnav_graph.estimators.ekf.alignment import START_FIXES
     from vnav_graph.simulation.scenario import load_scenario, simulate
 
     scenario, seed, duration = job

@@ -11,6 +11,9 @@ Contents
   for about 20 s; real logs may not).
 - ``moving_start`` — in-motion levelling when GNSS shows the vehicle moving from the start:
   the vehicle's acceleration from GNSS is removed from the specific force before levelling.
+- ``initial_state`` — the kernel's initial nominal state, covariance and parameters
+  (``Initial``): levelling over the static start (or in motion), position and velocity from
+  the median of the first ``START_FIXES`` fixes, heading given, from the compass or unknown.
 - ``track_heading`` — course over ground of each GNSS fix from its velocity (or, when the
   receiver gives no velocity, from the chord of the last 2 s of positions brought forward by
   the gyro), with a one-sigma heading uncertainty. Heading = track assumes no sideslip (car,
@@ -22,11 +25,26 @@ Angles in radians, NED navigation frame, FRD body frame.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ...geo.frames import lla_to_ned
-from ...types import FloatArray, GnssStream, ImuStream
+from ...config import BaroSpec
+from ...geo.earth import gravity
+from ...geo.frames import lla_to_ned, quat_to_mat, rph_to_quat
+from ...nav.levelling import coarse_level
+from ...sensors.model import BaroPrior, SensorModel
+from ...types import Drive, FloatArray, GnssStream, ImuStream
+from . import model as km
+from .magnetometer import initial_heading
+
+if TYPE_CHECKING:
+    from .filter import EkfConfig
+
+# the initial position is the median of the first START_FIXES fixes, so the filter's
+# estimate before the last of them is not causal (benchmarks/online_accuracy.py scores
+# online estimates from there on)
+START_FIXES = 9
 
 
 def static_window_end(imu: ImuStream, max_s: float, min_s: float = 0.5,
@@ -198,3 +216,115 @@ def moving_start(imu: ImuStream, gnss: GnssStream | None, i_static: int,
     w_z = float(np.mean(imu.gyro_b[:i_end, 2]))
     accel_b = np.array([a_along, max(v_mid, 0.0) * w_z, 0.0])
     return MovingStart(i_end, accel_b, max(a_sd, MOVING_ACCEL_SD_MIN))
+
+
+@dataclass(frozen=True)
+class Initial:
+    """Initial nominal state, covariance and parameters of the kernel (alignment)."""
+
+    lla0: FloatArray
+    v0: FloatArray
+    q0: FloatArray
+    par0: FloatArray
+    p0: FloatArray
+    heading_known: bool
+    yaw_unknown_var: float
+    i_static: int  # end of the static levelling window (IMU samples)
+    g_latency: float  # GNSS latency [s] subtracted from the fix stamps
+    lever: FloatArray  # GNSS antenna lever arm in b [m]
+    heading_from_mag: bool  # the initial heading is the magnetometer's
+
+
+def initial_state(drive: Drive, cfg: EkfConfig, model: SensorModel, bp: BaroPrior,
+                   ka_sd: float, fm: Any = None) -> Initial:
+    """Coarse levelling over the static start, position and velocity from the first fixes
+    (heading given or unknown; variances from the shared model's floored GNSS sigmas), and
+    the prior covariance of every state."""
+    ispec = model.imu
+    imu, gnss, baro = drive.imu, drive.gnss, drive.baro
+    t = imu.t
+    i_static = static_window_end(imu, cfg.align_max_s)
+    mv = moving_start(imu, gnss, i_static)
+    tilt_extra_var = 0.0
+    if mv is None:
+        roll, pitch = coarse_level(imu.accel_b[:i_static].mean(axis=0))
+    else:  # moving from the start: level on f_b minus the GNSS-derived acceleration
+        i_static = mv.i_end
+        roll, pitch = coarse_level(imu.accel_b[:i_static].mean(axis=0) - mv.accel_b)
+        tilt_extra_var = (mv.accel_sd / 9.81) ** 2
+    heading_known = cfg.initial_heading is not None
+    yaw0 = float(cfg.initial_heading) if heading_known else 0.0
+    heading_sd = cfg.initial_heading_sd
+    mag_yaw = None
+    if not heading_known and fm is not None:
+        mag_yaw = initial_heading(drive, float(t[i_static - 1]), roll, pitch, fm,
+                                  cfg.mag_heading_floor, cfg.mag_bias_sd)
+        if mag_yaw is not None:  # compass alignment
+            heading_known = True
+            yaw0, heading_sd = mag_yaw
+    q0 = rph_to_quat([roll, pitch, yaw0])[0]
+    c0 = quat_to_mat(q0)
+    # a writable copy: a read-only lever arm compiles a second specialisation of every
+    # helper it reaches in the kernel (skew3, the products; ~1 s of a first run)
+    lever = np.zeros(3) if gnss is None else np.array(gnss.lever_arm_b, dtype=float)
+    p0 = np.zeros((km.NX, km.NX))
+    v0 = np.zeros(3)
+    g_latency = 0.0
+    if gnss is not None and gnss.spec is not None:
+        g_latency = float(getattr(gnss.spec, "latency_s", 0.0))
+    if gnss is not None:
+        tg = gnss.t - g_latency
+        j0 = int(min(np.searchsorted(tg, t[0]), tg.size - 1))
+        # robust start: component-wise median of the first (up to) START_FIXES fixes, so that one
+        # outlier cannot become the initial position (the vehicle may move meanwhile: the
+        # spread of these fixes is added to the variance below)
+        j9 = min(j0 + START_FIXES, tg.size)
+        lla0 = np.median(gnss.lla[j0:j9], axis=0)
+        d_n = c0 @ lever
+        lla0[2] += d_n[2]  # antenna → IMU, vertical part (heading may be unknown)
+        assert model.gnss_pos_sd is not None
+        pos_var = model.gnss_pos_sd[j0] ** 2 + (0.0 if heading_known else lever @ lever)
+        if gnss.vel_n is not None and model.gnss_vel_sd is not None:
+            v0 = gnss.vel_n[j0].copy()
+            vel_var = model.gnss_vel_sd[j0] ** 2
+        else:
+            vel_var = np.full(3, 1.0)
+        # motion between t0 and the fixes used
+        pos_var = pos_var + (np.linalg.norm(v0) * abs(tg[j9 - 1] - t[0])) ** 2
+    else:
+        lla0 = drive.origin_lla.copy()
+        pos_var = np.array([100.0**2, 100.0**2, bp.bias_sd**2])
+        vel_var = np.full(3, 1.0)
+    p0[0:3, 0:3] = np.diag(pos_var)
+    p0[3:6, 3:6] = np.diag(vel_var)
+    p_ba = ispec.accel_bias_sd**2 * np.eye(3)
+    m_tilt = level_tilt_bias_jacobian(c0, float(gravity(lla0[0], lla0[2])))
+    p0[6:9, 6:9] = m_tilt @ p_ba @ m_tilt.T + (cfg.min_tilt_sd**2 + tilt_extra_var) * np.diag(
+        [1.0, 1.0, 0.0])
+    yaw_unknown_var = np.pi**2 / 3.0
+    p0[8, 8] = heading_sd**2 if heading_known else yaw_unknown_var
+    p0[6:9, 12:15] = m_tilt @ p_ba
+    p0[12:15, 6:9] = (m_tilt @ p_ba).T
+    p0[9:12, 9:12] = ispec.gyro_bias_sd**2 * np.eye(3)
+    p0[12:15, 12:15] = p_ba
+    p0[18:21, 18:21] = (ka_sd if ka_sd > 0 else 1e-7) ** 2 * np.eye(3)
+    p0[km.IMB:km.IMB + 3, km.IMB:km.IMB + 3] = cfg.mag_bias_sd**2 * np.eye(3)
+    par0 = np.zeros(km.NPAR)
+    par0[km.PTD] = bp.latency_mean
+    if baro is not None and not isinstance(baro.spec, BaroSpec):
+        # real log: baro bias prior centred on the first sample (relative altimeters)
+        jb = int(np.searchsorted(baro.t, t[0]))
+        jb = min(jb, baro.t.size - 1)
+        par0[km.PBB] = float(baro.altitude[jb]) - lla0[2]
+    p0[15, 15] = bp.scale_sd**2
+    p0[16, 16] = bp.latency_sd**2
+    p0[17, 17] = bp.bias_sd**2
+    gm = cfg.gnss_gm
+    if gm is not None:
+        p0[km.IGH, km.IGH] = gm.sd_m**2
+        if gnss is not None:
+            # the first fixes carry the correlated error g (down): δr_D = g + w, δg = −g
+            p0[2, 2] += gm.sd_m**2
+            p0[2, km.IGH] = p0[km.IGH, 2] = -gm.sd_m**2
+    return Initial(lla0, v0, q0, par0, p0, heading_known, yaw_unknown_var, i_static,
+                    g_latency, lever, mag_yaw is not None)

@@ -52,9 +52,8 @@ from typing import Any
 import numpy as np
 from scipy.stats import chi2
 
-from ...config import DEG, REAL_LOG_BARO, BaroSpec, ImuSpec
-from ...geo.earth import OMEGA_IE, gravity
-from ...geo.frames import quat_to_mat, rph_to_quat
+from ...config import DEG, REAL_LOG_BARO, ImuSpec
+from ...geo.earth import OMEGA_IE
 from ...nav.gaps import GAP_ACCEL_SD
 from ...nav.levelling import coarse_level
 from ...sensors.magnetometer import (
@@ -86,20 +85,11 @@ from ...types import (
 )
 from . import kernel, rts
 from . import model as km
-from .alignment import (
-    level_tilt_bias_jacobian,
-    moving_start,
-    static_window_end,
-    track_heading,
-)
-from .magnetometer import initial_heading, kernel_record, one_per_interval
+from .alignment import Initial, initial_state, track_heading
+from .magnetometer import kernel_record, one_per_interval
 
 NDArrayInt = Any
 PROVIDES = frozenset({"alt", "vel_d", "pos_h", "vel_h", "att", "baro", "cov"})
-# the initial position is the median of the first START_FIXES fixes, so the filter's
-# estimate before the last of them is not causal (benchmarks/online_accuracy.py scores
-# online estimates from there on)
-START_FIXES = 9
 
 
 @dataclass(frozen=True)
@@ -306,118 +296,6 @@ def _gap_relevel(imu: ImuStream, gaps: NDArrayInt, cfg: EkfConfig) -> FloatArray
 
 
 @dataclass(frozen=True)
-class _Initial:
-    """Initial nominal state, covariance and parameters of the kernel (alignment)."""
-
-    lla0: FloatArray
-    v0: FloatArray
-    q0: FloatArray
-    par0: FloatArray
-    p0: FloatArray
-    heading_known: bool
-    yaw_unknown_var: float
-    i_static: int  # end of the static levelling window (IMU samples)
-    g_latency: float  # GNSS latency [s] subtracted from the fix stamps
-    lever: FloatArray  # GNSS antenna lever arm in b [m]
-    heading_from_mag: bool  # the initial heading is the magnetometer's
-
-
-def _initial_state(drive: Drive, cfg: EkfConfig, model: SensorModel, bp: BaroPrior,
-                   ka_sd: float, fm: Any = None) -> _Initial:
-    """Coarse levelling over the static start, position and velocity from the first fixes
-    (heading given or unknown; variances from the shared model's floored GNSS sigmas), and
-    the prior covariance of every state."""
-    ispec = model.imu
-    imu, gnss, baro = drive.imu, drive.gnss, drive.baro
-    t = imu.t
-    i_static = static_window_end(imu, cfg.align_max_s)
-    mv = moving_start(imu, gnss, i_static)
-    tilt_extra_var = 0.0
-    if mv is None:
-        roll, pitch = coarse_level(imu.accel_b[:i_static].mean(axis=0))
-    else:  # moving from the start: level on f_b minus the GNSS-derived acceleration
-        i_static = mv.i_end
-        roll, pitch = coarse_level(imu.accel_b[:i_static].mean(axis=0) - mv.accel_b)
-        tilt_extra_var = (mv.accel_sd / 9.81) ** 2
-    heading_known = cfg.initial_heading is not None
-    yaw0 = float(cfg.initial_heading) if heading_known else 0.0
-    heading_sd = cfg.initial_heading_sd
-    mag_yaw = None
-    if not heading_known and fm is not None:
-        mag_yaw = initial_heading(drive, float(t[i_static - 1]), roll, pitch, fm,
-                                  cfg.mag_heading_floor, cfg.mag_bias_sd)
-        if mag_yaw is not None:  # compass alignment
-            heading_known = True
-            yaw0, heading_sd = mag_yaw
-    q0 = rph_to_quat([roll, pitch, yaw0])[0]
-    c0 = quat_to_mat(q0)
-    # a writable copy: a read-only lever arm compiles a second specialisation of every
-    # helper it reaches in the kernel (skew3, the products; ~1 s of a first run)
-    lever = np.zeros(3) if gnss is None else np.array(gnss.lever_arm_b, dtype=float)
-    p0 = np.zeros((km.NX, km.NX))
-    v0 = np.zeros(3)
-    g_latency = 0.0
-    if gnss is not None and gnss.spec is not None:
-        g_latency = float(getattr(gnss.spec, "latency_s", 0.0))
-    if gnss is not None:
-        tg = gnss.t - g_latency
-        j0 = int(min(np.searchsorted(tg, t[0]), tg.size - 1))
-        # robust start: component-wise median of the first (up to) START_FIXES fixes, so that one
-        # outlier cannot become the initial position (the vehicle may move meanwhile: the
-        # spread of these fixes is added to the variance below)
-        j9 = min(j0 + START_FIXES, tg.size)
-        lla0 = np.median(gnss.lla[j0:j9], axis=0)
-        d_n = c0 @ lever
-        lla0[2] += d_n[2]  # antenna → IMU, vertical part (heading may be unknown)
-        assert model.gnss_pos_sd is not None
-        pos_var = model.gnss_pos_sd[j0] ** 2 + (0.0 if heading_known else lever @ lever)
-        if gnss.vel_n is not None and model.gnss_vel_sd is not None:
-            v0 = gnss.vel_n[j0].copy()
-            vel_var = model.gnss_vel_sd[j0] ** 2
-        else:
-            vel_var = np.full(3, 1.0)
-        # motion between t0 and the fixes used
-        pos_var = pos_var + (np.linalg.norm(v0) * abs(tg[j9 - 1] - t[0])) ** 2
-    else:
-        lla0 = drive.origin_lla.copy()
-        pos_var = np.array([100.0**2, 100.0**2, bp.bias_sd**2])
-        vel_var = np.full(3, 1.0)
-    p0[0:3, 0:3] = np.diag(pos_var)
-    p0[3:6, 3:6] = np.diag(vel_var)
-    p_ba = ispec.accel_bias_sd**2 * np.eye(3)
-    m_tilt = level_tilt_bias_jacobian(c0, float(gravity(lla0[0], lla0[2])))
-    p0[6:9, 6:9] = m_tilt @ p_ba @ m_tilt.T + (cfg.min_tilt_sd**2 + tilt_extra_var) * np.diag(
-        [1.0, 1.0, 0.0])
-    yaw_unknown_var = np.pi**2 / 3.0
-    p0[8, 8] = heading_sd**2 if heading_known else yaw_unknown_var
-    p0[6:9, 12:15] = m_tilt @ p_ba
-    p0[12:15, 6:9] = (m_tilt @ p_ba).T
-    p0[9:12, 9:12] = ispec.gyro_bias_sd**2 * np.eye(3)
-    p0[12:15, 12:15] = p_ba
-    p0[18:21, 18:21] = (ka_sd if ka_sd > 0 else 1e-7) ** 2 * np.eye(3)
-    p0[km.IMB:km.IMB + 3, km.IMB:km.IMB + 3] = cfg.mag_bias_sd**2 * np.eye(3)
-    par0 = np.zeros(km.NPAR)
-    par0[km.PTD] = bp.latency_mean
-    if baro is not None and not isinstance(baro.spec, BaroSpec):
-        # real log: baro bias prior centred on the first sample (relative altimeters)
-        jb = int(np.searchsorted(baro.t, t[0]))
-        jb = min(jb, baro.t.size - 1)
-        par0[km.PBB] = float(baro.altitude[jb]) - lla0[2]
-    p0[15, 15] = bp.scale_sd**2
-    p0[16, 16] = bp.latency_sd**2
-    p0[17, 17] = bp.bias_sd**2
-    gm = cfg.gnss_gm
-    if gm is not None:
-        p0[km.IGH, km.IGH] = gm.sd_m**2
-        if gnss is not None:
-            # the first fixes carry the correlated error g (down): δr_D = g + w, δg = −g
-            p0[2, 2] += gm.sd_m**2
-            p0[2, km.IGH] = p0[km.IGH, 2] = -gm.sd_m**2
-    return _Initial(lla0, v0, q0, par0, p0, heading_known, yaw_unknown_var, i_static,
-                    g_latency, lever, mag_yaw is not None)
-
-
-@dataclass(frozen=True)
 class _Events:
     """GNSS fixes and baro samples merged into one time-sorted event list, with the per-fix
     arrays the kernel reads (empty without the stream)."""
@@ -514,7 +392,7 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
     gr = _grids(t, gaps, imu.rate_hz, cfg)
     qd = _process_noise(t, gr.grid_idx, gaps, ispec, bp, cfg)
     fm, mag_info = field_and_info(drive, cfg.use_mag)  # WMM on the drive's date, or None
-    ini = _initial_state(drive, cfg, model, bp, ka_sd, fm)
+    ini = initial_state(drive, cfg, model, bp, ka_sd, fm)
     ev = _events(drive, model, gr.grid_idx, ini.g_latency, cfg, fm is not None)
     baro = drive.baro
     max_consec_baro = 1
@@ -574,7 +452,7 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
                 gr.cov_grid, res[4], rts, innov, info, prior, tau, baro is not None)
 
 
-def _report(drive: Drive, res: tuple[Any, ...], gr: _Grids, gaps: NDArrayInt, ini: _Initial,
+def _report(drive: Drive, res: tuple[Any, ...], gr: _Grids, gaps: NDArrayInt, ini: Initial,
             cfg: EkfConfig, heading_accel: bool, est_scale: bool,
             has_vel: bool) -> tuple[dict[str, FloatArray], dict[str, Any]]:
     """Innovations of the accepted measurements and ``Estimate.info`` (module docstring)."""
