@@ -197,3 +197,24 @@ def test_gnss_outliers_are_gated():
     # and hardly any good fix is: the gate at p = 0.9995 refuses 0.05 % of clean fixes
     assert np.sum(rejected & (nz < 4.0)) <= 2
     assert est.info["gnss_rejected"] == int(rejected.sum())
+
+
+def test_nominal_biases_decay_as_the_gauss_markov_model_says():
+    """Without measurements (a GNSS outage on a drive without baro or compass) the ekf's
+    nominal gyro and accelerometer biases follow the mean of their Gauss-Markov model,
+    b(t1) = e^{−(t1 − t0)/τ}·b(t0) (``kernel.decay_gm``), the step the graph's bias link takes
+    (``sensors.noise.imu_bias_step``). Before session 29 they were held constant."""
+    d = simulate(load_scenario("hill-drive", duration_s=380.0), 3).replace(baro=None)
+    assert d.mag is None
+    est = EKF().run(d)
+    tr = est.trajectory
+    t0, t1 = d.imu.t[0] + 310.0, d.imu.t[0] + 350.0  # inside the 300–360 s outage
+    gap = d.gnss.t[(d.gnss.t > t0 - 5.0) & (d.gnss.t < t1 + 5.0)]
+    assert gap.size == 0, "the window must be free of fixes"
+    i0, i1 = np.searchsorted(tr.t, [t0, t1])
+    dt = tr.t[i1] - tr.t[i0]
+    spec = d.imu.spec
+    for b, tau in ((tr.bias_gyro, spec.gyro_bias_tau), (tr.bias_accel, spec.accel_bias_tau)):
+        assert np.all(np.abs(b[i0]) > 0)  # estimated, not the zero prior mean
+        np.testing.assert_allclose(b[i1], np.exp(-dt / tau) * b[i0], rtol=1e-9)
+        assert np.all(np.abs(b[i1]) < np.abs(b[i0]))  # it can fail: a held bias does
