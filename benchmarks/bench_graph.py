@@ -12,7 +12,8 @@ general_over_floor`` and (additive) ``peak_rss_mb_by_stage``, ``isam2_relineariz
   values, IMU preintegration) and the marginal covariances are not included in either
   timing.
 - ``builtin_floor_s``: the same keyframes, the same preintegrated IMU factors (``ImuFactor``
-  and the biases' random walk as ``BetweenFactorConstantBias``), GPS factors
+  and a ``BetweenFactorConstantBias`` with the variance of the graph's bias step,
+  ``builders.bias_step``: a random walk, no decay), GPS factors
   at keyframe epochs and GTSAM's ``BarometricFactor`` (pressure in kPa, +z up: the altitude
   is fed mirrored because the graph is NED; bias only, one baro sample per keyframe, bias
   random walk as ``BetweenFactorDouble``) — only C++ factors — solved with GTSAM's
@@ -121,7 +122,6 @@ def builtin_floor(drive: Any) -> float:
     graph.add(gtsam.PriorFactorDouble(C(0), 0.0, problem.noise([pri["b_sd"]])))
     vals = gtsam.Values()
     baro_noise = problem.noise([pri["noise"]])
-    q_b = builders.bias_walk_psd(P.params)
     # NED graph, +z-up factor: feed the pressure of the mirrored height −(h − h0)
     p_kpa = isa_pressure(-(alt[j] - P.h0)) / 1000.0
     for k in range(P.n_kf):
@@ -134,10 +134,11 @@ def builtin_floor(drive: Any) -> float:
         graph.add(gtsam.BarometricFactor(X(k), C(k), float(p_kpa[k]), baro_noise))
         if k + 1 < P.n_kf:
             dt = float(P.t_kf[k + 1] - P.t_kf[k])
-            # the graph's IMU factor and the biases' random walk (without the scale factors)
+            # the graph's IMU factor and its bias-step variance (no decay, no scale factors)
             graph.add(gtsam.ImuFactor(X(k), V(k), X(k + 1), V(k + 1), B(k), pims[k]))
             graph.add(gtsam.BetweenFactorConstantBias(
-                B(k), B(k + 1), gtsam.imuBias.ConstantBias(), problem.noise(np.sqrt(q_b * dt))))
+                B(k), B(k + 1), gtsam.imuBias.ConstantBias(),
+                problem.noise(np.sqrt(builders.bias_step(P.imu_spec, dt)[1]))))
             graph.add(gtsam.BetweenFactorDouble(
                 C(k), C(k + 1), 0.0, problem.noise([pri["b_sd"] * np.sqrt(2 * dt / pri["b_tau"])])))
     params = gtsam.LevenbergMarquardtParams()

@@ -33,8 +33,9 @@ def imu_bias_step(dt: float | FloatArray, tau: float, sd: float, rw: float
     """One step ``dt`` of an IMU bias modelled as one first-order Gauss-Markov state (σ
     ``sd``, correlation time ``tau``) plus a random walk of root PSD ``rw`` (``ImuSpec``):
     b(t + dt) = φ·b(t) + w, φ = exp(−dt/τ), var w = σ²(1 − φ²) + rw²·dt. Returns (φ, var w).
-    Both families discretise the IMU biases with it: the ekf's transition and process noise,
-    the graph's bias link (``graph.builders.bias_link``)."""
+    Both families discretise the IMU biases with it: the ekf's process noise (its Φ and
+    ``ekf.kernel.decay_gm`` apply the same φ), the graph's bias link
+    (``graph.builders.bias_link``)."""
     dt = np.asarray(dt, dtype=float)
     return gm_transition(dt, tau), gm_process_var(dt, tau, sd) + rw**2 * dt
 

@@ -95,13 +95,6 @@ def _linear(jf: Any, keys: list[tuple[int, int]]) -> Any:
     return gtsam.LinearContainerFactor(jf, _zeros(keys))
 
 
-def bias_walk_psd(params: Any) -> FloatArray:
-    """PSD (6,) of the IMU biases' random walk (accel, gyro) in the preintegration
-    parameters ``params`` (``Problem.params``): the bench's C++-only floor uses it."""
-    return np.r_[np.diag(params.getBiasAccCovariance()),
-                 np.diag(params.getBiasOmegaCovariance())]
-
-
 def bias_step(spec: ImuSpec, dt: float) -> tuple[FloatArray, FloatArray]:
     """(φ, var w), each (6,) in ``ConstantBias`` order (accel, gyro), of the IMU biases over
     ``dt``: the ekf's discretisation (``sensors.noise.imu_bias_step``), with the floors of
@@ -150,7 +143,7 @@ def bias_link(P: Problem, k: int, dt: float, a_keys: tuple[int, int] | None = No
 
 def imu_factor(k: int, pim: Any) -> Any:
     """Interval k's IMU factor on X(k), V(k), X(k+1), V(k+1) and its bias B(k) (the biases'
-    random walk is ``bias_link``)."""
+    Gauss-Markov step is ``bias_link``)."""
     return gtsam.ImuFactor(X(k), V(k), X(k + 1), V(k + 1), B(k), pim)
 
 

@@ -143,12 +143,8 @@ def setup(drive: Drive, cfg: GraphConfig) -> Problem:
     p.setAccelerometerCovariance(np.eye(3) * spec.accel_noise_density**2)
     p.setGyroscopeCovariance(np.eye(3) * spec.gyro_noise_density**2)
     p.setIntegrationCovariance(np.eye(3) * 1e-8)
-    # the biases' random walk of PSD 2σ²/τ + rw² (only the bench's C++-only floor uses it:
-    # the graph's own bias link is the Gauss-Markov step of ``bias_step``)
-    qa = 2 * spec.accel_bias_sd**2 / spec.accel_bias_tau + spec.accel_bias_rw**2
-    qg = 2 * spec.gyro_bias_sd**2 / spec.gyro_bias_tau + spec.gyro_bias_rw**2
-    p.setBiasAccCovariance(np.eye(3) * max(qa, 1e-12))
-    p.setBiasOmegaCovariance(np.eye(3) * max(qg, 1e-16))
+    # (no bias covariances: ImuFactor does not read them; the biases' Gauss-Markov step is
+    # ``builders.bias_link``)
     p.setOmegaCoriolis(omega_t)
     gn = drive.gnss
     t_kf = imu.t[kf_idx]
