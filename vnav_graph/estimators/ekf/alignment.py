@@ -12,7 +12,7 @@ Contents
 - ``moving_start`` — in-motion levelling when GNSS shows the vehicle moving from the start:
   the vehicle's acceleration from GNSS is removed from the specific force before levelling.
 - ``initial_state`` — the kernel's initial nominal state, covariance and parameters
-  (``Initial``): levelling over the static start (or in motion), position and velocity from
+  (``Alignment``): levelling over the static start (or in motion), position and velocity from
   the median of the first ``START_FIXES`` fixes, heading given, from the compass or unknown.
 - ``track_heading`` — course over ground of each GNSS fix from its velocity (or, when the
   receiver gives no velocity, from the chord of the last 2 s of positions brought forward by
@@ -219,8 +219,9 @@ def moving_start(imu: ImuStream, gnss: GnssStream | None, i_static: int,
 
 
 @dataclass(frozen=True)
-class Initial:
-    """Initial nominal state, covariance and parameters of the kernel (alignment)."""
+class Alignment:
+    """Initial nominal state, covariance and parameters from the alignment (what filter.py
+    hands to the kernel as ``kernel.Initial`` and keeps for its report)."""
 
     lla0: FloatArray
     v0: FloatArray
@@ -236,7 +237,7 @@ class Initial:
 
 
 def initial_state(drive: Drive, cfg: EkfConfig, model: SensorModel, bp: BaroPrior,
-                   ka_sd: float, fm: Any = None) -> Initial:
+                   ka_sd: float, fm: Any = None) -> Alignment:
     """Coarse levelling over the static start, position and velocity from the first fixes
     (heading given or unknown; variances from the shared model's floored GNSS sigmas), and
     the prior covariance of every state."""
@@ -326,5 +327,5 @@ def initial_state(drive: Drive, cfg: EkfConfig, model: SensorModel, bp: BaroPrio
             # the first fixes carry the correlated error g (down): δr_D = g + w, δg = −g
             p0[2, 2] += gm.sd_m**2
             p0[2, km.IGH] = p0[km.IGH, 2] = -gm.sd_m**2
-    return Initial(lla0, v0, q0, par0, p0, heading_known, yaw_unknown_var, i_static,
+    return Alignment(lla0, v0, q0, par0, p0, heading_known, yaw_unknown_var, i_static,
                     g_latency, lever, mag_yaw is not None)

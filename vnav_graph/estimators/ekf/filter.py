@@ -85,7 +85,7 @@ from ...types import (
 )
 from . import kernel, rts
 from . import model as km
-from .alignment import Initial, initial_state, track_heading
+from .alignment import Alignment, initial_state, track_heading
 from .magnetometer import kernel_record, one_per_interval
 
 NDArrayInt = Any
@@ -452,7 +452,7 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
                 gr.cov_grid, res[4], rts, innov, info, prior, tau, baro is not None)
 
 
-def _report(drive: Drive, res: tuple[Any, ...], gr: _Grids, gaps: NDArrayInt, ini: Initial,
+def _report(drive: Drive, res: tuple[Any, ...], gr: _Grids, gaps: NDArrayInt, ini: Alignment,
             cfg: EkfConfig, heading_accel: bool, est_scale: bool,
             has_vel: bool) -> tuple[dict[str, FloatArray], dict[str, Any]]:
     """Innovations of the accepted measurements and ``Estimate.info`` (module docstring)."""
