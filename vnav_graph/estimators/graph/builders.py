@@ -89,24 +89,27 @@ def _zeros(keys: list[tuple[int, int]]) -> Any:
     return lin
 
 
-def _linear(jf: Any, keys: list[tuple[int, int]]) -> Any:
+def _linear(jf: Any, keys: list[tuple[int, int]], zeros: Any = None) -> Any:
     """A linear factor on vector-space variables as a nonlinear one, linearised at zero
-    (exact at any point)."""
-    return gtsam.LinearContainerFactor(jf, _zeros(keys))
+    (exact at any point). ``zeros``: a ``Values`` that holds zero for every key of the factor
+    (it may hold others; the factor keeps only its own), else one is made for it."""
+    return gtsam.LinearContainerFactor(jf, _zeros(keys) if zeros is None else zeros)
 
 
-def bias_step(spec: ImuSpec, dt: float) -> tuple[FloatArray, FloatArray]:
+def bias_step(spec: ImuSpec, dt: float | FloatArray) -> tuple[FloatArray, FloatArray]:
     """(φ, var w), each (6,) in ``ConstantBias`` order (accel, gyro), of the IMU biases over
     ``dt``: the ekf's discretisation (``sensors.noise.imu_bias_step``), with the floors of
-    the preintegration parameters (a noiseless spec stays regular)."""
-    dt = max(dt, 1e-9)
+    the preintegration parameters (a noiseless spec stays regular). ``dt`` (n,): each (n, 6)
+    (one call for every interval of a graph)."""
+    dt = np.maximum(np.asarray(dt, dtype=float), 1e-9)
     pa, va = imu_bias_step(dt, spec.accel_bias_tau, spec.accel_bias_sd, spec.accel_bias_rw)
     pg, vg = imu_bias_step(dt, spec.gyro_bias_tau, spec.gyro_bias_sd, spec.gyro_bias_rw)
-    return (np.r_[[float(pa)] * 3, [float(pg)] * 3],
-            np.r_[[max(float(va), 1e-12 * dt)] * 3, [max(float(vg), 1e-16 * dt)] * 3])
+    va, vg = np.maximum(va, 1e-12 * dt), np.maximum(vg, 1e-16 * dt)
+    return (np.stack([pa] * 3 + [pg] * 3, axis=-1), np.stack([va] * 3 + [vg] * 3, axis=-1))
 
 
-def bias_link(P: Problem, k: int, dt: float, a_keys: tuple[int, int] | None = None) -> Any:
+def bias_link(P: Problem, k: int, dt: float, a_keys: tuple[int, int] | None = None,
+              step: tuple[FloatArray, FloatArray] | None = None, zeros: Any = None) -> Any:
     """B(k) → B(k+1): the IMU biases' Gauss-Markov step b(k+1) = φ·b(k) + w (``bias_step``:
     φ = exp(−Δt/τ), var w = σ²(1 − φ²) + rw²·Δt per component, the ekf's model of the
     ``ImuSpec``), as a linear factor. With the accelerometer scale factors (``AccelScale``)
@@ -114,14 +117,16 @@ def bias_link(P: Problem, k: int, dt: float, a_keys: tuple[int, int] | None = No
     B_a(k+1) − diag(ā_k+1)·k_a' − φ_a·(B_a(k) − diag(ā_k)·k_a) = w, k_a and k_a' the scale
     variables of intervals k and k+1 (``a_keys``; default A(0) for both, the batch's; the
     incremental front end has one per segment). Until session 29 the graph carried the
-    biases as random walks of PSD 2σ²/τ + rw² (no decay of the mean; docs/graph.md)."""
-    phi, var = bias_step(P.imu_spec, dt)
+    biases as random walks of PSD 2σ²/τ + rw² (no decay of the mean; docs/graph.md).
+    ``step``: ``bias_step(P.imu_spec, dt)`` when already computed; ``zeros``: as in
+    ``_linear``."""
+    phi, var = bias_step(P.imu_spec, dt) if step is None else step
     sd = noise(np.sqrt(var))
     minus_phi = -np.diag(phi)
     eye = np.eye(6)
     if P.ka is None:
         return _linear(gtsam.JacobianFactor(B(k), minus_phi, B(k + 1), eye, np.zeros(6), sd),
-                       [(B(k), 6), (B(k + 1), 6)])
+                       [(B(k), 6), (B(k + 1), 6)], zeros)
     a0, a1 = a_keys if a_keys is not None else (A(0), A(0))
     f0, f1 = phi[0:3] * P.ka.f_mean[k], P.ka.f_mean[k + 1]
     if a0 == a1:
@@ -129,7 +134,7 @@ def bias_link(P: Problem, k: int, dt: float, a_keys: tuple[int, int] | None = No
         ja[0:3] = np.diag(f0 - f1)
         return _linear(gtsam.JacobianFactor(B(k), minus_phi, B(k + 1), eye, a0, ja,
                                             np.zeros(6), sd),
-                       [(B(k), 6), (B(k + 1), 6), (a0, 3)])
+                       [(B(k), 6), (B(k + 1), 6), (a0, 3)], zeros)
     # four keys (a segment boundary): GTSAM's Python JacobianFactor takes ≤ 3, so the
     # information JᵀΣ⁻¹J goes in as ≤ 3-key Hessian pieces (``general.information_factor``)
     jac = np.zeros((6, 18))
@@ -138,7 +143,8 @@ def bias_link(P: Problem, k: int, dt: float, a_keys: tuple[int, int] | None = No
     jw = jac / np.sqrt(var)[:, None]
     keys = [(B(k), 6), (B(k + 1), 6), (a0, 3), (a1, 3)]
     return information_factor([key for key, _ in keys], jw.T @ jw, np.zeros(18),
-                              ((0, 6), (6, 6), (12, 3), (15, 3)), _zeros(keys))
+                              ((0, 6), (6, 6), (12, 3), (15, 3)),
+                              _zeros(keys) if zeros is None else zeros)
 
 
 def imu_factor(k: int, pim: Any) -> Any:
@@ -147,23 +153,24 @@ def imu_factor(k: int, pim: Any) -> Any:
     return gtsam.ImuFactor(X(k), V(k), X(k + 1), V(k + 1), B(k), pim)
 
 
-def gm_link(key0: int, key1: int, dt: float, tau: float, sd: float) -> Any:
+def gm_link(key0: int, key1: int, dt: float, tau: float, sd: float, zeros: Any = None) -> Any:
     """Exact discrete Gauss-Markov link x_1 − φ x_0 = w, φ = e^{−Δt/τ}, var w = σ²(1 − φ²),
-    between two scalar variables, as a (linear) C++ factor."""
+    between two scalar variables, as a (linear) C++ factor (``zeros``: as in ``_linear``)."""
     phi = float(gm_transition(dt, tau))
     sd_w = float(np.sqrt(max(gm_process_var(dt, tau, sd), 1e-12)))
     return _linear(gtsam.JacobianFactor(key0, np.array([[-phi]]), key1, np.array([[1.0]]),
-                                        np.zeros(1), noise([sd_w])), [(key0, 1), (key1, 1)])
+                                        np.zeros(1), noise([sd_w])), [(key0, 1), (key1, 1)],
+                   zeros)
 
 
-def gm_factor(k: int, dt: float, pri: dict[str, float]) -> Any:
+def gm_factor(k: int, dt: float, pri: dict[str, float], zeros: Any = None) -> Any:
     """The baro bias's Gauss-Markov link C(k) → C(k+1)."""
-    return gm_link(C(k), C(k + 1), dt, pri["b_tau"], pri["b_sd"])
+    return gm_link(C(k), C(k + 1), dt, pri["b_tau"], pri["b_sd"], zeros)
 
 
-def gnss_gm_factor(k: int, dt: float, gm: GnssHeightGM) -> Any:
+def gnss_gm_factor(k: int, dt: float, gm: GnssHeightGM, zeros: Any = None) -> Any:
     """The GNSS height error's Gauss-Markov link G(k) → G(k+1)."""
-    return gm_link(G(k), G(k + 1), dt, gm.tau_s, gm.sd_m)
+    return gm_link(G(k), G(k + 1), dt, gm.tau_s, gm.sd_m, zeros)
 
 
 
@@ -231,15 +238,24 @@ def build_batch_graph(P: Problem, rot: FloatArray, pos: FloatArray, vel: FloatAr
     gap = P.gap
     if gap.any():
         rot, pos, vel = rot.copy(), pos.copy(), vel.copy()
+    # the variables that start at zero (B, C, G, A) first: the linear links below take their
+    # linearisation point (zero) from ``vals`` instead of a Values made for each link
+    has_baro = P.drive.baro is not None
     for k in range(nk):
-        vals.insert(X(k), gtsam.Pose3(gtsam.Rot3(rot[k]), pos[k]))
-        vals.insert(V(k), vel[k])
         vals.insert(B(k), gtsam.imuBias.ConstantBias())
-        if P.drive.baro is not None:
+        if has_baro:
             vals.insert(C(k), np.zeros(1))
         if P.gm is not None:
             vals.insert(G(k), np.zeros(1))
+    if P.ka is not None:
+        vals.insert(A(0), np.zeros(3))
+    dts = np.diff(P.t_kf)
+    phis, bvars = bias_step(P.imu_spec, dts)  # every interval's bias step at once
+    for k in range(nk):
+        vals.insert(X(k), gtsam.Pose3(gtsam.Rot3(rot[k]), pos[k]))
+        vals.insert(V(k), vel[k])
         if k + 1 < nk:
+            dt = float(dts[k])
             if gap[k]:
                 x1, v1, fs = gap_factors(P, k, rot, pos, vel)
                 for f in fs:
@@ -247,16 +263,14 @@ def build_batch_graph(P: Problem, rot: FloatArray, pos: FloatArray, vel: FloatAr
                 rot[k + 1], pos[k + 1], vel[k + 1] = x1.rotation().matrix(), x1.translation(), v1
             elif pims is not None:
                 graph.add(imu_factor(k, pims[k]))
-                graph.add(bias_link(P, k, float(P.t_kf[k + 1] - P.t_kf[k])))
-            if P.drive.baro is not None:
-                graph.add(gm_factor(k, float(P.t_kf[k + 1] - P.t_kf[k]), pri))
+                graph.add(bias_link(P, k, dt, step=(phis[k], bvars[k]), zeros=vals))
+            if has_baro:
+                graph.add(gm_factor(k, dt, pri, vals))
             if P.gm is not None:
-                graph.add(gnss_gm_factor(k, float(P.t_kf[k + 1] - P.t_kf[k]), P.gm))
-    if P.drive.baro is not None:
+                graph.add(gnss_gm_factor(k, dt, P.gm, vals))
+    if has_baro:
         for j in np.unique(calib_of_kf):
             vals.insert(K(int(j)), np.array([0.0, pri["tau0"]]))
-    if P.ka is not None:
-        vals.insert(A(0), np.zeros(3))
     return graph, vals
 
 

@@ -226,31 +226,32 @@ def _pregate_gnss(drive: Drive, t: FloatArray, h: FloatArray, sd_h: FloatArray,
     n0 = min(10, idx.size)
     c0 = float(np.median(d[:n0]))
     mad = float(np.median(np.abs(d[:n0] - c0))) * 1.4826
-    x = np.array([c0, 0.0])
-    pm = np.diag([mad**2 + float(np.median(r[:n0])), pri["s_sd"] ** 2])
     keep = np.ones(idx.size, bool)
     if vel_d is not None and vel_d_sd is not None:
         var_v = (vel_d_sd[idx] ** 2 + 0.5 * pri["noise"] ** 2 + (pri["s_sd"] * v_up) ** 2
                  + 0.5**2)
         nu_v = -vel_d[idx] - v_up
         keep &= ~(nu_v**2 > thr * var_v) & np.isfinite(nu_v)
-    t_prev = tt[0]
-    for i in range(idx.size):
-        pm[0, 0] += q_rate * max(tt[i] - t_prev, 0.0)
-        t_prev = tt[i]
-        if not keep[i]:
+    # the filter in Python floats (x = [c, s], P = [[p00, p01], [p01, p11]]): numpy's
+    # 2-vector operations cost ~7 µs per fix (0.12 s on a 30-min drive of 10 Hz fixes)
+    c, s = c0, 0.0
+    p00, p01, p11 = mad**2 + float(np.median(r[:n0])), 0.0, float(pri["s_sd"]) ** 2
+    q_dt = (q_rate * np.maximum(np.diff(tt, prepend=tt[0]), 0.0)).tolist()
+    kept = keep.tolist()
+    for i, (di, hh, ri) in enumerate(zip(d.tolist(), hrel.tolist(), r.tolist(), strict=True)):
+        p00 += q_dt[i]
+        if not kept[i]:
             continue
-        hv = np.array([1.0, hrel[i]])
-        nu = d[i] - hv @ x
-        ph = pm @ hv
-        s_inn = hv @ ph + r[i]
+        nu = di - (c + hh * s)
+        ph0, ph1 = p00 + p01 * hh, p01 + p11 * hh
+        s_inn = ph0 + hh * ph1 + ri
         if nu * nu > thr * s_inn:
-            keep[i] = False
+            kept[i] = False
             continue
-        kg = ph / s_inn
-        x = x + kg * nu
-        pm = pm - np.outer(kg, ph)
-    use[idx[~keep]] = False
+        k0, k1 = ph0 / s_inn, ph1 / s_inn
+        c, s = c + k0 * nu, s + k1 * nu
+        p00, p01, p11 = p00 - k0 * ph0, p01 - k0 * ph1, p11 - k1 * ph1
+    use[idx[~np.asarray(kept, dtype=bool)]] = False
     return use
 
 
