@@ -49,6 +49,7 @@ from ...nav.arrays import put
 from ...nav.rotations import so3_exp
 from ...sensors.baro import baro_jacobian, measure_baro
 from ...types import FloatArray
+from .interp import increments_at, interpolant
 
 N_COLS = 19
 N_CORE = 16  # columns of the five key blocks below (the baro-bias/calibration part)
@@ -153,8 +154,8 @@ class DenseIncrements:
     (N, 3, 3) / (N, 3)) and over each whole interval (``*_end``: ΔR, Δv, ΔP over T, shapes
     (K−1, 3, 3) / (K−1, 3)); computed with the biases given to ``dense_preintegration``.
     The increment to sample j+1 is sample j+1's own, or the interval's end when j+1 starts
-    the next interval (``_next``): a second per-sample copy of them was half of the graph's
-    memory for the IMU (173 MB on a 1-hour 200 Hz drive, now 87 MB)."""
+    the next interval (``interp.increments_at``): a second per-sample copy of them was half
+    of the graph's memory for the IMU (173 MB on a 1-hour 200 Hz drive, now 87 MB)."""
 
     t: FloatArray
     kf_idx: np.ndarray
@@ -174,31 +175,16 @@ class DenseIncrements:
         """ΔR_T, Δv_T, ΔP_T per interval, shapes (K−1, 3, 3), (K−1, 3), (K−1, 3)."""
         return self.dr_end, self.dv_end, self.dp_end
 
-    def _next(self, j: np.ndarray, k: np.ndarray) -> tuple[FloatArray, FloatArray]:
-        """Δv, Δp from keyframe k to sample j+1 (j inside interval k)."""
-        at_end = (j + 1 == self.kf_idx[k + 1])[:, None]
-        return (np.where(at_end, self.dv_end[k], self.dv[j + 1]),
-                np.where(at_end, self.dp_end[k], self.dp[j + 1]))
-
     def at(self, t_q: FloatArray, k: np.ndarray) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Increments of interval ``k`` at times ``t_q``: Δp is the cubic Hermite through
         (Δp, Δv) at the two neighbouring IMU samples — exactly the trapezoidal integrator's
         linear-acceleration motion — and Δv is its time derivative, so Δp is C¹ in time and
         the latency Jacobian (−v_up) is the exact derivative of the baro prediction.
         Attitude from the nearest earlier sample."""
-        j = np.searchsorted(self.t, t_q, side="right") - 1
-        j = np.clip(j, self.kf_idx[k], self.kf_idx[k + 1] - 1)
-        h = (self.t[j + 1] - self.t[j])[:, None]
-        w = np.clip((t_q - self.t[j])[:, None] / h, 0.0, 1.0)
-        w2, w3 = w * w, w * w * w
-        v_next, p_next = self._next(j, np.broadcast_to(k, j.shape))
-        p0, p1 = self.dp[j], p_next
-        v0, v1 = self.dv[j] * h, v_next * h
-        dp = ((2 * w3 - 3 * w2 + 1) * p0 + (w3 - 2 * w2 + w) * v0 + (3 * w2 - 2 * w3) * p1
-              + (w3 - w2) * v1)
-        dv = ((6 * w2 - 6 * w) * p0 + (3 * w2 - 4 * w + 1) * v0 + (6 * w - 6 * w2) * p1
-              + (3 * w2 - 2 * w) * v1) / h
-        return self.dr[j], dv, dp
+        return increments_at(self.t, self.kf_idx, self.dr, self.dv, self.dp, self.dv_end,
+                             self.dp_end, np.ascontiguousarray(t_q, dtype=float),
+                             np.ascontiguousarray(np.broadcast_to(k, np.shape(t_q)),
+                                                  dtype=np.intp))
 
 
 def dense_preintegration(
@@ -282,41 +268,22 @@ def interpolate(
     times ``t_q`` inside intervals ``k``, plus the pieces the Jacobians need. ``incr``:
     ``dense.at(t_q, k)`` if the caller already has it (it depends on the times only);
     ``with_rot=False`` skips R(t) (``"rot"`` is then None)."""
-    t_kf = dense.t_kf
-    big_t = (t_kf[k + 1] - t_kf[k])[:, None]
-    tau = (t_q - t_kf[k])[:, None]
-    alpha = tau / big_t
+    t_q = np.ascontiguousarray(t_q, dtype=float)
+    k = np.ascontiguousarray(k, dtype=np.intp)
     dr, dv, dp = dense.at(t_q, k) if incr is None else incr
-    _, dv_end, dp_end = dense.end()
-    ba = st.bias_accel[k]
-    # first-order accel-bias correction relative to the biases of the dense integration
-    dp_c = dp - 0.5 * tau**2 * ba
-    dv_c = dv - tau * ba
-    dp_end_c = dp_end[k] - 0.5 * big_t**2 * ba
-    d = dp_c - alpha * dp_end_c
-    rk = st.rot[k]
-    a = st.accel_t[k]
-    dvel = dv_c - dp_end_c / big_t
-    imu = np.ones(k.size)
-    if dense.gap is not None and dense.gap[k].any():
-        # an interval holding an IMU logging gap has no inertial motion to follow (its one
-        # "sample" across the gap is a transient: on Loiter_RTL the crash, whose integral
-        # put the first baro sample after the gap tens of metres off and pulled the baro
-        # scale to −56 %): the linear interpolant between the keyframes, attitude R_k, no
-        # accelerometer-bias dependence (the gap factors link the keyframes loosely)
-        g = dense.gap[k]
-        imu[g] = 0.0
-        d = np.where(g[:, None], 0.0, d)
-        dvel = np.where(g[:, None], 0.0, dvel)
-        a = np.where(g[:, None], 0.0, a)
-        dr = np.where(g[:, None, None], np.eye(3), dr)
-    p = ((1 - alpha) * st.pos[k] + alpha * st.pos[k + 1] + 0.5 * a * (tau**2 - tau * big_t)
-         + np.einsum("nij,nj->ni", rk, d))
-    v = ((st.pos[k + 1] - st.pos[k]) / big_t + a * (tau - 0.5 * big_t)
-         + np.einsum("nij,nj->ni", rk, dvel))
-    rot = rk @ dr if with_rot else None
-    return {"p": p, "v": v, "rot": rot, "alpha": alpha[:, 0], "d": d, "dvel": dvel,
-            "T": big_t[:, 0], "tau": tau[:, 0], "imu": imu}
+    # an interval holding an IMU logging gap has no inertial motion to follow (its one
+    # "sample" across the gap is a transient: on Loiter_RTL the crash, whose integral put
+    # the first baro sample after the gap tens of metres off and pulled the baro scale to
+    # −56 %): the linear interpolant between the keyframes, attitude R_k, no
+    # accelerometer-bias dependence (the gap factors link the keyframes loosely)
+    gap = dense.gap if dense.gap is not None else np.zeros(dense.kf_idx.size, dtype=bool)
+    p, v, rot, alpha, d, dvel, big_t, tau, imu = interpolant(
+        dense.t_kf, dense.dv_end, dense.dp_end, gap, np.ascontiguousarray(dr),
+        np.ascontiguousarray(dv), np.ascontiguousarray(dp), t_q, k,
+        np.ascontiguousarray(st.pos), np.ascontiguousarray(st.rot),
+        np.ascontiguousarray(st.bias_accel), np.ascontiguousarray(st.accel_t), with_rot)
+    return {"p": p, "v": v, "rot": rot if with_rot else None, "alpha": alpha, "d": d,
+            "dvel": dvel, "T": big_t, "tau": tau, "imu": imu}
 
 
 GAP_ACCEL_LEVEL = 2.0  # m/s²: unknown acceleration over an IMU logging gap (builders.gap_factors)
