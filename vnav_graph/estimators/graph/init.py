@@ -32,7 +32,8 @@ def initial_states(P: Problem) -> tuple[FloatArray, FloatArray, FloatArray]:
     over ±1 s: without that TRIAD the heading started at 0 (yaw of the levelled first sample)
     and Gauss-Newton crept (½χ² 54 000 → 36 000 in 90 iterations, 28° heading RMSE,
     118 m horizontal error in the 60 s outage of hill-drive seed 0); with it, 5 iterations,
-    0.28° and 0.65 m."""
+    0.28° and 0.65 m. With the magnetometer in use the heading is then the compass's
+    (``compass_heading``: the course is not a multirotor's heading)."""
     imu = P.drive.imu
     nk = P.n_kf
     dr_t, dv_t, dp_t = P.dense.end()
