@@ -13,7 +13,8 @@ message. The kernels use it for every array-valued slice assignment; filling wit
 numba's ``np.linalg.solve`` brings the same message again (its LAPACK wrapper copies with
 slice assignments) and wrappers of its own; :func:`solve` is plain Gaussian elimination with
 partial pivoting (the algorithm of LAPACK's ``getrf``/``getrs``) for the filters' small
-systems (≤ 21 unknowns). :func:`outer` replaces ``np.outer``.
+systems (≤ 21 unknowns). :func:`outer` replaces ``np.outer``. :func:`nearest_index` (plain
+numpy, not a kernel) finds the nearest of sorted time stamps.
 ``tests/integration/test_kernel_compile.py`` checks that no kernel of the default run lowers
 an array-to-slice assignment.
 """
@@ -105,3 +106,13 @@ def outer(a, b):
         for j in range(b.shape[0]):
             out[i, j] = a[i] * b[j]
     return out
+
+
+def nearest_index(t_ref: np.ndarray, t_q: np.ndarray) -> np.ndarray:
+    """Index of the nearest stamp of ``t_ref`` (sorted, at least one) to each of ``t_q``;
+    on a tie the later stamp."""
+    n = t_ref.size
+    if n == 1:
+        return np.zeros(np.shape(t_q), dtype=np.intp)
+    j = np.clip(np.searchsorted(t_ref, t_q), 1, n - 1)
+    return np.where(np.abs(t_ref[j - 1] - t_q) < np.abs(t_ref[j] - t_q), j - 1, j)

@@ -54,6 +54,7 @@ from scipy.stats import chi2
 
 from ...config import DEG, REAL_LOG_BARO, ImuSpec
 from ...geo.earth import OMEGA_IE
+from ...nav.arrays import nearest_index
 from ...nav.gaps import GAP_ACCEL_SD
 from ...nav.levelling import coarse_level
 from ...sensors.magnetometer import (
@@ -319,7 +320,6 @@ class _Events:
 def _events(drive: Drive, model: SensorModel, grid_idx: NDArrayInt, g_latency: float,
             cfg: EkfConfig, use_mag: bool) -> _Events:
     t = drive.imu.t
-    n = t.size
     gnss, baro = drive.gnss, drive.baro
     ev_t_l, ev_type_l, ev_idx_l = [], [], []
     if gnss is not None:
@@ -363,8 +363,7 @@ def _events(drive: Drive, model: SensorModel, grid_idx: NDArrayInt, g_latency: f
     # events stamped on an IMU sample up to float round-off are put exactly on it, so that a
     # measurement at a grid epoch is processed there without back-propagation
     if ev_t.size:
-        j = np.clip(np.searchsorted(t, ev_t), 1, n - 1)
-        j = np.where(np.abs(t[j - 1] - ev_t) < np.abs(t[j] - ev_t), j - 1, j)
+        j = nearest_index(t, ev_t)
         ev_t = np.where(np.abs(t[j] - ev_t) < 1e-6, t[j], ev_t)
     counts = np.diff(np.searchsorted(ev_t, t[grid_idx], side="right"))
     max_pending = int(counts.max()) + 1 if counts.size else 1

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...geo.frames import ned_to_lla, skew
+from ...nav.arrays import nearest_index
 from ...nav.rotations import so3_exp
 from ...types import (
     FloatArray,
@@ -91,7 +92,7 @@ def initial_states(P: Problem) -> tuple[FloatArray, FloatArray, FloatArray]:
     rot_triad = np.zeros((nk, 3, 3))
     ok = np.flatnonzero(triad_ok)
     rot_triad[ok] = _triad(f_b[ok], np.array([1.0, 0.0, 0.0]), f_t[ok], vel_kf[ok])
-    k0 = int(np.flatnonzero(triad_ok)[0]) if triad_ok.any() else -1
+    k0 = int(ok[0]) if ok.size else -1
     if k0 < 0:
         r = level(f_b[0])
     else:
@@ -144,12 +145,11 @@ def compass_heading(P: Problem, rot: FloatArray) -> bool:
 
     drive = P.drive
     mag = drive.mag
-    if not P.cfg.use_mag or mag is None or mag.t.size == 0 or not usable(mag)[0]:
+    if not P.cfg.use_mag or not usable(mag)[0]:  # usable: a stream of ≥ 2 samples
         return False
     ref = drive_field(drive)[0].ned_ut
-    j = np.clip(np.searchsorted(mag.t, P.t_kf), 1, max(mag.t.size - 1, 1))
-    j = np.where(np.abs(mag.t[j - 1] - P.t_kf) < np.abs(mag.t[j] - P.t_kf), j - 1, j)
-    spacing = float(np.median(np.diff(mag.t))) if mag.t.size > 1 else 1.0
+    j = nearest_index(mag.t, P.t_kf)
+    spacing = float(np.median(np.diff(mag.t)))
     m_t = np.einsum("nij,nj->ni", rot, mag.field_b[j])
     ok = (np.abs(mag.t[j] - P.t_kf) <= 0.5 * spacing) & (np.hypot(m_t[:, 0], m_t[:, 1])
                                                          >= MIN_HORIZONTAL_UT)
@@ -160,14 +160,7 @@ def compass_heading(P: Problem, rot: FloatArray) -> bool:
     lo = np.searchsorted(t_ok, t_ok - COMPASS_WINDOW_S)
     hi = np.searchsorted(t_ok, t_ok + COMPASS_WINDOW_S, side="right")
     smooth = np.array([_circular_median(d_ok[a:b]) for a, b in zip(lo, hi, strict=True)])
-    nearest = np.clip(np.searchsorted(t_ok, P.t_kf), 1, max(t_ok.size - 1, 1))
-    if t_ok.size > 1:
-        nearest = np.where(np.abs(t_ok[nearest - 1] - P.t_kf) <= np.abs(t_ok[nearest]
-                                                                        - P.t_kf),
-                           nearest - 1, nearest)
-    else:
-        nearest = np.zeros(P.t_kf.size, dtype=int)
-    delta = smooth[nearest]
+    delta = smooth[nearest_index(t_ok, P.t_kf)]
     c, s = np.cos(delta), np.sin(delta)
     rz = np.zeros((delta.size, 3, 3))
     rz[:, 0, 0], rz[:, 0, 1], rz[:, 1, 0], rz[:, 1, 1], rz[:, 2, 2] = c, -s, s, c, 1.0

@@ -29,6 +29,7 @@ import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import H
 
+from ...nav.arrays import nearest_index
 from ...nav.rotations import skew3
 from ...sensors.magnetometer import (
     MIN_HORIZONTAL_UT,
@@ -77,8 +78,7 @@ class MagnetometerExtension:
         assert mag is not None
         fm = drive_field(view.drive)[0]  # the origin is view.origin_lla
         # field reference in the tangent frame at each keyframe (initial position)
-        i = np.clip(np.searchsorted(mag.t, view.t_kf), 1, mag.t.size - 1)
-        i = np.where(np.abs(mag.t[i - 1] - view.t_kf) < np.abs(mag.t[i] - view.t_kf), i - 1, i)
+        i = nearest_index(mag.t, view.t_kf)
         spacing = float(np.median(np.diff(mag.t))) if mag.t.size > 1 else np.inf
         near = np.abs(mag.t[i] - view.t_kf) <= 0.5 * spacing
         slot = np.floor((view.t_kf - view.t_kf[0]) / cfg.mag_interval_s).astype(np.int64)
