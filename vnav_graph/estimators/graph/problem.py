@@ -16,6 +16,7 @@ from gtsam.symbol_shorthand import B, K, X
 from ...config import REAL_LOG_BARO, BaroSpec, ImuSpec
 from ...geo.earth import gravity
 from ...nav.gaps import imu_gaps as nav_imu_gaps
+from ...nav.velocity_screen import velocity_screen
 from ...sensors.model import (
     BaroPrior,
     GnssHeightGM,
@@ -167,6 +168,12 @@ def setup(drive: Drive, cfg: GraphConfig) -> Problem:
                         cfg.gnss_gate_prob,
                         None if gn.vel_n is None else gn.vel_n[:, 2],
                         None if gn.vel_sd is None else gn.vel_sd[:, 2])
+    if cfg.velocity_screen and gn.vel_n is not None and cfg.gnss_gate_prob > 0:
+        # GNSS velocity against the IMU's specific-force integral (attitude-free)
+        use &= velocity_screen(gn.t, gn.vel_n, model.gnss_vel_sd, imu.t, imu.gyro_b,
+                               imu.accel_b, g0, spec.accel_bias_sd,
+                               accel_scale_sd(model, cfg.accel_scale),
+                               spec.accel_noise_density, cfg.gnss_gate_prob)
     P = Problem(drive, cfg, origin, h0, g0, omega_t, kf_idx, t_kf, dense, p, spec, bspec,
                 gn.t, pos, model.gnss_pos_sd, vel, model.gnss_vel_sd,
                 np.asarray(gn.lever_arm_b, float),

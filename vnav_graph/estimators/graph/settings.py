@@ -75,6 +75,9 @@ class GraphConfig:
     gnss_gate_prob: probability of the χ² gates on GNSS fixes (0 switches gating off):
     a causal pre-gate of the GNSS height against the barometer and a post-solve gate of
     each fix's normalised position (+ velocity) residual, repeated ≤ ``gate_rounds`` times.
+    velocity_screen: in the pre-gate, also refuse fixes whose velocity change disagrees with
+    the IMU's specific-force integral (``nav.velocity_screen``, attitude-free; same χ²
+    probability).
     """
 
     keyframe_dt: float = 1.0
@@ -99,6 +102,7 @@ class GraphConfig:
     observable_ratio: float = 0.8
     gnss_gate_prob: float = 0.9999
     gate_rounds: int = 3
+    velocity_screen: bool = True
     verbose: bool = False
     solver: str = "auto"
     loss_gnss_pos: str = "none"
