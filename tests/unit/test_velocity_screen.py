@@ -74,7 +74,11 @@ def test_graph_pregate_drops_the_faulty_fixes_only_with_the_screen_on():
     vel = g.vel_n.copy()
     vel[300:305, 0] -= 15.0
     d = d.replace(gnss=dataclasses.replace(g, vel_n=vel))
-    on = setup(d, GraphConfig()).g_use
-    off = setup(d, GraphConfig(velocity_screen=False)).g_use
+    p_on = setup(d, GraphConfig())
+    p_off = setup(d, GraphConfig(velocity_screen=False))
+    on, off = p_on.g_use, p_off.g_use
     assert not on[300:305].any() and off[300:305].all()
     assert (off & ~on).sum() <= 7
+    # counted apart (info["gnss_rejected_velocity_screen"]) and inside the pre-gate's count
+    assert p_on.g_rej_vel >= 5 and p_off.g_rej_vel == 0
+    assert p_on.g_rej_pre - p_off.g_rej_pre == (off & ~on).sum()

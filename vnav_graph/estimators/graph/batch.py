@@ -324,6 +324,7 @@ class GraphBatch:
                 "extra_variables": out["extra"],
                 **out["accel_scale"],
                 "gnss_rejected": P.gnss_rejected, "gnss_rejected_pregate": P.g_rej_pre,
+                "gnss_rejected_velocity_screen": P.g_rej_vel,
                 "gnss_rejected_postsolve": P.g_rej_post,
                 "observability": out["observability"],
                 "timing_s": {"init": t1 - t0, "preintegration": t2 - t1, "solve": t3 - t2,

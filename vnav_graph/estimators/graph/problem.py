@@ -107,7 +107,8 @@ class Problem:
     lever: FloatArray
     g_kf: np.ndarray  # keyframe index of fixes on a keyframe epoch, −1 otherwise
     g_use: np.ndarray  # fixes not rejected by the gates (bool)
-    g_rej_pre: int = 0  # rejected by the baro-consistency pre-gate
+    g_rej_pre: int = 0  # rejected by the pre-gate (baro consistency and velocity screen)
+    g_rej_vel: int = 0  # of those, refused by the velocity screen (nav.velocity_screen)
     g_rej_post: int = 0  # rejected by the post-solve residual gate
     g_incr: Any = None  # (fix indices, dense increments at them), see gnss_rows_of
     pri: dict[str, float] = field(default_factory=dict)  # baro priors (_baro_priors)
@@ -168,18 +169,22 @@ def setup(drive: Drive, cfg: GraphConfig) -> Problem:
                         cfg.gnss_gate_prob,
                         None if gn.vel_n is None else gn.vel_n[:, 2],
                         None if gn.vel_sd is None else gn.vel_sd[:, 2])
+    n_vel = 0
     if cfg.velocity_screen and gn.vel_n is not None and cfg.gnss_gate_prob > 0:
         # GNSS velocity against the IMU's specific-force integral (attitude-free)
-        use &= velocity_screen(gn.t, gn.vel_n, model.gnss_vel_sd, imu.t, imu.gyro_b,
+        ok_v = velocity_screen(gn.t, gn.vel_n, model.gnss_vel_sd, imu.t, imu.gyro_b,
                                imu.accel_b, g0, spec.accel_bias_sd,
                                accel_scale_sd(model, cfg.accel_scale),
                                spec.accel_noise_density, cfg.gnss_gate_prob)
+        n_vel = int(np.sum(~ok_v & (g_kf >= -1)))
+        use &= ok_v
     P = Problem(drive, cfg, origin, h0, g0, omega_t, kf_idx, t_kf, dense, p, spec, bspec,
                 gn.t, pos, model.gnss_pos_sd, vel, model.gnss_vel_sd,
                 np.asarray(gn.lever_arm_b, float),
                  g_kf, use)
     P.gap = gaps
     P.g_rej_pre = P.gnss_rejected
+    P.g_rej_vel = n_vel
     P.pri = _baro_priors(bspec)
     gm = cfg.gnss_gm
     if gm is not None:
