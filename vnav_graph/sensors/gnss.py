@@ -171,12 +171,13 @@ def simulate_gnss(
     t0 = truth.t[0] if t_start is None else t_start
     dt = 1.0 / spec.rate_hz
     t_all = np.arange(t0 + dt, truth.t[-1] + 1e-9, dt)
-    # time of validity is latency_s before the stamp
-    t_valid_all = np.maximum(t_all - spec.latency_s, truth.t[0])
+    # time of validity is latency_s before the stamp; a fix valid before the truth starts is
+    # not made (clamping its validity to the start gave duplicated times)
+    t_valid_all = t_all - spec.latency_s
     urban = None
     if urban_model_on(spec) and t_all.size:
         urban = _urban_errors(t_all, float(t0), float(truth.t[-1]), spec, urban_rng or rng)
-    keep = np.ones(t_all.size, dtype=bool)
+    keep = t_valid_all > truth.t[0]
     for a, b in spec.outages + (urban.random_outages if urban is not None else ()):
         keep &= ~((t_all >= a) & (t_all < b))
     t, t_valid = t_all[keep], t_valid_all[keep]

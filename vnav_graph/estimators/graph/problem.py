@@ -152,34 +152,37 @@ def setup(drive: Drive, cfg: GraphConfig) -> Problem:
     t_kf = imu.t[kf_idx]
     if gn is None or len(gn) == 0:
         raise ValueError("graph: the drive has no GNSS fixes (needed to anchor the graph)")
+    # fix times of validity: the stamp minus the receiver's latency (GnssSpec.latency_s), as
+    # the ekf takes them (ekf.alignment)
+    t_g = gn.t - float(getattr(gn.spec, "latency_s", 0.0) or 0.0)
     pos = gf.to_tangent(gn.lla, origin)
     c_tn = gf.rot_t_n(gn.lla, origin)
     vel = None if gn.vel_n is None else np.einsum("nij,nj->ni", c_tn, gn.vel_n)
     # the nearer keyframe of the two around each fix (a keyframe stamp a hair before the fix's
     # own was missed when only the next one was looked at: on hill-drive seed 0, 236 of the
     # 540 fixes on keyframe epochs, which then entered graph-isam2 two keyframes late)
-    j = np.clip(np.searchsorted(t_kf, gn.t), 0, t_kf.size - 1)
+    j = np.clip(np.searchsorted(t_kf, t_g), 0, t_kf.size - 1)
     jm = np.maximum(j - 1, 0)
-    j = np.where(np.abs(t_kf[jm] - gn.t) < np.abs(t_kf[j] - gn.t), jm, j)
-    on_kf = np.abs(t_kf[j] - gn.t) < 1e-6
-    inside = (gn.t >= t_kf[0]) & (gn.t <= t_kf[-1])
+    j = np.where(np.abs(t_kf[jm] - t_g) < np.abs(t_kf[j] - t_g), jm, j)
+    on_kf = np.abs(t_kf[j] - t_g) < 1e-6
+    inside = (t_g >= t_kf[0]) & (t_g <= t_kf[-1])
     g_kf = np.where(on_kf, j, -1)
     g_kf[~inside] = -2
-    use = _pregate_gnss(drive, gn.t, gn.lla[:, 2], model.gnss_pos_sd[:, 2], _baro_priors(bspec),
+    use = _pregate_gnss(drive, t_g, gn.lla[:, 2], model.gnss_pos_sd[:, 2], _baro_priors(bspec),
                         cfg.gnss_gate_prob,
                         None if gn.vel_n is None else gn.vel_n[:, 2],
                         None if gn.vel_sd is None else gn.vel_sd[:, 2])
     n_vel = 0
     if cfg.velocity_screen and gn.vel_n is not None and cfg.gnss_gate_prob > 0:
         # GNSS velocity against the IMU's specific-force integral (attitude-free)
-        ok_v = velocity_screen(gn.t, gn.vel_n, model.gnss_vel_sd, imu.t, imu.gyro_b,
+        ok_v = velocity_screen(t_g, gn.vel_n, model.gnss_vel_sd, imu.t, imu.gyro_b,
                                imu.accel_b, g0, spec.accel_bias_sd,
                                accel_scale_sd(model, cfg.accel_scale),
                                spec.accel_noise_density, cfg.gnss_gate_prob)
         n_vel = int(np.sum(~ok_v & (g_kf >= -1)))
         use &= ok_v
     P = Problem(drive, cfg, origin, h0, g0, omega_t, kf_idx, t_kf, dense, p, spec, bspec,
-                gn.t, pos, model.gnss_pos_sd, vel, model.gnss_vel_sd,
+                t_g, pos, model.gnss_pos_sd, vel, model.gnss_vel_sd,
                 np.asarray(gn.lever_arm_b, float),
                  g_kf, use)
     P.gap = gaps
