@@ -15,6 +15,7 @@ from gtsam.symbol_shorthand import B, K, X
 
 from ...config import REAL_LOG_BARO, BaroSpec, ImuSpec
 from ...geo.earth import gravity
+from ...nav.arrays import nearest_index
 from ...nav.gaps import imu_gaps as nav_imu_gaps
 from ...nav.velocity_screen import velocity_screen
 from ...sensors.model import (
@@ -161,9 +162,7 @@ def setup(drive: Drive, cfg: GraphConfig) -> Problem:
     # the nearer keyframe of the two around each fix (a keyframe stamp a hair before the fix's
     # own was missed when only the next one was looked at: on hill-drive seed 0, 236 of the
     # 540 fixes on keyframe epochs, which then entered graph-isam2 two keyframes late)
-    j = np.clip(np.searchsorted(t_kf, t_g), 0, t_kf.size - 1)
-    jm = np.maximum(j - 1, 0)
-    j = np.where(np.abs(t_kf[jm] - t_g) < np.abs(t_kf[j] - t_g), jm, j)
+    j = nearest_index(t_kf, t_g)
     on_kf = np.abs(t_kf[j] - t_g) < 1e-6
     inside = (t_g >= t_kf[0]) & (t_g <= t_kf[-1])
     g_kf = np.where(on_kf, j, -1)
