@@ -215,3 +215,43 @@ def test_spike_in_withheld_window_leaves_scores_unchanged(
     assert pc["horiz_rmse_m"] == pytest.approx(pb["horiz_rmse_m"], abs=1e-9)
     assert pb["n_scored"] == pa["n_scored"] - 8
     assert pb["alt_max_abs_m"] < 10.0  # no spike error is scored
+
+
+def test_plateau_in_withheld_window_leaves_scores_unchanged(
+        monkeypatch: pytest.MonkeyPatch, rng: np.random.Generator) -> None:
+    """A 40 s plateau (GNSS height +25 m, the baro flat) carries its own running median, so
+    the baro-climb check passes it; the height-excursion check sees d jump away and back.
+    Scored against it, the planted estimator's 2 m outage error would read ~13 m."""
+    monkeypatch.setitem(base._REGISTRY, "planted", _Planted)
+    clean = _flat_drive_with_baro(rng)
+    g = clean.gnss
+    lla = g.lla.copy()
+    plateau = (g.t >= 220.0) & (g.t < 260.0)  # inside the second window (209.85-269.85)
+    lla[plateau, 2] += 25.0
+    moved = clean.replace(gnss=GnssStream(g.t, lla, g.pos_sd))
+    b = run_holdout(moved, ["planted"]).doc
+    sb = b["reference_screening"]
+    assert sb["by_check"]["height_excursion"] == plateau.sum() == 40
+    assert sb["excluded"] == 40
+    assert sb["excluded_t"] == pytest.approx(list(g.t[plateau]))
+    a = run_holdout(clean, ["planted"]).doc
+    assert a["reference_screening"]["by_check"]["height_excursion"] == 0
+    c = run_holdout(clean.replace(gnss=g.select(~plateau)), ["planted"]).doc
+    pb, pc = b["estimators"]["planted"], c["estimators"]["planted"]
+    assert pb["alt_rmse_m"] == pytest.approx(pc["alt_rmse_m"], abs=1e-9)
+    assert pb["n_scored"] == pc["n_scored"]
+    assert pb["alt_max_abs_m"] < 10.0
+
+
+def test_height_step_without_return_is_kept(rng: np.random.Generator) -> None:
+    """A step of d that never comes back (a datum change, or a receiver that stays wrong)
+    has no level to return to: the log alone cannot say which side is wrong, so the
+    excursion check excludes nothing (the baro-climb check still judges each fix)."""
+    from vnav_graph.evaluation.screening import _excursion_check
+
+    clean = _flat_drive_with_baro(rng)
+    g = clean.gnss
+    lla = g.lla.copy()
+    lla[g.t >= 300.0, 2] += 25.0
+    ok = _excursion_check(clean.replace(gnss=GnssStream(g.t, lla, g.pos_sd)))
+    assert ok is not None and ok.all()

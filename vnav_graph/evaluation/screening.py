@@ -15,7 +15,18 @@ output — and excludes a withheld fix when any of these fails:
 - **reported velocity** (when the log has GNSS velocity): a fix whose horizontal position
   disagrees with *both* neighbours' positions carried by the mean reported velocity, beyond
   ``K_SIGMA`` × σ (σ from the reported position and velocity σ and an acceleration of
-  ``MAX_ACCEL`` over the interval).
+  ``MAX_ACCEL`` over the interval);
+- **height excursion**: the GNSS-minus-baro difference d *jumps* away from its level and
+  later jumps back to it (a multipath plateau, a receiver's wrong solution held for tens of
+  seconds). The baro-climb check judges a fix against the running median of the fixes
+  around it, so a plateau longer than about ``BARO_HALF_S`` carries its own median and
+  passes. A jump is a change of d between consecutive fixes (≤ ``JUMP_DT_S`` apart) beyond
+  ``K_SIGMA`` × √(σ₁² + σ₂²), each σ = max(reported σ_v, the robust scatter of those changes
+  over the log / √2, ``MIN_SD_M``): a barometer cannot step, and a true climb moves both
+  heights. The fixes from a jump up to an opposite jump that returns d to within the first
+  jump's bound of its level before it (medians of ``LEVEL_FIXES`` fixes each side), at most
+  ``MAX_EXCURSION_S`` later, are excluded. A step that never returns is left alone: with
+  no level to come back to, the log alone cannot say which side is wrong.
 
 The counts by check and the excluded times go into ``holdout.json["reference_screening"]``.
 """
@@ -33,6 +44,9 @@ K_SIGMA = 5.0
 MIN_SD_M = 0.5  # m
 MAX_VSPEED = 60.0  # m/s
 MAX_ACCEL = 5.0  # m/s²
+JUMP_DT_S = 5.0  # s: consecutive fixes further apart than this are not a jump
+MAX_EXCURSION_S = 300.0  # s
+LEVEL_FIXES = 5
 
 
 def _running_median(t: FloatArray, x: FloatArray, half: float) -> FloatArray:
@@ -90,13 +104,57 @@ def _velocity_check(drive: Drive) -> np.ndarray | None:
     return ok
 
 
+def _excursion_check(drive: Drive) -> np.ndarray | None:
+    """Bool (N,) over all fixes: not inside a height excursion (module docstring)."""
+    g, b = drive.gnss, drive.baro
+    if b is None or b.t.size < 2 or g is None:
+        return None
+    inside = np.flatnonzero((g.t >= b.t[0]) & (g.t <= b.t[-1]))
+    ok = np.ones(g.t.size, dtype=bool)
+    if inside.size < 2 * LEVEL_FIXES + 2:
+        return None
+    t = g.t[inside]
+    d = g.lla[inside, 2] - np.interp(t, b.t, b.altitude)
+    step = np.diff(d)
+    near = np.diff(t) <= JUMP_DT_S
+    if not near.any():
+        return ok
+    med = float(np.median(step[near]))
+    scatter = 1.4826 * float(np.median(np.abs(step[near] - med)))
+    sd = np.maximum(np.maximum(g.pos_sd[inside, 2], scatter / np.sqrt(2.0)), MIN_SD_M)
+    lim = K_SIGMA * np.hypot(sd[1:], sd[:-1])  # lim[k]: for the step d[k + 1] − d[k]
+    jumps = np.flatnonzero(near & (np.abs(step) > lim)) + 1  # d[j] differs from d[j - 1]
+    i = 0
+    while i < jumps.size:
+        j = jumps[i]
+        before = float(np.median(d[max(0, j - LEVEL_FIXES):j]))
+        back = None
+        for m in jumps[i + 1:]:
+            if t[m] - t[j] > MAX_EXCURSION_S:
+                break
+            if np.sign(step[m - 1]) != np.sign(step[j - 1]):
+                after = float(np.median(d[m:m + LEVEL_FIXES]))
+                if abs(after - before) <= lim[j - 1]:
+                    back = m
+                    break
+        if back is None:
+            i += 1
+            continue
+        ok[inside[j:back]] = False
+        i = int(np.searchsorted(jumps, back))  # the next jump at or after the return
+        if i < jumps.size and jumps[i] == back:
+            i += 1
+    return ok
+
+
 def screen_reference(drive: Drive, withheld: np.ndarray) -> tuple[np.ndarray, dict[str, Any]]:
     """(usable, report): ``usable`` (N,) bool is ``withheld`` minus the implausible fixes;
     ``report`` is the JSON block (module docstring)."""
     g = drive.gnss
     assert g is not None
     checks = {"baro_climb": _baro_check(drive), "vertical_speed": _vspeed_check(drive),
-              "reported_velocity": _velocity_check(drive)}
+              "reported_velocity": _velocity_check(drive),
+              "height_excursion": _excursion_check(drive)}
     keep = withheld.copy()
     by_check: dict[str, int | None] = {}
     for name, ok in checks.items():
@@ -108,7 +166,8 @@ def screen_reference(drive: Drive, withheld: np.ndarray) -> tuple[np.ndarray, di
     excluded = withheld & ~keep
     report = {
         "method": "baro-climb consistency, vertical-speed spikes, position vs reported "
-                  "velocity (no estimator output); see vnav_graph/evaluation/screening.py",
+                  "velocity, height excursions against the baro (no estimator output); see "
+                  "vnav_graph/evaluation/screening.py",
         "withheld": int(withheld.sum()), "excluded": int(excluded.sum()),
         "by_check": by_check, "excluded_t": [float(x) for x in g.t[excluded]],
     }
