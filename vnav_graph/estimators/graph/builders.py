@@ -225,6 +225,20 @@ def gap_factors(P: Problem, k: int, rot: FloatArray, pos: FloatArray, vel: Float
     ]
     return x1, v1, fs
 
+def gap_start_states(P: Problem, rot: FloatArray, pos: FloatArray, vel: FloatArray
+                     ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Copies of ``rot, pos, vel`` with the keyframe after each IMU logging gap set to its
+    gap prior's centre (``gap_factors``, gaps in time order), as ``build_batch_graph``
+    builds them: the states whose ``gap_factors`` are the batch problem's. graph-isam2 takes
+    its gap priors from these (from the initial states), so that its problem is
+    graph-batch's."""
+    rot, pos, vel = rot.copy(), pos.copy(), vel.copy()
+    for k in np.flatnonzero(P.gap):
+        x1, v1, _ = gap_factors(P, int(k), rot, pos, vel)
+        rot[k + 1], pos[k + 1], vel[k + 1] = x1.rotation().matrix(), x1.translation(), v1
+    return rot, pos, vel
+
+
 def build_batch_graph(P: Problem, rot: FloatArray, pos: FloatArray, vel: FloatArray,
                        pims: list[Any] | None, pri: dict[str, float],
                        calib_of_kf: np.ndarray) -> tuple[Any, Any]:
