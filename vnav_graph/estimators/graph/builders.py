@@ -225,6 +225,7 @@ def gap_factors(P: Problem, k: int, rot: FloatArray, pos: FloatArray, vel: Float
     ]
     return x1, v1, fs
 
+
 def gap_start_states(P: Problem, rot: FloatArray, pos: FloatArray, vel: FloatArray
                      ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Copies of ``rot, pos, vel`` with the keyframe after each IMU logging gap set to its
@@ -250,8 +251,8 @@ def build_batch_graph(P: Problem, rot: FloatArray, pos: FloatArray, vel: FloatAr
     vals = gtsam.Values()
     nk = P.n_kf
     gap = P.gap
-    if gap.any():
-        rot, pos, vel = rot.copy(), pos.copy(), vel.copy()
+    if gap.any():  # the keyframe after each gap starts at its gap prior's centre
+        rot, pos, vel = gap_start_states(P, rot, pos, vel)
     # the variables that start at zero (B, C, G, A) first: the linear links below take their
     # linearisation point (zero) from ``vals`` instead of a Values made for each link
     has_baro = P.drive.baro is not None
@@ -271,10 +272,8 @@ def build_batch_graph(P: Problem, rot: FloatArray, pos: FloatArray, vel: FloatAr
         if k + 1 < nk:
             dt = float(dts[k])
             if gap[k]:
-                x1, v1, fs = gap_factors(P, k, rot, pos, vel)
-                for f in fs:
+                for f in gap_factors(P, k, rot, pos, vel)[2]:
                     graph.add(f)
-                rot[k + 1], pos[k + 1], vel[k + 1] = x1.rotation().matrix(), x1.translation(), v1
             elif pims is not None:
                 graph.add(imu_factor(k, pims[k]))
                 graph.add(bias_link(P, k, dt, step=(phis[k], bvars[k]), zeros=vals))
