@@ -231,6 +231,7 @@ def test_ardupilot_218(data_dir: Path) -> None:
     assert not [w for w in rec if issubclass(w.category, ResourceWarning)]
     m = d.meta
     assert m["format"] == "ardupilot-dataflash" and m["height_reference"] == "msl"
+    assert m["vehicle"] == "multirotor"  # "ArduCopter V3.3-dev", "Frame: QUAD"
     assert (len(d.imu), len(d.gnss), len(d.baro)) == (16750, 1816, 3350)  # README counts
     # 50 Hz on the boot clock, which runs 0.9232 s per GPS second: 46.2 Hz in GPS time
     assert d.imu.rate_hz == pytest.approx(50.0 * 0.9232, rel=0.01)
@@ -248,6 +249,19 @@ def test_ardupilot_218(data_dir: Path) -> None:
     k = d.gnss.t < d.gnss.t[0] + 10
     ob = np.interp(d.gnss.t[k], m["onboard"]["t"], m["onboard"]["alt"])
     assert np.median(np.abs(ob - d.gnss.lla[k, 2])) < 3.0
+
+
+def test_ardupilot_vehicle_type_from_the_banner() -> None:
+    from vnav_graph.io.readers.ardupilot import _vehicle
+
+    quad = [{"Message": "Frame: QUAD"}]
+    assert _vehicle("ArduCopter V3.3-dev (834f90e8)", quad, {}) == "multirotor"
+    assert _vehicle("ArduCopter V4.5.7 (1234)", [], {"FRAME_CLASS": 1.0}) == "multirotor"
+    assert _vehicle("ArduCopter V4.5.7 (1234)", [], {"FRAME_CLASS": 6.0}) == "helicopter"
+    assert _vehicle("ArduCopter V3.2.1", [{"Message": "Frame: HELI"}], {}) == "helicopter"
+    assert _vehicle("ArduPlane V4.3.0", [], {}) == "fixed-wing"
+    assert _vehicle("ArduRover V4.2.0", [], {}) == "ground"
+    assert _vehicle(None, [], {}) == "unknown"
 
 
 def test_ardupilot_loiter_rtl_repairs(data_dir: Path) -> None:

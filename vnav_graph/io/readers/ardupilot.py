@@ -251,6 +251,29 @@ def _speed_evidence(t_fix: np.ndarray, gps_time: np.ndarray, lla: np.ndarray,
 CLOCK_CHOICES = ("auto", "gps", "boot")
 
 
+HELI_FRAME_CLASSES = (6, 11, 13)  # FRAME_CLASS: helicopter, dual heli, heli quad
+
+
+def _vehicle(firmware: str | None, msg_records: list[Any], params: dict[str, Any]) -> str:
+    """The vehicle type from the firmware banner: "multirotor" (Copter that is not a
+    helicopter by ``FRAME_CLASS`` or an older log's "Frame: HELI" message), "helicopter",
+    "fixed-wing" (Plane), "ground" (Rover), else "unknown"."""
+    fw = str(firmware or "")
+    if fw.startswith(("ArduPlane", "APM:Plane")):
+        return "fixed-wing"
+    if fw.startswith(("ArduRover", "APM:Rover")):
+        return "ground"
+    if not fw.startswith(("ArduCopter", "APM:Copter")):
+        return "unknown"
+    frames = [str(r.get("Message", "")) for r in msg_records
+              if str(r.get("Message", "")).startswith("Frame:")]
+    heli = "heli" in fw.lower() or any("HELI" in f.upper() for f in frames)
+    fc = params.get("FRAME_CLASS")
+    if fc is not None and int(fc) in HELI_FRAME_CLASSES:
+        heli = True
+    return "helicopter" if heli else "multirotor"
+
+
 def read_dataflash(path: str | Path, clock: str = "auto") -> Drive:
     """Read an ArduPilot DataFlash binary log into a Drive (see the module docstring).
 
@@ -305,6 +328,7 @@ def read_dataflash(path: str | Path, clock: str = "auto") -> Drive:
         "name": path.stem,
         "format": "ardupilot-dataflash",
         "firmware": firmware,
+        "vehicle": _vehicle(firmware, msgs["MSG"], params),
         "clock": clock_meta,
         "imu_frame": "ArduPilot body frame (forward-right-down), used as logged",
         "height_reference": "msl",
