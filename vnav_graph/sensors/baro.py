@@ -13,6 +13,9 @@ these two functions.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import Any
+
 import numpy as np
 from numpy.typing import ArrayLike
 
@@ -120,3 +123,54 @@ def simulate_baro(
     # white noise of noise_sd metres through the hydrostatic gradient dp/dh = −p·g/(R·T)
     p = p - noise * p * 9.80665 / (R_AIR * isa_temperature(h_del, dT))
     return BaroStream(t, pressure=p, spec=spec), truth, bias
+
+
+# The physical range of the scale error. s is the ISA pressure altitude's error against
+# height, set by the air's temperature off the standard atmosphere, s ≈ ΔT/T: ±25 % would
+# need air 70 K off it (−55 °C or +85 °C near sea level), beyond any flight or drive. An
+# estimate beyond it means the baro states absorbed something else: an inertial vertical
+# that contradicts the baro (an accelerometer bias step, e.g. vibration rectification on
+# 181.BIN: |f| 7–8 m/s² for 20 s of climb) drives (1 + s) towards 0, the baro's gain on the
+# height vanishes and the height drifts with the accelerometer (a 3 m/s² step in the last
+# 60 s of a 300 s hill-drive without GNSS: s → −1.01 and 3.7 km of altitude error for
+# graph-batch, s = +0.61 for ekf-rts; docs/graph.md, "Session 33").
+SCALE_LIMIT = 0.25
+# Prior σ of the scale in the solve that replaces such an estimate: held at the prior mean.
+STIFF_SCALE_SD = 1e-3
+
+
+def implausible_scale_note(result: Any) -> str:
+    """Why ``result`` (an ``Estimate``) has a physically impossible baro scale, or "": the
+    final |s|, or the largest |s| its pass went through (``info["baro_scale_max_abs"]``:
+    the forward filter's, iSAM2's online), beyond ``SCALE_LIMIT``."""
+    sc = result.baro.scale if result.baro is not None else None
+    if sc is None:
+        return ""
+    worst = max(abs(float(sc.est)), float(result.info.get("baro_scale_max_abs") or 0.0))
+    if not worst > SCALE_LIMIT:
+        return ""
+    return (f"baro scale {sc.est:+.1%} (|s| up to {worst:.0%} in the pass) is beyond the "
+            f"physical ±{SCALE_LIMIT:.0%}: the inertial vertical contradicts the barometer "
+            "(an accelerometer bias step, e.g. vibration) and the scale absorbed it")
+
+
+def without_implausible_scale(result: Any, config: Any, rerun: Callable[[Any], Any]) -> Any:
+    """The post-solve baro-scale check of every estimator with a scale state (ekf, ekf-rts,
+    graph-batch, graph-isam2): ``result`` when its scale is physical
+    (:func:`implausible_scale_note`), else ``rerun(config with baro_scale_sd =
+    STIFF_SCALE_SD)`` (the scale held at its prior mean) with the reason as a warning and in
+    ``info["baro_scale_note"]``. A config that already sets ``baro_scale_sd`` is the
+    user's (or this check's) own choice and is not second-guessed."""
+    if getattr(config, "baro_scale_sd", None) is not None:
+        return result
+    why = implausible_scale_note(result)
+    if not why:
+        return result
+    from dataclasses import replace
+
+    again = rerun(replace(config, baro_scale_sd=STIFF_SCALE_SD))
+    note = f"{why}; solved again with the scale held at 0 (prior σ {STIFF_SCALE_SD:.1%})"
+    info = {**again.info, "baro_scale_note": note,
+            "warnings": [*(again.info.get("warnings") or []), note]}
+    return again.replace(info=info, config=config,
+                         runtime_s=result.runtime_s + again.runtime_s)

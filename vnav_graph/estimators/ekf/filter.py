@@ -46,7 +46,7 @@ seed 001 (baro error model); Rauch, Tung & Striebel, AIAA J. 3(8), 1965.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -57,6 +57,7 @@ from ...geo.earth import OMEGA_IE
 from ...nav.arrays import nearest_index
 from ...nav.gaps import GAP_ACCEL_SD
 from ...nav.levelling import coarse_level
+from ...sensors.baro import without_implausible_scale
 from ...sensors.magnetometer import (
     MAG_BIAS_SD_UT,
     MAG_HEADING_FLOOR,
@@ -133,7 +134,10 @@ class EkfConfig:
     gnss_gm_sd_v [m] / gnss_gm_tau_s [s]: the time-correlated GNSS height error as a
     first-order Gauss-Markov state of that σ and τ (``sensors.model.GnssHeightGM``, the same
     model as ``GraphConfig``'s); 0 = off (the default; ``docs/real_logs.md`` has the holdout
-    comparison).
+    comparison);
+    baro_scale_sd: prior σ of the baro scale factor (None: the shared sensor model's,
+    ``sensors.model.baro_prior``); set to ``sensors.baro.STIFF_SCALE_SD`` by the post-solve
+    scale check when the scale left its physical range (``sensors.baro.SCALE_LIMIT``).
     """
 
     cov_rate_hz: float = 10.0
@@ -167,6 +171,7 @@ class EkfConfig:
     mag_reaccept_s: float = 20.0
     gnss_gm_sd_v: float = 0.0
     gnss_gm_tau_s: float = 300.0
+    baro_scale_sd: float | None = None
 
     @property
     def gnss_gm(self) -> GnssHeightGM | None:
@@ -387,6 +392,8 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
     ka_sd = accel_scale_sd(model, cfg.accel_scale)  # the shared rule (sensors.model)
     est_scale = ka_sd > 0
     bp = model.baro if model.baro is not None else baro_prior(REAL_LOG_BARO)
+    if cfg.baro_scale_sd is not None:
+        bp = replace(bp, scale_sd=float(cfg.baro_scale_sd))
     gaps = model.gaps
     gr = _grids(t, gaps, imu.rate_hz, cfg)
     qd = _process_noise(t, gr.grid_idx, gaps, ispec, bp, cfg)
@@ -445,6 +452,8 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
                                             "sd": sd_mb.tolist()}})
     if gm is not None:
         info["gnss_height_gm"] = {"sd_m": gm.sd_m, "tau_s": gm.tau_s}
+    if baro is not None:  # for the post-solve scale check (sensors.baro)
+        info["baro_scale_max_abs"] = float(np.max(np.abs(res[3][:, km.PSC])))
     prior = {"scale": bp.scale_sd, "latency": bp.latency_sd, "bias": bp.bias_sd}
     rts = tuple(res[5:10]) if store_rts else None
     return _Run(t[gr.out_idx], *res[:4], t[gr.grid_idx], gr.grid_idx, gr.out_idx,
@@ -537,8 +546,9 @@ class EKF:
         self.config = config or EkfConfig()
 
     def run(self, drive: Drive) -> Estimate:
-        return without_contradicting_mag(self._run(drive), self.config,
-                                         lambda cfg: type(self)(cfg)._run(drive))
+        est = without_contradicting_mag(self._run(drive), self.config,
+                                        lambda cfg: type(self)(cfg)._run(drive))
+        return without_implausible_scale(est, self.config, lambda cfg: type(self)(cfg).run(drive))
 
     def _run(self, drive: Drive) -> Estimate:
         t0 = time.perf_counter()
@@ -557,8 +567,9 @@ class EKFRTS:
         self.config = config or EkfConfig()
 
     def run(self, drive: Drive) -> Estimate:
-        return without_contradicting_mag(self._run(drive), self.config,
-                                         lambda cfg: type(self)(cfg)._run(drive))
+        est = without_contradicting_mag(self._run(drive), self.config,
+                                        lambda cfg: type(self)(cfg)._run(drive))
+        return without_implausible_scale(est, self.config, lambda cfg: type(self)(cfg).run(drive))
 
     def _run(self, drive: Drive) -> Estimate:
         t0 = time.perf_counter()

@@ -39,6 +39,7 @@ import numpy as np
 from gtsam.symbol_shorthand import A, B, C, K, V, X
 
 from ...geo.frames import mat_to_quat, ned_to_lla
+from ...sensors.baro import without_implausible_scale
 from ...sensors.magnetometer import without_contradicting_mag
 from ...types import (
     BaroEstimate,
@@ -296,7 +297,10 @@ class GraphBatch:
         ``info["mag_note"]``."""
         with single_thread_blas():
             est = self._run(drive)
-        return without_contradicting_mag(est, self.config,
+        est = without_contradicting_mag(est, self.config,
+                                        lambda cfg: GraphBatch(cfg, self.extensions).run(drive))
+        # the post-solve baro-scale check of both families (sensors.baro)
+        return without_implausible_scale(est, self.config,
                                          lambda cfg: GraphBatch(cfg, self.extensions).run(drive))
 
     def _run(self, drive: Drive) -> Estimate:

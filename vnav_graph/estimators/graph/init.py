@@ -72,14 +72,22 @@ def initial_states(P: Problem) -> tuple[FloatArray, FloatArray, FloatArray]:
         j = np.clip(np.searchsorted(gt, P.t_kf), 1, gt.size - 1)
         gap_len = gt[j] - gt[j - 1]
     in_gap = ~has & (gap_len > 5.0) & (P.t_kf > gt[0]) & (P.t_kf < gt[-1])
+    # after the last kept fix (a drive that ends in an outage): IMU propagation horizontally,
+    # the baro vertically (as in a gap: a stepped accelerometer carries the propagated height
+    # hundreds of metres away, 181.BIN, and the bilinear baro term (1 + s)·h, linearised
+    # there, then pulls s towards −1; docs/graph.md "Session 33"). Not before the first fix:
+    # keyframe 0 starts graph-isam2's causal pass, and the baro's offset is the whole drive's
+    outside = ~has & (P.t_kf > gt[-1]) if gt.size else ~has
     baro = P.drive.baro
-    if baro is not None and np.any(in_gap) and baro.t.size > 1:
+    v_bridge = np.zeros(nk, dtype=bool)
+    if baro is not None and np.any(in_gap | outside) and baro.t.size > 1 and gt.size:
         hg = ned_to_lla(pos, P.origin)[:, 2]
         off = float(np.median(hg - np.interp(gt, baro.t, baro.altitude)))
-        hb = np.interp(P.t_kf[in_gap], baro.t, baro.altitude) + off
-        pos_kf[in_gap, 2] = -(hb - P.h0)
+        v_bridge = in_gap | outside
+        hb = np.interp(P.t_kf[v_bridge], baro.t, baro.altitude) + off
+        pos_kf[v_bridge, 2] = -(hb - P.h0)
         vz = -np.gradient(np.interp(P.t_kf, baro.t, baro.altitude), P.t_kf)
-        vel_kf[in_gap, 2] = vz[in_gap]
+        vel_kf[v_bridge, 2] = vz[v_bridge]
     g_kf = gf.gravity_t(pos_kf, P.origin)
     # mean measured specific force over ±0.25 s
     cs = np.vstack([np.zeros((1, 3)), np.cumsum(imu.accel_b, axis=0)])
@@ -122,6 +130,8 @@ def initial_states(P: Problem) -> tuple[FloatArray, FloatArray, FloatArray]:
             # long gap between kept fixes (outage or rejected fixes): IMU propagation from
             # unknown biases drifts far outside Gauss-Newton's basin; bridge it instead
             p1, v1 = pos_kf[k + 1], vel_kf[k + 1]
+        elif v_bridge[k + 1]:
+            p1[2], v1[2] = pos_kf[k + 1, 2], vel_kf[k + 1, 2]
         rot[k + 1], p_out[k + 1], v_out[k + 1] = r1, p1, v1
     if compass_heading(P, rot) and np.any(P.lever):
         p_out[has] = pos_kf[has] - np.einsum("nij,j->ni", rot[has], P.lever)

@@ -53,6 +53,7 @@ import numpy as np
 from gtsam.symbol_shorthand import A, B, C, G, K, V, X
 
 from ...geo.frames import mat_to_quat, ned_to_lla
+from ...sensors.baro import without_implausible_scale
 from ...sensors.magnetometer import without_contradicting_mag
 from ...sensors.noise import gm_transition
 from ...types import Drive, Estimate, Trajectory
@@ -150,8 +151,10 @@ class GraphISAM2:
                 raise
             cfg = dataclasses.replace(cfg0, **ROBUST_SETTINGS)
             est = self._run(drive, cfg, True, t_start, str(exc))
-        # the post-solve hard-iron check of both families (graph-batch, ekf)
-        return without_contradicting_mag(
+        # the post-solve hard-iron and baro-scale checks of both families (graph-batch, ekf)
+        est = without_contradicting_mag(
+            est, self.config, lambda cfg: GraphISAM2(cfg, self.extensions).run(drive))
+        return without_implausible_scale(
             est, self.config, lambda cfg: GraphISAM2(cfg, self.extensions).run(drive))
 
     def _run(self, drive: Drive, cfg: GraphConfig, robust: bool, t_start: float,
@@ -222,6 +225,7 @@ class GraphISAM2:
         online_rot[0] = rot[0]
         baro_next = 0
         calib_rw = np.asarray(cfg.calib_rw, float)
+        s_max = 0.0  # the largest |s| of the online pass (sensors.baro scale check)
 
         arrays = (rot, pos, vel, bias, cb, gg)
 
@@ -366,6 +370,7 @@ class GraphISAM2:
                 j = int(seg[k + 1])
                 for jj in range(max(j - 1, 0), j + 1):
                     cal[jj] = isam.calculateEstimateVector(K(jj))
+                s_max = max(s_max, abs(float(cal[j][0])))
             if P.ka is not None:
                 ka = isam.calculateEstimateVector(A(int(seg[k + 1])))
             book.pending = book.due(marked, k + 1, rot, pos, cal if has_baro else None)
@@ -419,6 +424,7 @@ class GraphISAM2:
                             {"isam2_relinearized": book.relinearized,
                              "isam2_relinearized_factors": book.swapped_factors,
                              "isam2_calibration_steps_halved": book.damped,
+                             "baro_scale_max_abs": s_max if has_baro else None,
                              "isam2_final_rounds": rounds,
                              "isam2_gnss_rejected_postsolve": P.g_rej_post - gate0[1],
                              "final_rounds_s": time.perf_counter() - t_online}, gate0)

@@ -167,7 +167,10 @@ def setup(drive: Drive, cfg: GraphConfig) -> Problem:
     inside = (t_g >= t_kf[0]) & (t_g <= t_kf[-1])
     g_kf = np.where(on_kf, j, -1)
     g_kf[~inside] = -2
-    use = _pregate_gnss(drive, t_g, gn.lla[:, 2], model.gnss_pos_sd[:, 2], _baro_priors(bspec),
+    pri = _baro_priors(bspec)
+    if cfg.baro_scale_sd is not None:  # the post-solve scale check's (sensors.baro)
+        pri["s_sd"] = float(cfg.baro_scale_sd)
+    use = _pregate_gnss(drive, t_g, gn.lla[:, 2], model.gnss_pos_sd[:, 2], pri,
                         cfg.gnss_gate_prob,
                         None if gn.vel_n is None else gn.vel_n[:, 2],
                         None if gn.vel_sd is None else gn.vel_sd[:, 2])
@@ -187,7 +190,7 @@ def setup(drive: Drive, cfg: GraphConfig) -> Problem:
     P.gap = gaps
     P.g_rej_pre = P.gnss_rejected
     P.g_rej_vel = n_vel
-    P.pri = _baro_priors(bspec)
+    P.pri = pri
     gm = cfg.gnss_gm
     if gm is not None:
         # the pre-gate above used the receiver's whole σ (it models no GNSS error state)

@@ -80,6 +80,9 @@ class GraphConfig:
     velocity_screen: in the pre-gate, also refuse fixes whose velocity change disagrees with
     the IMU's specific-force integral (``nav.velocity_screen``, attitude-free; same χ²
     probability).
+    baro_scale_sd: prior σ of the baro scale factor (None: the shared sensor model's,
+    ``sensors.model.baro_prior``); set to ``sensors.baro.STIFF_SCALE_SD`` by the post-solve
+    scale check when the scale left its physical range (``sensors.baro.SCALE_LIMIT``).
     """
 
     keyframe_dt: float = 1.0
@@ -120,6 +123,7 @@ class GraphConfig:
     gnss_gm_tau_s: float = 300.0
     accel_scale: bool | None = None
     accel_scale_rw: float = 2e-3
+    baro_scale_sd: float | None = None
 
     @property
     def gnss_gm(self) -> GnssHeightGM | None:
