@@ -264,6 +264,14 @@ def test_ardupilot_vehicle_type_from_the_banner() -> None:
     assert _vehicle(None, [], {}) == "unknown"
 
 
+def test_px4_vehicle_type_from_mav_type() -> None:
+    from vnav_graph.io.readers.px4 import vehicle_of_mav_type
+
+    assert [vehicle_of_mav_type(m) for m in (2, 13, 14, 1, 4, 10, 22)] == [
+        "multirotor", "multirotor", "multirotor", "fixed-wing", "helicopter", "ground", "vtol"]
+    assert vehicle_of_mav_type(None) == "unknown" and vehicle_of_mav_type(99) == "unknown"
+
+
 def test_ardupilot_loiter_rtl_repairs(data_dir: Path) -> None:
     d = read_log(_log(data_dir, "erle_pxf_loiter_rtl/Loiter_RTL.bin"))
     drop = d.meta["dropped"]["gnss"]

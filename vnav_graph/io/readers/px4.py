@@ -85,6 +85,23 @@ def _stamp(d: dict[str, np.ndarray]) -> np.ndarray:
     return ts * 1e-6
 
 
+# MAVLink MAV_TYPE → the vehicle types ``Drive.meta["vehicle"]`` names (as the ArduPilot
+# reader does from its firmware banner)
+_MAV_TYPES = {1: "fixed-wing", 2: "multirotor", 13: "multirotor", 14: "multirotor",
+              15: "multirotor", 29: "multirotor", 3: "helicopter", 4: "helicopter",
+              10: "ground", 19: "vtol", 20: "vtol", 21: "vtol", 22: "vtol", 23: "vtol"}
+
+
+def vehicle_of_mav_type(mav_type: Any) -> str:
+    """The vehicle type of a PX4 log from its ``MAV_TYPE`` parameter (quadrotor 2,
+    hexa 13, octo 14, tri 15, dodeca 29: "multirotor"; 1 "fixed-wing"; 3, 4 "helicopter";
+    10 "ground"; 19–23 "vtol"), "unknown" otherwise or without it."""
+    try:
+        return _MAV_TYPES.get(int(mav_type), "unknown")
+    except (TypeError, ValueError):
+        return "unknown"
+
+
 def read_ulog(path: str | Path) -> Drive:
     """Read a PX4 ULog into a Drive (see the module docstring)."""
     from pyulog import ULog
@@ -124,6 +141,7 @@ def read_ulog(path: str | Path) -> Drive:
         "clock": "PX4 boot time [s]",
         "imu_frame": "PX4 body frame (forward-right-down), used as logged",
         "height_reference": href, "baro_alt_offset_m": off, "averaged_1s": False,
+        "vehicle": vehicle_of_mav_type(ulog.initial_parameters.get("MAV_TYPE")),
     }
     lp = _topic(ulog, "vehicle_local_position")
     if lp is not None and "z" in lp:

@@ -399,6 +399,7 @@ def read_sensorlogger_folder(path: str | Path) -> Drive:
     meta = {
         **year_meta(_year_of(loc["time"] if "time" in loc.columns else None, folder)),
         "source": "log", "name": folder.name, "format": "sensorlogger-folder",
+        "vehicle": "unknown",  # a phone: carried on anything
         "device": meta_csv.get("device name"), "platform": platform or None,
         "clock": "Sensor Logger seconds_elapsed [s]",
         "imu_frame": "phone mounting alignment (see imu_mounting)", "imu_mounting": mount,
@@ -450,6 +451,7 @@ def read_merged_csv(path: str | Path) -> Drive:
     meta = {
         **year_meta(_year_of(df["time"] if "time" in df.columns else None, path)),
         "source": "log", "name": path.stem, "format": "sensorlogger-merged-1hz",
+        "vehicle": "unknown",  # a phone: carried on anything
         "clock": "seconds since the first row's time + 0.5 s (bin centre)",
         "row_period_s": float(np.median(dt)) if dt.size else None,
         "imu_frame": "phone mounting alignment (see imu_mounting)", "imu_mounting": mount,
