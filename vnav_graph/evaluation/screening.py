@@ -55,17 +55,29 @@ def _running_median(t: FloatArray, x: FloatArray, half: float) -> FloatArray:
     return np.array([np.median(x[a:b]) for a, b in zip(lo, hi, strict=True)])
 
 
-def _baro_check(drive: Drive) -> np.ndarray | None:
-    """Bool (N,) over all fixes: passes the baro-climb check (None: no baro to check with)."""
+def _gnss_minus_baro(drive: Drive, min_fixes: int
+                     ) -> tuple[np.ndarray, FloatArray, FloatArray] | None:
+    """The fixes inside the baro's span (indices), their times and d = GNSS − baro height
+    there; None without a baro or with fewer than ``min_fixes`` such fixes."""
     g, b = drive.gnss, drive.baro
     if b is None or b.t.size < 2 or g is None:
         return None
-    inside = (g.t >= b.t[0]) & (g.t <= b.t[-1])
-    ok = np.ones(g.t.size, dtype=bool)
-    if inside.sum() < 5:
+    inside = np.flatnonzero((g.t >= b.t[0]) & (g.t <= b.t[-1]))
+    if inside.size < min_fixes:
         return None
     t = g.t[inside]
-    d = g.lla[inside, 2] - np.interp(t, b.t, b.altitude)
+    return inside, t, g.lla[inside, 2] - np.interp(t, b.t, b.altitude)
+
+
+def _baro_check(drive: Drive) -> np.ndarray | None:
+    """Bool (N,) over all fixes: passes the baro-climb check (None: no baro to check with)."""
+    got = _gnss_minus_baro(drive, 5)
+    if got is None:
+        return None
+    inside, t, d = got
+    g = drive.gnss
+    assert g is not None
+    ok = np.ones(g.t.size, dtype=bool)
     dev = d - _running_median(t, d, BARO_HALF_S)
     scatter = 1.4826 * float(np.median(np.abs(dev)))
     sd = np.maximum(np.maximum(g.pos_sd[inside, 2], scatter), MIN_SD_M)
@@ -106,15 +118,13 @@ def _velocity_check(drive: Drive) -> np.ndarray | None:
 
 def _excursion_check(drive: Drive) -> np.ndarray | None:
     """Bool (N,) over all fixes: not inside a height excursion (module docstring)."""
-    g, b = drive.gnss, drive.baro
-    if b is None or b.t.size < 2 or g is None:
+    got = _gnss_minus_baro(drive, 2 * LEVEL_FIXES + 2)
+    if got is None:
         return None
-    inside = np.flatnonzero((g.t >= b.t[0]) & (g.t <= b.t[-1]))
+    inside, t, d = got
+    g = drive.gnss
+    assert g is not None
     ok = np.ones(g.t.size, dtype=bool)
-    if inside.size < 2 * LEVEL_FIXES + 2:
-        return None
-    t = g.t[inside]
-    d = g.lla[inside, 2] - np.interp(t, b.t, b.altitude)
     step = np.diff(d)
     near = np.diff(t) <= JUMP_DT_S
     if not near.any():
