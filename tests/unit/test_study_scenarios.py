@@ -1,5 +1,5 @@
-"""The EKF-vs-graph study scenarios (cold-start, cold-start-posonly, urban, long-outage,
-hot-baro): each loads, simulates, and has what its TOML header promises."""
+"""The EKF-vs-graph study scenarios (cold-start, cold-start-posonly, cold-start-phone, urban,
+long-outage, hot-baro): each loads, simulates, and has what its TOML header promises."""
 
 import numpy as np
 import pytest
@@ -8,7 +8,8 @@ from vnav_graph.geo.atmosphere import T0
 from vnav_graph.simulation import list_scenarios, load_scenario, simulate
 from vnav_graph.simulation.trajectories import hill_drive_profiles
 
-STUDY = ["cold-start", "cold-start-posonly", "urban", "long-outage", "hot-baro"]
+STUDY = ["cold-start", "cold-start-posonly", "cold-start-phone", "urban", "long-outage",
+         "hot-baro"]
 
 
 @pytest.mark.parametrize("name", STUDY)
