@@ -85,7 +85,8 @@ MECHANISM = {
     "first 4 s of positions and needs 5 fixes there; a 1 Hz receiver has 4–5, so the launch "
     "acceleration is levelled as gravity (degrees of pitch with a tight σ), the vertical is "
     "inconsistent for the first seconds and the baro latency absorbs it, with too little "
-    "vertical motion later to move it back; the graph solves the whole drive at once",
+    "vertical motion later to move it back (the horizontal fails too); the graph solves the "
+    "whole drive at once",
     "urban": "a burst fix that passes the EKF's χ² gate (its reported σ understates the "
     "error) is absorbed for good; the graph re-weights every fix against the smoothed "
     "trajectory at each iteration (Huber), so burst fixes lose their weight after the fact",
