@@ -56,9 +56,10 @@ def _running_median(t: FloatArray, x: FloatArray, half: float) -> FloatArray:
 
 
 def _gnss_minus_baro(drive: Drive, min_fixes: int
-                     ) -> tuple[np.ndarray, FloatArray, FloatArray] | None:
-    """The fixes inside the baro's span (indices), their times and d = GNSS − baro height
-    there; None without a baro or with fewer than ``min_fixes`` such fixes."""
+                     ) -> tuple[np.ndarray, FloatArray, FloatArray, FloatArray, np.ndarray] | None:
+    """The fixes inside the baro's span (indices), their times, d = GNSS − baro height and
+    the receiver's σ_v there, and an all-True mask over every fix (for a check to clear);
+    None without a baro or with fewer than ``min_fixes`` such fixes."""
     g, b = drive.gnss, drive.baro
     if b is None or b.t.size < 2 or g is None:
         return None
@@ -66,7 +67,8 @@ def _gnss_minus_baro(drive: Drive, min_fixes: int
     if inside.size < min_fixes:
         return None
     t = g.t[inside]
-    return inside, t, g.lla[inside, 2] - np.interp(t, b.t, b.altitude)
+    return (inside, t, g.lla[inside, 2] - np.interp(t, b.t, b.altitude), g.pos_sd[inside, 2],
+            np.ones(g.t.size, dtype=bool))
 
 
 def _baro_check(drive: Drive) -> np.ndarray | None:
@@ -74,13 +76,10 @@ def _baro_check(drive: Drive) -> np.ndarray | None:
     got = _gnss_minus_baro(drive, 5)
     if got is None:
         return None
-    inside, t, d = got
-    g = drive.gnss
-    assert g is not None
-    ok = np.ones(g.t.size, dtype=bool)
+    inside, t, d, sd_v, ok = got
     dev = d - _running_median(t, d, BARO_HALF_S)
     scatter = 1.4826 * float(np.median(np.abs(dev)))
-    sd = np.maximum(np.maximum(g.pos_sd[inside, 2], scatter), MIN_SD_M)
+    sd = np.maximum(np.maximum(sd_v, scatter), MIN_SD_M)
     ok[inside] = np.abs(dev) <= K_SIGMA * sd
     return ok
 
@@ -121,17 +120,14 @@ def _excursion_check(drive: Drive) -> np.ndarray | None:
     got = _gnss_minus_baro(drive, 2 * LEVEL_FIXES + 2)
     if got is None:
         return None
-    inside, t, d = got
-    g = drive.gnss
-    assert g is not None
-    ok = np.ones(g.t.size, dtype=bool)
+    inside, t, d, sd_v, ok = got
     step = np.diff(d)
     near = np.diff(t) <= JUMP_DT_S
     if not near.any():
         return ok
     med = float(np.median(step[near]))
     scatter = 1.4826 * float(np.median(np.abs(step[near] - med)))
-    sd = np.maximum(np.maximum(g.pos_sd[inside, 2], scatter / np.sqrt(2.0)), MIN_SD_M)
+    sd = np.maximum(np.maximum(sd_v, scatter / np.sqrt(2.0)), MIN_SD_M)
     lim = K_SIGMA * np.hypot(sd[1:], sd[:-1])  # lim[k]: for the step d[k + 1] − d[k]
     jumps = np.flatnonzero(near & (np.abs(step) > lim)) + 1  # d[j] differs from d[j - 1]
     i = 0
