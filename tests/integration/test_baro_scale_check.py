@@ -67,6 +67,10 @@ def test_check_reruns_with_the_stiff_scale_once():
     assert res.runtime_s == 2.0 and res.config == C()
     # a config that sets the prior itself is not second-guessed
     assert without_implausible_scale(_est(-0.95), C(0.02), rerun).baro.scale.est == -0.95
+    # nor is a result that is already this check's re-solve (reached through the
+    # magnetometer check's rerun, which runs the whole estimator, checks included)
+    nested = _est(-0.95, {"baro_scale_note": "solved again"})
+    assert without_implausible_scale(nested, C(), rerun) is nested
     assert calls == [STIFF_SCALE_SD]
 
 

@@ -56,10 +56,10 @@ def _running_median(t: FloatArray, x: FloatArray, half: float) -> FloatArray:
 
 
 def _gnss_minus_baro(drive: Drive, min_fixes: int
-                     ) -> tuple[np.ndarray, FloatArray, FloatArray, FloatArray, np.ndarray] | None:
+                     ) -> tuple[np.ndarray, FloatArray, FloatArray, FloatArray] | None:
     """The fixes inside the baro's span (indices), their times, d = GNSS − baro height and
-    the receiver's σ_v there, and an all-True mask over every fix (for a check to clear);
-    None without a baro or with fewer than ``min_fixes`` such fixes."""
+    the receiver's σ_v there; None without a baro or with fewer than ``min_fixes`` such
+    fixes."""
     g, b = drive.gnss, drive.baro
     if b is None or b.t.size < 2 or g is None:
         return None
@@ -67,8 +67,7 @@ def _gnss_minus_baro(drive: Drive, min_fixes: int
     if inside.size < min_fixes:
         return None
     t = g.t[inside]
-    return (inside, t, g.lla[inside, 2] - np.interp(t, b.t, b.altitude), g.pos_sd[inside, 2],
-            np.ones(g.t.size, dtype=bool))
+    return inside, t, g.lla[inside, 2] - np.interp(t, b.t, b.altitude), g.pos_sd[inside, 2]
 
 
 def _baro_check(drive: Drive) -> np.ndarray | None:
@@ -76,7 +75,9 @@ def _baro_check(drive: Drive) -> np.ndarray | None:
     got = _gnss_minus_baro(drive, 5)
     if got is None:
         return None
-    inside, t, d, sd_v, ok = got
+    inside, t, d, sd_v = got
+    assert drive.gnss is not None  # the helper found fixes
+    ok = np.ones(len(drive.gnss), dtype=bool)
     dev = d - _running_median(t, d, BARO_HALF_S)
     scatter = 1.4826 * float(np.median(np.abs(dev)))
     sd = np.maximum(np.maximum(sd_v, scatter), MIN_SD_M)
@@ -120,7 +121,9 @@ def _excursion_check(drive: Drive) -> np.ndarray | None:
     got = _gnss_minus_baro(drive, 2 * LEVEL_FIXES + 2)
     if got is None:
         return None
-    inside, t, d, sd_v, ok = got
+    inside, t, d, sd_v = got
+    assert drive.gnss is not None  # the helper found fixes
+    ok = np.ones(len(drive.gnss), dtype=bool)
     step = np.diff(d)
     near = np.diff(t) <= JUMP_DT_S
     if not near.any():

@@ -160,9 +160,11 @@ def without_implausible_scale(result: Any, config: Any, rerun: Callable[[Any], A
     (:func:`implausible_scale_note`), else ``rerun(config with baro_scale_sd =
     STIFF_SCALE_SD)`` (the scale held at its prior mean) with the reason as a warning and in
     ``info["baro_scale_note"]``. A config that already sets ``baro_scale_sd`` is the
-    user's (or this check's) own choice and is not second-guessed."""
-    if getattr(config, "baro_scale_sd", None) is not None:
-        return result
+    user's (or this check's) own choice and is not second-guessed, and a result that
+    carries ``baro_scale_note`` already is that re-solve, reached through another check's
+    rerun (the magnetometer's runs the whole estimator again, checks included)."""
+    if getattr(config, "baro_scale_sd", None) is not None or "baro_scale_note" in result.info:
+        return result  # the user's prior, or already this check's re-solve (a nested rerun)
     why = implausible_scale_note(result)
     if not why:
         return result

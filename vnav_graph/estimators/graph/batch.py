@@ -297,11 +297,12 @@ class GraphBatch:
         ``info["mag_note"]``."""
         with single_thread_blas():
             est = self._run(drive)
-        est = without_contradicting_mag(est, self.config,
-                                        lambda cfg: GraphBatch(cfg, self.extensions).run(drive))
-        # the post-solve baro-scale check of both families (sensors.baro)
-        return without_implausible_scale(est, self.config,
-                                         lambda cfg: GraphBatch(cfg, self.extensions).run(drive))
+        def rerun(cfg: GraphConfig) -> Estimate:
+            return GraphBatch(cfg, self.extensions).run(drive)
+
+        # the post-solve hard-iron and baro-scale checks of both families
+        return without_implausible_scale(without_contradicting_mag(est, self.config, rerun),
+                                         self.config, rerun)
 
     def _run(self, drive: Drive) -> Estimate:
         t0 = time.perf_counter()

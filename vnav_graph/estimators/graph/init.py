@@ -77,10 +77,10 @@ def initial_states(P: Problem) -> tuple[FloatArray, FloatArray, FloatArray]:
     # hundreds of metres away, 181.BIN, and the bilinear baro term (1 + s)·h, linearised
     # there, then pulls s towards −1; docs/graph.md "Session 33"). Not before the first fix:
     # keyframe 0 starts graph-isam2's causal pass, and the baro's offset is the whole drive's
-    outside = ~has & (P.t_kf > gt[-1]) if gt.size else ~has
+    outside = ~has & (P.t_kf > gt[-1])
     baro = P.drive.baro
     v_bridge = np.zeros(nk, dtype=bool)
-    if baro is not None and np.any(in_gap | outside) and baro.t.size > 1 and gt.size:
+    if baro is not None and np.any(in_gap | outside) and baro.t.size > 1:
         hg = ned_to_lla(pos, P.origin)[:, 2]
         off = float(np.median(hg - np.interp(gt, baro.t, baro.altitude)))
         v_bridge = in_gap | outside

@@ -152,10 +152,11 @@ class GraphISAM2:
             cfg = dataclasses.replace(cfg0, **ROBUST_SETTINGS)
             est = self._run(drive, cfg, True, t_start, str(exc))
         # the post-solve hard-iron and baro-scale checks of both families (graph-batch, ekf)
-        est = without_contradicting_mag(
-            est, self.config, lambda cfg: GraphISAM2(cfg, self.extensions).run(drive))
-        return without_implausible_scale(
-            est, self.config, lambda cfg: GraphISAM2(cfg, self.extensions).run(drive))
+        def rerun(cfg: GraphConfig) -> Estimate:
+            return GraphISAM2(cfg, self.extensions).run(drive)
+
+        return without_implausible_scale(without_contradicting_mag(est, self.config, rerun),
+                                         self.config, rerun)
 
     def _run(self, drive: Drive, cfg: GraphConfig, robust: bool, t_start: float,
              fallback: str | None) -> Estimate:
