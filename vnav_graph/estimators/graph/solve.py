@@ -39,6 +39,12 @@ SOLVERS = ("auto", "banded", "general")
 # ski log with 0.25 s keyframes the model predicted 25 there, the step gained 0.04, and the
 # solve stopped 19 above a point 3 m better in altitude (docs/graph.md, "Session 34")
 STALL_MAX_PREDICTED = 1.0
+# Levenberg-Marquardt damping μ·diag(H): from 1e-5 on the first refused step, × LM_FACTOR per
+# refused step, ÷ LM_FACTOR per accepted one, plain Gauss-Newton again below LM_PLAIN_BELOW.
+# Until session 34 ×10 / ÷10 and plain below 1e-6: in a curved valley every third step was a
+# full step that failed, and the solve crept (docs/graph.md, "Session 34")
+LM_FACTOR = 5.0
+LM_PLAIN_BELOW = 1e-9
 
 
 @dataclass
@@ -98,10 +104,12 @@ def linear_system(P: Problem, lay: Layout, graph: Any, vals: Any,
 def gn_core(P: Problem, lay: Layout, graph: Any, vals: Any, calib_of_kf: np.ndarray,
              pri: dict[str, float]) -> BatchResult:
     """Gauss-Newton on the total cost (C++ factors + interval terms); a step that raises the
-    cost is retried with Levenberg-Marquardt damping μ·diag(H) (μ from 1e-5, ×10 per
-    retry, ÷10 after a success, back to plain Gauss-Newton below 1e-6). On the simulated
-    drives every full step is accepted; on hovering-multirotor logs the weakly determined
-    heading makes the full step overshoot (docs/graph.md). The interval rows evaluated at an
+    cost is retried with Levenberg-Marquardt damping μ·diag(H) (μ from 1e-5, × ``LM_FACTOR``
+    per retry, ÷ ``LM_FACTOR`` after a success, back to plain Gauss-Newton below
+    ``LM_PLAIN_BELOW``). On the shipped scenarios every full step is accepted; where the
+    heading is weakly determined (hovering multirotors, a phone inside GNSS-free windows, a
+    drive without horizontal motion) the full step overshoots (docs/graph.md). The interval
+    rows evaluated at an
     accepted candidate are reused as its linearisation."""
     st = states_from_values(P, vals, calib_of_kf)
     # the baro bias is read at t_s − λ with λ fixed while τd moves, so that the cost is smooth
@@ -146,12 +154,12 @@ def gn_core(P: Problem, lay: Layout, graph: Any, vals: Any, calib_of_kf: np.ndar
                 # gain far more than the ≈ 10 that moving λ by tens of ms changes)
                 ref = graph.error(vals) + interval_rows(P, st, pri, lag_c).cost
             if new_cost <= ref * (1 + 1e-12):
-                mu = 0.0 if mu <= 1e-6 else mu / 10.0
+                mu = 0.0 if mu <= LM_PLAIN_BELOW else mu / LM_FACTOR
                 break
             if mu == 0.0 and abs(new_cost - ref) < P.cfg.rel_tol * ref:
                 converged = True
                 break  # converged: the change is at round-off level
-            mu = 1e-5 if mu == 0.0 else mu * 10.0
+            mu = 1e-5 if mu == 0.0 else mu * LM_FACTOR
             if mu > 1e3:
                 failed = True  # no descent even as a tiny gradient step: stop here
                 break
