@@ -7,6 +7,7 @@ raises, which makes "the config reached the estimator" visible on every path.
 """
 
 import json
+import re
 import sys
 from pathlib import Path
 
@@ -101,6 +102,9 @@ def test_config_changes_graph_batch_behaviour(tmp_path):
     (w,) = block["warnings"]
     assert "stopped at max_iterations=1" in w
     assert "--config FILE.toml with [graph-batch] max_iterations = 100" in w
+    # and what the model still expected: from the initial guess, far more than abs_tol
+    m = re.search(r"model still predicted ([0-9.e+-]+) less", w)
+    assert m is not None and float(m.group(1)) > 1.0
 
 
 # --- --plugin -----------------------------------------------------------------------------

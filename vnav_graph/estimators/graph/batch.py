@@ -69,12 +69,15 @@ def solver_warnings(res: BatchResult, cfg: GraphConfig, what: str = "Gauss-Newto
     """User-facing warning for a solve that did not converge (``info["warnings"]``)."""
     if res.stop == "max_iterations":
         return [f"{what} stopped at max_iterations={cfg.max_iterations} per solve without "
-                f"converging (final ½χ² {res.cost:.6g}); the estimate may be off — raise it: "
+                f"converging (final ½χ² {res.cost:.6g}; at its last linearisation the model "
+                f"still predicted {res.predicted_decrease:.3g} less); the estimate may be off "
+                "— raise it: "
                 f"--config FILE.toml with [{estimator}] max_iterations = "
                 f"{max(2 * cfg.max_iterations, 100)} (Python: GraphConfig(max_iterations=...))"]
     if res.stop == "no_descent":
         return [f"{what} found no step that lowers the cost (Levenberg-Marquardt damping up "
-                f"to 1e3, final ½χ² {res.cost:.6g}): a flat or strongly nonlinear direction "
+                f"to 1e3, final ½χ² {res.cost:.6g}, the model predicting "
+                f"{res.predicted_decrease:.3g} less): a flat or strongly nonlinear direction "
                 "(e.g. heading without motion); the estimate is a stationary point of "
                 "uncertain quality"]
     return []
@@ -323,6 +326,7 @@ class GraphBatch:
         t4 = time.perf_counter()
         info = {"keyframes": P.n_kf, "iterations": res.iterations, "final_cost": res.cost,
                 "converged": res.converged, "stop": res.stop,
+                "predicted_decrease": res.predicted_decrease,
                 "warnings": solver_warnings(res, self.config),
                 "baro_bias_lag_s": res.bias_lag, "solver": res.solver,
                 "robust_weights": res.rows.weights,

@@ -95,6 +95,7 @@ def estimate_info(P: Any, cfg: GraphConfig, res: Any, out: dict[str, Any], upd_m
     return {
         "keyframes": P.n_kf, "iterations_final": res.iterations,
         "converged_final": res.converged, "stop_final": res.stop,
+        "predicted_decrease_final": res.predicted_decrease,
         "gnss_rejected": P.gnss_rejected, "gnss_rejected_pregate": P.g_rej_pre,
         "gnss_rejected_velocity_screen": P.g_rej_vel,
         "gnss_rejected_postsolve": P.g_rej_post,

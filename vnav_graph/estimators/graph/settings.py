@@ -18,13 +18,15 @@ class GraphConfig:
     """Settings of the factor-graph smoothers (SI units).
 
     keyframe_dt: keyframe spacing [s]; max_iterations / rel_tol / abs_tol: Gauss-Newton
-    stops when an iteration lowers the cost ½χ² by less than rel_tol·cost or abs_tol, or
+    stops when an iteration lowers the cost ½χ² by less than rel_tol·cost or (if the model
+    predicted < 1 for it, ``solve.STALL_MAX_PREDICTED``) abs_tol, or
     when the decrease predicted for the next step is below abs_tol (0.05: a χ² change of
     0.1, a tenth of the change that moves one parameter by 1σ; that step is not taken and
     its factorisation gives the covariance); max_iterations per solve (and per gate round):
     4 suffice on the simulated drives, real logs need up to ≈ 100 (ski: 93 — the cap of 12
     used until session 4 left it unconverged with a −26 % scale and 23 wrongly gated fixes;
-    ``info["converged"]`` says whether the cap was hit); bias_lag_tol [s]: the baro bias is read at
+    ``info["converged"]`` says whether the cap was hit, ``info["predicted_decrease"]`` what
+    the model still expected at its last linearisation); bias_lag_tol [s]: the baro bias is read at
     t_s − λ, λ the latency at the start of the solve, re-set when τd moves further than this
     (``factors.baro_rows``);
     output_rate_hz: rate of the output trajectory (interpolated between keyframes with the

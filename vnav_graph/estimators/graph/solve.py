@@ -59,6 +59,10 @@ class BatchResult:
     system: Any = None  # linear system at ``values`` (BandedSystem | GeneralSystem), if kept
     bias_lag: float = 0.0  # baro-bias read time offset of the last solve (baro_rows)
     stop: str = "converged"  # "converged" | "max_iterations" | "no_descent"
+    # ½χ² decrease the quadratic model predicted at the last linearisation (at the returned
+    # point when converged; else at the point before the last step): what a solve stopped at
+    # its cap or without descent still expected to gain
+    predicted_decrease: float = 0.0
 
     @property
     def converged(self) -> bool:
@@ -118,6 +122,7 @@ def gn_core(P: Problem, lay: Layout, graph: Any, vals: Any, calib_of_kf: np.ndar
     rows = interval_rows(P, st, pri, lag)
     cost = graph.error(vals) + rows.cost
     it = 0
+    dec = 0.0
     system = None
     mu = 0.0
     converged = False
@@ -187,7 +192,8 @@ def gn_core(P: Problem, lay: Layout, graph: Any, vals: Any, calib_of_kf: np.ndar
             converged = True
             break
     stop = "converged" if converged else ("no_descent" if failed else "max_iterations")
-    return BatchResult(vals, graph, cost, it, calib_of_kf, lay, rows, system, lag, stop)
+    return BatchResult(vals, graph, cost, it, calib_of_kf, lay, rows, system, lag, stop,
+                       float(dec))
 
 
 def evaluate_at(P: Problem, graph: Any, vals: Any, calib_of_kf: np.ndarray,
