@@ -111,6 +111,13 @@ def in_windows(t: FloatArray, windows: Sequence[tuple[float, float]]) -> np.ndar
     return m
 
 
+def withhold(drive: Drive, windows: Sequence[tuple[float, float]]) -> Drive:
+    """The drive the estimators see: its GNSS fixes inside ``windows`` removed, the windows
+    recorded in ``meta["gnss_holdout_windows"]``."""
+    return drive.replace(gnss=drive.gnss.select(~in_windows(drive.gnss.t, windows)),
+                         meta={**drive.meta, "gnss_holdout_windows": [list(w) for w in windows]})
+
+
 def _rms(x: FloatArray) -> float | None:
     x = x[np.isfinite(x)]
     return float(np.sqrt(np.mean(x**2))) if x.size else None
@@ -243,8 +250,7 @@ def run_holdout(drive: Drive, estimators: Sequence[str] | None = None, outage_s:
     windows = choose_windows(drive.gnss.t, outage_s, spacing_s)
     withheld = in_windows(drive.gnss.t, windows)
     reference, screen = screen_reference(drive, withheld)
-    held = drive.replace(gnss=drive.gnss.select(~withheld),
-                         meta={**drive.meta, "gnss_holdout_windows": [list(w) for w in windows]})
+    held = withhold(drive, windows)
     results: dict[str, dict[str, Any]] = {}
     series: dict[str, Scored] = {}
     for r in run_estimators(held, names, progress, configs, desc="holdout run"):

@@ -113,8 +113,7 @@ def gn_core(P: Problem, lay: Layout, graph: Any, vals: Any, calib_of_kf: np.ndar
     ``LM_PLAIN_BELOW``). On the shipped scenarios every full step is accepted; where the
     heading is weakly determined (hovering multirotors, a phone inside GNSS-free windows, a
     drive without horizontal motion) the full step overshoots (docs/graph.md). The interval
-    rows evaluated at an
-    accepted candidate are reused as its linearisation."""
+    rows evaluated at an accepted candidate are reused as its linearisation."""
     st = states_from_values(P, vals, calib_of_kf)
     # the baro bias is read at t_s − λ with λ fixed while τd moves, so that the cost is smooth
     # along τd (factors.baro_rows); λ follows τd when they drift > bias_lag_tol apart
