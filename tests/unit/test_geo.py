@@ -101,3 +101,17 @@ def test_slerp_on_knots_and_between(rng):
     only_knots = slerp_quat(t, q, t)
     np.testing.assert_allclose(np.linalg.norm(only_knots, axis=1), 1.0, atol=1e-15)
     assert np.all(only_knots[:, 0] >= 0)
+
+
+def test_slerp_matches_scipy_slerp_on_random_rotations(rng):
+    # slerp_quat works on the bracketing knots only; scipy's Slerp built on all knots is the
+    # reference (same rotation, so q or -q)
+    from scipy.spatial.transform import Rotation, Slerp
+
+    t = np.cumsum(rng.uniform(0.05, 1.0, 300))
+    rot = Rotation.random(300, random_state=rng)
+    tq = np.sort(rng.uniform(t[0], t[-1], 2000))
+    out = slerp_quat(t, rot.as_quat(scalar_first=True), tq)
+    ref = Slerp(t, rot)(tq).as_quat(scalar_first=True)
+    np.testing.assert_allclose(np.abs(np.einsum("ij,ij->i", out, ref)), 1.0, atol=1e-12)
+    assert np.all(out[:, 0] >= 0)
