@@ -499,13 +499,19 @@ def _report(drive: Drive, res: tuple[Any, ...], gr: _Grids, gaps: NDArrayInt, in
 def _unpack_cov(packed: FloatArray, has_baro: bool) -> FloatArray:
     """Packed (M, NPACK) NX-state covariances → (M, 18, 18) in the ERROR_STATE layout."""
     iu, ju = np.triu_indices(km.NX)
-    full = np.empty((packed.shape[0], km.NX, km.NX))
-    full[:, iu, ju] = packed
-    full[:, ju, iu] = packed
-    cov = full[:, :ERROR_STATE_DIM, :ERROR_STATE_DIM].copy()
+    keep = np.flatnonzero(ju < ERROR_STATE_DIM)  # upper triangle of the leading block
+    iu, ju = iu[keep], ju[keep]
+    # straight into the (M, 18, 18) result: an (M, NX, NX) temporary was the ekf's largest
+    # allocation (90 MB on a 1-hour drive)
+    cov = np.empty((packed.shape[0], ERROR_STATE_DIM, ERROR_STATE_DIM))
+    for a in range(0, packed.shape[0], 4096):  # the gathered columns in blocks, not all at once
+        blk = packed[a:a + 4096][:, keep]
+        cov[a:a + 4096, iu, ju] = blk
+        cov[a:a + 4096, ju, iu] = blk
     if not has_baro:
         cov[:, 15:18, :] = np.nan
         cov[:, :, 15:18] = np.nan
+    cov.setflags(write=False)  # read-only and owned: ``Estimate`` shares it instead of a copy
     return cov
 
 
@@ -532,9 +538,12 @@ def _estimate(name: str, run: _Run, traj: Trajectory, par: FloatArray, cov: Floa
 
 def _trajectory(run: _Run, lla: FloatArray, vel: FloatArray, q: FloatArray,
                 par: FloatArray) -> Trajectory:
-    q = np.where(q[:, :1] < 0, -q, q)
-    return Trajectory(run.t_out, lla, vel, q, par[:, km.PBG:km.PBG + 3].copy(),
-                      par[:, km.PBA:km.PBA + 3].copy(), par[:, km.PBB].copy())
+    # arrays made here are handed over read-only: ``Trajectory`` shares them, not copies
+    fresh = [np.where(q[:, :1] < 0, -q, q), par[:, km.PBG:km.PBG + 3].copy(),
+             par[:, km.PBA:km.PBA + 3].copy(), par[:, km.PBB].copy()]
+    for a in fresh:
+        a.setflags(write=False)
+    return Trajectory(run.t_out, lla, vel, *fresh)
 
 
 class EKF:
