@@ -215,7 +215,7 @@ class VerticalProblem:
         for k in range(nk - 1):
             j0, j1 = int(kf_idx[k]), int(kf_idx[k + 1])
             fm = 0.5 * (imu.accel_b[j0:j1] + imu.accel_b[j0 + 1:j1 + 1])
-            fm = fm + np.einsum("nji,j->ni", self.dense.dr[j0:j1], self.R[k].T @ dg[k])
+            fm = fm + np.einsum("nji,j->ni", self.dense.rot(j0, j1), self.R[k].T @ dg[k])
             wm = 0.5 * (imu.gyro_b[j0:j1] + imu.gyro_b[j0 + 1:j1 + 1])
             pim = gtsam.PreintegratedImuMeasurements(par, gtsam.imuBias.ConstantBias())
             for a, w, dt in zip(fm, wm, np.diff(imu.t[j0:j1 + 1]), strict=True):

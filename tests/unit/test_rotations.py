@@ -61,3 +61,21 @@ def test_coarse_level_inverts_gravity(rng):
         c_nb = rot.quat_to_dcm(rot.rpy_quat(roll, pitch, rng.uniform(-3, 3)))
         f_b = c_nb.T @ np.array([0.0, 0.0, -g])  # at rest: f = −g, NED (g down)
         assert coarse_level(f_b) == pytest.approx((roll, pitch), abs=1e-12)
+
+
+def test_dcm_to_quat_inverts_quat_to_dcm_on_every_branch():
+    # random rotations plus angles near π about each axis (the branches where 1 + tr is
+    # small and the largest diagonal element leads Shepperd's method)
+    rng = np.random.default_rng(5)
+    qs = list(Rotation.random(200, random_state=rng).as_quat(scalar_first=True))
+    for axis in np.eye(3):
+        for ang in (np.pi - 1e-3, np.pi, 0.5):
+            qs.append(np.r_[np.cos(ang / 2), np.sin(ang / 2) * axis])
+    qs.append(np.array([1.0, 0.0, 0.0, 0.0]))
+    for q in qs:
+        q = q * np.sign(q[0]) if q[0] != 0 else q
+        back = rot.dcm_to_quat(rot.quat_to_dcm(q))
+        assert back[0] >= 0.0
+        # the same rotation (q and −q are one rotation when w = 0)
+        assert abs(abs(back @ q) - 1.0) < 1e-12
+        np.testing.assert_allclose(rot.quat_to_dcm(back), rot.quat_to_dcm(q), atol=1e-14)

@@ -62,6 +62,41 @@ def quat_to_dcm(q):
 
 
 @njit(cache=True)
+def dcm_to_quat(c):
+    """Unit quaternion (w ≥ 0) of a rotation matrix (Shepperd: the largest of 1 + tr, 1 + 2c_ii
+    − tr under the square root, so no branch loses precision); the inverse of ``quat_to_dcm``."""
+    tr = c[0, 0] + c[1, 1] + c[2, 2]
+    q = np.empty(4)
+    if tr >= c[0, 0] and tr >= c[1, 1] and tr >= c[2, 2]:
+        s = 2.0 * np.sqrt(1.0 + tr)
+        q[0] = 0.25 * s
+        q[1] = (c[2, 1] - c[1, 2]) / s
+        q[2] = (c[0, 2] - c[2, 0]) / s
+        q[3] = (c[1, 0] - c[0, 1]) / s
+    elif c[0, 0] >= c[1, 1] and c[0, 0] >= c[2, 2]:
+        s = 2.0 * np.sqrt(1.0 + 2.0 * c[0, 0] - tr)
+        q[0] = (c[2, 1] - c[1, 2]) / s
+        q[1] = 0.25 * s
+        q[2] = (c[0, 1] + c[1, 0]) / s
+        q[3] = (c[0, 2] + c[2, 0]) / s
+    elif c[1, 1] >= c[2, 2]:
+        s = 2.0 * np.sqrt(1.0 + 2.0 * c[1, 1] - tr)
+        q[0] = (c[0, 2] - c[2, 0]) / s
+        q[1] = (c[0, 1] + c[1, 0]) / s
+        q[2] = 0.25 * s
+        q[3] = (c[1, 2] + c[2, 1]) / s
+    else:
+        s = 2.0 * np.sqrt(1.0 + 2.0 * c[2, 2] - tr)
+        q[0] = (c[1, 0] - c[0, 1]) / s
+        q[1] = (c[0, 2] + c[2, 0]) / s
+        q[2] = (c[1, 2] + c[2, 1]) / s
+        q[3] = 0.25 * s
+    if q[0] < 0.0:
+        q = -q
+    return q / np.sqrt(q[0] ** 2 + q[1] ** 2 + q[2] ** 2 + q[3] ** 2)
+
+
+@njit(cache=True)
 def so3_exp(phi):
     """Rotation matrix exp([φ×]) (Rodrigues; second-order series below 1e-9 rad)."""
     a = np.sqrt(phi[0] ** 2 + phi[1] ** 2 + phi[2] ** 2)

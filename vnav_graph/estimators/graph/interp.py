@@ -9,12 +9,15 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from ...nav.arrays import put
+from ...nav.rotations import quat_to_dcm
+
 
 @njit(cache=True)
-def increments_at(t, kf_idx, dr, dv, dp, dv_end, dp_end, t_q, k):  # pragma: no cover - jit
+def increments_at(t, kf_idx, qr, dv, dp, dv_end, dp_end, t_q, k):  # pragma: no cover - jit
     """ΔR (nearest earlier sample), Δv and Δp (cubic Hermite through the neighbouring
-    samples' (Δp, Δv)) of interval ``k[i]`` at ``t_q[i]``; arrays as in ``DenseIncrements``.
-    Returns (M, 3, 3), (M, 3), (M, 3)."""
+    samples' (Δp, Δv)) of interval ``k[i]`` at ``t_q[i]``; arrays as in ``DenseIncrements``
+    (ΔR as unit quaternions ``qr``). Returns (M, 3, 3), (M, 3), (M, 3)."""
     m = t_q.size
     dr_q = np.empty((m, 3, 3))
     dv_q = np.empty((m, 3))
@@ -44,8 +47,7 @@ def increments_at(t, kf_idx, dr, dv, dp, dv_end, dp_end, t_q, k):  # pragma: no 
             v1 = v_next * h
             dp_q[i, a] = c0 * p0 + c1 * v0 + c2 * p_next + c3 * v1
             dv_q[i, a] = (e0 * p0 + e1 * v0 + e2 * p_next + e3 * v1) / h
-            for b in range(3):
-                dr_q[i, a, b] = dr[j, a, b]
+        put(dr_q[i], quat_to_dcm(qr[j]))
     return dr_q, dv_q, dp_q
 
 

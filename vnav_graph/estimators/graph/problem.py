@@ -302,7 +302,7 @@ def preintegrate(P: Problem, k: int, r_k: FloatArray, dg_k: FloatArray,
     fm = 0.5 * (imu.accel_b[j0:j1] + imu.accel_b[j0 + 1:j1 + 1])
     wm = 0.5 * (imu.gyro_b[j0:j1] + imu.gyro_b[j0 + 1:j1 + 1])
     if np.any(dg_k):
-        fm = fm + np.einsum("nji,j->ni", P.dense.dr[j0:j1], r_k.T @ dg_k)
+        fm = fm + np.einsum("nji,j->ni", P.dense.rot(j0, j1), r_k.T @ dg_k)
     dts = np.diff(imu.t[j0:j1 + 1])
     fm = fm + 0.5 * np.cross(wm, fm) * dts[:, None]
     pim = gtsam.PreintegratedImuMeasurements(P.params, bias)
