@@ -79,3 +79,6 @@ def test_dcm_to_quat_inverts_quat_to_dcm_on_every_branch():
         # the same rotation (q and −q are one rotation when w = 0)
         assert abs(abs(back @ q) - 1.0) < 1e-12
         np.testing.assert_allclose(rot.quat_to_dcm(back), rot.quat_to_dcm(q), atol=1e-14)
+        into = np.empty((3, 3))
+        rot.quat_to_dcm_into(q, into)
+        np.testing.assert_array_equal(into, rot.quat_to_dcm(q))

@@ -51,6 +51,21 @@ def quat_exp(phi):
 
 
 @njit(cache=True)
+def quat_to_dcm_into(q, c):
+    """``c[...] = quat_to_dcm(q)`` without allocating (c: a (3, 3) array or view)."""
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    c[0, 0] = 1 - 2 * (y * y + z * z)
+    c[0, 1] = 2 * (x * y - w * z)
+    c[0, 2] = 2 * (x * z + w * y)
+    c[1, 0] = 2 * (x * y + w * z)
+    c[1, 1] = 1 - 2 * (x * x + z * z)
+    c[1, 2] = 2 * (y * z - w * x)
+    c[2, 0] = 2 * (x * z - w * y)
+    c[2, 1] = 2 * (y * z + w * x)
+    c[2, 2] = 1 - 2 * (x * x + y * y)
+
+
+@njit(cache=True)
 def quat_to_dcm(q):
     """Rotation matrix of a unit quaternion (C_nb of q_nb)."""
     w, x, y, z = q[0], q[1], q[2], q[3]

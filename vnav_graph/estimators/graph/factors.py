@@ -46,7 +46,7 @@ from numba import njit
 from ...geo.earth import OMEGA_IE, gravity
 from ...geo.frames import lla_to_ned, ned_to_lla, skew
 from ...nav.arrays import put
-from ...nav.rotations import dcm_to_quat, quat_to_dcm, so3_exp
+from ...nav.rotations import dcm_to_quat, quat_to_dcm_into, so3_exp
 from ...sensors.baro import baro_jacobian, measure_baro
 from ...types import FloatArray
 from .interp import increments_at, interpolant
@@ -152,7 +152,7 @@ def _dense(t, gyro, accel, kf_idx):
 def _rot_of(qr):  # pragma: no cover - jit
     out = np.empty((qr.shape[0], 3, 3))
     for i in range(qr.shape[0]):
-        put(out[i], quat_to_dcm(qr[i]))
+        quat_to_dcm_into(qr[i], out[i])
     return out
 
 

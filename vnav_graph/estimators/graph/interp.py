@@ -9,8 +9,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ...nav.arrays import put
-from ...nav.rotations import quat_to_dcm
+from ...nav.rotations import quat_to_dcm_into
 
 
 @njit(cache=True)
@@ -47,7 +46,7 @@ def increments_at(t, kf_idx, qr, dv, dp, dv_end, dp_end, t_q, k):  # pragma: no 
             v1 = v_next * h
             dp_q[i, a] = c0 * p0 + c1 * v0 + c2 * p_next + c3 * v1
             dv_q[i, a] = (e0 * p0 + e1 * v0 + e2 * p_next + e3 * v1) / h
-        put(dr_q[i], quat_to_dcm(qr[j]))
+        quat_to_dcm_into(qr[j], dr_q[i])
     return dr_q, dv_q, dp_q
 
 
