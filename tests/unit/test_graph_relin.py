@@ -192,3 +192,26 @@ def test_a_reversed_calibration_step_is_halved_a_monotone_one_taken_whole(proble
     cal = {0: np.array([0.006, 0.5])}
     book._damped_calibration(cal, ms)
     np.testing.assert_allclose(cal[0], [0.006, 0.5])
+
+
+def test_gnss_chi2_in_blocks_equals_the_whole_set(problem, monkeypatch):
+    # the post-solve gate's χ² is computed in blocks of fixes (memory); with blocks of 7
+    # fixes, with and without the cached increments, it equals the χ² of the rows of every
+    # fix at once (gnss_rows_of)
+    from vnav_graph.estimators.graph import problem as gp
+
+    P, a, _ = problem
+    st = relin.estimate_states(P, (a["rot"], a["pos"], a["vel"], a["bias"], a["cb"], a["gg"]),
+                               np.array([0.01, 0.1]))
+    idx = gp.gnss_batch_idx(P)
+    assert idx.size > 20
+    rows = gp.gnss_rows_of(P, st, idx)  # also caches the increments at these fixes
+    r = rows.r.reshape(-1, idx.size, 3)
+    whole = np.sum(r**2, axis=(0, 2))
+    monkeypatch.setattr(gp, "CHI2_BLOCK", 7)
+    c2, dof = gp.gnss_chi2(P, st, idx)
+    np.testing.assert_allclose(c2, whole, rtol=1e-12)
+    assert dof == 3 * r.shape[0]
+    P.g_incr = None  # without the cache: the increments per block
+    c2_nc, _ = gp.gnss_chi2(P, st, idx)
+    np.testing.assert_allclose(c2_nc, whole, rtol=1e-12)
