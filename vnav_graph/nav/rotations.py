@@ -52,7 +52,8 @@ def quat_exp(phi):
 
 @njit(cache=True)
 def quat_to_dcm_into(q, c):
-    """``c[...] = quat_to_dcm(q)`` without allocating (c: a (3, 3) array or view)."""
+    """Rotation matrix of a unit quaternion written into ``c`` (a (3, 3) array or view),
+    without allocating; ``quat_to_dcm`` returns a new one."""
     w, x, y, z = q[0], q[1], q[2], q[3]
     c[0, 0] = 1 - 2 * (y * y + z * z)
     c[0, 1] = 2 * (x * y - w * z)
@@ -68,12 +69,9 @@ def quat_to_dcm_into(q, c):
 @njit(cache=True)
 def quat_to_dcm(q):
     """Rotation matrix of a unit quaternion (C_nb of q_nb)."""
-    w, x, y, z = q[0], q[1], q[2], q[3]
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
+    c = np.empty((3, 3))
+    quat_to_dcm_into(q, c)
+    return c
 
 
 @njit(cache=True)

@@ -188,7 +188,6 @@ class GeneralSystem:
         self._gfg: Any = None
         if lay.ordering is None:
             lay.ordering = elimination_ordering(lay)
-        self.delta: Any = None
 
     @property
     def gfg(self) -> Any:
@@ -239,7 +238,6 @@ class GeneralSystem:
                     "graph: the Gauss-Newton system stays singular even with Marquardt damping "
                     "1e-1·diag(H) — the drive does not determine the states (check IMU "
                     "rate/units and GNSS coverage)") from None
-        self.delta = delta
         return delta, -0.5 * float(delta.dot(self.gfg.gradientAtZero()))
 
     def damped(self, mu: float) -> Any:
@@ -250,7 +248,6 @@ class GeneralSystem:
         # the step's graph is not needed for it (rebuilt if a step is asked for again): its
         # HessianFactor pieces are released before the factorisation, not alive under it
         self._gfg = None
-        self.delta = None
         return GeneralCovariance(self.lay, self.cpp, self.info)
 
 

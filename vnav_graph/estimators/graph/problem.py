@@ -395,10 +395,17 @@ def gnss_rows_of(P: Problem, st: gf.KeyframeStates, idx: np.ndarray,
     if P.g_incr is None or not np.array_equal(P.g_incr[0], idx):
         k = gf.interval_of(P.t_kf, t_g)
         P.g_incr = (idx, P.dense.at(t_g, k))
+    return _gnss_rows(P, st, idx, P.g_incr[1], out)
+
+
+def _gnss_rows(P: Problem, st: gf.KeyframeStates, idx: np.ndarray, incr: Any,
+               out: FloatArray | None = None) -> gf.IntervalRows:
+    """``gf.gnss_rows`` of fixes ``idx`` with the IMU increments ``incr`` at them (None:
+    computed for these fixes)."""
     return gf.gnss_rows(
-        P.dense, st, t_g, P.g_pos[idx], P.g_pos_sd[idx],
+        P.dense, st, P.g_t[idx], P.g_pos[idx], P.g_pos_sd[idx],
         None if P.g_vel is None else P.g_vel[idx],
-        None if P.g_vel_sd is None else P.g_vel_sd[idx], P.lever, incr=P.g_incr[1], out=out)
+        None if P.g_vel_sd is None else P.g_vel_sd[idx], P.lever, incr=incr, out=out)
 
 
 def interval_rows(P: Problem, st: gf.KeyframeStates, pri: dict[str, float],
@@ -474,11 +481,7 @@ def gnss_chi2(P: Problem, st: gf.KeyframeStates, idx: np.ndarray) -> tuple[Float
     for a in range(0, m, CHI2_BLOCK):
         sl = slice(a, a + CHI2_BLOCK)
         ii = idx[sl]
-        rows = gf.gnss_rows(
-            P.dense, st, P.g_t[ii], P.g_pos[ii], P.g_pos_sd[ii],
-            None if P.g_vel is None else P.g_vel[ii],
-            None if P.g_vel_sd is None else P.g_vel_sd[ii], P.lever,
-            incr=tuple(x[sl] for x in P.g_incr[1]) if cached else None)
+        rows = _gnss_rows(P, st, ii, tuple(x[sl] for x in P.g_incr[1]) if cached else None)
         r = rows.r.reshape(-1, ii.size, 3)  # (1 or 2, n, 3): position rows, then velocity
         c2[sl] = np.sum(r**2, axis=(0, 2))
         n_kind = r.shape[0]
