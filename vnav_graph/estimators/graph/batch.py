@@ -53,6 +53,7 @@ from . import factors as gf
 from .builders import build_batch_graph, pims_for
 from .extend import GraphExtension, check_extensions, collect, make_view
 from .init import initial_states
+from .layout import interval_info
 from .linalg import single_thread_blas
 from .magnetometer import builtin_extensions, mag_info
 from .problem import (
@@ -201,7 +202,13 @@ def outputs(P: Problem, res: BatchResult, pri: dict[str, float],
     # GTSAM's marginals of the eliminated graph (general path)
     system = res.system
     if system is None:
-        system = linear_system(P, lay, res.graph, vals, res.rows)
+        # the rows' Jacobian (~44 MB on a 1-hour drive) is needed only for their information
+        # blocks: not kept alive under the system and the covariance (graph-isam2's own
+        # estimate reaches here with it)
+        info = interval_info(lay, res.rows, P.n_kf)
+        res.rows = res.rows.without_jac()
+        system = linear_system(P, lay, res.graph, vals, info)
+        del info
     cov_of = system.covariance()
     nk = P.n_kf
     sel = np.unique(np.linspace(0, nk - 1, min(P.cfg.cov_epochs, nk)).astype(int))

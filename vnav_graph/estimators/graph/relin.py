@@ -92,6 +92,21 @@ class TermBook:
         self.seg_lin: dict[int, np.ndarray] = {}
         self.seg_step: dict[int, np.ndarray] = {}
         self.damped = 0  # rebuilds whose (s, τd) step was halved
+        # with a window (``graph.window``): the oldest keyframe and segment still in iSAM2;
+        # intervals before ``floor`` were marginalised and are never rebuilt
+        self.floor = 0
+        self.first_seg = 0
+
+    def freeze(self, floor: int, first_seg: int, deleted: list[int]) -> None:
+        """Keyframes before ``floor`` (segments before ``first_seg``) left iSAM2 with its
+        factors ``deleted``: their intervals' terms are no longer iSAM2's to swap."""
+        self.gnss_idx[:floor] = -1
+        for m in range(self.floor, min(floor, len(self.baro_idx))):
+            self.baro_idx[m], self.baro_of[m] = [], []
+        gone = set(deleted)
+        self.kf_fix_idx = {i: v for i, v in self.kf_fix_idx.items()
+                           if not gone.issuperset(v)}
+        self.floor, self.first_seg = floor, first_seg
 
     # -- bookkeeping -----------------------------------------------------------------------
 
@@ -148,7 +163,7 @@ class TermBook:
         if self.thr is None:
             return np.zeros(0, dtype=int)
         ks = np.unique(np.r_[marked, marked - 1]).astype(int)
-        ks = ks[(ks >= 0) & (ks < k_new)]
+        ks = ks[(ks >= self.floor) & (ks < k_new)]
         ks = ks[self.built[ks]]
         out = [np.zeros(0, dtype=int)]
         if ks.size:
@@ -164,7 +179,7 @@ class TermBook:
             j_new = int(self.seg[k_new - 1])
             lo = 0 if all_segments else int(np.searchsorted(self.seg, max(j_new - 1, 0),
                                                             side="left"))
-            m = np.arange(lo, k_new)
+            m = np.arange(max(lo, self.floor), k_new)
             m = m[~np.isnan(self.lin_cal[m, 0])]
             if m.size:
                 k_now = np.array([cal[int(j)] for j in self.seg[m]])
@@ -212,7 +227,7 @@ class TermBook:
         keyframe k+1: its prediction) into ``nf``; returns their tags and the indices of
         the factors they replace. Samples whose delayed time moved past keyframe k+1 are
         clipped into interval k, as when they first entered."""
-        ks = [int(m) for m in self.pending if m < k + 1]
+        ks = [int(m) for m in self.pending if self.floor <= m < k + 1]
         self.pending = np.zeros(0, dtype=int)
         if not ks:
             return [], []
@@ -308,7 +323,8 @@ def settle(isam: Any, book: TermBook, P: Any, seg: Any, rw_idx: list[int],
     nf = gtsam.NonlinearFactorGraph()
     removed = list(removed or [])
     nk = P.n_kf
-    everything = np.arange(nk)
+    everything = np.arange(book.floor, nk)  # the keyframes iSAM2 holds
+    j0 = book.first_seg
     has_baro = P.drive.baro is not None
     rot, pos, vel, bias, cb, gg = arrays
     tags: list[tuple[Any, ...]] = []
@@ -318,7 +334,7 @@ def settle(isam: Any, book: TermBook, P: Any, seg: Any, rw_idx: list[int],
                                   cal if has_baro else None, bt, bz, P.pri, dg)
         removed = sorted(set(removed) | set(more))
     if tie and n_seg > 1 and (has_baro or P.ka is not None):
-        for j in range(1, n_seg):
+        for j in range(j0 + 1, n_seg):
             if has_baro:
                 nf.add(gtsam.BetweenFactorVector(K(j - 1), K(j), np.zeros(2), noise(TIE_SD)))
             if P.ka is not None:  # the segments' accelerometer scale factors A(j) too
@@ -335,7 +351,7 @@ def settle(isam: Any, book: TermBook, P: Any, seg: Any, rw_idx: list[int],
         est = isam.calculateBestEstimate()
         read_states(est, everything, arrays, P)
         if has_baro:
-            for j in range(n_seg):
+            for j in range(j0, n_seg):
                 cal[j] = est.atVector(K(j))
         book.pending = book.due(everything, nk - 1, rot, pos, cal if has_baro else None,
                                 all_segments=True)
@@ -357,6 +373,13 @@ def post_solve_gate(book: TermBook, P: Any, states: Any) -> list[int]:
     rejected keyframe fixes (``TermBook.kf_fix_idx``), to be removed. Empty when nothing (or
     everything) fails."""
     rej = post_solve_rejections(P, states)
+    if book.floor > 0 and rej.size:
+        # fixes of keyframes that left iSAM2 (``graph.window``) are in its marginal: kept
+        frozen = np.where(P.g_kf[rej] >= 0, P.g_kf[rej],
+                          gf.interval_of(P.t_kf, P.g_t[rej])) < book.floor
+        P.g_use[rej[frozen]] = True
+        P.g_rej_post -= int(frozen.sum())
+        rej = rej[~frozen]
     if not rej.size:
         return []
     pend = []

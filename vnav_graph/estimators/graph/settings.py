@@ -53,6 +53,10 @@ class GraphConfig:
     keyframe (at most; ``relin.settle``) that make iSAM2's own estimate the smoothed optimum;
     final_batch: also run the batch solver from iSAM2's estimate, as the check of it and as
     the fallback when iSAM2's estimate is not at the optimum (``info["final_batch"]``).
+    isam2_window_s: graph-isam2 keeps this many seconds of keyframes in iSAM2 and
+    marginalises older ones, keeping their conditionals for the smoothed estimate
+    (``graph.window``: memory and per-update cost bounded on long drives; drives shorter
+    than it are not affected); None keeps every keyframe. At least two segments.
     solver: linear algebra of the batch solve — "auto" (the banded-arrow fast path when every
     factor couples keyframes at most one apart and the added variables are few, else GTSAM's
     sparse elimination), "banded" (error when the graph does not fit) or "general" (GTSAM
@@ -106,6 +110,7 @@ class GraphConfig:
     wildfire_threshold: float | None = 0.01
     final_batch: bool = True
     final_rounds: int = 8
+    isam2_window_s: float | None = 600.0
     observable_ratio: float = 0.8
     gnss_gate_prob: float = 0.9999
     gate_rounds: int = 3
@@ -136,6 +141,11 @@ class GraphConfig:
         if self.solver not in ("auto", "banded", "general"):
             raise ValueError(f"GraphConfig.solver must be 'auto', 'banded' or 'general', not "
                              f"{self.solver!r}")
+        if self.isam2_window_s is not None and not (
+                np.isfinite(self.isam2_window_s) and self.isam2_window_s >= 2 * self.segment_s):
+            raise ValueError("GraphConfig.isam2_window_s must be None or at least two segments "
+                             f"(2 × segment_s = {2 * self.segment_s:g} s), not "
+                             f"{self.isam2_window_s!r}")
         for f in ("loss_gnss_pos", "loss_gnss_vel", "loss_baro"):
             check_loss(getattr(self, f), f)
         if len(self.loss_threshold_sd) != 3 or not all(
