@@ -30,6 +30,7 @@ from .layout import (
     sparse_pattern,
     template_keys,
 )
+from .linalg import trim_heap
 
 
 def pair_cover(n: int) -> tuple[tuple[int, ...], ...]:
@@ -204,7 +205,7 @@ class GeneralSystem:
     def _diag(self) -> FloatArray:
         sj = self.cpp.sparseJacobian_()
         pat: SparsePattern = sparse_pattern(self.lay, sj[0].astype(np.int64) - 1,
-                                            sj[1].astype(np.int64) - 1)
+                                            sj[1].astype(np.int64) - 1, cache=False)
         return hessian_diagonal(self.lay, pat, sj[2], self.info)
 
     def _solve_damped(self, mu: float, add: float = 0.0) -> Any:
@@ -262,7 +263,11 @@ class GeneralCovariance:
     def __init__(self, lay: Layout, cpp: Any, info: IntervalInfo) -> None:
         from scipy.sparse.linalg import splu
 
+        # the solve's freed C++ factors and numpy buffers go back to the OS first: left in
+        # the heap they stayed resident under H and the LU
+        trim_heap()
         h = _information_matrix(lay, cpp, info)  # its temporaries are gone before the LU
+        trim_heap()
         self.lay = lay
         # H is symmetric positive definite: no pivoting (partial pivoting filled L and U to
         # 2.3e7 entries on a 10-minute drive instead of 5e5, 1.4 s instead of 0.03 s)
@@ -288,7 +293,8 @@ def _information_matrix(lay: Layout, cpp: Any, info: IntervalInfo) -> Any:
     from scipy.sparse import coo_matrix, csr_matrix
 
     sj = cpp.sparseJacobian_()
-    pat = sparse_pattern(lay, sj[0].astype(np.int64) - 1, sj[1].astype(np.int64) - 1)
+    pat = sparse_pattern(lay, sj[0].astype(np.int64) - 1, sj[1].astype(np.int64) - 1,
+                         cache=False)
     vals = sj[2][pat.a_sorted]
     del sj
     rows = np.repeat(np.arange(pat.n_rows), np.diff(pat.indptr))

@@ -215,7 +215,11 @@ def _band_ok(lay: Layout, cols: np.ndarray, indptr: np.ndarray) -> bool:
     return bool(np.all(rmax[has] - rmin[has] <= lay.bandwidth))
 
 
-def sparse_pattern(lay: Layout, i: np.ndarray, j: np.ndarray) -> SparsePattern:
+def sparse_pattern(lay: Layout, i: np.ndarray, j: np.ndarray,
+                   cache: bool = True) -> SparsePattern:
+    """The pattern of GTSAM's sparse Jacobian (i, j); kept in ``lay.pattern`` (the banded
+    path reuses it at every linearisation) unless ``cache`` is False (the general path
+    needs it only once per factorisation: ~50 MB on a 1-hour drive)."""
     pat = lay.pattern
     if pat is not None and np.array_equal(pat.i, i) and np.array_equal(pat.j, j):
         return pat
@@ -229,7 +233,8 @@ def sparse_pattern(lay: Layout, i: np.ndarray, j: np.ndarray) -> SparsePattern:
     indptr = np.r_[0, np.cumsum(np.bincount(i[a], minlength=nrow))]
     pat = SparsePattern(i, j, np.flatnonzero(is_b), i[is_b], a[order], cols, indptr, nrow,
                         _band_ok(lay, cols, indptr))
-    lay.pattern = pat
+    if cache:
+        lay.pattern = pat
     return pat
 
 

@@ -104,6 +104,8 @@ def linear_system(P: Problem, lay: Layout, graph: Any, vals: Any,
         lay.banded = fits if solver == "auto" else solver == "banded"
         if lay.banded:
             return BandedSystem.build(lay, pat, v, info)
+        lay.pattern = None  # the general path does not reuse it (``sparse_pattern``)
+        del pat, v
         return GeneralSystem(lay, gfg, info)
     if lay.banded:
         _, pat, v = linearize(lay, graph, vals)
