@@ -145,7 +145,9 @@ class GraphISAM2:
         t_start = time.perf_counter()
         cfg0 = self.config
         dt_imu = np.diff(drive.imu.t)
-        if dt_imu.size and float(np.median(dt_imu)) >= LOW_RATE_DT and self.config == \
+        dt_med = float(np.median(dt_imu)) if dt_imu.size else 0.0
+        del dt_imu  # not alive through the run (5.5 MB on a 1-hour 200 Hz drive)
+        if dt_med >= LOW_RATE_DT and self.config == \
                 GraphConfig(**{f.name: getattr(self.config, f.name)
                                  for f in dataclasses.fields(self.config)
                                  if f.name not in LOW_RATE_SETTINGS}):
