@@ -241,6 +241,10 @@ class GeneralSystem:
                     "rate/units and GNSS coverage)") from None
         return delta, -0.5 * float(delta.dot(self.gfg.gradientAtZero()))
 
+    def release_factor(self) -> None:
+        """Free the step's linear graph (rebuilt if a damped step needs it)."""
+        self._gfg = None
+
     def damped(self, mu: float) -> Any:
         """Step of H + μ·diag(H) (Levenberg-Marquardt damping)."""
         return self._solve_damped(mu)

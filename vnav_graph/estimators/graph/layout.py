@@ -300,6 +300,10 @@ class BandedSystem:
         delta = self.fac.solve(self.g)
         return self.lay.vector_values(delta), 0.5 * float(delta @ self.g)
 
+    def release_factor(self) -> None:
+        """Free the factorisation (``covariance`` factorises again if it is needed)."""
+        self.fac = None
+
     def damped(self, mu: float) -> Any:
         """Step of H + μ·diag(H) (Levenberg-Marquardt damping)."""
         ab2 = self.ab.copy()

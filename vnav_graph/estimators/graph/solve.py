@@ -153,6 +153,10 @@ def gn_core(P: Problem, lay: Layout, graph: Any, vals: Any, calib_of_kf: np.ndar
             # normal equations at the solution — is kept for the covariance
             converged = True
             break
+        # the factorisation is not needed while candidates are evaluated (a damped step
+        # factorises its own matrix; a solve that ends below refactorises for the
+        # covariance): freed, it is not alive under the candidate's rows (the solve's peak)
+        system.release_factor()
         if mu > 0.0:
             delta = system.damped(mu)
         failed = False
