@@ -389,7 +389,8 @@ class GraphISAM2:
                 # keyframes older than the window leave iSAM2 (their conditionals are kept)
                 gone = win.marginalise(isam, m1, b_last)
                 book.freeze(win.first, win.first_seg, gone)
-                rw_idx = [i for i in rw_idx if i not in set(gone)]
+                gone_set = set(gone)
+                rw_idx = [i for i in rw_idx if i not in gone_set]
             book.pending = book.due(marked, k + 1, rot, pos, cal if has_baro else None)
             online[k + 1, 0:6] = np.r_[pos[k + 1], vel[k + 1]]
             online_rot[k + 1] = rot[k + 1]

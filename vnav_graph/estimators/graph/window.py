@@ -43,6 +43,8 @@ import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import A, B, C, G, K, V, X
 
+from .extend import read_value
+
 # marginalise in chunks of this fraction of the window: one elimination per chunk
 CHUNK_FRACTION = 0.1
 
@@ -73,18 +75,19 @@ class Window:
         self.groups: list[tuple[list[_Conditional], dict[int, Any]]] = []
         self.marginalised = 0
         self.reeliminated = 0  # variables iSAM2 re-eliminated for the marginals
-        self.ext_types = ({key: var.value for key, (var, _) in ext.variables.items()}
-                          if ext is not None else {})
+        self.ext_vars = ({key: var for key, (var, _) in ext.variables.items()}
+                         if ext is not None else {})
         # a user factor enters with the last keyframe it touches: the keyframes it touches
         # must still be in iSAM2 then (hold[k]: the oldest keyframe touched by a factor
-        # still to enter after the update that creates keyframe k)
+        # still to enter after the update that creates keyframe k, i.e. with ready > k)
         n = P.n_kf
-        self.hold = np.full(n + 1, n, dtype=np.int64)
+        lo_at = np.full(n + 2, n, dtype=np.int64)  # per ready keyframe: its factors' oldest
         if ext is not None:
             for f, ready in zip(ext.factors, ext.ready, strict=True):
                 lo = min((int(gtsam.Symbol(k).index()) for k in f.keys()
                           if int(k) not in ext.variables), default=ready)
-                self.hold[:ready] = np.minimum(self.hold[:ready], lo)
+                lo_at[ready] = min(lo_at[ready], lo)
+        self.hold = np.minimum.accumulate(lo_at[::-1])[::-1][1:]  # min over ready > k
 
     # -- which keys ----------------------------------------------------------------------
 
@@ -124,11 +127,8 @@ class Window:
             return vals.atPose3(key)
         if ch == "b":
             return vals.atConstantBias(key)
-        typ = self.ext_types.get(key)
-        if isinstance(typ, gtsam.Pose3):
-            return vals.atPose3(key)
-        if isinstance(typ, gtsam.Rot3):
-            return vals.atRot3(key)
+        if key in self.ext_vars:
+            return read_value(vals, self.ext_vars[key])
         return np.asarray(vals.atVector(key), float)
 
     @staticmethod
