@@ -57,6 +57,7 @@ from ...geo.earth import OMEGA_IE
 from ...nav.arrays import nearest_index
 from ...nav.gaps import GAP_ACCEL_SD
 from ...nav.levelling import coarse_level
+from ...pages import small_pages
 from ...sensors.baro import without_implausible_scale
 from ...sensors.magnetometer import (
     MAG_BIAS_SD_UT,
@@ -555,9 +556,11 @@ class EKF:
         self.config = config or EkfConfig()
 
     def run(self, drive: Drive) -> Estimate:
-        est = without_contradicting_mag(self._run(drive), self.config,
-                                        lambda cfg: type(self)(cfg)._run(drive))
-        return without_implausible_scale(est, self.config, lambda cfg: type(self)(cfg).run(drive))
+        with small_pages():  # numpy's large arrays without huge-page faults (vnav_graph.pages)
+            est = without_contradicting_mag(self._run(drive), self.config,
+                                            lambda cfg: type(self)(cfg)._run(drive))
+            return without_implausible_scale(est, self.config,
+                                             lambda cfg: type(self)(cfg).run(drive))
 
     def _run(self, drive: Drive) -> Estimate:
         t0 = time.perf_counter()
@@ -576,9 +579,11 @@ class EKFRTS:
         self.config = config or EkfConfig()
 
     def run(self, drive: Drive) -> Estimate:
-        est = without_contradicting_mag(self._run(drive), self.config,
-                                        lambda cfg: type(self)(cfg)._run(drive))
-        return without_implausible_scale(est, self.config, lambda cfg: type(self)(cfg).run(drive))
+        with small_pages():  # numpy's large arrays without huge-page faults (vnav_graph.pages)
+            est = without_contradicting_mag(self._run(drive), self.config,
+                                            lambda cfg: type(self)(cfg)._run(drive))
+            return without_implausible_scale(est, self.config,
+                                             lambda cfg: type(self)(cfg).run(drive))
 
     def _run(self, drive: Drive) -> Estimate:
         t0 = time.perf_counter()

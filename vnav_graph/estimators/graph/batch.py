@@ -54,7 +54,7 @@ from .builders import build_batch_graph, pims_for
 from .extend import GraphExtension, check_extensions, collect, make_view
 from .init import initial_states
 from .layout import interval_info
-from .linalg import single_thread_blas
+from .linalg import solver_context
 from .magnetometer import builtin_extensions, mag_info
 from .problem import (
     Problem,
@@ -305,7 +305,7 @@ class GraphBatch:
         """Solve; when the magnetometer was used and its hard iron fails the post-solve check
         (``sensors.magnetometer.hard_iron_note``), solve again without it and say why in
         ``info["mag_note"]``."""
-        with single_thread_blas():
+        with solver_context():
             est = self._run(drive)
         def rerun(cfg: GraphConfig) -> Estimate:
             return GraphBatch(cfg, self.extensions).run(drive)

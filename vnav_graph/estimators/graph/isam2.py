@@ -83,7 +83,7 @@ from .isam2_setup import (
     segments,
     update_error,
 )
-from .linalg import single_thread_blas, trim_heap
+from .linalg import solver_context, trim_heap
 from .magnetometer import builtin_extensions, mag_info
 from .problem import (
     gravity_delta,
@@ -168,7 +168,7 @@ class GraphISAM2:
 
     def _run(self, drive: Drive, cfg: GraphConfig, robust: bool, t_start: float,
              fallback: str | None) -> Estimate:
-        with single_thread_blas():
+        with solver_context():
             return self._run_pass(drive, cfg, robust, t_start, fallback)
 
     def _run_pass(self, drive: Drive, cfg: GraphConfig, robust: bool, t_start: float,

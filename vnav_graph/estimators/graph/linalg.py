@@ -22,6 +22,8 @@ O(n·w²), no dense inverse.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
 
@@ -29,6 +31,7 @@ import numpy as np
 from numba import njit
 from scipy.linalg import LinAlgError, cho_solve_banded, cholesky_banded
 
+from ...pages import small_pages
 from ...types import FloatArray
 
 
@@ -227,6 +230,14 @@ def single_thread_blas() -> Any:
     from threadpoolctl import threadpool_limits
 
     return threadpool_limits(limits=1, user_api="blas")
+
+
+@contextmanager
+def solver_context() -> Iterator[None]:
+    """The graph solvers' run context: BLAS on one thread (``single_thread_blas``) and numpy
+    on small pages (``small_pages``)."""
+    with single_thread_blas(), small_pages():
+        yield
 
 
 _MALLOC_TRIM: Any = None  # glibc's malloc_trim, False where there is none
