@@ -58,6 +58,7 @@ from .linalg import solver_context
 from .magnetometer import builtin_extensions, mag_info
 from .problem import (
     Problem,
+    interval_rows,
     setup,
     states_from_values,
 )
@@ -205,8 +206,14 @@ def outputs(P: Problem, res: BatchResult, pri: dict[str, float],
         # the rows' Jacobian (~44 MB on a 1-hour drive) is needed only for their information
         # blocks: not kept alive under the system and the covariance (graph-isam2's own
         # estimate reaches here with it)
-        info = interval_info(lay, res.rows, P.n_kf)
-        res.rows = res.rows.without_jac()
+        rows = res.rows
+        if rows.jac.shape[0] != rows.r.size:
+            # released with the system (graph-isam2's check pass, when it is chosen after
+            # iSAM2's own estimate was evaluated): linearised again at the solution
+            rows = interval_rows(P, st, pri, res.bias_lag)
+        info = interval_info(lay, rows, P.n_kf)
+        res.rows = rows.without_jac()
+        del rows
         system = linear_system(P, lay, res.graph, vals, info)
         del info
     cov_of = system.covariance()

@@ -498,6 +498,12 @@ class GraphISAM2:
         # iSAM2's own estimate under the batch's cost (after its post-solve GNSS gate: the
         # same fixes), and the choice: iSAM2's own unless the batch pass found a point
         # significantly lower (OWN_GAP_FRACTION)
+        if res is not None:
+            # the check pass's system and the rows' Jacobian (~55 MB on a 1-hour drive) are
+            # not alive under iSAM2's own rows: ``outputs`` rebuilds them if the check pass
+            # is the one chosen (stage script: graph-isam2 peak 667 -> 650 MB)
+            res.system = None
+            res.rows = res.rows.without_jac()
         own = evaluate_at(P, own_graph, own_vals, calib0, pri)
         chosen, source, warn = own, "isam2", []
         final_batch = None
@@ -530,10 +536,8 @@ class GraphISAM2:
         del own_graph, own_vals
         if chosen is own:
             if res is not None and res is not own:
-                # the check pass's system, rows and sparse pattern are not needed: freed
-                # before the covariances (~75 MB on a 1-hour drive)
-                res.system = None
-                res.rows = res.rows.without_jac()
+                # the check pass's sparse pattern is not needed: freed before the
+                # covariances (its system and rows' Jacobian went before iSAM2's rows)
                 if res.layout is not own.layout:
                     res.layout.pattern = None
         else:
