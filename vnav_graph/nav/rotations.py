@@ -78,8 +78,15 @@ def quat_to_dcm(q):
 def dcm_to_quat(c):
     """Unit quaternion (w ≥ 0) of a rotation matrix (Shepperd: the largest of 1 + tr, 1 + 2c_ii
     − tr under the square root, so no branch loses precision); the inverse of ``quat_to_dcm``."""
-    tr = c[0, 0] + c[1, 1] + c[2, 2]
     q = np.empty(4)
+    dcm_to_quat_into(c, q)
+    return q
+
+
+@njit(cache=True)
+def dcm_to_quat_into(c, q):
+    """``dcm_to_quat`` written into ``q`` (a (4,) array or view), without allocating."""
+    tr = c[0, 0] + c[1, 1] + c[2, 2]
     if tr >= c[0, 0] and tr >= c[1, 1] and tr >= c[2, 2]:
         s = 2.0 * np.sqrt(1.0 + tr)
         q[0] = 0.25 * s
@@ -104,19 +111,40 @@ def dcm_to_quat(c):
         q[1] = (c[0, 2] + c[2, 0]) / s
         q[2] = (c[1, 2] + c[2, 1]) / s
         q[3] = 0.25 * s
-    if q[0] < 0.0:
-        q = -q
-    return q / np.sqrt(q[0] ** 2 + q[1] ** 2 + q[2] ** 2 + q[3] ** 2)
+    sign = -1.0 if q[0] < 0.0 else 1.0
+    norm = np.sqrt(q[0] ** 2 + q[1] ** 2 + q[2] ** 2 + q[3] ** 2)
+    for i in range(4):
+        q[i] = sign * q[i] / norm
 
 
 @njit(cache=True)
 def so3_exp(phi):
     """Rotation matrix exp([φ×]) (Rodrigues; second-order series below 1e-9 rad)."""
-    a = np.sqrt(phi[0] ** 2 + phi[1] ** 2 + phi[2] ** 2)
-    k = skew3(phi)
+    out = np.empty((3, 3))
+    so3_exp_into(phi, out)
+    return out
+
+
+@njit(cache=True)
+def so3_exp_into(phi, out):
+    """``so3_exp`` written into ``out`` (a (3, 3) array or view), without allocating:
+    I + (sin a / a)[φ×] + ((1 − cos a)/a²)[φ×]², a = |φ|, with [φ×]² = φφᵀ − a²I."""
+    a2 = phi[0] ** 2 + phi[1] ** 2 + phi[2] ** 2
+    a = np.sqrt(a2)
     if a < 1e-9:
-        return np.eye(3) + k + 0.5 * k @ k
-    return np.eye(3) + np.sin(a) / a * k + (1.0 - np.cos(a)) / a**2 * (k @ k)
+        s1, s2 = 1.0, 0.5
+    else:
+        s1, s2 = np.sin(a) / a, (1.0 - np.cos(a)) / a2
+    for i in range(3):
+        for j in range(3):
+            out[i, j] = s2 * phi[i] * phi[j]
+        out[i, i] += 1.0 - s2 * a2
+    out[0, 1] -= s1 * phi[2]
+    out[0, 2] += s1 * phi[1]
+    out[1, 0] += s1 * phi[2]
+    out[1, 2] -= s1 * phi[0]
+    out[2, 0] -= s1 * phi[1]
+    out[2, 1] += s1 * phi[0]
 
 
 @njit(cache=True)
