@@ -14,7 +14,7 @@ _HUGEPAGE_USERS = 0
 _HUGEPAGE_PREVIOUS = True
 
 
-def _hugepage_setter() -> Any:
+def numpy_hugepage_setter() -> Any:
     """numpy's ``_set_madvise_hugepage`` (``numpy._core`` from 2.0, ``numpy.core`` before), or
     None."""
     core = getattr(np, "_core", None)
@@ -39,7 +39,7 @@ def small_pages() -> Iterator[None]:
     estimator runs inside it (the ekf's first 1-hour run: 3.2 → 2.3 s). A no-op where numpy
     has no such switch."""
     global _HUGEPAGE_USERS, _HUGEPAGE_PREVIOUS
-    setter = _hugepage_setter()
+    setter = numpy_hugepage_setter()
     if setter is None:
         yield
         return

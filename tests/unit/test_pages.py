@@ -10,7 +10,7 @@ from vnav_graph import pages
 
 
 def _state() -> bool:
-    setter = pages._hugepage_setter()
+    setter = pages.numpy_hugepage_setter()
     prev = bool(setter(True))
     setter(prev)
     return prev
@@ -18,7 +18,7 @@ def _state() -> bool:
 
 @pytest.fixture
 def setter():
-    s = pages._hugepage_setter()
+    s = pages.numpy_hugepage_setter()
     if s is None:
         pytest.skip("this numpy has no huge-page switch")
     before = _state()
