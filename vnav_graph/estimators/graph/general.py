@@ -27,6 +27,7 @@ from .layout import (
     Layout,
     SparsePattern,
     hessian_diagonal,
+    jacobian_indices,
     sparse_pattern,
     template_keys,
 )
@@ -204,8 +205,7 @@ class GeneralSystem:
 
     def _diag(self) -> FloatArray:
         sj = self.cpp.sparseJacobian_()
-        pat: SparsePattern = sparse_pattern(self.lay, sj[0].astype(np.int64) - 1,
-                                            sj[1].astype(np.int64) - 1, cache=False)
+        pat: SparsePattern = sparse_pattern(self.lay, *jacobian_indices(sj), cache=False)
         return hessian_diagonal(self.lay, pat, sj[2], self.info)
 
     def _solve_damped(self, mu: float, add: float = 0.0) -> Any:
@@ -297,8 +297,7 @@ def _information_matrix(lay: Layout, cpp: Any, info: IntervalInfo) -> Any:
     from scipy.sparse import coo_matrix, csr_matrix
 
     sj = cpp.sparseJacobian_()
-    pat = sparse_pattern(lay, sj[0].astype(np.int64) - 1, sj[1].astype(np.int64) - 1,
-                         cache=False)
+    pat = sparse_pattern(lay, *jacobian_indices(sj), cache=False)
     vals = sj[2][pat.a_sorted]
     del sj
     rows = np.repeat(np.arange(pat.n_rows), np.diff(pat.indptr))
