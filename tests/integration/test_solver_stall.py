@@ -21,6 +21,7 @@ from vnav_graph.estimators.graph.batch import outputs
 from vnav_graph.estimators.graph.builders import build_batch_graph, pims_for
 from vnav_graph.estimators.graph.extend import collect, make_view
 from vnav_graph.estimators.graph.init import initial_states
+from vnav_graph.estimators.graph.layout import interval_info
 from vnav_graph.estimators.graph.magnetometer import builtin_extensions
 from vnav_graph.estimators.graph.problem import interval_rows, setup, states_from_values
 from vnav_graph.estimators.graph.settings import low_rate_config
@@ -49,8 +50,8 @@ def test_a_stall_with_a_large_predicted_decrease_is_not_convergence(data_dir: Pa
     res = solve.gn_core(P, solve.batch_layout(P, graph, vals), graph, vals, calib, P.pri)
     # the model's predicted decrease at the returned point
     st = states_from_values(P, res.values, calib)
-    system = solve.linear_system(P, res.layout, graph, res.values,
-                                 interval_rows(P, st, P.pri, res.bias_lag))
+    info = interval_info(res.layout, interval_rows(P, st, P.pri, res.bias_lag), P.n_kf)
+    system = solve.linear_system(P, res.layout, graph, res.values, info)
     _, dec = system.step()
     if res.converged:  # converged means the model sees (almost) nothing left
         assert dec < solve.STALL_MAX_PREDICTED

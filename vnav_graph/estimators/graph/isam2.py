@@ -534,14 +534,12 @@ class GraphISAM2:
                         f"pass); the trajectory is the final batch pass"]
         t_final = time.perf_counter()
         del own_graph, own_vals
-        if chosen is own:
-            if res is not None and res is not own:
-                # the check pass's sparse pattern is not needed: freed before the
-                # covariances (its system and rows' Jacobian went before iSAM2's rows)
-                if res.layout is not own.layout:
-                    res.layout.pattern = None
-        else:
+        if chosen is not own:
             del own
+        elif res is not None and res.layout is not own.layout:
+            # the check pass's sparse pattern is not needed: freed before the covariances
+            # (its system and rows' Jacobian went before iSAM2's rows)
+            res.layout.pattern = None
         out = outputs(P, chosen, pri, K(0) if has_baro else None)
         isam_k = None
         if has_baro:

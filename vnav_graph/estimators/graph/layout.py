@@ -271,6 +271,7 @@ class IntervalInfo:
 
 
 def interval_info(lay: Layout, rows: gf.IntervalRows, n_kf: int) -> IntervalInfo:
+    assert rows.jac.shape[0] == rows.r.size, "interval rows without their Jacobian"
     groups, lam, eta, _ = gf.group_information(rows, n_kf - 1)
     tc = lay.term_cols
     return IntervalInfo(groups, lay.block_cols(groups), lam[:, tc[:, None], tc[None, :]],

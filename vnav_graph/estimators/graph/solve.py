@@ -81,17 +81,12 @@ def batch_layout(P: Problem, graph: Any, vals: Any) -> Layout:
 
 
 def linear_system(P: Problem, lay: Layout, graph: Any, vals: Any,
-                  rows: gf.IntervalRows | IntervalInfo) -> BandedSystem | GeneralSystem:
+                  info: IntervalInfo) -> BandedSystem | GeneralSystem:
     """The Gauss-Newton system at ``vals``: the C++ factors linearised by GTSAM plus the
-    interval terms (per-interval information blocks; ``rows``, or their ``interval_info``).
-    The first call decides the path (``GraphConfig.solver``; "auto": banded when the
-    structure fits, ``Layout.fits_band``)."""
-    if isinstance(rows, IntervalInfo):
-        info = rows
-    else:
-        assert rows.jac.shape[0] == rows.r.size, "interval rows without their Jacobian"
-        info = interval_info(lay, rows, P.n_kf)
-    del rows
+    interval terms' information blocks (``layout.interval_info`` of their rows, formed by
+    the caller so that it can drop the rows' Jacobian first). The first call decides the
+    path (``GraphConfig.solver``; "auto": banded when the structure fits,
+    ``Layout.fits_band``)."""
     if lay.banded is None:
         solver = P.cfg.solver
         gfg, pat, v = linearize(lay, graph, vals)
