@@ -212,11 +212,23 @@ class Collected:
 
 
 def tangent_dim(value: Any) -> int:
-    if isinstance(value, gtsam.Pose3):
+    if isinstance(value, (gtsam.Pose3, gtsam.imuBias.ConstantBias)):
         return 6
     if isinstance(value, gtsam.Rot3):
         return 3
     return int(np.asarray(value).size)
+
+
+def prior_factor(key: int, mean: Any, model: Any) -> Any:
+    """GTSAM's prior factor on ``key`` for a value of ``mean``'s type (Pose3, Rot3,
+    imuBias.ConstantBias or a vector)."""
+    if isinstance(mean, gtsam.Pose3):
+        return gtsam.PriorFactorPose3(key, mean, model)
+    if isinstance(mean, gtsam.Rot3):
+        return gtsam.PriorFactorRot3(key, mean, model)
+    if isinstance(mean, gtsam.imuBias.ConstantBias):
+        return gtsam.PriorFactorConstantBias(key, mean, model)
+    return gtsam.PriorFactorVector(key, mean, model)
 
 
 def read_value(vals: Any, var: Variable) -> Any:
@@ -273,14 +285,7 @@ def _normalise(var: Any, who: str) -> tuple[Any, Any]:
     if sd.shape != (n,) or not np.all(np.isfinite(sd) & (sd > 0)):
         raise ValueError(f"{who}: variable {key_name(key)}: prior_sd must be {n} positive "
                          f"finite σ (one per tangent component), not {var.prior_sd!r}")
-    model = gtsam.noiseModel.Diagonal.Sigmas(sd)
-    if isinstance(value, gtsam.Pose3):
-        prior = gtsam.PriorFactorPose3(key, mean, model)
-    elif isinstance(value, gtsam.Rot3):
-        prior = gtsam.PriorFactorRot3(key, mean, model)
-    else:
-        prior = gtsam.PriorFactorVector(key, mean, model)
-    return value, prior
+    return value, prior_factor(key, mean, gtsam.noiseModel.Diagonal.Sigmas(sd))
 
 
 def _name(ext: Any, i: int) -> str:

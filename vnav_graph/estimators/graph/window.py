@@ -43,7 +43,7 @@ import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import A, B, C, G, K, V, X
 
-from .extend import read_value
+from .extend import prior_factor, read_value, tangent_dim
 
 # marginalise in chunks of this fraction of the window: one elimination per chunk
 CHUNK_FRACTION = 0.1
@@ -210,14 +210,8 @@ class Window:
         return idx + [int(i) for i in deleted]
 
     def _unit_prior(self, lin: Any, key: int) -> Any:
-        ch = chr(gtsam.Symbol(key).chr())
-        if ch == "x":
-            return gtsam.PriorFactorPose3(key, lin.atPose3(key), gtsam.noiseModel.Unit.Create(6))
-        if ch == "b":
-            return gtsam.PriorFactorConstantBias(key, lin.atConstantBias(key),
-                                                 gtsam.noiseModel.Unit.Create(6))
-        v = np.asarray(lin.atVector(key), float)
-        return gtsam.PriorFactorVector(key, v, gtsam.noiseModel.Unit.Create(v.size))
+        v = self._read(lin, key)
+        return prior_factor(key, v, gtsam.noiseModel.Unit.Create(tangent_dim(v)))
 
     def info(self) -> dict[str, Any]:
         """What ``Estimate.info`` reports about the window."""
