@@ -570,20 +570,11 @@ class EKF:
         return _estimate(self.name, run, traj, run.par, cov, t0, None, self.config)
 
 
-class EKFRTS:
-    """``ekf`` followed by a Rauch-Tung-Striebel smoother on the covariance grid."""
+class EKFRTS(EKF):
+    """``ekf`` followed by a Rauch-Tung-Striebel smoother on the covariance grid (``run``
+    and its post-solve checks are ``EKF``'s)."""
 
     name = "ekf-rts"
-
-    def __init__(self, config: EkfConfig | None = None) -> None:
-        self.config = config or EkfConfig()
-
-    def run(self, drive: Drive) -> Estimate:
-        with small_pages():  # numpy's large arrays without huge-page faults (vnav_graph.pages)
-            est = without_contradicting_mag(self._run(drive), self.config,
-                                            lambda cfg: type(self)(cfg)._run(drive))
-            return without_implausible_scale(est, self.config,
-                                             lambda cfg: type(self)(cfg).run(drive))
 
     def _run(self, drive: Drive) -> Estimate:
         t0 = time.perf_counter()
