@@ -18,11 +18,14 @@ from vnav_graph.nav.gnss_gate import (
     new_gate_state,
 )
 from vnav_graph.sensors.model import (
+    DEFICIT_LIMIT,
+    K_VRE_DEFICIT,
     REAL_LOG_IMU,
     baro_prior,
     infer_imu_spec,
     measured_white_sd,
     robust_white_sd,
+    specific_force_deficit,
 )
 
 G0 = 9.80665
@@ -75,6 +78,51 @@ def test_accel_bias_sigma_covers_the_specific_force_magnitude_error(rng) -> None
     imu = _imu(100.0, 0.01, 1e-4, 5000, rng)
     imu.accel_b[:, 2] -= 0.4  # |f| reads 0.4 m/s² high at rest
     assert infer_imu_spec(imu, G0).accel_bias_sd == pytest.approx(0.8, rel=0.01)
+
+
+def _climb(rng, loss: float = 0.0, rate: float = 100.0, dur: float = 120.0):
+    """A level vehicle going up and down, h = 20·(1 − cos(2πt/40)) (a_up up to ±0.49 m/s²),
+    its IMU at ``rate`` with 1 m/s² vibration, a 20 Hz baro with 0.3 m noise; from 40 to
+    70 s the accelerometer z loses ``loss`` m/s² of specific force."""
+    t = np.arange(int(dur * rate)) / rate
+    w = 2 * np.pi / 40.0
+    a_up = 20.0 * w**2 * np.cos(w * t)
+    acc = np.zeros((t.size, 3))
+    acc[:, 2] = -(G0 + a_up) + np.where((t > 40) & (t < 70), loss, 0.0)
+    acc += rng.standard_normal(acc.shape)
+    imu = SimpleNamespace(t=t, accel_b=acc, gyro_b=1e-3 * rng.standard_normal(acc.shape),
+                          rate_hz=rate)
+    tb = np.arange(int(dur * 20)) / 20.0
+    baro = SimpleNamespace(t=tb, altitude=20.0 * (1 - np.cos(w * tb))
+                           + 0.3 * rng.standard_normal(tb.size))
+    return imu, baro
+
+
+def test_specific_force_deficit_sees_a_lost_specific_force_not_a_climb(rng) -> None:
+    """|f| ≥ |g + a_up| for a working accelerometer: climbing and descending (a_up ±0.49
+    m/s²) leave the deficit near 0 (its noise: 1 m/s² vibration over ~400 samples, the baro's
+    second difference); an accelerometer that reads 2 m/s² low for 30 s of the 120 s gives
+    its 5th percentile ≈ −2."""
+    imu, baro = _climb(rng)
+    ok = specific_force_deficit(imu, baro, G0)
+    assert ok is not None and abs(ok) < 0.2
+    imu, baro = _climb(rng, loss=2.0)
+    bad = specific_force_deficit(imu, baro, G0)
+    assert bad is not None and bad == pytest.approx(-2.0, abs=0.3)
+    assert specific_force_deficit(imu, None, G0) is None
+
+
+def test_rectifying_accelerometer_gets_the_vibration_bias_walk(rng) -> None:
+    imu, baro = _climb(rng)
+    assert infer_imu_spec(imu, G0, baro=baro).accel_bias_rw == REAL_LOG_IMU.accel_bias_rw
+    imu, baro = _climb(rng, loss=3 * DEFICIT_LIMIT)
+    spec = infer_imu_spec(imu, G0, baro=baro)
+    assert spec.name.endswith("-rectifying")
+    sd = float(np.max(robust_white_sd(imu.accel_b)))
+    assert spec.accel_bias_rw == pytest.approx(K_VRE_DEFICIT * sd, rel=1e-12)
+    # at 1 Hz the differences are manoeuvres: no vibration walk, whatever the deficit
+    slow, baro = _climb(rng, loss=3 * DEFICIT_LIMIT, rate=1.0, dur=600.0)
+    assert infer_imu_spec(slow, G0, baro=baro).accel_bias_rw == REAL_LOG_IMU.accel_bias_rw
 
 
 def test_baro_prior_closed_forms() -> None:

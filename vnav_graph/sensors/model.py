@@ -64,6 +64,20 @@ REAL_LOG_IMU = ImuSpec(
 # loiter 2.13 → 2.20 m. The term is kept for users who model it (``infer_imu_spec(k_vre=)``).
 K_VRE = 0.0
 VRE_MIN_RATE_HZ = 10.0
+# ... except where the log shows an accelerometer that reads too little specific force. A
+# working accelerometer cannot: |f| = |a − g| ≥ |g + a_up| at every instant, and vibration
+# only raises a window's mean |f| (mean of norms ≥ norm of means). So over windows of
+# ``DEFICIT_WINDOW_S`` the deficit e = mean|f| − g0 − a_up (a_up the baro's vertical
+# acceleration) is ≥ 0 up to noise; a 5th percentile below −``DEFICIT_LIMIT`` is a sensor
+# that loses specific force in flight (vibration rectification, clipping). On the shared logs
+# (``docs/real_logs.md``): 218 −0.13, Loiter_RTL −0.09, ski −0.11 m/s²; 181.BIN −3.5 m/s²
+# (|f| 7.3–8.9 m/s² for seconds while the baro climbs). There the bias walk ``K_VRE_DEFICIT``
+# ·σ_robust lets the accelerometer bias follow the loss, instead of every estimator
+# tilting the vehicle by 20–30° and fitting a 5 m/s² horizontal bias to explain it.
+DEFICIT_WINDOW_S = 2.0
+DEFICIT_LIMIT = 0.5  # m/s²
+DEFICIT_QUANTILE = 5.0  # %
+K_VRE_DEFICIT = 0.14
 
 # Numerical floors: they keep a noiseless simulated drive's covariances regular and are far
 # below any real sensor (gyro 1e-6 rad/s/√Hz = 0.003 °/√h).
@@ -183,8 +197,50 @@ def robust_white_sd(x: FloatArray) -> FloatArray:
     return 1.4826 * np.median(np.abs(np.diff(x, axis=0)), axis=0) / np.sqrt(2.0)
 
 
+def specific_force_deficit(imu: Any, baro: Any, g0: float,
+                           window_s: float = DEFICIT_WINDOW_S) -> float | None:
+    """The ``DEFICIT_QUANTILE`` percentile of e = |f|̄ − g0 − a_up [m/s²] (see
+    ``DEFICIT_LIMIT``), both sides averaged with one kernel: on a 0.1 s grid of bin means, a_up
+    is the second difference (step W = ``window_s``) of the W-box-averaged baro altitude over
+    W², which is the vertical acceleration averaged with box_W ∗ triangle_W, and |f| gets that
+    same kernel; taken every W seconds. None without a barometer or with fewer than 10
+    points."""
+    if baro is None or baro.t.size < 10 or imu.t.size < 10:
+        return None
+    dt = 0.1
+    t0, t1 = max(imu.t[0], baro.t[0]), min(imu.t[-1], baro.t[-1])
+    nb = int((t1 - t0) / dt)
+    nw = int(round(window_s / dt))
+    if nb < 6 * nw:
+        return None
+
+    def bins(t: FloatArray, x: FloatArray) -> FloatArray:
+        j = np.floor((t - t0) / dt).astype(int)
+        m = (j >= 0) & (j < nb)
+        cnt = np.bincount(j[m], minlength=nb)
+        tot = np.bincount(j[m], weights=x[m], minlength=nb)
+        have = cnt > 0
+        tc = t0 + (np.arange(nb) + 0.5) * dt
+        return np.interp(tc, tc[have], tot[have] / cnt[have])
+
+    f = bins(imu.t, np.linalg.norm(imu.accel_b, axis=1))
+    h = bins(baro.t, np.asarray(baro.altitude, float))
+    box = np.full(nw, 1.0 / nw)
+    tri = (nw - np.abs(np.arange(-nw + 1, nw))) / nw**2
+    hb = np.convolve(h, box, mode="valid")  # hb[i]: mean of h[i : i + nw]
+    a_up = (hb[2 * nw:] - 2.0 * hb[nw:-nw] + hb[:-2 * nw]) / window_s**2
+    fk = np.convolve(np.convolve(f, box, mode="valid"), tri, mode="valid")
+    # a_up[i] is centred on grid index i + nw + (nw − 1)/2, fk[i] on i + nw − 1 + (nw − 1)/2
+    fk = fk[1:]
+    n = min(a_up.size, fk.size)
+    e = (fk[:n] - g0 - a_up[:n])[::nw]
+    if e.size < 10:
+        return None
+    return float(np.percentile(e, DEFICIT_QUANTILE))
+
+
 def infer_imu_spec(imu: Any, g0: float, base: ImuSpec = REAL_LOG_IMU,
-                   k_vre: float = K_VRE) -> ImuSpec:
+                   k_vre: float = K_VRE, baro: Any = None) -> ImuSpec:
     """IMU noise model of a log without a spec: ``base`` raised to what the data show.
 
     - white-noise densities ≥ max_axis σ_white / √f_s [unit/√Hz] (``measured_white_sd``;
@@ -196,7 +252,10 @@ def infer_imu_spec(imu: Any, g0: float, base: ImuSpec = REAL_LOG_IMU,
       IMUs sampled at ≥ ``VRE_MIN_RATE_HZ``: at 1 Hz (averaged phone logs) the differences
       are the vehicle's own manoeuvres;
     - accelerometer bias σ ≥ 2·|median |f| − g0| [m/s²], the specific-force magnitude error
-      (a vehicle spends most of its time unaccelerated).
+      (a vehicle spends most of its time unaccelerated);
+    - with ``baro``: where the accelerometer loses specific force in flight
+      (``specific_force_deficit`` below −``DEFICIT_LIMIT``), k_vre is at least
+      ``K_VRE_DEFICIT`` (the name gets "-rectifying").
     """
     if imu.t.size < 10:
         return base
@@ -207,7 +266,13 @@ def infer_imu_spec(imu: Any, g0: float, base: ImuSpec = REAL_LOG_IMU,
     vib = rate >= VRE_MIN_RATE_HZ
     a_rob = float(np.max(robust_white_sd(imu.accel_b)))  # the scale k_vre was set on
     fmag = float(np.median(np.linalg.norm(imu.accel_b, axis=1)))
-    return replace(base, name=f"{base.name}-measured",
+    name = f"{base.name}-measured"
+    if vib and baro is not None:
+        deficit = specific_force_deficit(imu, baro, g0)
+        if deficit is not None and deficit < -DEFICIT_LIMIT:
+            k_vre = max(k_vre, K_VRE_DEFICIT)
+            name += "-rectifying"
+    return replace(base, name=name,
                    gyro_noise_density=max(base.gyro_noise_density, g_nd),
                    accel_noise_density=max(base.accel_noise_density, a_sd / rt),
                    accel_bias_rw=max(base.accel_bias_rw, k_vre * a_rob if vib else 0.0),
@@ -273,7 +338,7 @@ def sensor_model(drive: Any, gnss_gm: GnssHeightGM | None = None) -> SensorModel
     inferred = not isinstance(imu.spec, ImuSpec)
     if inferred:
         lat, h = float(drive.origin_lla[0]), float(drive.origin_lla[2])
-        spec = infer_imu_spec(imu, float(gravity(lat, h)))
+        spec = infer_imu_spec(imu, float(gravity(lat, h)), baro=drive.baro)
     else:
         spec = imu.spec
     bspec = drive_baro_spec(drive)

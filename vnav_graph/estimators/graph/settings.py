@@ -86,6 +86,11 @@ class GraphConfig:
     velocity_screen: in the pre-gate, also refuse fixes whose velocity change disagrees with
     the IMU's specific-force integral (``nav.velocity_screen``, attitude-free; same χ²
     probability).
+    init_attitude: initial keyframe attitudes — "auto" (the forward ekf's on a hover-capable
+    vehicle, ``Drive.meta["vehicle"]`` multirotor, helicopter or vtol, when the graph uses no
+    compass; else TRIAD and the compass, ``graph.init``), "triad" or "ekf". An initial guess
+    only: the solution is the graph's own optimum, but which one Gauss-Newton reaches
+    depends on it (181.BIN: ½χ² 2054 from TRIAD, 1260 from the ekf's attitude).
     baro_scale_sd: prior σ of the baro scale factor (None: the shared sensor model's,
     ``sensors.model.baro_prior``); set to ``sensors.baro.STIFF_SCALE_SD`` by the post-solve
     scale check when the scale left its physical range (``sensors.baro.SCALE_LIMIT``).
@@ -131,6 +136,7 @@ class GraphConfig:
     accel_scale: bool | None = None
     accel_scale_rw: float = 2e-3
     baro_scale_sd: float | None = None
+    init_attitude: str = "auto"
 
     @property
     def gnss_gm(self) -> GnssHeightGM | None:
@@ -146,6 +152,9 @@ class GraphConfig:
             raise ValueError("GraphConfig.isam2_window_s must be None or at least two segments "
                              f"(2 × segment_s = {2 * self.segment_s:g} s), not "
                              f"{self.isam2_window_s!r}")
+        if self.init_attitude not in INIT_ATTITUDES:
+            raise ValueError(f"GraphConfig.init_attitude must be one of {INIT_ATTITUDES}, "
+                             f"not {self.init_attitude!r}")
         for f in ("loss_gnss_pos", "loss_gnss_vel", "loss_baro"):
             check_loss(getattr(self, f), f)
         if len(self.loss_threshold_sd) != 3 or not all(
@@ -153,6 +162,9 @@ class GraphConfig:
             raise ValueError("GraphConfig.loss_threshold_sd must be three positive thresholds "
                              "[σ] (GNSS position, GNSS velocity, baro), not "
                              f"{self.loss_threshold_sd!r}")
+
+
+INIT_ATTITUDES = ("auto", "triad", "ekf")
 
 
 # averaged low-rate IMU logs (median IMU spacing ≥ LOW_RATE_DT, e.g. the 1 Hz phone logs):
