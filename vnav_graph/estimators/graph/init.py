@@ -102,12 +102,18 @@ def initial_states(P: Problem) -> tuple[FloatArray, FloatArray, FloatArray]:
     ok = np.flatnonzero(triad_ok)
     rot_triad[ok] = _triad(f_b[ok], np.array([1.0, 0.0, 0.0]), f_t[ok], vel_kf[ok])
     k0 = int(ok[0]) if ok.size else -1
+    # where TRIAD has no course, the tilt still comes from the specific force against the
+    # GNSS acceleration at every keyframe that has both (``_retilt``); only the heading is
+    # carried by the gyro
+    tilt_ok = has & acc_ok & ~triad_ok
     if k0 < 0:
         r = level(f_b[0])
     else:
         r = rot_triad[k0]
         for k in range(k0 - 1, -1, -1):
             r = so3_exp(P.omega_t * (P.t_kf[k + 1] - P.t_kf[k])) @ r @ dr_t[k].T
+            if tilt_ok[k]:
+                r = _retilt(r, f_b[k], f_t[k])
     rot = np.zeros((nk, 3, 3))
     p_out = np.zeros((nk, 3))
     v_out = np.zeros((nk, 3))
@@ -124,6 +130,8 @@ def initial_states(P: Problem) -> tuple[FloatArray, FloatArray, FloatArray]:
         r1 = so3_exp(-P.omega_t * T) @ rr @ dr_t[k]
         if triad_ok[k + 1]:
             r1 = rot_triad[k + 1]
+        elif tilt_ok[k + 1]:
+            r1 = _retilt(r1, f_b[k + 1], f_t[k + 1])
         if has[k + 1]:
             p1 = pos_kf[k + 1] - r1 @ P.lever
             v1 = vel_kf[k + 1]
@@ -265,6 +273,19 @@ def _nearest_gap(t_ref: FloatArray, t_q: FloatArray) -> FloatArray:
     lo = ts[np.clip(j - 1, 0, ts.size - 1)]
     hi = ts[np.clip(j, 0, ts.size - 1)]
     return np.minimum(np.abs(t_q - lo), np.abs(hi - t_q))
+
+
+def _retilt(r: FloatArray, f_b: FloatArray, f_t: FloatArray) -> FloatArray:
+    """``r`` turned by the smallest rotation that takes r·f_b onto f_t: the tilt of the
+    specific force, the heading (nearly) kept, as TRIAD's first vector does. Propagated
+    through 181.BIN's vibrating gyro (2°/s/√Hz) for the 40 s before its first TRIAD keyframe,
+    the initial tilt was 36° at the start, where the autopilot read 5°."""
+    u, v = _unit(r @ f_b), _unit(f_t)
+    axis = np.cross(u, v)
+    sin = float(np.linalg.norm(axis))
+    if sin < 1e-12:
+        return r
+    return so3_exp(axis / sin * np.arctan2(sin, float(u @ v))) @ r
 
 
 def _unit(x: FloatArray) -> FloatArray:
