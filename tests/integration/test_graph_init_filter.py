@@ -87,6 +87,7 @@ def test_the_initial_guess_does_not_move_a_well_posed_optimum(drive):
     a = GraphBatch(GraphConfig(init_attitude="triad")).run(drive)
     b = GraphBatch(GraphConfig(init_attitude="ekf")).run(drive)
     assert a.info["converged"] and b.info["converged"]
+    assert (a.info["init_attitude"], b.info["init_attitude"]) == ("triad", "ekf")
     # the same minimum up to the solve's stopping rule (½χ² 10215.37 from TRIAD, 10215.18
     # from the ekf: each stops when its model predicts < abs_tol more; a different minimum
     # was 11.7 higher, when the ekf's placeholder heading before its acquisition was used)
@@ -133,3 +134,16 @@ def test_retilt_puts_the_specific_force_on_the_tangent_one_and_keeps_the_heading
                                                                       truth[0, 0])))
     assert abs(yaw) < 2.0, yaw
     np.testing.assert_allclose(r.T @ r, np.eye(3), atol=1e-12)
+
+
+def test_a_failing_ekf_falls_back_to_triad_and_says_so(drive, monkeypatch):
+    """The initial guess is not worth failing the smoother for."""
+    def boom(self, d):
+        raise RuntimeError("no alignment")
+
+    monkeypatch.setattr(EKF, "run", boom)
+    P = setup(drive, GraphConfig())
+    rot = initial_states(P)[0]
+    triad = initial_states(setup(drive, GraphConfig(init_attitude="triad")))[0]
+    np.testing.assert_array_equal(rot, triad)
+    assert P.init_attitude == "triad" and "no alignment" in P.init_note

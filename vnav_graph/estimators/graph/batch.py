@@ -343,6 +343,8 @@ class GraphBatch:
                 "predicted_decrease": res.predicted_decrease,
                 "warnings": solver_warnings(res, self.config),
                 "baro_bias_lag_s": res.bias_lag, "solver": res.solver,
+                "init_attitude": P.init_attitude,
+                **({"init_note": P.init_note} if P.init_note else {}),
                 "robust_weights": res.rows.weights,
                 "extra_variables": out["extra"],
                 **out["accel_scale"],

@@ -142,7 +142,11 @@ def initial_states(P: Problem) -> tuple[FloatArray, FloatArray, FloatArray]:
         elif v_bridge[k + 1]:
             p1[2], v1[2] = pos_kf[k + 1, 2], vel_kf[k + 1, 2]
         rot[k + 1], p_out[k + 1], v_out[k + 1] = r1, p1, v1
-    if (compass_heading(P, rot) or filter_attitude(P, rot)) and np.any(P.lever):
+    if compass_heading(P, rot):
+        P.init_attitude = "compass"
+    elif filter_attitude(P, rot):
+        P.init_attitude = "ekf"
+    if P.init_attitude != "triad" and np.any(P.lever):
         p_out[has] = pos_kf[has] - np.einsum("nij,j->ni", rot[has], P.lever)
     return rot, p_out, v_out
 
@@ -179,7 +183,12 @@ def filter_attitude(P: Problem, rot: FloatArray) -> bool:
     from ...types import ERROR_STATE
     from ..ekf.filter import EKF, EkfConfig
 
-    est = EKF(EkfConfig(use_mag=False)).run(P.drive)
+    try:
+        est = EKF(EkfConfig(use_mag=False)).run(P.drive)
+    except (ValueError, RuntimeError, FloatingPointError, np.linalg.LinAlgError) as exc:
+        # an initial guess is not worth failing the smoother for: TRIAD's, and say why
+        P.init_note = f"initial attitude from TRIAD: the forward ekf failed ({exc})"
+        return False
     tr = est.trajectory
     if tr.q_nb is None or est.cov is None or est.t_cov is None:
         return False

@@ -117,6 +117,10 @@ class Problem:
     # interval k spans an IMU logging gap (``imu_gaps``; computed once in ``setup``)
     gap: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     ka: AccelScale | None = None  # the accelerometer scale factors A(0), if carried
+    # where the initial keyframe attitudes came from (``init.initial_states``): "triad",
+    # "compass" or "ekf"; and why not the ekf's where it was due but failed
+    init_attitude: str = "triad"
+    init_note: str = ""
 
     @property
     def gnss_rejected(self) -> int:
