@@ -219,6 +219,26 @@ def test_clipping_is_removed_as_a_gap_and_counted():
     assert np.max(np.abs(d.imu.accel_b)) < 16 * G0 * 0.998
 
 
+def test_accelerometer_that_loses_specific_force_is_reported():
+    """A log (no IMU spec) whose accelerometer reads 2.5 m/s² short for a third of the drive
+    (vibration rectification): reported with the bias walk; the same log intact is not."""
+    imu = SIM.imu
+    as_log = SIM.replace(imu=ImuStream(imu.t, imu.gyro_b, imu.accel_b, None))
+    ok = check_drive(as_log)
+    assert not any("less specific force" in w for w in ok.meta.get("warnings") or [])
+    assert ok.meta["sanity"]["specific_force_deficit_mps2"] > -0.5
+    acc = imu.accel_b.copy()
+    n = acc.shape[0]
+    acc[n // 3: 2 * n // 3, 2] += 2.5  # f_z is ≈ −g: 2.5 m/s² less specific force
+    bad = check_drive(as_log.replace(imu=ImuStream(imu.t, imu.gyro_b, acc, None)))
+    w = [x for x in bad.meta["warnings"] if "less specific force" in x]
+    assert len(w) == 1 and "random walk" in w[0]
+    assert bad.meta["sanity"]["specific_force_deficit_mps2"] == pytest.approx(-2.5, abs=0.3)
+    # a simulated IMU keeps its spec: nothing inferred, nothing reported
+    assert "specific_force_deficit_mps2" not in check_drive(
+        SIM.replace(imu=ImuStream(imu.t, imu.gyro_b, acc, imu.spec))).meta["sanity"]
+
+
 def test_baro_in_feet_step_and_constant():
     alt = SIM.baro.altitude
     d = check_drive(_drive(baro_alt=alt / 0.3048))

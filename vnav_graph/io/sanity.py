@@ -30,6 +30,9 @@ Checks, with the evidence each uses
   isolated fixes jumping faster than ``GNSS_JUMP_SPEED`` → dropped.
 - coverage: a missing GNSS or baro stream, logging gaps (``GAP_WARN_S``) and a stream that
   ends well before the others (a truncated file) are reported.
+- specific force: an accelerometer that reads less than gravity and the baro's climb need
+  (``sensors.model.specific_force_deficit``, logs without an IMU spec) is reported with the
+  bias walk the estimators then give it.
 - magnetometer (optional): reader drops, the time-unit comparison with the IMU, gaps and a
   stream cut short, as for baro. Its absence is not reported (most drives have none; the
   reader's notes say why).
@@ -292,9 +295,34 @@ def _check_truth(drive: Drive, f: Findings) -> Drive:
     return drive.replace(truth=None, baro_truth=None)
 
 
+def _check_specific_force(drive: Drive, f: Findings) -> None:
+    """An accelerometer that reads less specific force than gravity and the baro's climb need
+    (``sensors.model.specific_force_deficit``): reported, with what the estimators do about
+    it. Only where the IMU model is inferred from the data (a log without a spec)."""
+    from ..config import ImuSpec
+    from ..geo.earth import gravity
+    from ..sensors import model as sm
+
+    i = drive.imu
+    if isinstance(i.spec, ImuSpec) or drive.baro is None or len(i) < 10 or \
+            float(i.rate_hz) < sm.VRE_MIN_RATE_HZ:
+        return
+    g0 = float(gravity(float(drive.origin_lla[0]), float(drive.origin_lla[2])))
+    d = sm.specific_force_deficit(i, drive.baro, g0)
+    if d is None or not np.isfinite(d):
+        return
+    f.diag["specific_force_deficit_mps2"] = d
+    if d < -sm.DEFICIT_LIMIT:
+        rw = sm.K_VRE_DEFICIT * float(np.max(sm.robust_white_sd(i.accel_b)))
+        f.warn(f"imu: the accelerometer reads less specific force than gravity and the baro's "
+               f"climb need ({sm.DEFICIT_QUANTILE:g}th percentile {d:+.2f} m/s² over "
+               f"{sm.DEFICIT_WINDOW_S:g} s windows: vibration rectification or clipping); the "
+               f"estimators give its bias a random walk of {rw:.3g} m/s²/√s")
+
+
 CHECKS: tuple[Callable[[Drive, Findings], Drive | None], ...] = (
     _check_drops, _check_time_units, _check_truth, *IMU_CHECKS, _check_baro, _check_gnss,
-    _check_coverage,
+    _check_coverage, _check_specific_force,
 )
 
 
