@@ -304,20 +304,18 @@ def _check_specific_force(drive: Drive, f: Findings) -> None:
     from ..sensors import model as sm
 
     i = drive.imu
-    if isinstance(i.spec, ImuSpec) or drive.baro is None or len(i) < 10 or \
-            float(i.rate_hz) < sm.VRE_MIN_RATE_HZ:
+    if isinstance(i.spec, ImuSpec) or len(i) < 10:
         return
     g0 = float(gravity(float(drive.origin_lla[0]), float(drive.origin_lla[2])))
-    d = sm.specific_force_deficit(i, drive.baro, g0)
+    d, walk = sm.rectifying_walk(i, drive.baro, g0)
     if d is None or not np.isfinite(d):
         return
     f.diag["specific_force_deficit_mps2"] = d
-    if d < -sm.DEFICIT_LIMIT:
-        rw = sm.K_VRE_DEFICIT * float(np.max(sm.robust_white_sd(i.accel_b)))
+    if walk > 0:
         f.warn(f"imu: the accelerometer reads less specific force than gravity and the baro's "
                f"climb need ({sm.DEFICIT_QUANTILE:g}th percentile {d:+.2f} m/s² over "
                f"{sm.DEFICIT_WINDOW_S:g} s windows: vibration rectification or clipping); the "
-               f"estimators give its bias a random walk of {rw:.3g} m/s²/√s")
+               f"estimators give its bias a random walk of {walk:.3g} m/s²/√s")
 
 
 CHECKS: tuple[Callable[[Drive, Findings], Drive | None], ...] = (

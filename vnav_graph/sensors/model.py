@@ -70,10 +70,11 @@ VRE_MIN_RATE_HZ = 10.0
 # ``DEFICIT_WINDOW_S`` the deficit e = mean|f| − g0 − a_up (a_up the baro's vertical
 # acceleration) is ≥ 0 up to noise; a 5th percentile below −``DEFICIT_LIMIT`` is a sensor
 # that loses specific force in flight (vibration rectification, clipping). On the shared logs
-# (``docs/real_logs.md``): 218 −0.13, Loiter_RTL −0.09, ski −0.11 m/s²; 181.BIN −3.5 m/s²
+# (``docs/real_logs.md``): 218 +0.07, Loiter_RTL −0.01, ski +0.02 m/s²; 181.BIN −2.34 m/s²
 # (|f| 7.3–8.9 m/s² for seconds while the baro climbs). There the bias walk ``K_VRE_DEFICIT``
 # ·σ_robust lets the accelerometer bias follow the loss, instead of every estimator
-# tilting the vehicle by 20–30° and fitting a 5 m/s² horizontal bias to explain it.
+# tilting the vehicle by 20–30° and fitting a 5 m/s² horizontal bias to explain it
+# (``rectifying_walk``, used by ``infer_imu_spec`` and reported by ``io.sanity``).
 DEFICIT_WINDOW_S = 2.0
 DEFICIT_LIMIT = 0.5  # m/s²
 DEFICIT_QUANTILE = 5.0  # %
@@ -239,6 +240,19 @@ def specific_force_deficit(imu: Any, baro: Any, g0: float,
     return float(np.percentile(e, DEFICIT_QUANTILE))
 
 
+def rectifying_walk(imu: Any, baro: Any, g0: float) -> tuple[float | None, float]:
+    """(``specific_force_deficit``, the accelerometer bias walk [m/s²/√s] it calls for):
+    ``K_VRE_DEFICIT``·σ_robust when the deficit is below −``DEFICIT_LIMIT`` on an IMU at
+    ≥ ``VRE_MIN_RATE_HZ``, else 0. The deficit is None where it is not measured (no baro,
+    too short, or a low-rate IMU whose differences are manoeuvres)."""
+    if baro is None or float(imu.rate_hz) < VRE_MIN_RATE_HZ:
+        return None, 0.0
+    d = specific_force_deficit(imu, baro, g0)
+    if d is None or not np.isfinite(d) or d >= -DEFICIT_LIMIT:
+        return d, 0.0
+    return d, K_VRE_DEFICIT * float(np.max(robust_white_sd(imu.accel_b)))
+
+
 def infer_imu_spec(imu: Any, g0: float, base: ImuSpec = REAL_LOG_IMU,
                    k_vre: float = K_VRE, baro: Any = None) -> ImuSpec:
     """IMU noise model of a log without a spec: ``base`` raised to what the data show.
@@ -266,16 +280,13 @@ def infer_imu_spec(imu: Any, g0: float, base: ImuSpec = REAL_LOG_IMU,
     vib = rate >= VRE_MIN_RATE_HZ
     a_rob = float(np.max(robust_white_sd(imu.accel_b)))  # the scale k_vre was set on
     fmag = float(np.median(np.linalg.norm(imu.accel_b, axis=1)))
-    name = f"{base.name}-measured"
-    if vib and baro is not None:
-        deficit = specific_force_deficit(imu, baro, g0)
-        if deficit is not None and deficit < -DEFICIT_LIMIT:
-            k_vre = max(k_vre, K_VRE_DEFICIT)
-            name += "-rectifying"
+    walk = rectifying_walk(imu, baro, g0)[1]
+    name = f"{base.name}-measured" + ("-rectifying" if walk > 0 else "")
     return replace(base, name=name,
                    gyro_noise_density=max(base.gyro_noise_density, g_nd),
                    accel_noise_density=max(base.accel_noise_density, a_sd / rt),
-                   accel_bias_rw=max(base.accel_bias_rw, k_vre * a_rob if vib else 0.0),
+                   accel_bias_rw=max(base.accel_bias_rw, k_vre * a_rob if vib else 0.0,
+                                     walk),
                    accel_bias_sd=max(base.accel_bias_sd, 2.0 * abs(fmag - g0)))
 
 
