@@ -111,7 +111,7 @@ def initial_states(P: Problem) -> tuple[FloatArray, FloatArray, FloatArray]:
     else:
         r = rot_triad[k0]
         for k in range(k0 - 1, -1, -1):
-            r = so3_exp(P.omega_t * (P.t_kf[k + 1] - P.t_kf[k])) @ r @ dr_t[k].T
+            r = _gyro_back(P, r, k, dr_t)
             if tilt_ok[k]:
                 r = _retilt(r, f_b[k], f_t[k])
     rot = np.zeros((nk, 3, 3))
@@ -127,7 +127,7 @@ def initial_states(P: Problem) -> tuple[FloatArray, FloatArray, FloatArray]:
         rr = rot[k]
         p1 = p_out[k] + v_out[k] * T + 0.5 * a * T * T + rr @ dp_t[k]
         v1 = v_out[k] + a * T + rr @ dv_t[k]
-        r1 = so3_exp(-P.omega_t * T) @ rr @ dr_t[k]
+        r1 = _gyro_forward(P, rr, k, dr_t)
         if triad_ok[k + 1]:
             r1 = rot_triad[k + 1]
         elif tilt_ok[k + 1]:
@@ -194,24 +194,20 @@ def filter_attitude(P: Problem, rot: FloatArray) -> bool:
         return False
     yaw = ERROR_STATE["att_n"].start + 2
     yaw_sd = np.sqrt(np.interp(P.t_kf, est.t_cov, est.cov[:, yaw, yaw]))
-    good = np.flatnonzero(yaw_sd <= FILTER_YAW_SD_MAX)
+    good = yaw_sd <= FILTER_YAW_SD_MAX
     j = nearest_index(tr.t, P.t_kf)
     out = gf.rot_t_n(tr.lla[j], P.origin) @ quat_to_mat(tr.q_nb[j])
-    if good.size == 0:
-        # the heading was never acquired: the ekf's tilt (levelled by its accelerometer and
-        # GNSS updates) with its best heading, which the gyro carries
-        rot[:] = out
-        return True
-    ok = np.zeros(P.n_kf, dtype=bool)
-    ok[good] = True
-    dr_t = P.dense.end()[0]
-    for k in range(int(good[0]) + 1, P.n_kf):  # forwards from the last good keyframe
-        if not ok[k]:
-            T = P.t_kf[k] - P.t_kf[k - 1]
-            out[k] = so3_exp(-P.omega_t * T) @ out[k - 1] @ dr_t[k - 1]
-    for k in range(int(good[0]) - 1, -1, -1):  # backwards before the first
-        T = P.t_kf[k + 1] - P.t_kf[k]
-        out[k] = so3_exp(P.omega_t * T) @ out[k + 1] @ dr_t[k].T
+    if good.any():
+        # elsewhere the gyro carries the attitude: forwards from the previous keyframe,
+        # backwards before the first good one. (Where the heading was never acquired, the
+        # ekf's tilt — levelled by its accelerometer and GNSS updates — with its best heading.)
+        dr_t = P.dense.end()[0]
+        first = int(np.argmax(good))
+        for k in range(first + 1, P.n_kf):
+            if not good[k]:
+                out[k] = _gyro_forward(P, out[k - 1], k - 1, dr_t)
+        for k in range(first - 1, -1, -1):
+            out[k] = _gyro_back(P, out[k + 1], k, dr_t)
     rot[:] = out
     return True
 
@@ -282,6 +278,17 @@ def _nearest_gap(t_ref: FloatArray, t_q: FloatArray) -> FloatArray:
     lo = ts[np.clip(j - 1, 0, ts.size - 1)]
     hi = ts[np.clip(j, 0, ts.size - 1)]
     return np.minimum(np.abs(t_q - lo), np.abs(hi - t_q))
+
+
+def _gyro_forward(P: Problem, r: FloatArray, k: int, dr_t: FloatArray) -> FloatArray:
+    """R_tb at keyframe k+1 from ``r`` at k: the preintegrated gyro increment ``dr_t[k]`` and
+    the Earth rate of the (Earth-fixed) tangent frame."""
+    return so3_exp(-P.omega_t * (P.t_kf[k + 1] - P.t_kf[k])) @ r @ dr_t[k]
+
+
+def _gyro_back(P: Problem, r: FloatArray, k: int, dr_t: FloatArray) -> FloatArray:
+    """R_tb at keyframe k from ``r`` at k+1 (``_gyro_forward`` inverted)."""
+    return so3_exp(P.omega_t * (P.t_kf[k + 1] - P.t_kf[k])) @ r @ dr_t[k].T
 
 
 def _retilt(r: FloatArray, f_b: FloatArray, f_t: FloatArray) -> FloatArray:
