@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from vnav_graph.estimators.graph import isam2 as gi
+from vnav_graph.estimators.graph import isam2_setup as gi
 from vnav_graph.estimators.graph import problem as gp
 from vnav_graph.evaluation.holdout import run_holdout
 

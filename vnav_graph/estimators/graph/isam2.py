@@ -1,11 +1,12 @@
 """``graph-isam2``: incremental smoothing with GTSAM iSAM2 (Kaess et al., IJRR 2012).
 
-One iSAM2 update per keyframe. To keep the per-update cost bounded on long drives the baro
-calibration (s, τd) is a *slowly varying per-segment* state K(j) (segments of
-``GraphConfig.segment_s``, linked by a random-walk ``BetweenFactorVector``) instead of one
-global variable tied to every baro sample: the graph stays chain-structured, so an update only
-re-eliminates the cliques of the last keyframes (a global K sits in the root clique and every
-new baro term touches it — measured in ``docs/graph.md``).
+One iSAM2 update per keyframe (``isam2_online.OnlinePass``; this module runs it, retries it
+with robust settings and checks its result against a batch pass). To keep the per-update cost
+bounded on long drives the baro calibration (s, τd) is a *slowly varying per-segment* state
+K(j) (segments of ``GraphConfig.segment_s``, linked by a random-walk ``BetweenFactorVector``)
+instead of one global variable tied to every baro sample: the graph stays chain-structured, so
+an update only re-eliminates the cliques of the last keyframes (a global K sits in the root
+clique and every new baro term touches it — measured in ``docs/graph.md``).
 
 Baro samples and GNSS fixes between keyframes are linearised once (numpy, ``factors``) at
 the current estimate as soon as they have arrived — in the update that creates keyframe k+1:
@@ -48,53 +49,24 @@ import time
 from collections.abc import Sequence
 from typing import Any
 
-import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import A, B, C, G, K, V, X
 
-from ...geo.frames import mat_to_quat, ned_to_lla
+from ...geo.frames import mat_to_quat, ned_to_lla, quat_to_mat
 from ...sensors.baro import without_implausible_scale
 from ...sensors.magnetometer import without_contradicting_mag
-from ...sensors.noise import gm_transition
 from ...types import Drive, Estimate, Trajectory
 from . import factors as gf
-from . import relin, terms
 from .batch import gnss_gm_info, outputs, provides
-from .builders import (
-    bias_link,
-    bias_step,
-    build_batch_graph,
-    gap_factors,
-    gap_start_states,
-    gm_factor,
-    gnss_gm_factor,
-    imu_factor,
-    keyframe_fixes,
-    pims_for,
-)
-from .extend import GraphExtension, check_extensions, collect, make_view
-from .init import initial_states
-from .isam2_setup import (
-    estimate_info,
-    extra_online_of,
-    first_keyframe,
-    isam2_params,
-    segment_span,
-    segments,
-    update_error,
-)
-from .linalg import solver_context, trim_heap
+from .builders import build_batch_graph, pims_for
+from .extend import GraphExtension, check_extensions
+from .isam2_online import OnlinePass, OnlineResult
+from .isam2_setup import estimate_info
+from .linalg import solver_context
 from .magnetometer import builtin_extensions, mag_info
-from .problem import (
-    gravity_delta,
-    noise,
-    preintegrate,
-    setup,
-    states_from_values,
-)
+from .problem import states_from_values
 from .settings import LOW_RATE_DT, LOW_RATE_KEYFRAME_DT, GraphConfig
 from .solve import evaluate_at, gauss_newton
-from .window import Window
 
 # averaged low-rate IMU logs (median spacing ≥ LOW_RATE_DT, e.g. the 1 Hz phone logs): a
 # keyframe every sample made a 93-min log take 5563 updates (213 s online), and after its 37 s
@@ -111,7 +83,6 @@ LOW_RATE_SETTINGS = {"keyframe_dt": LOW_RATE_KEYFRAME_DT, "relinearize_skip": 50
 # settings of the retry after a failed/diverged incremental pass (GraphISAM2.run)
 ROBUST_SETTINGS = {"relinearize_skip": 1, "relinearize_typed": None,
                    "relinearize_threshold": 0.01}
-DIVERGED_SPEED = 1e4  # m/s: an online velocity above this means the solution diverged
 # iSAM2's own smoothed estimate is returned unless the batch pass started from it ends lower
 # by more than this fraction of the problem's dimension n. The cost gap is ½‖Δx‖²_H (the
 # squared Mahalanobis distance between the two solutions, halved), while either solution's
@@ -173,301 +144,25 @@ class GraphISAM2:
 
     def _run_pass(self, drive: Drive, cfg: GraphConfig, robust: bool, t_start: float,
                   fallback: str | None) -> Estimate:
-        P = setup(drive, cfg)
-        pri = P.pri
-        has_baro = drive.baro is not None
-        rot_i, pos_i, vel_i = initial_states(P)
-        nk = P.n_kf
-        seg = segments(P)
-        calib0 = np.zeros(nk, dtype=int)
-        ext = None
         extensions = (*self.extensions, *builtin_extensions(drive, cfg))
-        if extensions:
-            # the view is the batch's: the same initial values (no IMU factors needed)
-            vals_i = build_batch_graph(P, rot_i, pos_i, vel_i, None, pri, calib0)[1]
-            ext = collect(extensions, make_view(P, vals_i))
-        isam = gtsam.ISAM2(isam2_params(cfg, robust, ext))
-        # running linearisation arrays (keyframe states as last estimated)
-        rot = np.zeros((nk, 3, 3))
-        pos = np.zeros((nk, 3))
-        vel = np.zeros((nk, 3))
-        bias = np.zeros((nk, 6))
-        cb = np.zeros(nk)
-        gg = np.zeros(nk)  # the GNSS height error G(k) (GraphConfig.gnss_gm_sd_v), if carried
-        cal = {0: np.array([0.0, pri["tau0"]])}
-        rot[0], pos[0], vel[0] = rot_i[0], pos_i[0], vel_i[0]
-        gap_states = gap_start_states(P, rot_i, pos_i, vel_i) if P.gap.any() else None
-        graph0, vals0, fix_at0 = first_keyframe(P, rot[0], pos[0], vel[0], cal[0])
-        if ext is not None:
-            fs, nv_ext = ext.at_keyframe(0)
-            for f in fs:
-                graph0.add(f)
-            vals0.insert(nv_ext)
-        new0 = isam.update(graph0, vals0).getNewFactorsIndices()
-        bt = drive.baro.t if has_baro else np.zeros(0)
-        bz = drive.baro.altitude if has_baro else np.zeros(0)
-        # the fixes of each interval, once (fixes and keyframes are in time order): strictly
-        # inside it, and — with the GNSS height state — on the keyframe that ends it (the one
-        # on keyframe 0 goes with interval 0)
-        g_between = np.flatnonzero((P.g_kf == -1) & P.g_use)
-        cuts = np.arange(1, nk - 1)
-        fixes_of = np.split(g_between, np.searchsorted(
-            gf.interval_of(P.t_kf, P.g_t[g_between]), cuts))
-        if P.gm is not None:
-            on_kf = np.flatnonzero((P.g_kf >= 0) & P.g_use)
-            ends = np.split(on_kf, np.searchsorted(np.maximum(P.g_kf[on_kf] - 1, 0), cuts))
-            fixes_of = [np.r_[a, b] for a, b in zip(fixes_of, ends, strict=True)]
-        book = relin.TermBook(P, seg, fixes_of)
-        win = (Window(P, seg, cfg.isam2_window_s, ext) if cfg.isam2_window_s is not None
-               else None)
-        win_info: dict[str, Any] = {"isam2_window_s": None}
-        book.record_fixes(fix_at0, new0, 0)
-        rw_idx: list[int] = []  # iSAM2 indices of the K / A segment random walks
-        rw_at: list[int] = []
-        dg_kf = np.zeros((nk, 3))  # gravity anomaly at each keyframe, once (terms)
-        pims: list[Any] = []
-        gap = P.gap
-        upd_ms = np.zeros(nk - 1)
-        # per update: preintegration, interval term, isam.update, estimate read-back [ms];
-        # variables relinearised, variables re-eliminated, interval terms relinearised
-        brk = np.zeros((nk - 1, 7))
-        online = np.zeros((nk, 10))  # p(3), v(3), quat(4) in t frame
-        online_rot = np.zeros((nk, 3, 3))  # its attitude, as quaternions after the pass
-        online[0, 0:6] = np.r_[pos[0], vel[0]]
-        online_rot[0] = rot[0]
-        baro_next = 0
-        calib_rw = np.asarray(cfg.calib_rw, float)
-        s_max = 0.0  # the largest |s| of the online pass (sensors.baro scale check)
+        on = OnlinePass(drive, cfg, robust, extensions).run()
+        return self._finish(drive, cfg, on, robust, fallback, t_start)
 
-        arrays = (rot, pos, vel, bias, cb, gg)
-
-        b_last = 0  # the last B(k) in iSAM2: B(k), interval k's bias, enters with it
-        ka = np.zeros(3)  # the accelerometer scale factors as last estimated (P.ka)
-        # k_a, like (s, τd), is one variable per segment, A(j), linked by a random walk of
-        # root PSD accel_scale_rw·σ_ka (a global A in every bias link put it in every
-        # clique: 1800 s hill-drive online pass 35 → 47 s)
-        ka_rw = cfg.accel_scale_rw * (P.ka.sd if P.ka is not None else 0.0)
-
-        def a_keys(m: int) -> tuple[int, int]:
-            return A(int(seg[m])), A(int(seg[m + 1]))
-
-        def refresh(keys_k: Any) -> None:
-            relin.read_states(isam.calculateEstimate(relin.state_keys(keys_k, P, b_last)),
-                              keys_k, arrays, P, b_last)
-
-        def new_bias(nv: Any, nf: Any, k: int) -> None:
-            """B(k) and its link from B(k−1) (``bias_link``: with the scale factors it needs
-            ā_k, known once interval k is preintegrated), predicted from B(k−1)."""
-            dt_b = float(P.t_kf[k] - P.t_kf[k - 1])
-            phi = bias_step(P.imu_spec, dt_b)[0]  # the link's mean: b(k) = φ·b(k−1)
-            bias[k] = phi * bias[k - 1]
-            if P.ka is not None:
-                bias[k, 0:3] += (P.ka.f_mean[k] - phi[0:3] * P.ka.f_mean[k - 1]) * ka
-            nv.insert(B(k), gtsam.imuBias.ConstantBias(bias[k, 0:3], bias[k, 3:6]))
-            nf.add(bias_link(P, k - 1, dt_b, a_keys(k - 1)))
-
-        for k in range(nk - 1):
-            tu = time.perf_counter()
-            dg = gravity_delta(P, pos[k:k + 1])[0]
-            dg_kf[k] = dg
-            nf = gtsam.NonlinearFactorGraph()
-            nv = gtsam.Values()
-            if b_last < k:
-                new_bias(nv, nf, k)
-                b_last = k
-            b_k = gtsam.imuBias.ConstantBias(bias[k, 0:3], bias[k, 3:6])
-            pim = preintegrate(P, k, rot[k], dg, b_k)
-            pims.append(pim)
-            t_pre = time.perf_counter()
-            if gap[k]:  # its factors link B(k) to B(k+1): B(k+1) enters now
-                # the new keyframe starts at the gap prior's centre from iSAM2's estimate;
-                # the prior itself is graph-batch's (from the initial states), so that both
-                # smoothers solve one problem
-                x1, v1, _ = gap_factors(P, k, rot, pos, vel, a_keys(k))
-                gap_f = gap_factors(P, k, *gap_states, a_keys(k))[2]
-                nv.insert(X(k + 1), x1)
-                nv.insert(V(k + 1), v1)
-                nv.insert(B(k + 1), b_k)
-                b_last = k + 1
-                for f in gap_f:
-                    nf.add(f)
-            else:
-                nav = pim.predict(gtsam.NavState(gtsam.Rot3(rot[k]), pos[k], vel[k]), b_k)
-                nv.insert(X(k + 1), nav.pose())
-                nv.insert(V(k + 1), nav.velocity())
-                nf.add(imu_factor(k, pim))
-            # the new keyframe's linearisation point: its prediction
-            x_new = nv.atPose3(X(k + 1))
-            rot[k + 1], pos[k + 1] = x_new.rotation().matrix(), x_new.translation()
-            vel[k + 1], bias[k + 1] = nv.atVector(V(k + 1)), bias[k]
-            cb[k + 1] = cb[k]
-            dt = float(P.t_kf[k + 1] - P.t_kf[k])
-            fix_at: list[tuple[int, int]] = []
-            if P.gm is None:
-                for i, f in keyframe_fixes(P, k + 1):
-                    fix_at.append((i, nf.size()))
-                    nf.add(f)
-            else:  # G(k+1) and its link; the fix on keyframe k+1 ends interval k's rows
-                gg[k + 1] = gg[k] * gm_transition(dt, P.gm.tau_s)
-                nv.insert(G(k + 1), np.array([gg[k + 1]]))
-                nf.add(gnss_gm_factor(k, dt, P.gm))
-            # the interval terms go first in the update (their factor indices come first):
-            # the ones due for relinearisation, rebuilt at the current estimate ...
-            nf_t = gtsam.NonlinearFactorGraph()
-            tags, removed = book.rebuild(nf_t, k, rot, pos, vel, bias, cb, gg,
-                                         cal if has_baro else None, bt, bz, pri, dg_kf)
-            n_swap = len(tags)
-            # ... then the new ones, at this linearisation: the GNSS fixes inside interval k
-            # enter with its end keyframe (no delay to wait for)
-            st = terms.keyframe_states(P, k, rot, pos, vel, bias, cb, gg, dg_kf)
-            gcf = terms.gnss_factor(P, k, st, bias, fixes_of[k])
-            if has_baro:
-                nv.insert(C(k + 1), np.array([cb[k]]))
-                nf.add(gm_factor(k, dt, pri))
-                if seg[k + 1] != seg[k]:
-                    j = int(seg[k + 1])
-                    cal[j] = cal[j - 1].copy()
-                    nv.insert(K(j), cal[j])
-                    span = segment_span(P, seg, j)
-                    rw_at.append(nf.size())  # its index is recorded: the final rounds
-                    nf.add(gtsam.BetweenFactorVector(K(j - 1), K(j), np.zeros(2),  # remove it
-                                                     noise(calib_rw * np.sqrt(span))))
-            if P.ka is not None and seg[k + 1] != seg[k]:
-                j = int(seg[k + 1])
-                nv.insert(A(j), ka)
-                rw_at.append(nf.size())
-                nf.add(gtsam.BetweenFactorVector(A(j - 1), A(j), np.zeros(3), noise(
-                    [ka_rw * np.sqrt(segment_span(P, seg, j))] * 3)))
-            if ext is not None:
-                fs, nv_ext = ext.at_keyframe(k + 1)
-                for f in fs:
-                    nf.add(f)
-                nv.insert(nv_ext)
-            # baro samples stamped up to the new keyframe (each to the interval of its
-            # delayed time t_s − τd: interval k, or k − 1 for the first τd of interval k)
-            new_baro, baro_next = terms.baro_factors(P, k, st, bias, cal, seg, bt, bz,
-                                                     baro_next, pri)
-            tags += book.new_terms(k, gcf, new_baro, st, cal if has_baro else None, nf_t)
-            last = None
-            if removed:
-                # the keys of the new factors go last in the ordering (iSAM2's default), not
-                # those of the rebuilt terms: with them a large swap leaves a root clique of
-                # hundreds of variables
-                last = gtsam.KeyGroupMap()
-                for i in range(n_swap, nf_t.size()):
-                    for key in nf_t.at(i).keys():
-                        last.insert2(key, 1)
-                for i in range(nf.size()):
-                    for key in nf.at(i).keys():
-                        last.insert2(key, 1)
-            nf_t.push_back(nf)
-            t_lcf = time.perf_counter()
-            try:
-                ures = isam.update(nf_t, nv, removed, last)
-                t_upd = time.perf_counter()
-                new_idx = ures.getNewFactorsIndices()
-                book.record(tags, new_idx)
-                rw_idx += [int(new_idx[len(tags) + i]) for i in rw_at]
-                rw_at = []
-                book.record_fixes(fix_at, new_idx, len(tags))
-                marked = relin.marked_keyframes(ures.getMarkedKeys())
-                read = np.r_[np.arange(max(k - 1, 0), k + 2), marked - 1, marked, marked + 1]
-                refresh(np.unique(read[(read >= book.floor) & (read <= k + 1)]))
-            except RuntimeError as exc:
-                raise update_error(P, k, exc, bool(gap[k])) from exc
-            if not (np.all(np.isfinite(rot[k + 1])) and np.all(np.isfinite(pos[k + 1]))
-                    and np.linalg.norm(vel[k + 1]) < DIVERGED_SPEED):
-                raise update_error(P, k, None, bool(gap[k]))
-            if has_baro:
-                j = int(seg[k + 1])
-                for jj in range(max(j - 1, book.first_seg), j + 1):
-                    cal[jj] = isam.calculateEstimateVector(K(jj))
-                s_max = max(s_max, abs(float(cal[j][0])))
-            if P.ka is not None:
-                ka = isam.calculateEstimateVector(A(int(seg[k + 1])))
-            if win is not None and (m1 := win.due(k + 1)) > win.first:
-                # keyframes older than the window leave iSAM2 (their conditionals are kept)
-                gone = win.marginalise(isam, m1, b_last)
-                book.freeze(win.first, win.first_seg, gone)
-                gone_set = set(gone)
-                rw_idx = [i for i in rw_idx if i not in gone_set]
-            book.pending = book.due(marked, k + 1, rot, pos, cal if has_baro else None)
-            online[k + 1, 0:6] = np.r_[pos[k + 1], vel[k + 1]]
-            online_rot[k + 1] = rot[k + 1]
-            t_end = time.perf_counter()
-            upd_ms[k] = 1e3 * (t_end - tu)
-            brk[k] = (1e3 * (t_pre - tu), 1e3 * (t_lcf - t_pre), 1e3 * (t_upd - t_lcf),
-                      1e3 * (t_end - t_upd), ures.getVariablesRelinearized(),
-                      ures.getVariablesReeliminated(), n_swap)
-        # baro samples stamped after the last keyframe whose delayed time is inside the span,
-        # and the last keyframe's B (a continuation of the last interval's: no IMU factor)
-        if nk >= 2:
-            st = terms.keyframe_states(P, nk - 2, rot, pos, vel, bias, cb, gg, dg_kf)
-            new_baro, baro_next = terms.baro_factors(P, nk - 2, st, bias, cal, seg, bt, bz,
-                                                     baro_next, pri, last=True)
-            nf = gtsam.NonlinearFactorGraph()
-            nv = gtsam.Values()
-            tags = book.new_terms(nk - 2, None, new_baro, st, cal if has_baro else None, nf)
-            if b_last < nk - 1:
-                new_bias(nv, nf, nk - 1)
-                b_last = nk - 1
-            if nf.size():
-                book.record(tags, isam.update(nf, nv).getNewFactorsIndices())
-        online[:, 6:10] = mat_to_quat(online_rot)  # one call (0.4 ms each, per keyframe)
-        t_online = time.perf_counter()
-        extra_online = extra_online_of(isam, isam.calculateEstimate(), ext)
-        rounds = relin.settle(isam, book, P, seg, rw_idx, arrays, cal, bt, bz,
-                              dg_kf) if cfg.final_rounds > 0 else []
-        gate0 = (P.g_use.copy(), P.g_rej_post)
-        if cfg.final_rounds > 0:
-            # the batch's post-solve GNSS gate at iSAM2's estimate, then final rounds
-            # without the rejected fixes: its own estimate keeps the fixes the batch keeps
-            # (a 15 s IMU gap on hill-drive: 7 fixes the batch gated, a cost gap of 26
-            # against the batch pass with them in iSAM2)
-            for _ in range(cfg.gate_rounds):
-                k_cal = cal[int(seg[-1])] if has_baro else None
-                kf_rm = relin.post_solve_gate(book, P,
-                                              relin.estimate_states(P, arrays, k_cal))
-                if not book.pending.size and not kf_rm:
-                    break
-                rounds += relin.settle(isam, book, P, seg, rw_idx, arrays, cal, bt, bz,
-                                       dg_kf, tie=False, removed=kf_rm)
-        est = isam.calculateBestEstimate()  # full back-substitution (no wildfire)
-        if win is not None:  # and of the keyframes that left iSAM2
-            est = win.complete(est)
-            win_info = win.info()
-            win = None  # its conditionals (~20 MB on a 1-hour drive) are not needed now
-        # the Bayes tree is not needed by the final pass: released before it (≈ 210 MB of
-        # C++ memory on a 1-hour drive, otherwise alive under the final pass's peak)
-        isam = None  # the closure ``refresh`` shares this name: it is not called again
-        trim_heap()  # its freed nodes are scattered over the heap: hand them back
-        return self._finish(drive, P, cfg, est, extra_online, t_online, online, ext, robust,
-                            fallback, t_start, (rot_i, pos_i, vel_i), pims, seg, upd_ms, brk,
-                            {"isam2_relinearized": book.relinearized,
-                             "isam2_relinearized_factors": book.swapped_factors,
-                             "isam2_calibration_steps_halved": book.damped,
-                             "baro_scale_max_abs": s_max if has_baro else None,
-                             "isam2_final_rounds": rounds,
-                             "isam2_gnss_rejected_postsolve": P.g_rej_post - gate0[1],
-                             **win_info,
-                             "final_rounds_s": time.perf_counter() - t_online}, gate0)
-
-    def _finish(self, drive: Drive, P: Any, cfg: GraphConfig, est: Any, extra_online: Any,
-                t_online: float, online: Any, ext: Any, robust: bool, fallback: str | None,
-                t_start: float, init: tuple[Any, Any, Any], pims: list[Any], seg: Any,
-                upd_ms: Any, brk: Any, relin_counts: dict[str, Any],
-                gate0: tuple[Any, int]) -> Estimate:
-        """After the online pass and the final rounds (``est``: iSAM2's estimate,
-        ``extra_online``: its new variables after the last keyframe, read at ``t_online``):
-        the online trajectory, iSAM2's own smoothed estimate with its covariances and, with
-        ``final_batch``, the batch pass started from it as its check; the Estimate.
-        ``gate0``: ``P.g_use`` and ``P.g_rej_post`` before iSAM2's own post-solve gate, where
-        a restart from graph-batch's start begins."""
+    def _finish(self, drive: Drive, cfg: GraphConfig, on: OnlineResult, robust: bool,
+                fallback: str | None, t_start: float) -> Estimate:
+        """After the online pass and the final rounds (``on``: iSAM2's estimate, its new
+        variables after the last keyframe and the pass's records): the online trajectory,
+        iSAM2's own smoothed estimate with its covariances and, with ``final_batch``, the
+        batch pass started from it as its check; the Estimate. A restart from graph-batch's
+        start begins with the GNSS gate decisions ``on.gate0`` (before iSAM2's own post-solve
+        gate)."""
+        P, est, ext, init, pims, seg = on.P, on.est, on.ext, on.init, on.pims, on.seg
+        gate0, t_online = on.gate0, on.t_online
         pri = P.pri
         has_baro = drive.baro is not None
         rot_i, pos_i, vel_i = init
         calib0 = np.zeros(P.n_kf, dtype=int)
-        online_traj = self._online_trajectory(P, online)
+        online_traj = self._online_trajectory(P, on.online)
         # iSAM2's own estimate as a point of the batch problem (one global (s, τd): the
         # segments are tied by the final rounds)
         own_vals, own_graph = self._batch_from(P, est, pims, pri, seg, init)
@@ -546,17 +241,18 @@ class GraphISAM2:
             j_last = int(seg[-1])
             isam_k = est.atVector(K(j_last)).tolist()
         times = {"online_s": t_online - t_start, "final_smoothing_s": t_final - t_online}
-        info = estimate_info(P, cfg, res if res is not None else chosen, out, upd_ms, brk,
-                             robust, fallback, times, isam_k, int(seg[-1]) + 1, self.name)
+        info = estimate_info(P, cfg, res if res is not None else chosen, out, on.upd_ms,
+                             on.brk, robust, fallback, times, isam_k, int(seg[-1]) + 1,
+                             self.name)
         info["warnings"] += warn
-        info.update(relin_counts)
+        info.update(on.relin_counts)
         info["trajectory_source"] = source
         info["final_batch"] = final_batch
         info["solver_final"] = chosen.solver
         info["final_pass_restarted"] = restarted
         info["extra_variables"] = out["extra"]
         info.update(out["accel_scale"])
-        info["extra_variables_online"] = extra_online
+        info["extra_variables_online"] = on.extra_online
         info.update(mag_info(drive, cfg))
         info.update(gnss_gm_info(P))
         return Estimate(self.name, out["trajectory"], provides(drive), out["cov"],
@@ -597,8 +293,6 @@ class GraphISAM2:
         lla = ned_to_lla(online[:, 0:3], P.origin)
         c_tn = gf.rot_t_n(lla, P.origin)
         vel_n = np.einsum("nji,nj->ni", c_tn, online[:, 3:6])
-        from ...geo.frames import quat_to_mat
-
         q = mat_to_quat(np.swapaxes(c_tn, 1, 2) @ quat_to_mat(online[:, 6:10]))
         return Trajectory(P.t_kf, lla, vel_n, q)
 
