@@ -99,9 +99,12 @@ def test_baro_parameters_within_sigma(monte_carlo):
             assert p.sd < p.prior_sd  # every parameter is informed by 300 s of data
     for k, v in z.items():
         v = np.asarray(v)
-        # normalised errors of a consistent estimator are ~N(0,1) (bias_m: sd is an upper
-        # bound, so smaller); rms < 1.5 over 20 seeds and no seed beyond 3.5 sigma
-        assert np.sqrt(np.mean(v**2)) < 1.5, (k, v)
+        # normalised errors of a consistent estimator are ~N(0,1) (bias_m: σ of the time
+        # average from the smoothed cross-covariances, ``ekf.rts``); rms within 0.6-1.5 over
+        # the seeds (too wide a σ fails too: the pointwise average reported until session 39
+        # was an upper bound) and no seed beyond 3.5 sigma. Measured: scale 1.18, latency
+        # 0.82, bias 1.23
+        assert 0.6 < np.sqrt(np.mean(v**2)) < 1.5, (k, v)
         assert np.max(np.abs(v)) < 3.5, (k, v)
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from scipy.linalg import expm
 
 from vnav_graph.estimators.ekf import model as km
@@ -120,3 +121,22 @@ def test_unpack_cov_is_the_leading_block_of_the_packed_covariance():
     no_baro = _unpack_cov(s[:, iu, ju], False)
     assert np.isnan(no_baro[:, 15:18]).all() and np.isnan(no_baro[:, :, 15:18]).all()
     np.testing.assert_array_equal(no_baro[:, :15, :15], s[:, :15, :15])
+
+
+def test_rts_mean_weights_reproduce_the_mean_of_the_interpolated_errors():
+    """``rts.mean_weights``: Σ_k w_k e_k equals the mean over the output epochs of what
+    ``smooth_corrections`` interpolates (with the constant shifts c_k set to 0), across an
+    uneven grid, output epochs on and between grid epochs, and a heading reset (held)."""
+    from vnav_graph.estimators.ekf import rts
+
+    rng = np.random.default_rng(3)
+    grid_t = np.r_[0.0, 0.1, 0.2, 0.35, 0.5, 0.6, 1.6, 1.7]
+    t_out = np.r_[np.arange(0.0, 0.6, 0.02), 0.6, 1.0, 1.2, 1.65, 1.7]
+    reset_at = np.full(grid_t.size, np.nan)
+    reset_at[3] = 0.2
+    es = rng.normal(size=(grid_t.size, 4))
+    w = rts.mean_weights(grid_t, t_out, reset_at)
+    direct = rts.smooth_corrections(grid_t, t_out, np.zeros_like(es), reset_at, es).mean(0)
+    assert w.sum() == pytest.approx(1.0)
+    assert np.all(w >= 0)
+    assert w @ es == pytest.approx(direct, abs=1e-12)

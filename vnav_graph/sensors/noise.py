@@ -28,6 +28,16 @@ def gm_process_var(dt: float | FloatArray, tau: float, sd: float) -> FloatArray:
     return sd**2 * (1.0 - np.exp(-2.0 * dt / tau))
 
 
+def gm_mean_prior_sd(sd: float, tau: float, dur: float) -> float:
+    """Prior sigma of the time average of a stationary GM process over ``dur`` seconds:
+    var = σ²·(2τ/D)(1 − (τ/D)(1 − e^{−D/τ})). The prior of the reported mean baro bias
+    ``bias_m`` in both families (its ``observable`` flag compares against it)."""
+    if dur <= 0 or not np.isfinite(tau):
+        return sd
+    x = tau / dur
+    return float(sd * np.sqrt(max(2 * x * (1 - x * (1 - np.exp(-1 / x))), 0.0)))
+
+
 def imu_bias_step(dt: float | FloatArray, tau: float, sd: float, rw: float
                   ) -> tuple[FloatArray, FloatArray]:
     """One step ``dt`` of an IMU bias modelled as one first-order Gauss-Markov state (σ

@@ -15,8 +15,10 @@ Outputs
   when the drive has no barometer.
 - ``baro``: scale and latency are random constants: the final filtered (``ekf``) / smoothed
   (``ekf-rts``) value with its one-sigma. ``bias_m`` is the time average of b(t) over the
-  output epochs; its ``sd`` is the time average of σ_b(t), an upper bound of the σ of the
-  average (σ(mean e) ≤ mean σ(e) for any correlation between epochs).
+  output epochs; its ``sd`` for ``ekf-rts`` is the smoothed σ of that average, with the
+  epochs' cross-covariances (``rts`` docstring), for ``ekf`` the time average of σ_b(t), an
+  upper bound (σ(mean e) ≤ mean σ(e) for any correlation between epochs); its prior σ is
+  that of a stationary Gauss-Markov bias's time average over the drive, as in graph-batch.
 - innovations: normalised (z − h(x̃))/√S_ii of every accepted measurement component:
   ``gnss_pos`` (N, 3), ``gnss_vel`` (N, 3), ``baro`` (N,).
 - info: ``gnss_rejected`` (fixes whose horizontal pair or height was refused: χ² gate,
@@ -75,7 +77,7 @@ from ...sensors.model import (
     gnss_gm,
     sensor_model,
 )
-from ...sensors.noise import gm_process_var, imu_bias_step, white_sd
+from ...sensors.noise import gm_mean_prior_sd, gm_process_var, imu_bias_step, white_sd
 from ...types import (
     ERROR_STATE_DIM,
     BaroEstimate,
@@ -455,7 +457,9 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
         info["gnss_height_gm"] = {"sd_m": gm.sd_m, "tau_s": gm.tau_s}
     if baro is not None:  # for the post-solve scale check (sensors.baro)
         info["baro_scale_max_abs"] = float(np.max(np.abs(res[3][:, km.PSC])))
-    prior = {"scale": bp.scale_sd, "latency": bp.latency_sd, "bias": bp.bias_sd}
+    # the bias's is the prior σ of its time average over the drive, as graph-batch's
+    prior = {"scale": bp.scale_sd, "latency": bp.latency_sd,
+             "bias": gm_mean_prior_sd(bp.bias_sd, bp.bias_tau, float(t[-1] - t[0]))}
     rts = tuple(res[5:10]) if store_rts else None
     return _Run(t[gr.out_idx], *res[:4], t[gr.grid_idx], gr.grid_idx, gr.out_idx,
                 gr.cov_grid, res[4], rts, innov, info, prior, tau, baro is not None)
@@ -517,17 +521,21 @@ def _unpack_cov(packed: FloatArray, has_baro: bool) -> FloatArray:
 
 
 def _estimate(name: str, run: _Run, traj: Trajectory, par: FloatArray, cov: FloatArray,
-              t0: float, online: Trajectory | None, cfg: EkfConfig) -> Estimate:
+              t0: float, online: Trajectory | None, cfg: EkfConfig,
+              bias_mean_sd: float | None = None) -> Estimate:
+    """``bias_mean_sd``: the smoothed σ of the mean baro bias (``rts``); without it (the
+    forward filter) the average of the pointwise σ, an upper bound (module docstring)."""
     baro = None
     if run.has_baro:
         last = cov[-1]
-        sd_b = np.sqrt(np.clip(cov[:, 17, 17], 0, None))
+        if bias_mean_sd is None:
+            bias_mean_sd = float(np.mean(np.sqrt(np.clip(cov[:, 17, 17], 0, None))))
         baro = BaroEstimate(
             scale=ParamEstimate(float(par[-1, km.PSC]), float(np.sqrt(last[15, 15])),
                                 run.prior_sd["scale"]),
             latency_s=ParamEstimate(float(par[-1, km.PTD]), float(np.sqrt(last[16, 16])),
                                     run.prior_sd["latency"]),
-            bias_m=ParamEstimate(float(np.mean(par[:, km.PBB])), float(np.mean(sd_b)),
+            bias_m=ParamEstimate(float(np.mean(par[:, km.PBB])), bias_mean_sd,
                                  run.prior_sd["bias"]),
         )
     return Estimate(
@@ -583,11 +591,13 @@ class EKFRTS(EKF):
         rts_p, rts_ing, rts_q, corr, reset_at = run.rts
         cov_out_of = np.full(run.t_grid.size, -1, dtype=np.int64)
         cov_out_of[run.cov_grid] = np.arange(run.cov_grid.size)
-        es, cov_s = rts.rts_smooth(rts_p, rts_ing, rts_q, corr, reset_at, *run.tau,
-                                  cov_out_of, run.cov_grid.size)
+        w_mean = rts.mean_weights(run.t_grid, run.t_out, reset_at)
+        es, cov_s, var_b = rts.rts_smooth(rts_p, rts_ing, rts_q, corr, reset_at, *run.tau,
+                                          cov_out_of, run.cov_grid.size, w_mean)
         e_out = rts.smooth_corrections(run.t_grid, run.t_out, run.rts[3], run.rts[4], es)
         lla, vel, q, par = rts.apply_error(run.lla, run.vel, run.q, run.par, e_out)
         online = _trajectory(run, run.lla, run.vel, run.q, run.par)
         traj = _trajectory(run, lla, vel, q, par)
         cov = _unpack_cov(cov_s, run.has_baro)
-        return _estimate(self.name, run, traj, par, cov, t0, online, self.config)
+        return _estimate(self.name, run, traj, par, cov, t0, online, self.config,
+                         float(np.sqrt(max(var_b, 0.0))))

@@ -4,12 +4,21 @@
 process noise the forward kernel stored (``ekf.model`` docstring); ``smooth_corrections``
 carries the smoothed errors to every output epoch and ``apply_error`` removes them from the
 nominal states.
+
+The reported mean baro bias b̄ = Σ_k w_k b_k (``mean_weights``: the output epochs' average,
+written on the grid) has the variance Σ_k Σ_m w_k w_m P_{k,m}[b, b], where the smoothed
+cross-covariances are P_{k,m} = G_k P_{k+1,m} (m > k; G the smoother gain). ``rts_smooth``
+accumulates it backward with u_k = Σ_{m≥k} w_m P_{k,m}[:, b] = w_k P_{k,k}[:, b] + G_k u_{k+1}:
+var = Σ_k w_k (2 u_k[b] − w_k P_{k,k}[b, b]). The pointwise σ's average, reported before,
+is an upper bound of it (on the simulated `default` drive 0.31 m against graph-batch's
+0.21 m from its joint covariance: ``docs/real_logs.md``, item 5b).
 """
 
 from __future__ import annotations
 
 import numpy as np
 from numba import njit
+from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
 from ...geo.earth import radii
@@ -44,12 +53,13 @@ from .model import (
 
 @njit(cache=True)
 def rts_smooth(rts_p, rts_ing, rts_q, corr, reset_at, tau_g, tau_a, tau_b, tau_h, cov_out_of,
-               n_cov_out):
+               n_cov_out, w_mean):
     """Backward RTS pass on the covariance grid (module docstring).
 
     Returns ê^s (K, NX) — the smoothed estimate of the error of the filtered (post-update)
-    nominal state at each grid epoch, estimated minus true — and the packed smoothed
-    covariances at the covariance-output epochs.
+    nominal state at each grid epoch, estimated minus true —, the packed smoothed
+    covariances at the covariance-output epochs and the smoothed variance of the weighted
+    mean Σ_k w_mean[k]·b_k of the baro bias.
     """
     kk = rts_p.shape[0]
     es = np.zeros((kk, NX))
@@ -57,6 +67,8 @@ def rts_smooth(rts_p, rts_ing, rts_q, corr, reset_at, tau_g, tau_a, tau_b, tau_h
     ps = unpack(rts_p[kk - 1])
     if cov_out_of[kk - 1] >= 0:
         pack(ps, cov_s[cov_out_of[kk - 1]])
+    u = w_mean[kk - 1] * ps[:, IBB]  # Σ_{m≥k} w_m P_{k,m}[:, b] (module docstring)
+    var_mean = w_mean[kk - 1] * u[IBB]
     for k in range(kk - 2, -1, -1):
         pk = unpack(rts_p[k])
         ing = rts_ing[k + 1]
@@ -86,7 +98,9 @@ def rts_smooth(rts_p, rts_ing, rts_q, corr, reset_at, tau_g, tau_a, tau_b, tau_h
         ps = 0.5 * (ps + ps.T)
         if cov_out_of[k] >= 0:
             pack(ps, cov_s[cov_out_of[k]])
-    return es, cov_s
+        u = w_mean[k] * ps[:, IBB] + g @ u
+        var_mean += w_mean[k] * (2.0 * u[IBB] - w_mean[k] * ps[IBB, IBB])
+    return es, cov_s, var_mean
 
 
 def warm_up() -> None:
@@ -98,7 +112,29 @@ def warm_up() -> None:
     for row in p:
         pack(np.eye(NX), row)
     rts_smooth(p, np.zeros((k, NING)), np.zeros((k, NX)), np.zeros((k, NX)),
-               np.full(k, np.nan), 1.0, 1.0, 1.0, 1.0, np.arange(k, dtype=np.int64), k)
+               np.full(k, np.nan), 1.0, 1.0, 1.0, 1.0, np.arange(k, dtype=np.int64), k,
+               np.full(k, 1.0 / k))
+
+
+def _interp(grid_t: FloatArray, t_out: FloatArray, reset_at: FloatArray
+            ) -> tuple[NDArray[np.intp], NDArray[np.intp], FloatArray]:
+    """For each output epoch: its grid epoch k, the next one kn and the weight α of kn in
+    ``smooth_corrections``' interpolation (0 at a grid epoch and across a heading reset)."""
+    k = np.searchsorted(grid_t, t_out, side="right") - 1
+    k = np.clip(k, 0, grid_t.size - 1)
+    at_grid = np.isclose(t_out, grid_t[k], rtol=0, atol=1e-12)
+    kn = np.minimum(k + 1, grid_t.size - 1)
+    span = np.where(kn > k, grid_t[kn] - grid_t[k], 1.0)
+    al = np.where(at_grid | ~np.isnan(reset_at[kn]), 0.0, (t_out - grid_t[k]) / span)
+    return k, kn, al
+
+
+def mean_weights(grid_t: FloatArray, t_out: FloatArray, reset_at: FloatArray) -> FloatArray:
+    """Weights w (K,) on the grid epochs with Σ_k w_k e_k = the mean over the output epochs of
+    ``smooth_corrections``' interpolated error (the shifts c_k are constants: no variance)."""
+    k, kn, al = _interp(grid_t, t_out, reset_at)
+    w = np.bincount(k, 1.0 - al, grid_t.size) + np.bincount(kn, al, grid_t.size)
+    return w / t_out.size
 
 
 def smooth_corrections(grid_t: FloatArray, t_out: FloatArray, corr: FloatArray,
@@ -109,15 +145,9 @@ def smooth_corrections(grid_t: FloatArray, t_out: FloatArray, corr: FloatArray,
     ê^s_k (after the update at t_k) and ê^s_{k+1} + c_{k+1} (the same error relative to the
     un-updated nominal state that runs up to t_{k+1}); across a heading reset it is held.
     """
-    k = np.searchsorted(grid_t, t_out, side="right") - 1
-    k = np.clip(k, 0, grid_t.size - 1)
-    at_grid = np.isclose(t_out, grid_t[k], rtol=0, atol=1e-12)
-    kn = np.minimum(k + 1, grid_t.size - 1)
-    span = np.where(kn > k, grid_t[kn] - grid_t[k], 1.0)
-    al = np.where(at_grid, 0.0, (t_out - grid_t[k]) / span)[:, None]
-    right = es[kn] + corr[kn]
-    right = np.where(np.isnan(reset_at[kn])[:, None], right, es[k])
-    return (1.0 - al) * es[k] + al * right
+    k, kn, al = _interp(grid_t, t_out, reset_at)
+    al = al[:, None]
+    return (1.0 - al) * es[k] + al * (es[kn] + corr[kn])
 
 
 def apply_error(lla: FloatArray, vel: FloatArray, q: FloatArray, par: FloatArray,

@@ -41,6 +41,7 @@ from gtsam.symbol_shorthand import A, B, C, K, V, X
 from ...geo.frames import mat_to_quat, ned_to_lla
 from ...sensors.baro import without_implausible_scale
 from ...sensors.magnetometer import without_contradicting_mag
+from ...sensors.noise import gm_mean_prior_sd
 from ...types import (
     BaroEstimate,
     Drive,
@@ -182,15 +183,6 @@ def extra_variables(lay: Any, cov_of: Any, vals: Any) -> dict[str, dict[str, Any
             "est": value_of(vals, key), "sd": np.sqrt(np.clip(np.diag(cov), 0, None)).tolist(),
             "cov": cov.tolist()}
     return out
-
-
-def gm_mean_prior_sd(sd: float, tau: float, dur: float) -> float:
-    """Prior sigma of the time average of a stationary GM process over ``dur`` seconds:
-    var = σ²·(2τ/D)(1 − (τ/D)(1 − e^{−D/τ}))."""
-    if dur <= 0 or not np.isfinite(tau):
-        return sd
-    x = tau / dur
-    return float(sd * np.sqrt(max(2 * x * (1 - x * (1 - np.exp(-1 / x))), 0.0)))
 
 
 def outputs(P: Problem, res: BatchResult, pri: dict[str, float],
