@@ -64,7 +64,12 @@ def render(docs: dict[str, dict[str, Any]]) -> str:
         ra = gb["alt_rmse_m"] / er["alt_rmse_m"]
         rh = (gb["horiz_rmse_m"] / er["horiz_rmse_m"]
               if gb.get("horiz_rmse_m") and er.get("horiz_rmse_m") else float("nan"))
-        warn = len((gb.get("warnings") or []) + (gi.get("warnings") or []))
+        # solver warnings: the warnings that are not a baro prior conflict (a note on the
+        # data, ``sensors.baro.prior_conflict_notes``; counted apart)
+        notes = (gb.get("baro_prior_conflict") or []) + (gi.get("baro_prior_conflict") or [])
+        warn = len([w for w in (gb.get("warnings") or []) + (gi.get("warnings") or [])
+                    if w not in notes])
+        warn_cell = f"{warn}" + (f" (+{len(notes)} prior conflict)" if notes else "")
         sb, si, se = _scale(gb), _scale(gi), _scale(er)
 
         def f(s: tuple[float, float] | None) -> str:
@@ -73,7 +78,7 @@ def render(docs: dict[str, dict[str, Any]]) -> str:
         z = "—" if sb is None or si is None else \
             f"{abs(sb[0] - si[0]) / max((sb[1] ** 2 + si[1] ** 2) ** 0.5, 1e-12):.1f}"
         sc = docs[c]["reference_screening"]
-        out.append(f"| {c} | {ra:.2f} | {rh:.2f} | {warn} | {f(sb)} | {f(si)} | {f(se)} | "
+        out.append(f"| {c} | {ra:.2f} | {rh:.2f} | {warn_cell} | {f(sb)} | {f(si)} | {f(se)} | "
                    f"{z} | {sc['withheld']} / {sc['excluded']} |")
     return "\n".join(out)
 

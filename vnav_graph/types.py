@@ -519,11 +519,13 @@ class Drive:
 
 @dataclass(frozen=True)
 class ParamEstimate:
-    """A scalar parameter estimate with its one-sigma uncertainty and prior sigma."""
+    """A scalar parameter estimate with its one-sigma uncertainty, prior sigma and (where the
+    estimator reports it) prior mean."""
 
     est: float
     sd: float | None
     prior_sd: float | None = None
+    prior_mean: float | None = None
 
     @property
     def observable(self) -> bool | None:

@@ -51,6 +51,9 @@ def _flat_drive() -> Drive:
     return Drive(imu, gnss, None, lla[0], meta={"name": "flat", "source": "log"})
 
 
+CONFLICT = "baro latency -0.99 ± 0.05 s is 10.9 prior σ from its prior 0.10 ± 0.10 s"
+
+
 class _Planted:
     """Knows the true path; adds +3 m everywhere (a datum offset, removed by scoring), +2 m
     height and 1 m north inside the withheld windows (the outage error to be measured)."""
@@ -67,7 +70,8 @@ class _Planted:
                                np.full(t.size, 0.2), 500.0 + 0.05 * t + 3.0 + 2.0 * inside])
         return Estimate("planted", Trajectory(t, lla, np.zeros((t.size, 3))),
                         frozenset({"alt", "pos_h"}), runtime_s=0.01,
-                        info={"gnss_rejected": 7})
+                        info={"gnss_rejected": 7, "warnings": ["solver note", CONFLICT],
+                              "baro_prior_conflict": [CONFLICT]})
 
 
 class _Broken:
@@ -95,6 +99,9 @@ def test_holdout_scores_planted_errors_exactly(monkeypatch: pytest.MonkeyPatch) 
     # 1 m north on the meridian; tangent-plane vs meridian arc differ by < 1 mm over 1.2 km
     assert p["horiz_rmse_m"] == pytest.approx(1.0, abs=1e-3)
     assert p["gnss_rejected"] == 7
+    # the estimator's warnings, and which of them are baro prior conflicts (data, not solver)
+    assert p["warnings"] == ["solver note", CONFLICT]
+    assert p["baro_prior_conflict"] == [CONFLICT]
     # per window: the same 2 m and 1 m in each, 60 fixes each; no v_D (not provided)
     assert [(w["n"], w["alt_rmse_m"]) for w in p["per_window"]] == [(60, pytest.approx(2.0))] * 4
     assert all(w["horiz_rmse_m"] == pytest.approx(1.0, abs=1e-3) for w in p["per_window"])

@@ -176,3 +176,43 @@ def without_implausible_scale(result: Any, config: Any, rerun: Callable[[Any], A
             "warnings": [*(again.info.get("warnings") or []), note]}
     return again.replace(info=info, config=config,
                          runtime_s=result.runtime_s + again.runtime_s)
+
+
+# A calibration estimate this many prior σ from its prior mean contradicts its prior: a draw
+# that far out of a Gaussian prior has probability 6e-7, and the estimate's own σ, computed
+# as if the prior held, is then too small. Simulated: a baro whose latency is 1.0 s against
+# the default prior 0.1 ± 0.1 s is estimated at 0.70–0.73 ± 0.06 s by all four estimators
+# (4.5 of their σ from the truth). Real: car 03-01a (1 Hz phone) puts the latency at −0.99 s
+# with ekf-rts and at −0.48 s with graph-batch, each ±0.05 s, and graph-batch run on
+# ekf-rts's 1 s time grid (keyframes every second) gives −1.00 s: the value follows the
+# model's time resolution, not the data (docs/real_logs.md, session 39).
+PRIOR_CONFLICT_Z = 5.0
+
+
+def prior_conflict_notes(baro: Any) -> list[str]:
+    """One note per calibration parameter of ``baro`` (a ``BaroEstimate``: scale, latency)
+    whose estimate lies more than ``PRIOR_CONFLICT_Z`` prior σ from its prior mean."""
+    out = []
+    for name, unit, k in (("scale", "%", 100.0), ("latency", "s", 1.0)):
+        pe = getattr(baro, "scale" if name == "scale" else "latency_s", None) if baro else None
+        if pe is None or pe.prior_mean is None or not pe.prior_sd or pe.sd is None:
+            continue
+        z = (pe.est - pe.prior_mean) / pe.prior_sd
+        if abs(z) > PRIOR_CONFLICT_Z:
+            out.append(f"baro {name} {k * pe.est:+.2f} ± {k * pe.sd:.2f} {unit} is {abs(z):.1f} "
+                       f"prior σ from its prior {k * pe.prior_mean:.2f} ± {k * pe.prior_sd:.2f} "
+                       f"{unit}: the data contradict the prior (a sensor far from the default, "
+                       f"a timing error or an unmodelled baro/GNSS height error) and its ± "
+                       f"does not include that")
+    return out
+
+
+def with_prior_conflict_notes(result: Any) -> Any:
+    """``result`` (an ``Estimate``) with :func:`prior_conflict_notes` in
+    ``info["baro_prior_conflict"]`` and among its warnings (none, or already noted by a
+    nested re-run of the estimator: unchanged)."""
+    notes = prior_conflict_notes(result.baro)
+    if not notes or "baro_prior_conflict" in result.info:
+        return result
+    warns = [*(result.info.get("warnings") or []), *notes]
+    return result.replace(info={**result.info, "baro_prior_conflict": notes, "warnings": warns})

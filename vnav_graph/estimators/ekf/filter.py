@@ -60,7 +60,7 @@ from ...nav.arrays import nearest_index
 from ...nav.gaps import GAP_ACCEL_SD
 from ...nav.levelling import coarse_level
 from ...pages import small_pages
-from ...sensors.baro import without_implausible_scale
+from ...sensors.baro import with_prior_conflict_notes, without_implausible_scale
 from ...sensors.magnetometer import (
     MAG_BIAS_SD_UT,
     MAG_HEADING_FLOOR,
@@ -206,6 +206,7 @@ class _Run:
     innovations: dict[str, FloatArray]
     info: dict[str, Any]
     prior_sd: dict[str, float]
+    latency_mean: float  # the baro latency's prior mean [s]
     tau: tuple[float, float, float, float]
     has_baro: bool
 
@@ -462,7 +463,8 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
              "bias": gm_mean_prior_sd(bp.bias_sd, bp.bias_tau, float(t[-1] - t[0]))}
     rts = tuple(res[5:10]) if store_rts else None
     return _Run(t[gr.out_idx], *res[:4], t[gr.grid_idx], gr.grid_idx, gr.out_idx,
-                gr.cov_grid, res[4], rts, innov, info, prior, tau, baro is not None)
+                gr.cov_grid, res[4], rts, innov, info, prior, bp.latency_mean, tau,
+                baro is not None)
 
 
 def _report(drive: Drive, res: tuple[Any, ...], gr: _Grids, gaps: NDArrayInt, ini: Alignment,
@@ -532,9 +534,9 @@ def _estimate(name: str, run: _Run, traj: Trajectory, par: FloatArray, cov: Floa
             bias_mean_sd = float(np.mean(np.sqrt(np.clip(cov[:, 17, 17], 0, None))))
         baro = BaroEstimate(
             scale=ParamEstimate(float(par[-1, km.PSC]), float(np.sqrt(last[15, 15])),
-                                run.prior_sd["scale"]),
+                                run.prior_sd["scale"], 0.0),
             latency_s=ParamEstimate(float(par[-1, km.PTD]), float(np.sqrt(last[16, 16])),
-                                    run.prior_sd["latency"]),
+                                    run.prior_sd["latency"], run.latency_mean),
             bias_m=ParamEstimate(float(np.mean(par[:, km.PBB])), bias_mean_sd,
                                  run.prior_sd["bias"]),
         )
@@ -567,8 +569,8 @@ class EKF:
         with small_pages():  # numpy's large arrays without huge-page faults (vnav_graph.pages)
             est = without_contradicting_mag(self._run(drive), self.config,
                                             lambda cfg: type(self)(cfg)._run(drive))
-            return without_implausible_scale(est, self.config,
-                                             lambda cfg: type(self)(cfg).run(drive))
+            return with_prior_conflict_notes(without_implausible_scale(
+                est, self.config, lambda cfg: type(self)(cfg).run(drive)))
 
     def _run(self, drive: Drive) -> Estimate:
         t0 = time.perf_counter()

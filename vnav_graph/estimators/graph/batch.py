@@ -39,7 +39,7 @@ import numpy as np
 from gtsam.symbol_shorthand import A, B, C, K, V, X
 
 from ...geo.frames import mat_to_quat, ned_to_lla
-from ...sensors.baro import without_implausible_scale
+from ...sensors.baro import with_prior_conflict_notes, without_implausible_scale
 from ...sensors.magnetometer import without_contradicting_mag
 from ...sensors.noise import gm_mean_prior_sd
 from ...types import (
@@ -236,8 +236,9 @@ def outputs(P: Problem, res: BatchResult, pri: dict[str, float],
     dur = float(P.t_kf[-1] - P.t_kf[0])
     b_prior = gm_mean_prior_sd(pri["b_sd"], pri["b_tau"], dur)
     baro = BaroEstimate(
-        scale=ParamEstimate(float(kc[0]), float(np.sqrt(pk[0, 0])), pri["s_sd"]),
-        latency_s=ParamEstimate(float(kc[1]), float(np.sqrt(pk[1, 1])), pri["tau_sd"]),
+        scale=ParamEstimate(float(kc[0]), float(np.sqrt(pk[0, 0])), pri["s_sd"], 0.0),
+        latency_s=ParamEstimate(float(kc[1]), float(np.sqrt(pk[1, 1])), pri["tau_sd"],
+                                pri["tau0"]),
         bias_m=ParamEstimate(b_mean, b_sd, b_prior),
     )
     obs = {}
@@ -309,9 +310,10 @@ class GraphBatch:
         def rerun(cfg: GraphConfig) -> Estimate:
             return GraphBatch(cfg, self.extensions).run(drive)
 
-        # the post-solve hard-iron and baro-scale checks of both families
-        return without_implausible_scale(without_contradicting_mag(est, self.config, rerun),
-                                         self.config, rerun)
+        # the post-solve hard-iron and baro-scale checks of both families, then the
+        # calibration's prior-conflict notes
+        return with_prior_conflict_notes(without_implausible_scale(
+            without_contradicting_mag(est, self.config, rerun), self.config, rerun))
 
     def _run(self, drive: Drive) -> Estimate:
         t0 = time.perf_counter()

@@ -53,7 +53,7 @@ import numpy as np
 from gtsam.symbol_shorthand import A, B, C, G, K, V, X
 
 from ...geo.frames import mat_to_quat, ned_to_lla, quat_to_mat
-from ...sensors.baro import without_implausible_scale
+from ...sensors.baro import with_prior_conflict_notes, without_implausible_scale
 from ...sensors.magnetometer import without_contradicting_mag
 from ...types import Drive, Estimate, Trajectory
 from . import factors as gf
@@ -134,8 +134,8 @@ class GraphISAM2:
         def rerun(cfg: GraphConfig) -> Estimate:
             return GraphISAM2(cfg, self.extensions).run(drive)
 
-        return without_implausible_scale(without_contradicting_mag(est, self.config, rerun),
-                                         self.config, rerun)
+        return with_prior_conflict_notes(without_implausible_scale(
+            without_contradicting_mag(est, self.config, rerun), self.config, rerun))
 
     def _run(self, drive: Drive, cfg: GraphConfig, robust: bool, t_start: float,
              fallback: str | None) -> Estimate:

@@ -71,7 +71,7 @@ from ...geo.earth import gravity_scalar, radii, radii_scalar
 from ...nav.arrays import outer, put
 from ...nav.gaps import GAP_ACCEL_SD, cv_bridge_noise, gap_threshold
 from ...nav.gnss_gate import NO_LIMIT, REFUSE, height_gate, new_gate_state
-from ...sensors.baro import baro_jacobian, measure_baro
+from ...sensors.baro import baro_jacobian, measure_baro, with_prior_conflict_notes
 from ...sensors.model import SensorModel, sensor_model
 from ...sensors.noise import gm_process_var, gm_transition
 from ...types import (
@@ -517,8 +517,9 @@ class VEKF7:
         lla = np.column_stack([np.full(n, np.nan), np.full(n, np.nan), res.h])
         vel = np.column_stack([np.full(n, np.nan), np.full(n, np.nan), -res.v])
         baro = BaroEstimate(
-            scale=ParamEstimate(float(nom[IS]), float(np.sqrt(p[IS, IS])), nz.s_sd),
-            latency_s=ParamEstimate(float(nom[ITD]), float(np.sqrt(p[ITD, ITD])), nz.td_sd),
+            scale=ParamEstimate(float(nom[IS]), float(np.sqrt(p[IS, IS])), nz.s_sd, 0.0),
+            latency_s=ParamEstimate(float(nom[ITD]), float(np.sqrt(p[ITD, ITD])), nz.td_sd,
+                                    nz.td0),
             bias_m=ParamEstimate(float(nom[II] / dur), float(np.sqrt(p[II, II]) / dur),
                                  nz.b_sd),
         )
@@ -530,14 +531,14 @@ class VEKF7:
             "accel_scale_z_sd": float(np.sqrt(p[IK, IK])),
             "baro_bias_final": float(nom[IBB]),
         }
-        return Estimate(
+        return with_prior_conflict_notes(Estimate(
             estimator=self.name, trajectory=Trajectory(t, lla, vel),
             provides=frozenset({"alt", "vel_d", "baro", "cov"}),
             cov=_to_error_state(np.array(res.p_cov)), t_cov=np.array(res.t_cov), baro=baro,
             runtime_s=time.perf_counter() - t_start,
             innovations={k: np.asarray(v) for k, v in res.innov.items()},
             info=info, config=cfg,
-        )
+        ))
 
 
 # ERROR_STATE rows (estimated − true = −x): pos_n[2] down = −h → +δh_i; vel_n[2] = −v_up →
