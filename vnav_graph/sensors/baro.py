@@ -193,8 +193,9 @@ def prior_conflict_notes(baro: Any) -> list[str]:
     """One note per calibration parameter of ``baro`` (a ``BaroEstimate``: scale, latency)
     whose estimate lies more than ``PRIOR_CONFLICT_Z`` prior σ from its prior mean."""
     out = []
-    for name, unit, k in (("scale", "%", 100.0), ("latency", "s", 1.0)):
-        pe = getattr(baro, "scale" if name == "scale" else "latency_s", None) if baro else None
+    for attr, name, unit, k in (("scale", "scale", "%", 100.0),
+                                ("latency_s", "latency", "s", 1.0)):
+        pe = getattr(baro, attr, None)
         if pe is None or pe.prior_mean is None or not pe.prior_sd or pe.sd is None:
             continue
         z = (pe.est - pe.prior_mean) / pe.prior_sd
