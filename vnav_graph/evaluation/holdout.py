@@ -259,10 +259,11 @@ def run_holdout(drive: Drive, estimators: Sequence[str] | None = None, outage_s:
             continue
         try:
             s = score(r.estimate, drive, reference, windows, given=~withheld)
-            s.block["warnings"] = [str(x) for x in (r.estimate.info or {}).get("warnings") or []]
+            info = r.estimate.info or {}
+            s.block["warnings"] = [str(x) for x in info.get("warnings") or []]
             # of those, the baro calibration's prior conflicts (sensors.baro): data, not solver
-            s.block["baro_prior_conflict"] = [
-                str(x) for x in (r.estimate.info or {}).get("baro_prior_conflict") or []]
+            s.block["baro_prior_conflict"] = [str(x) for x in
+                                              info.get("baro_prior_conflict") or []]
             s.block["baro"] = _baro_block(r.estimate)
             results[r.name], series[r.name] = s.block, s
         except Exception as exc:  # one estimator's failure is data, not a crash

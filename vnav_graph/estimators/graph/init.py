@@ -9,9 +9,7 @@ import numpy as np
 from ...geo.frames import ned_to_lla, quat_to_mat, skew
 from ...nav.arrays import nearest_index
 from ...nav.rotations import so3_exp
-from ...types import (
-    FloatArray,
-)
+from ...types import ERROR_STATE, FloatArray
 from . import factors as gf
 from .builders import level
 from .problem import Problem
@@ -180,7 +178,6 @@ def filter_attitude(P: Problem, rot: FloatArray) -> bool:
         compass = P.cfg.use_mag and usable(P.drive.mag)[0]
         if compass or P.drive.meta.get("vehicle") not in HOVERING:
             return False
-    from ...types import ERROR_STATE
     from ..ekf.filter import EKF, EkfConfig
 
     try:

@@ -109,8 +109,7 @@ def estimate_info(P: Any, cfg: GraphConfig, res: Any, out: dict[str, Any], upd_m
         "segments": n_seg,
         "isam2_fallback": fallback,
         # keyframe 0's attitude, where the online pass starts (graph.init.initial_states)
-        "init_attitude": P.init_attitude,
-        **({"init_note": P.init_note} if P.init_note else {}),
+        **P.init_info(),
         "warnings": solver_warnings(res, cfg, "final smoothing pass", name)
         + ([] if fallback is None else [
             f"iSAM2 update failed and was retried with dogleg ({fallback})"]),

@@ -122,6 +122,11 @@ class Problem:
     init_attitude: str = "triad"
     init_note: str = ""
 
+    def init_info(self) -> dict[str, str]:
+        """``info["init_attitude"]`` (and ``init_note`` when there is one) of both smoothers."""
+        return {"init_attitude": self.init_attitude,
+                **({"init_note": self.init_note} if self.init_note else {})}
+
     @property
     def gnss_rejected(self) -> int:
         return int(np.sum(~self.g_use & (self.g_kf >= -1)))
