@@ -1,4 +1,5 @@
-"""Command-line front end: ``vnav-graph simulate | run | bench | holdout | calibrate-baro | list``.
+"""Command-line front end: ``vnav-graph simulate | run | export | bench | holdout | calibrate-baro |
+list``.
 
 Thin: parses arguments and calls library functions. Any bad input ends with one line on
 stderr and exit code 2 (no traceback, nothing written half-way); ``VNAV_DEBUG=1`` shows
@@ -16,6 +17,7 @@ import time
 import traceback
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 EXIT_BAD_INPUT = 2
 
@@ -29,6 +31,15 @@ def _positive_float(s: str) -> float:
     if not v > 0:
         raise argparse.ArgumentTypeError(f"must be > 0, got {s}")
     return v
+
+
+def _export_formats(s: str) -> list[str]:
+    from .export import parse_formats
+
+    try:
+        return parse_formats(s)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def _extension_args(p: argparse.ArgumentParser, config: bool = True) -> None:
@@ -86,7 +97,26 @@ def build_parser() -> argparse.ArgumentParser:
                         "step)")
     r.add_argument("--no-holdout", action="store_true",
                    help="real logs: skip the withheld-GNSS scoring run (metrics become null)")
+    r.add_argument("--export", type=_export_formats, default=None, metavar="FORMATS",
+                   help="also export the trajectories at the end: comma-separated "
+                        "csv,kml,gpx,tum (into OUT/export/; see 'vnav-graph export')")
     _extension_args(r)
+
+    x = sub.add_parser(
+        "export", help="export a finished run's trajectories as CSV, KML, GPX or TUM",
+        description="Write OUT_DIR/export/<estimator>.<format> (and truth.<format> where the "
+                    "drive has a truth, and all.kml with every track) from the folder a "
+                    "'vnav-graph run --out OUT_DIR' wrote. csv: the Parquet's columns and "
+                    "units with a commented header; kml: tracks (absolute altitude) and the "
+                    "GNSS windows; gpx: track with elevation, UTC time where the drive has "
+                    "one; tum: 'timestamp x y z qx qy qz qw' in local NED (evo). "
+                    "Vertical-only estimators export as CSV only.")
+    x.add_argument("run_dir", metavar="OUT_DIR", help="output folder of 'vnav-graph run'")
+    x.add_argument("--format", dest="formats", type=_export_formats, required=True,
+                   metavar="FORMATS", help="comma-separated: csv,kml,gpx,tum")
+    x.add_argument("--estimators", type=_csv_list, default=None,
+                   help="comma-separated names (default: every estimate in OUT_DIR, and "
+                        "truth)")
 
     b = sub.add_parser("bench", help="Monte Carlo over scenarios x seeds x estimators")
     b.add_argument("--quick", action="store_true")
@@ -194,10 +224,18 @@ def cmd_run(args: argparse.Namespace) -> int:
     except ModuleNotFoundError as exc:
         if exc.name != "vnav_graph.report":
             raise
+    from .export import write_run_info
+
+    writers.append(write_run_info)
     with stage(f"writing results, plots and report to {out}", mode):
         write_outputs(out, summary, results, drive, writers)
+    if args.export:
+        with stage(f"exporting {','.join(args.export)} to {out / 'export'}", mode):
+            exported = _export(out, args.export, None)
     print(format_table(summary))
     # the wall time of the whole command (a first run's compile included): what a user waited
+    if args.export:
+        _print_export(exported)
     print(f"\nwrote {out / 'summary.json'} (run took {time.perf_counter() - t_start:.1f} s)")
     from .pipeline import run_status
 
@@ -205,6 +243,24 @@ def cmd_run(args: argparse.Namespace) -> int:
     if line:
         print(f"vnav-graph: {line}", file=sys.stderr)
     return code
+
+
+def _export(out: Path, formats: list[str], estimators: list[str] | None) -> Any:
+    from .export import export_run
+
+    return export_run(out, formats, estimators)
+
+
+def _print_export(res: Any) -> None:
+    for why in res.skipped:
+        print(f"export: skipped {why}")
+    folders = sorted({str(p.parent) for p in res.written})
+    print(f"export: wrote {len(res.written)} file(s) to {', '.join(folders) or '(nothing)'}")
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    _print_export(_export(Path(args.run_dir), args.formats, args.estimators))
+    return 0
 
 
 def cmd_list(args: argparse.Namespace) -> int:
@@ -219,6 +275,7 @@ def cmd_list(args: argparse.Namespace) -> int:
 COMMANDS = {
     "simulate": cmd_simulate,
     "run": cmd_run,
+    "export": cmd_export,
     "list": cmd_list,
     "bench": lambda a: _dispatch("vnav_graph.evaluation.montecarlo:cli_bench", a),
     "holdout": lambda a: _dispatch("vnav_graph.evaluation.holdout:cli_holdout", a),

@@ -444,7 +444,7 @@ def estimate_table(est: Estimate, origin_lla: Any = None) -> Any:
 
 # files a run owns in its output directory (removed when a later run does not write them again)
 RUN_OUTPUTS = ("summary.json", "summary.txt", "report.html", "estimates/*.parquet",
-               "plots/*.png")
+               "plots/*.png", "drive.json", "truth.parquet", "export/*")
 
 
 def write_outputs(

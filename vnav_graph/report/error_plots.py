@@ -22,6 +22,7 @@ import numpy as np
 from . import canvas
 from .errors import GIVEN, TRUTH, ErrorSeries, ErrorSet, from_holdout
 from .groups import group_names, robust_limits
+from .palette import estimator_color
 
 _COLOR = {TRUTH: "tab:red", GIVEN: "tab:purple"}
 
@@ -133,7 +134,8 @@ def _overlay(es: ErrorSet, pick: Any, values: Mapping[str, float | None], spec: 
             x, e = xaxis.map(by_name[n].t, pick(by_name[n]))
             clip = n in lims.clipped
             (handles[i],) = ax.plot(x, e, lw=0.6 if clip else 0.85, alpha=0.5 if clip else 1.0,
-                                    color=f"C{i}", label=f"{n} ({_value(values, n, spec, unit)})")
+                                    color=estimator_color(n),
+                                    label=f"{n} ({_value(values, n, spec, unit)})")
         ax.axhline(0.0, color="k", lw=0.5)
         ax.set_ylim(-lims.lim, lims.lim)
         _clip_text(ax, lims.clipped, unit, prefix=True)

@@ -25,6 +25,7 @@ import numpy as np
 from ..types import ERROR_STATE, Drive, Estimate, FloatArray
 from . import canvas
 from .canvas import decimate
+from .palette import estimator_color
 
 _IDX = {"scale": ERROR_STATE["baro_scale"].start, "latency_s": ERROR_STATE["baro_latency"].start,
         "bias_m": ERROR_STATE["baro_bias"].start}
@@ -155,7 +156,8 @@ def plot_baro_convergence(drive: Drive, results: Sequence[Any],
                 if key in h:
                     t, sd = h[key]
                     s = decimate(t.size)
-                    ax.plot(t[s], sd[s] * sc, lw=0.9, label=name)
+                    ax.plot(t[s], sd[s] * sc, lw=0.9, label=name,
+                            color=estimator_color(name))
             ax.set_yscale("log")
             ax.set_ylabel("σ of " + label, fontsize=8)
         else:
@@ -164,7 +166,8 @@ def plot_baro_convergence(drive: Drive, results: Sequence[Any],
                     continue
                 t, v, sd = h[key]
                 s = decimate(t.size)
-                (line,) = ax.plot(t[s], v[s] * sc, lw=0.9, label=name)
+                (line,) = ax.plot(t[s], v[s] * sc, lw=0.9, label=name,
+                                  color=estimator_color(name))
                 if sd is not None:
                     ax.fill_between(t[s], (v[s] - sd[s]) * sc, (v[s] + sd[s]) * sc,
                                     color=line.get_color(), alpha=0.15, lw=0)

@@ -265,6 +265,35 @@ def decimal_year_unix(seconds: Any) -> float | None:
     return round(float(decimal_year_from_datetime(datetime.fromtimestamp(float(ok[0]), UTC))), 4)
 
 
+GPS_EPOCH_UNIX_S = 315964800.0  # 1980-01-06T00:00:00Z
+# GPS - UTC [s] from the Unix time each leap second took effect (13 s before 2006)
+_GPS_LEAPS = ((1136073600.0, 14.0), (1230768000.0, 15.0), (1341100800.0, 16.0),
+              (1435708800.0, 17.0), (1483228800.0, 18.0))
+
+
+def gps_to_unix(gps_s: Any) -> np.ndarray:
+    """GPS seconds (week * 604800 + time of week) → Unix time [s, UTC]."""
+    u = np.asarray(gps_s, dtype=float) + GPS_EPOCH_UNIX_S
+    leap = np.full(u.shape, 13.0)
+    for start, n in _GPS_LEAPS:
+        leap = np.where(u - n >= start, n, leap)
+    return u - leap
+
+
+def t0_unix_meta(unix_s: Any, t: Any) -> dict[str, float]:
+    """``{"t0_unix_s": x}``: the Unix time [s, UTC] of t = 0 on the drive's clock, the median
+    of (absolute time - drive-clock stamp) over the samples that have both; {} without a
+    plausible Unix time (1973..2286). Export uses it for UTC time stamps (GPX)."""
+    u, tt = np.asarray(unix_s, dtype=float), np.asarray(t, dtype=float)
+    d = (u - tt)[np.isfinite(u) & np.isfinite(tt) & (u > 0)]
+    if d.size == 0:
+        return {}
+    t0 = float(np.median(d))
+    if not 1e8 <= t0 + float(np.nanmax(tt)) < 1e10:
+        return {}
+    return {"t0_unix_s": t0}
+
+
 def year_meta(year: float | None) -> dict[str, float]:
     """``{"decimal_year": year}``, or {} when the log has no date."""
     return {} if year is None else {"decimal_year": year}

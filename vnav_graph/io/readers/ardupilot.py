@@ -80,11 +80,13 @@ from ._common import (
     find_gaps,
     finite_rows,
     fit_clock,
+    gps_to_unix,
     local_to_gps_seconds,
     mag_stream,
     monotonic_mask,
     onboard_block,
     pressure_altitude,
+    t0_unix_meta,
     valid_pressure,
 )
 
@@ -339,6 +341,9 @@ def read_dataflash(path: str | Path, clock: str = "auto") -> Drive:
         "boot_clock_per_gps_second": report.clock_rate,
         **report.as_meta(),
     }
+    if fixes.clock_fit is not None:  # GPS time of the fixes: the drive's absolute time
+        ok = fixes.gps_time > 1500 * 604800.0  # with a week number (after 2008)
+        meta.update(t0_unix_meta(gps_to_unix(fixes.gps_time[ok]), t_gnss[ok]))
     year = _decimal_year(fixes.gps_time)
     if year is not None:
         meta["decimal_year"] = year  # the date of the Earth's field (geo.magfield)

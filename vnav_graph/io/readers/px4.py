@@ -44,6 +44,7 @@ from ._common import (
     monotonic_mask,
     onboard_block,
     pressure_altitude,
+    t0_unix_meta,
     valid_pressure,
     year_meta,
 )
@@ -137,6 +138,7 @@ def read_ulog(path: str | Path) -> Drive:
     mag = _read_mag(ulog, report, t_imu)
     meta: dict[str, Any] = {
         **year_meta(_gps_year(ulog)),
+        **_gps_t0_unix(ulog),
         "source": "log", "name": path.stem, "format": "px4-ulog",
         "clock": "PX4 boot time [s]",
         "imu_frame": "PX4 body frame (forward-right-down), used as logged",
@@ -173,6 +175,14 @@ def _read_mag(ulog: Any, report: Report, t_imu: np.ndarray) -> MagStream | None:
             return mag_stream(_stamp(d), field, MAG_SD_UT, report, t_imu, name)
     report.notes.append("no vehicle_magnetometer / sensor_mag topic: drive has no magnetometer")
     return None
+
+
+def _gps_t0_unix(ulog: Any) -> dict[str, float]:
+    """``t0_unix_meta`` from the receiver's UTC time (``time_utc_usec``, 0 before a fix)."""
+    g = _topic(ulog, "sensor_gps") or _topic(ulog, "vehicle_gps_position")
+    if g is None or "time_utc_usec" not in g:
+        return {}
+    return t0_unix_meta(np.asarray(g["time_utc_usec"], dtype=float) * 1e-6, _stamp(g))
 
 
 def _gps_year(ulog: Any) -> float | None:

@@ -88,6 +88,7 @@ from ._common import (
     mag_stream,
     monotonic_mask,
     pressure_altitude,
+    t0_unix_meta,
     valid_pressure,
     year_meta,
 )
@@ -398,6 +399,7 @@ def read_sensorlogger_folder(path: str | Path) -> Drive:
     report.notes.append("phone GNSS has no vertical velocity: vel_n not provided")
     meta = {
         **year_meta(_year_of(loc["time"] if "time" in loc.columns else None, folder)),
+        **_t0_unix(loc["time"] if "time" in loc.columns else None, t_l, folder),
         "source": "log", "name": folder.name, "format": "sensorlogger-folder",
         "vehicle": "unknown",  # a phone: carried on anything
         "device": meta_csv.get("device name"), "platform": platform or None,
@@ -450,6 +452,7 @@ def read_merged_csv(path: str | Path) -> Drive:
     report.notes.append("phone GNSS has no vertical velocity: vel_n not provided")
     meta = {
         **year_meta(_year_of(df["time"] if "time" in df.columns else None, path)),
+        **_t0_unix(df["time"] if "time" in df.columns else None, t, path, shift=0.5),
         "source": "log", "name": path.stem, "format": "sensorlogger-merged-1hz",
         "vehicle": "unknown",  # a phone: carried on anything
         "clock": "seconds since the first row's time + 0.5 s (bin centre)",
@@ -516,6 +519,19 @@ def _year_of(col: pd.Series | None, path: Path) -> float | None:
     except ValueError:
         return None
     return None if tc is None else decimal_year_unix(tc[0] + tc[1])
+
+
+def _t0_unix(col: pd.Series | None, t: np.ndarray, path: Path,
+             shift: float = 0.0) -> dict[str, float]:
+    """``t0_unix_meta`` of a time column beside the stamps ``t`` (``shift``: 0.5 s for the
+    merged CSV's bin centres); {} when the column holds no absolute time."""
+    if col is None:
+        return {}
+    try:
+        tc = _time_column(col, path)
+    except ValueError:
+        return {}
+    return {} if tc is None else t0_unix_meta(tc[0] + tc[1] + shift, t)
 
 
 def _merged_time(df: pd.DataFrame, path: Path) -> np.ndarray:
