@@ -8,6 +8,7 @@ never does.
 
 from __future__ import annotations
 
+import os
 import sys
 import threading
 import time
@@ -28,10 +29,22 @@ def mode_for(enabled: bool = True, stream: Any = None) -> Mode:
     return "bar" if isatty is not None and isatty() else "lines"
 
 
-def say(msg: str, mode: Mode) -> None:
-    """One progress line (``vnav-graph: msg``) unless progress is off."""
+def say(msg: str, mode: Mode, stream: Any = None) -> None:
+    """One progress line (``vnav-graph: msg``) unless progress is off (to ``stream``, default
+    ``sys.stderr``)."""
     if mode != "off":
-        print(f"vnav-graph: {msg}", file=sys.stderr, flush=True)
+        print(f"vnav-graph: {msg}", file=sys.stderr if stream is None else stream, flush=True)
+
+
+def _terminal_stderr() -> Any:
+    """A writer on a duplicate of the current standard-error descriptor, or None when stderr
+    has no descriptor (a test's capture object). A step's delayed announcement is written
+    there, so that it reaches the terminal even when the step itself captures descriptors 1
+    and 2 (``io.quiet`` around a log reader) and is never counted as the reader's output."""
+    try:
+        return os.fdopen(os.dup(sys.stderr.fileno()), "w", buffering=1)
+    except (OSError, ValueError, AttributeError):
+        return None
 
 
 @contextmanager
@@ -42,13 +55,17 @@ def stage(msg: str, mode: Mode, announce_after_s: float = 1.0) -> Iterator[None]
         yield
         return
     t0 = time.perf_counter()
-    timer = threading.Timer(announce_after_s, say, (f"{msg} ...", mode))
+    out = _terminal_stderr()
+    timer = threading.Timer(announce_after_s, say, (f"{msg} ...", mode, out))
     timer.daemon = True
     timer.start()
     try:
         yield
     finally:
         timer.cancel()
+        timer.join()
+        if out is not None:
+            out.close()
     if time.perf_counter() - t0 >= announce_after_s:
         say(f"{msg}: done in {time.perf_counter() - t0:.1f} s", mode)
 
