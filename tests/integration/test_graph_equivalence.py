@@ -1,6 +1,6 @@
 """Equivalence: ``graph-batch`` equals a Kalman filter + RTS smoother on the same vertical problem.
 
-Issue 5, item 5. A smoother is a linear least-squares solver once its factors are linearised;
+A smoother is a linear least-squares solver once its factors are linearised;
 a Kalman filter followed by a Rauch-Tung-Striebel smoother solves the same linear-Gaussian
 problem by a different algorithm (forward recursion + backward pass instead of Gauss-Newton
 on the whole graph + multifrontal elimination + GTSAM marginals). If both are given exactly
@@ -537,9 +537,9 @@ def test_ekf_rts_sigma_of_the_mean_baro_bias_equals_graph_batch(problem):
     its joint covariance (uᵀH⁻¹u), ekf-rts from the smoothed cross-covariances
     P_{k,m} = G_k P_{k+1,m} accumulated in its backward pass (``ekf.rts``). On one linear-
     Gaussian problem they agree (measured here: 0.2746 / 0.2703 m; within 1 % on default,
-    hill-drive and sortie drives), below the average of ekf-rts's pointwise σ (0.2959 m, its
-    report until session 39), which bounds the σ of a mean from above, and below the forward
-    ekf's (0.40 m). Both report the same prior (the GM mean's)."""
+    hill-drive and sortie drives), below the average of ekf-rts's pointwise σ (0.2959 m),
+    which bounds the σ of a mean from above, and below the forward ekf's (0.40 m). Both
+    report the same prior (the GM mean's)."""
     drive, est, _, _ = problem
     rts = EKFRTS().run(drive)
     fwd = EKF().run(drive)
