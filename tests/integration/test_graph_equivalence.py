@@ -13,7 +13,7 @@ The problem
 with a vertical specific force f, a tilt ψ only produces the horizontal acceleration f×ψ),
 GNSS heights at 1 Hz on keyframe epochs (σ 2 m), baro at 10 Hz with a scale error, a 0.1 s
 latency and a Gauss-Markov bias. The consumer IMU is used with its gyro noise (the scenario's
-ideal gyro made ``graph-batch`` fail at commit f1679ea, see the last-but-one test).
+ideal gyro makes GTSAM's elimination fail, see the last-but-one test).
 
 The vertical state per keyframe k is x_k = (p_k down [m], v_k down [m/s], a_k accel bias z
 [m/s²], b_k baro bias [m]) plus the constants (s, τd, κ) — κ the z accelerometer scale
@@ -482,8 +482,8 @@ def test_graph_batch_and_ekf_rts_agree_on_the_vertical_problem(problem):
 def test_graph_batch_runs_on_the_ideal_gyro_of_seed003():
     """The shipped seed003 scenario has an ideal gyro (noise density 0, bias σ 0). The floors
     in graph._setup then give a gyro-bias random walk of 1e-8 rad/s per keyframe; GTSAM's
-    elimination threw 'Indeterminate linear system' at commit f1679ea (regression test: the
-    own banded solver with Marquardt fallback solves it). Heights must be within 1 m rms of
+    elimination throws 'Indeterminate linear system' there; the own banded solver with its
+    Marquardt fallback solves it. Heights must be within 1 m rms of
     truth — GNSS σ 2 m averaged over 30 fixes plus the baro."""
     drive = simulate(load_scenario("seed003", duration_s=30.0), SEED)
     est = g.GraphBatch().run(drive)
