@@ -66,7 +66,7 @@ def test_car_1hz_holdout_isam2(data_dir: Path) -> None:
     e = r.doc["estimators"]["graph-isam2"]
     assert e["status"] == "ok", e["error"]
     # 93-min log, 1 Hz averaged IMU: low-rate settings (5 s keyframes) → ~1100 updates,
-    # measured 7.4 s, 213 s before the fix (runtime: benchmarks/bench_real_logs.py)
+    # measured 7.4 s, 213 s with the high-rate settings (runtime: benchmarks/bench_real_logs.py)
     # withheld-fix height RMSE measured 1.35 m (graph-batch 1.5 m); a diverged online pass
     # that the final batch pass could not repair ends metres above it
     assert e["alt_rmse_m"] < 3.0

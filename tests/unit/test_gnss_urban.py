@@ -1,6 +1,6 @@
 """Urban GNSS error model (Gauss-Markov errors, multipath bursts, random outages) and the
 hot-day barometer (``BaroSpec.isa_offset_k``), each against its defining statistic or a
-closed form; plus the guarantee that the defaults simulate exactly as before."""
+closed form; plus the guarantee that with those fields off a drive keeps its random draws."""
 
 from dataclasses import replace
 
