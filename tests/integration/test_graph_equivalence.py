@@ -197,7 +197,7 @@ class VerticalProblem:
             self.R, pos, vel, ba, self.b_hat, np.full(nk, self.s_hat), np.full(nk, self.tau_hat),
             np.array([0.0, 0.0, g0]) + dg - 2 * np.cross(omega_t, vel))
         self.dense = gf.dense_preintegration(imu.t, imu.gyro_b, imu.accel_b, kf_idx)
-        # priors on the first keyframe (graph._prior_factors): translation σ 10 m and velocity
+        # priors on the first keyframe (builders.prior_factors): translation σ 10 m and velocity
         # σ 2 m/s around the GNSS-initialised state, accel bias σ from the spec
         sp = imu.spec
         g_ned = lla_to_ned(drive.gnss.lla, origin)
@@ -481,7 +481,7 @@ def test_graph_batch_and_ekf_rts_agree_on_the_vertical_problem(problem):
 
 def test_graph_batch_runs_on_the_ideal_gyro_of_seed003():
     """The shipped seed003 scenario has an ideal gyro (noise density 0, bias σ 0). The floors
-    in graph._setup then give a gyro-bias random walk of 1e-8 rad/s per keyframe; GTSAM's
+    in problem.setup then give a gyro-bias random walk of 1e-8 rad/s per keyframe; GTSAM's
     elimination throws 'Indeterminate linear system' there; the own banded solver with its
     Marquardt fallback solves it. Heights must be within 1 m rms of
     truth — GNSS σ 2 m averaged over 30 fixes plus the baro."""
