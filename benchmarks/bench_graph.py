@@ -40,8 +40,7 @@ general_over_floor`` and (additive) ``peak_rss_mb_by_stage``, ``isam2_relineariz
   elsewhere the running maximum; the C heap is trimmed first, ``linalg.trim_heap``). A
   stage's peak includes what earlier stages left alive (the drive, the interpreter and the
   loaded numba kernels: ≈ 260 MB before the drive); each stage's estimate is released once
-  its numbers are read (until session 36 graph-batch's and the general path's, ≈ 12 MB
-  each, were alive under graph-isam2's stage).
+  its numbers are read (graph-batch's and the general path's hold ≈ 12 MB each).
 """
 
 from __future__ import annotations

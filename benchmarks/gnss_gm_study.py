@@ -1,4 +1,4 @@
-"""Does the Gauss-Markov GNSS height state help on the shared real logs? (issue 13, item 2)
+"""Does the Gauss-Markov GNSS height state help on the shared real logs?
 
     python benchmarks/gnss_gm_study.py [--data DIR] [--out DIR] [--sd M] [--tau S ...]
 

@@ -9,7 +9,7 @@ first part of a recording, a 60 s +15 m GNSS height plateau in mid-log (multipat
 the receiver), and other outage lengths (30 s, 90 s). Each variant runs ``run_holdout``
 with graph-batch, graph-isam2, ekf-rts and ekf and records, per estimator, status, altitude
 / horizontal RMSE, baro scale and warnings, plus graph-batch's altitude RMSE over
-ekf-rts's (issue 13's ratio). Writes ``DIR/log_variants.json`` and prints one line per
+ekf-rts's (the real-log goal's ratio). Writes ``DIR/log_variants.json`` and prints one line per
 variant and every warning. Absent logs are skipped. Nothing here is tuned to these
 variants: they are a check, like the hidden logs.
 

@@ -77,7 +77,7 @@ METRICS = (
     ("baro_latency_abs_err_s", "|baro latency error|", "ms", 1000.0, ".1f"),
     ("runtime_s", "runtime", "s", 1.0, ".2f"),
 )
-# Numbers read from the seed papers (docs: /seeds in the design brief). Where the extracted
+# Numbers read from the seed papers (titles in README.md). Where the extracted
 # text is ambiguous the note says so.
 PAPER = {
     "seed003_steady_sd_m": (1.2, "seed 003: steady altitude deviation 'near 1.2 m'"),

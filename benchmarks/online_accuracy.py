@@ -1,5 +1,5 @@
-"""Online (causal) accuracy: graph-isam2's online estimate against the forward ekf (issue 14,
-item 4), paired per seed on ``hill-drive`` and ``sortie``.
+"""Online (causal) accuracy: graph-isam2's online estimate against the forward ekf, paired
+per seed on ``hill-drive`` and ``sortie``.
 
 Both estimators run on the same simulated drive; their *online* trajectories are scored
 against the truth
@@ -13,7 +13,7 @@ against the truth
 Reported per seed: horizontal and vertical RMSE [m] of both; aggregates: their means, the
 ratios of the means, the number of seeds where graph-isam2 ≤ ekf, and the paired difference
 graph-isam2 − ekf (mean over seeds and its standard error, ``diff_mean`` / ``diff_se``).
-Goal (issue 14): the online graph at least as accurate as the ekf, horizontally and
+Goal: the online graph at least as accurate as the ekf, horizontally and
 vertically.
 
 Usage::

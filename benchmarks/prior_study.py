@@ -1,4 +1,4 @@
-"""Is the default real-log baro prior (``config.REAL_LOG_BARO``) honest? (issue 13, item 5b)
+"""Is the default real-log baro prior (``config.REAL_LOG_BARO``) honest?
 
 Monte Carlo over simulated scenarios × seeds: each simulated drive is handed to the estimators
 *as a real log* — its IMU and baro streams lose their spec (``spec=None``, what the log
@@ -7,7 +7,7 @@ from ``REAL_LOG_BARO``, exactly as on a shared log — and the estimated baro sc
 mean bias are compared with the simulation's truth: z = (estimate − truth) / σ, with the
 estimate, σ and truth taken from the ``baro`` block of summary.json
 (``vnav_graph.evaluation.metrics.baro_block``; bias truth = time average of b(t)). An honest σ
-gives rms z ≈ 1 over the seeds; the goal of issue 13 is 0.8 ≤ rms z ≤ 1.25 for every
+gives rms z ≈ 1 over the seeds; the goal is 0.8 ≤ rms z ≤ 1.25 for every
 scenario × estimator × parameter. With n seeds the rms z of an exactly calibrated σ scatters:
 ``rms_z_ci95`` is its χ²(n) 95 % interval (assumes zero-mean Gaussian z; n = 20 gives
 rms/1.31 … rms/0.69).
@@ -45,7 +45,7 @@ import numpy as np
 SCENARIOS = ("default", "hill-drive", "sortie")
 ESTIMATORS = ("ekf-rts", "graph-batch")
 PARAMS = ("scale", "latency_s", "bias_m")
-GOAL = (0.8, 1.25)  # issue 13 item 5b: rms z of every baro parameter
+GOAL = (0.8, 1.25)  # rms z of every baro parameter
 
 
 def as_real_log(drive: Any, keep_imu_spec: bool = False) -> Any:

@@ -6,7 +6,7 @@ Runs ``vnav_graph.evaluation.holdout.run_holdout`` (60 s windows, default spacin
 estimator, screened withheld GNSS) on each shared log present, writes
 ``DIR/real_logs_table.json`` (the holdout documents) and replaces the text between the
 markers ``<!-- holdout-table:begin -->`` and ``<!-- holdout-table:end -->`` of
-``docs/real_logs.md`` with the table, the issue-13 goals check (graph-batch against ekf-rts,
+``docs/real_logs.md`` with the table, the real-log goals check (graph-batch against ekf-rts,
 solver warnings, baro-scale agreement) and the screening counts.
 """
 
@@ -50,7 +50,7 @@ def render(docs: dict[str, dict[str, Any]]) -> str:
     ob = [docs[c].get("onboard") for c in cols]
     out.append("| onboard (autopilot, had GNSS) | " + " | ".join(
         "—" if not o else f"{o['alt_rmse_m']:.2f}*" for o in ob) + " |")
-    out += ["", "Goals of issue 13 (graph-batch against ekf-rts on screened withheld GNSS; "
+    out += ["", "Real-log goals (graph-batch against ekf-rts on screened withheld GNSS; "
             "baro scale s ± σ):", "",
             "| log | alt ratio (≤ 1.05) | horiz ratio (≤ 1.2) | solver warnings | "
             "s graph-batch | s graph-isam2 | s ekf-rts | batch vs isam2 [σ] | "

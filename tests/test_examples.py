@@ -87,29 +87,27 @@ def test_ex_custom_estimator(monkeypatch):
 def test_ex_calibrate_baro():
     res = load("ex_calibrate_baro").main(duration_s=300.0, seed=1)
     cal, t = res["calibration"], res["truth"]
-    assert t["scale"] == res["drive"].baro_truth.scale
     # OLS standard errors assume white residuals; the simulated bias b(t) is a Gauss-Markov
     # process (correlated), which makes the true error larger than the stated σ for the
     # scale and bias — allow 6σ there, 4σ for the latency (driven by white noise).
     assert abs(cal.latency_s - t["latency_s"]) < 4 * cal.latency_sd
     assert abs(cal.scale - t["scale"]) < 6 * cal.scale_sd
     assert abs(cal.bias_m - t["bias_m"]) < 6 * cal.bias_sd
-    if res["vekf7"] is not None:
-        v = res["vekf7"]["latency_s"]
-        if v["est"] is not None and v["sd"] is not None:
-            assert abs(v["est"] - v["truth"]) < 4 * v["sd"]  # 4σ: filter consistency
+    v = res["vekf7"]["latency_s"]  # vekf7 is in every build
+    assert v["est"] is not None and v["sd"] is not None and v["truth"] is not None
+    assert abs(v["est"] - v["truth"]) < 4 * v["sd"]  # 4σ: filter consistency
 
 
 def test_ex_compare_ekf_graph():
     res = load("ex_compare_ekf_graph").main(duration_s=60.0, seed=0)
     s = res["summary"]["estimators"]
     assert all(m["status"] == "ok" for m in s.values()), {k: m["error"] for k, m in s.items()}
-    for m in s.values():  # real-time factor = drive duration / runtime (closed form)
-        assert m["realtime_factor"] == pytest.approx(60.0 / m["runtime_s"], rel=1e-6)
-    if "ekf-rts" in s:
-        assert res["gains"]["smoothing_m"] == s["ekf"]["alt_rmse_m"] - s["ekf-rts"]["alt_rmse_m"]
-        assert res["gains"]["graph_m"] == (s["ekf-rts"]["alt_rmse_m"]
-                                           - s["graph-batch"]["alt_rmse_m"])
+    assert set(s) == {"ekf", "ekf-rts", "graph-batch"}
+    rmse = {k: m["alt_rmse_m"] for k, m in s.items()}
+    # smoothing pays: measured ekf 0.19 m, ekf-rts 0.033 m (gain 0.16 m) on 60 s of hill-drive
+    assert res["gains"]["smoothing_m"] > 0.5 * rmse["ekf"]
+    # the graph smoother solves the same problem: measured 0.037 m, 13 % above ekf-rts
+    assert rmse["graph-batch"] < 1.3 * rmse["ekf-rts"]
 
 
 def test_ex_graph_real_log():

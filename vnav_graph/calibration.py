@@ -17,7 +17,7 @@ multiplied by (1 + dSF) (``baro_jacobian``); the regression coefficient θ_Td is
 errors from the residual variance, cov = (MᵀM)⁻¹·σ̂², σ̂² = RSS/(N − 3), right only for white
 residuals. A real baro's bias is not a constant but a Gauss-Markov process (docs/design.md),
 so the residuals are correlated over the bias time constant and those standard errors are
-several times too small (issue 13: σ 10-16× smaller than the error on a sortie variant).
+several times too small (σ 10-16× smaller than the error on a sortie variant).
 ``calibrate_baro`` therefore solves the same regression by **generalised least squares** with
 the residual covariance of the shared baro model (``sensors.model``: the drive's bias σ_b
 and τ_b — the real-log prior on a log — and white baro plus GNSS height noise):

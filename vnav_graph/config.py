@@ -1,6 +1,6 @@
 """Configuration: frozen dataclasses with SI defaults and validation.
 
-Noise specs state their kind in the field name (STYLE.md §2.3):
+Noise specs state their kind in the field name:
 ``*_noise_density`` is a white-noise root PSD (rad/s/√Hz or m/s²/√Hz), ``*_bias_sd`` the
 steady-state sigma of a first-order Gauss-Markov bias with correlation time ``*_bias_tau``,
 ``*_bias_rw`` a bias random walk root PSD (rad/s/√s or m/s²/√s), ``*_scale_sd`` a random
@@ -265,12 +265,12 @@ class BaroSpec:
 # 6 K off the ISA alone makes 2 %; seed 001), 0.5 m of noise, and an unknown latency
 # N(0.1 s, 0.1 s) — expressed as a uniform range of that mean and σ (σ = width/√12), which
 # is how every estimator reads a latency prior.
-# Checked by benchmarks/prior_study.py (issue 13, 5b; docs/real_logs.md "Default real-log
-# baro prior"): on the simulated scenarios, whose biases drift 4–6× slower (q = 2σ²/τ
-# 0.010–0.014 m²/s against 0.056 here), the σ come out too wide (sortie rms z 0.5–0.6). A
-# slower default (τ 4 h) fixed that but made every shared log's withheld-GNSS altitude
-# worse (218: 0.67 → 1.06 m), and a faster one (τ 15 min) made them better (218: 0.30 m):
-# the shared logs' baro errors drift faster than the scenarios', so τ stays 1 h.
+# Checked by benchmarks/prior_study.py (docs/real_logs.md "Default real-log baro prior"):
+# on the simulated scenarios, whose biases drift 4–6× slower (q = 2σ²/τ 0.010–0.014 m²/s
+# against 0.056 here), the σ come out too wide (sortie rms z 0.5–0.6). A slower default
+# (τ 4 h) fixed that but made every shared log's withheld-GNSS altitude worse (218: 0.67 →
+# 1.06 m), and a faster one (τ 15 min) made them better (218: 0.30 m): the shared logs'
+# baro errors drift faster than the scenarios', so τ stays 1 h.
 REAL_LOG_LATENCY_S = 0.1
 REAL_LOG_LATENCY_SD = 0.1
 REAL_LOG_BARO = BaroSpec(

@@ -1,4 +1,4 @@
-"""Seeded corpus of corrupted and hostile inputs for every supported format (issue 16).
+"""Seeded corpus of corrupted and hostile inputs for every supported format.
 
 Nothing here is committed as data: every case is written at test time from
 

@@ -1,4 +1,4 @@
-"""One test per input defect of issue 16 (the corpus runs them all; these name them)."""
+"""One test per input defect (the corpus runs them all; these name them)."""
 
 from __future__ import annotations
 

@@ -76,6 +76,7 @@ def test_run_on_real_log_scores_against_withheld_gnss(tmp_path):
     m = s["estimators"]["vkf4"]
     assert m["status"] == "ok"
     # 200 s car cut, 1 Hz GNSS: the score is a real number of metres, not null or fake zero
-    assert m["alt_rmse_m"] is not None and 0.0 < m["alt_rmse_m"] < 50.0
+    # (measured 5.65 m against the one 60 s window of withheld phone fixes)
+    assert m["alt_rmse_m"] is not None and 0.0 < m["alt_rmse_m"] < 10.0
     assert m["nees_mean"] is None  # no reference for NEES on a real log
     assert s["estimators"]["vkf4"]["baro"]["bias_m"]["truth"] is None

@@ -1,7 +1,7 @@
 """``cold-start-phone``: a car pulling away from the first sample, logged as a phone logs
 (1 Hz position-only GNSS with σ_v 5 m, a 0.93 Hz barometer). graph-batch's baro latency is
 Monte-Carlo consistent there; the EKF's is not (its in-motion levelling misses the 1 Hz
-start and its vertical absorbs the tilt error, docs/graph.md "Session 33": ekf-rts latency
+start and its vertical absorbs the tilt error, docs/graph.md "Accuracy": ekf-rts latency
 −0.142 s on average, rms z 2.95, over 10 seeds)."""
 
 from __future__ import annotations

@@ -48,7 +48,7 @@ def test_nees_inside_chi2_band(monte_carlo):
     avg = np.mean(vals, axis=0)
     lo, hi = chi2.ppf([0.025, 0.975], N_SEEDS * dof) / N_SEEDS
     frac = np.mean((avg >= lo) & (avg <= hi))
-    # issue 4: the 20-seed average NEES lies in the two-sided 95 % band on >= 90 % of epochs
+    # the 20-seed average NEES lies in the two-sided 95 % band on >= 90 % of epochs
     assert frac >= 0.90, (frac, avg.mean())
     # and the grand mean is the number of degrees of freedom within 10 % (no systematic
     # optimism or pessimism hidden inside the band)
@@ -101,8 +101,8 @@ def test_baro_parameters_within_sigma(monte_carlo):
         v = np.asarray(v)
         # normalised errors of a consistent estimator are ~N(0,1) (bias_m: σ of the time
         # average from the smoothed cross-covariances, ``ekf.rts``); rms within 0.6-1.5 over
-        # the seeds (too wide a σ fails too: the pointwise average reported until session 39
-        # was an upper bound) and no seed beyond 3.5 sigma. Measured: scale 1.18, latency
+        # the seeds (too wide a σ fails too: the average of the pointwise σ's is
+        # an upper bound) and no seed beyond 3.5 sigma. Measured: scale 1.18, latency
         # 0.82, bias 1.23
         assert 0.6 < np.sqrt(np.mean(v**2)) < 1.5, (k, v)
         assert np.max(np.abs(v)) < 3.5, (k, v)
@@ -133,7 +133,7 @@ def test_noiseless_drive_converges_to_truth():
 def sortie_outage():
     # first outage of the sortie (400-460 s); the drive ends 20 s after it. (Seed 2 is a
     # known 3-sigma draw of the scale/bias split: its outage altitude error reaches 2.5 m at
-    # sigma 0.85 m; see the issue-4 closing note.)
+    # sigma 0.85 m.)
     d = simulate("sortie", 0, duration_s=480.0)
     return d, EKF().run(d)
 
@@ -206,7 +206,7 @@ def test_nominal_biases_decay_as_the_gauss_markov_model_says():
     """Without measurements (a GNSS outage on a drive without baro or compass) the ekf's
     nominal gyro and accelerometer biases follow the mean of their Gauss-Markov model,
     b(t1) = e^{−(t1 − t0)/τ}·b(t0) (``kernel.decay_gm``), the step the graph's bias link takes
-    (``sensors.noise.imu_bias_step``). Before session 29 they were held constant."""
+    (``sensors.noise.imu_bias_step``)."""
     d = simulate(load_scenario("hill-drive", duration_s=380.0), 3).replace(baro=None)
     assert d.mag is None
     est = EKF().run(d)

@@ -1,4 +1,4 @@
-"""The optional Gauss-Markov GNSS height error state (issue 13, item 2), ``ekf-rts`` and
+"""The optional Gauss-Markov GNSS height error state, ``ekf-rts`` and
 ``graph-batch`` (the same model: ``sensors.model.GnssHeightGM``; the graph's G(k) chain).
 
 Drive: hill-drive, 300 s, GNSS height error = white 0.5 m + Gauss-Markov σ 3 m, τ 120 s (the

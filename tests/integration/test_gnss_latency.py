@@ -1,6 +1,6 @@
 """A receiver whose fixes are valid ``GnssSpec.latency_s`` before their stamps: the simulator
-makes such a drive, and every smoother takes the fixes at their time of validity (the ekf did;
-the graph smoothers used the stamps until session 31)."""
+makes such a drive, and every smoother takes the fixes at their time of validity (with the stamps
+instead, graph-batch's horizontal RMSE is 2.23 m)."""
 
 from __future__ import annotations
 

@@ -46,9 +46,8 @@ def test_noiseless_drive_recovers_truth(noiseless_hill):
     # yaw from 1 cm fixes over 100 m baselines: ≈ 1e-4 rad; 2 mrad leaves margin for turns
     assert np.max(np.abs(att)) < 2e-3
     # baro calibration: noise-free altimeter, but the 1 cm GNSS over this drive's height span
-    # determines s only to σ ≈ 9e-5 (reported): within 3σ and 0.03 %; τd to 5 ms. (The bound
-    # was 1e-4 ≈ 1.1σ; measured errors −0.7e-4 and, with the second-order IMU step of
-    # session 31 that cut the horizontal error 4×, −1.1e-4.)
+    # determines s only to σ ≈ 9e-5 (reported): within 3σ and 0.03 %; τd to 5 ms. Measured
+    # −1.1e-4 with the second-order IMU step, −0.7e-4 without it.
     assert abs(e.baro.scale.est - d.baro_truth.scale) < 3 * e.baro.scale.sd
     assert abs(e.baro.scale.est - d.baro_truth.scale) < 3e-4
     assert abs(e.baro.latency_s.est - d.baro_truth.latency_s) < 5e-3
@@ -162,8 +161,8 @@ def test_imu_logging_gap_is_bridged_not_preintegrated(monkeypatch):
 def test_isam2_online_takes_gnss_back_at_once_after_an_outage():
     """The online (filter-like) estimate uses every fix that has arrived: at the first
     keyframe after hill-drive's 60 s GNSS outage it is back at GNSS accuracy, as the forward
-    ekf is (measured 1.7 m, ekf 1.8 m; before session 25 it was still 84 m off there, and 88 m
-    one keyframe later, because fixes waited one or two keyframes)."""
+    ekf is (measured 1.7 m, ekf 1.8 m; with fixes waiting one or two keyframes it was 84 m off
+    there, and 88 m one keyframe later)."""
     from vnav_graph.estimators.ekf.filter import EKF
     from vnav_graph.estimators.graph import GraphISAM2
     from vnav_graph.estimators.graph.problem import setup

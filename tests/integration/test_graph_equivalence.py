@@ -1,6 +1,6 @@
 """Equivalence: ``graph-batch`` equals a Kalman filter + RTS smoother on the same vertical problem.
 
-Issue 5, item 5. A smoother is a linear least-squares solver once its factors are linearised;
+A smoother is a linear least-squares solver once its factors are linearised;
 a Kalman filter followed by a Rauch-Tung-Striebel smoother solves the same linear-Gaussian
 problem by a different algorithm (forward recursion + backward pass instead of Gauss-Newton
 on the whole graph + multifrontal elimination + GTSAM marginals). If both are given exactly
@@ -13,7 +13,7 @@ The problem
 with a vertical specific force f, a tilt ψ only produces the horizontal acceleration f×ψ),
 GNSS heights at 1 Hz on keyframe epochs (σ 2 m), baro at 10 Hz with a scale error, a 0.1 s
 latency and a Gauss-Markov bias. The consumer IMU is used with its gyro noise (the scenario's
-ideal gyro made ``graph-batch`` fail at commit f1679ea, see the last-but-one test).
+ideal gyro makes GTSAM's elimination fail, see the last-but-one test).
 
 The vertical state per keyframe k is x_k = (p_k down [m], v_k down [m/s], a_k accel bias z
 [m/s²], b_k baro bias [m]) plus the constants (s, τd, κ) — κ the z accelerometer scale
@@ -197,7 +197,7 @@ class VerticalProblem:
             self.R, pos, vel, ba, self.b_hat, np.full(nk, self.s_hat), np.full(nk, self.tau_hat),
             np.array([0.0, 0.0, g0]) + dg - 2 * np.cross(omega_t, vel))
         self.dense = gf.dense_preintegration(imu.t, imu.gyro_b, imu.accel_b, kf_idx)
-        # priors on the first keyframe (graph._prior_factors): translation σ 10 m and velocity
+        # priors on the first keyframe (builders.prior_factors): translation σ 10 m and velocity
         # σ 2 m/s around the GNSS-initialised state, accel bias σ from the spec
         sp = imu.spec
         g_ned = lla_to_ned(drive.gnss.lla, origin)
@@ -481,9 +481,9 @@ def test_graph_batch_and_ekf_rts_agree_on_the_vertical_problem(problem):
 
 def test_graph_batch_runs_on_the_ideal_gyro_of_seed003():
     """The shipped seed003 scenario has an ideal gyro (noise density 0, bias σ 0). The floors
-    in graph._setup then give a gyro-bias random walk of 1e-8 rad/s per keyframe; GTSAM's
-    elimination threw 'Indeterminate linear system' at commit f1679ea (regression test: the
-    own banded solver with Marquardt fallback solves it). Heights must be within 1 m rms of
+    in problem.setup then give a gyro-bias random walk of 1e-8 rad/s per keyframe; GTSAM's
+    elimination throws 'Indeterminate linear system' there; the own banded solver with its
+    Marquardt fallback solves it. Heights must be within 1 m rms of
     truth — GNSS σ 2 m averaged over 30 fixes plus the baro."""
     drive = simulate(load_scenario("seed003", duration_s=30.0), SEED)
     est = g.GraphBatch().run(drive)
@@ -537,9 +537,9 @@ def test_ekf_rts_sigma_of_the_mean_baro_bias_equals_graph_batch(problem):
     its joint covariance (uᵀH⁻¹u), ekf-rts from the smoothed cross-covariances
     P_{k,m} = G_k P_{k+1,m} accumulated in its backward pass (``ekf.rts``). On one linear-
     Gaussian problem they agree (measured here: 0.2746 / 0.2703 m; within 1 % on default,
-    hill-drive and sortie drives), below the average of ekf-rts's pointwise σ (0.2959 m, its
-    report until session 39), which bounds the σ of a mean from above, and below the forward
-    ekf's (0.40 m). Both report the same prior (the GM mean's)."""
+    hill-drive and sortie drives), below the average of ekf-rts's pointwise σ (0.2959 m),
+    which bounds the σ of a mean from above, and below the forward ekf's (0.40 m). Both
+    report the same prior (the GM mean's)."""
     drive, est, _, _ = problem
     rts = EKFRTS().run(drive)
     fwd = EKF().run(drive)

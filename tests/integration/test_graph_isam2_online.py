@@ -1,4 +1,4 @@
-"""graph-isam2's online estimate is the filtering optimum (issue 14, item 4).
+"""graph-isam2's online estimate is the filtering optimum.
 
 The online estimate of keyframe k is what iSAM2 holds right after the update that created k.
 If every term is relinearised as it should be, that is the maximum a posteriori estimate of
@@ -80,10 +80,10 @@ def test_own_estimate_is_returned_and_checked_by_the_batch_pass(monkeypatch):
 def test_the_check_solves_graph_batchs_problem():
     """The batch pass that checks iSAM2's estimate solves graph-batch's problem: its priors
     (keyframe 0's, the gaps') come from the initial states, as iSAM2's and graph-batch's
-    do, so it ends at graph-batch's optimum whatever iSAM2 returned. Until session 32 they
-    were built around iSAM2's own estimate: with a position-only receiver (heading held
-    weakly, so keyframe 0's prior matters) that pass ended 4.5 below graph-batch's cost
-    (3402.7 against 3407.2), and iSAM2's estimate was judged in a problem of its own making.
+    do, so it ends at graph-batch's optimum whatever iSAM2 returned. Built around iSAM2's own
+    estimate instead, with a position-only receiver (heading held weakly, so keyframe 0's
+    prior matters) that pass ended 4.5 below graph-batch's cost (3402.7 against 3407.2), and
+    iSAM2's estimate was judged in a problem of its own making.
     Both passes stop within a predicted decrease of 0.05 of their optimum (measured here:
     0.004 apart)."""
     import dataclasses

@@ -60,7 +60,7 @@ def test_robust_loss_recovers_outlier_free_accuracy(drives, loss, k):
     clean = _rmse(GraphBatch().run(d0), d0)  # the default graph on the outlier-free drive
     cfg = replace(NO_GATE, loss_gnss_pos=loss, loss_threshold_sd=(k, 2.0, 2.0))
     e = GraphBatch(cfg).run(d1)
-    # altitude and horizontal RMSE within 10 % of the outlier-free run (issue 14)
+    # altitude and horizontal RMSE within 10 % of the outlier-free run
     assert np.all(_rmse(e, d1) <= 1.10 * clean)
     # per-fix final weights are exported: the injected fixes are the distrusted ones
     w = e.info["robust_weights"]

@@ -196,7 +196,7 @@ def _flat_drive_with_baro(rng: np.random.Generator) -> Drive:
 
 def test_spike_in_withheld_window_leaves_scores_unchanged(
         monkeypatch: pytest.MonkeyPatch, rng: np.random.Generator) -> None:
-    """Issue 13: 8 withheld fixes jumping to +15…17 m while the baro stays flat are not a
+    """8 withheld fixes jumping to +15…17 m while the baro stays flat are not a
     height the vehicle had; scored against them every estimator would look worse."""
     monkeypatch.setitem(base._REGISTRY, "planted", _Planted)
     clean = _flat_drive_with_baro(rng)

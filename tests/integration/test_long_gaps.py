@@ -1,4 +1,4 @@
-"""Logging gaps longer than one baro-calibration segment (issue 16).
+"""Logging gaps longer than one baro-calibration segment.
 
 graph-isam2 numbered its calibration segments by time (``floor(t / segment_s)``) and
 assumed the next keyframe is at most one segment later: a gap longer than ``segment_s``
@@ -56,7 +56,7 @@ def _all_stream_gap(seed: int, t0: float, gap: float, outage: float = 60.0):
 @pytest.mark.slow
 @pytest.mark.parametrize("gap", [11.0, 30.0])
 def test_graph_bridges_an_all_stream_gap_as_well_as_ekf_rts(gap: float) -> None:
-    """Issue 13 item 3: at the first epoch after the gap the graph's horizontal and altitude
+    """At the first epoch after the gap the graph's horizontal and altitude
     errors are no larger than ekf-rts's (measured over seeds 1-3: horizontal 0.04-0.18 m
     against 0.21-1.49 m, altitude equal within 1 cm)."""
     from vnav_graph.estimators.base import create

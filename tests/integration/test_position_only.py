@@ -1,9 +1,9 @@
-"""A receiver without velocity: heading from positions alone (issue 15's position-only case).
+"""A receiver without velocity: heading from positions alone (the position-only case).
 
-Measured before the fix on hill-drive (vel_sd = 0, seeds 0-2): the EKF took a course from
-position noise at standstill and then rejected 1,400-2,700 of 5,400 fixes (ekf-rts 16-40 m
-horizontal RMSE); graph-batch crept through 300 Gauss-Newton iterations to 25-28 m on two
-seeds. After: ekf-rts 0.34-0.59 m with <= 6 rejections, graph-batch 0.35-0.65 m in 5 iterations.
+On hill-drive (vel_sd = 0, seeds 0-2): ekf-rts 0.34-0.59 m horizontal RMSE with <= 6 of 5,400
+fixes rejected, graph-batch 0.35-0.65 m in 5 iterations. An EKF that takes a course from
+position noise at standstill rejects 1,400-2,700 fixes there (ekf-rts 16-40 m), and a graph
+started from such a course creeps through 300 Gauss-Newton iterations to 25-28 m.
 """
 
 from __future__ import annotations
@@ -43,7 +43,7 @@ def test_no_course_from_position_noise_at_standstill(drive):
 def test_position_only_smoothers_stay_on_the_fixes(drive, name):
     est = create(name).run(drive)
     m = evaluate(est, drive)
-    assert m["horiz_rmse_m"] < 2.0  # issue 15's bound; measured 1.07 (ekf-rts), 1.06 m
+    assert m["horiz_rmse_m"] < 2.0  # measured 1.07 (ekf-rts), 1.06 m
     assert m["gnss_rejected"] < 0.01 * drive.gnss.t.size
     if name == "graph-batch":
         assert est.info["converged"]

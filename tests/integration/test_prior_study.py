@@ -1,4 +1,4 @@
-"""Default real-log baro prior: σ within a factor of two on a short simulated drive (issue 13, 5b).
+"""Default real-log baro prior: σ within a factor of two on a short simulated drive.
 
 A reduced run of benchmarks/prior_study.py: the 240 s ``default`` scenario, 8 seeds, ekf-rts
 and graph-batch, each drive handed over as a real log (no IMU/baro spec, so
@@ -7,7 +7,7 @@ docs/real_logs.md "Default real-log baro prior".
 
 Band 0.5–2.0: with 8 seeds the rms z of an exactly calibrated σ scatters over 0.52–1.47
 (95 %, χ²(8)), so the band admits an honest σ and fails a σ that is wrong by a factor of two
-either way (the default prior gives 0.49–0.61 on the sortie, issue 13 reports 1.4–2.2 for a
+either way (the default prior gives 0.49–0.61 on the sortie, 1.4–2.2 for a
 fast-drifting bias). The seeds are fixed, so the outcome is reproducible. Measured (scale /
 latency / bias): ekf-rts 0.84 / 1.22 / 0.76, graph-batch 0.81 / 1.21 / 0.85 (with a bias τ of
 4 h instead of 1 h: 0.80 / 1.12 / 0.69 and 0.84 / 0.94 / 0.93, also inside — this short drive

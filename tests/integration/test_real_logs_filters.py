@@ -1,5 +1,5 @@
 """Filters (ekf, ekf-rts, vekf7, vkf4) on real-log pathologies: an isolated GNSS height spike
-(simulated, issue 6), a 22 s IMU/baro/GNSS logging gap after a crash (Loiter_RTL.bin), a
+(simulated), a 22 s IMU/baro/GNSS logging gap after a crash (Loiter_RTL.bin), a
 vibrating phone without GNSS velocity (ski log), the 181.BIN GNSS-height glitch, and the
 1 Hz averaged car drive. Real logs come from ../shared/data or $VNAV_DATA (skipped if absent).
 """
@@ -31,7 +31,7 @@ def _read(data_dir: Path, rel: str):
 
 @pytest.mark.parametrize("spike_m", [20.0, 300.0])
 def test_isolated_gnss_spike_does_not_move_smoothed_altitude(spike_m: float) -> None:
-    """Issue 6: one GNSS height spike moves the ekf-rts altitude by at most the GNSS σ_v."""
+    """One GNSS height spike moves the ekf-rts altitude by at most the GNSS σ_v."""
     d = simulate("hill-drive", 3, duration_s=120.0)
     g = d.gnss
     j = int(np.searchsorted(g.t, g.t[0] + 70.0))
@@ -42,7 +42,7 @@ def test_isolated_gnss_spike_does_not_move_smoothed_altitude(spike_m: float) -> 
     bad = EKFRTS().run(spiked)
     assert g.t[j] in bad.info["gnss_rejected_t"]  # the spike is refused ...
     dh = np.abs(bad.trajectory.alt - clean.trajectory.alt)
-    # ... and the smoothed altitude moves by no more than the GNSS vertical noise (issue 6)
+    # ... and the smoothed altitude moves by no more than the GNSS vertical noise
     assert dh.max() <= float(g.pos_sd[j, 2])
     # the forward filter obeys the same bound
     dh_f = np.abs(EKF().run(spiked).trajectory.alt - EKF().run(d).trajectory.alt)
@@ -64,8 +64,8 @@ def test_imu_logging_gap_is_bridged(data_dir: Path) -> None:
         # 3 m: the withheld GNSS heights' own noise (σ_v ≈ 2.3-3.8 m); measured 0.8-1.1 m
         assert blk["alt_rmse_m"] < 3.0, (name, blk["alt_rmse_m"])
     # horizontal: the smoother re-anchors on the fixes; 60 s outages of a hobby IMU on a
-    # hovering quad drift tens of metres (measured 30 m), not kilometres
-    assert res.doc["estimators"]["ekf-rts"]["horiz_rmse_m"] < 100.0
+    # hovering quad drift tens of metres (measured 41 m; the forward ekf 434 m), not kilometres
+    assert res.doc["estimators"]["ekf-rts"]["horiz_rmse_m"] < 80.0
 
 
 def test_phone_without_gnss_velocity(data_dir: Path) -> None:

@@ -1,4 +1,4 @@
-"""``run`` on short logs, partial failures and non-finite numbers (issue 16).
+"""``run`` on short logs, partial failures and non-finite numbers.
 
 - The optional holdout scoring never sinks a run: a log too short for one outage window keeps
   its results and says in ``summary.json`` and the table that scoring was skipped, and why.

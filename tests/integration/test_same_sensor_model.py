@@ -1,4 +1,4 @@
-"""ekf, ekf-rts, vekf7, graph-batch and graph-isam2 receive the same sensor model (issue 12).
+"""ekf, ekf-rts, vekf7, graph-batch and graph-isam2 receive the same sensor model.
 
 The numbers are read where each estimator hands them to its numerical core, not from the
 shared function: the EKF's ``run_filter`` input records (process-noise table, initial

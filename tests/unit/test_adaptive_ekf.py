@@ -144,7 +144,7 @@ def test_gnss_spike_rejected_and_counted():
     # ν of the spike ≈ 50/√S ≥ 15 normalised units
     assert abs(out2[8][150]) > 15
     # a rejected fix is not applied; the next ones are the same fixes: after it the two runs
-    # differ only through that one missing update — bounded by the GNSS σ (issue 6)
+    # differ only through that one missing update — bounded by the GNSS σ
     assert np.max(np.abs(out2[0] - out1[0])) < 2.0
 
 

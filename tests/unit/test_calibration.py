@@ -129,7 +129,7 @@ def _coverage(scenario: str, seeds: range) -> tuple[np.ndarray, np.ndarray]:
 
 
 def test_calibration_sigma_is_honest_on_the_default_drive() -> None:
-    """Issue 13: with a Gauss-Markov baro bias the OLS σ was 10-16× too small. The GLS σ
+    """With a Gauss-Markov baro bias the OLS σ is 10-16× too small. The GLS σ
     covers the truth: measured rms z 0.87 (scale) and 1.14 (latency) over 20 seeds."""
     zs, zl = _coverage("default", range(8))
     assert np.all(np.abs(zs) < 3.5) and np.all(np.abs(zl) < 3.5)
@@ -138,7 +138,7 @@ def test_calibration_sigma_is_honest_on_the_default_drive() -> None:
 
 @pytest.mark.slow
 def test_calibration_truth_within_3_sigma_in_95_percent() -> None:
-    """20 seeds each of hill-drive, sortie and the default drive (issue 13 done-when)."""
+    """20 seeds each of hill-drive, sortie and the default drive."""
     z = [np.abs(np.concatenate(_coverage(sc, range(20)))) < 3.0
          for sc in ("default", "hill-drive", "sortie")]
     assert np.mean(np.concatenate(z)) >= 0.95

@@ -1,5 +1,5 @@
 """Baro-inertial damping loops: bias offsets against the final-value theorem, pole placement,
-and the steady-state-Kalman-filter equivalence (STYLE.md §2.6)."""
+and the steady-state-Kalman-filter equivalence."""
 
 from __future__ import annotations
 

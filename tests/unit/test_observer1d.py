@@ -18,17 +18,17 @@ from vnav_graph.studies.seed003 import seed003_monte_carlo, seed003_noise_for_si
 
 @pytest.fixture(scope="module")
 def mc_zoh():
-    # 200 runs × 300 s at 100 Hz: the minimum the brief asks for; ~1 s vectorised
+    # 200 runs × 300 s at 100 Hz (seed 003's Monte Carlo); ~1 s vectorised
     return seed003_monte_carlo(200, 0)
 
 
 def test_seed003_steady_sigma_and_settling(mc_zoh):
     r = mc_zoh
-    # seed 003: "final value near 1.2 m", GPS alone 2 m; ±15 % band of the brief
+    # seed 003: "final value near 1.2 m", GPS alone 2 m; ±15 % band
     assert abs(r.steady_sd_m - 1.2) < 0.15 * 1.2
     # GPS-alone σ is the simulated 2 m; 200×300 draws give ±0.4 % (1σ) -> 2 % tolerance
     assert abs(r.gps_only_sd_m - 2.0) < 0.04
-    # seed 003: "around 50 samples" at 1 Hz; the brief's band 30-80 s
+    # seed 003: "around 50 samples" at 1 Hz; band 30-80 s
     assert 30.0 <= r.settling_s <= 80.0
     # the Monte Carlo settling equals the analytic one (same definition) to one sample
     assert abs(r.settling_s - r.analytic_settling_s) <= 1.0

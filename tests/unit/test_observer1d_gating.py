@@ -103,5 +103,5 @@ def test_estimator_spike_moves_altitude_less_than_gnss_noise():
     assert e1.info["gnss_rejected"] == 0  # clean 200 fixes at p_fa 1e-3: P(≥1) ≈ 15 %
     assert e2.info["gnss_rejected"] == 1
     # the spike still reaches the AHRS (velocity by differencing the positions), not the
-    # height channel; issue 6: it must not move the altitude by more than the GNSS σ (2 m)
+    # height channel: it must not move the altitude by more than the GNSS σ (2 m)
     assert np.max(np.abs(e2.trajectory.alt - e1.trajectory.alt)) < 2.0

@@ -1,4 +1,4 @@
-"""The z statistics and the real-log disguise of benchmarks/prior_study.py (issue 13, 5b)."""
+"""The z statistics and the real-log disguise of benchmarks/prior_study.py."""
 
 from __future__ import annotations
 

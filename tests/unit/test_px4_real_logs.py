@@ -1,6 +1,6 @@
 """The PX4 reader on the two real ULogs of the shared data (pyulog's BSD test files).
 
-Before issue 16 the reader had only met a synthetic file. Values below were measured on these
+Values below were measured on these
 files and cross-checked by hand: Trondheim (63.42 N) and Zurich (47.40 N) fields, ellipsoidal
 GNSS heights, Pa from vehicle_air_data, a stationary or hovering vehicle (|f| ≈ g).
 """

@@ -132,7 +132,7 @@ def test_baro_prior_closed_forms() -> None:
     assert p.latency_sd == pytest.approx(0.2 / np.sqrt(12.0))  # uniform: width/√12
     assert (p.scale_sd, p.bias_sd, p.bias_tau, p.noise_sd) == (0.02, 3.0, 900.0, 0.3)
     # a spec that fixes the truth (a scale, a zero scale σ, a fixed latency) does not leak it:
-    # the estimators get the documented real-log prior (issue 13)
+    # the estimators get the documented real-log prior
     dflt = baro_prior(REAL_LOG_BARO)
     for fixed in (BaroSpec(scale=-0.05, scale_sd=0.0, latency_s=0.25, latency_range_s=None),
                   BaroSpec(scale_sd=0.0, latency_s=0.0, latency_range_s=None)):

@@ -4,7 +4,7 @@ long-outage, hot-baro): each loads, simulates, and has what its TOML header prom
 import numpy as np
 import pytest
 
-from vnav_graph.geo.atmosphere import T0
+from vnav_graph.geo.atmosphere import T0, L
 from vnav_graph.simulation import list_scenarios, load_scenario, simulate
 from vnav_graph.simulation.trajectories import hill_drive_profiles
 
@@ -87,12 +87,19 @@ def test_long_outage_has_three_180_s_outages_without_fixes():
 
 def test_hot_baro_has_pressure_and_the_stated_effective_scale():
     d = simulate("hot-baro", 0, duration_s=120.0)
+    spec = d.baro.spec
     assert d.baro.pressure is not None and d.baro.alt is None
-    assert d.baro_truth.latency_s == 0.3
-    # sensor -3 % on an ISA + 15 K day, reading set exact at the origin (890 m): -7.95 %,
-    # close to the sea-level 0.97·T0/(T0 + 15) − 1 = −7.80 %
-    assert d.baro_truth.scale == pytest.approx(-0.0795, abs=2e-4)
-    assert d.baro_truth.scale == pytest.approx(0.97 * T0 / (T0 + 15.0) - 1.0, abs=2e-3)
+    assert d.baro_truth.latency_s == spec.latency_s == 0.3
+    # Standard-law altimeter in an ISA + dT troposphere, its setting exact at h0: with
+    # T(h) = T0 + dT − L·h the pressure is p0·(T(h)/(T0 + dT))^(g/RL), the reading
+    # (T0/L)·(1 − k·T(h)/(T0 + dT)), so its slope against the true height is
+    # (T0 − L·h0)/(T0 − L·h0 + dT) at every height. The sensor's own scale s enters as
+    # dT = (T0 + ΔT)/(1 + s) − T0 (a standard day read with scale s needs dT = −s·T0/(1 + s)).
+    s, h0 = spec.scale, d.origin_lla[2]
+    dT = (T0 + spec.isa_offset_k) / (1.0 + s) - T0
+    t_h0 = T0 - L * h0
+    assert d.baro_truth.scale == pytest.approx(t_h0 / (t_h0 + dT) - 1.0, rel=1e-9)
+    assert (s, spec.isa_offset_k, h0) == (-0.03, 15.0, 890.0)  # the TOML's inputs
 
 
 def test_urban_drive_round_trips_through_npz(tmp_path):

@@ -85,7 +85,7 @@ def test_gravity_gradient_term() -> None:
 @pytest.mark.slow
 def test_nees_consistent(runs) -> None:
     # 2-dof NEES (height, down velocity) averaged over 3 seeds inside the two-sided 99 % χ²
-    # band chi2(0.005/0.995, 3·2)/3 on ≥ 90 % of the 1 Hz epochs (STYLE.md §2.6).
+    # band chi2(0.005/0.995, 3·2)/3 on ≥ 90 % of the 1 Hz epochs.
     vals = [nees(est, d) for d, est in runs]
     assert vals[0][1] == 2
     k = min(v[0].size for v in vals)

@@ -49,7 +49,7 @@ def test_altitude_bounded_in_120s_outage(outage_runs) -> None:
 
 def test_nees_consistent(outage_runs) -> None:
     # 2-dof NEES (height, down velocity) averaged over 3 seeds: inside the two-sided 99 %
-    # χ² band chi2(0.005/0.995, 3·2)/3 on ≥ 90 % of the 1 Hz epochs (STYLE.md §2.6).
+    # χ² band chi2(0.005/0.995, 3·2)/3 on ≥ 90 % of the 1 Hz epochs.
     vals = [nees(est, d) for d, est in outage_runs]
     dof = vals[0][1]
     assert dof == 2

@@ -1,6 +1,6 @@
 """Errors of an Estimate against truth: altitude, vertical velocity, NEES, baro parameters.
 
-Truth is interpolated to the estimate's stamps, never the other way round (STYLE.md §2.4).
+Truth is interpolated to the estimate's stamps, never the other way round.
 ``evaluate`` returns the per-estimator metric block of ``summary.json`` (docs/design.md); metrics
 that do not apply are ``None``.
 """

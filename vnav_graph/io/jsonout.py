@@ -2,7 +2,7 @@
 
 ``json.dumps`` writes ``NaN`` and ``Infinity`` by default, which are not JSON: a NaN in a
 drive's truth once made ``summary.json`` unreadable by strict parsers. Non-finite numbers
-become ``null`` (DESIGN.md: metrics that do not apply are null).
+become ``null`` (docs/design.md: metrics that do not apply are null).
 """
 
 from __future__ import annotations

@@ -133,7 +133,7 @@ def simulate_baro(
 # 181.BIN: |f| 7–8 m/s² for 20 s of climb) drives (1 + s) towards 0, the baro's gain on the
 # height vanishes and the height drifts with the accelerometer (a 3 m/s² step in the last
 # 60 s of a 300 s hill-drive without GNSS: s → −1.01 and 3.7 km of altitude error for
-# graph-batch, s = +0.61 for ekf-rts; docs/graph.md, "Session 33").
+# graph-batch, s = +0.61 for ekf-rts; docs/graph.md, "Baro scale limit").
 SCALE_LIMIT = 0.25
 # Prior σ of the scale in the solve that replaces such an estimate: held at the prior mean.
 STIFF_SCALE_SD = 1e-3
@@ -185,7 +185,7 @@ def without_implausible_scale(result: Any, config: Any, rerun: Callable[[Any], A
 # (4.5 of their σ from the truth). Real: car 03-01a (1 Hz phone) puts the latency at −0.99 s
 # with ekf-rts and at −0.48 s with graph-batch, each ±0.05 s, and graph-batch run on
 # ekf-rts's 1 s time grid (keyframes every second) gives −1.00 s: the value follows the
-# model's time resolution, not the data (docs/real_logs.md, session 39).
+# model's time resolution, not the data (docs/real_logs.md, "Baro latency on 1 Hz logs").
 PRIOR_CONFLICT_Z = 5.0
 
 

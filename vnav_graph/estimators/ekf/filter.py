@@ -99,48 +99,45 @@ PROVIDES = frozenset({"alt", "vel_d", "pos_h", "vel_h", "att", "baro", "cov"})
 
 @dataclass(frozen=True)
 class EkfConfig:
-    """Settings of ``ekf`` / ``ekf-rts`` (SI units).
+    """Settings of ``ekf`` / ``ekf-rts`` (SI units); the gates and gap rules are described in
+    the ``ekf.model`` docstring.
 
-    cov_rate_hz: covariance propagation grid; cov_output_hz: rate of ``Estimate.cov``;
-    traj_rate_hz: output trajectory rate (None = every IMU epoch); gate_prob: χ² gate
-    probability for GNSS position (horizontal pair χ²₂, height χ²₁), GNSS velocity and baro
-    innovations; max_consecutive_rejects: after this many consecutive rejections the next
-    horizontal GNSS pair / baro sample is accepted (recovers from a diverged filter instead of
-    refusing GNSS forever; the baro after baro_reaccept_s [s] of refusals, at least 3 samples),
-    and the GNSS-height probation gate is widened by the baro-bias
-    prior (with a baro) or the height accepted (without); max_gnss_sd_v: GNSS heights whose
-    own σ_v [m] exceeds this are not used; gnss_probation_s: a GNSS height, once rejected, is
-    used again after passing the gate this long without a break (``ekf.model`` docstring);
-    IMU logging gaps (``nav.gaps``: the shared rule) are bridged at constant velocity with the
-    shared unknown motion ``GAP_ACCEL_SD``, gap_yaw_rw [rad/√s] added to the covariance,
-    roll/pitch re-levelled from the mean specific force of the first gap_level_s after it
-    with σ gap_level_sd [rad]; align_max_s: maximum
-    static levelling window; initial_heading / initial_heading_sd: given heading [rad] (None =
-    from the GNSS track once moving faster than heading_speed_min [m/s], σ from the velocity
-    noise and sideslip_sd); accel_scale: estimate accelerometer scale factors (None = when the
-    IMU spec has accel_scale_sd > 0 or there is no spec: sensors.model.accel_scale_sd, the
-    rule the graph smoothers share); heading_source: "auto" (acceleration
-    matching when the GNSS stream has velocity, else the track), "accel" or "track";
-    align_chunk_s, align_forget_s, align_sd_max: acceleration-matching chunk length [s],
-    forgetting time [s] and the σ [rad] below which the heading is accepted (also the course
-    of the GNSS track);
-    gap_heading_forget_s: IMU gaps at least this long [s] make the heading unknown again
-    (``ekf.model`` docstring);
-    use_mag: use the drive's magnetometer heading when it has one (``sensors.magnetometer``;
-    the first sample acquires an unknown heading); mag_interval_s: at most one magnetometer
-    heading per this many seconds (its errors — interference, soft iron — are correlated
-    over seconds, so 10 Hz of them would be trusted 10× too much); mag_heading_floor [rad]:
-    heading σ floor for declination and soft-iron errors, added to σ_m/H; mag_bias_sd [µT]:
-    prior σ of each hard-iron component left after the log's own calibration; mag_bias_rw
-    [µT/√s]: its random walk; mag_reaccept_s: after this long of refused headings the next is
-    forced in;
-    gnss_gm_sd_v [m] / gnss_gm_tau_s [s]: the time-correlated GNSS height error as a
-    first-order Gauss-Markov state of that σ and τ (``sensors.model.GnssHeightGM``, the same
-    model as ``GraphConfig``'s); 0 = off (the default; ``docs/real_logs.md`` has the holdout
-    comparison);
-    baro_scale_sd: prior σ of the baro scale factor (None: the shared sensor model's,
-    ``sensors.model.baro_prior``); set to ``sensors.baro.STIFF_SCALE_SD`` by the post-solve
-    scale check when the scale left its physical range (``sensors.baro.SCALE_LIMIT``).
+    cov_rate_hz: covariance propagation grid [Hz].
+    cov_output_hz: rate of ``Estimate.cov`` [Hz].
+    traj_rate_hz: output trajectory rate [Hz] (None: every IMU epoch).
+    gate_prob: χ² gate probability of GNSS position, GNSS velocity and baro innovations.
+    max_consecutive_rejects: after this many refusals in a row the next GNSS pair is forced in.
+    align_max_s: longest static levelling window [s].
+    initial_heading: given initial heading [rad] (None: from GNSS or the magnetometer).
+    initial_heading_sd: σ of the given heading [rad].
+    heading_speed_min: speed above which the GNSS track gives a heading [m/s].
+    sideslip_sd: σ of the track's sideslip against the body heading [rad].
+    accel_scale: estimate accelerometer scale factors (None: the shared rule of sensors.model).
+    min_tilt_sd: levelling σ floor besides the accelerometer-bias term [rad].
+    max_gnss_sd_v: GNSS heights whose own σ_v exceeds this are not used [m].
+    baro_reaccept_s: after this long of refused baro samples (≥ 3) the next is forced in [s].
+    gnss_probation_s: a refused GNSS height is used again after passing the gate this long [s].
+    gap_level_sd: σ of the roll/pitch re-levelled after an IMU logging gap [rad].
+    gap_level_s: mean specific force over this long after a gap re-levels it [s].
+    gap_yaw_rw: heading random walk added across an IMU logging gap [rad/√s].
+    heading_source: "auto" (acceleration matching with GNSS velocity, else track), "accel", "track".
+    align_chunk_s: acceleration-matching chunk length [s].
+    align_forget_s: acceleration-matching forgetting time [s].
+    align_sd_max: heading σ below which the matched heading is accepted [rad].
+    gap_heading_forget_s: IMU gaps at least this long make the heading unknown again [s].
+    use_mag: magnetometer headings when the drive has a magnetometer.
+    mag_interval_s: at most one magnetometer heading per this many seconds [s].
+    mag_heading_floor: heading σ floor for declination and soft-iron errors [rad].
+    mag_bias_sd: prior σ of each hard-iron component [µT].
+    mag_bias_rw: hard-iron random walk [µT/√s].
+    mag_reaccept_s: after this long of refused headings the next is forced in [s].
+    gnss_gm_sd_v: σ of the Gauss-Markov GNSS height error state [m] (0: no state).
+    gnss_gm_tau_s: time constant of that state [s].
+    baro_scale_sd: prior σ of the baro scale (None: the shared sensor model's).
+
+    Magnetometer headings are thinned to one per ``mag_interval_s`` because their errors
+    (interference, soft iron) are correlated over seconds: 10 Hz of them would be trusted
+    10× too much.
     """
 
     cov_rate_hz: float = 10.0

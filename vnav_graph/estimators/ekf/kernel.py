@@ -522,9 +522,9 @@ def run_filter(grids, init, noise, events, gnss, baro, mag, settings):
             for a in range(NX):
                 p[a, a] += qd[a]
             # the nominal Gauss-Markov states follow the same model as their errors (Φ's
-            # −1/τ): b ← exp(−Δt/τ)·b. Held constant, as before, the mean of a Gauss-Markov
-            # bias did not follow the model the covariance assumes (docs/graph.md, online
-            # accuracy); the graph's bias link decays it alike (sensors.noise.imu_bias_step)
+            # −1/τ): b ← exp(−Δt/τ)·b. Held constant, the mean of a Gauss-Markov bias would
+            # not follow the model the covariance assumes; the graph's bias link decays it
+            # alike (sensors.noise.imu_bias_step)
             decay_gm(par, dtg, tau_g, tau_a, tau_b, tau_h)
             if not heading_ok and not np.isnan(reset_delta):
                 # heading acquired from the GNSS track: reset yaw, rotate tilt covariance

@@ -9,10 +9,11 @@ The reported mean baro bias b̄ = Σ_k w_k b_k (``mean_weights``: the output epo
 written on the grid) has the variance Σ_k Σ_m w_k w_m P_{k,m}[b, b], where the smoothed
 cross-covariances are P_{k,m} = G_k P_{k+1,m} (m > k; G the smoother gain). ``rts_smooth``
 accumulates it backward with u_k = Σ_{m≥k} w_m P_{k,m}[:, b] = w_k P_{k,k}[:, b] + G_k u_{k+1}:
-var = Σ_k w_k (2 u_k[b] − w_k P_{k,k}[b, b]). The pointwise σ's average, reported until
-session 39, is an upper bound of it (median 0.31 m against graph-batch's 0.21 m from its
-joint covariance on the simulated `default` drives); now the two agree within 1–2 %
-(``tests/integration/test_graph_equivalence.py``, ``docs/real_logs.md`` item 5b).
+var = Σ_k w_k (2 u_k[b] − w_k P_{k,k}[b, b]). The average of the pointwise σ's is only an
+upper bound of it (median 0.31 m against graph-batch's 0.21 m from its joint covariance on
+the simulated `default` drives); with the cross-covariances the two agree within 1–2 %
+(``tests/integration/test_graph_equivalence.py``; ``docs/real_logs.md``, "Default real-log
+baro prior").
 """
 
 from __future__ import annotations

@@ -116,8 +116,8 @@ def bias_link(P: Problem, k: int, dt: float, a_keys: tuple[int, int] | None = No
     B holds effective biases b_a + diag(ā)·k_a and the link is
     B_a(k+1) − diag(ā_k+1)·k_a' − φ_a·(B_a(k) − diag(ā_k)·k_a) = w, k_a and k_a' the scale
     variables of intervals k and k+1 (``a_keys``; default A(0) for both, the batch's; the
-    incremental front end has one per segment). Until session 29 the graph carried the
-    biases as random walks of PSD 2σ²/τ + rw² (no decay of the mean; docs/graph.md).
+    incremental front end has one per segment). The step is the Gauss-Markov one the ekf
+    uses too (``sensors.noise.imu_bias_step``; docs/graph.md).
     ``step``: ``bias_step(P.imu_spec, dt)`` when already computed; ``zeros``: as in
     ``_linear``."""
     phi, var = bias_step(P.imu_spec, dt) if step is None else step

@@ -37,7 +37,7 @@ the batch but one per segment in iSAM2).
 
 Cost: a ``CustomFactor`` is linearised from Python by ``graph-batch`` (``graph.linearize``,
 ≈ 0.1 ms per factor), but inside iSAM2's C++ relinearisation each callback copies the whole
-``Values`` (docs/graph.md, DESIGN.md: O(number of variables) per call), so thousands of
+``Values`` (O(number of variables) per call), so thousands of
 custom factors on a long drive slow ``graph-isam2`` down; C++ built-ins cost nothing special.
 
 Bad input — an extension that is not callable or returns something else than ``Terms``, a

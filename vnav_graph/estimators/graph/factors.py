@@ -377,7 +377,7 @@ def baro_rows(
     The bias is read at t_b = t_s − ``bias_lag``, a time that does NOT move with τd:
     b = (1−α_b)·b_k + α_b·b_{k+1}, α_b = clip((t_b − t_k)/T, 0, 1). ``bias_lag`` should be
     the latency of the linearisation point, fixed for one Gauss-Newton solve. Reading b at
-    the moving t_d instead (the form before session 4) adds −(b_{k+1} − b_k)/T to ∂/∂τd, a
+    the moving t_d instead adds −(b_{k+1} − b_k)/T to ∂/∂τd, a
     slope that jumps at every keyframe (the estimated Gauss-Markov chain has ≈ σ_b·√(2T/τ_b)
     steps), so the cost is kinked along τd and Gauss-Newton crawls along the τd–bias valley
     (measured: 11 instead of 4 iterations on a 1-hour drive). The shared model reads b at

@@ -74,7 +74,7 @@ def initial_states(P: Problem) -> tuple[FloatArray, FloatArray, FloatArray]:
     # after the last kept fix (a drive that ends in an outage): IMU propagation horizontally,
     # the baro vertically (as in a gap: a stepped accelerometer carries the propagated height
     # hundreds of metres away, 181.BIN, and the bilinear baro term (1 + s)·h, linearised
-    # there, then pulls s towards −1; docs/graph.md "Session 33"). Not before the first fix:
+    # there, then pulls s towards −1; docs/graph.md "Baro scale limit"). Not before the first fix:
     # keyframe 0 starts graph-isam2's causal pass, and the baro's offset is the whole drive's
     outside = ~has & (P.t_kf > gt[-1])
     baro = P.drive.baro

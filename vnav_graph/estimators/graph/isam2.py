@@ -301,11 +301,11 @@ class GraphISAM2:
                     seg: Any, init: tuple[Any, Any, Any]) -> tuple[Any, Any]:
         """The batch problem with iSAM2's factors (``pims``) at iSAM2's estimate ``est``.
         Its priors (keyframe 0's, the gaps') are built from the initial states ``init``, as
-        iSAM2's and graph-batch's are: built from ``est`` (until session 32) they were
-        centred on iSAM2's own estimate, which then paid nothing for them, and the final
-        batch pass optimised a problem pulled toward it (ski's first 200 s: iSAM2's own
-        estimate judged 20.1 above that problem's optimum, the batch pass moving keyframe
-        0's pose off iSAM2's value at a prior cost of 4.9)."""
+        iSAM2's and graph-batch's are: priors built from ``est`` would be centred on iSAM2's
+        own estimate, which then pays nothing for them, and the batch pass would optimise a
+        problem pulled toward it (ski's first 200 s: iSAM2's own estimate judged 20.1 above
+        that problem's optimum, the batch pass moving keyframe 0's pose off iSAM2's value at
+        a prior cost of 4.9)."""
         nk = P.n_kf
         graph, vals = build_batch_graph(P, *init, pims, pri, np.zeros(nk, dtype=int))
         for k in range(nk):

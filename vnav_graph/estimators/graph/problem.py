@@ -151,7 +151,7 @@ def setup(drive: Drive, cfg: GraphConfig) -> Problem:
         dense = replace(dense, gap=gaps)
     omega_t = gf.earth_rate_t(origin) if cfg.coriolis else np.zeros(3)
     p = gtsam.PreintegrationCombinedParams.MakeSharedD(g0)
-    # continuous-time densities (STYLE.md pitfall 3); floors keep noiseless drives regular
+    # continuous-time densities, not discrete variances; floors keep noiseless drives regular
     p.setAccelerometerCovariance(np.eye(3) * spec.accel_noise_density**2)
     p.setGyroscopeCovariance(np.eye(3) * spec.gyro_noise_density**2)
     p.setIntegrationCovariance(np.eye(3) * 1e-8)
@@ -305,7 +305,7 @@ def preintegrate(P: Problem, k: int, r_k: FloatArray, dg_k: FloatArray,
     ``strapdown_step`` carries). It is added to the sample, f'' = f' + ½ (ω × f') Δt, which
     makes the increment exact to second order for constant ω and f over the step: without
     it the online estimate's 60 s outage error on a noiseless hill-drive was 0.2–0.6 m
-    larger than the ekf's (``docs/graph.md``, session 31)."""
+    larger than the ekf's (``docs/graph.md``, "Variables, factors, keyframes")."""
     imu = P.drive.imu
     j0, j1 = int(P.kf_idx[k]), int(P.kf_idx[k + 1])
     fm = 0.5 * (imu.accel_b[j0:j1] + imu.accel_b[j0 + 1:j1 + 1])

@@ -1,4 +1,4 @@
-"""Relinearisation of ``graph-isam2``'s custom interval terms (issue 14, item 4).
+"""Relinearisation of ``graph-isam2``'s custom interval terms.
 
 The baro samples and GNSS fixes between keyframes enter iSAM2 as ``LinearContainerFactor``s
 built in numpy (``terms``): a fixed quadratic around the point where they were built (the

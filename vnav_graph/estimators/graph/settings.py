@@ -15,85 +15,49 @@ from .robust import check_loss
 
 @dataclass(frozen=True)
 class GraphConfig:
-    """Settings of the factor-graph smoothers (SI units).
+    """Settings of the factor-graph smoothers (SI units); docs/graph.md gives the measurements
+    behind the defaults.
 
-    keyframe_dt: keyframe spacing [s]; max_iterations / rel_tol / abs_tol: Gauss-Newton
-    stops when an iteration lowers the cost ½χ² by less than rel_tol·cost or (if the model
-    predicted < 1 for it, ``solve.STALL_MAX_PREDICTED``) abs_tol, or
-    when the decrease predicted for the next step is below abs_tol (0.05: a χ² change of
-    0.1, a tenth of the change that moves one parameter by 1σ; that step is not taken and
-    its factorisation gives the covariance); max_iterations per solve (and per gate round):
-    4 suffice on the simulated drives, real logs need up to ≈ 100 (ski: 93 — the cap of 12
-    used until session 4 left it unconverged with a −26 % scale and 23 wrongly gated fixes;
-    ``info["converged"]`` says whether the cap was hit, ``info["predicted_decrease"]`` what
-    the model still expected at its last linearisation); bias_lag_tol [s]: the baro bias is read at
-    t_s − λ, λ the latency at the start of the solve, re-set when τd moves further than this
-    (``factors.baro_rows``);
-    output_rate_hz: rate of the output trajectory (interpolated between keyframes with the
-    IMU-shaped interpolant); cov_epochs: maximum number of keyframes with an 18×18 covariance;
-    gravity_correction / coriolis: tangent-frame corrections (off only for studies);
-    segment_s: length of a baro-calibration segment in the incremental front end;
-    calib_rw: random-walk root PSD of (s [1/√s], τd [s/√s]) between segments: the model
-    is a random constant (the batch's one K, the ekf's states), the walk only keeps the
-    front end's Bayes tree a chain, so it is stiff (1e-7/√s: 6e-6 in s over an hour; with
-    2e-5 the online vertical RMSE on the sortie lagged the ekf's by 6.6 ± 4.5 mm over 16
-    seeds, with 1e-7 by 1.0 ± 2.2 mm, docs/graph.md);
-    relinearize_threshold: iSAM2 relinearisation threshold (one value for every component;
-    used only when ``relinearize_typed`` is None; 0 switches relinearisation off);
-    relinearize_typed: per-type thresholds (rotation [rad], translation [m], velocity [m/s],
-    accel bias [m/s²], gyro bias [rad/s]) — the baro bias C and calibration K only appear in
-    linear factors and are never relinearised by iSAM2; the rotation and translation
-    thresholds also decide when the custom baro/GNSS terms are rebuilt (``relin``; K by
-    ``relin.CALIB_THRESHOLD``); relinearize_skip: iSAM2 relinearizeSkip (the defaults, 10×
-    tighter than before issue 14 item 4, keep the online estimate within ~1 m of the
-    filtering optimum through a 60 s GNSS outage, ``docs/graph.md``);
-    partial_relinearization_check: iSAM2 option of that name; wildfire_threshold: iSAM2
-    back-substitution threshold (None: GTSAM's 1e-3); see ``docs/graph.md`` for the measured
-    per-update latencies; final_rounds: forced-relinearisation updates after the last
-    keyframe (at most; ``relin.settle``) that make iSAM2's own estimate the smoothed optimum;
-    final_batch: also run the batch solver from iSAM2's estimate, as the check of it and as
-    the fallback when iSAM2's estimate is not at the optimum (``info["final_batch"]``).
-    isam2_window_s: graph-isam2 keeps this many seconds of keyframes in iSAM2 and
-    marginalises older ones, keeping their conditionals for the smoothed estimate
-    (``graph.window``: memory and per-update cost bounded on long drives; drives shorter
-    than it are not affected); None keeps every keyframe. At least two segments.
-    solver: linear algebra of the batch solve — "auto" (the banded-arrow fast path when every
-    factor couples keyframes at most one apart and the added variables are few, else GTSAM's
-    sparse elimination), "banded" (error when the graph does not fit) or "general" (GTSAM
-    elimination always; same solution, slower; ``layout``, ``general``).
-    loss_gnss_pos, loss_gnss_vel, loss_baro: robust loss of each measurement type, "none",
-    "huber" or "cauchy" (``robust``), with the thresholds ``loss_threshold_sd`` [σ] in that
-    order (GNSS position, GNSS velocity, baro); a GNSS fix's loss is of the Mahalanobis norm
-    of its 3-vector residual. The final weights are in ``Estimate.info["robust_weights"]``.
-    use_mag: heading factors from the drive's magnetometer when it has one, with a hard-iron
-    bias variable H(0) (``graph.magnetometer``; the model is the EKF's); mag_interval_s: at
-    most one per this many seconds; mag_heading_floor [rad]: heading σ floor; mag_bias_sd
-    [µT]: prior σ of each hard-iron component; mag_loss_sd: Huber threshold [σ].
-    accel_scale: carry the accelerometer scale factors k_a as one variable A(0) (3, random
-    constant) — None: by the rule every estimator shares (``sensors.model.accel_scale_sd``:
-    real logs, and simulated IMUs whose spec has a scale error). B(k) then holds the
-    effective accelerometer bias of interval k, b_a + diag(ā_k)·k_a (ā_k the mean measured
-    specific force over it), and the bias chain carries diag(ā_k+1 − ā_k)·k_a
-    (``builders.bias_link``); the reported accelerometer bias is b_a. accel_scale_rw [1/√s]:
-    graph-isam2's online pass carries k_a per segment, like (s, τd), linked by a random walk
-    of root PSD accel_scale_rw times k_a's prior σ (the final rounds tie them into the
-    batch's one constant). Not stiff like calib_rw: the online estimate does not depend on
-    it on the simulated drives (1e-5 gave the sortie's numbers to 0.1 mm), and on 181.BIN's
-    holdout a stiff k_a walk together with the stiff calib_rw made the online pass diverge.
-    gnss_gate_prob: probability of the χ² gates on GNSS fixes (0 switches gating off):
-    a causal pre-gate of the GNSS height against the barometer and a post-solve gate of
-    each fix's normalised position (+ velocity) residual, repeated ≤ ``gate_rounds`` times.
-    velocity_screen: in the pre-gate, also refuse fixes whose velocity change disagrees with
-    the IMU's specific-force integral (``nav.velocity_screen``, attitude-free; same χ²
-    probability).
-    init_attitude: initial keyframe attitudes — "auto" (the forward ekf's on a hover-capable
-    vehicle, ``Drive.meta["vehicle"]`` multirotor, helicopter or vtol, when the graph uses no
-    compass; else TRIAD and the compass, ``graph.init``), "triad" or "ekf". An initial guess
-    only: the solution is the graph's own optimum, but which one Gauss-Newton reaches
-    depends on it (181.BIN: ½χ² 2054 from TRIAD, 1260 from the ekf's attitude).
-    baro_scale_sd: prior σ of the baro scale factor (None: the shared sensor model's,
-    ``sensors.model.baro_prior``); set to ``sensors.baro.STIFF_SCALE_SD`` by the post-solve
-    scale check when the scale left its physical range (``sensors.baro.SCALE_LIMIT``).
+    keyframe_dt: keyframe spacing [s] (``low_rate_config``: 5 s on averaged ≤ 2 Hz IMU logs).
+    bias_lag_tol: re-set the baro bias read lag λ when τd moves further than this [s].
+    max_iterations: Gauss-Newton iterations per solve and per gate round.
+    rel_tol: stop when an iteration lowers ½χ² by less than rel_tol·cost.
+    abs_tol: stop when the predicted (or, after a stall, the gained) decrease is below it [½χ²].
+    output_rate_hz: rate of the output trajectory, interpolated between keyframes [Hz].
+    cov_epochs: at most this many keyframes carry an 18×18 covariance.
+    gravity_correction: tangent-frame normal-gravity difference (off only for studies).
+    coriolis: Earth-rate Coriolis term in the preintegration (off only for studies).
+    segment_s: length of a baro-calibration segment in graph-isam2's online pass [s].
+    calib_rw: random-walk root PSD of (s [1/√s], τd [s/√s]) between segments.
+    relinearize_threshold: iSAM2's scalar threshold, used when relinearize_typed is None.
+    relinearize_skip: iSAM2 relinearizeSkip.
+    partial_relinearization_check: iSAM2 option of that name.
+    relinearize_typed: iSAM2 thresholds (rot [rad], trans [m], vel [m/s], b_a [m/s²], b_g [rad/s]).
+    wildfire_threshold: iSAM2 back-substitution threshold (None: GTSAM's 1e-3).
+    final_batch: also run the batch solver from iSAM2's estimate, as its check and fallback.
+    final_rounds: at most this many forced-relinearisation updates after the last keyframe.
+    isam2_window_s: seconds of keyframes kept in iSAM2 (None: all; at least two segments).
+    observable_ratio: posterior/prior σ below which a baro parameter counts as observed.
+    gnss_gate_prob: probability of the GNSS χ² gates (0 switches gating off).
+    gate_rounds: at most this many post-solve gate rounds.
+    velocity_screen: pre-gate GNSS velocity against the IMU's specific-force integral.
+    verbose: print the solver's progress.
+    solver: "auto", "banded" (error when the graph does not fit) or "general".
+    loss_gnss_pos: robust loss of a GNSS position fix: "none", "huber" or "cauchy".
+    loss_gnss_vel: robust loss of a GNSS velocity fix.
+    loss_baro: robust loss of a baro sample.
+    loss_threshold_sd: loss thresholds [σ] (GNSS position, GNSS velocity, baro).
+    use_mag: heading factors and a hard-iron variable when the drive has a magnetometer.
+    mag_interval_s: at most one heading factor per this many seconds [s].
+    mag_heading_floor: heading σ floor [rad].
+    mag_bias_sd: prior σ of each hard-iron component [µT].
+    mag_loss_sd: Huber threshold of the heading factors [σ].
+    gnss_gm_sd_v: σ of the Gauss-Markov GNSS height error state [m] (0: no state).
+    gnss_gm_tau_s: time constant of that state [s].
+    accel_scale: carry accelerometer scale factors (None: the shared rule of sensors.model).
+    accel_scale_rw: online per-segment k_a random walk, times k_a's prior σ [1/√s].
+    baro_scale_sd: prior σ of the baro scale (None: the shared sensor model's).
+    init_attitude: initial keyframe attitudes: "auto", "triad" or "ekf".
     """
 
     keyframe_dt: float = 1.0

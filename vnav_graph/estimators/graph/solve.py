@@ -38,12 +38,12 @@ SOLVERS = ("auto", "banded", "general")
 # a stalled full step (gain < abs_tol) counts as convergence only when the quadratic model
 # at the point before it predicted less than this [½χ²] (a 1σ move along the step): on the
 # ski log with 0.25 s keyframes the model predicted 25 there, the step gained 0.04, and the
-# solve stopped 19 above a point 3 m better in altitude (docs/graph.md, "Session 34")
+# solve stopped 19 above a point 3 m better in altitude (docs/graph.md, "Stopping and damping")
 STALL_MAX_PREDICTED = 1.0
 # Levenberg-Marquardt damping μ·diag(H): from 1e-5 on the first refused step, × LM_FACTOR per
 # refused step, ÷ LM_FACTOR per accepted one, plain Gauss-Newton again below LM_PLAIN_BELOW.
-# Until session 34 ×10 / ÷10 and plain below 1e-6: in a curved valley every third step was a
-# full step that failed, and the solve crept (docs/graph.md, "Session 34")
+# With ×10 / ÷10 and plain below 1e-6 every third step in a curved valley is a full step that
+# fails, and the solve creeps (docs/graph.md, "Stopping and damping")
 LM_FACTOR = 5.0
 LM_PLAIN_BELOW = 1e-9
 

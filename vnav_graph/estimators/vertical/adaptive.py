@@ -75,11 +75,19 @@ _SIGNALS = {"error": 0, "vz": 1}
 
 @dataclass(frozen=True)
 class AdaptiveConfig:
-    """tau [s] nominal triple-pole time constant; s_max [-] largest speed-up; function (see
-    module docstring); signal "error" | "vz"; e0 [m], v0 [m/s] normalisations; t_avg [s]
-    time constant T_a of the error-magnitude low-pass.
+    """Settings of ``loop3-adaptive`` (seed 000).
 
-    EKF-with-control-signals variant (``ekf_control=True``, docs/adaptive_loop.md):
+    tau : nominal triple-pole time constant [s]
+    s_max : largest speed-up of the loop [-]
+    function : adaptation function (module docstring)
+    signal : what drives the adaptation, "error" or "vz"
+    e0 : normalisation of the loop error [m]
+    v0 : normalisation of the vertical speed [m/s]
+    t_avg : time constant T_a of the error-magnitude low-pass [s]
+    ahrs : attitude-reference gains
+    ekf_control : run the EKF-with-control-signals variant (docs/adaptive_loop.md)
+
+    EKF-with-control-signals variant (``ekf_control=True``):
     gains : explicit base gains (k1, k2, k3) [1/s, 1/s², 1/s³] instead of the triple pole
         at −1/τ (the adaptation scales them as k1·s, (k2 − ω_s²)·s² + ω_s², k3·s³);
         (0, 0, 0) removes the loop (the filter is then a plain GNSS-aided vertical KF)

@@ -51,7 +51,7 @@ decided by that undershoot and by Monte Carlo noise). The transient is linear in
 bias error, so the Monte Carlo uses a large one (2 m/s², peak ≈ 22 m) to keep the ensemble
 mean's noise (σ/√n ≈ 0.08 m for 200 runs) far below the 10 % level.
 
-GNSS gating (our addition; issue 6 item 5 — seed 003 assumes clean GPS). A fix whose
+GNSS gating (not in seed 003, which assumes clean GPS). A fix whose
 innovation δy = z̃_gps − ẑ⁻ satisfies δy² > k²·S(τ) is rejected (not applied, counted in
 ``Estimate.info["gnss_rejected"]``), with k² = χ²₁(1 − p_fa) (``gate_prob`` = p_fa, default
 10⁻³: k = 3.29) and S(τ) = [Φ(τ) P⁺ Φ(τ)ᵀ + Q(τ)]₀₀ + σ_gps² the innovation variance of the
