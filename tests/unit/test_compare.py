@@ -68,7 +68,11 @@ def test_headline_picks_best_and_states_the_margin() -> None:
     assert "95 % CI [+0.37, +0.63] m (graph-batch lower in 4 of 4 holdout windows)" in h["text"]
     # one estimator has a horizontal RMSE: nothing to rank
     assert comp["metrics"]["horiz_rmse_m"] is None
-    assert headline_lines({"comparison": comp}) == [h["text"], "note"]
+    assert h["summary_text"] == (
+        "Altitude RMSE: graph-batch is best at 1.00 m, 1.5× better than the best filter "
+        "(ekf 1.50 m) and 3.0× better than the best loop or observer (loop2 3.00 m).")
+    assert comp["headline"] == [h["summary_text"], h["text"]]
+    assert headline_lines({"comparison": comp}) == [h["summary_text"], h["text"], "note"]
 
 
 def test_headline_tied_when_ci_includes_zero() -> None:
@@ -93,3 +97,40 @@ def test_headline_mixed_and_no_ci() -> None:
     assert h["verdict"] == "no CI" and h["ci95"] is None and h["n_blocks"] == 1
     assert "no confidence interval" in h["text"]
     assert rank_metric({"a": 1.0, "b": None}, {}, "alt_rmse_m", "x", "y") is None
+
+
+def test_headline_names_the_family_that_ties_and_its_margin() -> None:
+    """Three smoothers within noise of each other: one sentence names the family, its value and
+    how far the best filter and loop trail; the statistics name every tied estimator."""
+    rng = np.random.default_rng(3)
+    base = 0.18 + 0.02 * rng.standard_normal(8)
+    noise = {"ekf-rts": 0.002, "graph-batch": 0.0, "graph-isam2": -0.001}
+    ests, pb = {}, {}
+    for n, off in noise.items():
+        blocks = list(base + off + 0.01 * rng.standard_normal(8))
+        pb[n] = _blocks(blocks)
+        ests[n] = _est(float(np.sqrt(np.mean(np.square(blocks)))))
+    for n, v in (("ekf", 0.34), ("vekf7", 0.50), ("loop3", 3.6)):
+        pb[n], ests[n] = _blocks([v] * 8), _est(v)
+    comp = comparison(ests, pb, "truth", [(0, 1)] * 8, "time block", "note")
+    h = comp["metrics"]["alt_rmse_m"]
+    assert {t["name"] for t in h["tied"]} == {"ekf-rts", "graph-batch", "graph-isam2"} - {
+        h["best"]}
+    assert h["resolved"]
+    assert h["summary_text"].startswith(
+        "Altitude RMSE: the smoothers (ekf-rts, graph-batch, graph-isam2) tie at 0.1")
+    r_filter = 0.34 / h["best_value"]
+    assert f"{r_filter:.1f}× better than the best filter (ekf 0.34 m)" in h["summary_text"]
+    assert "better than the best loop or observer (loop3 3.60 m)" in h["summary_text"]
+    third = ({"ekf-rts", "graph-batch", "graph-isam2"} - {h["best"], h["runner_up"]}).pop()
+    assert f"Also not separated from {h['best']}: {third}" in h["text"]
+
+
+def test_two_windows_cannot_rank() -> None:
+    h = rank_metric({"ekf-rts": 0.67, "graph-batch": 0.672, "vekf7": 1.73},
+                    {"ekf-rts": [0.6, 0.74], "graph-batch": [0.62, 0.72],
+                     "vekf7": [1.5, 1.9]}, "alt_rmse_m", "Altitude RMSE", "holdout window")
+    assert not h["resolved"]
+    assert h["summary_text"].startswith(
+        "Altitude RMSE: 2 paired holdout window(s) cannot rank the estimators (at least 4 are "
+        "needed); lowest ekf-rts 0.67 m")

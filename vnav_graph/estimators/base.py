@@ -25,6 +25,21 @@ class Estimator(Protocol):
     def run(self, drive: Drive) -> Estimate: ...
 
 
+# The three families of core estimators (report panels, headline): name, singular, members.
+FAMILIES: tuple[tuple[str, str, tuple[str, ...]], ...] = (
+    ("smoothers", "smoother", ("ekf-rts", "graph-batch", "graph-isam2")),
+    ("filters", "filter", ("ekf", "vekf7", "vkf4")),
+    ("loops and observers", "loop or observer",
+     ("observer1d", "loop2", "loop3", "loop3-adaptive")),
+)
+OTHER_FAMILY = ("other", "other estimator")
+
+
+def family_of(name: str) -> tuple[str, str]:
+    """(family, its singular) of an estimator name; ``OTHER_FAMILY`` for an extension."""
+    return next(((f, one) for f, one, members in FAMILIES if name in members), OTHER_FAMILY)
+
+
 # name -> "module:attribute" of a callable(config | None) -> Estimator, in report order.
 _REGISTRY: dict[str, str | Callable[..., Estimator]] = {}
 _CORE: dict[str, str] = {

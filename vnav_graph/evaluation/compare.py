@@ -40,6 +40,12 @@ BLOCK_MIN_S = 30.0
 MAX_BLOCKS = 10
 # (summary key, label in the headline)
 HEADLINE_METRICS = (("alt_rmse_m", "Altitude RMSE"), ("horiz_rmse_m", "Horizontal RMSE"))
+# Fewer paired blocks than this cannot rank estimators: the t quantile with 2 degrees of
+# freedom is 4.3 (3.2 with 3), so only a difference several times its scatter is resolved.
+MIN_BLOCKS_TO_RANK = 4
+# The finding sentence says "tie" for estimators the blocks do not separate from the best and
+# whose value is within this fraction of it; the others are named as not separated.
+TIE_REL = 0.10
 
 
 def time_blocks(t0: float, t1: float) -> list[tuple[float, float]]:
@@ -76,56 +82,146 @@ def paired_interval(d: Sequence[float], level: float = 0.95) -> tuple[float, flo
     return mean, mean - half, mean + half
 
 
+def _m(x: float) -> str:
+    """A length [m] with the decimals its size needs (3 significant figures, at most 3
+    decimals), so that a small difference never prints as 0.00."""
+    a = abs(x)
+    return f"{x:.1f}" if a >= 10 else (f"{x:.2f}" if a >= 0.1 else f"{x:.3f}")
+
+
+def _dm(x: float) -> str:
+    return ("+" if x >= 0 else "-") + _m(abs(x))
+
+
 def rank_metric(values: Mapping[str, float | None],
                 per_block: Mapping[str, Sequence[float | None]], key: str, label: str,
                 block_kind: str) -> dict[str, Any] | None:
     """The headline block of one metric, or None when fewer than two estimators have it.
 
     ``values``: overall value per estimator (the table's number); ``per_block``: the same
-    metric per block, aligned across estimators.
+    metric per block, aligned across estimators. Besides best and runner-up, ``tied`` lists
+    every other estimator the blocks do not separate from the best (its paired CI includes
+    0 or lies below it, or fewer than two paired blocks), and ``resolved`` says whether there
+    are ``MIN_BLOCKS_TO_RANK`` paired blocks or more.
     """
     have = sorted(((v, n) for n, v in values.items() if v is not None and np.isfinite(v)))
     if len(have) < 2:
         return None
     (best_v, best), (run_v, runner) = have[0], have[1]
-    pb, pr = per_block.get(best) or [], per_block.get(runner) or []
-    d = [r - b for b, r in zip(pb, pr, strict=False) if b is not None and r is not None]
-    ci = paired_interval(d)
+
+    def paired(other: str) -> tuple[list[float], tuple[float, float, float] | None]:
+        pb, po = per_block.get(best) or [], per_block.get(other) or []
+        d = [o - b for b, o in zip(pb, po, strict=False) if b is not None and o is not None]
+        return d, paired_interval(d)
+
+    d, ci = paired(runner)
     diff = run_v - best_v
     rel = 100.0 * diff / run_v if run_v > 0 else None
     if ci is None:
         verdict = "no CI"
     else:
         verdict = "better" if ci[1] > 0 else ("mixed" if ci[2] < 0 else "tied")
+    tied = []
+    for v, n in have[1:]:
+        dn, cin = paired(n)
+        if cin is None or cin[1] <= 0:
+            tied.append({"name": n, "value": v, "n_blocks": len(dn),
+                         "paired_mean": None if cin is None else cin[0],
+                         "ci95": None if cin is None else [cin[1], cin[2]]})
     out = {"metric": key, "best": best, "best_value": best_v, "runner_up": runner,
            "runner_up_value": run_v, "diff": diff, "rel_pct": rel, "n_blocks": len(d),
            "n_blocks_best_lower": int(sum(x > 0 for x in d)),
            "paired_mean": None if ci is None else ci[0],
-           "ci95": None if ci is None else [ci[1], ci[2]], "verdict": verdict}
+           "ci95": None if ci is None else [ci[1], ci[2]], "verdict": verdict,
+           "tied": tied, "resolved": len(d) >= MIN_BLOCKS_TO_RANK,
+           "values": {n: v for v, n in have}}
     out["text"] = headline_text(out, label, block_kind)
+    out["summary_text"] = people_text(out, label, block_kind)
     return out
 
 
 def headline_text(h: Mapping[str, Any], label: str, block_kind: str) -> str:
-    """One sentence stating the result of ``rank_metric`` (used by the table and the report)."""
+    """The statistical sentence of ``rank_metric``: best, runner-up, the paired interval, and
+    every estimator the blocks do not separate from the best."""
     rel = "" if h["rel_pct"] is None else f", {h['rel_pct']:.0f} %"
-    vs = (f"{h['best_value']:.2f} m vs {h['runner_up']} {h['runner_up_value']:.2f} m "
-          f"({h['diff']:.2f} m{rel} lower)")
+    vs = (f"{_m(h['best_value'])} m vs {h['runner_up']} {_m(h['runner_up_value'])} m "
+          f"({_m(h['diff'])} m{rel} lower)")
     if h["verdict"] == "no CI":
         return (f"{label}: {h['best']} lowest, {vs}; {h['n_blocks']} paired {block_kind}(s): "
                 "no confidence interval (needs two or more).")
     lo, hi = h["ci95"]
-    ci = (f"paired difference over {h['n_blocks']} {block_kind}s {h['paired_mean']:+.2f} m, "
-          f"95 % CI [{lo:+.2f}, {hi:+.2f}] m")
+    ci = (f"paired difference over {h['n_blocks']} {block_kind}s {_dm(h['paired_mean'])} m, "
+          f"95 % CI [{_dm(lo)}, {_dm(hi)}] m")
     wins = (f" ({h['best']} lower in {h['n_blocks_best_lower']} of {h['n_blocks']} "
             f"{block_kind}s)")
+    others = [t for t in h.get("tied", []) if t["name"] != h["runner_up"]]
+    also = ""
+    if others:
+        also = (" Also not separated from " + h["best"] + ": " + ", ".join(
+            f"{t['name']} {_m(t['value'])} m" + (
+                "" if t["ci95"] is None else
+                f" (CI [{_dm(t['ci95'][0])}, {_dm(t['ci95'][1])}] m)") for t in others) + ".")
     if h["verdict"] == "better":
-        return f"{label}: {h['best']} best, {vs}; {ci}{wins}."
+        return f"{label}: {h['best']} best, {vs}; {ci}{wins}.{also}"
     if h["verdict"] == "tied":
         return (f"{label}: {h['best']} and {h['runner_up']} tied: {h['best']} {vs}, but the "
-                f"{ci} includes 0{wins}.")
+                f"{ci} includes 0{wins}.{also}")
     return (f"{label}: {h['best']} lowest overall but the {block_kind}s favour "
-            f"{h['runner_up']} (mixed): {vs}; {ci}{wins}.")
+            f"{h['runner_up']} (mixed): {vs}; {ci}{wins}.{also}")
+
+
+def _names(names: Sequence[str]) -> str:
+    return names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
+
+
+def _times(r: float) -> str:
+    return f"{r:.0f}×" if r >= 10 else f"{r:.1f}×"
+
+
+def people_text(h: Mapping[str, Any], label: str, block_kind: str) -> str:
+    """The finding of ``rank_metric`` in one sentence for a person: who is best (or which
+    estimators the blocks cannot separate), and by how much the best of every other family
+    trails, e.g. "Altitude RMSE: the smoothers (ekf-rts, graph-batch, graph-isam2) tie at
+    0.18 m, 1.9× better than the best filter (ekf 0.34 m) and 12× better than the best loop
+    or observer (observer1d 2.08 m)."."""
+    from ..estimators.base import FAMILIES, family_of
+
+    values: dict[str, float] = h["values"]
+    best = h["best"]
+    if not h["resolved"]:
+        top = [best, *[t["name"] for t in h["tied"]]][:3]
+        return (f"{label}: {h['n_blocks']} paired {block_kind}(s) cannot rank the "
+                f"estimators (at least {MIN_BLOCKS_TO_RANK} are needed); lowest "
+                + ", ".join(f"{n} {_m(values[n])} m" for n in top) + ".")
+    close = [t["name"] for t in h["tied"] if t["value"] <= (1 + TIE_REL) * h["best_value"]]
+    loose = [t["name"] for t in h["tied"] if t["name"] not in close]
+    top = [best, *close]
+    top_v = [values[n] for n in top]
+    fams = {family_of(n)[0] for n in top}
+    at = (f"{_m(min(top_v))} m" if _m(min(top_v)) == _m(max(top_v))
+          else f"{_m(min(top_v))}–{_m(max(top_v))} m")
+    if len(top) == 1:
+        who = f"{best} is best at {at}"
+    else:
+        members = next((m for f, _, m in FAMILIES if f in fams), ())
+        present = [n for n in members if n in values]
+        if len(fams) == 1 and sorted(present) == sorted(top):
+            who = f"the {family_of(best)[0]} ({', '.join(present)}) tie at {at}"
+        else:
+            who = f"{_names(top)} tie at {at}"
+    trail: dict[str, tuple[str, float, str]] = {}
+    for n, v in values.items():
+        f, one = family_of(n)
+        if f not in fams and (f not in trail or v < trail[f][1]):
+            trail[f] = (n, v, one)
+    parts = [f"{_times(v / h['best_value'])} better than the best {one} ({n} {_m(v)} m)"
+             for n, v, one in sorted(trail.values(), key=lambda x: x[1])
+             if h["best_value"] > 0 and n not in loose]
+    if loose:
+        who += ("; the " + block_kind + "s do not separate " + _names(
+            [f"{n} ({_m(values[n])} m)" for n in loose]) + " from " + (
+                "it" if len(top) == 1 else "them") + ", though")
+    return f"{label}: {who}" + (", " + " and ".join(parts) if parts else "") + "."
 
 
 def comparison(estimators: Mapping[str, Mapping[str, Any]],
@@ -143,7 +239,9 @@ def comparison(estimators: Mapping[str, Mapping[str, Any]],
         vals = {n: m.get(key) for n, m in estimators.items() if m.get("status") == "ok"}
         pb = {n: [b.get(key) for b in rows] for n, rows in per_block.items()}
         metrics[key] = rank_metric(vals, pb, key, label, block_kind)
-    return {"basis": basis, "block_kind": block_kind,
+    headline = [m["summary_text"] for m in metrics.values() if m]
+    headline += [m["text"] for m in metrics.values() if m]
+    return {"basis": basis, "block_kind": block_kind, "headline": headline,
             "blocks": [[float(a), float(b)] for a, b in blocks], "note": note,
             "method": "95 % Student-t interval of the paired per-block RMSE difference "
                       "(runner-up − best); tied when it includes 0",
@@ -155,7 +253,7 @@ def headline_lines(summary: Mapping[str, Any]) -> list[str]:
     comp = summary.get("comparison")
     if not comp:
         return []
-    lines = [m["text"] for m in comp["metrics"].values() if m]
+    lines = list(comp.get("headline") or [m["text"] for m in comp["metrics"].values() if m])
     if lines and comp.get("note"):
         lines.append(comp["note"])
     return lines

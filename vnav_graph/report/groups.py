@@ -21,14 +21,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..estimators.base import FAMILIES, OTHER_FAMILY
 from ..types import FloatArray
 
-GROUPS: tuple[tuple[str, tuple[str, ...]], ...] = (
-    ("smoothers", ("ekf-rts", "graph-batch", "graph-isam2")),
-    ("filters", ("ekf", "vekf7", "vkf4")),
-    ("loops and observers", ("observer1d", "loop2", "loop3", "loop3-adaptive")),
-)
-OTHER = "other"
+GROUPS: tuple[tuple[str, tuple[str, ...]], ...] = tuple((f, m) for f, _, m in FAMILIES)
+OTHER = OTHER_FAMILY[0]
 PERCENTILE = 99.0
 OUTLIER_FACTOR = 5.0
 MARGIN = 1.15
