@@ -182,7 +182,8 @@ def failed_block(error: str, runtime_s: float) -> dict[str, Any]:
     null_param = {"est": None, "sd": None, "truth": None}
     return {
         "status": "failed", "error": error, "alt_rmse_m": None, "alt_max_abs_m": None,
-        "horiz_rmse_m": None, "heading_rmse_deg": None, "outage_alt_max_m": None,
+        "horiz_rmse_m": None, "heading_rmse_deg": None, "heading_known_rmse_deg": None,
+        "heading_known_after_s": None, "outage_alt_max_m": None,
         "outage_horiz_max_m": None, "vel_down_rmse_mps": None, "nees_mean": None,
         "nees_dof": None, "runtime_s": runtime_s,
         "realtime_factor": None, "gnss_rejected": None, "warnings": [],

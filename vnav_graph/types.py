@@ -659,6 +659,17 @@ class Estimate:
                 cols["horiz_sd_m"] = self._sd_at(tr.t, var[:, 0] + var[:, 1])
         return pd.DataFrame(cols)
 
+    def sigma_at(self, t: FloatArray, component: int) -> FloatArray | None:
+        """One-sigma of ``ERROR_STATE`` component ``component`` at the times ``t`` (the rules
+        of ``to_dataframe``'s sigma columns); None without a covariance or a finite variance
+        of that component."""
+        if self.cov is None or self.t_cov is None:
+            return None
+        var = self.cov[:, component, component]
+        if not np.any(np.isfinite(var)):
+            return None
+        return self._sd_at(np.asarray(t, dtype=float), var)
+
     def _sd_at(self, t: FloatArray, var: FloatArray) -> FloatArray:
         """√var at the covariance epochs, interpolated to ``t`` (see ``to_dataframe``)."""
         assert self.t_cov is not None

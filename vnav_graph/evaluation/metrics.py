@@ -23,6 +23,7 @@ class Errors:
     vel_down: FloatArray | None  # [m/s]
     horiz: FloatArray | None = None  # |NE position error| [m], estimates providing pos_h
     heading: FloatArray | None = None  # yaw error wrapped to [-180, 180) [deg], "att"
+    heading_sd: FloatArray | None = None  # the estimate's own σ of yaw [deg], from its cov
 
 
 def errors_vs_truth(est: Estimate, drive: Drive) -> Errors:
@@ -47,7 +48,35 @@ def errors_vs_truth(est: Estimate, drive: Drive) -> Errors:
     if "att" in est.provides and tr.q_nb is not None and truth.q_nb is not None:
         dyaw = tr.to_rph()[m, 2] - truth.to_rph()[:, 2]
         heading = np.degrees((dyaw + np.pi) % (2.0 * np.pi) - np.pi)
-    return Errors(t, alt, vd, horiz, heading)
+    heading_sd = None
+    if heading is not None:
+        sd = est.sigma_at(t, ERROR_STATE["att_n"].start + 2)  # rotation error about down
+        heading_sd = None if sd is None else np.degrees(sd)
+    return Errors(t, alt, vd, horiz, heading, heading_sd)
+
+
+# Heading is "known" where the estimate's own yaw σ is at most this [deg]: a magnetometer-free
+# INS on a vehicle that has not yet turned or accelerated reports σ_yaw of tens of degrees
+# (cold start), and scoring those epochs charges it for what it says it does not know.
+HEADING_KNOWN_SD_DEG = 5.0
+
+
+def heading_known(t: FloatArray, heading: FloatArray | None, sd: FloatArray | None,
+                  limit_deg: float = HEADING_KNOWN_SD_DEG) -> tuple[float | None, float | None]:
+    """(RMS heading error over the epochs with σ_yaw ≤ ``limit_deg`` [deg], the time [s after
+    the first epoch] from which σ_yaw stays ≤ ``limit_deg``); None where it never is, or
+    without a heading error or its σ."""
+    if heading is None or sd is None:
+        return None, None
+    known = np.isfinite(sd) & (sd <= limit_deg) & np.isfinite(heading)
+    if not known.any():
+        return None, None
+    rms = float(np.sqrt(np.mean(heading[known] ** 2)))
+    bad = np.flatnonzero(~(np.isfinite(sd) & (sd <= limit_deg)))
+    if bad.size and bad[-1] == t.size - 1:
+        return rms, None  # not known at the end
+    start = 0 if bad.size == 0 else int(bad[-1]) + 1
+    return rms, float(t[start] - t[0])
 
 
 def outage_max(t: FloatArray, err: FloatArray | None,
@@ -126,7 +155,10 @@ def evaluate(est: Estimate, drive: Drive,
 
     Additions to the docs/design.md block: ``horiz_rmse_m`` (RMS of the north/east position
     error, estimates providing ``pos_h``), ``heading_rmse_deg`` (RMS of the yaw error wrapped
-    to ±180°, estimates providing ``att``), ``outage_alt_max_m`` / ``outage_horiz_max_m``
+    to ±180°, estimates providing ``att``), ``heading_known_rmse_deg`` and
+    ``heading_known_after_s`` (the same over the epochs where the estimate's own σ_yaw ≤
+    ``HEADING_KNOWN_SD_DEG``, and the time from which it stays there: ``heading_known``),
+    ``outage_alt_max_m`` / ``outage_horiz_max_m``
     (max |error| inside the drive's GNSS outages, ``meta["gnss_outages"]``; null without
     outages), ``warnings`` and ``extra_variables`` (the
     variables a graph extension added, ``{"m0": {"est": [...], "sd": [...]}}`` from
@@ -137,7 +169,8 @@ def evaluate(est: Estimate, drive: Drive,
     """
     out: dict[str, Any] = {
         "status": "ok", "error": None, "alt_rmse_m": None, "alt_max_abs_m": None,
-        "horiz_rmse_m": None, "heading_rmse_deg": None, "outage_alt_max_m": None,
+        "horiz_rmse_m": None, "heading_rmse_deg": None, "heading_known_rmse_deg": None,
+        "heading_known_after_s": None, "outage_alt_max_m": None,
         "outage_horiz_max_m": None, "vel_down_rmse_mps": None, "nees_mean": None,
         "nees_dof": None, "runtime_s": float(est.runtime_s),
         "realtime_factor": (drive.duration_s / est.runtime_s) if est.runtime_s > 0 else None,
@@ -157,6 +190,8 @@ def evaluate(est: Estimate, drive: Drive,
             out["horiz_rmse_m"] = float(np.sqrt(np.mean(err.horiz**2)))
         if err.heading is not None:
             out["heading_rmse_deg"] = float(np.sqrt(np.mean(err.heading**2)))
+        out["heading_known_rmse_deg"], out["heading_known_after_s"] = heading_known(
+            err.t, err.heading, err.heading_sd)
         outages = drive.meta.get("gnss_outages") or []
         out["outage_alt_max_m"] = outage_max(err.t, err.alt, outages)
         out["outage_horiz_max_m"] = outage_max(err.t, err.horiz, outages)

@@ -57,7 +57,8 @@ BENCH_SCHEMA = "vnav_graph.bench/1"
 AGG_METRICS = (
     "alt_rmse_m", "nees_mean", "runtime_s", "vel_down_rmse_mps", "alt_max_abs_m",
     "nees_per_dof", "realtime_factor", "baro_scale_abs_err", "baro_latency_abs_err_s",
-    "baro_bias_abs_err_m", "horiz_rmse_m", "heading_rmse_deg", "outage_alt_max_m",
+    "baro_bias_abs_err_m", "horiz_rmse_m", "heading_rmse_deg", "heading_known_rmse_deg",
+    "heading_known_after_s", "outage_alt_max_m",
     "outage_horiz_max_m", "gnss_rejected",
 )
 
