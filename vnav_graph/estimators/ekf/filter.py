@@ -57,6 +57,7 @@ from scipy.stats import chi2
 from ...config import DEG, REAL_LOG_BARO, ImuSpec
 from ...geo.earth import OMEGA_IE
 from ...nav.arrays import nearest_index
+from ...nav.error_state import BARO_COMPONENTS, mark_absent
 from ...nav.gaps import GAP_ACCEL_SD
 from ...nav.levelling import coarse_level
 from ...pages import small_pages
@@ -513,8 +514,7 @@ def _unpack_cov(packed: FloatArray, has_baro: bool) -> FloatArray:
         cov[a:a + 4096, iu, ju] = blk
         cov[a:a + 4096, ju, iu] = blk
     if not has_baro:
-        cov[:, 15:18, :] = np.nan
-        cov[:, :, 15:18] = np.nan
+        mark_absent(cov, BARO_COMPONENTS)
     cov.setflags(write=False)  # read-only and owned: ``Estimate`` shares it instead of a copy
     return cov
 

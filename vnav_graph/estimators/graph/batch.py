@@ -39,10 +39,13 @@ import numpy as np
 from gtsam.symbol_shorthand import A, B, C, K, V, X
 
 from ...geo.frames import mat_to_quat, ned_to_lla
+from ...nav.error_state import component, embed_error_state
 from ...sensors.baro import with_prior_conflict_notes, without_implausible_scale
 from ...sensors.magnetometer import without_contradicting_mag
 from ...sensors.noise import gm_mean_prior_sd
 from ...types import (
+    ERROR_STATE,
+    ERROR_STATE_DIM,
     BaroEstimate,
     Drive,
     Estimate,
@@ -140,23 +143,20 @@ def cov_18(P: Problem, cov_of: Any, vals: Any, k: int) -> FloatArray:
     r = vals.atPose3(X(k)).rotation().matrix()
     lla = ned_to_lla(vals.atPose3(X(k)).translation()[None, :], P.origin)
     c_nt = gf.rot_t_n(lla, P.origin)[0].T
-    tmat = np.zeros((18, n))
-    tmat[6:9, 0:3] = c_nt @ r
-    tmat[0:3, 3:6] = c_nt @ r
-    tmat[3:6, 6:9] = c_nt
-    tmat[12:15, 9:12] = np.eye(3)
-    tmat[9:12, 12:15] = np.eye(3)
+    es = ERROR_STATE
+    tmat = np.zeros((ERROR_STATE_DIM, n))
+    tmat[es["att_n"], 0:3] = c_nt @ r
+    tmat[es["pos_n"], 3:6] = c_nt @ r
+    tmat[es["vel_n"], 6:9] = c_nt
+    tmat[es["bias_accel"], 9:12] = np.eye(3)
+    tmat[es["bias_gyro"], 12:15] = np.eye(3)
     if P.ka is not None:
-        tmat[12:15, n - 3:n] = -np.diag(P.ka.f_mean[k])
-    if P.drive.baro is not None:
-        tmat[17, 15] = 1.0
-        tmat[15, 16] = 1.0
-        tmat[16, 17] = 1.0
-    cov = tmat @ full @ tmat.T
-    if P.drive.baro is None:
-        cov[15:18, :] = np.nan
-        cov[:, 15:18] = np.nan
-    return cov
+        tmat[es["bias_accel"], n - 3:n] = -np.diag(P.ka.f_mean[k])
+    if P.drive.baro is not None:  # C(k), then K(0) = (s, τd); without a baro: NaN rows
+        tmat[component("baro_bias"), 15] = 1.0
+        tmat[component("baro_scale"), 16] = 1.0
+        tmat[component("baro_latency"), 17] = 1.0
+    return embed_error_state(full, tmat)
 
 
 def value_of(vals: Any, key: int) -> list[float] | None:

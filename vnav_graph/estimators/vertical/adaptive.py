@@ -55,9 +55,9 @@ from numba import njit
 
 from ...config import REAL_LOG_BARO
 from ...nav.arrays import outer, put
+from ...nav.error_state import embed_error_state, selection
 from ...sensors.model import sensor_model
 from ...types import (
-    ERROR_STATE_DIM,
     BaroEstimate,
     Drive,
     Estimate,
@@ -403,20 +403,14 @@ def run_adaptive_ekf(inp: LoopInputs, cfg: AdaptiveConfig, t_fix, z_fix, r_fix, 
 
 # ERROR_STATE rows (estimated − true = +δx): pos_n[2] down = −δh, vel_n[2] down = −δv,
 # bias_accel[2] (body z ≈ down for a near-level IMU) = −δc, baro_scale = +δs, baro_bias = +δb
-_MAP = ((2, IH, -1.0), (5, IV, -1.0), (14, IC, -1.0), (15, IS, 1.0), (17, IB, 1.0))
+_TO_ERROR_STATE = selection((("pos_n", 2, IH, -1.0), ("vel_n", 2, IV, -1.0),
+                             ("bias_accel", 2, IC, -1.0), ("baro_scale", 0, IS, 1.0),
+                             ("baro_bias", 0, IB, 1.0)), NX)
 
 
 def _to_error_state(p: FloatArray) -> FloatArray:
     """(M, 5, 5) filter covariances -> (M, 18, 18) ERROR_STATE layout, NaN where absent."""
-    tmat = np.zeros((ERROR_STATE_DIM, NX))
-    for row, col, sign in _MAP:
-        tmat[row, col] = sign
-    out = np.einsum("ij,mjk,lk->mil", tmat, p, tmat)
-    mask = np.ones(ERROR_STATE_DIM, dtype=bool)
-    mask[[r for r, _, _ in _MAP]] = False
-    out[:, mask, :] = np.nan
-    out[:, :, mask] = np.nan
-    return out
+    return embed_error_state(p, _TO_ERROR_STATE)
 
 
 class AdaptiveLoop3:

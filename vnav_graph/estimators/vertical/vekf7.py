@@ -69,13 +69,13 @@ from numpy.typing import NDArray
 
 from ...geo.earth import gravity_scalar, radii, radii_scalar
 from ...nav.arrays import outer, put
+from ...nav.error_state import embed_error_state, selection
 from ...nav.gaps import GAP_ACCEL_SD, cv_bridge_noise, gap_threshold
 from ...nav.gnss_gate import NO_LIMIT, REFUSE, height_gate, new_gate_state
 from ...sensors.baro import baro_jacobian, measure_baro, with_prior_conflict_notes
 from ...sensors.model import SensorModel, sensor_model
 from ...sensors.noise import gm_process_var, gm_transition
 from ...types import (
-    ERROR_STATE_DIM,
     BaroEstimate,
     Drive,
     Estimate,
@@ -543,22 +543,14 @@ class VEKF7:
 
 # ERROR_STATE rows (estimated − true = −x): pos_n[2] down = −h → +δh_i; vel_n[2] = −v_up →
 # +δv_z; bias_accel[2] = −B_z; baro_scale, baro_latency, baro_bias = −(dSF, Td, δh_b).
-_MAP = ((2, IH, 1.0), (5, IV, 1.0), (14, IB, -1.0), (15, IS, -1.0), (16, ITD, -1.0),
-        (17, IBB, -1.0))
+_TO_ERROR_STATE = selection((("pos_n", 2, IH, 1.0), ("vel_n", 2, IV, 1.0),
+                             ("bias_accel", 2, IB, -1.0), ("baro_scale", 0, IS, -1.0),
+                             ("baro_latency", 0, ITD, -1.0), ("baro_bias", 0, IBB, -1.0)), NX)
 
 
 def _to_error_state(p: FloatArray) -> FloatArray:
     """(M, 8, 8) filter covariances -> (M, 18, 18) ERROR_STATE layout, NaN where absent."""
-    tmat = np.zeros((ERROR_STATE_DIM, NX))
-    for row, col, sign in _MAP:
-        tmat[row, col] = sign
-    out = np.einsum("ij,mjk,lk->mil", tmat, p, tmat)
-    rows = np.array([r for r, _, _ in _MAP])
-    mask = np.ones(ERROR_STATE_DIM, dtype=bool)
-    mask[rows] = False
-    out[:, mask, :] = np.nan
-    out[:, :, mask] = np.nan
-    return out
+    return embed_error_state(p, _TO_ERROR_STATE)
 
 
 __all__ = ["VEKF7", "VEKF7Config"]

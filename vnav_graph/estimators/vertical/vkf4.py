@@ -63,12 +63,12 @@ from numba import njit
 
 from ...geo.earth import gravity_scalar
 from ...nav.arrays import outer, put
+from ...nav.error_state import embed_error_state, selection
 from ...nav.gaps import GAP_ACCEL_SD, cv_bridge_noise, gap_threshold
 from ...nav.gnss_gate import NO_LIMIT, REFUSE, height_gate
 from ...sensors.model import sensor_model
 from ...sensors.noise import gm_process_var, gm_transition
 from ...types import (
-    ERROR_STATE_DIM,
     BaroEstimate,
     Drive,
     Estimate,
@@ -309,14 +309,11 @@ def _to_error_state(p: FloatArray) -> FloatArray:
     """(M, 4, 4) -> (M, 18, 18). ERROR_STATE is estimated − true: the corrected INS error is
     (x − x̂): pos_n[2] down = −(Δh − Δĥ) → −1; vel_n[2] = +(Δv_d − Δv̂_d) → +1; the baro-error
     estimate's error is −(x₃ − x̂₃) → −1."""
-    tmat = np.zeros((ERROR_STATE_DIM, NX))
-    tmat[2, 0], tmat[5, 1], tmat[17, 2] = -1.0, 1.0, -1.0
-    out = np.einsum("ij,mjk,lk->mil", tmat, p, tmat)
-    mask = np.ones(ERROR_STATE_DIM, dtype=bool)
-    mask[[2, 5, 17]] = False
-    out[:, mask, :] = np.nan
-    out[:, :, mask] = np.nan
-    return out
+    return embed_error_state(p, _TO_ERROR_STATE)
+
+
+_TO_ERROR_STATE = selection((("pos_n", 2, 0, -1.0), ("vel_n", 2, 1, 1.0),
+                             ("baro_bias", 0, 2, -1.0)), NX)
 
 
 __all__ = ["VKF4", "VKF4Config"]
