@@ -45,6 +45,12 @@ ERROR_STATE: MappingProxyType[str, slice] = MappingProxyType(
 )
 ERROR_STATE_DIM = 18
 
+# ``Drive.height_reference`` values and what they mean
+HEIGHT_DATUMS = {
+    "ellipsoid": "height above the WGS-84 ellipsoid",
+    "msl": "height above mean sea level (as the log's GNSS reports it)",
+}
+
 # Column of ``Estimate.to_dataframe()`` holding the one-sigma of each ERROR_STATE component.
 # The down-position sigma is the altitude sigma and keeps the first Parquet layout's name.
 SD_COLUMNS: tuple[str, ...] = (
@@ -214,6 +220,12 @@ class GnssStream:
 
     def __len__(self) -> int:
         return int(self.t.size)
+
+    @property
+    def alt(self) -> FloatArray:
+        """Antenna height [m, +up]: ``lla[:, 2]``, in the drive's height datum
+        (``Drive.height_reference``)."""
+        return self.lla[:, 2]
 
     def select(self, mask: NDArray[np.bool_]) -> GnssStream:
         """Sub-stream of the fixes where ``mask`` is True (used for outages and holdout)."""
@@ -510,6 +522,17 @@ class Drive:
     @property
     def source(self) -> str:
         return str(self.meta.get("source", "log"))
+
+    @property
+    def height_reference(self) -> str:
+        """Datum of every height in the drive: ``"ellipsoid"`` (WGS-84; simulated drives,
+        phones, PX4 with an ellipsoidal height) or ``"msl"`` (a log whose GNSS gives heights
+        above mean sea level, e.g. ArduPilot's GPS.Alt); ``height_datum`` says it in words."""
+        return str(self.meta.get("height_reference", "ellipsoid"))
+
+    @property
+    def height_datum(self) -> str:
+        return HEIGHT_DATUMS.get(self.height_reference, self.height_reference)
 
     def replace(self, **changes: Any) -> Drive:
         from dataclasses import replace

@@ -67,3 +67,16 @@ def test_trajectory_interpolation_is_linear_and_slerps():
     assert mid.to_rph()[0, 2] == pytest.approx(0.5, abs=1e-12)
     with pytest.raises(ValueError, match="outside the trajectory span"):
         tr.at(np.array([2.0]))
+
+
+def test_gnss_alt_and_the_drive_height_datum():
+    from vnav_graph.report.html import drive_rows
+    from vnav_graph.simulation import simulate
+
+    drive = simulate("default", 0, duration_s=20.0)
+    np.testing.assert_array_equal(drive.gnss.alt, drive.gnss.lla[:, 2])
+    assert drive.height_reference == "ellipsoid"
+    assert drive.height_datum == "height above the WGS-84 ellipsoid"
+    msl = drive.replace(meta={**drive.meta, "height_reference": "msl"})
+    assert msl.height_datum.startswith("height above mean sea level")
+    assert ("heights", msl.height_datum) in drive_rows(msl)

@@ -24,12 +24,6 @@ SCHEMA = "vnav_graph.drive_info/1"
 GAP_MIN_S = 2.0
 GAP_MIN_INTERVALS = 5.0
 
-_DATUM = {
-    "ellipsoid": "height above the WGS-84 ellipsoid",
-    "msl": "height above mean sea level (as the log's GNSS reports it)",
-}
-
-
 def gnss_gaps(t: np.ndarray) -> list[list[float]]:
     """Intervals [s] between consecutive fixes longer than ``GAP_MIN_S`` and
     ``GAP_MIN_INTERVALS`` times the median fix interval."""
@@ -43,7 +37,6 @@ def gnss_gaps(t: np.ndarray) -> list[list[float]]:
 def drive_info(drive: Drive) -> dict[str, Any]:
     """The ``drive.json`` document of ``drive`` (module docstring)."""
     meta = drive.meta
-    ref = str(meta.get("height_reference", "ellipsoid"))
     t0 = meta.get("t0_unix_s")
     lat, lon, h = (float(v) for v in drive.origin_lla)
     return {
@@ -52,8 +45,8 @@ def drive_info(drive: Drive) -> dict[str, Any]:
         "source": drive.source,
         "origin_lla": {"lat_deg": float(np.degrees(lat)), "lon_deg": float(np.degrees(lon)),
                        "height_m": h},
-        "height_reference": ref,
-        "height_datum": _DATUM.get(ref, ref),
+        "height_reference": drive.height_reference,
+        "height_datum": drive.height_datum,
         "t0_unix_s": None if t0 is None else float(t0),
         "time_reference": ("t_s is seconds on the drive's clock; t0_unix_s is the Unix time "
                            "[s, UTC] of t_s = 0" if t0 is not None else

@@ -51,7 +51,15 @@ def drive_rows(drive: Drive) -> list[tuple[str, str]]:
             ("duration", f"{drive.duration_s:.1f} s"),
             ("IMU", f"{len(drive.imu)} samples, {drive.imu.rate_hz:.0f} Hz"),
             ("GNSS", "none" if drive.gnss is None else f"{len(drive.gnss)} fixes"),
-            ("baro", "none" if drive.baro is None else f"{len(drive.baro)} samples")]
+            ("baro", "none" if drive.baro is None else f"{len(drive.baro)} samples"),
+            ("heights", drive.height_datum)]
+    t0 = drive.meta.get("t0_unix_s")
+    if t0 is not None:
+        from datetime import UTC, datetime
+
+        start = datetime.fromtimestamp(float(t0) + float(drive.imu.t[0]), UTC)
+        rows.append(("start", f"{start:%Y-%m-%d %H:%M:%S} UTC (t = {drive.imu.t[0]:.2f} s on "
+                              "the drive's clock)"))
     for key in ("imu_grade", "gnss_outages"):
         if key in drive.meta:
             rows.append((key.replace("_", " "), str(drive.meta[key])))
