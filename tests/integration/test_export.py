@@ -140,8 +140,8 @@ def test_vertical_only_is_csv_only(run_dir, capsys):
 @pytest.mark.parametrize("argv, needle", [
     (["export", "{tmp}", "--format", "csv"], "not a run folder"),
     (["export", "{run}", "--format", "shp"], "unknown export format 'shp'"),
-    (["export", "{run}", "--format", "cvs"], "did you mean 'csv'"),
-    (["export", "{run}", "--format", "csv", "--estimators", "ekf-rst"], "did you mean 'ekf-rts'"),
+    (["export", "{run}", "--format", "cvs"], "did you mean 'csv'?"),
+    (["export", "{run}", "--format", "csv", "--estimators", "ekf-rst"], "did you mean 'ekf-rts'?"),
     (["run", "--export", "xls", "--out", "{tmp}/o"], "unknown export format 'xls'"),
 ])
 def test_bad_input_one_line_exit_2(run_dir, tmp_path, argv, needle):

@@ -96,7 +96,10 @@ def create(name: str, config: Any = None) -> Estimator:
     spec = _REGISTRY.get(name, _CORE.get(name))
     factory = None if spec is None else _resolve(spec)
     if factory is None:
-        raise ValueError(f"unknown estimator {name!r} (available: {', '.join(available())})")
+        from ..suggest import did_you_mean
+
+        raise ValueError(f"unknown estimator {name!r}{did_you_mean(name, available())} "
+                         f"(available: {', '.join(available())})")
     return factory(config) if config is not None else factory()
 
 

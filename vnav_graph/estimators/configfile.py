@@ -30,13 +30,13 @@ default config (``graph.isam2.LOW_RATE_SETTINGS``); any ``[graph-isam2]`` sectio
 from __future__ import annotations
 
 import dataclasses
-import difflib
 import tomllib
 import types
 import typing
 from pathlib import Path
 from typing import Any
 
+from ..suggest import did_you_mean
 from .base import available, create
 
 
@@ -96,8 +96,7 @@ def override(config: Any, table: dict[str, Any], where: str = "config", prefix: 
 
 
 def _hint(word: str, choices: list[str]) -> str:
-    close = difflib.get_close_matches(word, choices, n=1)
-    return f" (did you mean {close[0]!r}?)" if close else ""
+    return did_you_mean(word, choices)
 
 
 def _type_name(tp: Any) -> str:

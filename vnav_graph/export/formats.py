@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import difflib
 import json
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
@@ -13,6 +12,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from ..suggest import did_you_mean
 from .run_info import DRIVE_INFO, TRUTH_TABLE
 
 FORMATS = ("csv", "kml", "gpx", "tum")
@@ -34,10 +34,8 @@ def parse_formats(spec: str | Iterable[str]) -> list[str]:
         raise ValueError(f"no export format given (choose from {', '.join(FORMATS)})")
     for s in items:
         if s not in FORMATS:
-            close = difflib.get_close_matches(s, FORMATS, n=1)
-            hint = f"; did you mean '{close[0]}'?" if close else ""
-            raise ValueError(f"unknown export format '{s}' (choose from "
-                             f"{', '.join(FORMATS)}){hint}")
+            raise ValueError(f"unknown export format '{s}'{did_you_mean(s, FORMATS)} "
+                             f"(choose from {', '.join(FORMATS)})")
     return list(dict.fromkeys(items))
 
 
@@ -137,10 +135,8 @@ def export_run(run_dir: str | Path, formats: str | Sequence[str],
     names = list(run.tables) if estimators is None else list(dict.fromkeys(estimators))
     for n in names:
         if n not in run.tables:
-            close = difflib.get_close_matches(n, list(run.tables), n=1)
-            hint = f"; did you mean '{close[0]}'?" if close else ""
-            raise ValueError(f"no estimate '{n}' in {run.path} (it has "
-                             f"{', '.join(run.tables)}){hint}")
+            raise ValueError(f"no estimate '{n}' in {run.path}{did_you_mean(n, run.tables)} "
+                             f"(it has {', '.join(run.tables)})")
     tracks = [Track(n, pd.read_parquet(run.tables[n])) for n in names]
     res = ExportResult()
 

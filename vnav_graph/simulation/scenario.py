@@ -81,9 +81,12 @@ def load_scenario(name_or_path: str | Path, **overrides: Any) -> ScenarioConfig:
     if p.suffix != ".toml":
         p = SCENARIO_DIR / f"{name_or_path}.toml"
         if not p.exists():
-            raise ValueError(
-                f"unknown scenario {str(name_or_path)!r} (known: {', '.join(list_scenarios())})"
-            )
+            from ..suggest import did_you_mean
+
+            known = list_scenarios()
+            raise ValueError(f"unknown scenario {str(name_or_path)!r}"
+                             f"{did_you_mean(str(name_or_path), known)} (known: "
+                             f"{', '.join(known)})")
     elif not p.exists():
         raise ValueError(f"scenario file not found: {p}")
     try:
