@@ -264,11 +264,17 @@ def cmd_export(args: argparse.Namespace) -> int:
 
 
 def cmd_list(args: argparse.Namespace) -> int:
-    from .estimators.base import available
-    from .simulation import list_scenarios
+    from .estimators.base import available, describe
+    from .simulation import list_scenarios, scenario_description
 
-    print("estimators:", ", ".join(available()))
-    print("scenarios: ", ", ".join(list_scenarios()))
+    names, scen = available(), list_scenarios()
+    width = max(len(n) for n in [*names, *scen]) + 2
+    print("estimators (vnav-graph run --estimators a,b):")
+    for n in names:
+        print(f"  {n:<{width}}{describe(n)}")
+    print("scenarios (vnav-graph run --scenario NAME):")
+    for s in scen:
+        print(f"  {s:<{width}}{scenario_description(s)}")
     return 0
 
 

@@ -112,14 +112,16 @@ def test_config_changes_graph_batch_behaviour(tmp_path):
 
 def test_plugin_from_a_file_is_listed(capsys):
     assert main(["list", "--plugin", PLUGIN]) == 0
-    assert "baro-only" in capsys.readouterr().out.splitlines()[0]
+    lines = capsys.readouterr().out.splitlines()
+    assert any(ln.split()[:2] == ["baro-only", "extension:"] for ln in lines)
 
 
 def test_plugin_by_module_name_and_under_a_given_name(monkeypatch, capsys):
     monkeypatch.syspath_prepend(str(EXAMPLE.parent))
     assert main(["list", "--plugin", "ex_custom_estimator:BaroOnly",
                  "--plugin", "floor=ex_custom_estimator:BaroOnly"]) == 0
-    names = capsys.readouterr().out.splitlines()[0]
+    names = [ln.split()[0] for ln in capsys.readouterr().out.splitlines()
+             if ln.startswith("  ")]
     assert "baro-only" in names and "floor" in names
 
 

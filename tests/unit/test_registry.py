@@ -41,3 +41,17 @@ def test_listing_imports_no_estimator_module() -> None:
                          check=True).stdout.split(maxsplit=1)
     assert int(out[0]) >= len(DESIGN_NAMES)
     assert out[1].strip() == "[]"
+
+
+def test_list_says_what_each_estimator_and_scenario_is(capsys):
+    from vnav_graph.cli import main
+    from vnav_graph.estimators.base import DESCRIPTIONS, available
+    from vnav_graph.simulation import list_scenarios, scenario_description
+
+    assert main(["list"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    rows = {ln.split()[0]: ln.split(None, 1)[1] for ln in out if ln.startswith("  ")}
+    for name in available():
+        assert rows[name] == DESCRIPTIONS[name]
+    for s in list_scenarios():
+        assert rows[s] == scenario_description(s) and rows[s]

@@ -35,6 +35,33 @@ FAMILIES: tuple[tuple[str, str, tuple[str, ...]], ...] = (
 OTHER_FAMILY = ("other", "other estimator")
 
 
+# one line per core estimator for ``vnav-graph list`` (the seed papers: README)
+DESCRIPTIONS = {
+    "observer1d": "1-DOF INS + GPS altitude observer, fixed gains (seed 003)",
+    "loop2": "2nd-order baro-inertial damping loop, fixed gains",
+    "loop3": "3rd-order baro-inertial damping loop, fixed gains",
+    "loop3-adaptive": "3rd-order loop with adaptive gains (seed 000)",
+    "vkf4": "4-state baro-inertial Kalman filter (seed 004)",
+    "vekf7": "7-state vertical EKF with baro scale, latency and bias (seed 001)",
+    "ekf": "full INS/GNSS/baro error-state EKF (forward filter, real time)",
+    "ekf-rts": "the same EKF followed by a Rauch-Tung-Striebel smoother",
+    "graph-isam2": "GTSAM factor graph, incremental (iSAM2)",
+    "graph-batch": "GTSAM factor graph, full-batch smoothing of the whole drive",
+}
+
+
+def describe(name: str) -> str:
+    """One line saying what the estimator is: the core ones from ``DESCRIPTIONS``, an
+    extension from the first line of its class docstring ("extension estimator" without)."""
+    if name in DESCRIPTIONS:
+        return DESCRIPTIONS[name]
+    try:
+        doc = (type(create(name)).__doc__ or "").strip().splitlines()
+    except Exception:  # a broken extension: list still lists it; run reports the error
+        doc = []
+    return f"extension: {doc[0]}" if doc else "extension estimator"
+
+
 def family_of(name: str) -> tuple[str, str]:
     """(family, its singular) of an estimator name; ``OTHER_FAMILY`` for an extension."""
     return next(((f, one) for f, one, members in FAMILIES if name in members), OTHER_FAMILY)

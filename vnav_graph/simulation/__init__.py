@@ -19,6 +19,14 @@ def list_scenarios() -> list[str]:
     return sorted(p.stem for p in SCENARIO_DIR.glob("*.toml"))
 
 
+def scenario_description(name: str) -> str:
+    """The one-line ``description`` of a shipped scenario ("" when it has none)."""
+    import tomllib
+
+    return str(tomllib.loads((SCENARIO_DIR / f"{name}.toml").read_text()).get("description",
+                                                                               ""))
+
+
 def __getattr__(name: str) -> Any:
     if name in ("load_scenario", "simulate"):
         return getattr(importlib.import_module(".scenario", __name__), name)
