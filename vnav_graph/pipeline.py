@@ -421,6 +421,8 @@ def format_table(summary: dict[str, Any]) -> str:
     else:
         lines.append("errors against truth; NEES/dof: mean NEES per degree of freedom "
                      "(1.0 = consistent)")
+    lines.append("run s: the estimator's wall time; x RT: drive duration / run s (how many "
+                 "times faster than real time)")
     jit = sum(m.get("jit_s") or 0.0 for m in summary["estimators"].values())
     if jit > 0.05:
         lines.append(f"numba compiled kernels for {jit:.1f} s (first run on this machine; "
