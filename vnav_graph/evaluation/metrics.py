@@ -178,6 +178,10 @@ def evaluate(est: Estimate, drive: Drive,
         # things the user should know about this result (e.g. a solver that stopped at its
         # iteration cap); an addition to the docs/design.md block, always a list
         "warnings": [str(w) for w in est.info.get("warnings", [])],
+        # what the estimator fell back to (damping of a singular system, the general sparse
+        # solver, ...; each also a warning), and the graph's solver path (null elsewhere)
+        "fallbacks": [str(f) for f in est.info.get("fallbacks", [])],
+        "solver": est.info.get("solver"),
         "extra_variables": extra_variables_block(est.info.get("extra_variables")),
     }
     if drive.truth is not None:

@@ -70,6 +70,24 @@ from .settings import GraphConfig, low_rate_config
 from .solve import BatchResult, gauss_newton, linear_system
 
 
+def fallback_notes(res: BatchResult, cfg: GraphConfig, cov_damping: float) -> list[str]:
+    """What the solve fell back to (``info["fallbacks"]``, also warnings): Marquardt damping
+    added to a numerically singular system, a covariance taken from a damped factorisation
+    (its σ are too small), the general sparse solver where the banded one was the default."""
+    notes = []
+    if res.singular_damping > 0:
+        notes.append(f"the Gauss-Newton system was numerically singular: Marquardt damping "
+                     f"up to {res.singular_damping:.0e}·diag(H) added (a direction the data "
+                     "do not determine)")
+    if cov_damping > 0:
+        notes.append(f"the covariance comes from a system damped by {cov_damping:.0e}·diag(H): "
+                     "its sigmas understate the uncertainty")
+    if res.solver == "general" and cfg.solver == "auto":
+        notes.append("general sparse solver: the graph does not fit the keyframe band (slower "
+                     "than the banded path; docs/extending.md)")
+    return notes
+
+
 def solver_warnings(res: BatchResult, cfg: GraphConfig, what: str = "Gauss-Newton",
                      estimator: str = "graph-batch") -> list[str]:
     """User-facing warning for a solve that did not converge (``info["warnings"]``)."""
@@ -209,10 +227,12 @@ def outputs(P: Problem, res: BatchResult, pri: dict[str, float],
         system = linear_system(P, lay, res.graph, vals, info)
         del info
     cov_of = system.covariance()
+    cov_damping = system.damping
     nk = P.n_kf
     sel = np.unique(np.linspace(0, nk - 1, min(P.cfg.cov_epochs, nk)).astype(int))
     cov = np.array([cov_18(P, cov_of, vals, int(k)) for k in sel])
     out: dict[str, Any] = {"trajectory": traj, "cov": cov, "t_cov": P.t_kf[sel],
+                           "cov_damping": cov_damping,
                            "extra": extra_variables(lay, cov_of, vals),
                            "accel_scale": accel_scale_info(P, vals, cov_of)}
     if P.drive.baro is None or calib_key is None:
@@ -335,7 +355,10 @@ class GraphBatch:
         info = {"keyframes": P.n_kf, "iterations": res.iterations, "final_cost": res.cost,
                 "converged": res.converged, "stop": res.stop,
                 "predicted_decrease": res.predicted_decrease,
-                "warnings": solver_warnings(res, self.config),
+                "warnings": [*solver_warnings(res, self.config),
+                             *fallback_notes(res, self.config, out["cov_damping"])],
+                "fallbacks": fallback_notes(res, self.config, out["cov_damping"]),
+                "singular_damping": res.singular_damping, "cov_damped": out["cov_damping"] > 0,
                 "baro_bias_lag_s": res.bias_lag, "solver": res.solver,
                 **P.init_info(),
                 "robust_weights": res.rows.weights,

@@ -188,6 +188,7 @@ class GeneralSystem:
     def __init__(self, lay: Layout, cpp: Any, info: IntervalInfo) -> None:
         self.lay, self.cpp, self.info = lay, cpp, info
         self._gfg: Any = None
+        self.damping = 0.0  # Marquardt damping a singular step needed (BandedSystem.damping)
         if lay.ordering is None:
             lay.ordering = elimination_ordering(lay)
 
@@ -231,6 +232,7 @@ class GeneralSystem:
             for mu in (1e-9, 1e-7, 1e-5, 1e-3, 1e-1):
                 try:
                     delta = self._solve_damped(mu, 1e-12)
+                    self.damping = max(self.damping, mu)
                     break
                 except RuntimeError:
                     continue

@@ -297,6 +297,10 @@ class BandedSystem:
     dm: FloatArray
     g: FloatArray
     fac: gla.ArrowFactor | None = None
+    # largest Marquardt damping μ (of μ·diag(H)) a singular system needed in ``step`` or
+    # ``covariance`` (0: none); reported as a fallback, and a covariance from a damped
+    # factorisation understates σ
+    damping: float = 0.0
 
     @classmethod
     def build(cls, lay: Layout, pat: SparsePattern, v: FloatArray, info: IntervalInfo
@@ -310,7 +314,8 @@ class BandedSystem:
 
     def step(self) -> tuple[Any, float]:
         """Gauss-Newton step (as VectorValues) and the cost decrease ½ δᵀg it predicts."""
-        self.fac = factorize(self.ab, self.bm, self.dm)
+        self.fac, mu = factorize(self.ab, self.bm, self.dm)
+        self.damping = max(self.damping, mu)
         delta = self.fac.solve(self.g)
         return self.lay.vector_values(delta), 0.5 * float(delta @ self.g)
 
@@ -322,12 +327,13 @@ class BandedSystem:
         """Step of H + μ·diag(H) (Levenberg-Marquardt damping)."""
         ab2 = self.ab.copy()
         ab2[0] *= 1.0 + mu
-        fac = factorize(ab2, self.bm, self.dm + mu * np.diag(np.diag(self.dm)))
+        fac, _ = factorize(ab2, self.bm, self.dm + mu * np.diag(np.diag(self.dm)))
         return self.lay.vector_values(fac.solve(self.g))
 
     def covariance(self) -> BandedCovariance:
         if self.fac is None:
-            self.fac = factorize(self.ab, self.bm, self.dm)
+            self.fac, mu = factorize(self.ab, self.bm, self.dm)
+            self.damping = max(self.damping, mu)
         return BandedCovariance(self.lay, self.fac)
 
 
@@ -354,17 +360,19 @@ class BandedCovariance:
         return self.lay.solve_by_key(self.fac.solve, u, out)
 
 
-def factorize(ab: FloatArray, bm: FloatArray, dm: FloatArray) -> gla.ArrowFactor:
-    """Cholesky of the normal equations; if H is numerically singular (e.g. 1 Hz averaged
-    IMU with an unobservable direction), retry with growing Marquardt damping μ·diag(H)."""
+def factorize(ab: FloatArray, bm: FloatArray, dm: FloatArray
+              ) -> tuple[gla.ArrowFactor, float]:
+    """Cholesky of the normal equations and the damping it needed: if H is numerically
+    singular (e.g. 1 Hz averaged IMU with an unobservable direction), retry with growing
+    Marquardt damping μ·diag(H) (μ returned; 0 when none was needed)."""
     mu = 0.0
     for _ in range(6):
         try:
             if mu == 0.0:
-                return gla.factorize(ab, bm, dm)
+                return gla.factorize(ab, bm, dm), 0.0
             ab2 = ab.copy()
             ab2[0] += mu * ab[0] + 1e-12
-            return gla.factorize(ab2, bm, dm + np.diag(mu * np.diag(dm) + 1e-12))
+            return gla.factorize(ab2, bm, dm + np.diag(mu * np.diag(dm) + 1e-12)), mu
         except gla.LinAlgError:
             mu = 1e-9 if mu == 0.0 else mu * 100.0
     raise RuntimeError(

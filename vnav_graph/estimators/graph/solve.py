@@ -64,6 +64,8 @@ class BatchResult:
     # point when converged; else at the point before the last step): what a solve stopped at
     # its cap or without descent still expected to gain
     predicted_decrease: float = 0.0
+    # largest Marquardt damping a numerically singular system needed (0: none)
+    singular_damping: float = 0.0
 
     @property
     def converged(self) -> bool:
@@ -129,6 +131,7 @@ def gn_core(P: Problem, lay: Layout, graph: Any, vals: Any, calib_of_kf: np.ndar
     mu = 0.0
     converged = False
     failed = False
+    singular = 0.0
     for it in range(1, P.cfg.max_iterations + 1):
         converged = False
         # the system holds the rows' information: their Jacobian is not needed again (the
@@ -141,6 +144,7 @@ def gn_core(P: Problem, lay: Layout, graph: Any, vals: Any, calib_of_kf: np.ndar
         system = linear_system(P, lay, graph, vals, info)
         del info
         delta, dec = system.step()  # dec: decrease predicted by the quadratic model
+        singular = max(singular, system.damping)
         if P.cfg.verbose:
             print(f"GN it {it}: predicted decrease {dec:.3g}")
         if dec < P.cfg.abs_tol:
@@ -203,7 +207,7 @@ def gn_core(P: Problem, lay: Layout, graph: Any, vals: Any, calib_of_kf: np.ndar
             break
     stop = "converged" if converged else ("no_descent" if failed else "max_iterations")
     return BatchResult(vals, graph, cost, it, calib_of_kf, lay, rows, system, lag, stop,
-                       float(dec))
+                       float(dec), singular)
 
 
 def evaluate_at(P: Problem, graph: Any, vals: Any, calib_of_kf: np.ndarray,
@@ -230,13 +234,14 @@ def gauss_newton(P: Problem, graph: Any, vals: Any, calib_of_kf: np.ndarray,
     res = gn_core(P, lay, graph, vals, calib_of_kf, pri)
     if P.cfg.gnss_gate_prob <= 0:
         return res
-    iters = res.iterations
+    iters, singular = res.iterations, res.singular_damping
     for _ in range(P.cfg.gate_rounds):
         if not post_solve_rejections(P, states_from_values(P, res.values, calib_of_kf)).size:
             break
         res = gn_core(P, lay, graph, res.values, calib_of_kf, pri)
         iters += res.iterations
-    res.iterations = iters
+        singular = max(singular, res.singular_damping)
+    res.iterations, res.singular_damping = iters, singular
     return res
 
 
