@@ -341,14 +341,22 @@ def run_status(summary: dict[str, Any]) -> tuple[int, str | None]:
     run or in evaluation), summary written for diagnosis.
     """
     ests = summary["estimators"]
-    failed = [n for n, b in ests.items() if b["status"] != "ok"]
-    if not failed:
+    failed = [n for n, b in ests.items() if b["status"] == "failed"]
+    diverged = [n for n, b in ests.items() if b["status"] == "diverged"]
+    if not failed and not diverged:
         return 0, None
-    first = str(ests[failed[0]].get("error") or "").splitlines()
-    detail = f"{failed[0]}: {first[0] if first else 'unknown error'}"
+    parts = []
+    for what, names in (("failed", failed), ("diverged", diverged)):
+        if names:
+            first = str(ests[names[0]].get("error") or "").splitlines()
+            parts.append(f"{len(names)} of {len(ests)} estimators {what} ({names[0]}: "
+                         f"{first[0] if first else 'unknown error'})")
     if len(failed) == len(ests):
-        return EXIT_ALL_FAILED, f"every estimator failed ({detail})"
-    return EXIT_SOME_FAILED, f"{len(failed)} of {len(ests)} estimators failed ({detail})"
+        return EXIT_ALL_FAILED, "every estimator failed" + parts[0][parts[0].index(" ("):]
+    if len(failed) + len(diverged) == len(ests):
+        return EXIT_ALL_FAILED, "no estimator produced a trustworthy result: " + "; ".join(
+            parts)
+    return EXIT_SOME_FAILED, "; ".join(parts)
 
 
 def _fmt(v: Any, spec: str) -> str:
@@ -434,6 +442,8 @@ def format_table(summary: dict[str, Any]) -> str:
     for name, m in summary["estimators"].items():
         if m["status"] == "failed":
             lines.append(f"{name} failed: {m['error']}")
+        elif m["status"] == "diverged":
+            lines.append(f"{name} DIVERGED (kept in the outputs, not ranked): {m['error']}")
         for w in m.get("warnings") or []:
             lines.append(f"{name} warning: {w}")
     return "\n".join(lines)

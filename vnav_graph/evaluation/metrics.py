@@ -212,4 +212,10 @@ def evaluate(est: Estimate, drive: Drive,
             out["nees_mean"] = float(np.mean(ne[0]))
             out["nees_dof"] = ne[1]
     out["baro"] = baro_block(est.baro, drive)
+    from .selfcheck import DIVERGED, self_check
+
+    check = self_check(est, drive)
+    out["self_check"] = check.as_dict()
+    if check.diverged:  # kept in the outputs, marked, never ranked (comparison: "ok" only)
+        out["status"], out["error"] = DIVERGED, check.reason
     return out

@@ -1,8 +1,8 @@
 """Does an estimate agree with the measurements it was given? A self-check that needs no truth.
 
 Every estimate is compared with the GNSS fixes of the drive it ran on (on a real log's
-holdout run, the withheld fixes are not in that drive). At each fix inside the estimate's
-time span, the normalised residual is
+holdout run, the withheld fixes are not in that drive). At each fix within ``NEAR_S`` (or five
+output epochs) of an epoch of the estimate, the normalised residual is
 
     z = r / √(σ_gnss² + σ_est²),   r = estimate − fix,
 
@@ -18,9 +18,16 @@ overconfidence under GNSS errors correlated over minutes: measured NEES/dof up t
 urban variant, i.e. |z| ≈ 25 in the worst case. ``Z_DIVERGED`` is four times that. A glitch is
 not divergence either: a receiver that jumps for a few seconds (and the estimator that
 rightly refuses it) makes one window at most, so a verdict needs ``DIVERGED_WINDOWS``
-consecutive windows (60 s). ``RESID_FLOOR_M`` is a physical floor: a residual under 50 m is
+consecutive windows (60 s). ``RESID_FLOOR_M`` is a physical floor: a residual under 100 m is
 never called divergence, whatever σ claims (a 1 cm σ on a 1 m error is overconfidence, which
 NEES reports).
+
+Measured with every estimator (seed 0 of each shipped scenario, each shared log): the largest
+window median |z| on the scenarios is 43 (the fixed-gain loops on hot-baro, which report no
+σ), on the shared logs 52 (loop2 on 181 and 218; on 218 its residual stays near 51 m). On
+long-outage observer1d reaches |z| 319 (640 m) in the one window after each 180 s outage and
+is back under 1 the window after: a recovering estimator, not a diverged one. None is
+flagged.
 
 The estimate is ``"diverged"`` when a run of ``DIVERGED_WINDOWS`` consecutive windows each has
 median |z| > ``Z_DIVERGED`` and median |r| > ``RESID_FLOOR_M``, in height or horizontally.
@@ -38,8 +45,10 @@ from ..types import Drive, Estimate, FloatArray
 WINDOW_S = 30.0
 MIN_FIXES = 3
 Z_DIVERGED = 100.0
-RESID_FLOOR_M = 50.0
+RESID_FLOOR_M = 100.0
 DIVERGED_WINDOWS = 2
+NEAR_S = 1.0  # a fix is checked when an epoch of the estimate is this close (or 5 epochs)
+DIVERGED = "diverged"  # the status of an estimate that fails the check (summary.json)
 
 
 @dataclass(frozen=True)
@@ -93,7 +102,12 @@ def self_check(est: Estimate, drive: Drive) -> SelfCheck:
     tr = est.trajectory
     if g is None or tr.t.size < 2:
         return SelfCheck(False, None, None, 0)
-    inside = (g.t >= tr.t[0]) & (g.t <= tr.t[-1])
+    # fixes near an epoch of the estimate: across a gap in its output (an IMU gap) the
+    # interpolated trajectory is no estimate
+    j = np.clip(np.searchsorted(tr.t, g.t), 1, tr.t.size - 1)
+    near = np.minimum(np.abs(g.t - tr.t[j - 1]), np.abs(tr.t[j] - g.t))
+    reach = max(NEAR_S, 5.0 * float(np.median(np.diff(tr.t))))
+    inside = (g.t >= tr.t[0]) & (g.t <= tr.t[-1]) & (near <= reach)
     if not inside.any():
         return SelfCheck(False, None, None, 0)
     tg = g.t[inside]
