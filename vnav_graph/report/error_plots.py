@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from ..types import FloatArray
 from . import canvas
 from .errors import GIVEN, TRUTH, ErrorSeries, ErrorSet, from_holdout
 from .groups import group_names, robust_limits
@@ -43,6 +44,18 @@ def _axis(es: ErrorSet) -> canvas.TimeAxis | canvas.WindowAxis:
 def _value(values: Mapping[str, Any], name: str, spec: str, unit: str) -> str:
     v = values.get(name)
     return "not scored" if v is None else f"{format(v, spec)} {unit}"
+
+
+# the ±3σ band is drawn pale when it fills the panel more than this fraction of the time, and
+# noted (in the panel and under the figure) above BAND_NOTE_ABOVE
+BAND_PALE_ABOVE = 0.5
+BAND_NOTE_ABOVE = 0.05
+
+
+def band_overflow(sd: FloatArray, lim: float) -> float:
+    """Fraction of the finite samples whose ±3σ extends beyond ±``lim``."""
+    ok = np.isfinite(sd)
+    return float(np.mean(3.0 * sd[ok] > lim)) if ok.any() else 0.0
 
 
 def _clip_text(ax: Any, names_max: Mapping[str, float], unit: str, prefix: bool) -> None:
@@ -87,8 +100,19 @@ def plot_altitude_errors(es: ErrorSet, values: Mapping[str, float | None],
             x, e, sd = xaxis.map(s.t, s.alt, s.alt_sd)
             xaxis.decorate(ax, legend=first)
             if sd is not None:
-                ax.fill_between(x, -3 * sd, 3 * sd, color="tab:blue", alpha=0.18, lw=0,
-                                label="±3σ")
+                over = band_overflow(sd, lims.lim)
+                # clipped to the axis, and pale where it fills the panel, so that it never
+                # hides the shaded windows or the error line
+                band = np.minimum(3.0 * sd, lims.lim)
+                ax.fill_between(x, -band, band, color="tab:blue", lw=0, label="±3σ",
+                                alpha=0.18 if over < BAND_PALE_ABOVE else 0.07, zorder=0.5)
+                if over > BAND_NOTE_ABOVE:
+                    note = (f"±3σ beyond the axis {100 * over:.0f} % of the time (median "
+                            f"3σ {np.nanmedian(3.0 * sd):.3g} m)")
+                    notes.append(f"{s.name}: {note}")
+                    ax.text(0.99, 0.03, note, transform=ax.transAxes, fontsize=6.5,
+                            color="tab:blue", va="bottom", ha="right",
+                            bbox={"fc": "white", "ec": "none", "alpha": 0.8, "pad": 1.0})
             ax.plot(x, e, color=_COLOR.get(es.basis, "tab:green"), lw=0.8,
                     label="estimate − reference")
             ax.axhline(0.0, color="k", lw=0.5)
