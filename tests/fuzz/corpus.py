@@ -110,6 +110,12 @@ def _gnss_jump(r: Raw, k: int, dn_m: float, dh_m: float) -> None:
     r.h[k] += dh_m
 
 
+def _gnss_held_jump(r: Raw, t0: float, dur: float, dn_m: float) -> None:
+    """Every fix in [t0, t0 + dur) s moved ``dn_m`` north (a receiver glitch held a while)."""
+    m = (r.t_gnss >= r.t_gnss[0] + t0) & (r.t_gnss < r.t_gnss[0] + t0 + dur)
+    r.lat_deg[m] += dn_m / 111_320.0
+
+
 def _imu_gap(r: Raw, t0: float, t1: float) -> None:
     keep = ~((r.t_imu > r.t_imu[0] + t0) & (r.t_imu < r.t_imu[0] + t1))
     r.t_imu, r.gyro, r.acc = r.t_imu[keep], r.gyro[keep], r.acc[keep]
@@ -176,6 +182,8 @@ SEMANTIC: dict[str, tuple[Callable[[Raw, np.random.Generator], Raw], str, tuple[
     "baro-spike-300m": (_m(lambda r, g: _baro_step(r, 300.0, 70.0, 70.5)), "hostile", None),
     "gnss-jump-500m": (_m(lambda r, g: _gnss_jump(r, 500, 500.0, 300.0)), "hostile", None),
     "gnss-far-fix": (_m(lambda r, g: _gnss_jump(r, 700, 8.5e6, 0.0)), "hostile", None),
+    "gnss-jump-10km-5s": (_m(lambda r, g: _gnss_held_jump(r, 60.0, 5.0, 1.0e4)), "hostile",
+                          None),
 }
 
 

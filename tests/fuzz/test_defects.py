@@ -271,3 +271,16 @@ def test_nan_truth_is_dropped_with_a_warning():
     q[:] = np.nan
     d = check_drive(SIM.replace(truth=tr.__class__(tr.t, tr.lla, tr.vel_n, q)))
     assert d.truth is None and d.meta["source"] == "log"
+
+
+def test_gnss_held_10_km_jump_is_dropped_as_one_glitch(tmp_path):
+    """A phone folder whose GNSS sits 10 km north for 5 s: the 50 fixes are dropped and named
+    (the 3-D spike rule alone reported "2 position steps faster than 150 m/s")."""
+    from .corpus import write_sl_folder
+
+    d = load_drive(write_sl_folder(_mut("gnss-jump-10km-5s"), tmp_path / "jump"))
+    c = load_drive(write_sl_folder(RAW, tmp_path / "clean"))
+    w = [x for x in d.meta["warnings"] if x.startswith("gnss: 50 fix(es) in 1 glitch")]
+    assert len(w) == 1 and "4.9 s" in w[0], d.meta["warnings"]
+    assert len(d.gnss) == len(c.gnss) - 50
+    assert d.meta["repaired"]["gnss"] == {"position glitch (away and back) dropped": 50}
