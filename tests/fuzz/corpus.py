@@ -170,6 +170,7 @@ SEMANTIC: dict[str, tuple[Callable[[Raw, np.random.Generator], Raw], str, tuple[
     "pressure-constant": (_m(lambda r, g: (r.press.__setitem__(slice(None), r.press[0]),
                                            r.baro_alt.__setitem__(slice(None), r.baro_alt[0]))),
                           "semantic", None),
+    "gnss-alt-feet": (_m(lambda r, g: setattr(r, "h", r.h / 0.3048)), "semantic", None),
     "gnss-alt-zero": (_m(lambda r, g: r.h.__setitem__(slice(None), 0.0)), "semantic", None),
     "gnss-constant": (_m(lambda r, g: _constant_gnss(r)), "semantic", None),
     "clip-accel-16g": (_m(lambda r, g: _clip(r, "acc", 2, 16 * G0, 40.0, 2.0)), "hostile",

@@ -30,6 +30,8 @@ Checks, with the evidence each uses
   fixes that jump away faster than ``GNSS_JUMP_SPEED`` and come back: an isolated fix, or
   a horizontal block of them within ``GNSS_GLITCH_MAX_S`` (``vnav_graph.nav.gnss_glitch``)
   → dropped; other impossible steps are reported (heights are gated by the estimators).
+- GNSS height unit: its climb against the baro's and against its own vertical velocity;
+  feet → × 0.3048, another scale → refused (:mod:`vnav_graph.io.height_units`).
 - coverage: a missing GNSS or baro stream, logging gaps (``GAP_WARN_S``) and a stream that
   ends well before the others (a truncated file) are reported.
 - specific force: an accelerometer that reads less than gravity and the baro's climb need
@@ -52,6 +54,7 @@ from numpy.typing import NDArray
 from ..nav.gnss_glitch import MAX_GLITCH_S, MAX_SPEED, glitch_mask
 from ..types import BaroStream, Drive, GnssStream
 from .findings import Findings, reject
+from .height_units import check_gnss_height_units
 from .imu_checks import IMU_CHECKS
 
 FloatArray = NDArray[np.float64]
@@ -337,8 +340,8 @@ def _check_specific_force(drive: Drive, f: Findings) -> None:
 
 
 CHECKS: tuple[Callable[[Drive, Findings], Drive | None], ...] = (
-    _check_drops, _check_time_units, _check_truth, *IMU_CHECKS, _check_baro, _check_gnss,
-    _check_coverage, _check_specific_force,
+    _check_drops, _check_time_units, _check_truth, *IMU_CHECKS, _check_baro,
+    check_gnss_height_units, _check_gnss, _check_coverage, _check_specific_force,
 )
 
 
