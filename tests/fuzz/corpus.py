@@ -223,6 +223,14 @@ def byte_mutations(header_len: int) -> dict[str, Callable[[bytes, np.random.Gene
         i = int(g.integers(header_len, max(header_len + 1, len(b) - n)))
         return b[:i] + bytes(n) + b[i + n:]
 
+    def zero_half(b: bytes, g: np.random.Generator) -> bytes:
+        n = len(b) // 2
+        return b[:n] + bytes(len(b) - n)
+
+    def noise_half(b: bytes, g: np.random.Generator) -> bytes:
+        n = len(b) // 2
+        return b[:n] + g.integers(0, 256, len(b) - n, dtype=np.uint8).tobytes()
+
     def head_zero(b: bytes, g: np.random.Generator) -> bytes:
         n = max(8, header_len)
         return bytes(n) + b[n:]
@@ -244,6 +252,7 @@ def byte_mutations(header_len: int) -> dict[str, Callable[[bytes, np.random.Gene
         "flip-1": flips(1), "flip-10": flips(10), "flip-100": flips(100),
         "flip-1000": flips(1000),
         "swap-blocks": swap, "dup-block": dup, "zero-block": zero,
+        "zeroed-second-half": zero_half, "noise-second-half": noise_half,
         "header-zeroed": head_zero, "header-noise": head_noise, "header-flip": head_flip,
     }
 

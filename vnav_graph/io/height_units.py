@@ -99,15 +99,14 @@ class Climb:
                 f"{WINDOW_S:g} s) as fast as {ref}")
 
 
-def _window_means(t: FloatArray, h: FloatArray, t0: float, n: int, window_s: float
-                  ) -> FloatArray:
-    """Mean of ``h`` in each of ``n`` windows from ``t0`` (NaN where a window is empty)."""
-    k = np.floor((t - t0) / window_s).astype(np.int64)
-    m = (k >= 0) & (k < n)
-    cnt = np.bincount(k[m], minlength=n)
-    tot = np.bincount(k[m], weights=h[m], minlength=n)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(cnt > 0, tot / np.maximum(cnt, 1), np.nan)
+def _window_means(t: FloatArray, h: FloatArray, t0: float, t1: float, window_s: float
+                  ) -> tuple[NDArray[np.int64], FloatArray]:
+    """(window index, mean of ``h``) of every occupied ``window_s`` window in [t0, t1): only
+    occupied windows are held (a stamp far in the future costs nothing)."""
+    m = (t >= t0) & (t < t1)
+    k = np.floor((t[m] - t0) / window_s).astype(np.int64)
+    win, inv = np.unique(k, return_inverse=True)
+    return win, np.bincount(inv, weights=h[m]) / np.bincount(inv)
 
 
 def _weighted_median(x: FloatArray, w: FloatArray) -> float:
@@ -125,13 +124,16 @@ def climb_ratio(t_g: FloatArray, h_g: FloatArray, t_r: FloatArray, h_r: FloatArr
     if t_g.size < 3 or t_r.size < 3:
         return None
     t0, t1 = max(t_g[0], t_r[0]), min(t_g[-1], t_r[-1])
-    n = int((t1 - t0) // window_s)
-    if n < MIN_WINDOWS + 1:
+    if t1 - t0 < (MIN_WINDOWS + 1) * window_s:
         return None
-    mg = _window_means(t_g, h_g, t0, n, window_s)
-    mr = _window_means(t_r, h_r, t0, n, window_s)
-    a = t0 + window_s * np.arange(n - 1)  # a pair of windows spans [a, a + 2 W)
-    keep = np.isfinite(np.diff(mg)) & np.isfinite(np.diff(mr))
+    wg, mg = _window_means(t_g, h_g, t0, t1, window_s)
+    wr, mr = _window_means(t_r, h_r, t0, t1, window_s)
+    win, ig, ir = np.intersect1d(wg, wr, return_indices=True)  # windows both streams fill
+    mg, mr = mg[ig], mr[ir]
+    if win.size < MIN_WINDOWS + 1:
+        return None
+    a = t0 + window_s * win[:-1]  # a pair of neighbouring windows spans [a, a + 2 W)
+    keep = np.diff(win) == 1
     for gs in (_gaps(t_g), _gaps(t_r)):
         for g0, g1 in gs:
             keep &= ~((a < g1) & (a + 2.0 * window_s > g0))
