@@ -2,7 +2,8 @@
 
 Nothing here is committed as data: every case is written at test time from
 
-- a **simulated drive** (``hill-drive``, seed 1, 120 s), written by the small writers of
+- a **simulated drive** (``hill-drive``, seed 1, 120 s; and a ``sortie`` aircraft, 400 s, for
+  the gyro-axis damage), written by the small writers of
   ``writers`` in all five formats: ``.npz`` (``save_npz``), ArduPilot DataFlash ``.bin``,
   PX4 ``.ulg``, a Sensor Logger CSV folder and a merged 1 Hz CSV;
 - the **small real cuts in tests/data** (always present);
@@ -147,6 +148,8 @@ SEMANTIC: dict[str, tuple[Callable[[Raw, np.random.Generator], Raw], str, tuple[
     "swap-acc-xz": (_m(lambda r, g: setattr(r, "acc", r.acc[:, [2, 1, 0]])), "semantic", None),
     "swap-gyro-xz": (_m(lambda r, g: setattr(r, "gyro", r.gyro[:, [2, 1, 0]])), "semantic",
                      None),
+    "gyro-z-inverted": (_m(lambda r, g: setattr(r, "gyro", r.gyro * np.array([1.0, 1.0, -1.0]))),
+                        "semantic", None),
     "acc-sign-flipped": (_m(lambda r, g: setattr(r, "acc", -r.acc)), "semantic",
                          ("npz", "dataflash", "ulog")),
     "accz-all-nan": (_m(lambda r, g: r.acc.__setitem__((slice(None), 2), np.nan)), "semantic",
@@ -534,6 +537,17 @@ def build_cases(include_shared: bool = True) -> list[Case]:
         for name, mut in byte_mutations(hl).items():
             cases.append(_bytes_case(f"{fmt}/sim/bytes/{name}", fmt, sim_writer(fmt, raw), mut,
                                      int(rng.integers(2**31)), ctrl))
+
+    # ---- a base that is not a car (sortie: an aircraft, 400 s, banked turns from 180 s): the
+    # gyro-axis damage, which the ground-vehicle checks do not see
+    air, _ = sim_raw("sortie", 400.0)
+    for fmt in ("dataflash", "ulog"):
+        ctrl = f"{fmt}/sortie/control/none"
+        cases.append(Case(ctrl, fmt, "control", False, sim_writer(fmt, air), ctrl))
+        for name in ("swap-gyro-xz", "gyro-z-inverted"):
+            mut, fam, _ = SEMANTIC[name]
+            cases.append(Case(f"{fmt}/sortie/{fam}/{name}", fmt, fam, True,
+                              sim_writer(fmt, mut(air, np.random.default_rng(0))), ctrl))
 
     # ---- format-specific structure damage on the simulated base
     arrays, header = npz_arrays(raw, sim)

@@ -45,12 +45,13 @@ class Raw:
                    extra=dict(self.extra))
 
 
-def sim_raw() -> tuple[Raw, Any]:
-    """The simulated base: hill-drive seed 1, 120 s, IMU decimated to 100 Hz."""
+def sim_raw(scenario: str = "hill-drive", duration_s: float = 120.0) -> tuple[Raw, Any]:
+    """The simulated base: ``scenario`` (hill-drive: a car; sortie: an aircraft, which turns
+    first at 180 s) seed 1, ``duration_s``, IMU decimated to 100 Hz."""
     from vnav_graph.geo.atmosphere import isa_pressure
     from vnav_graph.simulation import simulate
 
-    d = simulate("hill-drive", 1, duration_s=120.0)
+    d = simulate(scenario, 1, duration_s=duration_s)
     i = d.imu
     k = slice(None, None, 2)
     g, b = d.gnss, d.baro

@@ -53,7 +53,7 @@ def test_a_zeroed_second_half_is_reported_with_size_and_read_time(tmp_path, fmt)
     assert 55.0 < span < 62.0  # half of the 120 s drive was read
 
 
-@pytest.mark.parametrize("fmt", ["dataflash", "merged-csv"])
+@pytest.mark.parametrize("fmt", ["dataflash", "merged-csv", "ulog"])
 def test_a_random_second_half_is_unparsable_bytes(tmp_path, fmt):
     fn, suffix = WRITE[fmt]
     p = fn(RAW, tmp_path / f"log{suffix}")
@@ -95,3 +95,22 @@ def test_shared_logs_have_no_garbage(data_dir: Path):
     assert len(files) >= 10
     for p in files:
         assert garbage_stretches(p) == [], p.name
+
+
+@pytest.mark.parametrize("fmt", ["dataflash", "ulog"])
+def test_a_noise_block_inside_a_binary_log_is_placed(tmp_path, fmt):
+    """20 % of the file overwritten in the middle: one stretch, placed to within a record or
+    message (the readers resume after it)."""
+    fn, suffix = WRITE[fmt]
+    p = fn(RAW, tmp_path / f"log{suffix}")
+    b = p.read_bytes()
+    a, n = int(0.4 * len(b)), int(0.2 * len(b))
+    noise = np.random.default_rng(5).integers(0, 256, n, dtype=np.uint8).tobytes()
+    p.write_bytes(b[:a] + noise + b[a + n:])
+    found = garbage_stretches(p)
+    assert len(found) == 1 and not found[0].is_tail, found
+    assert abs(found[0].start - a) < 300 and abs(found[0].length - n) < 600
+    m = re.fullmatch(rf"log{re.escape(suffix)}: (\d+) kB \(20 %\) of unparsable bytes from "
+                     r"byte (\d+) \(40 % into the file\)", found[0].text(None))
+    assert m is not None, found[0].text(None)
+    assert abs(int(m.group(1)) - n / 1024) < 1.5 and abs(int(m.group(2)) - a) < 300

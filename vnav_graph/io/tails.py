@@ -7,6 +7,8 @@ at most. This scan finds, in the raw bytes of every file of the input,
 - runs of NUL bytes;
 - in a DataFlash log, stretches without a record header (``0xA3 0x95``): every record is at
   most 256 bytes long and starts with one, so a longer stretch holds no record;
+- in a ULog, stretches where the chain of messages (size, known type) breaks, up to where a
+  chain of ``ULOG_RESYNC`` well-formed messages starts again;
 - in a CSV file, consecutive lines holding control bytes (other than tab / CR), which no
   CSV field carries: binary garbage written into a text file;
 
@@ -33,6 +35,10 @@ MIN_BYTES = 4096
 MIN_FRACTION = 0.02
 DF_HEADER = (0xA3, 0x95)
 DF_MAX_RECORD = 256
+ULOG_HEADER = 16  # bytes before the first message
+ULOG_TYPES = frozenset(b"BFIMPQARDLCSO")  # the message types of ULog v1
+ULOG_RESYNC = 8  # well-formed messages in a row that end a broken stretch
+ULOG_MAX_OTHER = 1024  # bytes: the longest non-data message once data have begun
 
 
 @dataclass(frozen=True)
@@ -108,6 +114,57 @@ def _dataflash_gaps(b: NDArray[np.uint8], name: str) -> list[Stretch]:
                                          strict=True)))
 
 
+def _ulog_chain(b: NDArray[np.uint8], pos: int, d_size: dict[int, int],
+                limit: int | None = None) -> tuple[int, int]:
+    """(where it breaks, messages) of the chain of well-formed ULog messages from ``pos``; at
+    most ``limit`` messages. Well-formed: a known type, inside the file; a data message ('D')
+    for a subscription id an 'A' message declared, as long as the first data message of that
+    id (``d_size``: id → size, 0 until the first; filled as they come); once data messages
+    have begun, any other message at most ``ULOG_MAX_OTHER`` bytes (logged text, parameter
+    changes, subscriptions, sync and dropout markers are short)."""
+    n = 0
+    while pos + 3 <= b.size and (limit is None or n < limit):
+        size = int(b[pos]) | (int(b[pos + 1]) << 8)
+        typ = int(b[pos + 2])
+        if typ not in ULOG_TYPES or pos + 3 + size > b.size:
+            break
+        if typ == ord("D"):
+            msg_id = int(b[pos + 3]) | (int(b[pos + 4]) << 8) if size >= 2 else -1
+            if msg_id not in d_size or d_size[msg_id] not in (0, size):
+                break
+            d_size[msg_id] = size
+        elif typ == ord("A") and size >= 3:
+            d_size.setdefault(int(b[pos + 4]) | (int(b[pos + 5]) << 8), 0)
+        if typ != ord("D") and any(d_size.values()) and size > ULOG_MAX_OTHER:
+            break
+        pos += 3 + size
+        n += 1
+    return pos, n
+
+
+def _ulog_gaps(b: NDArray[np.uint8], name: str) -> list[Stretch]:
+    """Stretches where the ULog message chain is broken: from the break to the next place a
+    chain of ``ULOG_RESYNC`` well-formed messages (or one ending the file) starts."""
+    cand = np.flatnonzero(np.isin(b[2:], np.array(sorted(ULOG_TYPES), dtype=np.uint8)))
+    d_size: dict[int, int] = {}
+    pieces = []
+    pos = ULOG_HEADER
+    while True:
+        pos, _ = _ulog_chain(b, pos, d_size)
+        if pos + 3 > b.size:
+            break
+        nxt = b.size
+        known = dict(d_size)  # a resync candidate must match the subscriptions seen so far
+        for q in cand[np.searchsorted(cand, pos + 1):].tolist():
+            end, n = _ulog_chain(b, q, dict(known), ULOG_RESYNC)
+            if n >= ULOG_RESYNC or (n >= 3 and end == b.size):
+                nxt = q
+                break
+        pieces.append((pos, nxt))
+        pos = nxt
+    return _unparsable(b, name, pieces)
+
+
 def _csv_garbage(b: NDArray[np.uint8], name: str) -> list[Stretch]:
     """Runs of lines holding control bytes (NUL runs are reported as zero bytes)."""
     ctrl = ((b < 32) & (b != 9) & (b != 10) & (b != 13)) | (b == 127)
@@ -140,6 +197,8 @@ def garbage_stretches(path: Path) -> list[Stretch]:
         found = _zero_runs(b, name)
         if bytes(b[:3].tolist()) == bytes((DF_HEADER[0], DF_HEADER[1], 128)):
             found += _dataflash_gaps(b, name)
+        elif bytes(b[:4].tolist()) == b"ULog":
+            found += _ulog_gaps(b, name)
         elif f.suffix.lower() == ".csv":
             found += _csv_garbage(b, name)
         out += sorted(found, key=lambda s: s.start)
