@@ -275,7 +275,7 @@ def test_nan_truth_is_dropped_with_a_warning():
 
 def test_gnss_held_10_km_jump_is_dropped_as_one_glitch(tmp_path):
     """A phone folder whose GNSS sits 10 km north for 5 s: the 50 fixes are dropped and named
-    (the 3-D spike rule alone reported "2 position steps faster than 150 m/s")."""
+    (a rule that takes one fix at a time sees only "2 position steps faster than 150 m/s")."""
     from .corpus import write_sl_folder
 
     d = load_drive(write_sl_folder(_mut("gnss-jump-10km-5s"), tmp_path / "jump"))

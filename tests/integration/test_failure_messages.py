@@ -46,9 +46,9 @@ def test_an_empty_or_newline_first_message_is_never_reported_bare(tmp_path, monk
 
 @pytest.mark.slow
 def test_phone_folder_with_a_held_10_km_gnss_jump_runs_graph_isam2(tmp_path):
-    """The corpus's 10 km / 5 s jump in a Sensor Logger folder: graph-isam2 used to fail with
-    "RuntimeError: " and nothing after it; the fixes are now dropped (input warning) and both
-    graphs run."""
+    """The corpus's 10 km / 5 s jump in a Sensor Logger folder (unhandled, graph-isam2 meets an
+    indefinite information block, whose GTSAM message starts with a newline): the fixes are
+    dropped with an input warning and both graphs run."""
     from tests.fuzz.corpus import SEMANTIC, sim_raw, write_sl_folder
 
     raw, _ = sim_raw()

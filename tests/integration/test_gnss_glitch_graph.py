@@ -26,8 +26,8 @@ def jumped():
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["graph-isam2", "graph-batch"])
 def test_graph_gates_a_held_10_km_jump(jumped, name):
-    """Without the gate graph-isam2 failed (an indefinite information block) and graph-batch
-    ended 700 m RMS off horizontally; gated, both stay within 1 m of the truth."""
+    """Ungated, graph-isam2 meets an indefinite information block and graph-batch ends 700 m
+    RMS off horizontally; gated, both stay within 1 m of the truth."""
     clean, d, n = jumped
     est = create(name).run(d)
     assert est.info["gnss_rejected_pregate"] >= n

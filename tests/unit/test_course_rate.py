@@ -1,6 +1,7 @@
 """Gyro axes against the GNSS course rate, any vehicle (``io.imu_checks.course_rate_fit``):
 an aircraft log with the gyro's x and z columns swapped, or its z axis inverted, is refused
-in one line (the ground-vehicle checks passed both); clean drives and the shared logs pass."""
+in one line (the ground-vehicle checks do not apply to it); clean drives and the shared logs
+pass."""
 
 from __future__ import annotations
 

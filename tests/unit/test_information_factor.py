@@ -1,6 +1,6 @@
-"""``information_factor`` on a block that rounding made indefinite: GTSAM's Cholesky refused it
-(graph-isam2 failed with "RuntimeError: " and an empty first line); it is floored at the
-rounding level and built."""
+"""``information_factor`` on a block that rounding made indefinite (GTSAM's Cholesky refuses
+it, with a message whose first line is empty): it is floored at the rounding level and
+built."""
 
 from __future__ import annotations
 
