@@ -99,3 +99,18 @@ def test_simulated_scenarios_are_silent(scenario):
         f = Findings(dict(d.meta))
         assert check_gnss_height_units(d, f) is None, (scenario, seed)
         assert f.warnings == list(d.meta.get("warnings") or []), (scenario, seed, f.warnings)
+
+
+def test_the_refusal_is_exit_2_with_one_line(tmp_path, capsys):
+    from vnav_graph.cli import main
+
+    raw = RAW.copy()
+    raw.h = raw.h[0] + 2.0 * (raw.h - raw.h[0])
+    out = tmp_path / "out"
+    assert main(["run", str(write_dataflash(raw, tmp_path / "x2.bin")), "--estimators", "loop3",
+                 "--out", str(out), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1, err
+    assert err[0].startswith("vnav-graph: error: gnss: height climbs 2.0")  # measured 2.01
+    assert "neither metres nor feet" in err[0]
+    assert not out.exists() or not any(out.iterdir())
