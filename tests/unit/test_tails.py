@@ -114,3 +114,21 @@ def test_a_noise_block_inside_a_binary_log_is_placed(tmp_path, fmt):
                      r"byte (\d+) \(40 % into the file\)", found[0].text(None))
     assert m is not None, found[0].text(None)
     assert abs(int(m.group(1)) - n / 1024) < 1.5 and abs(int(m.group(2)) - a) < 300
+
+
+@pytest.mark.parametrize("log", ["erle_pxf_218/218.BIN", "px4_ulog_samples/sample_log_small.ulg",
+                                 "car_phone_1hz_2025-03-01a/2025-03-01_15-04-26.csv"])
+def test_shared_logs_with_a_zeroed_second_half(data_dir, tmp_path, log):
+    src = data_dir / log
+    if not src.exists():
+        pytest.skip(f"{log} not present")
+    b = src.read_bytes()
+    n = len(b) // 2
+    p = tmp_path / src.name
+    p.write_bytes(b[:n] + bytes(len(b) - n))
+    found = garbage_stretches(p)
+    assert len(found) == 1 and found[0].kind == "zero bytes" and found[0].is_tail
+    assert 0 <= found[0].length - (len(b) - n) < 128
+    d = load_drive(p)  # measured: 218 read up to 179.9 s, the car drive to 2729 s
+    assert any(w.startswith(f"{src.name}: the last ") and "(50 %) of the file are zero bytes: "
+               "data read up to" in w for w in d.meta["warnings"]), d.meta["warnings"]
