@@ -281,7 +281,7 @@ def test_gnss_held_10_km_jump_is_dropped_as_one_glitch(tmp_path):
     d = load_drive(write_sl_folder(_mut("gnss-jump-10km-5s"), tmp_path / "jump"))
     c = load_drive(write_sl_folder(RAW, tmp_path / "clean"))
     w = [x for x in d.meta["warnings"] if x.startswith("gnss: 50 fix(es) in 1 glitch")]
-    assert len(w) == 1 and "4.9 s" in w[0], d.meta["warnings"]
+    assert len(w) == 1 and "away for 5.1 s" in w[0], d.meta["warnings"]  # 50 fixes at 10 Hz
     assert len(d.gnss) == len(c.gnss) - 50
     assert d.meta["repaired"]["gnss"] == {"position glitch (away and back) dropped": 50}
 

@@ -281,8 +281,8 @@ def _check_gnss(drive: Drive, f: Findings) -> Drive:
         runs = int(np.sum(np.diff(np.r_[0, glitch.astype(np.int8)]) == 1))
         f.repair("gnss", "position glitch (away and back) dropped", n,
                  f"gnss: {n} fix(es) in {runs} glitch(es) jumping up to {big:.0f} m away and "
-                 f"back (faster than {GNSS_JUMP_SPEED:.0f} m/s, the longest "
-                 f"{_longest_run_s(g.t, glitch):.1f} s): dropped")
+                 f"back (faster than {GNSS_JUMP_SPEED:.0f} m/s, the longest away for "
+                 f"{_longest_away_s(g.t, glitch):.1f} s): dropped")
         drive = drive.replace(gnss=g.select(~glitch))
     elif fast.any():
         f.warn(f"gnss: {int(fast.sum())} position step(s) faster than "
@@ -290,17 +290,14 @@ def _check_gnss(drive: Drive, f: Findings) -> Drive:
     return drive
 
 
-def _longest_run_s(t: FloatArray, mask: NDArray[np.bool_]) -> float:
-    """Longest time span of consecutive True entries of ``mask`` (first to last stamp)."""
-    best, start = 0.0, None
-    for i, m in enumerate(mask.tolist()):
-        if m and start is None:
-            start = i
-        if start is not None and (not m or i == mask.size - 1):
-            last = i if m else i - 1
-            best = max(best, float(t[last] - t[start]))
-            start = None
-    return best
+def _longest_away_s(t: FloatArray, mask: NDArray[np.bool_]) -> float:
+    """The longest time a run of True entries of ``mask`` kept the stream away: from the last
+    False entry before the run to the first after it (a glitch never starts or ends a
+    stream)."""
+    d = np.diff(np.r_[0, mask.astype(np.int8), 0])
+    first, end = np.flatnonzero(d == 1), np.flatnonzero(d == -1)
+    before, after = np.maximum(first - 1, 0), np.minimum(end, t.size - 1)
+    return float(np.max(t[after] - t[before])) if first.size else 0.0
 
 
 def _check_truth(drive: Drive, f: Findings) -> Drive:
