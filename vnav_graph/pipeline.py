@@ -104,7 +104,7 @@ def run_one(name: str, drive: Drive, config: Any = None, waited_s: float = 0.0,
                 raise KeyboardInterrupt from exc
             if os.environ.get("VNAV_DEBUG"):
                 traceback.print_exc()
-            msg = str(exc).splitlines()[0] if str(exc) else ""
+            msg = next((ln.strip() for ln in str(exc).splitlines() if ln.strip()), "no message")
             est, err = None, f"{type(exc).__name__}: {msg}"
         if interrupted:
             raise KeyboardInterrupt

@@ -2,7 +2,8 @@
 
 Nothing here is committed as data: every case is written at test time from
 
-- a **simulated drive** (``hill-drive``, seed 1, 120 s), written by the small writers of
+- a **simulated drive** (``hill-drive``, seed 1, 120 s; and a ``sortie`` aircraft, 400 s, for
+  the gyro-axis damage), written by the small writers of
   ``writers`` in all five formats: ``.npz`` (``save_npz``), ArduPilot DataFlash ``.bin``,
   PX4 ``.ulg``, a Sensor Logger CSV folder and a merged 1 Hz CSV;
 - the **small real cuts in tests/data** (always present);
@@ -110,6 +111,12 @@ def _gnss_jump(r: Raw, k: int, dn_m: float, dh_m: float) -> None:
     r.h[k] += dh_m
 
 
+def _gnss_held_jump(r: Raw, t0: float, dur: float, dn_m: float) -> None:
+    """Every fix in [t0, t0 + dur) s moved ``dn_m`` north (a receiver glitch held a while)."""
+    m = (r.t_gnss >= r.t_gnss[0] + t0) & (r.t_gnss < r.t_gnss[0] + t0 + dur)
+    r.lat_deg[m] += dn_m / 111_320.0
+
+
 def _imu_gap(r: Raw, t0: float, t1: float) -> None:
     keep = ~((r.t_imu > r.t_imu[0] + t0) & (r.t_imu < r.t_imu[0] + t1))
     r.t_imu, r.gyro, r.acc = r.t_imu[keep], r.gyro[keep], r.acc[keep]
@@ -141,6 +148,8 @@ SEMANTIC: dict[str, tuple[Callable[[Raw, np.random.Generator], Raw], str, tuple[
     "swap-acc-xz": (_m(lambda r, g: setattr(r, "acc", r.acc[:, [2, 1, 0]])), "semantic", None),
     "swap-gyro-xz": (_m(lambda r, g: setattr(r, "gyro", r.gyro[:, [2, 1, 0]])), "semantic",
                      None),
+    "gyro-z-inverted": (_m(lambda r, g: setattr(r, "gyro", r.gyro * np.array([1.0, 1.0, -1.0]))),
+                        "semantic", None),
     "acc-sign-flipped": (_m(lambda r, g: setattr(r, "acc", -r.acc)), "semantic",
                          ("npz", "dataflash", "ulog")),
     "accz-all-nan": (_m(lambda r, g: r.acc.__setitem__((slice(None), 2), np.nan)), "semantic",
@@ -164,6 +173,7 @@ SEMANTIC: dict[str, tuple[Callable[[Raw, np.random.Generator], Raw], str, tuple[
     "pressure-constant": (_m(lambda r, g: (r.press.__setitem__(slice(None), r.press[0]),
                                            r.baro_alt.__setitem__(slice(None), r.baro_alt[0]))),
                           "semantic", None),
+    "gnss-alt-feet": (_m(lambda r, g: setattr(r, "h", r.h / 0.3048)), "semantic", None),
     "gnss-alt-zero": (_m(lambda r, g: r.h.__setitem__(slice(None), 0.0)), "semantic", None),
     "gnss-constant": (_m(lambda r, g: _constant_gnss(r)), "semantic", None),
     "clip-accel-16g": (_m(lambda r, g: _clip(r, "acc", 2, 16 * G0, 40.0, 2.0)), "hostile",
@@ -176,6 +186,8 @@ SEMANTIC: dict[str, tuple[Callable[[Raw, np.random.Generator], Raw], str, tuple[
     "baro-spike-300m": (_m(lambda r, g: _baro_step(r, 300.0, 70.0, 70.5)), "hostile", None),
     "gnss-jump-500m": (_m(lambda r, g: _gnss_jump(r, 500, 500.0, 300.0)), "hostile", None),
     "gnss-far-fix": (_m(lambda r, g: _gnss_jump(r, 700, 8.5e6, 0.0)), "hostile", None),
+    "gnss-jump-10km-5s": (_m(lambda r, g: _gnss_held_jump(r, 60.0, 5.0, 1.0e4)), "hostile",
+                          None),
 }
 
 
@@ -214,6 +226,14 @@ def byte_mutations(header_len: int) -> dict[str, Callable[[bytes, np.random.Gene
         i = int(g.integers(header_len, max(header_len + 1, len(b) - n)))
         return b[:i] + bytes(n) + b[i + n:]
 
+    def zero_half(b: bytes, g: np.random.Generator) -> bytes:
+        n = len(b) // 2
+        return b[:n] + bytes(len(b) - n)
+
+    def noise_half(b: bytes, g: np.random.Generator) -> bytes:
+        n = len(b) // 2
+        return b[:n] + g.integers(0, 256, len(b) - n, dtype=np.uint8).tobytes()
+
     def head_zero(b: bytes, g: np.random.Generator) -> bytes:
         n = max(8, header_len)
         return bytes(n) + b[n:]
@@ -235,6 +255,7 @@ def byte_mutations(header_len: int) -> dict[str, Callable[[bytes, np.random.Gene
         "flip-1": flips(1), "flip-10": flips(10), "flip-100": flips(100),
         "flip-1000": flips(1000),
         "swap-blocks": swap, "dup-block": dup, "zero-block": zero,
+        "zeroed-second-half": zero_half, "noise-second-half": noise_half,
         "header-zeroed": head_zero, "header-noise": head_noise, "header-flip": head_flip,
     }
 
@@ -516,6 +537,17 @@ def build_cases(include_shared: bool = True) -> list[Case]:
         for name, mut in byte_mutations(hl).items():
             cases.append(_bytes_case(f"{fmt}/sim/bytes/{name}", fmt, sim_writer(fmt, raw), mut,
                                      int(rng.integers(2**31)), ctrl))
+
+    # ---- a base that is not a car (sortie: an aircraft, 400 s, banked turns from 180 s): the
+    # gyro-axis damage, which the ground-vehicle checks do not see
+    air, _ = sim_raw("sortie", 400.0)
+    for fmt in ("dataflash", "ulog"):
+        ctrl = f"{fmt}/sortie/control/none"
+        cases.append(Case(ctrl, fmt, "control", False, sim_writer(fmt, air), ctrl))
+        for name in ("swap-gyro-xz", "gyro-z-inverted"):
+            mut, fam, _ = SEMANTIC[name]
+            cases.append(Case(f"{fmt}/sortie/{fam}/{name}", fmt, fam, True,
+                              sim_writer(fmt, mut(air, np.random.default_rng(0))), ctrl))
 
     # ---- format-specific structure damage on the simulated base
     arrays, header = npz_arrays(raw, sim)

@@ -271,3 +271,43 @@ def test_nan_truth_is_dropped_with_a_warning():
     q[:] = np.nan
     d = check_drive(SIM.replace(truth=tr.__class__(tr.t, tr.lla, tr.vel_n, q)))
     assert d.truth is None and d.meta["source"] == "log"
+
+
+def test_gnss_held_10_km_jump_is_dropped_as_one_glitch(tmp_path):
+    """A phone folder whose GNSS sits 10 km north for 5 s: the 50 fixes are dropped and named
+    (a rule that takes one fix at a time sees only "2 position steps faster than 150 m/s")."""
+    from .corpus import write_sl_folder
+
+    d = load_drive(write_sl_folder(_mut("gnss-jump-10km-5s"), tmp_path / "jump"))
+    c = load_drive(write_sl_folder(RAW, tmp_path / "clean"))
+    w = [x for x in d.meta["warnings"] if x.startswith("gnss: 50 fix(es) in 1 glitch")]
+    assert len(w) == 1 and "away for 5.1 s" in w[0], d.meta["warnings"]  # 50 fixes at 10 Hz
+    assert len(d.gnss) == len(c.gnss) - 50
+    assert d.meta["repaired"]["gnss"] == {"position glitch (away and back) dropped": 50}
+
+
+def test_shared_ski_folder_gnss_held_10_km_jump_is_dropped(data_dir, tmp_path):
+    """The real phone folder (1 Hz fixes) with every fix of 100-105 s moved 10 km north."""
+    import shutil
+
+    src = data_dir / "ski_iphone_100hz"
+    if not src.is_dir():
+        pytest.skip("ski_iphone_100hz not present")
+    dst = tmp_path / "ski"
+    shutil.copytree(src, dst)
+    f = dst / "Location.csv"
+    lines = f.read_text().splitlines()
+    cols = lines[0].split(",")
+    it, ilat = cols.index("seconds_elapsed"), cols.index("latitude")
+    n = 0
+    for k in range(1, len(lines)):
+        p = lines[k].split(",")
+        if 100.0 <= float(p[it]) < 105.0:
+            p[ilat] = repr(float(p[ilat]) + 1.0e4 / 111_320.0)
+            lines[k] = ",".join(p)
+            n += 1
+    f.write_text("\n".join(lines) + "\n")
+    d, c = load_drive(dst), load_drive(src)
+    w = [x for x in d.meta["warnings"] if x.startswith(f"gnss: {n} fix(es) in 1 glitch")]
+    assert n >= 4 and len(w) == 1, (n, d.meta["warnings"])
+    assert len(d.gnss) == len(c.gnss) - n

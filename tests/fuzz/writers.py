@@ -45,12 +45,13 @@ class Raw:
                    extra=dict(self.extra))
 
 
-def sim_raw() -> tuple[Raw, Any]:
-    """The simulated base: hill-drive seed 1, 120 s, IMU decimated to 100 Hz."""
+def sim_raw(scenario: str = "hill-drive", duration_s: float = 120.0) -> tuple[Raw, Any]:
+    """The simulated base: ``scenario`` (hill-drive: a car; sortie: an aircraft, which turns
+    first at 180 s) seed 1, ``duration_s``, IMU decimated to 100 Hz."""
     from vnav_graph.geo.atmosphere import isa_pressure
     from vnav_graph.simulation import simulate
 
-    d = simulate("hill-drive", 1, duration_s=120.0)
+    d = simulate(scenario, 1, duration_s=duration_s)
     i = d.imu
     k = slice(None, None, 2)
     g, b = d.gnss, d.baro
@@ -259,6 +260,48 @@ def write_dataflash(raw: Raw, path: Path, names: dict[str, str] | None = None) -
         order = list(range(len(recs)))
     path.write_bytes(b"".join(out) + b"".join(recs[j][1] for j in order))
     return path
+
+
+# DataFlash's scaled integer codes: struct code and scale (e: int32 x 100, c: int16 x 100, ...)
+_DF_SCALED = {"e": ("i", 100), "E": ("I", 100), "c": ("h", 100), "C": ("H", 100),
+              "L": ("i", 10**7), "M": ("B", 1)}
+
+
+def dataflash_scale_field(data: bytes, msg: str, field_name: str, factor: float) -> bytes:
+    """A DataFlash log with one numeric field of every ``msg`` record multiplied by
+    ``factor`` (e.g. GPS ``Alt`` in feet; scaled integer fields are rounded), records walked
+    in order by the lengths their FMT records give; bytes that start no known record are
+    copied as they are."""
+    import numpy as np
+
+    out = bytearray(data)
+    fmts: dict[int, tuple[str, int, str, list[str]]] = {}
+    i = 0
+    while i + 3 <= len(out):
+        if out[i] != 0xA3 or out[i + 1] != 0x95:
+            i += 1
+            continue
+        tid = out[i + 2]
+        if tid == 128 and i + 89 <= len(out):
+            t, length, name, fmt, cols = struct.unpack("<BB4s16s64s", out[i + 3:i + 89])
+            fmts[t] = (name.rstrip(b"\0").decode(), length, fmt.rstrip(b"\0").decode(),
+                       cols.rstrip(b"\0").decode().split(","))
+            i += 89
+            continue
+        if tid not in fmts:
+            i += 1
+            continue
+        name, length, fmt, cols = fmts[tid]
+        if name == msg and field_name in cols:
+            k = cols.index(field_name)
+            off = i + 3 + struct.calcsize("<" + "".join(_DF_SCALED.get(c, ("", 1))[0]
+                                                        or _DF_STRUCT[c] for c in fmt[:k]))
+            code = _DF_SCALED[fmt[k]][0] if fmt[k] in _DF_SCALED else _DF_STRUCT[fmt[k]]
+            (v,) = struct.unpack_from("<" + code, out, off)
+            new = float(np.float32(v * factor)) if code in "fd" else int(round(v * factor))
+            struct.pack_into("<" + code, out, off, new)
+        i += length
+    return bytes(out)
 
 
 def _i32(x: float) -> int:

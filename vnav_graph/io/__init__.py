@@ -26,6 +26,7 @@ def load_drive(path: str | Path, check: bool = True) -> Drive:
         meta["warnings"] = [*list(meta.get("warnings") or []), noise.summary()]
         meta["library_messages"] = noise.count
         drive = drive.replace(meta=meta)
+    drive = _with_garbage_stretches(drive, Path(path))
     if check:
         from .sanity import check_drive
 
@@ -35,6 +36,26 @@ def load_drive(path: str | Path, check: bool = True) -> Drive:
             meta["warnings"] = [*list(meta.get("warnings") or []), noise.summary()]
             drive = drive.replace(meta=meta)
     return drive
+
+
+def _with_garbage_stretches(drive: Drive, path: Path) -> Drive:
+    """``meta["warnings"]`` (and ``meta["garbage"]``) for the zero-byte and unparsable
+    stretches of the input's files (:mod:`vnav_graph.io.tails`)."""
+    from .tails import garbage_stretches
+
+    found = garbage_stretches(path)
+    if not found:
+        return drive
+    end_s = None
+    if path.is_file():
+        streams = [s for s in (drive.imu, drive.gnss, drive.baro, drive.mag)
+                   if s is not None and len(s)]
+        end_s = max(float(s.t[-1]) for s in streams) - min(float(s.t[0]) for s in streams)
+    meta = dict(drive.meta)
+    meta["warnings"] = [*list(meta.get("warnings") or []), *(s.text(end_s) for s in found)]
+    meta["garbage"] = [{"file": s.file, "kind": s.kind, "start_byte": s.start,
+                        "bytes": s.length, "file_bytes": s.size} for s in found]
+    return drive.replace(meta=meta)
 
 
 def _load_unchecked(path: str | Path) -> Drive:

@@ -27,7 +27,11 @@ Checks, with the evidence each uses
   against GNSS height) → ÷ 3.28084 and re-aligned; single-sample jumps larger than
   ``BARO_STEP_M`` + 30 m/s·Δt → spikes removed, persistent ones → level shift removed.
 - GNSS: height identical in every fix (not logged) → vertical σ set to ``UNUSED_SD_M``;
-  isolated fixes jumping faster than ``GNSS_JUMP_SPEED`` → dropped.
+  fixes that jump away faster than ``GNSS_JUMP_SPEED`` and come back: an isolated fix, or
+  a horizontal block of them within ``GNSS_GLITCH_MAX_S`` (``vnav_graph.nav.gnss_glitch``)
+  → dropped; other impossible steps are reported (heights are gated by the estimators).
+- GNSS height unit: its climb against the baro's and against its own vertical velocity;
+  feet → × 0.3048, another scale → refused (:mod:`vnav_graph.io.height_units`).
 - coverage: a missing GNSS or baro stream, logging gaps (``GAP_WARN_S``) and a stream that
   ends well before the others (a truncated file) are reported.
 - specific force: an accelerometer that reads less than gravity and the baro's climb need
@@ -47,8 +51,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ..nav.gnss_glitch import MAX_GLITCH_S, MAX_SPEED, glitch_mask
 from ..types import BaroStream, Drive, GnssStream
 from .findings import Findings, reject
+from .height_units import check_gnss_height_units
 from .imu_checks import IMU_CHECKS
 
 FloatArray = NDArray[np.float64]
@@ -63,7 +69,8 @@ BARO_STEP_M = 30.0
 BARO_STEP_RATE = 30.0  # m/s: vertical speed no vehicle of this package exceeds
 FEET = 0.3048
 UNUSED_SD_M = 1.0e4
-GNSS_JUMP_SPEED = 150.0  # m/s between consecutive fixes, there and back
+GNSS_JUMP_SPEED = MAX_SPEED  # m/s between consecutive fixes (nav.gnss_glitch)
+GNSS_GLITCH_MAX_S = MAX_GLITCH_S  # longest away-and-back glitch dropped [s]
 
 
 # ---------------------------------------------------------------------------- drops
@@ -260,26 +267,37 @@ def _check_gnss(drive: Drive, f: Findings) -> Drive:
 
     ned = lla_to_ned(g.lla, g.lla[0])
     step = np.linalg.norm(np.diff(ned, axis=0), axis=1)
-    speed = step / np.diff(g.t)
-    fast = speed > GNSS_JUMP_SPEED
-    # an isolated bad fix: fast in and fast out, and its neighbours agree with each other
-    spike = np.zeros(len(g), dtype=bool)
-    spike[1:-1] = fast[:-1] & fast[1:]
-    if spike.any():
-        k = np.flatnonzero(spike)
-        around = np.linalg.norm(ned[k + 1] - ned[k - 1], axis=1) / (g.t[k + 1] - g.t[k - 1])
-        spike[k[around > GNSS_JUMP_SPEED]] = False
-    if spike.any():
-        n = int(spike.sum())
-        big = float(np.max(step[np.flatnonzero(spike) - 1]))
-        f.repair("gnss", "isolated position jump dropped", n,
-                 f"gnss: {n} isolated fix(es) jumping up to {big:.0f} m away and back "
-                 f"(faster than {GNSS_JUMP_SPEED:.0f} m/s): dropped")
-        drive = drive.replace(gnss=g.select(~spike))
+    fast = step / np.diff(g.t) > GNSS_JUMP_SPEED
+    # fixes that jump away and come back (one fix or a block): nav.gnss_glitch
+    # (horizontal: any length; 3-D: isolated spikes only, see its docstring)
+    glitch = (glitch_mask(g.t, ned[:, :2], GNSS_JUMP_SPEED, GNSS_GLITCH_MAX_S)
+              | glitch_mask(g.t, ned, GNSS_JUMP_SPEED, GNSS_GLITCH_MAX_S, max_fixes=1))
+    if glitch.any():
+        n = int(glitch.sum())
+        k = np.flatnonzero(glitch)
+        # each glitch fix against the last good fix before it (a glitch never starts a stream)
+        before = np.maximum.accumulate(np.where(glitch, 0, np.arange(len(g))))[k]
+        big = float(np.max(np.linalg.norm(ned[k] - ned[before], axis=1)))
+        runs = int(np.sum(np.diff(np.r_[0, glitch.astype(np.int8)]) == 1))
+        f.repair("gnss", "position glitch (away and back) dropped", n,
+                 f"gnss: {n} fix(es) in {runs} glitch(es) jumping up to {big:.0f} m away and "
+                 f"back (faster than {GNSS_JUMP_SPEED:.0f} m/s, the longest away for "
+                 f"{_longest_away_s(g.t, glitch):.1f} s): dropped")
+        drive = drive.replace(gnss=g.select(~glitch))
     elif fast.any():
         f.warn(f"gnss: {int(fast.sum())} position step(s) faster than "
                f"{GNSS_JUMP_SPEED:.0f} m/s between consecutive fixes (glitches?)")
     return drive
+
+
+def _longest_away_s(t: FloatArray, mask: NDArray[np.bool_]) -> float:
+    """The longest time a run of True entries of ``mask`` kept the stream away: from the last
+    False entry before the run to the first after it (a glitch never starts or ends a
+    stream)."""
+    d = np.diff(np.r_[0, mask.astype(np.int8), 0])
+    first, end = np.flatnonzero(d == 1), np.flatnonzero(d == -1)
+    before, after = np.maximum(first - 1, 0), np.minimum(end, t.size - 1)
+    return float(np.max(t[after] - t[before])) if first.size else 0.0
 
 
 def _check_truth(drive: Drive, f: Findings) -> Drive:
@@ -319,8 +337,8 @@ def _check_specific_force(drive: Drive, f: Findings) -> None:
 
 
 CHECKS: tuple[Callable[[Drive, Findings], Drive | None], ...] = (
-    _check_drops, _check_time_units, _check_truth, *IMU_CHECKS, _check_baro, _check_gnss,
-    _check_coverage, _check_specific_force,
+    _check_drops, _check_time_units, _check_truth, *IMU_CHECKS, _check_baro,
+    check_gnss_height_units, _check_gnss, _check_coverage, _check_specific_force,
 )
 
 

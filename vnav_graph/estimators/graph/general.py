@@ -364,7 +364,41 @@ def information_factor(keys: list[int], lam: FloatArray, eta: FloatArray,
     # 1e-9 information (σ ≈ 3e4 in any unit) makes the block positive definite so it can be
     # turned into a Jacobian for QR; it is far below any real information.
     lam = lam + 1e-9 * np.eye(lam.shape[0])
+    try:
+        return _container(keys, lam, eta, blocks, lin)
+    except RuntimeError:
+        # GTSAM's Cholesky refused the block: indefinite by rounding (a block with entries
+        # of 1e15 at a far linearisation point has eigenvalues of ±0.1 from rounding alone,
+        # where the 1e-9 above is below the last digit). Its eigenvalues are floored at the
+        # rounding level of the block, 10·n·ε·max|λ| (a PSD block, the information a
+        # least-squares term can carry), and it is tried once more.
+        if not np.all(np.isfinite(lam)):
+            raise RuntimeError(f"graph: an information block over {len(keys)} variables "
+                               "has non-finite entries (the solve diverged)") from None
+        w, v = np.linalg.eigh(0.5 * (lam + lam.T))
+        floor = max(10.0 * lam.shape[0] * np.finfo(float).eps * float(np.max(np.abs(w))),
+                    1e-9)
+        try:
+            return _container(keys, (v * np.maximum(w, floor)) @ v.T, eta, blocks, lin)
+        except RuntimeError as exc:
+            raise RuntimeError(f"graph: an information block over {len(keys)} variables is "
+                               "not positive definite even with its eigenvalues floored "
+                               f"(GTSAM: {first_line(exc)})") from None
+
+
+def _container(keys: list[int], lam: FloatArray, eta: FloatArray,
+               blocks: tuple[tuple[int, int], ...], lin: Any) -> Any:
     gfg = gtsam.GaussianFactorGraph()
     for f in hessian_pieces(keys, lam, eta, tuple(range(len(keys))), blocks):
         gfg.push_back(f)
     return gtsam.LinearContainerFactor(gtsam.JacobianFactor(gtsam.HessianFactor(gfg)), lin)
+
+
+def first_line(exc: BaseException) -> str:
+    """The first non-empty line of an exception's message, or its type's name and "with an
+    empty message" (GTSAM's C++ exceptions reach Python with a message that starts with a
+    newline, or none at all)."""
+    for line in str(exc).splitlines():
+        if line.strip():
+            return line.strip()
+    return f"{type(exc).__name__} with an empty message"

@@ -60,6 +60,7 @@ from . import factors as gf
 from .batch import gnss_gm_info, outputs, provides
 from .builders import build_batch_graph, pims_for
 from .extend import GraphExtension, check_extensions
+from .general import first_line
 from .isam2_online import OnlinePass, OnlineResult
 from .isam2_setup import estimate_info
 from .linalg import solver_context
@@ -126,10 +127,16 @@ class GraphISAM2:
         try:
             est = self._run(drive, cfg0, False, t_start, None)
         except RuntimeError as exc:
-            if "graph-isam2:" not in str(exc):
-                raise
+            if "graph-isam2:" not in str(exc):  # not an update: no retry, but named
+                raise RuntimeError(f"graph-isam2: {first_line(exc)}") from exc
             cfg = dataclasses.replace(cfg0, **ROBUST_SETTINGS)
-            est = self._run(drive, cfg, True, t_start, str(exc))
+            try:
+                est = self._run(drive, cfg, True, t_start, str(exc))
+            except RuntimeError as exc2:
+                if "graph-isam2:" in str(exc2):
+                    raise
+                raise RuntimeError(f"graph-isam2 (robust retry after: {first_line(exc)}): "
+                                   f"{first_line(exc2)}") from exc2
         # the post-solve hard-iron and baro-scale checks of both families (graph-batch, ekf)
         def rerun(cfg: GraphConfig) -> Estimate:
             return GraphISAM2(cfg, self.extensions).run(drive)

@@ -17,6 +17,7 @@ from ...config import REAL_LOG_BARO, BaroSpec, ImuSpec
 from ...geo.earth import gravity
 from ...nav.arrays import nearest_index
 from ...nav.gaps import imu_gaps as nav_imu_gaps
+from ...nav.gnss_glitch import glitch_mask
 from ...nav.velocity_screen import velocity_screen
 from ...sensors.model import (
     BaroPrior,
@@ -108,7 +109,8 @@ class Problem:
     lever: FloatArray
     g_kf: np.ndarray  # keyframe index of fixes on a keyframe epoch, −1 otherwise
     g_use: np.ndarray  # fixes not rejected by the gates (bool)
-    g_rej_pre: int = 0  # rejected by the pre-gate (baro consistency and velocity screen)
+    g_rej_pre: int = 0  # rejected by the pre-gate (baro consistency, position glitches and
+    # the velocity screen)
     g_rej_vel: int = 0  # of those, refused by the velocity screen (nav.velocity_screen)
     g_rej_post: int = 0  # rejected by the post-solve residual gate
     g_incr: Any = None  # (fix indices, dense increments at them), see gnss_rows_of
@@ -183,6 +185,12 @@ def setup(drive: Drive, cfg: GraphConfig) -> Problem:
                         cfg.gnss_gate_prob,
                         None if gn.vel_n is None else gn.vel_n[:, 2],
                         None if gn.vel_sd is None else gn.vel_sd[:, 2])
+    if cfg.gnss_gate_prob > 0:
+        # fixes that jump away faster than any vehicle and come back (nav.gnss_glitch): the
+        # post-solve gate cannot take them, the initial guess already follows them (a 10 km
+        # jump held for 5 s left both smoothers 700 m off and graph-isam2's information
+        # blocks indefinite)
+        use &= ~glitch_mask(t_g, pos[:, :2])  # heights: the baro gate above
     n_vel = 0
     if cfg.velocity_screen and gn.vel_n is not None and cfg.gnss_gate_prob > 0:
         # GNSS velocity against the IMU's specific-force integral (attitude-free)
