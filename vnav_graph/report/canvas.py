@@ -24,14 +24,14 @@ BREAK_FRACTION = 0.04
 
 
 def figure(w: float, h: float, left: float = 0.08, wspace: float = 0.12,
-           right: float = 0.98, bottom_in: float = 0.55) -> Any:
+           right: float = 0.98, bottom_in: float = 0.55, top_in: float = 0.75) -> Any:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
     # fixed margins instead of constrained layout: the layout solver cost ~1 s per figure
     fig = Figure(figsize=(w, h), dpi=DPI)
     FigureCanvasAgg(fig)
-    fig.subplots_adjust(left=left, right=right, bottom=bottom_in / h, top=1.0 - 0.75 / h,
+    fig.subplots_adjust(left=left, right=right, bottom=bottom_in / h, top=1.0 - top_in / h,
                         hspace=0.55, wspace=wspace)
     return fig
 

@@ -83,8 +83,9 @@ def plot_altitude_errors(es: ErrorSet, values: Mapping[str, float | None],
     ncol = max(len(m) for _, m in groups)
     nrow = len(groups)
     xaxis = _axis(es)
-    fig = canvas.figure(11.0, 1.1 + 2.0 * nrow, left=0.09, wspace=0.18,
-                        bottom_in=0.75 if xaxis.broken else 0.55)
+    height = 1.35 + 2.0 * nrow
+    fig = canvas.figure(11.0, height, left=0.09, wspace=0.18,
+                        bottom_in=0.75 if xaxis.broken else 0.55, top_in=1.0)
     axes = fig.subplots(nrow, ncol, sharex=True, squeeze=False)
     notes: list[str] = []
     first = True
@@ -123,8 +124,9 @@ def plot_altitude_errors(es: ErrorSet, values: Mapping[str, float | None],
             ax.tick_params(labelsize=7)
             if col == 0:
                 ax.set_ylabel(f"{label}\nalt error [m]", fontsize=8)
-            if first:
-                ax.legend(fontsize=6.5, loc="lower left")
+            if first:  # one legend for the figure, under the title: never over the data
+                fig.legend(*ax.get_legend_handles_labels(), loc="upper center", ncol=4,
+                           fontsize=7.5, frameon=False, bbox_to_anchor=(0.5, 1 - 0.3 / height))
                 first = False
             if row == nrow - 1 or col >= len(groups[row + 1][1]):
                 ax.set_xlabel(xaxis.xlabel(short=True), fontsize=7)
