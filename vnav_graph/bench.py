@@ -110,7 +110,8 @@ def run_task(task: BenchTask) -> dict[str, Any]:
         warm_up(task)
         res = run_one(task.estimator, drive, task.config, interrupts=False)
         if res.estimate is None:
-            row.update(failed_block(f"estimate: {res.error}", res.runtime_s))
+            error = res.error if res.skipped else f"estimate: {res.error}"
+            row.update(failed_block(error, res.runtime_s, res.status))
             return row
         stage = "evaluate"
         row.update(finite(evaluate(res.estimate, drive)))

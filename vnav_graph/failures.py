@@ -29,3 +29,21 @@ def failure_message(exc: BaseException, typed: bool = False) -> str:
         f = frames[-1]
         where = f"; raised at {Path(f.filename).name}:{f.lineno} in {f.name}"
     return f"{kind} (no message{where})"
+
+
+class MissingStream(ValueError):
+    """An estimator needs a stream the drive does not have (e.g. no barometer).
+
+    Not a failure: a vehicle without a barometer is a valid input, the estimators that need
+    one cannot run on it. ``vnav_graph.runner`` reports them with ``status: "skipped"`` and
+    ``reason`` (``"no barometer"``) instead of ``"failed"``. A ``ValueError``, so that a
+    direct ``estimator.run(drive)`` caller sees the same exception type as before.
+    """
+
+    def __init__(self, stream: str, message: str) -> None:
+        super().__init__(message)
+        self.stream = stream
+
+    @property
+    def reason(self) -> str:
+        return f"no {self.stream}"

@@ -76,7 +76,7 @@ def summarize(drive: Drive, results: Sequence[RunResult]) -> dict[str, Any]:
     per_block: dict[str, list[dict[str, Any]]] = {}
     for r in results:
         if r.estimate is None:
-            ests[r.name] = failed_block(r.error or "unknown error", r.runtime_s)
+            ests[r.name] = failed_block(r.error or "unknown error", r.runtime_s, r.status)
             continue
         try:
             ests[r.name] = evaluate(r.estimate, drive, blocks)
@@ -179,17 +179,28 @@ EXIT_ALL_FAILED = 4
 def run_status(summary: dict[str, Any]) -> tuple[int, str | None]:
     """Exit code of ``run`` from its summary, and the one line to print on stderr.
 
-    0: every estimator ok; 3 (``EXIT_SOME_FAILED``): some failed, results written;
-    4 (``EXIT_ALL_FAILED``): none produced a scored result (every estimator failed in its
-    run or in evaluation), summary written for diagnosis.
+    0: every estimator that could run is ok (estimators ``skipped`` for a stream the drive
+    lacks are named on the stderr line, not counted as failures); 3 (``EXIT_SOME_FAILED``):
+    some failed, results written; 4 (``EXIT_ALL_FAILED``): none produced a scored result
+    (every estimator failed in its run or in evaluation, or none could run), summary written
+    for diagnosis.
     """
     ests = summary["estimators"]
-    failed = [n for n, b in ests.items() if b["status"] != "ok"]
+
+    def first(names: list[str], default: str) -> str:
+        lines = str(ests[names[0]].get("error") or "").splitlines()
+        return f"{names[0]}: {lines[0] if lines else default}"
+
+    skipped = [n for n, b in ests.items() if b["status"] == "skipped"]
+    failed = [n for n, b in ests.items() if b["status"] not in ("ok", "skipped")]
+    note = (f"{len(skipped)} of {len(ests)} estimators skipped ({first(skipped, 'skipped')})"
+            if skipped else None)
     if not failed:
-        return 0, None
-    first = str(ests[failed[0]].get("error") or "").splitlines()
-    detail = f"{failed[0]}: {first[0] if first else 'unknown error'}"
-    if len(failed) == len(ests):
+        if skipped and len(skipped) == len(ests):
+            return EXIT_ALL_FAILED, f"no estimator could run on this drive ({first(skipped, '')})"
+        return 0, note
+    detail = first(failed, "unknown error")
+    if len(failed) + len(skipped) == len(ests):
         return EXIT_ALL_FAILED, f"every estimator failed ({detail})"
     return EXIT_SOME_FAILED, f"{len(failed)} of {len(ests)} estimators failed ({detail})"
 
@@ -273,8 +284,8 @@ def format_table(summary: dict[str, Any]) -> str:
     for r in summary.get("repairs") or []:
         lines.append(f"reader: {r}")
     for name, m in summary["estimators"].items():
-        if m["status"] == "failed":
-            lines.append(f"{name} failed: {m['error']}")
+        if m["status"] in ("failed", "skipped"):
+            lines.append(f"{name} {m['status']}: {m['error']}")
         for w in m.get("warnings") or []:
             lines.append(f"{name} warning: {w}")
     return "\n".join(lines)

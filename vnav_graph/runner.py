@@ -10,10 +10,12 @@ local or on Dask (``vnav_graph.bench.run_task``), all call :func:`run_one`:
   machine only: the compiled code is cached);
 - an estimator that raises is returned as data, ``error`` = ``failure_message(exc, typed=True)``
   (never empty), and the others still run (docs/design.md);
+- an estimator that needs a stream the drive lacks (``failures.MissingStream``) is returned
+  as skipped, ``error`` = the reason (``"no barometer"``): not a failure;
 - the first Ctrl-C stops after the current estimator (:func:`interrupt_flag`).
 
-A failed estimator's block in ``summary.json``, ``holdout.json`` and ``bench.json`` is
-:func:`failed_block`: every metric null, ``status`` and ``error`` set.
+A failed (or skipped) estimator's block in ``summary.json``, ``holdout.json`` and
+``bench.json`` is :func:`failed_block`: every metric null, ``status`` and ``error`` set.
 """
 
 from __future__ import annotations
@@ -43,7 +45,7 @@ from .evaluation.holdout import (
     withhold,
 )
 from .evaluation.screening import screen_reference
-from .failures import failure_message
+from .failures import MissingStream, failure_message
 from .jit import CompileTimer, Prewarm, family_of, mark_warm
 from .progress import Mode, mode_for, say, steps
 from .sharing import Shared, sharing
@@ -56,6 +58,8 @@ class RunResult:
 
     ``runtime_s`` excludes ``jit_s``, the time numba spent compiling kernels during this run
     (non-zero only the first time a kernel meets this machine: the compiled code is cached).
+    ``skipped``: the estimator could not run on this drive (a stream it needs is missing);
+    ``error`` is then the reason, e.g. ``"no barometer"``.
     """
 
     name: str
@@ -63,6 +67,14 @@ class RunResult:
     error: str | None
     runtime_s: float
     jit_s: float = 0.0
+    skipped: bool = False
+
+    @property
+    def status(self) -> str:
+        """``"ok"``, ``"skipped"`` or ``"failed"`` (the ``status`` of its JSON block)."""
+        if self.estimate is not None:
+            return "ok"
+        return "skipped" if self.skipped else "failed"
 
 
 def resolve_estimators(names: Sequence[str] | None) -> list[str]:
@@ -119,10 +131,13 @@ def run_one(name: str, drive: Drive, config: Any = None, waited_s: float = 0.0,
     """
     t0 = time.perf_counter()
     flag = interrupt_flag() if interrupts else nullcontext([])
+    skipped = False
     with flag as interrupted, CompileTimer() as jit:
         try:
             est = run_captured(name, drive, config)
             err = None
+        except MissingStream as exc:  # the drive cannot feed this estimator: not a failure
+            est, err, skipped = None, exc.reason, True
         except Exception as exc:  # an estimator failure is data, not a crash
             if interrupted:
                 raise KeyboardInterrupt from exc
@@ -135,7 +150,8 @@ def run_one(name: str, drive: Drive, config: Any = None, waited_s: float = 0.0,
     jit_s = jit.seconds + waited_s
     reused = shared.take() if shared is not None else 0.0
     if est is None:
-        return RunResult(name, None, err, max(wall - jit.seconds, 0.0) + reused, jit_s)
+        return RunResult(name, None, err, max(wall - jit.seconds, 0.0) + reused, jit_s,
+                         skipped)
     runtime = est.runtime_s if est.runtime_s > 0 else wall
     est = est.replace(runtime_s=max(runtime - jit.seconds, 0.0) + reused)
     return RunResult(name, est, None, est.runtime_s, jit_s)
@@ -201,13 +217,15 @@ def run_captured(name: str, drive: Drive, config: Any = None) -> Estimate:
     return est.replace(info=info)
 
 
-def failed_block(error: str, runtime_s: float, **extra: Any) -> dict[str, Any]:
-    """The block of an estimator without a result: ``status: "failed"``, its ``error``, every
-    metric of the ``summary.json`` block null; ``extra`` adds document-specific keys (the
-    holdout's ``alt_offset_m``, ``n_scored``, ``per_window``)."""
+def failed_block(error: str, runtime_s: float, status: str = "failed",
+                 **extra: Any) -> dict[str, Any]:
+    """The block of an estimator without a result: ``status`` (``"failed"``, or ``"skipped"``
+    when the drive lacks a stream it needs), ``error`` (the error, or the reason it was
+    skipped), every metric of the ``summary.json`` block null; ``extra`` adds
+    document-specific keys (the holdout's ``alt_offset_m``, ``n_scored``, ``per_window``)."""
     null_param = {"est": None, "sd": None, "truth": None}
     return {
-        "status": "failed", "error": error, "alt_rmse_m": None, "alt_max_abs_m": None,
+        "status": status, "error": error, "alt_rmse_m": None, "alt_max_abs_m": None,
         "horiz_rmse_m": None, "heading_rmse_deg": None, "outage_alt_max_m": None,
         "outage_horiz_max_m": None, "vel_down_rmse_mps": None, "nees_mean": None,
         "nees_dof": None, "runtime_s": runtime_s,
@@ -218,9 +236,10 @@ def failed_block(error: str, runtime_s: float, **extra: Any) -> dict[str, Any]:
     }
 
 
-def holdout_failed(error: str, runtime_s: float) -> dict[str, Any]:
+def holdout_failed(error: str, runtime_s: float, status: str = "failed") -> dict[str, Any]:
     """``failed_block`` with the holdout's own keys."""
-    return failed_block(error, runtime_s, alt_offset_m=None, n_scored=0, per_window=[])
+    return failed_block(error, runtime_s, status, alt_offset_m=None, n_scored=0,
+                        per_window=[])
 
 
 def run_holdout(drive: Drive, estimators: Sequence[str] | None = None, outage_s: float = 60.0,
@@ -244,7 +263,7 @@ def run_holdout(drive: Drive, estimators: Sequence[str] | None = None, outage_s:
     series: dict[str, Scored] = {}
     for r in run_estimators(held, names, progress, configs, desc="holdout run"):
         if r.estimate is None:
-            results[r.name] = holdout_failed(r.error or "unknown error", r.runtime_s)
+            results[r.name] = holdout_failed(r.error or "unknown error", r.runtime_s, r.status)
             continue
         try:
             s = score(r.estimate, drive, reference, windows, given=~withheld)

@@ -270,7 +270,7 @@ def format_markdown(doc: dict[str, Any]) -> str:
         "|---|---|---|---|---|---|---|---|",
     ]
     for name, b in doc["estimators"].items():
-        status = b["status"] if b["error"] is None else f"failed: {b['error'][:60]}"
+        status = b["status"] if b["error"] is None else f"{b['status']}: {b['error'][:60]}"
         lines.append(f"| {name} | {status} | {f(b['alt_rmse_m'])} | {f(b['alt_max_abs_m'])} | "
                      f"{f(b['horiz_rmse_m'])} | {f(b['gnss_rejected'], 'd')} | "
                      f"{f(b['alt_offset_m'])} | {f(b['runtime_s'])} |")

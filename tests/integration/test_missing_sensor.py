@@ -1,0 +1,78 @@
+"""A drive without a barometer is a valid input: the estimators that need one are "skipped",
+the others run, and ``run`` exits 0 when every estimator that could run succeeded."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from vnav_graph.cli import main
+from vnav_graph.io import save_npz
+from vnav_graph.pipeline import run_status
+from vnav_graph.simulation import simulate
+
+NEED_BARO = ("loop2", "loop3", "loop3-adaptive", "vkf4", "vekf7")
+NO_BARO_OK = ("observer1d", "ekf")
+
+
+@pytest.fixture(scope="module")
+def no_baro(tmp_path_factory) -> tuple[Path, Path]:
+    """The simulated hill drive (120 s) with its baro stream removed: with truth, and
+    without it (as a real log, scored by the holdout)."""
+    d = simulate("hill-drive", 1, duration_s=120.0).replace(baro=None)
+    root = tmp_path_factory.mktemp("no-baro")
+    return (save_npz(d, root / "truth.npz"),
+            save_npz(d.replace(truth=None), root / "log.npz"))
+
+
+def test_run_skips_the_estimators_that_need_a_barometer(no_baro, tmp_path, capsys) -> None:
+    out = tmp_path / "run"
+    names = ",".join(NO_BARO_OK[:1] + NEED_BARO + NO_BARO_OK[1:])
+    code = main(["run", str(no_baro[0]), "--estimators", names, "--out", str(out),
+                 "--no-progress"])
+    cap = capsys.readouterr()
+    ests = json.loads((out / "summary.json").read_text())["estimators"]
+    assert {n: b["status"] for n, b in ests.items()} == {
+        **{n: "skipped" for n in NEED_BARO}, **{n: "ok" for n in NO_BARO_OK}}
+    assert code == 0
+    for n in NEED_BARO:
+        assert ests[n]["error"] == "no barometer"
+        assert ests[n]["alt_rmse_m"] is None and ests[n]["baro"]["scale"]["est"] is None
+        assert f"{n} skipped: no barometer" in cap.out
+        assert not (out / "estimates" / f"{n}.parquet").exists()
+    for n in NO_BARO_OK:
+        assert ests[n]["error"] is None and 0.0 < ests[n]["alt_rmse_m"] < 5.0
+        assert (out / "estimates" / f"{n}.parquet").exists()
+    assert "5 of 7 estimators skipped (loop2: no barometer)" in cap.err
+    assert "failed" not in cap.err
+
+
+def test_holdout_reports_skipped_estimators(no_baro, tmp_path, capsys) -> None:
+    out = tmp_path / "holdout"
+    assert main(["holdout", str(no_baro[1]), "--estimators", "vkf4,observer1d",
+                 "--out", str(out), "--no-progress"]) == 0
+    doc = json.loads((out / "holdout.json").read_text())["estimators"]
+    assert doc["vkf4"]["status"] == "skipped" and doc["vkf4"]["error"] == "no barometer"
+    assert doc["vkf4"]["n_scored"] == 0 and doc["vkf4"]["alt_rmse_m"] is None
+    assert doc["observer1d"]["status"] == "ok" and doc["observer1d"]["n_scored"] > 0
+    assert "| vkf4 | skipped: no barometer |" in capsys.readouterr().out
+
+
+def _summary(**status: str) -> dict:
+    return {"estimators": {n: {"status": s, "error": None if s == "ok" else
+                               ("no barometer" if s == "skipped" else "RuntimeError: x")}
+                           for n, s in status.items()}}
+
+
+def test_exit_code_counts_failures_among_the_estimators_that_could_run() -> None:
+    assert run_status(_summary(a="ok", b="skipped")) == (
+        0, "1 of 2 estimators skipped (b: no barometer)")
+    assert run_status(_summary(a="ok", b="skipped", c="failed")) == (
+        3, "1 of 3 estimators failed (c: RuntimeError: x)")
+    assert run_status(_summary(b="skipped", c="failed")) == (
+        4, "every estimator failed (c: RuntimeError: x)")
+    assert run_status(_summary(b="skipped", d="skipped")) == (
+        4, "no estimator could run on this drive (b: no barometer)")
+    assert run_status(_summary(a="ok")) == (0, None)
