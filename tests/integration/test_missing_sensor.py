@@ -4,6 +4,7 @@ the others run, and ``run`` exits 0 when every estimator that could run succeede
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
 import pytest
@@ -76,3 +77,19 @@ def test_exit_code_counts_failures_among_the_estimators_that_could_run() -> None
     assert run_status(_summary(b="skipped", d="skipped")) == (
         4, "no estimator could run on this drive (b: no barometer)")
     assert run_status(_summary(a="ok")) == (0, None)
+
+
+def test_phone_folder_without_barometer_csv(tmp_path, capsys) -> None:
+    """The reader's path: a Sensor Logger folder with its Barometer.csv removed."""
+    folder = tmp_path / "phone"
+    shutil.copytree(Path(__file__).resolve().parents[1] / "data" / "sensorlogger_ski_cut", folder)
+    (folder / "Barometer.csv").unlink()
+    out = tmp_path / "out"
+    code = main(["run", str(folder), "--estimators", "loop3,vekf7,observer1d,ekf-rts",
+                 "--out", str(out), "--no-progress"])
+    cap = capsys.readouterr()
+    ests = json.loads((out / "summary.json").read_text())["estimators"]
+    assert {n: (b["status"], b["error"]) for n, b in ests.items()} == {
+        "loop3": ("skipped", "no barometer"), "vekf7": ("skipped", "no barometer"),
+        "observer1d": ("ok", None), "ekf-rts": ("ok", None)}
+    assert code == 0 and "2 of 4 estimators skipped" in cap.err
