@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 
 from vnav_graph.cli import main
+from vnav_graph.failures import MissingStream
 from vnav_graph.io import save_npz
 from vnav_graph.pipeline import run_status
 from vnav_graph.simulation import simulate
@@ -93,3 +94,28 @@ def test_phone_folder_without_barometer_csv(tmp_path, capsys) -> None:
         "loop3": ("skipped", "no barometer"), "vekf7": ("skipped", "no barometer"),
         "observer1d": ("ok", None), "ekf-rts": ("ok", None)}
     assert code == 0 and "2 of 4 estimators skipped" in cap.err
+
+
+class _NeedsBaro:
+    name = "needs-baro"
+
+    def run(self, drive):
+        raise MissingStream("barometer", "needs-baro: the drive has no barometer stream")
+
+
+def test_bench_rows_of_a_missing_stream_are_skipped_not_failed(monkeypatch) -> None:
+    from vnav_graph import runner
+    from vnav_graph.bench import BenchTask, run_tasks
+    from vnav_graph.evaluation.montecarlo import aggregate, failure_summary, format_bench_md
+
+    monkeypatch.setattr(runner, "create", lambda name, config=None: _NeedsBaro())
+    rows = run_tasks([BenchTask("hill-drive", 0, "needs-baro", 30.0)], workers=1)
+    assert [(r["status"], r["error"], r["alt_rmse_m"]) for r in rows] == [
+        ("skipped", "no barometer", None)]
+    doc = {"config": {"scenarios": ["hill-drive"], "seeds": [0], "duration_s": 30.0,
+                      "executor": "local", "wall_s": 1.0},
+           "runs": rows, "aggregate": aggregate(rows)}
+    assert failure_summary(doc) is None
+    md = format_bench_md(doc)
+    assert "## Skipped runs" in md and "| hill-drive | 0 | needs-baro | no barometer |" in md
+    assert "## Failed runs" not in md

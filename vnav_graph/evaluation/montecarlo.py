@@ -195,13 +195,16 @@ def format_bench_md(doc: dict[str, Any]) -> str:
                 f"{_fmt_ci(c['baro_bias_abs_err_m'], '.2f')} | "
                 f"{_fmt_ci(c['runtime_s'], '.2f')} |")
         lines.append("")
-    failed = [r for r in doc["runs"] if r["status"] != "ok"]
-    if failed:
-        lines += ["## Failed runs", "", "| scenario | seed | estimator | error |",
-                  "| --- | --- | --- | --- |"]
-        lines += [f"| {r['scenario']} | {r['seed']} | {r['estimator']} | "
-                  f"{str(r['error']).replace('|', '/')} |" for r in failed]
-        lines.append("")
+    for status, title, what in (("failed", "Failed runs", "error"),
+                                ("skipped", "Skipped runs (a stream the drive lacks)", "reason")):
+        rows = [r for r in doc["runs"] if (r["status"] == "skipped") == (status == "skipped")
+                and r["status"] != "ok"]
+        if rows:
+            lines += [f"## {title}", "", f"| scenario | seed | estimator | {what} |",
+                      "| --- | --- | --- | --- |"]
+            lines += [f"| {r['scenario']} | {r['seed']} | {r['estimator']} | "
+                      f"{str(r['error']).replace('|', '/')} |" for r in rows]
+            lines.append("")
     return "\n".join(lines)
 
 
