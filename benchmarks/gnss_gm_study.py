@@ -2,7 +2,7 @@
 
     python benchmarks/gnss_gm_study.py [--data DIR] [--out DIR] [--sd M] [--tau S ...]
 
-For every shared log present: the holdout (``evaluation.holdout.run_holdout``: 60 s windows,
+For every shared log present: the holdout (``runner.run_holdout``: 60 s windows,
 default spacing, screened withheld GNSS) of ``ekf-rts`` and ``graph-batch`` without the state
 and with it (σ ``--sd``, each τ of ``--tau``), the same windows and references for all.
 Writes ``DIR/gnss_gm_study.json`` and prints the altitude-RMSE table (graph-batch's solver
@@ -46,8 +46,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--sd", type=float, default=3.0, help="GM σ [m]")
     ap.add_argument("--tau", type=float, nargs="+", default=[120.0, 600.0], help="GM τ [s]")
     args = ap.parse_args(argv)
-    from vnav_graph.evaluation.holdout import run_holdout
     from vnav_graph.io import load_drive
+    from vnav_graph.runner import run_holdout
 
     root = data_root(args.data)
     variants = [("off", None)] + [(f"σ {args.sd:g} m τ {t:g} s", (args.sd, t))

@@ -451,8 +451,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="plots, attribution and page section from an existing bench.json")
     ap.add_argument("--out", required=True)
     a = ap.parse_args(argv)
+    from vnav_graph.bench import bench
     from vnav_graph.estimators.configfile import load_configs
-    from vnav_graph.evaluation.montecarlo import bench, write_bench
+    from vnav_graph.evaluation.montecarlo import write_bench
 
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)

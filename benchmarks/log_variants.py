@@ -122,8 +122,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--data", default=None)
     ap.add_argument("--only", default=None, help="comma-separated variant numbers")
     a = ap.parse_args(argv)
-    from vnav_graph.evaluation.holdout import run_holdout
     from vnav_graph.io.readers import read_log
+    from vnav_graph.runner import run_holdout
 
     root = data_root(a.data)
     only = None if a.only is None else {int(x) for x in a.only.split(",")}

@@ -28,10 +28,9 @@ are imported on first use, so ``import vnav_graph`` stays light (no scipy, numba
 import importlib as _importlib
 from typing import Any as _Any
 
-__version__ = "0.1.0"
-
 from .jit import configure_cache as _configure_cache  # noqa: E402
 from .jit import configure_opt as _configure_opt  # noqa: E402
+from .version import __version__
 
 _configure_cache()  # numba's cache in the user cache dir, never inside the installed package
 _configure_opt()  # LLVM level 2 unless NUMBA_OPT is set (jit.NUMBA_OPT_LEVEL: faster compile)

@@ -42,13 +42,12 @@ Observability warnings (``BaroCalibration.warnings``):
 
 Contents: ``BaroCalibration`` (frozen result), ``calibrate_baro(drive)``,
 ``calibrate_arrays(...)`` (the bare regression), ``format_calibration`` and
-``cli_calibrate_baro(args)`` for ``vnav-graph calibrate-baro DRIVE``.
+``vnav-graph calibrate-baro DRIVE`` prints ``format_calibration(calibrate_baro(drive))``.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
@@ -302,15 +301,3 @@ def format_calibration(cal: BaroCalibration) -> str:
     ]
     lines += [f"warning: {w}" for w in cal.warnings]
     return "\n".join(lines)
-
-
-def cli_calibrate_baro(args: Any) -> int:
-    """``vnav-graph calibrate-baro DRIVE``: load ``args.drive``, print the table, return 0.
-
-    Bad input raises ValueError (the CLI turns it into one line on stderr and exit code 2).
-    """
-    from .io import load_drive
-
-    drive = load_drive(args.drive)
-    print(format_calibration(calibrate_baro(drive)))
-    return 0

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import argparse
 import functools
-import importlib
 import os
 import sys
 import time
@@ -146,17 +145,6 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def _dispatch(target: str, args: argparse.Namespace) -> int:
-    mod, _, fn = target.partition(":")
-    try:
-        m = importlib.import_module(mod)
-    except ModuleNotFoundError as exc:
-        if exc.name == mod:
-            raise ValueError(f"'{args.command}' is not available in this build") from None
-        raise
-    return int(getattr(m, fn)(args))
-
-
 def cmd_simulate(args: argparse.Namespace) -> int:
     from .io import save_npz
     from .simulation import simulate
@@ -177,8 +165,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     from .io import load_drive
     from .jit import Prewarm
     from .outputs import check_out_dir
-    from .pipeline import format_table, resolve_estimators, run_estimators, summarize
+    from .pipeline import format_table, summarize
     from .progress import mode_for, stage
+    from .runner import resolve_estimators, run_estimators
     from .simulation import simulate
 
     t_start = time.perf_counter()
@@ -245,6 +234,100 @@ def cmd_run(args: argparse.Namespace) -> int:
     return code
 
 
+def cmd_bench(args: argparse.Namespace) -> int:
+    """``vnav-graph bench``: validate arguments, run, write ``bench.json`` and ``bench.md``.
+
+    Bad arguments raise ValueError (exit 2). Returns 1 when any run failed (after writing the
+    files, with a one-line summary on stderr), 130 when interrupted, else 0.
+    """
+    from .bench import bench
+    from .evaluation import montecarlo as mc
+    from .outputs import check_out_dir
+    from .progress import mode_for
+    from .runner import resolve_estimators
+    from .simulation import list_scenarios
+
+    estimators = resolve_estimators(args.estimators)
+    scenarios = list(args.scenarios or (mc.QUICK_SCENARIOS if args.quick
+                                        else mc.DEFAULT_SCENARIOS))
+    known = list_scenarios()
+    bad = [s for s in scenarios if s not in known and not s.endswith(".toml")]
+    if bad:
+        from .suggest import did_you_mean
+
+        raise ValueError(f"unknown scenario(s) {', '.join(bad)}{did_you_mean(bad[0], known)} "
+                         f"(known: {', '.join(known)})")
+    n_seeds = args.seeds if args.seeds is not None else (mc.QUICK_SEEDS if args.quick
+                                                         else mc.DEFAULT_SEEDS)
+    if n_seeds < 1:
+        raise ValueError(f"--seeds must be >= 1, got {n_seeds}")
+    workers = args.workers if args.workers is not None else mc.DEFAULT_WORKERS
+    if workers < 1:
+        raise ValueError(f"--workers must be >= 1, got {workers}")
+    duration = mc.QUICK_DURATION_S if args.quick else None
+    for sc in scenarios:  # parse every scenario before any work
+        mc.shorten_scenario(sc, duration)
+    out = check_out_dir(args.out)
+    doc = bench(scenarios, estimators, list(range(n_seeds)), duration_s=duration,
+                workers=workers, dask=args.dask, progress=mode_for(not args.no_progress),
+                configs=getattr(args, "configs", None))
+    mc.write_bench(doc, out)
+    n_ok = sum(r["status"] == "ok" for r in doc["runs"])
+    if doc["config"]["interrupted"]:
+        print(f"vnav-graph: interrupted: wrote the {len(doc['runs'])} of "
+              f"{doc['config']['runs_planned']} runs that finished to {out / 'bench.json'}",
+              file=sys.stderr)
+        return 130
+    print(mc.format_bench_md(doc))
+    print(f"wrote {out / 'bench.json'} and {out / 'bench.md'}: {n_ok}/{len(doc['runs'])} runs "
+          f"ok in {doc['config']['wall_s']:.1f} s")
+    msg = mc.failure_summary(doc)
+    if msg:
+        print(f"vnav-graph bench: {msg}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def cmd_holdout(args: argparse.Namespace) -> int:
+    """``vnav-graph holdout LOG``: writes ``holdout.json``, ``holdout.md`` (also printed) and
+    ``holdout.png`` (``vnav_graph.report.error_plots``, grouped like the run report)."""
+    from .evaluation.holdout import format_markdown
+    from .io import load_drive
+    from .io.jsonout import dumps_strict
+    from .outputs import check_out_dir, publish
+    from .progress import mode_for, stage
+    from .report.error_plots import plot_holdout_errors
+    from .runner import run_holdout
+
+    out = check_out_dir(args.out)
+    mode = mode_for(not args.no_progress)
+    with stage(f"reading {Path(args.log).name}", mode):
+        drive = load_drive(args.log)
+    res = run_holdout(drive, args.estimators, args.outage, args.spacing, progress=mode,
+                      configs=getattr(args, "configs", None))
+    md = format_markdown(res.doc)
+
+    def fill(tmp: Path) -> None:
+        (tmp / "holdout.json").write_text(dumps_strict(res.doc))
+        (tmp / "holdout.md").write_text(md)
+        png = plot_holdout_errors(res)
+        if png is not None:
+            (tmp / "holdout.png").write_bytes(png.png)
+
+    publish(out, fill)
+    print(md, end="")
+    return 0
+
+
+def cmd_calibrate_baro(args: argparse.Namespace) -> int:
+    """``vnav-graph calibrate-baro DRIVE``: the least-squares baro calibration's table."""
+    from .calibration import calibrate_baro, format_calibration
+    from .io import load_drive
+
+    print(format_calibration(calibrate_baro(load_drive(args.drive))))
+    return 0
+
+
 def _export(out: Path, formats: list[str], estimators: list[str] | None) -> Any:
     from .export import export_run
 
@@ -283,9 +366,9 @@ COMMANDS = {
     "run": cmd_run,
     "export": cmd_export,
     "list": cmd_list,
-    "bench": lambda a: _dispatch("vnav_graph.evaluation.montecarlo:cli_bench", a),
-    "holdout": lambda a: _dispatch("vnav_graph.evaluation.holdout:cli_holdout", a),
-    "calibrate-baro": lambda a: _dispatch("vnav_graph.calibration:cli_calibrate_baro", a),
+    "bench": cmd_bench,
+    "holdout": cmd_holdout,
+    "calibrate-baro": cmd_calibrate_baro,
 }
 
 
@@ -297,8 +380,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (ValueError, FileNotFoundError, IsADirectoryError, PermissionError) as exc:
         if os.environ.get("VNAV_DEBUG"):
             traceback.print_exc()
-        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        print(f"vnav-graph: error: {msg}", file=sys.stderr)
+        from .failures import failure_message
+
+        print(f"vnav-graph: error: {failure_message(exc)}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
         print("vnav-graph: interrupted", file=sys.stderr)

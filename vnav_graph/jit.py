@@ -135,7 +135,7 @@ class CompileTimer:
 # second process does. ``Prewarm`` starts
 # ``python -m vnav_graph.jit KEY FAMILY ...``, which runs the family's estimators on a short
 # simulated drive (compiling their kernels into the shared on-disk cache) and leaves a stamp
-# per family. ``pipeline.run_estimators`` runs the child's families last, so the main process
+# per family. ``runner.run_estimators`` runs the child's families last, so the main process
 # compiles and runs every other estimator meanwhile, then waits for the stamp (``wait``) and
 # loads the kernels from the cache. Default drive, empty cache, idle 2-core machine, one run
 # each: 64.4 s with the EKF in the middle of the run order (the main process waited for the
@@ -173,7 +173,7 @@ def _source_key() -> str:
     """Changes whenever a kernel's source may have changed (numba then recompiles)."""
     import hashlib
 
-    from . import __version__
+    from .version import __version__
 
     h = hashlib.sha1(__version__.encode())
     root = Path(__file__).resolve().parent

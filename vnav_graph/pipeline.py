@@ -1,195 +1,40 @@
-"""The main job: run estimators on one drive, evaluate, write ``summary.json`` and tables.
+"""The main job: estimators run on one drive (``vnav_graph.runner``) are evaluated into
+``summary.json``, its table and the per-estimator Parquet files.
 
-``run_estimators`` never lets one estimator's failure stop the others: a failed estimator is
-reported with ``status: failed`` and its error (docs/design.md).
+A failed estimator is reported with ``status: failed`` and its error (docs/design.md,
+``runner.failed_block``). ``RunResult``, ``run_estimators`` and the other runner names are
+importable from here too.
 """
 
 from __future__ import annotations
 
 import json
-import os
-import signal
-import sys
-import threading
-import time
-import traceback
-import warnings
-from collections.abc import Iterator, Mapping, Sequence
-from contextlib import contextmanager
-from dataclasses import dataclass
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from .estimators.base import available, create
 from .evaluation.metrics import evaluate
+from .failures import failure_message
 from .io.jsonout import dumps_strict
-from .jit import CompileTimer, Prewarm, family_of, mark_warm
-from .progress import Mode, mode_for, say, steps
-from .sharing import Shared, sharing
+from .progress import Mode
+from .runner import (
+    RunResult,
+    failed_block,
+    interrupt_flag,
+    resolve_estimators,
+    run_captured,
+    run_estimators,
+    run_holdout,
+    run_one,
+)
 from .types import Drive, Estimate
 
+__all__ = ["EXIT_ALL_FAILED", "EXIT_SOME_FAILED", "SUMMARY_SCHEMA", "RunResult",
+           "apply_holdout", "estimate_table", "failed_block", "format_table", "interrupt_flag",
+           "reader_repairs", "resolve_estimators", "run_captured", "run_estimators",
+           "run_one", "run_status", "score_holdout", "summarize", "write_outputs"]
+
 SUMMARY_SCHEMA = "vnav_graph.summary/1"
-
-
-@dataclass(frozen=True)
-class RunResult:
-    """Outcome of one estimator on one drive: an Estimate, or the error that stopped it.
-
-    ``runtime_s`` excludes ``jit_s``, the time numba spent compiling kernels during this run
-    (non-zero only the first time a kernel meets this machine: the compiled code is cached).
-    """
-
-    name: str
-    estimate: Estimate | None
-    error: str | None
-    runtime_s: float
-    jit_s: float = 0.0
-
-
-def resolve_estimators(names: Sequence[str] | None) -> list[str]:
-    """Validate estimator names (ValueError on an unknown one); None means all available."""
-    avail = available()
-    if not names:
-        return avail
-    unknown = [n for n in names if n not in avail]
-    if unknown:
-        raise ValueError(f"unknown estimator(s) {', '.join(unknown)} "
-                         f"(available: {', '.join(avail)})")
-    return list(names)
-
-
-@contextmanager
-def interrupt_flag(what: str = "estimator") -> Iterator[list[int]]:
-    """Record SIGINT while an estimator runs; the caller stops after it (``run_one``).
-
-    Raising ``KeyboardInterrupt`` from the handler while a numba kernel runs is not safe: it
-    surfaced as a ``SystemError`` that passed for an estimator failure (the run then exited 0),
-    and sometimes as a segmentation fault. So the first Ctrl-C only sets the flag and says
-    so; a second one raises at once. Outside the main thread there is no handler.
-    """
-    flag: list[int] = []
-    if threading.current_thread() is not threading.main_thread():
-        yield flag
-        return
-
-    def handler(signum: int, frame: Any) -> None:
-        if flag:
-            raise KeyboardInterrupt
-        flag.append(signum)
-        print(f"vnav-graph: interrupt: stopping after the current {what} "
-              "(Ctrl-C again to stop at once)", file=sys.stderr, flush=True)
-
-    old = signal.signal(signal.SIGINT, handler)
-    try:
-        yield flag
-    finally:
-        signal.signal(signal.SIGINT, old)
-
-
-def run_one(name: str, drive: Drive, config: Any = None, waited_s: float = 0.0,
-            shared: Shared | None = None) -> RunResult:
-    """Run one estimator; its failure is returned as data, never raised (except interrupts).
-
-    ``waited_s``: time already spent waiting for this estimator's kernels to be compiled by
-    another process (counted in ``jit_s``). ``shared``: the run's ``sharing`` block; the
-    seconds of the shared results this estimator reused are added to its ``runtime_s``.
-    """
-    t0 = time.perf_counter()
-    with interrupt_flag() as interrupted, CompileTimer() as jit:
-        try:
-            est = run_captured(name, drive, config)
-            err = None
-        except Exception as exc:  # an estimator failure is data, not a crash
-            if interrupted:
-                raise KeyboardInterrupt from exc
-            if os.environ.get("VNAV_DEBUG"):
-                traceback.print_exc()
-            msg = next((ln.strip() for ln in str(exc).splitlines() if ln.strip()), "no message")
-            est, err = None, f"{type(exc).__name__}: {msg}"
-        if interrupted:
-            raise KeyboardInterrupt
-    wall = time.perf_counter() - t0
-    jit_s = jit.seconds + waited_s
-    reused = shared.take() if shared is not None else 0.0
-    if est is None:
-        return RunResult(name, None, err, max(wall - jit.seconds, 0.0) + reused, jit_s)
-    runtime = est.runtime_s if est.runtime_s > 0 else wall
-    est = est.replace(runtime_s=max(runtime - jit.seconds, 0.0) + reused)
-    return RunResult(name, est, None, est.runtime_s, jit_s)
-
-
-def run_estimators(drive: Drive, names: Sequence[str], progress: bool | Mode = True,
-                   configs: Mapping[str, Any] | None = None,
-                   desc: str = "estimators", prewarm: Any = "auto") -> list[RunResult]:
-    """Run each named estimator on ``drive``; failures are captured, not raised.
-
-    ``progress``: a ``vnav_graph.progress`` mode, or a bool (True: bar on a terminal, a line
-    per estimator otherwise). ``configs`` maps estimator names to their config objects.
-    On a machine where the kernels are not compiled yet, a second process compiles the later
-    estimator families meanwhile (``vnav_graph.jit.Prewarm``): ``prewarm="auto"`` starts one
-    here, or pass one started earlier (``cli.cmd_run`` starts it before reading the drive) or
-    None. It is closed here.
-    """
-    mode = progress if isinstance(progress, str) else mode_for(bool(progress))
-    configs = configs or {}
-    pre = Prewarm.start(list(names)) if prewarm == "auto" else prewarm
-    if pre is not None:
-        say(f"first run on this machine: compiling kernels (cached for later runs; "
-            f"{', '.join(pre.families)} in a second process)", mode)
-    order = list(range(len(names)))
-    if pre is not None:
-        # the child's families last: this process compiles and runs everything else first
-        # instead of waiting for the child half-way (jit.py: the first run of the default
-        # drive); the results keep the requested order
-        order = ([i for i, n in enumerate(names) if family_of(n) not in pre.families]
-                 + [i for i, n in enumerate(names) if family_of(n) in pre.families])
-    results: dict[int, RunResult] = {}
-    try:
-        with sharing() as shared:  # the vertical filters' AHRS once (vnav_graph.sharing)
-            for i in steps(order, desc, mode, label=lambda i: names[i]):
-                name = names[i]
-                waited = pre.wait(name) if pre is not None else 0.0
-                results[i] = run_one(name, drive, configs.get(name), waited, shared)
-    finally:
-        if pre is not None:
-            pre.close()
-    out = [results[i] for i in sorted(results)]
-    mark_warm([r.name for r in out if r.estimate is not None])
-    return out
-
-
-def run_captured(name: str, drive: Drive, config: Any = None) -> Estimate:
-    """``create(name).run(drive)`` with Python warnings (numpy RuntimeWarnings: overflow,
-    invalid value, ...) captured and appended to the estimate's ``info["warnings"]`` as one
-    line per distinct message with its count, instead of reaching the terminal unexplained."""
-    with warnings.catch_warnings(record=True) as rec:
-        warnings.simplefilter("always")
-        est = create(name, config).run(drive)
-    if not rec:
-        return est
-    counts: dict[str, int] = {}
-    for w in rec:
-        where = f" ({Path(w.filename).name}:{w.lineno})" if w.filename else ""
-        key = f"{w.category.__name__}: {w.message}{where}"
-        counts[key] = counts.get(key, 0) + 1
-    lines = [f"{k} x{n}" if n > 1 else k for k, n in counts.items()]
-    info = dict(est.info)
-    info["warnings"] = [*list(info.get("warnings") or []), *lines]
-    return est.replace(info=info)
-
-
-def failed_block(error: str, runtime_s: float) -> dict[str, Any]:
-    null_param = {"est": None, "sd": None, "truth": None}
-    return {
-        "status": "failed", "error": error, "alt_rmse_m": None, "alt_max_abs_m": None,
-        "horiz_rmse_m": None, "heading_rmse_deg": None, "heading_known_rmse_deg": None,
-        "heading_known_after_s": None, "outage_alt_max_m": None,
-        "outage_horiz_max_m": None, "vel_down_rmse_mps": None, "nees_mean": None,
-        "nees_dof": None, "runtime_s": runtime_s,
-        "realtime_factor": None, "gnss_rejected": None, "warnings": [],
-        "baro": {"scale": dict(null_param), "latency_s": dict(null_param),
-                 "bias_m": dict(null_param)},
-    }
 
 
 def reader_repairs(meta: Any) -> list[str]:
@@ -231,7 +76,7 @@ def summarize(drive: Drive, results: Sequence[RunResult]) -> dict[str, Any]:
     per_block: dict[str, list[dict[str, Any]]] = {}
     for r in results:
         if r.estimate is None:
-            ests[r.name] = failed_block(r.error or "unknown error", r.runtime_s)
+            ests[r.name] = failed_block(r.error or "unknown error", r.runtime_s, r.status)
             continue
         try:
             ests[r.name] = evaluate(r.estimate, drive, blocks)
@@ -318,13 +163,11 @@ def score_holdout(summary: dict[str, Any], drive: Drive, names: Sequence[str],
 
     Returns the summary and the ``HoldoutResult`` (None when skipped), whose error series the
     report draws."""
-    from .evaluation.holdout import run_holdout
-
     try:
         res = run_holdout(drive, list(names), progress=progress, configs=configs)
     except ValueError as exc:
         out = dict(summary)
-        out["evaluation"] = {"basis": None, "skipped": str(exc).splitlines()[0]}
+        out["evaluation"] = {"basis": None, "skipped": failure_message(exc)}
         return out, None
     return apply_holdout(summary, res.doc), res
 
@@ -336,26 +179,34 @@ EXIT_ALL_FAILED = 4
 def run_status(summary: dict[str, Any]) -> tuple[int, str | None]:
     """Exit code of ``run`` from its summary, and the one line to print on stderr.
 
-    0: every estimator ok; 3 (``EXIT_SOME_FAILED``): some failed, results written;
-    4 (``EXIT_ALL_FAILED``): none produced a scored result (every estimator failed in its
-    run or in evaluation), summary written for diagnosis.
+    0: every estimator that could run is ok (estimators ``skipped`` for a stream the drive
+    lacks are named on the stderr line, not counted as failures); 3 (``EXIT_SOME_FAILED``):
+    some failed, results written; 4 (``EXIT_ALL_FAILED``): none produced a scored result
+    (every estimator failed in its run or in evaluation, or none could run), summary written
+    for diagnosis.
     """
     ests = summary["estimators"]
+
+    def first(names: list[str], default: str) -> str:
+        lines = str(ests[names[0]].get("error") or "").splitlines()
+        return f"{names[0]}: {lines[0] if lines else default}"
+
+    skipped = [n for n, b in ests.items() if b["status"] == "skipped"]
     failed = [n for n, b in ests.items() if b["status"] == "failed"]
     diverged = [n for n, b in ests.items() if b["status"] == "diverged"]
+    note = (f"{len(skipped)} of {len(ests)} estimators skipped ({first(skipped, 'skipped')})"
+            if skipped else None)
     if not failed and not diverged:
-        return 0, None
-    parts = []
-    for what, names in (("failed", failed), ("diverged", diverged)):
-        if names:
-            first = str(ests[names[0]].get("error") or "").splitlines()
-            parts.append(f"{len(names)} of {len(ests)} estimators {what} ({names[0]}: "
-                         f"{first[0] if first else 'unknown error'})")
-    if len(failed) == len(ests):
-        return EXIT_ALL_FAILED, "every estimator failed" + parts[0][parts[0].index(" ("):]
-    if len(failed) + len(diverged) == len(ests):
-        return EXIT_ALL_FAILED, "no estimator produced a trustworthy result: " + "; ".join(
-            parts)
+        if skipped and len(skipped) == len(ests):
+            return EXIT_ALL_FAILED, f"no estimator could run on this drive ({first(skipped, '')})"
+        return 0, note
+    parts = [f"{len(names)} of {len(ests)} estimators {what} ({first(names, 'unknown error')})"
+             for what, names in (("failed", failed), ("diverged", diverged)) if names]
+    if len(failed) + len(skipped) == len(ests):
+        return EXIT_ALL_FAILED, f"every estimator failed ({first(failed, 'unknown error')})"
+    if len(failed) + len(diverged) + len(skipped) == len(ests):
+        return EXIT_ALL_FAILED, ("no estimator produced a trustworthy result: "
+                                 + "; ".join(parts))
     return EXIT_SOME_FAILED, "; ".join(parts)
 
 
@@ -440,8 +291,8 @@ def format_table(summary: dict[str, Any]) -> str:
     for r in summary.get("repairs") or []:
         lines.append(f"reader: {r}")
     for name, m in summary["estimators"].items():
-        if m["status"] == "failed":
-            lines.append(f"{name} failed: {m['error']}")
+        if m["status"] in ("failed", "skipped"):
+            lines.append(f"{name} {m['status']}: {m['error']}")
         elif m["status"] == "diverged":
             lines.append(f"{name} DIVERGED (kept in the outputs, not ranked): {m['error']}")
         for w in m.get("warnings") or []:

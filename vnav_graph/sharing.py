@@ -2,12 +2,12 @@
 
 The six vertical estimators all start from the same GNSS-aided AHRS
 (``estimators.vertical.inputs.vertical_inputs``): same drive, same default ``AhrsConfig``.
-Inside ``pipeline.run_estimators`` it is computed once (:func:`sharing` block) and handed to
+Inside ``runner.run_estimators`` it is computed once (:func:`sharing` block) and handed to
 the others; its arrays are made read-only so that no estimator can change what another reads.
 
 Runtimes stay honest: every estimator that reuses a result is charged the seconds that result
 took to compute (compilation excluded), as if it had computed it itself. :meth:`Shared.take`
-returns the seconds charged since the last call; ``pipeline.run_one`` adds them to the
+returns the seconds charged since the last call; ``runner.run_one`` adds them to the
 estimator's ``runtime_s``. Python warnings raised while computing are raised again at every
 reuse, so each estimator's ``info["warnings"]`` is the same as without sharing.
 

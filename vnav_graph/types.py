@@ -582,6 +582,9 @@ class Estimate:
     online : for incremental smoothers, the estimate known at each time (filter-like)
     innovations : normalised innovations per measurement type
     info : free-form diagnostics (rejected GNSS count ``gnss_rejected``, observability, ...)
+    config : the estimator's settings
+    origin_lla : (3,) or None, the drive's tangent-plane origin (``vnav_graph.runner`` sets it;
+        ``to_dataframe()`` uses it)
     """
 
     estimator: str
@@ -597,6 +600,7 @@ class Estimate:
     )
     info: MappingProxyType[str, Any] = field(default_factory=lambda: MappingProxyType({}))
     config: Any = None
+    origin_lla: FloatArray | None = None  # the drive's origin (set by the runner)
 
     def __post_init__(self) -> None:
         unknown = set(self.provides) - QUANTITIES
@@ -624,7 +628,9 @@ class Estimate:
         Parameters
         ----------
         origin_lla : (3,) or None, tangent-plane origin (lat [rad], lon [rad], height [m]) for
-            the ``pos_*_m`` columns, normally ``Drive.origin_lla``; None leaves them out.
+            the ``pos_*_m`` columns; None takes the estimate's own ``origin_lla`` (the drive's
+            origin, set when the estimator ran through ``vnav_graph.runner``, e.g.
+            ``run_estimators``), and leaves the columns out when it has none.
 
         Returns
         -------
@@ -654,6 +660,8 @@ class Estimate:
         cols: dict[str, FloatArray] = {
             "t_s": tr.t, "lat_rad": tr.lla[:, 0], "lon_rad": tr.lla[:, 1], "alt_m": tr.alt,
         }
+        if origin_lla is None:
+            origin_lla = self.origin_lla
         if origin_lla is not None and "pos_h" in self.provides:
             pos = tr.pos_n(np.asarray(origin_lla, dtype=float))
             cols.update(pos_n_m=pos[:, 0], pos_e_m=pos[:, 1], pos_d_m=pos[:, 2])

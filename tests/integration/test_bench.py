@@ -13,14 +13,10 @@ import sys
 import numpy as np
 import pytest
 
+from vnav_graph.bench import BenchTask, run_task
 from vnav_graph.cli import main
 from vnav_graph.estimators import base
-from vnav_graph.evaluation.montecarlo import (
-    QUICK_DURATION_S,
-    BenchTask,
-    run_task,
-    shorten_scenario,
-)
+from vnav_graph.evaluation.montecarlo import QUICK_DURATION_S, shorten_scenario
 from vnav_graph.pipeline import run_estimators, summarize
 from vnav_graph.simulation import simulate
 from vnav_graph.types import Estimate, Trajectory

@@ -11,7 +11,7 @@ import pytest
 
 from vnav_graph.estimators.graph import isam2_setup as gi
 from vnav_graph.estimators.graph import problem as gp
-from vnav_graph.evaluation.holdout import run_holdout
+from vnav_graph.runner import run_holdout
 
 LOITER = "erle_pxf_loiter_rtl/Loiter_RTL.bin"
 

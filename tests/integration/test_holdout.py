@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 
 from vnav_graph.estimators import base
-from vnav_graph.evaluation.holdout import choose_windows, run_holdout
+from vnav_graph.evaluation.holdout import choose_windows
 from vnav_graph.geo.earth import radii
+from vnav_graph.runner import run_holdout
 from vnav_graph.types import Drive, Estimate, GnssStream, ImuStream, Trajectory
 
 GLITCH = "erle_pxf_181_gps_glitch/181.BIN"

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from vnav_graph import pipeline
+from vnav_graph import pipeline, runner
 from vnav_graph.cli import main
 from vnav_graph.io import save_npz
 from vnav_graph.io.jsonout import dumps_strict
@@ -56,13 +56,13 @@ def test_real_ulog_run_exits_0_with_holdout_skipped(data_dir, tmp_path):
 
 
 def _failing(monkeypatch, names):
-    real = pipeline.run_captured
+    real = runner.run_captured
 
     def fake(name, drive, config=None):
         if name in names:
             raise RuntimeError(f"{name} exploded")
         return real(name, drive, config)
-    monkeypatch.setattr(pipeline, "run_captured", fake)
+    monkeypatch.setattr(runner, "run_captured", fake)
 
 
 @pytest.mark.parametrize(("fail", "code"), [({"vkf4"}, 3), ({"vkf4", "loop3"}, 4)])
@@ -108,9 +108,9 @@ def test_runtime_warnings_become_estimator_warnings(monkeypatch):
             np.log(np.zeros(3))  # RuntimeWarning: divide by zero
             return est
 
-    monkeypatch.setattr(pipeline, "create", lambda name, config=None: Noisy())
+    monkeypatch.setattr(runner, "create", lambda name, config=None: Noisy())
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # nothing may escape to the caller
-        est = pipeline.run_captured("loop3", d)
+        est = runner.run_captured("loop3", d)
     w = est.info["warnings"]
     assert any(x.startswith("RuntimeWarning: divide by zero encountered in log") for x in w)

@@ -12,8 +12,8 @@ from vnav_graph.calibration import (
     SEED001_TABLE1,
     calibrate_arrays,
     calibrate_baro,
-    cli_calibrate_baro,
 )
+from vnav_graph.cli import cmd_calibrate_baro
 from vnav_graph.sensors.baro import measure_baro
 from vnav_graph.simulation import load_scenario, simulate
 
@@ -105,12 +105,12 @@ def test_cli_prints_table_and_rejects_bad_input(tmp_path, capsys) -> None:
     d = simulate("sortie", 5, imu_rate_hz=20.0, duration_s=300.0)
     p = tmp_path / "d.npz"
     save_npz(d, p)
-    assert cli_calibrate_baro(Namespace(drive=str(p))) == 0
+    assert cmd_calibrate_baro(Namespace(drive=str(p))) == 0
     out = capsys.readouterr().out
     est = calibrate_baro(d)
     assert f"{100 * est.scale:.4f}" in out and "Td [s]" in out and "B [m]" in out
     with pytest.raises(ValueError):
-        cli_calibrate_baro(Namespace(drive=str(tmp_path / "missing.npz")))
+        cmd_calibrate_baro(Namespace(drive=str(tmp_path / "missing.npz")))
     with pytest.raises(ValueError, match="needs both GNSS and baro"):
         calibrate_baro(d.replace(baro=None))
 

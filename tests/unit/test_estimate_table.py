@@ -114,3 +114,15 @@ def test_position_columns_need_an_origin_and_a_horizontal_estimate(rng):
     assert "pos_n_m" not in est.to_dataframe()  # no origin given
     no_h = est.replace(provides=est.provides - {"pos_h"})
     assert "pos_n_m" not in no_h.to_dataframe(ORIGIN)
+
+
+def test_to_dataframe_needs_no_origin_after_the_runner():
+    from vnav_graph.runner import run_estimators
+    from vnav_graph.simulation import simulate
+
+    drive = simulate("default", 0, duration_s=30.0)
+    est = run_estimators(drive, ["ekf"])[0].estimate
+    np.testing.assert_array_equal(est.origin_lla, drive.origin_lla)
+    auto, given = est.to_dataframe(), est.to_dataframe(drive.origin_lla)
+    assert "pos_n_m" in auto.columns
+    pd.testing.assert_frame_equal(auto, given)

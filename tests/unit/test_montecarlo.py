@@ -15,15 +15,12 @@ import math
 import numpy as np
 import pytest
 
+from vnav_graph.bench import BenchTask, bench, run_task, run_tasks
 from vnav_graph.estimators import base
 from vnav_graph.evaluation.montecarlo import (
-    BenchTask,
     aggregate,
-    bench,
     format_bench_md,
     mean_ci95,
-    run_task,
-    run_tasks,
     shorten_scenario,
 )
 from vnav_graph.types import Estimate, Trajectory

@@ -351,10 +351,10 @@ def test_plotted_errors_are_the_scored_ones(tmp_path, monkeypatch):
     """The series the report draws for a log are the holdout errors at the withheld fixes:
     their RMS is the summary's number (the old report drew residuals against the GNSS the
     estimator had been given: 0.0 m here)."""
-    from vnav_graph.evaluation.holdout import run_holdout
     from vnav_graph.io import load_drive
     from vnav_graph.pipeline import apply_holdout, run_estimators
     from vnav_graph.report.errors import error_set
+    from vnav_graph.runner import run_holdout
 
     monkeypatch.setitem(base._REGISTRY, "ekf-rts", lambda: _Planted("ekf-rts", [2.0, 4.0]))
     drive = load_drive(_flat_log(tmp_path))

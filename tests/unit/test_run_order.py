@@ -5,19 +5,19 @@ from __future__ import annotations
 
 import pytest
 
-from vnav_graph import jit, pipeline
+from vnav_graph import jit, runner
 
 
 @pytest.fixture
 def ran(monkeypatch) -> list[str]:
-    """The names ``pipeline.run_one`` is called with, in call order (nothing is run)."""
+    """The names ``runner.run_one`` is called with, in call order (nothing is run)."""
     calls: list[str] = []
 
     def fake_run_one(name, drive, config=None, waited_s=0.0, shared=None):
         calls.append(name)
-        return pipeline.RunResult(name, None, "not run", 0.0, waited_s)
+        return runner.RunResult(name, None, "not run", 0.0, waited_s)
 
-    monkeypatch.setattr(pipeline, "run_one", fake_run_one)
+    monkeypatch.setattr(runner, "run_one", fake_run_one)
     return calls
 
 
@@ -39,7 +39,7 @@ class _FakePrewarm:
 def test_child_families_run_last_and_results_keep_the_order(ran) -> None:
     pre = _FakePrewarm()
     names = ["loop2", "ekf", "ekf-rts", "graph-batch", "vkf4"]
-    out = pipeline.run_estimators(None, names, progress=False, prewarm=pre)
+    out = runner.run_estimators(None, names, progress=False, prewarm=pre)
     assert ran == ["loop2", "graph-batch", "vkf4", "ekf", "ekf-rts"]
     assert [r.name for r in out] == names
     assert pre.waited == ["loop2", "graph-batch", "vkf4", "ekf", "ekf-rts"] and pre.closed
@@ -109,7 +109,7 @@ def test_rts_warm_up_compiles_the_signature_ekf_rts_uses() -> None:
 
 def test_without_a_second_process_the_order_is_the_requested_one(ran) -> None:
     names = ["ekf", "loop2", "graph-batch"]
-    out = pipeline.run_estimators(None, names, progress=False, prewarm=None)
+    out = runner.run_estimators(None, names, progress=False, prewarm=None)
     assert ran == names and [r.name for r in out] == names
 
 

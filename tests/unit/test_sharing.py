@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from vnav_graph import pipeline, sharing
+from vnav_graph import runner, sharing
 from vnav_graph.estimators.vertical import inputs
 
 
@@ -80,9 +80,9 @@ def test_the_vertical_filters_of_a_run_share_one_ahrs_and_each_is_charged_for_it
         return vi
 
     monkeypatch.setattr(inputs, "_vertical_inputs", counted)
-    alone = pipeline.run_one("loop3", drive)
+    alone = runner.run_one("loop3", drive)
     assert len(seconds) == 1
-    out = pipeline.run_estimators(drive, ["loop2", "loop3", "vkf4"], progress=False,
+    out = runner.run_estimators(drive, ["loop2", "loop3", "vkf4"], progress=False,
                                   prewarm=None)
     assert len(seconds) == 2  # one AHRS for the three filters of the run
     assert all(r.estimate is not None for r in out)

@@ -16,6 +16,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Protocol
 
+from ..failures import failure_message
 from ..types import Drive, Estimate
 
 
@@ -88,6 +89,12 @@ def register(name: str, factory: str | Callable[..., Estimator]) -> None:
     _REGISTRY[name] = factory
 
 
+def registered_factories() -> dict[str, str | Callable[..., Estimator]]:
+    """The estimators registered at run time (``register``, ``load_plugin``): name → factory
+    (a bench task carries its factory so that a worker process can register it again)."""
+    return dict(_REGISTRY)
+
+
 def _resolve(spec: str | Callable[..., Estimator]) -> Callable[..., Estimator] | None:
     if callable(spec):
         return spec
@@ -155,9 +162,8 @@ def load_plugin(spec: str) -> str:
     try:
         module = importlib.import_module(mod)
     except Exception as exc:  # whatever the plugin raises on import: one line, exit 2
-        msg = str(exc).splitlines()[0] if str(exc) else ""
         raise ValueError(f"--plugin {spec!r}: cannot import {mod}: "
-                         f"{type(exc).__name__}: {msg}".rstrip(": ")) from None
+                         f"{failure_message(exc, typed=True)}") from None
     if path is not None and Path(getattr(module, "__file__", "") or "").resolve() != path:
         raise ValueError(f"--plugin {spec!r}: module name {mod!r} is taken by "
                          f"{module.__file__}; rename the file")

@@ -36,6 +36,7 @@ import typing
 from pathlib import Path
 from typing import Any
 
+from ..failures import failure_message
 from ..suggest import did_you_mean
 from .base import available, create
 
@@ -90,7 +91,7 @@ def override(config: Any, table: dict[str, Any], where: str = "config", prefix: 
     try:
         return dataclasses.replace(config, **changes)
     except (ValueError, TypeError) as exc:  # the config's own validation
-        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        msg = failure_message(exc)
         loc = f"{where} {prefix.rstrip('.')}" if prefix else where
         raise ValueError(f"{loc}: {msg}") from None
 

@@ -31,25 +31,20 @@ at least 5 s before the last fix. Default spacing (start to start) is
 ``max(2·outage, (span − lead − outage − 5 s)/4)``: up to five windows with at least one
 outage length of GNSS between them.
 
-``cli_holdout(args)`` is the ``vnav-graph holdout`` entry point; it writes ``holdout.json``,
-``holdout.md`` (also printed) and ``holdout.png`` (drawn by ``vnav_graph.report.error_plots``,
-grouped like the run report).
+``vnav_graph.runner.run_holdout`` runs the estimators on the withheld drive and scores them
+here; ``vnav-graph holdout`` writes its ``holdout.json`` (``holdout_doc``), ``holdout.md``
+(``format_markdown``, also printed) and ``holdout.png``.
 """
 
 from __future__ import annotations
 
-import os
-import traceback
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from ..progress import Mode, mode_for
 from ..types import ERROR_STATE, Drive, Estimate, FloatArray
-from .screening import screen_reference
 
 HOLDOUT_SCHEMA = "vnav_graph.holdout/1"
 TAIL_S = 5.0
@@ -189,7 +184,7 @@ def score(est: Estimate, drive: Drive, withheld: np.ndarray,
     return Scored(block, t, err, w, sd, horiz_err, vd_err)
 
 
-def _baro_block(est: Estimate) -> dict[str, Any] | None:
+def baro_block(est: Estimate) -> dict[str, Any] | None:
     """Baro parameters of the holdout run: {name: {"est", "sd"}} (s [-], τd [s], b [m])."""
     if est.baro is None:
         return None
@@ -199,12 +194,6 @@ def _baro_block(est: Estimate) -> dict[str, Any] | None:
         out[k] = None if p is None else {
             "est": float(p.est), "sd": None if p.sd is None else float(p.sd)}
     return out
-
-
-def failed(error: str, runtime_s: float) -> dict[str, Any]:
-    return {"status": "failed", "error": error, "alt_rmse_m": None, "alt_max_abs_m": None,
-            "horiz_rmse_m": None, "vel_down_rmse_mps": None, "gnss_rejected": None,
-            "alt_offset_m": None, "n_scored": 0, "runtime_s": runtime_s, "per_window": []}
 
 
 def _onboard_score(drive: Drive, withheld: np.ndarray,
@@ -226,53 +215,15 @@ def _onboard_score(drive: Drive, withheld: np.ndarray,
             "alt_rmse_m": float(np.sqrt(np.mean(e**2))), "alt_max_abs_m": float(np.max(abs(e)))}
 
 
-def run_holdout(drive: Drive, estimators: Sequence[str] | None = None, outage_s: float = 60.0,
-                spacing_s: float | None = None, progress: bool | Mode = False,
-                configs: Mapping[str, Any] | None = None) -> HoldoutResult:
-    """Withhold GNSS in windows, run the estimators, score them (module docstring).
-
-    An estimator that raises is reported ``status: failed`` with its error; the others still run.
-    ``progress``: a ``vnav_graph.progress`` mode or a bool; ``configs``: estimator configs by name.
-    """
-    from ..estimators.base import available
-    from ..pipeline import run_estimators
-
-    if drive.gnss is None or len(drive.gnss) < 10:
-        raise ValueError("holdout needs a drive with GNSS (fewer than 10 fixes)")
-    avail = available()
-    names = list(estimators) if estimators else avail
-    unknown = [n for n in names if n not in avail]
-    if unknown:
-        raise ValueError(f"unknown estimator(s) {', '.join(unknown)} "
-                         f"(available: {', '.join(avail) or 'none'})")
-    if not names:
-        raise ValueError("no estimators available in this build")
-    windows = choose_windows(drive.gnss.t, outage_s, spacing_s)
-    withheld = in_windows(drive.gnss.t, windows)
-    reference, screen = screen_reference(drive, withheld)
-    held = withhold(drive, windows)
-    results: dict[str, dict[str, Any]] = {}
-    series: dict[str, Scored] = {}
-    for r in run_estimators(held, names, progress, configs, desc="holdout run"):
-        if r.estimate is None:
-            results[r.name] = failed(r.error or "unknown error", r.runtime_s)
-            continue
-        try:
-            s = score(r.estimate, drive, reference, windows, given=~withheld)
-            info = r.estimate.info or {}
-            s.block["warnings"] = [str(x) for x in info.get("warnings") or []]
-            # of those, the baro calibration's prior conflicts (sensors.baro): data, not solver
-            s.block["baro_prior_conflict"] = [str(x) for x in
-                                              info.get("baro_prior_conflict") or []]
-            s.block["baro"] = _baro_block(r.estimate)
-            results[r.name], series[r.name] = s.block, s
-        except Exception as exc:  # one estimator's failure is data, not a crash
-            if os.environ.get("VNAV_DEBUG"):
-                traceback.print_exc()
-            msg = str(exc).splitlines()[0] if str(exc) else ""
-            results[r.name] = failed(f"{type(exc).__name__}: {msg}", r.runtime_s)
+def holdout_doc(drive: Drive, windows: Sequence[tuple[float, float]], withheld: np.ndarray,
+                reference: np.ndarray, screen: dict[str, Any], outage_s: float,
+                results: dict[str, dict[str, Any]]) -> dict[str, Any]:
+    """The ``holdout.json`` document: the windows, the withheld fixes (``withheld``) and those
+    that passed the reference screen (``reference``, ``screen``), one block per estimator
+    (``results``: ``score(...).block`` or a failed block), the onboard estimate's score."""
+    assert drive.gnss is not None
     sd_v = drive.gnss.pos_sd[withheld, 2]
-    doc = {
+    return {
         "schema": HOLDOUT_SCHEMA,
         "drive": {"name": drive.name, "source": drive.source,
                   "format": drive.meta.get("format"), "duration_s": drive.duration_s,
@@ -293,7 +244,6 @@ def run_holdout(drive: Drive, estimators: Sequence[str] | None = None, outage_s:
         "estimators": results,
         "onboard": _onboard_score(drive, reference, ~withheld),
     }
-    return HoldoutResult(doc, windows, series)
 
 
 def _screen_note(sc: dict[str, Any] | None) -> str:
@@ -320,7 +270,7 @@ def format_markdown(doc: dict[str, Any]) -> str:
         "|---|---|---|---|---|---|---|---|",
     ]
     for name, b in doc["estimators"].items():
-        status = b["status"] if b["error"] is None else f"failed: {b['error'][:60]}"
+        status = b["status"] if b["error"] is None else f"{b['status']}: {b['error'][:60]}"
         lines.append(f"| {name} | {status} | {f(b['alt_rmse_m'])} | {f(b['alt_max_abs_m'])} | "
                      f"{f(b['horiz_rmse_m'])} | {f(b['gnss_rejected'], 'd')} | "
                      f"{f(b['alt_offset_m'])} | {f(b['runtime_s'])} |")
@@ -329,39 +279,3 @@ def format_markdown(doc: dict[str, Any]) -> str:
         lines.append(f"| onboard: {ob['name']} (had GNSS) | ok | {f(ob['alt_rmse_m'])} | "
                      f"{f(ob['alt_max_abs_m'])} | — | — | — | — |")
     return "\n".join(lines) + "\n"
-
-
-def plot_holdout(res: HoldoutResult, path: Path) -> None:
-    """Altitude error at the withheld fixes, estimators grouped by family, windows shaded (PNG;
-    drawn by ``vnav_graph.report.error_plots.plot_holdout_errors``)."""
-    from ..report.error_plots import plot_holdout_errors
-
-    png = plot_holdout_errors(res)
-    if png is not None:
-        path.write_bytes(png.png)
-
-
-def cli_holdout(args: Any) -> int:
-    """``vnav-graph holdout LOG [--outage S] [--spacing S] [--estimators a,b] --out DIR``."""
-    from ..io import load_drive
-    from ..io.jsonout import dumps_strict
-    from ..outputs import check_out_dir, publish
-    from ..progress import stage
-
-    out = check_out_dir(args.out)
-    mode = mode_for(not getattr(args, "no_progress", False))
-    with stage(f"reading {Path(args.log).name}", mode):
-        drive = load_drive(args.log)
-    res = run_holdout(drive, getattr(args, "estimators", None),
-                      float(getattr(args, "outage", 60.0) or 60.0), getattr(args, "spacing", None),
-                      progress=mode, configs=getattr(args, "configs", None))
-    md = format_markdown(res.doc)
-
-    def fill(tmp: Path) -> None:
-        (tmp / "holdout.json").write_text(dumps_strict(res.doc))
-        (tmp / "holdout.md").write_text(md)
-        plot_holdout(res, tmp / "holdout.png")
-
-    publish(out, fill)
-    print(md, end="")
-    return 0

@@ -75,7 +75,7 @@ def write_report(out_dir: str | Path, summary: dict[str, Any], results: Sequence
     ----------
     out_dir : directory to write into (created if missing)
     summary : the ``summary.json`` document (``pipeline.summarize`` / ``apply_holdout``)
-    results : ``pipeline.RunResult`` list (estimate or error per estimator)
+    results : ``runner.RunResult`` list (estimate or error per estimator)
     drive : the drive the estimators ran on
     holdout : the ``HoldoutResult`` of a real log (its errors are drawn), or None
 

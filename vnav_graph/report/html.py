@@ -201,7 +201,8 @@ def render_html(summary: dict[str, Any], drive: Drive,
     d = summary["drive"]
     info = "".join(f"<tr><td>{_e(k)}</td><td>{_e(v)}</td></tr>"
                    for k, v in run_rows(summary) + drive_rows(drive))
-    failed = [(n, m["error"]) for n, m in summary["estimators"].items() if m["status"] != "ok"]
+    failed = [(n, m["error"] if m["status"] == "failed" else f"{m['status']}: {m['error']}")
+              for n, m in summary["estimators"].items() if m["status"] != "ok"]
     fail_html = "".join(f"<li><b>{_e(n)}</b>: {_e(err)}</li>" for n, err in failed)
     warned = [(n, w) for n, m in summary["estimators"].items() for w in m.get("warnings") or []]
     warn_html = "".join(f"<li><b>{_e(n)}</b>: {_e(w)}</li>" for n, w in warned)

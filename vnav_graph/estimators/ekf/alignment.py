@@ -25,7 +25,7 @@ Angles in radians, NED navigation frame, FRD body frame.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
@@ -37,9 +37,7 @@ from ...sensors.model import BaroPrior, SensorModel
 from ...types import Drive, FloatArray, GnssStream, ImuStream
 from . import model as km
 from .magnetometer import initial_heading
-
-if TYPE_CHECKING:
-    from .filter import EkfConfig
+from .settings import EkfConfig
 
 # the initial position is the median of the first START_FIXES fixes, so the filter's
 # estimate before the last of them is not causal (benchmarks/online_accuracy.py scores

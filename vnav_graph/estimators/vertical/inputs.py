@@ -419,7 +419,7 @@ def vertical_inputs(drive: Drive, config: AhrsConfig | None = None) -> VerticalI
     -------
     VerticalInputs
         arrays of shape (N,) (``q_nb`` (N, 4), ``bias_gyro`` (N, 3)) at ``drive.imu.t``.
-        Inside ``pipeline.run_estimators`` it is computed once per drive and config and
+        Inside ``runner.run_estimators`` it is computed once per drive and config and
         shared, read-only, by the vertical estimators (``vnav_graph.sharing``).
     """
     cfg = config or AhrsConfig()

@@ -55,6 +55,7 @@ import numpy as np
 from numba import njit
 from scipy.linalg import expm, solve_discrete_are
 
+from ...failures import MissingStream
 from ...geo.earth import gravity, radii
 from ...nav.arrays import put
 from ...nav.gaps import imu_gaps
@@ -199,7 +200,7 @@ class LoopInputs:
 def loop_inputs(drive: Drive, ahrs: AhrsConfig | None = None) -> LoopInputs:
     """Vertical acceleration from the AHRS and the baro altitude interpolated to the IMU."""
     if drive.baro is None or len(drive.baro) == 0:
-        raise ValueError("loops: the drive has no barometer stream")
+        raise MissingStream("barometer", "loops: the drive has no barometer stream")
     vi = vertical_inputs(drive, ahrs)
     h0 = float(drive.origin_lla[2])
     a_up = -(vi.f_down + gravity(vi.lat, h0) + vi.coriolis_down)

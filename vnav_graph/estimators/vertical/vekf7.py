@@ -67,6 +67,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from ...failures import MissingStream
 from ...geo.earth import gravity_scalar, radii, radii_scalar
 from ...nav.arrays import outer, put
 from ...nav.error_state import embed_error_state, selection
@@ -504,7 +505,7 @@ class VEKF7:
         t_start = time.perf_counter()
         cfg = self.config
         if drive.baro is None:
-            raise ValueError("vekf7: the drive has no baro stream")
+            raise MissingStream("barometer", "vekf7: the drive has no baro stream")
         vi: VerticalInputs = vertical_inputs(drive, cfg.ahrs)
         model = sensor_model(drive)  # shared with ekf and the graphs (sensors.model)
         nz = _noise(drive, vi, model, cfg)

@@ -61,6 +61,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from ...failures import MissingStream
 from ...geo.earth import gravity_scalar
 from ...nav.arrays import outer, put
 from ...nav.error_state import embed_error_state, selection
@@ -231,7 +232,7 @@ class VKF4:
         t_start = time.perf_counter()
         cfg = self.config
         if drive.baro is None:
-            raise ValueError("vkf4: the drive has no baro stream")
+            raise MissingStream("barometer", "vkf4: the drive has no baro stream")
         vi = vertical_inputs(drive, cfg.ahrs)
         model = sensor_model(drive)  # shared noise model (sensors.model)
         ims, bp = model.imu, model.baro

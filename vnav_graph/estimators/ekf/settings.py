@@ -1,0 +1,101 @@
+"""``EkfConfig``: the settings of the reference EKF (``ekf``, ``ekf-rts``).
+
+In a module of its own so that the filter's set-up (``filter``) and its alignment
+(``alignment``) both import it without importing each other; ``filter`` re-exports it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ...config import DEG
+from ...sensors.magnetometer import MAG_BIAS_SD_UT, MAG_HEADING_FLOOR, MAG_INTERVAL_S
+from ...sensors.model import GnssHeightGM, gnss_gm
+
+
+@dataclass(frozen=True)
+class EkfConfig:
+    """Settings of ``ekf`` / ``ekf-rts`` (SI units); the gates and gap rules are described in
+    the ``ekf.model`` docstring.
+
+    cov_rate_hz: covariance propagation grid [Hz].
+    cov_output_hz: rate of ``Estimate.cov`` [Hz].
+    traj_rate_hz: output trajectory rate [Hz] (None: every IMU epoch).
+    gate_prob: χ² gate probability of GNSS position, GNSS velocity and baro innovations.
+    max_consecutive_rejects: after this many refusals in a row the next GNSS pair is forced in.
+    align_max_s: longest static levelling window [s].
+    initial_heading: given initial heading [rad] (None: from GNSS or the magnetometer).
+    initial_heading_sd: σ of the given heading [rad].
+    heading_speed_min: speed above which the GNSS track gives a heading [m/s].
+    sideslip_sd: σ of the track's sideslip against the body heading [rad].
+    accel_scale: estimate accelerometer scale factors (None: the shared rule of sensors.model).
+    min_tilt_sd: levelling σ floor besides the accelerometer-bias term [rad].
+    max_gnss_sd_v: GNSS heights whose own σ_v exceeds this are not used [m].
+    baro_reaccept_s: after this long of refused baro samples (≥ 3) the next is forced in [s].
+    gnss_probation_s: a refused GNSS height is used again after passing the gate this long [s].
+    gap_level_sd: σ of the roll/pitch re-levelled after an IMU logging gap [rad].
+    gap_level_s: mean specific force over this long after a gap re-levels it [s].
+    gap_yaw_rw: heading random walk added across an IMU logging gap [rad/√s].
+    heading_source: "auto" (acceleration matching with GNSS velocity, else track), "accel", "track".
+    align_chunk_s: acceleration-matching chunk length [s].
+    align_forget_s: acceleration-matching forgetting time [s].
+    align_sd_max: heading σ below which the matched heading is accepted [rad].
+    gap_heading_forget_s: IMU gaps at least this long make the heading unknown again [s].
+    use_mag: magnetometer headings when the drive has a magnetometer.
+    mag_interval_s: at most one magnetometer heading per this many seconds [s].
+    mag_heading_floor: heading σ floor for declination and soft-iron errors [rad].
+    mag_bias_sd: prior σ of each hard-iron component [µT].
+    mag_bias_rw: hard-iron random walk [µT/√s].
+    mag_reaccept_s: after this long of refused headings the next is forced in [s].
+    gnss_gm_sd_v: σ of the Gauss-Markov GNSS height error state [m] (0: no state).
+    gnss_gm_tau_s: time constant of that state [s].
+    baro_scale_sd: prior σ of the baro scale (None: the shared sensor model's).
+
+    Magnetometer headings are thinned to one per ``mag_interval_s`` because their errors
+    (interference, soft iron) are correlated over seconds: 10 Hz of them would be trusted
+    10× too much.
+    """
+
+    cov_rate_hz: float = 10.0
+    cov_output_hz: float = 5.0
+    traj_rate_hz: float | None = 50.0
+    gate_prob: float = 0.9995
+    max_consecutive_rejects: int = 50
+    align_max_s: float = 20.0
+    initial_heading: float | None = None
+    initial_heading_sd: float = 2.0 * DEG
+    heading_speed_min: float = 0.5
+    sideslip_sd: float = 2.0 * DEG
+    accel_scale: bool | None = None
+    min_tilt_sd: float = 1e-4  # rad, levelling residual besides the accel-bias term
+    max_gnss_sd_v: float = 15.0
+    baro_reaccept_s: float = 1.0
+    gnss_probation_s: float = 10.0
+    gap_level_sd: float = 0.05  # rad
+    gap_level_s: float = 1.0
+    gap_yaw_rw: float = 0.05  # rad/√s
+    heading_source: str = "auto"
+    align_chunk_s: float = 1.0
+    align_forget_s: float = 30.0
+    align_sd_max: float = 15.0 * DEG
+    gap_heading_forget_s: float = 5.0
+    use_mag: bool = True
+    mag_interval_s: float = MAG_INTERVAL_S
+    mag_heading_floor: float = MAG_HEADING_FLOOR
+    mag_bias_sd: float = MAG_BIAS_SD_UT
+    mag_bias_rw: float = 0.01
+    mag_reaccept_s: float = 20.0
+    gnss_gm_sd_v: float = 0.0
+    gnss_gm_tau_s: float = 300.0
+    baro_scale_sd: float | None = None
+
+    @property
+    def gnss_gm(self) -> GnssHeightGM | None:
+        return gnss_gm(self.gnss_gm_sd_v, self.gnss_gm_tau_s, "EkfConfig")
+
+    def __post_init__(self) -> None:
+        self.gnss_gm  # noqa: B018 -- validates the Gauss-Markov GNSS height settings
+        if not (self.cov_rate_hz > 0 and self.cov_output_hz > 0):
+            raise ValueError("EkfConfig.cov_rate_hz / cov_output_hz: must be > 0")
+        if not 0.5 < self.gate_prob < 1.0:
+            raise ValueError("EkfConfig.gate_prob: must be in (0.5, 1)")
