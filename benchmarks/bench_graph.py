@@ -80,7 +80,7 @@ class StagePeaks:
         return None
 
     def start(self) -> None:
-        from vnav_graph.estimators.graph.linalg import trim_heap
+        from vnav_graph.estimators.graph.batch.linalg import trim_heap
 
         gc.collect()
         trim_heap()  # what earlier stages freed goes back to the OS, not into this stage's peak
@@ -100,7 +100,9 @@ def builtin_floor(drive: Any) -> float:
     import gtsam
     from gtsam.symbol_shorthand import B, C, V, X
 
-    from vnav_graph.estimators.graph import builders, init, problem
+    from vnav_graph.estimators.graph.model import cpp_factors as builders
+    from vnav_graph.estimators.graph.model import initial_guess as init
+    from vnav_graph.estimators.graph.model import problem as problem
     from vnav_graph.geo.atmosphere import isa_pressure
 
     cfg = problem.GraphConfig()

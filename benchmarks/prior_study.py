@@ -103,7 +103,7 @@ def patch_prior(**kw: float) -> Any:
                    latency_range_s=(float(mean - np.sqrt(3.0) * sd),
                                     float(mean + np.sqrt(3.0) * sd)), **kw)
     for name in ("vnav_graph.config", "vnav_graph.sensors.model",
-                 "vnav_graph.estimators.ekf.filter", "vnav_graph.estimators.graph.problem",
+                 "vnav_graph.estimators.ekf.filter", "vnav_graph.estimators.graph.model.problem",
                  "vnav_graph.estimators.vertical.adaptive"):
         mod = importlib.import_module(name)
         if hasattr(mod, "REAL_LOG_BARO"):

@@ -32,8 +32,9 @@ This example *simulates* its magnetometer from the drive's truth attitude
 (``simulated_magnetometer``: field, hard-iron bias ``HARD_IRON_UT``, noise ``MAG_SD_UT``,
 seeded) on hill-drive, which has none. The package now has its own: the ``hill-drive-mag``
 scenario and the log readers fill ``Drive.mag``, and both graphs then add heading factors with
-a hard-iron variable H(0) themselves (``vnav_graph/estimators/graph/magnetometer.py``, built on
-this same extension hook); this example stays as the worked 3-axis ``CustomFactor``.
+a hard-iron variable H(0) themselves
+(``vnav_graph/estimators/graph/model/magnetometer.py``, built on this same extension hook);
+this example stays as the worked 3-axis ``CustomFactor``.
 
 Run once through the bench (the plugin estimator ``graph-batch-mag`` simulates the
 magnetometer from each simulated drive's truth the same way)::
@@ -55,7 +56,7 @@ import numpy as np
 from gtsam.symbol_shorthand import M
 
 from vnav_graph.estimators.graph import GraphBatch, GraphConfig, GraphISAM2
-from vnav_graph.estimators.graph.extend import GraphView, Terms, Variable, X
+from vnav_graph.estimators.graph.model.extend import GraphView, Terms, Variable, X
 from vnav_graph.evaluation.montecarlo import shorten_scenario
 from vnav_graph.geo.frames import quat_to_mat
 from vnav_graph.simulation import simulate

@@ -45,7 +45,7 @@ import gtsam
 import numpy as np
 
 from vnav_graph.estimators.graph import GraphBatch, GraphConfig, GraphISAM2
-from vnav_graph.estimators.graph.extend import GraphView, Terms, X
+from vnav_graph.estimators.graph.model.extend import GraphView, Terms, X
 from vnav_graph.evaluation.metrics import errors_vs_truth
 from vnav_graph.evaluation.montecarlo import shorten_scenario
 from vnav_graph.geo.frames import quat_to_mat
@@ -77,7 +77,7 @@ def simulated_odometry(drive: Drive, t_kf: FloatArray, seed: int = 0) -> Odometr
     k0 = np.arange(0, t_kf.size - SPAN, SPAN)
     t0, t1 = t_kf[k0], t_kf[k0 + SPAN]
     a, b = tr.at(t0), tr.at(t1)
-    from vnav_graph.estimators.graph.factors import rot_t_n
+    from vnav_graph.estimators.graph.model.interval_factors import rot_t_n
 
     p0 = a.pos_n(drive.origin_lla)
     p1 = b.pos_n(drive.origin_lla)

@@ -49,7 +49,7 @@ import gtsam
 import numpy as np
 
 from vnav_graph.estimators.graph import GraphBatch, GraphConfig
-from vnav_graph.estimators.graph.extend import GraphView, Terms, V
+from vnav_graph.estimators.graph.model.extend import GraphView, Terms, V
 from vnav_graph.evaluation.montecarlo import shorten_scenario
 from vnav_graph.simulation import simulate
 from vnav_graph.types import Drive, FloatArray, ImuStream

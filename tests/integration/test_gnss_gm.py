@@ -137,7 +137,7 @@ def test_gm_link_is_the_exact_discrete_process():
     import gtsam
     from gtsam.symbol_shorthand import G
 
-    from vnav_graph.estimators.graph.builders import gnss_gm_factor
+    from vnav_graph.estimators.graph.model.cpp_factors import gnss_gm_factor
 
     gm = GnssHeightGM(3.0, 120.0)
     f = gnss_gm_factor(4, 2.0, gm)

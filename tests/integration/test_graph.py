@@ -137,7 +137,7 @@ def test_imu_logging_gap_is_bridged_not_preintegrated(monkeypatch):
     gap factors, not by a CombinedImuFactor built from the one sample pair spanning it.
     Measured on this drive: altitude RMSE 0.11 m with gap factors, 0.35 m with the IMU factor
     across the gap (the old batch behaviour, reproduced here by hiding the gap)."""
-    from vnav_graph.estimators.graph import problem as gp
+    from vnav_graph.estimators.graph.model import problem as gp
     from vnav_graph.evaluation.metrics import errors_vs_truth
     from vnav_graph.types import ImuStream
 
@@ -165,7 +165,7 @@ def test_isam2_online_takes_gnss_back_at_once_after_an_outage():
     there, and 88 m one keyframe later)."""
     from vnav_graph.estimators.ekf.filter import EKF
     from vnav_graph.estimators.graph import GraphISAM2
-    from vnav_graph.estimators.graph.problem import setup
+    from vnav_graph.estimators.graph.model.problem import setup
     from vnav_graph.geo.frames import lla_to_ned
 
     d = simulate("hill-drive", 0, duration_s=400.0)

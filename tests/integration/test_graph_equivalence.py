@@ -75,8 +75,8 @@ from gtsam.symbol_shorthand import B, V, X
 from vnav_graph.config import IMU_PRESETS
 from vnav_graph.estimators import graph as g
 from vnav_graph.estimators.ekf.filter import EKF, EKFRTS
-from vnav_graph.estimators.graph import factors as gf
-from vnav_graph.estimators.graph import problem as gp
+from vnav_graph.estimators.graph.model import interval_factors as gf
+from vnav_graph.estimators.graph.model import problem as gp
 from vnav_graph.evaluation.metrics import errors_vs_truth
 from vnav_graph.geo.earth import gravity
 from vnav_graph.geo.frames import lla_to_ned, quat_to_mat

@@ -10,7 +10,7 @@ import pytest
 from gtsam.symbol_shorthand import K, M, X
 
 from vnav_graph.estimators.graph import GraphBatch, GraphConfig, GraphISAM2
-from vnav_graph.estimators.graph.extend import GraphView, Terms, Variable, collect
+from vnav_graph.estimators.graph.model.extend import GraphView, Terms, Variable, collect
 from vnav_graph.simulation.scenario import simulate
 
 SPAN = 10

@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 
 from vnav_graph.estimators.graph import GraphConfig
-from vnav_graph.estimators.graph import factors as gf
-from vnav_graph.estimators.graph.init import compass_heading, initial_states
-from vnav_graph.estimators.graph.problem import setup
+from vnav_graph.estimators.graph.model import interval_factors as gf
+from vnav_graph.estimators.graph.model.initial_guess import compass_heading, initial_states
+from vnav_graph.estimators.graph.model.problem import setup
 from vnav_graph.geo.frames import ned_to_lla, quat_to_mat
 from vnav_graph.sensors.magnetometer import drive_field, wrap_pi
 from vnav_graph.simulation.scenario import simulate

@@ -17,13 +17,13 @@ import pytest
 
 from vnav_graph.estimators.ekf.filter import EKF, EkfConfig
 from vnav_graph.estimators.graph import GraphBatch, GraphConfig
-from vnav_graph.estimators.graph import factors as gf
-from vnav_graph.estimators.graph.init import (
+from vnav_graph.estimators.graph.model import interval_factors as gf
+from vnav_graph.estimators.graph.model.initial_guess import (
     FILTER_YAW_SD_MAX,
     filter_attitude,
     initial_states,
 )
-from vnav_graph.estimators.graph.problem import setup
+from vnav_graph.estimators.graph.model.problem import setup
 from vnav_graph.geo.frames import mat_to_quat, ned_to_lla, quat_to_mat
 from vnav_graph.nav.arrays import nearest_index
 from vnav_graph.sensors.magnetometer import wrap_pi
@@ -119,7 +119,7 @@ def test_retilt_puts_the_specific_force_on_the_tangent_one_and_keeps_the_heading
     """``init._retilt``: the smallest rotation taking R·f_b onto f_t. From an attitude tilted
     20° off (about a horizontal axis), the down axis returns exactly; the heading moves by
     the second-order amount only."""
-    from vnav_graph.estimators.graph.init import _retilt
+    from vnav_graph.estimators.graph.model.initial_guess import _retilt
     from vnav_graph.nav.rotations import so3_exp
 
     truth = _rz(np.radians(70.0)) @ so3_exp(np.radians([3.0, -2.0, 0.0]))

@@ -52,7 +52,7 @@ def test_own_estimate_is_returned_and_checked_by_the_batch_pass(monkeypatch):
     reported in ``info["final_batch"]`` and replaces it only when it ends significantly
     lower (forced here by a negative tolerance), with a warning."""
     from vnav_graph.estimators.graph import GraphConfig, GraphISAM2
-    from vnav_graph.estimators.graph import isam2 as gi
+    from vnav_graph.estimators.graph.isam2 import smoother as gi
 
     drive = simulate(load_scenario("hill-drive", duration_s=120.0), seed=1)
     batch = create("graph-batch").run(drive)
@@ -107,8 +107,9 @@ def test_post_solve_gate_removes_a_keyframe_fix_from_isam2(monkeypatch):
     removed, own estimate kept, cost gap 0.13 against the batch pass."""
     import dataclasses
 
-    from vnav_graph.estimators.graph import GraphConfig, GraphISAM2, relin
-    from vnav_graph.estimators.graph.problem import setup
+    from vnav_graph.estimators.graph import GraphConfig, GraphISAM2
+    from vnav_graph.estimators.graph.isam2 import relin as relin
+    from vnav_graph.estimators.graph.model.problem import setup
 
     d = simulate(load_scenario("hill-drive", duration_s=120.0), seed=1)
     on_kf = np.flatnonzero(setup(d, GraphConfig()).g_kf >= 0)

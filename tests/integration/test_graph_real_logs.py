@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from vnav_graph.estimators.graph import isam2_setup as gi
-from vnav_graph.estimators.graph import problem as gp
+from vnav_graph.estimators.graph.isam2 import setup as gi
+from vnav_graph.estimators.graph.model import problem as gp
 from vnav_graph.runner import run_holdout
 
 LOITER = "erle_pxf_loiter_rtl/Loiter_RTL.bin"
@@ -109,7 +109,7 @@ def test_218_holdout_isam2_keeps_its_own_estimate(data_dir: Path) -> None:
     # (0.05 s, ≈ 1σ here), so its settled τd may differ from the batch's by a fraction of
     # that: measured 0.005 s (0.09σ) with the biases as random walks, 0.012 s (0.23σ) with
     # their Gauss-Markov step; the cycling this test guards against was ±0.3 s
-    from vnav_graph.estimators.graph.relin import CALIB_THRESHOLD
+    from vnav_graph.estimators.graph.isam2.relin import CALIB_THRESHOLD
 
     assert abs(e.baro.latency_s.est - b.baro.latency_s.est) < 0.5 * CALIB_THRESHOLD[1]
     assert abs(e.baro.latency_s.est - b.baro.latency_s.est) < 0.5 * b.baro.latency_s.sd

@@ -16,14 +16,15 @@ import numpy as np
 import pytest
 from gtsam.symbol_shorthand import K
 
-from vnav_graph.estimators.graph import GraphConfig, solve
-from vnav_graph.estimators.graph.batch import outputs
-from vnav_graph.estimators.graph.builders import build_batch_graph, pims_for
-from vnav_graph.estimators.graph.extend import collect, make_view
-from vnav_graph.estimators.graph.init import initial_states
-from vnav_graph.estimators.graph.layout import interval_info
-from vnav_graph.estimators.graph.magnetometer import builtin_extensions
-from vnav_graph.estimators.graph.problem import interval_rows, setup, states_from_values
+from vnav_graph.estimators.graph import GraphConfig
+from vnav_graph.estimators.graph.batch import solve as solve
+from vnav_graph.estimators.graph.batch.layout import interval_info
+from vnav_graph.estimators.graph.batch.smoother import outputs
+from vnav_graph.estimators.graph.model.cpp_factors import build_batch_graph, pims_for
+from vnav_graph.estimators.graph.model.extend import collect, make_view
+from vnav_graph.estimators.graph.model.initial_guess import initial_states
+from vnav_graph.estimators.graph.model.magnetometer import builtin_extensions
+from vnav_graph.estimators.graph.model.problem import interval_rows, setup, states_from_values
 from vnav_graph.estimators.graph.settings import low_rate_config
 from vnav_graph.evaluation.holdout import choose_windows, withhold
 

@@ -13,8 +13,8 @@ from gtsam.symbol_shorthand import A, B
 
 from vnav_graph.config import IMU_PRESETS
 from vnav_graph.estimators.graph import GraphConfig
-from vnav_graph.estimators.graph import builders as gb
-from vnav_graph.estimators.graph import problem as gp
+from vnav_graph.estimators.graph.model import cpp_factors as gb
+from vnav_graph.estimators.graph.model import problem as gp
 from vnav_graph.sensors.model import MIN_INFERRED_ACCEL_SCALE_SD, accel_scale_sd, sensor_model
 from vnav_graph.simulation.scenario import load_scenario, simulate
 

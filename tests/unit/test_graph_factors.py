@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from vnav_graph.estimators.graph import factors as gf
+from vnav_graph.estimators.graph.model import interval_factors as gf
 from vnav_graph.geo.earth import gravity
 from vnav_graph.geo.frames import lla_to_ned, ned_to_lla
 
@@ -208,7 +208,7 @@ def test_group_information_in_chunks_equals_one_block(monkeypatch):
 def test_nearest_fix_gap_equals_the_brute_force_distance():
     """The initialiser's distance from each keyframe to the nearest GNSS fix (searchsorted,
     no (keyframes × fixes) matrix) equals the brute-force minimum, unsorted fixes included."""
-    from vnav_graph.estimators.graph.init import _nearest_gap
+    from vnav_graph.estimators.graph.model.initial_guess import _nearest_gap
 
     rng = np.random.default_rng(3)
     for _ in range(100):
@@ -327,7 +327,7 @@ def test_preintegrated_velocity_increment_exact_in_a_turn():
     import gtsam
 
     from vnav_graph.estimators.graph import GraphConfig
-    from vnav_graph.estimators.graph.problem import preintegrate, setup
+    from vnav_graph.estimators.graph.model.problem import preintegrate, setup
     from vnav_graph.simulation.scenario import simulate
 
     d = simulate("hill-drive", 0, duration_s=5.0)

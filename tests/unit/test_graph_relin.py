@@ -9,10 +9,11 @@ import numpy as np
 import pytest
 from gtsam.symbol_shorthand import B, C, K, X
 
-from vnav_graph.estimators.graph import factors as gf
-from vnav_graph.estimators.graph import relin, terms
-from vnav_graph.estimators.graph.init import initial_states
-from vnav_graph.estimators.graph.problem import setup
+from vnav_graph.estimators.graph.isam2 import linear_factors as terms
+from vnav_graph.estimators.graph.isam2 import relin as relin
+from vnav_graph.estimators.graph.model import interval_factors as gf
+from vnav_graph.estimators.graph.model.initial_guess import initial_states
+from vnav_graph.estimators.graph.model.problem import setup
 from vnav_graph.estimators.graph.settings import GraphConfig
 from vnav_graph.simulation.scenario import load_scenario, simulate
 
@@ -198,7 +199,7 @@ def test_gnss_chi2_in_blocks_equals_the_whole_set(problem, monkeypatch):
     # the post-solve gate's χ² is computed in blocks of fixes (memory); with blocks of 7
     # fixes, with and without the cached increments, it equals the χ² of the rows of every
     # fix at once (gnss_rows_of)
-    from vnav_graph.estimators.graph import problem as gp
+    from vnav_graph.estimators.graph.model import problem as gp
 
     P, a, _ = problem
     st = relin.estimate_states(P, (a["rot"], a["pos"], a["vel"], a["bias"], a["cb"], a["gg"]),

@@ -8,7 +8,7 @@ import dataclasses
 import numpy as np
 
 from vnav_graph.estimators.graph import GraphConfig
-from vnav_graph.estimators.graph.problem import setup
+from vnav_graph.estimators.graph.model.problem import setup
 from vnav_graph.nav.rotations import so3_exp
 from vnav_graph.nav.velocity_screen import specific_force_integral, velocity_screen
 from vnav_graph.sensors.model import accel_scale_sd, sensor_model

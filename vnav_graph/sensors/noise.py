@@ -45,7 +45,7 @@ def imu_bias_step(dt: float | FloatArray, tau: float, sd: float, rw: float
     b(t + dt) = φ·b(t) + w, φ = exp(−dt/τ), var w = σ²(1 − φ²) + rw²·dt. Returns (φ, var w).
     Both families discretise the IMU biases with it: the ekf's process noise (its Φ and
     ``ekf.kernel.decay_gm`` apply the same φ), the graph's bias link
-    (``graph.builders.bias_link``)."""
+    (``graph.model.cpp_factors.bias_link``)."""
     dt = np.asarray(dt, dtype=float)
     return gm_transition(dt, tau), gm_process_var(dt, tau, sd) + rw**2 * dt
 

@@ -38,11 +38,11 @@ def __getattr__(name: str) -> Any:
 
         return GraphConfig
     if name == "GraphBatch":
-        from .batch import GraphBatch
+        from .batch.smoother import GraphBatch
 
         return GraphBatch
     if name == "GraphISAM2":
-        from .isam2 import GraphISAM2
+        from .isam2.smoother import GraphISAM2
 
         return GraphISAM2
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

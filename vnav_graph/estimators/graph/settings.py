@@ -10,7 +10,7 @@ import numpy as np
 from ...sensors.magnetometer import MAG_BIAS_SD_UT, MAG_HEADING_FLOOR, MAG_INTERVAL_S
 from ...sensors.model import GnssHeightGM, gnss_gm
 from ...types import Drive
-from .robust import check_loss
+from .model.robust import check_loss
 
 
 @dataclass(frozen=True)

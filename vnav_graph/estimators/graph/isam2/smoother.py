@@ -1,6 +1,6 @@
 """``graph-isam2``: incremental smoothing with GTSAM iSAM2 (Kaess et al., IJRR 2012).
 
-One iSAM2 update per keyframe (``isam2_online.OnlinePass``; this module runs it, retries it
+One iSAM2 update per keyframe (``online.OnlinePass``; this module runs it, retries it
 with robust settings and checks its result against a batch pass). To keep the per-update cost
 bounded on long drives the baro calibration (s, τd) is a *slowly varying per-segment* state
 K(j) (segments of ``GraphConfig.segment_s``, linked by a random-walk ``BetweenFactorVector``)
@@ -8,16 +8,16 @@ instead of one global variable tied to every baro sample: the graph stays chain-
 an update only re-eliminates the cliques of the last keyframes (a global K sits in the root
 clique and every new baro term touches it — measured in ``docs/graph.md``).
 
-Baro samples and GNSS fixes between keyframes are linearised once (numpy, ``factors``) at
-the current estimate as soon as they have arrived — in the update that creates keyframe k+1:
-the fixes inside interval k, and the baro samples stamped up to t_{k+1}, one factor per
-interval of their delayed time — and inserted as ``LinearContainerFactor``s with the
-accelerometer-bias columns on B(k) (``terms.gnss_factor``, ``terms.baro_factors``); no
-Python callback ever runs inside iSAM2. They are relinearised as iSAM2 relinearises its own
-factors (``relin.TermBook``): after each update the terms on the keyframes iSAM2 marked are
-checked against the rotation/translation thresholds (and their segment's (s, τd) against
-``relin.CALIB_THRESHOLD``); the due ones are rebuilt at the current estimate and swapped in
-at the next update (``removeFactorIndices``), counted in ``info["isam2_relinearized"]``.
+Baro samples and GNSS fixes between keyframes are linearised once (numpy, ``factors``) at the
+current estimate as soon as they have arrived — in the update that creates keyframe k+1: the
+fixes inside interval k, and the baro samples stamped up to t_{k+1}, one factor per interval of
+their delayed time — and inserted as ``LinearContainerFactor``s with the accelerometer-bias
+columns on B(k) (``linear_factors.gnss_factor``, ``linear_factors.baro_factors``); no Python
+callback ever runs inside iSAM2. They are relinearised as iSAM2 relinearises its own factors
+(``relin.TermBook``): after each update the terms on the keyframes iSAM2 marked are checked
+against the rotation/translation thresholds (and their segment's (s, τd) against
+``relin.CALIB_THRESHOLD``); the due ones are rebuilt at the current estimate and swapped in at
+the next update (``removeFactorIndices``), counted in ``info["isam2_relinearized"]``.
 
 Thresholds: per variable type (``GraphConfig.relinearize_typed``), C/K never (linear
 factors only), checked at every update (``relinearize_skip`` 1). With the looser thresholds
@@ -52,22 +52,22 @@ from typing import Any
 import numpy as np
 from gtsam.symbol_shorthand import A, B, C, G, K, V, X
 
-from ...geo.frames import mat_to_quat, ned_to_lla, quat_to_mat
-from ...sensors.baro import with_prior_conflict_notes, without_implausible_scale
-from ...sensors.magnetometer import without_contradicting_mag
-from ...types import Drive, Estimate, Trajectory
-from . import factors as gf
-from .batch import gnss_gm_info, outputs, provides
-from .builders import build_batch_graph, pims_for
-from .extend import GraphExtension, check_extensions
-from .general import first_line
-from .isam2_online import OnlinePass, OnlineResult
-from .isam2_setup import estimate_info
-from .linalg import solver_context
-from .magnetometer import builtin_extensions, mag_info
-from .problem import states_from_values
-from .settings import LOW_RATE_DT, LOW_RATE_KEYFRAME_DT, GraphConfig
-from .solve import evaluate_at, gauss_newton
+from ....geo.frames import mat_to_quat, ned_to_lla, quat_to_mat
+from ....sensors.baro import with_prior_conflict_notes, without_implausible_scale
+from ....sensors.magnetometer import without_contradicting_mag
+from ....types import Drive, Estimate, Trajectory
+from ..batch.general import first_line
+from ..batch.linalg import solver_context
+from ..batch.smoother import gnss_gm_info, outputs, provides
+from ..batch.solve import evaluate_at, gauss_newton
+from ..model import interval_factors as gf
+from ..model.cpp_factors import build_batch_graph, pims_for
+from ..model.extend import GraphExtension, check_extensions
+from ..model.magnetometer import builtin_extensions, mag_info
+from ..model.problem import states_from_values
+from ..settings import LOW_RATE_DT, LOW_RATE_KEYFRAME_DT, GraphConfig
+from .online import OnlinePass, OnlineResult
+from .setup import estimate_info
 
 # averaged low-rate IMU logs (median spacing ≥ LOW_RATE_DT, e.g. the 1 Hz phone logs): a
 # keyframe every sample made a 93-min log take 5563 updates (213 s online), and after its 37 s

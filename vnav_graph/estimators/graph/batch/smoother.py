@@ -15,7 +15,7 @@ Only the modules of this subpackage import gtsam. Design (details and measuremen
   calibration (one for the batch, one per segment in the incremental front end).
 - C++ factors: ImuFactor (Forster et al. 2017) on B(k), GPSFactorArm and velocity priors for
   fixes at keyframe epochs, priors, and as linear factors the IMU biases' Gauss-Markov step
-  (``builders.bias_link``, the ekf's discretisation, with the accelerometer scale factors A(0)
+  (``cpp_factors.bias_link``, the ekf's discretisation, with the accelerometer scale factors A(0)
   when carried:
   ``problem.AccelScale``) and the exact Gauss-Markov chain b_{k+1} = e^{−Δt/τ} b_k + w,
   var w = σ²(1 − e^{−2Δt/τ}).
@@ -38,12 +38,12 @@ import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import A, B, C, K, V, X
 
-from ...geo.frames import mat_to_quat, ned_to_lla
-from ...nav.error_state import component, embed_error_state
-from ...sensors.baro import with_prior_conflict_notes, without_implausible_scale
-from ...sensors.magnetometer import without_contradicting_mag
-from ...sensors.noise import gm_mean_prior_sd
-from ...types import (
+from ....geo.frames import mat_to_quat, ned_to_lla
+from ....nav.error_state import component, embed_error_state
+from ....sensors.baro import with_prior_conflict_notes, without_implausible_scale
+from ....sensors.magnetometer import without_contradicting_mag
+from ....sensors.noise import gm_mean_prior_sd
+from ....types import (
     ERROR_STATE,
     ERROR_STATE_DIM,
     BaroEstimate,
@@ -53,20 +53,20 @@ from ...types import (
     ParamEstimate,
     Trajectory,
 )
-from . import factors as gf
-from .builders import build_batch_graph, pims_for
-from .extend import GraphExtension, check_extensions, collect, make_view
-from .init import initial_states
-from .layout import interval_info
-from .linalg import solver_context
-from .magnetometer import builtin_extensions, mag_info
-from .problem import (
+from ..model import interval_factors as gf
+from ..model.cpp_factors import build_batch_graph, pims_for
+from ..model.extend import GraphExtension, check_extensions, collect, make_view
+from ..model.initial_guess import initial_states
+from ..model.magnetometer import builtin_extensions, mag_info
+from ..model.problem import (
     Problem,
     interval_rows,
     setup,
     states_from_values,
 )
-from .settings import GraphConfig, low_rate_config
+from ..settings import GraphConfig, low_rate_config
+from .layout import interval_info
+from .linalg import solver_context
 from .solve import BatchResult, gauss_newton, linear_system
 
 

@@ -10,10 +10,10 @@ import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import A, B, C, G, K, V, X
 
-from .batch import solver_warnings, value_of
-from .builders import keyframe_fixes, prior_factors
-from .extend import Collected, key_name
-from .settings import GraphConfig
+from ..batch.smoother import solver_warnings, value_of
+from ..model.cpp_factors import keyframe_fixes, prior_factors
+from ..model.extend import Collected, key_name
+from ..settings import GraphConfig
 
 
 def update_error(P: Any, k: int, exc: BaseException | None, gap: bool) -> RuntimeError:

@@ -23,12 +23,12 @@ import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import A, B, C, G, K, V, X
 
-from ...geo.frames import mat_to_quat
-from ...sensors.noise import gm_transition
-from ...types import Drive
-from . import factors as gf
-from . import relin, terms
-from .builders import (
+from ....geo.frames import mat_to_quat
+from ....sensors.noise import gm_transition
+from ....types import Drive
+from ..batch.linalg import trim_heap
+from ..model import interval_factors as gf
+from ..model.cpp_factors import (
     bias_link,
     bias_step,
     build_batch_graph,
@@ -39,9 +39,13 @@ from .builders import (
     imu_factor,
     keyframe_fixes,
 )
-from .extend import Collected, GraphExtension, collect, make_view
-from .init import initial_states
-from .isam2_setup import (
+from ..model.extend import Collected, GraphExtension, collect, make_view
+from ..model.initial_guess import initial_states
+from ..model.problem import gravity_delta, noise, preintegrate, setup
+from ..settings import GraphConfig
+from . import linear_factors as terms
+from . import relin
+from .setup import (
     extra_online_of,
     first_keyframe,
     isam2_params,
@@ -49,9 +53,6 @@ from .isam2_setup import (
     segments,
     update_error,
 )
-from .linalg import trim_heap
-from .problem import gravity_delta, noise, preintegrate, setup
-from .settings import GraphConfig
 from .window import Window
 
 DIVERGED_SPEED = 1e4  # m/s: an online velocity above this means the solution diverged

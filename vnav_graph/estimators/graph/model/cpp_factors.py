@@ -12,13 +12,13 @@ import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import A, B, C, G, K, V, X
 
-from ...config import ImuSpec
-from ...nav.levelling import coarse_level
-from ...sensors.model import GnssHeightGM
-from ...sensors.noise import gm_process_var, gm_transition, imu_bias_step
-from ...types import FloatArray
-from . import factors as gf
-from .general import information_factor
+from ....config import ImuSpec
+from ....nav.levelling import coarse_level
+from ....sensors.model import GnssHeightGM
+from ....sensors.noise import gm_process_var, gm_transition, imu_bias_step
+from ....types import FloatArray
+from ..batch.general import information_factor
+from . import interval_factors as gf
 from .problem import Problem, gravity_delta, noise, preintegrate
 from .robust import robust_noise
 

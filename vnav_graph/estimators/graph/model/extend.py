@@ -61,9 +61,9 @@ import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import B, C, V, X
 
-from ...geo.frames import lla_to_ned
-from ...types import Drive, FloatArray
-from .factors import rot_t_n
+from ....geo.frames import lla_to_ned
+from ....types import Drive, FloatArray
+from .interval_factors import rot_t_n
 
 __all__ = ["RESERVED", "GraphExtension", "GraphView", "Terms", "Variable", "B", "C", "V", "X"]
 

@@ -43,7 +43,7 @@ import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import A, B, C, G, K, V, X
 
-from .extend import prior_factor, read_value, tangent_dim
+from ..model.extend import prior_factor, read_value, tangent_dim
 
 # marginalise in chunks of this fraction of the window: one elimination per chunk
 CHUNK_FRACTION = 0.1

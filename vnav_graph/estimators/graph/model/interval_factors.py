@@ -43,12 +43,12 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from ...geo.earth import OMEGA_IE, gravity
-from ...geo.frames import lla_to_ned, ned_to_lla, skew
-from ...nav.arrays import put
-from ...nav.rotations import dcm_to_quat_into, quat_to_dcm_into, so3_exp_into
-from ...sensors.baro import baro_jacobian, measure_baro
-from ...types import FloatArray
+from ....geo.earth import OMEGA_IE, gravity
+from ....geo.frames import lla_to_ned, ned_to_lla, skew
+from ....nav.arrays import put
+from ....nav.rotations import dcm_to_quat_into, quat_to_dcm_into, so3_exp_into
+from ....sensors.baro import baro_jacobian, measure_baro
+from ....types import FloatArray
 from .interp import increments_at, interpolant
 
 N_COLS = 19

@@ -2,7 +2,8 @@
 tangent frame and its pre-gate, baro priors, IMU logging gaps, the accelerometer scale
 factors), preintegration, and the interval rows of the custom baro/GNSS terms at a
 linearisation point (the settings: ``settings.GraphConfig``). The C++ factors built from it
-are in ``builders``. Used by ``batch``, ``solve``, ``isam2``, ``relin`` and ``terms``."""
+are in ``cpp_factors``. Used by ``batch.smoother``, ``batch.solve``, ``isam2.smoother``,
+``isam2.relin`` and ``isam2.linear_factors``."""
 
 from __future__ import annotations
 
@@ -13,13 +14,13 @@ import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import B, K, X
 
-from ...config import REAL_LOG_BARO, BaroSpec, ImuSpec
-from ...geo.earth import gravity
-from ...nav.arrays import nearest_index
-from ...nav.gaps import imu_gaps as nav_imu_gaps
-from ...nav.gnss_glitch import glitch_mask
-from ...nav.velocity_screen import velocity_screen
-from ...sensors.model import (
+from ....config import REAL_LOG_BARO, BaroSpec, ImuSpec
+from ....geo.earth import gravity
+from ....nav.arrays import nearest_index
+from ....nav.gaps import imu_gaps as nav_imu_gaps
+from ....nav.gnss_glitch import glitch_mask
+from ....nav.velocity_screen import velocity_screen
+from ....sensors.model import (
     BaroPrior,
     GnssHeightGM,
     accel_scale_sd,
@@ -27,13 +28,13 @@ from ...sensors.model import (
     gnss_gm_split,
     sensor_model,
 )
-from ...types import (
+from ....types import (
     Drive,
     FloatArray,
 )
-from . import factors as gf
+from ..settings import GraphConfig
+from . import interval_factors as gf
 from .robust import reweight
-from .settings import GraphConfig
 
 
 def imu_gaps(t: np.ndarray, kf_idx: np.ndarray) -> np.ndarray:
@@ -119,7 +120,7 @@ class Problem:
     # interval k spans an IMU logging gap (``imu_gaps``; computed once in ``setup``)
     gap: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     ka: AccelScale | None = None  # the accelerometer scale factors A(0), if carried
-    # where the initial keyframe attitudes came from (``init.initial_states``): "triad",
+    # where the initial keyframe attitudes came from (``initial_guess.initial_states``): "triad",
     # "compass" or "ekf"; and why not the ekf's where it was due but failed
     init_attitude: str = "triad"
     init_note: str = ""
@@ -158,7 +159,7 @@ def setup(drive: Drive, cfg: GraphConfig) -> Problem:
     p.setGyroscopeCovariance(np.eye(3) * spec.gyro_noise_density**2)
     p.setIntegrationCovariance(np.eye(3) * 1e-8)
     # (no bias covariances: ImuFactor does not read them; the biases' Gauss-Markov step is
-    # ``builders.bias_link``)
+    # ``cpp_factors.bias_link``)
     p.setOmegaCoriolis(omega_t)
     gn = drive.gnss
     t_kf = imu.t[kf_idx]
@@ -427,7 +428,7 @@ def _gnss_rows(P: Problem, st: gf.KeyframeStates, idx: np.ndarray, incr: Any,
 
 def interval_rows(P: Problem, st: gf.KeyframeStates, pri: dict[str, float],
                   bias_lag: float) -> gf.IntervalRows:
-    """Baro and GNSS interval rows; ``bias_lag``: see ``factors.baro_rows``. Under robust
+    """Baro and GNSS interval rows; ``bias_lag``: see ``interval_factors.baro_rows``. Under robust
     losses (``GraphConfig.loss_*``) the rows are reweighted (IRLS, ``robust.reweight``),
     ``loss`` holds Σρ and ``weights`` the weight of every sample and fix. The Jacobians of
     all rows are written into one array (no per-type pieces concatenated: that held the

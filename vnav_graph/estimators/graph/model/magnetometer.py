@@ -29,9 +29,9 @@ import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import H
 
-from ...nav.arrays import nearest_index
-from ...nav.rotations import skew3
-from ...sensors.magnetometer import (
+from ....nav.arrays import nearest_index
+from ....nav.rotations import skew3
+from ....sensors.magnetometer import (
     MIN_HORIZONTAL_UT,
     drive_field,
     field_and_info,
@@ -39,7 +39,7 @@ from ...sensors.magnetometer import (
     usable,
     wrap_pi,
 )
-from ...types import FloatArray
+from ....types import FloatArray
 from .extend import GraphView, Terms, Variable, X
 
 KEY = H(0)

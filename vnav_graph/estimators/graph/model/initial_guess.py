@@ -6,12 +6,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...geo.frames import ned_to_lla, quat_to_mat, skew
-from ...nav.arrays import nearest_index
-from ...nav.rotations import so3_exp
-from ...types import ERROR_STATE, FloatArray
-from . import factors as gf
-from .builders import level
+from ....geo.frames import ned_to_lla, quat_to_mat, skew
+from ....nav.arrays import nearest_index
+from ....nav.rotations import so3_exp
+from ....types import ERROR_STATE, FloatArray
+from . import interval_factors as gf
+from .cpp_factors import level
 from .problem import Problem
 
 # TRIAD (specific force + course) needs a clear course: moving faster than this [m/s]
@@ -173,12 +173,12 @@ def filter_attitude(P: Problem, rot: FloatArray) -> bool:
     if mode == "triad":
         return False
     if mode == "auto":
-        from ...sensors.magnetometer import usable
+        from ....sensors.magnetometer import usable
 
         compass = P.cfg.use_mag and usable(P.drive.mag)[0]
         if compass or P.drive.meta.get("vehicle") not in HOVERING:
             return False
-    from ..ekf.filter import EKF, EkfConfig
+    from ...ekf.filter import EKF, EkfConfig
 
     try:
         est = EKF(EkfConfig(use_mag=False)).run(P.drive)
@@ -226,7 +226,7 @@ def compass_heading(P: Problem, rot: FloatArray) -> bool:
     crept along the weakly held heading for hundreds of iterations. The ekf aligns its
     heading on the compass too (``ekf.magnetometer.initial_heading``). Returns whether the
     attitudes were turned."""
-    from ...sensors.magnetometer import MIN_HORIZONTAL_UT, drive_field, usable, wrap_pi
+    from ....sensors.magnetometer import MIN_HORIZONTAL_UT, drive_field, usable, wrap_pi
 
     drive = P.drive
     mag = drive.mag

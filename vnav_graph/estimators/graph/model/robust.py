@@ -20,7 +20,7 @@ from typing import Any
 import gtsam
 import numpy as np
 
-from ...types import FloatArray
+from ....types import FloatArray
 
 LOSSES = ("none", "huber", "cauchy")
 

@@ -33,9 +33,9 @@ import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import A, B, C, G, K, V, X
 
-from . import factors as gf
-from . import terms
-from .problem import nav_accel, noise, post_solve_rejections
+from ..model import interval_factors as gf
+from ..model.problem import nav_accel, noise, post_solve_rejections
+from . import linear_factors as terms
 
 # relinearisation thresholds of K = (s, τd) for the interval terms: the linearisation error
 # of (1 + s)·h is δs·δh (≤ 1 cm for δh ≤ 1 m at δs = 0.01), that of h(t_s − τd) is

@@ -11,7 +11,13 @@ from typing import Any
 
 import numpy as np
 
-from . import factors as gf
+from ..model import interval_factors as gf
+from ..model.problem import (
+    Problem,
+    interval_rows,
+    post_solve_rejections,
+    states_from_values,
+)
 from .general import GeneralSystem
 from .layout import (
     MAX_GLOBAL_DIM,
@@ -21,12 +27,6 @@ from .layout import (
     interval_info,
     linearize,
     make_layout,
-)
-from .problem import (
-    Problem,
-    interval_rows,
-    post_solve_rejections,
-    states_from_values,
 )
 
 # ----------------------------------------------------------------------------------------

@@ -27,8 +27,8 @@ import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import A, B, C, G, K, V, X
 
-from ...types import FloatArray
-from . import factors as gf
+from ....types import FloatArray
+from ..model import interval_factors as gf
 from . import linalg as gla
 
 MAX_GLOBAL_DIM = 64  # global columns kept as the dense border of the arrow

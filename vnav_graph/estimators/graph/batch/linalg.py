@@ -31,8 +31,8 @@ import numpy as np
 from numba import njit
 from scipy.linalg import LinAlgError, cho_solve_banded, cholesky_banded
 
-from ...pages import small_pages
-from ...types import FloatArray
+from ....pages import small_pages
+from ....types import FloatArray
 
 
 @dataclass

@@ -1,15 +1,16 @@
-"""Numba kernels of the IMU-shaped interpolant between keyframes (``factors.DenseIncrements.at``
-and ``factors.interpolate``): one pass over the query times instead of ~40 numpy
-temporaries of the queries' length. They are evaluated at every baro sample and GNSS fix in
-every Gauss-Newton iteration (~0.3 s per iteration-hour of drive in numpy; the formulas and
-their order of operations are those of the numpy form they replace)."""
+"""Numba kernels of the IMU-shaped interpolant between keyframes
+(``interval_factors.DenseIncrements.at`` and ``interval_factors.interpolate``): one pass over
+the query times instead of ~40 numpy temporaries of the queries' length. They are evaluated at
+every baro sample and GNSS fix in every Gauss-Newton iteration (~0.3 s per iteration-hour of
+drive in numpy; the formulas and their order of operations are those of the numpy form they
+replace)."""
 
 from __future__ import annotations
 
 import numpy as np
 from numba import njit
 
-from ...nav.rotations import quat_to_dcm_into
+from ....nav.rotations import quat_to_dcm_into
 
 
 @njit(cache=True)
