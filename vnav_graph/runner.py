@@ -33,6 +33,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from .ahrs_cache import Shared, sharing
 from .estimators.base import available, create
 from .evaluation.holdout import (
     HoldoutResult,
@@ -48,7 +49,6 @@ from .evaluation.screening import screen_reference
 from .failures import MissingStream, failure_message
 from .jit import CompileTimer, Prewarm, family_of, mark_warm
 from .progress import Mode, mode_for, say, steps
-from .sharing import Shared, sharing
 from .types import Drive, Estimate
 
 
@@ -188,7 +188,7 @@ def run_estimators(drive: Drive, names: Sequence[str], progress: bool | Mode = T
                  + [i for i, n in enumerate(names) if family_of(n) in pre.families])
     results: dict[int, RunResult] = {}
     try:
-        with sharing() as shared:  # the vertical filters' AHRS once (vnav_graph.sharing)
+        with sharing() as shared:  # the vertical filters' AHRS once (vnav_graph.ahrs_cache)
             for i in steps(order, desc, mode, label=lambda i: names[i]):
                 name = names[i]
                 waited = pre.wait(name) if pre is not None else 0.0

@@ -60,7 +60,7 @@ from ...nav.arrays import nearest_index
 from ...nav.error_state import BARO_COMPONENTS, mark_absent
 from ...nav.gaps import GAP_ACCEL_SD
 from ...nav.levelling import coarse_level
-from ...pages import small_pages
+from ...numpy_pages import small_pages
 from ...sensors.baro import with_prior_conflict_notes, without_implausible_scale
 from ...sensors.magnetometer import (
     field_and_info,
@@ -471,7 +471,7 @@ class EKF:
         self.config = config or EkfConfig()
 
     def run(self, drive: Drive) -> Estimate:
-        with small_pages():  # numpy's large arrays without huge-page faults (vnav_graph.pages)
+        with small_pages():  # large numpy arrays without huge-page faults (numpy_pages)
             est = without_contradicting_mag(self._run(drive), self.config,
                                             lambda cfg: type(self)(cfg)._run(drive))
             return with_prior_conflict_notes(without_implausible_scale(

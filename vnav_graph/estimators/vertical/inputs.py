@@ -120,9 +120,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ...ahrs_cache import shared_call
 from ...geo.earth import OMEGA_IE, gravity, radii
 from ...nav.gaps import gap_threshold
-from ...sharing import shared_call
 from ...types import Drive, FloatArray
 from .ahrs import ahrs_kernel, poly_velocity
 
@@ -420,7 +420,7 @@ def vertical_inputs(drive: Drive, config: AhrsConfig | None = None) -> VerticalI
     VerticalInputs
         arrays of shape (N,) (``q_nb`` (N, 4), ``bias_gyro`` (N, 3)) at ``drive.imu.t``.
         Inside ``runner.run_estimators`` it is computed once per drive and config and
-        shared, read-only, by the vertical estimators (``vnav_graph.sharing``).
+        shared, read-only, by the vertical estimators (``vnav_graph.ahrs_cache``).
     """
     cfg = config or AhrsConfig()
     # computed once per run for all vertical estimators, time charged to each (sharing.py)

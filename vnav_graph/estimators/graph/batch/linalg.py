@@ -31,7 +31,7 @@ import numpy as np
 from numba import njit
 from scipy.linalg import LinAlgError, cho_solve_banded, cholesky_banded
 
-from ....pages import small_pages
+from ....numpy_pages import small_pages
 from ....types import FloatArray
 
 
