@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from ..config import BaroSpec, GnssSpec, ImuSpec
+from ..failures import failure_message
 from ..types import BaroStream, BaroTruth, Drive, GnssStream, ImuStream, MagStream, Trajectory
 
 FORMAT = "vnav_graph.drive/1"
@@ -163,8 +164,8 @@ def _spec_checked(d: Any, key: str, fname: str) -> Any:
     try:
         return _spec_from_json(d)
     except (TypeError, ValueError) as exc:
-        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise ValueError(f"{fname}: header {key!r} has an invalid field ({msg})") from None
+        raise ValueError(f"{fname}: header {key!r} has an invalid field "
+                         f"({failure_message(exc)})") from None
 
 
 def _mag_checked(a: dict[str, np.ndarray], header: dict[str, Any],
@@ -195,8 +196,8 @@ def load_npz(path: str | Path) -> Drive:
         with np.load(p, allow_pickle=False) as z:  # known members only: nothing else inflated
             raw = {k: z[k] for k in z.files if k in _ARRAY_KEYS_FLOAT or k == "header"}
     except (OSError, ValueError, zipfile.BadZipFile, EOFError, zlib.error) as exc:
-        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise ValueError(f"{p.name}: not a readable .npz drive ({msg})") from None
+        raise ValueError(f"{p.name}: not a readable .npz drive ({failure_message(exc)})"
+                         ) from None
     if "header" not in raw:
         raise ValueError(f"{p.name}: .npz without a vnav_graph header")
     try:

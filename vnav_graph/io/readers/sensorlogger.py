@@ -78,6 +78,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from ...failures import failure_message
 from ...types import BaroStream, Drive, GnssStream, ImuStream, MagStream
 from ._common import (
     Report,
@@ -257,8 +258,8 @@ def _read_csv(path: Path, what: str, report: Report | None = None) -> pd.DataFra
     try:
         df = pd.read_csv(io.StringIO(text), on_bad_lines="skip")
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
-        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise ValueError(f"{path.name}: cannot parse {what} CSV ({msg})") from None
+        raise ValueError(f"{path.name}: cannot parse {what} CSV ({failure_message(exc)})"
+                         ) from None
     if df.empty:
         raise ValueError(f"{path.name}: {what} CSV has no data rows (truncated?)")
     return df
@@ -471,7 +472,7 @@ def _read_csv_text(text: str, path: Path) -> pd.DataFrame:
     try:
         df = pd.read_csv(io.StringIO(text), on_bad_lines="skip")
     except (pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
-        raise ValueError(f"{path.name}: cannot parse CSV ({str(exc).splitlines()[0]})") from None
+        raise ValueError(f"{path.name}: cannot parse CSV ({failure_message(exc)})") from None
     if len(df) < 10:
         raise ValueError(f"{path.name}: merged CSV has only {len(df)} data rows (truncated?)")
     return df

@@ -10,6 +10,7 @@ import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import A, B, C, G, K, V, X
 
+from ....failures import failure_message
 from ..batch.smoother import solver_warnings, value_of
 from ..model.cpp_factors import keyframe_fixes, prior_factors
 from ..model.extend import Collected, key_name
@@ -36,9 +37,8 @@ def update_error(P: Any, k: int, exc: BaseException | None, gap: bool) -> Runtim
         causes.append("GNSS without velocity (attitude/velocity weakly observable)")
     if not causes:
         causes.append("a linearisation point far from the solution (diverged prediction)")
-    what = ("iSAM2 update raised " + (str(exc).strip().splitlines()[0] if str(exc).strip()
-                                      else type(exc).__name__ + " with an empty message")
-            if exc is not None else "the online estimate became non-finite or diverged")
+    what = ("iSAM2 update raised " + failure_message(exc, typed=True) if exc is not None
+            else "the online estimate became non-finite or diverged")
     return RuntimeError(
         f"graph-isam2: {what} at keyframe {k + 1} (t = {t1:.2f} s, interval "
         f"[{t0:.2f}, {t1:.2f}] s, largest IMU spacing {max_dt:.3g} s); likely cause: "
