@@ -117,6 +117,12 @@ def _gnss_held_jump(r: Raw, t0: float, dur: float, dn_m: float) -> None:
     r.lat_deg[m] += dn_m / 111_320.0
 
 
+def _gnss_held_height_jump(r: Raw, t0: float, dur: float, dh_m: float) -> None:
+    """Every fix in [t0, t0 + dur) s raised by ``dh_m`` (a height glitch held a while)."""
+    m = (r.t_gnss >= r.t_gnss[0] + t0) & (r.t_gnss < r.t_gnss[0] + t0 + dur)
+    r.h[m] += dh_m
+
+
 def _imu_gap(r: Raw, t0: float, t1: float) -> None:
     keep = ~((r.t_imu > r.t_imu[0] + t0) & (r.t_imu < r.t_imu[0] + t1))
     r.t_imu, r.gyro, r.acc = r.t_imu[keep], r.gyro[keep], r.acc[keep]
@@ -188,6 +194,8 @@ SEMANTIC: dict[str, tuple[Callable[[Raw, np.random.Generator], Raw], str, tuple[
     "gnss-far-fix": (_m(lambda r, g: _gnss_jump(r, 700, 8.5e6, 0.0)), "hostile", None),
     "gnss-jump-10km-5s": (_m(lambda r, g: _gnss_held_jump(r, 60.0, 5.0, 1.0e4)), "hostile",
                           None),
+    "gnss-alt-jump-1km-5s": (_m(lambda r, g: _gnss_held_height_jump(r, 60.0, 5.0, 1.0e3)),
+                             "hostile", None),
 }
 
 
