@@ -43,11 +43,22 @@ def reader_repairs(meta: Any) -> list[str]:
     Reads the reader's ``notes`` (sentences such as "CLOCK REPAIRED: the boot clock advanced
     0.92315 s per GPS second ..."), ``repaired`` and ``dropped`` (stream → reason → count) and
     ``gaps`` (stream → [[start_s, length_s], ...]). Empty for a simulated drive.
+
+    Each fact is said once: a repair that a note already describes ("CLOCK REPAIRED: ..."
+    for the stream ``clock``) and a repair or drop that the input checks already list among
+    ``meta["warnings"]`` (the ``input warning:`` lines) are left out.
     """
-    out = [str(n) for n in meta.get("notes") or []]
+    notes = [str(n) for n in meta.get("notes") or []]
+    said = " ".join(str(w) for w in meta.get("warnings") or [])
+    out = list(notes)
     for kind in ("repaired", "dropped"):
         for stream, reasons in (meta.get(kind) or {}).items():
+            if kind == "repaired" and any(n.startswith(f"{stream.upper()} REPAIRED")
+                                          for n in notes):
+                continue
             for reason, count in reasons.items():
+                if reason in said:
+                    continue
                 out.append(f"{stream}: {kind} {count}: {reason}")
     for stream, gaps in (meta.get("gaps") or {}).items():
         if gaps:

@@ -386,3 +386,16 @@ class _Shifted:
 
     def run(self, drive):
         return shifted_truth(drive)
+
+
+def test_reader_lines_say_each_fact_once():
+    from vnav_graph.pipeline import reader_repairs
+
+    meta = {"notes": ["CLOCK REPAIRED: the boot clock advanced 0.92315 s per GPS second"],
+            "repaired": {"clock": {"boot-clock stamps rescaled to GPS seconds": 1}},
+            "dropped": {"log": {"incomplete last record (file truncated)": 1},
+                        "gnss": {"zero fix": 3}},
+            "warnings": ["log: 1 incomplete last record (file truncated)"]}
+    assert reader_repairs(meta) == [
+        "CLOCK REPAIRED: the boot clock advanced 0.92315 s per GPS second",
+        "gnss: dropped 3: zero fix"]
