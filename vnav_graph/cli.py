@@ -96,6 +96,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "step)")
     r.add_argument("--no-holdout", action="store_true",
                    help="real logs: skip the withheld-GNSS scoring run (metrics become null)")
+    r.add_argument("--outage", type=_positive_float, default=60.0,
+                   help="real logs: length of each withheld-GNSS window [s] (default 60)")
+    r.add_argument("--spacing", type=_positive_float, default=None,
+                   help="real logs: spacing of the windows [s] (default: as holdout)")
     r.add_argument("--export", type=_export_formats, default=None, metavar="FORMATS",
                    help="also export the trajectories at the end: comma-separated "
                         "csv,kml,gpx,tum (into OUT/export/; see 'vnav-graph export')")
@@ -202,7 +206,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         if ok:
             with stage("scoring against withheld GNSS (holdout run of every estimator)", mode):
                 summary, holdout = score_holdout(summary, drive, ok, progress=mode,
-                                                 configs=configs)
+                                                 configs=configs, outage_s=args.outage,
+                                                 spacing_s=args.spacing)
     from .pipeline import write_outputs
 
     writers = []

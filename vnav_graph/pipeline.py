@@ -166,16 +166,19 @@ def apply_holdout(summary: dict[str, Any], holdout_doc: dict[str, Any]) -> dict[
 
 
 def score_holdout(summary: dict[str, Any], drive: Drive, names: Sequence[str],
-                  progress: bool | Mode = False, configs: Mapping[str, Any] | None = None
+                  progress: bool | Mode = False, configs: Mapping[str, Any] | None = None,
+                  outage_s: float = 60.0, spacing_s: float | None = None
                   ) -> tuple[dict[str, Any], Any]:
     """The optional holdout scoring of ``run`` (:func:`apply_holdout`), which never sinks the
     run: when the log cannot be scored (GNSS span too short for one outage window, too few
-    fixes) the summary keeps its results and says why in ``evaluation.skipped``.
+    fixes) the summary keeps its results and says why in ``evaluation.skipped``. ``outage_s``
+    and ``spacing_s``: the windows (``run --outage / --spacing``, as ``holdout``'s).
 
     Returns the summary and the ``HoldoutResult`` (None when skipped), whose error series the
     report draws."""
     try:
-        res = run_holdout(drive, list(names), progress=progress, configs=configs)
+        res = run_holdout(drive, list(names), outage_s, spacing_s, progress=progress,
+                          configs=configs)
     except ValueError as exc:
         out = dict(summary)
         out["evaluation"] = {"basis": None, "skipped": failure_message(exc)}

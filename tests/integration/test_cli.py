@@ -80,3 +80,19 @@ def test_run_on_real_log_scores_against_withheld_gnss(tmp_path):
     assert m["alt_rmse_m"] is not None and 0.0 < m["alt_rmse_m"] < 10.0
     assert m["nees_mean"] is None  # no reference for NEES on a real log
     assert s["estimators"]["vkf4"]["baro"]["bias_m"]["truth"] is None
+
+
+def test_run_takes_the_holdout_windows_like_holdout(tmp_path):
+    """``run --outage / --spacing`` on a real log set the withheld-GNSS windows it is scored
+    in, as ``holdout`` does (the hint for a log too short names ``--outage``)."""
+    from pathlib import Path
+
+    log = Path(__file__).resolve().parents[1] / "data" / "sensorlogger_car_1hz_cut.csv"
+    out = tmp_path / "o"
+    code = main(["run", str(log), "--estimators", "vkf4", "--outage", "30", "--out", str(out),
+                 "--no-progress"])
+    assert code == 0
+    ev = json.loads((out / "summary.json").read_text())["evaluation"]
+    assert ev["outage_s"] == 30.0
+    assert all(abs((w["t1"] - w["t0"]) - 30.0) < 1e-9 if isinstance(w, dict)
+               else abs((w[1] - w[0]) - 30.0) < 1e-9 for w in ev["windows"])

@@ -490,12 +490,13 @@ def _choose_clock(clock: str, fixes: _Fixes, t_ref: float, report: Report) -> di
         report.notes.append(
             f"CLOCK REPAIRED: the boot clock advanced {r:.5f} s per GPS second "
             f"({(r - 1) * 100:+.2f} %); IMU, baro, GNSS and onboard stamps are rescaled to "
-            f"GPS seconds keeping t = {t_ref:.3f} s fixed (read with clock='boot' to keep "
-            "the raw boot clock)")
+            f"GPS seconds keeping t = {t_ref:.3f} s fixed (the raw boot clock: Python "
+            "vnav_graph.io.readers.ardupilot.read_dataflash(path, clock='boot'))")
     elif off:
         report.notes.append(
             f"WARNING: the boot clock advanced {r:.5f} s per GPS second "
-            f"({(r - 1) * 100:+.2f} %); streams kept on the boot clock (clock='boot'): IMU "
+            f"({(r - 1) * 100:+.2f} %); streams kept on the boot clock (read_dataflash "
+            f"clock='boot'): IMU "
             "intervals are then off by this factor if GPS time is right")
     return clock_meta
 
