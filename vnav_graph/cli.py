@@ -70,8 +70,43 @@ class _Parser(argparse.ArgumentParser):
         self.exit(EXIT_BAD_INPUT, f"vnav-graph: error: {message}\n")
 
 
+DESCRIPTION = ("INS / GNSS / barometric-altimeter navigation: a GTSAM factor-graph smoother,\n"
+               "a reference EKF + RTS smoother and the classical baro-inertial loops on one\n"
+               "set of sensor models, compared on your drive. 'vnav-graph run --help' lists\n"
+               "the estimators and scenarios.")
+
+EXIT_CODES = """exit codes:
+  0    every estimator that could run is ok (skipped ones are named on stderr)
+  2    bad input: one line on stderr, nothing written
+  3    some estimators failed or diverged (the others' results are written)
+  4    no estimator produced a trustworthy result (summary written for diagnosis)
+  130  interrupted (Ctrl-C)"""
+
+
+class _Help(argparse.RawDescriptionHelpFormatter):
+    """Epilogs keep their line breaks (lists of names, exit codes)."""
+
+
+def _names_epilog() -> str:
+    """The estimators and scenarios of this build, one line each (``run --help``)."""
+    from .estimators.base import available, describe
+    from .simulation import list_scenarios, scenario_description
+
+    names, scen = available(), list_scenarios()
+    w = max(len(n) for n in [*names, *scen]) + 2
+    lines = ["estimators (--estimators a,b; default: all):"]
+    lines += [f"  {n:<{w}}{describe(n)}" for n in names]
+    lines += ["", "scenarios (--scenario NAME; default: default):"]
+    lines += [f"  {s:<{w}}{scenario_description(s)}" for s in scen]
+    lines += ["", "outputs in --out: summary.json, summary.txt, report.html, plots/*.png, "
+              "estimates/<name>.parquet,", "  drive.json, truth.parquet (simulated), export/ "
+              "(with --export)", "", EXIT_CODES]
+    return "\n".join(lines)
+
+
 def build_parser() -> argparse.ArgumentParser:
-    p = _Parser(prog="vnav-graph", description=__doc__.splitlines()[0])
+    p = _Parser(prog="vnav-graph", description=DESCRIPTION, epilog=EXIT_CODES,
+                formatter_class=_Help)
     from . import __version__
 
     p.add_argument("--version", action="version", version=f"vnav-graph {__version__}")
@@ -83,14 +118,22 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--duration", type=_positive_float, default=None, help="override [s]")
     s.add_argument("-o", "--output", required=True, help="output .npz path")
 
-    r = sub.add_parser("run", help="run estimators on a drive and compare them")
+    r = sub.add_parser("run", help="run estimators on a drive and compare them",
+                       description="Run estimators on a drive (a .npz, a real log, or a\n"
+                                   "simulated scenario), print the comparison and write the\n"
+                                   "results, plots and an HTML report.",
+                       epilog=_names_epilog(), formatter_class=_Help)
     r.add_argument("drive", nargs="?", default=None,
                    help="drive .npz or real log; default: simulated scenario")
     r.add_argument("--scenario", default=None, help="scenario to simulate (default: default)")
-    r.add_argument("--seed", type=int, default=0)
-    r.add_argument("--duration", type=_positive_float, default=None, help="override [s]")
-    r.add_argument("--estimators", type=_csv_list, default=None, help="comma-separated names")
-    r.add_argument("--out", default="vnav-graph-out", help="output directory")
+    r.add_argument("--seed", type=int, default=0,
+                   help="seed of the simulated scenario's noise and errors (default 0)")
+    r.add_argument("--duration", type=_positive_float, default=None,
+                   help="shorten or lengthen the simulated scenario [s]")
+    r.add_argument("--estimators", type=_csv_list, default=None,
+                   help="comma-separated names (default: all; listed below)")
+    r.add_argument("--out", default="vnav-graph-out",
+                   help="output directory (default: vnav-graph-out)")
     r.add_argument("--no-progress", action="store_true",
                    help="no progress on stderr (default: a bar on a terminal, else a line per "
                         "step)")

@@ -96,3 +96,20 @@ def test_run_takes_the_holdout_windows_like_holdout(tmp_path):
     assert ev["outage_s"] == 30.0
     assert all(abs((w["t1"] - w["t0"]) - 30.0) < 1e-9 if isinstance(w, dict)
                else abs((w[1] - w[0]) - 30.0) < 1e-9 for w in ev["windows"])
+
+
+def test_help_explains_itself(capsys):
+    """``--help`` and ``run --help``: no raw markup; run's help lists every estimator and
+    scenario with its line, the outputs and the exit codes."""
+    from vnav_graph.estimators.base import DESCRIPTIONS
+
+    for argv in (["--help"], ["run", "--help"]):
+        with pytest.raises(SystemExit) as e:
+            main(argv)
+        assert e.value.code == 0
+        text = capsys.readouterr().out
+        assert "``" not in text and "exit codes:" in text
+    assert "default: vnav-graph-out" in text and "summary.json" in text
+    for name, line in DESCRIPTIONS.items():
+        assert any(ln.split()[:1] == [name] and line in ln for ln in text.splitlines()), name
+    assert "urban" in text and "seed of the simulated scenario" in text
