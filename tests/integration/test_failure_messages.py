@@ -26,8 +26,8 @@ def _named(err: str) -> bool:
 
 
 @pytest.mark.parametrize(("message", "expect"), [
-    ("", "RuntimeError: no message"),
-    ("   \n  ", "RuntimeError: no message"),
+    ("", "RuntimeError (no message; raised at test_failure_messages.py"),
+    ("   \n  ", "RuntimeError (no message; raised at test_failure_messages.py"),
     (GTSAM_LIKE, "RuntimeError: Indeterminate linear system detected while working near "
                  "variable"),
 ])
@@ -40,7 +40,7 @@ def test_an_empty_or_newline_first_message_is_never_reported_bare(tmp_path, monk
     assert main(["run", "--scenario", "hill-drive", "--duration", "30", "--estimators",
                  "loop3,vkf4", "--out", str(out), "--no-progress"]) == 3
     err = _errors(out)
-    assert set(err) == {"vkf4"} and err["vkf4"] == expect
+    assert set(err) == {"vkf4"} and err["vkf4"].startswith(expect)
     assert all(_named(e) for e in err.values())
 
 
