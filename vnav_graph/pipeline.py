@@ -136,7 +136,7 @@ def apply_holdout(summary: dict[str, Any], holdout_doc: dict[str, Any]) -> dict[
     per_block: dict[str, list[dict[str, Any]]] = {}
     for name, block in out["estimators"].items():
         h = holdout_doc["estimators"].get(name)
-        if h is None or block["status"] != "ok":
+        if h is None or block["status"] not in ("ok", "diverged"):
             continue
         for k in ("alt_rmse_m", "alt_max_abs_m", "horiz_rmse_m", "vel_down_rmse_mps",
                   "nees_mean", "nees_dof"):

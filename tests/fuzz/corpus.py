@@ -613,6 +613,21 @@ def build_cases(include_shared: bool = True) -> list[Case]:
     cases.append(Case("dataflash/sim/structure/records-unsorted", "dataflash", "structure",
                       False, sim_writer("dataflash", r_shuf), "dataflash/sim/control/none"))
 
+    # ---- a 12-minute base for a 10-minute IMU gap while GNSS and baro go on (no rng draws:
+    # the other cases keep their seeds)
+    long_raw, long_sim = sim_raw(duration_s=720.0)
+    gap = long_raw.copy()
+    _imu_gap(gap, 60.0, 660.0)
+    for fmt in ("npz", "sl-folder"):
+        def build_l(d: Path, fmt: str = fmt, r: Raw = long_raw) -> Path:
+            d.mkdir(parents=True, exist_ok=True)
+            p = d / ("long" + SUFFIX[fmt])
+            return write_npz(r, p, long_sim) if fmt == "npz" else WRITERS[fmt](r, p)
+        ctrl = f"{fmt}/sim-long/control/none"
+        cases.append(Case(ctrl, fmt, "control", False, build_l, ctrl))
+        cases.append(Case(f"{fmt}/sim-long/semantic/imu-gap-10min", fmt, "semantic", True,
+                          lambda d, fmt=fmt, b=build_l: b(d, fmt, gap), ctrl))
+
     # ---- the small real cuts in tests/data (always present)
     real: list[tuple[str, str, Path]] = [
         ("merged-csv", "car-cut", TEST_DATA / "sensorlogger_car_1hz_cut.csv"),

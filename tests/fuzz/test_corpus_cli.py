@@ -24,7 +24,9 @@ SAMPLE += [c for c in ALL if c.id in ("npz/sim/hostile/clip-accel-16g",
                                       "dataflash/sim/hostile/baro-step-100m",
                                       "ulog/sim/semantic/imu-gap-70s",
                                       "dataflash/sim/hostile/gnss-alt-jump-1km-5s",
-                                      "sl-folder/sim/hostile/gnss-jump-10km-5s")]
+                                      "sl-folder/sim/hostile/gnss-jump-10km-5s",
+                                      "sl-folder/sim/structure/missing-Barometer",
+                                      "sl-folder/sim-long/semantic/imu-gap-10min")]
 
 
 @pytest.mark.slow

@@ -63,3 +63,20 @@ def test_a_short_excursion_and_an_overconfident_small_error_are_not_divergence(d
 def test_no_gnss_nothing_to_check(drive):
     c = self_check(_est(drive, d_alt=5000.0), drive.replace(gnss=None))
     assert not c.diverged and c.windows == 0 and c.worst_z is None
+
+
+def test_lost_whatever_its_sigma(drive):
+    """Kilometres from the fixes for over 30 s is divergence even when σ claims as much
+    (z stays under the limit): the estimate lost its measurements."""
+    from vnav_graph.evaluation.selfcheck import LOST_M, LOST_S
+
+    e = _est(drive, d_alt=2000.0, t_from=60.0)
+    t_cov = e.trajectory.t[::50]
+    cov = np.tile(np.eye(18) * 5000.0**2, (t_cov.size, 1, 1))  # σ 5 km everywhere
+    c = self_check(e.replace(cov=cov, t_cov=t_cov), drive)
+    assert c.worst_z < Z_DIVERGED  # not outside its own σ...
+    assert c.diverged and "above 1000 m for" in c.reason and "lost" in c.reason
+    assert LOST_M == 1000.0 and LOST_S == 30.0
+    # the same offset for 20 s only: not lost
+    e2 = _est(drive, d_alt=2000.0, t_from=60.0, t_to=80.0)
+    assert not self_check(e2.replace(cov=cov, t_cov=t_cov), drive).diverged
