@@ -517,6 +517,8 @@ def test_a_too_short_isam2_window_is_caught_by_the_batch_check(problem):
     fb = e2.info["final_batch"]
     assert 2 * fb["cost_gap"] > g.isam2.smoother.OWN_GAP_FRACTION * fb["dimension"]
     assert e2.info["trajectory_source"] == "final_batch"
+    assert e2.info["isam2_final"] == "batch"
+    assert any("final batch pass's" in f for f in e2.info["fallbacks"])
     assert any("not at the optimum" in w for w in e2.info["warnings"])
     assert np.max(np.abs(e2.trajectory.alt - est.trajectory.alt)) < 1e-3
     # its covariances come from a system rebuilt at the batch pass's solution (the check

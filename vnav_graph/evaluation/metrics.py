@@ -182,6 +182,8 @@ def evaluate(est: Estimate, drive: Drive,
         # solver, ...; each also a warning), and the graph's solver path (null elsewhere)
         "fallbacks": [str(f) for f in est.info.get("fallbacks", [])],
         "solver": est.info.get("solver"),
+        # graph-isam2: whose answer the trajectory is, "isam2" or "batch" (null elsewhere)
+        "isam2_final": est.info.get("isam2_final"),
         "extra_variables": extra_variables_block(est.info.get("extra_variables")),
     }
     if drive.truth is not None:

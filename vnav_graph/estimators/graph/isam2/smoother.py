@@ -58,7 +58,7 @@ from ....sensors.magnetometer import without_contradicting_mag
 from ....types import Drive, Estimate, Trajectory
 from ..batch.general import first_line
 from ..batch.linalg import solver_context
-from ..batch.smoother import gnss_gm_info, outputs, provides
+from ..batch.smoother import fallback_notes, gnss_gm_info, outputs, provides
 from ..batch.solve import evaluate_at, gauss_newton
 from ..model import interval_factors as gf
 from ..model.cpp_factors import build_batch_graph, pims_for
@@ -251,11 +251,19 @@ class GraphISAM2:
         info = estimate_info(P, cfg, res if res is not None else chosen, out, on.upd_ms,
                              on.brk, robust, fallback, times, isam_k, int(seg[-1]) + 1,
                              self.name)
-        info["warnings"] += warn
+        solver_notes = fallback_notes(chosen, cfg, out["cov_damping"])
+        info["warnings"] += warn + solver_notes
+        # what the answer fell back to, each also a warning (summary.json / bench rows)
+        info["fallbacks"] = (
+            ([] if fallback is None else [f"iSAM2 update failed and was retried with dogleg "
+                                          f"({fallback})"])
+            + (["the trajectory is the final batch pass's, not iSAM2's own estimate"]
+               if source == "final_batch" else []) + solver_notes)
         info.update(on.relin_counts)
         info["trajectory_source"] = source
+        info["isam2_final"] = "batch" if source == "final_batch" else "isam2"
         info["final_batch"] = final_batch
-        info["solver_final"] = chosen.solver
+        info["solver_final"] = info["solver"] = chosen.solver
         info["final_pass_restarted"] = restarted
         info["extra_variables"] = out["extra"]
         info.update(out["accel_scale"])
