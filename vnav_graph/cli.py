@@ -139,6 +139,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "step)")
     r.add_argument("--no-holdout", action="store_true",
                    help="real logs: skip the withheld-GNSS scoring run (metrics become null)")
+    r.add_argument("--baseline", default=None, metavar="NAME",
+                   help="put every estimator against NAME in the headline (paired CI per "
+                        "metric), e.g. your variant against the estimator it extends")
     r.add_argument("--outage", type=_positive_float, default=60.0,
                    help="real logs: length of each withheld-GNSS window [s] (default 60)")
     r.add_argument("--spacing", type=_positive_float, default=None,
@@ -219,6 +222,11 @@ def cmd_run(args: argparse.Namespace) -> int:
 
     t_start = time.perf_counter()
     names = resolve_estimators(args.estimators)  # validate before any work
+    if args.baseline is not None and args.baseline not in names:
+        from .suggest import did_you_mean
+
+        raise ValueError(f"--baseline {args.baseline!r} is not among the estimators run"
+                         f"{did_you_mean(args.baseline, names)} ({', '.join(names)})")
     out = check_out_dir(args.out)
     mode = mode_for(not args.no_progress)
     if args.drive is not None and args.scenario is not None:
@@ -251,6 +259,10 @@ def cmd_run(args: argparse.Namespace) -> int:
                 summary, holdout = score_holdout(summary, drive, ok, progress=mode,
                                                  configs=configs, outage_s=args.outage,
                                                  spacing_s=args.spacing)
+    if args.baseline is not None:
+        from .evaluation.compare import against_baseline
+
+        summary = against_baseline(summary, args.baseline)
     from .pipeline import write_outputs
 
     writers = []

@@ -113,3 +113,18 @@ def test_help_explains_itself(capsys):
     for name, line in DESCRIPTIONS.items():
         assert any(ln.split()[:1] == [name] and line in ln for ln in text.splitlines()), name
     assert "urban" in text and "seed of the simulated scenario" in text
+
+
+def test_run_baseline_leads_the_headline(tmp_path):
+    out = tmp_path / "o"
+    assert main(["run", "--estimators", "loop3,vkf4", "--baseline", "vkf4", "--duration", "60",
+                 "--out", str(out), "--no-progress"]) == 0
+    s = json.loads((out / "summary.json").read_text())
+    assert s["comparison"]["baseline"]["name"] == "vkf4"
+    assert s["comparison"]["headline"][0].startswith("Altitude RMSE against vkf4")
+    assert "loop3" in s["comparison"]["baseline"]["metrics"]["alt_rmse_m"]
+    r = subprocess.run([sys.executable, "-m", "vnav_graph", "run", "--estimators", "vkf4",
+                        "--baseline", "vkf5", "--out", str(tmp_path / "x")],
+                       capture_output=True, text=True)
+    assert r.returncode == 2 and "did you mean 'vkf4'?" in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1

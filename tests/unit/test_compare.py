@@ -134,3 +134,25 @@ def test_two_windows_cannot_rank() -> None:
     assert h["summary_text"].startswith(
         "Altitude RMSE: 2 paired holdout window(s) cannot rank the estimators (at least 4 are "
         "needed); lowest ekf-rts 0.67 m")
+
+
+def test_against_baseline_puts_everyone_against_one() -> None:
+    from vnav_graph.evaluation.compare import against_baseline
+
+    ests = {"base": _est(1.0), "variant": _est(0.9), "worse": _est(1.5),
+            "broken": _est(0.1, status="failed")}
+    pb = {"base": _blocks([1.0, 1.1, 0.9, 1.0]), "variant": _blocks([0.9, 1.0, 0.8, 0.9]),
+          "worse": _blocks([1.6, 1.4, 1.7, 1.3]), "broken": _blocks([0.1] * 4)}
+    comp = comparison(ests, pb, "truth", [(0, 1)] * 4, "time block", "note")
+    s = against_baseline({"estimators": ests, "comparison": comp}, "base")
+    rows = s["comparison"]["baseline"]["metrics"]["alt_rmse_m"]
+    assert set(rows) == {"variant", "worse"}  # failed: not compared
+    assert rows["variant"]["diff"] == pytest.approx(-0.1)
+    assert rows["variant"]["verdict"] == "better"  # d = −0.1 in every block: CI below 0
+    assert rows["worse"]["verdict"] == "worse"  # +0.6, +0.3, +0.8, +0.3: CI [+0.11, +0.89]
+    first = s["comparison"]["headline"][0]
+    assert first.startswith("Altitude RMSE against base (1.00 m), paired 95 % CI over the "
+                            "time blocks: variant -0.100 m")
+    missing = against_baseline({"estimators": ests, "comparison": comp}, "broken")
+    assert missing["comparison"]["headline"][0] == ("Altitude RMSE: the baseline broken has "
+                                                    "no result (failed).")

@@ -257,3 +257,52 @@ def headline_lines(summary: Mapping[str, Any]) -> list[str]:
     if lines and comp.get("note"):
         lines.append(comp["note"])
     return lines
+
+
+def against_baseline(summary: Mapping[str, Any], baseline: str) -> dict[str, Any]:
+    """The summary with every estimator put against ``baseline`` (``run --baseline NAME``):
+    per metric the paired difference estimator − baseline over the same blocks, its 95 %
+    t-interval and a verdict ("better" / "worse" when the interval excludes 0, else "tied";
+    "no CI" under two blocks), in ``comparison["baseline"]``, and one headline line per metric
+    put first. A baseline without a result (failed, skipped, diverged) is said so instead."""
+    import copy
+
+    out = copy.deepcopy(dict(summary))
+    comp = out.get("comparison")
+    if not comp:
+        return out
+    ests = out["estimators"]
+    kind = comp.get("block_kind", "block")
+    lines: list[str] = []
+    res: dict[str, Any] = {}
+    for key, label in HEADLINE_METRICS:
+        vals = {n: m[key] for n, m in ests.items()
+                if m.get("status") == "ok" and m.get(key) is not None}
+        if baseline not in vals:
+            if key == "alt_rmse_m":
+                status = ests.get(baseline, {}).get("status", "not run")
+                lines.append(f"{label}: the baseline {baseline} has no result ({status}).")
+            continue
+        pb = {n: [b.get(key) for b in rows] for n, rows in comp.get("per_block", {}).items()}
+        base_v, base_b = vals[baseline], pb.get(baseline) or []
+        rows: dict[str, Any] = {}
+        parts = []
+        for n, v in sorted(vals.items(), key=lambda x: x[1]):
+            if n == baseline:
+                continue
+            d = [x - y for x, y in zip(pb.get(n) or [], base_b, strict=False)
+                 if x is not None and y is not None]
+            ci = paired_interval(d)
+            verdict = ("no CI" if ci is None else "better" if ci[2] < 0 else
+                       "worse" if ci[1] > 0 else "tied")
+            rows[n] = {"value": v, "diff": v - base_v, "n_blocks": len(d),
+                       "ci95": None if ci is None else [ci[1], ci[2]], "verdict": verdict}
+            ci_txt = "" if ci is None else f" [{_dm(ci[1])}, {_dm(ci[2])}]"
+            parts.append(f"{n} {_dm(v - base_v)} m{ci_txt} ({verdict})")
+        res[key] = rows
+        if parts:
+            lines.append(f"{label} against {baseline} ({_m(base_v)} m), paired 95 % CI over "
+                         f"the {kind}s: " + ", ".join(parts) + ".")
+    comp["baseline"] = {"name": baseline, "metrics": res}
+    comp["headline"] = [*lines, *(comp.get("headline") or [])]
+    return out
