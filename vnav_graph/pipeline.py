@@ -260,7 +260,10 @@ def format_table(summary: dict[str, Any]) -> str:
             s += "±" + format(p["sd"] * scale, spec)
         return s
 
-    for name, m in summary["estimators"].items():
+    from .estimators.base import family_order
+
+    for name in family_order(list(summary["estimators"])):  # the report's row order
+        m = summary["estimators"][name]
         b = m["baro"]
         nees = m["nees_mean"] / m["nees_dof"] if m.get("nees_dof") else None
         lines.append(row([

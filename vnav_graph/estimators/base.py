@@ -63,6 +63,13 @@ def describe(name: str) -> str:
     return f"extension: {doc[0]}" if doc else "extension estimator"
 
 
+def family_order(names: list[str]) -> list[str]:
+    """``names`` in the one row order of every table and figure: smoothers, filters, loops and
+    observers (each in ``FAMILIES`` order), then any other estimator in the order given."""
+    known = [n for _, _, members in FAMILIES for n in members if n in names]
+    return known + [n for n in names if n not in known]
+
+
 def family_of(name: str) -> tuple[str, str]:
     """(family, its singular) of an estimator name; ``OTHER_FAMILY`` for an extension."""
     return next(((f, one) for f, one, members in FAMILIES if name in members), OTHER_FAMILY)

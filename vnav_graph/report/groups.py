@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..estimators.base import FAMILIES, OTHER_FAMILY
+from ..estimators.base import FAMILIES, OTHER_FAMILY, family_order
 from ..types import FloatArray
 
 GROUPS: tuple[tuple[str, tuple[str, ...]], ...] = tuple((f, m) for f, _, m in FAMILIES)
@@ -83,5 +83,6 @@ def robust_limits(errors: Mapping[str, FloatArray | None], floor: float = 1e-3) 
 
 
 def ordered(names: Sequence[str]) -> list[str]:
-    """The names in family order (smoothers, filters, loops/observers, other)."""
-    return [n for _, members in group_names(names) for n in members]
+    """The names in family order (smoothers, filters, loops/observers, other):
+    ``estimators.base.family_order``, the terminal table's order too."""
+    return family_order(list(names))

@@ -121,8 +121,11 @@ def baro_table(summary: dict[str, Any]) -> str:
     """HTML table of the baro parameters (estimate ± σ) per estimator, truth in the last row."""
     head = ("<tr><th>estimator</th><th>scale s [%]</th><th>latency τ<sub>d</sub> [ms]</th>"
             "<th>bias b [m]</th></tr>")
+    from .groups import ordered
+
     rows, truth = [], None
-    for name, m in summary["estimators"].items():
+    for name in ordered(list(summary["estimators"])):
+        m = summary["estimators"][name]
         b = m["baro"]
         truth = b
         if all(b[k]["est"] is None for k in ("scale", "latency_s", "bias_m")):

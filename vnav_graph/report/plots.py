@@ -27,6 +27,17 @@ from . import canvas
 from .canvas import decimate
 from .palette import estimator_color
 
+
+def _plain_log_ticks(ax: Any) -> None:
+    """Log axis labelled 1, 2, 5 × 10ⁿ in plain numbers ("0.02", "5"), minor ticks unlabelled:
+    a range under a decade otherwise gets minor labels like "1.975×10⁰" that crowd the axis
+    and push its label off the figure."""
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+
+    ax.yaxis.set_major_locator(LogLocator(base=10.0, subs=(1.0, 2.0, 5.0)))
+    ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    ax.yaxis.set_minor_formatter(NullFormatter())
+
 _IDX = {"scale": ERROR_STATE["baro_scale"].start, "latency_s": ERROR_STATE["baro_latency"].start,
         "bias_m": ERROR_STATE["baro_bias"].start}
 # (key, label, display scale) of the three baro parameters
@@ -159,6 +170,7 @@ def plot_baro_convergence(drive: Drive, results: Sequence[Any],
                     ax.plot(t[s], sd[s] * sc, lw=0.9, label=name,
                             color=estimator_color(name))
             ax.set_yscale("log")
+            _plain_log_ticks(ax)
             ax.set_ylabel("σ of " + label, fontsize=8)
         else:
             for name, h in hists.items():
