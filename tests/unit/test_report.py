@@ -399,3 +399,14 @@ def test_reader_lines_say_each_fact_once():
     assert reader_repairs(meta) == [
         "CLOCK REPAIRED: the boot clock advanced 0.92315 s per GPS second",
         "gnss: dropped 3: zero fix"]
+
+
+def test_real_log_baro_convergence_caption_says_it_shows_the_whole_log():
+    from vnav_graph.report import captions
+    from vnav_graph.report.errors import WITHHELD, ErrorSet
+
+    es = ErrorSet(WITHHELD, [], [(100.0, 160.0), (250.0, 310.0)], True)
+    cap = captions(es, {"evaluation": {"outage_s": 60.0}})
+    assert "time axis shows only them" in cap["altitude_error.png"]
+    assert "time axis shows only them" not in cap["baro_convergence.png"]
+    assert "whole log" in cap["baro_convergence.png"]

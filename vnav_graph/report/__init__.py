@@ -63,7 +63,10 @@ def captions(es: Any, summary: dict[str, Any]) -> dict[str, str]:
         "baro_parameters.png": "Barometer parameters: final estimate ± 1σ"
                                + (" vs truth" if es.basis == TRUTH else " (no truth)") + ".",
         "baro_convergence.png": "Barometer parameter histories (±1σ) and the σ of scale and "
-                                f"latency from the covariance; {shade}.",
+                                "latency from the covariance; " + (
+                                    shade if es.basis in (TRUTH, GIVEN) else
+                                    "the run with all GNSS over the whole log; shaded: the "
+                                    "windows in which the scoring run withheld GNSS") + ".",
     }
 
 
