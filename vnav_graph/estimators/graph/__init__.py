@@ -1,26 +1,24 @@
 """GTSAM factor-graph smoothers: ``graph-batch`` (full batch) and ``graph-isam2`` (incremental).
 
-Public surface: ``GraphConfig``, ``GraphBatch``, ``GraphISAM2`` (imported on first use, so that
-importing a submodule such as ``factors`` does not load the estimators). Modules:
+Public surface: ``GraphConfig``, ``GraphBatch``, ``GraphISAM2`` and ``check_jacobians`` (a
+factor's Jacobians against central differences), imported on first use so that importing a
+submodule does not load the estimators. Three rooms:
 
-- ``problem``: problem set-up (GNSS pre-gate, baro priors, IMU gaps, accelerometer scale
-  factors), preintegration and the interval rows of the custom baro/GNSS terms at a
-  linearisation point;
-- ``builders``: the C++ factors (priors, keyframe fixes, IMU factor and the biases'
-  Gauss-Markov link, Gauss-Markov chains, IMU-gap factors, the batch's C++ graph);
-- ``factors``: the custom baro/GNSS terms, linearised in vectorised numpy, and frame helpers;
-- ``init``: initial keyframe states from GNSS and the IMU;
-- ``solve``: batch Gauss-Newton / Levenberg-Marquardt with the post-solve GNSS gate;
-- ``layout``: column layout from the graph's keys, the banded-arrow fast path (system and
-  covariance) and the test whether a graph fits it;
-- ``linalg``: banded-arrow normal equations, Cholesky and selected inversion;
-- ``general``: the general sparse path (GTSAM elimination of the linearised graph) and the
-  interval information blocks as GTSAM HessianFactor pieces;
-- ``batch``: outputs (trajectory, covariance, baro parameters) and ``GraphBatch``;
-- ``isam2``: ``GraphISAM2``, the incremental front end;
-- ``extend``: the public extension point — user factors and variables for both smoothers
-  (``GraphBatch(config, extensions=[...])``, ``GraphISAM2(config, extensions=[...])``;
-  guide in ``docs/extending.md``).
+- ``model/``: the model. ``problem`` (set-up: keyframes, GNSS pre-gate, baro priors, IMU gaps,
+  accelerometer scale factors, preintegration, interval rows at a linearisation point),
+  ``cpp_factors`` (priors, keyframe fixes, IMU factor and the biases' Gauss-Markov link,
+  Gauss-Markov chains, IMU-gap factors, the batch's C++ graph), ``interval_factors`` (the
+  custom baro/GNSS factors between keyframes, linearised in vectorised numpy, with
+  ``interp``), ``initial_guess``, ``robust``, ``magnetometer`` and ``extend`` (the public
+  extension point: ``GraphBatch(config, extensions=[...])``, guide in
+  ``docs/extending.md``);
+- ``batch/``: the batch solver. ``solve`` (Gauss-Newton / Levenberg-Marquardt, post-solve GNSS
+  gate), ``layout`` + ``linalg`` (the banded-arrow fast path and selected inversion),
+  ``general`` (GTSAM elimination of the linearised graph), ``smoother`` (outputs,
+  ``GraphBatch``);
+- ``isam2/``: the incremental front end. ``smoother`` (``GraphISAM2``), ``setup``, ``online``
+  (one update per keyframe), ``linear_factors`` + ``relin`` (its interval factors and their
+  relinearisation), ``window``.
 
 Design, measurements and references in ``docs/graph.md``.
 """
@@ -29,7 +27,7 @@ from __future__ import annotations
 
 from typing import Any
 
-__all__ = ["GraphBatch", "GraphConfig", "GraphISAM2"]
+__all__ = ["GraphBatch", "GraphConfig", "GraphISAM2", "check_jacobians"]
 
 
 def __getattr__(name: str) -> Any:
@@ -45,4 +43,8 @@ def __getattr__(name: str) -> Any:
         from .isam2.smoother import GraphISAM2
 
         return GraphISAM2
+    if name == "check_jacobians":
+        from .model.jacobians import check_jacobians
+
+        return check_jacobians
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
