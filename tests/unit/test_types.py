@@ -80,3 +80,17 @@ def test_gnss_alt_and_the_drive_height_datum():
     msl = drive.replace(meta={**drive.meta, "height_reference": "msl"})
     assert msl.height_datum.startswith("height above mean sea level")
     assert ("heights", msl.height_datum) in drive_rows(msl)
+
+
+def test_report_drive_table_explains_a_log_time_axis():
+    from vnav_graph.report.html import drive_rows
+    from vnav_graph.simulation import simulate
+
+    drive = simulate("default", 0, duration_s=20.0)
+    log = drive.replace(meta={**drive.meta, "clock": {
+        "basis": "GPS time [s] (boot clock rescaled)", "boot_clock_per_gps_second": 0.92315}})
+    rows = dict(drive_rows(log))
+    assert rows["clock"] == ("GPS time [s] (boot clock rescaled) (the boot clock ran -7.68 % "
+                             "against GPS time)")
+    assert rows["duration"].startswith("20.0 s (t = 0.00 … 20.00 s")
+    assert "clock" not in dict(drive_rows(drive))

@@ -48,7 +48,8 @@ def _pm(p: dict[str, Any], spec: str, scale: float) -> str:
 def drive_rows(drive: Drive) -> list[tuple[str, str]]:
     """(label, value) pairs describing the drive."""
     rows = [("name", drive.name), ("source", drive.source),
-            ("duration", f"{drive.duration_s:.1f} s"),
+            ("duration", f"{drive.duration_s:.1f} s (t = {drive.imu.t[0]:.2f} … "
+                         f"{drive.imu.t[-1]:.2f} s, the IMU's span on the drive's clock)"),
             ("IMU", f"{len(drive.imu)} samples, {drive.imu.rate_hz:.0f} Hz"),
             ("GNSS", "none" if drive.gnss is None else f"{len(drive.gnss)} fixes"),
             ("baro", "none" if drive.baro is None else f"{len(drive.baro)} samples"),
@@ -60,6 +61,13 @@ def drive_rows(drive: Drive) -> list[tuple[str, str]]:
         start = datetime.fromtimestamp(float(t0) + float(drive.imu.t[0]), UTC)
         rows.append(("start", f"{start:%Y-%m-%d %H:%M:%S} UTC (t = {drive.imu.t[0]:.2f} s on "
                               "the drive's clock)"))
+    clock = drive.meta.get("clock")
+    if clock:  # a log's time axis: the boot clock, or the boot clock rescaled to GPS seconds
+        basis = clock.get("basis") if isinstance(clock, dict) else str(clock)
+        rate = clock.get("boot_clock_per_gps_second") if isinstance(clock, dict) else None
+        rows.append(("clock", str(basis) + (
+            f" (the boot clock ran {(rate - 1) * 100:+.2f} % against GPS time)"
+            if rate is not None and abs(rate - 1.0) > 1e-3 else "")))
     for key in ("imu_grade", "gnss_outages"):
         if key in drive.meta:
             rows.append((key.replace("_", " "), str(drive.meta[key])))
