@@ -110,15 +110,15 @@ def test_unpack_cov_is_the_leading_block_of_the_packed_covariance():
     # packed upper triangles of NX×NX matrices → their leading 18×18 blocks, symmetric; the
     # baro rows/columns NaN when the drive has no barometer (blocks of 4096 epochs: 5000
     # crosses one boundary)
-    from vnav_graph.estimators.ekf.filter import _unpack_cov
+    from vnav_graph.estimators.ekf.model import unpack_cov
 
     rng = np.random.default_rng(3)
     a = rng.normal(size=(5000, km.NX, km.NX))
     s = a @ a.transpose(0, 2, 1)
     iu, ju = np.triu_indices(km.NX)
-    cov = _unpack_cov(s[:, iu, ju], True)
+    cov = unpack_cov(s[:, iu, ju], True)
     np.testing.assert_array_equal(cov, s[:, :18, :18])
-    no_baro = _unpack_cov(s[:, iu, ju], False)
+    no_baro = unpack_cov(s[:, iu, ju], False)
     assert np.isnan(no_baro[:, 15:18]).all() and np.isnan(no_baro[:, :, 15:18]).all()
     np.testing.assert_array_equal(no_baro[:, :15, :15], s[:, :15, :15])
 

@@ -57,7 +57,6 @@ from scipy.stats import chi2
 from ...config import REAL_LOG_BARO, ImuSpec
 from ...geo.earth import OMEGA_IE
 from ...nav.arrays import nearest_index
-from ...nav.error_state import BARO_COMPONENTS, mark_absent
 from ...nav.gaps import GAP_ACCEL_SD
 from ...nav.levelling import coarse_level
 from ...numpy_pages import small_pages
@@ -75,7 +74,6 @@ from ...sensors.model import (
 )
 from ...sensors.noise import gm_mean_prior_sd, gm_process_var, imu_bias_step, white_sd
 from ...types import (
-    ERROR_STATE_DIM,
     BaroEstimate,
     Drive,
     Estimate,
@@ -409,24 +407,6 @@ def _report(drive: Drive, res: tuple[Any, ...], gr: _Grids, gaps: NDArrayInt, in
     return innov, info
 
 
-def _unpack_cov(packed: FloatArray, has_baro: bool) -> FloatArray:
-    """Packed (M, NPACK) NX-state covariances → (M, 18, 18) in the ERROR_STATE layout."""
-    iu, ju = np.triu_indices(km.NX)
-    keep = np.flatnonzero(ju < ERROR_STATE_DIM)  # upper triangle of the leading block
-    iu, ju = iu[keep], ju[keep]
-    # straight into the (M, 18, 18) result: an (M, NX, NX) temporary was the ekf's largest
-    # allocation (90 MB on a 1-hour drive)
-    cov = np.empty((packed.shape[0], ERROR_STATE_DIM, ERROR_STATE_DIM))
-    for a in range(0, packed.shape[0], 4096):  # the gathered columns in blocks, not all at once
-        blk = packed[a:a + 4096][:, keep]
-        cov[a:a + 4096, iu, ju] = blk
-        cov[a:a + 4096, ju, iu] = blk
-    if not has_baro:
-        mark_absent(cov, BARO_COMPONENTS)
-    cov.setflags(write=False)  # read-only and owned: ``Estimate`` shares it instead of a copy
-    return cov
-
-
 def _estimate(name: str, run: _Run, traj: Trajectory, par: FloatArray, cov: FloatArray,
               t0: float, online: Trajectory | None, cfg: EkfConfig,
               bias_mean_sd: float | None = None) -> Estimate:
@@ -481,7 +461,7 @@ class EKF:
         t0 = time.perf_counter()
         run = run_forward(drive, self.config, store_rts=False)
         traj = _trajectory(run, run.lla, run.vel, run.q, run.par)
-        cov = _unpack_cov(run.cov_packed, run.has_baro)
+        cov = km.unpack_cov(run.cov_packed, run.has_baro)
         return _estimate(self.name, run, traj, run.par, cov, t0, None, self.config)
 
 
@@ -505,6 +485,6 @@ class EKFRTS(EKF):
         lla, vel, q, par = rts.apply_error(run.lla, run.vel, run.q, run.par, e_out)
         online = _trajectory(run, run.lla, run.vel, run.q, run.par)
         traj = _trajectory(run, lla, vel, q, par)
-        cov = _unpack_cov(cov_s, run.has_baro)
+        cov = km.unpack_cov(cov_s, run.has_baro)
         return _estimate(self.name, run, traj, par, cov, t0, online, self.config,
                          float(np.sqrt(max(var_b, 0.0))))

@@ -123,13 +123,17 @@ tests/unit/test_ekf_model.py).
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from numba import njit
 
 from ...geo.earth import OMEGA_IE, gravity_scalar, radii_scalar
 from ...nav.arrays import put, solve
+from ...nav.error_state import BARO_COMPONENTS, mark_absent
 from ...nav.rotations import quat_exp, quat_mul, skew3
 from ...nav.strapdown import nav_rates
+from ...types import ERROR_STATE_DIM
 
 NX = 25  # internal error-state dimension
 NPACK = NX * (NX + 1) // 2
@@ -330,3 +334,21 @@ def apply_correction(lla, v, q, par, dx):
     par[PTD] -= dx[ITD]
     par[PBB] -= dx[IBB]
     par[PGH] -= dx[IGH]
+
+
+def unpack_cov(packed: Any, has_baro: bool) -> Any:
+    """Packed (M, NPACK) NX-state covariances → (M, 18, 18) in the ERROR_STATE layout."""
+    iu, ju = np.triu_indices(NX)
+    keep = np.flatnonzero(ju < ERROR_STATE_DIM)  # upper triangle of the leading block
+    iu, ju = iu[keep], ju[keep]
+    # straight into the (M, 18, 18) result: an (M, NX, NX) temporary was the ekf's largest
+    # allocation (90 MB on a 1-hour drive)
+    cov = np.empty((packed.shape[0], ERROR_STATE_DIM, ERROR_STATE_DIM))
+    for a in range(0, packed.shape[0], 4096):  # the gathered columns in blocks, not all at once
+        blk = packed[a:a + 4096][:, keep]
+        cov[a:a + 4096, iu, ju] = blk
+        cov[a:a + 4096, ju, iu] = blk
+    if not has_baro:
+        mark_absent(cov, BARO_COMPONENTS)
+    cov.setflags(write=False)  # read-only and owned: ``Estimate`` shares it instead of a copy
+    return cov
