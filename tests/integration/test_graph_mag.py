@@ -114,3 +114,19 @@ def test_graph_isam2_drops_a_contradicting_compass_too(drive) -> None:
     est = GraphISAM2().run(bad)
     assert "contradicts the heading" in est.info["mag_note"]
     assert "h0" not in est.info["extra_variables"]
+
+
+def test_extension_counts_reach_the_summary():
+    """What each extension added (here the smoothers' own magnetometer: one heading factor
+    per magnetometer interval and the hard-iron variable H(0)) is in ``info["extensions"]``
+    and the summary block; null for an estimator without extensions."""
+    from vnav_graph.pipeline import summarize
+    from vnav_graph.runner import run_estimators
+    from vnav_graph.simulation import simulate
+
+    d = simulate("hill-drive-mag", 0, duration_s=60.0)
+    s = summarize(d, run_estimators(d, ["graph-batch", "graph-isam2", "ekf"]))["estimators"]
+    for name in ("graph-batch", "graph-isam2"):
+        mag = s[name]["extensions"]["magnetometer"]
+        assert mag["variables"] == 1 and 40 <= mag["factors"] <= 70  # measured 61 in 60 s
+    assert s["ekf"]["extensions"] is None

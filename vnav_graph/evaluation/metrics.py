@@ -184,6 +184,8 @@ def evaluate(est: Estimate, drive: Drive,
         "solver": est.info.get("solver"),
         # graph-isam2: whose answer the trajectory is, "isam2" or "batch" (null elsewhere)
         "isam2_final": est.info.get("isam2_final"),
+        # graph smoothers: factors and variables each extension added (null elsewhere)
+        "extensions": est.info.get("extensions"),
         "extra_variables": extra_variables_block(est.info.get("extra_variables")),
     }
     if drive.truth is not None:

@@ -347,12 +347,15 @@ class GraphBatch:
         graph, vals = build_batch_graph(P, rot, pos, vel, pims, pri, calib)
         extensions = (*self.extensions, *builtin_extensions(drive, self.config))
         if extensions:
-            collect(extensions, make_view(P, vals)).add_to_batch(graph, vals)
+            added = collect(extensions, make_view(P, vals))
+            added.add_to_batch(graph, vals)
         res = gauss_newton(P, graph, vals, calib, pri)
         t3 = time.perf_counter()
         out = outputs(P, res, pri, K(0) if drive.baro is not None else None)
         t4 = time.perf_counter()
+        counts = added.counts if extensions else {}
         info = {"keyframes": P.n_kf, "iterations": res.iterations, "final_cost": res.cost,
+                "extensions": counts,
                 "converged": res.converged, "stop": res.stop,
                 "predicted_decrease": res.predicted_decrease,
                 "warnings": [*solver_warnings(res, self.config),

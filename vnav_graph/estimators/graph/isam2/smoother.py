@@ -262,6 +262,7 @@ class GraphISAM2:
         info.update(on.relin_counts)
         info["trajectory_source"] = source
         info["isam2_final"] = "batch" if source == "final_batch" else "isam2"
+        info["extensions"] = on.ext.counts if on.ext is not None else {}
         info["final_batch"] = final_batch
         info["solver_final"] = info["solver"] = chosen.solver
         info["final_pass_restarted"] = restarted

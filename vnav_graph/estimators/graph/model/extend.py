@@ -170,6 +170,8 @@ class Collected:
     variables: dict[int, tuple[Variable, Any]] = field(default_factory=dict)
     prior: dict[int, Any] = field(default_factory=dict)
     first: dict[int, int] = field(default_factory=dict)
+    # extension name → {"factors": n, "variables": m} it added (``info["extensions"]``)
+    counts: dict[str, dict[str, int]] = field(default_factory=dict)
 
     def __bool__(self) -> bool:
         return bool(self.factors or self.variables)
@@ -322,6 +324,9 @@ def collect(extensions: Sequence[Callable[[GraphView], Terms]], view: GraphView)
         if not isinstance(terms, Terms):
             raise ValueError(f"{who}: returned {type(terms).__name__}, expected "
                              "graph.extend.Terms(factors=[...], variables=[...])")
+        name = who[who.index("(") + 1:-1] if who.endswith(")") else who
+        col.counts[name if name not in col.counts else f"{name} {i}"] = {
+            "factors": len(terms.factors), "variables": len(terms.variables)}
         for var in terms.variables:
             value, prior = _normalise(var, who)
             key = int(var.key)
