@@ -87,17 +87,22 @@ class _Help(argparse.RawDescriptionHelpFormatter):
     """Epilogs keep their line breaks (lists of names, exit codes)."""
 
 
-def _names_epilog() -> str:
-    """The estimators and scenarios of this build, one line each (``run --help``)."""
+def _name_lines(est_title: str, scen_title: str, between: tuple[str, ...] = ()) -> list[str]:
+    """The estimators and scenarios of this build, one line each (``list``, ``run --help``);
+    ``between``: lines between the two lists."""
     from .estimators.base import available, describe
     from .simulation import list_scenarios, scenario_description
 
     names, scen = available(), list_scenarios()
     w = max(len(n) for n in [*names, *scen]) + 2
-    lines = ["estimators (--estimators a,b; default: all):"]
-    lines += [f"  {n:<{w}}{describe(n)}" for n in names]
-    lines += ["", "scenarios (--scenario NAME; default: default):"]
-    lines += [f"  {s:<{w}}{scenario_description(s)}" for s in scen]
+    return ([est_title, *(f"  {n:<{w}}{describe(n)}" for n in names), *between, scen_title,
+             *(f"  {s:<{w}}{scenario_description(s)}" for s in scen)])
+
+
+def _names_epilog() -> str:
+    """``run --help``'s epilog: the names, the outputs and the exit codes."""
+    lines = _name_lines("estimators (--estimators a,b; default: all):",
+                        "scenarios (--scenario NAME; default: default):", between=("",))
     lines += ["", "outputs in --out: summary.json, summary.txt, report.html, plots/*.png, "
               "estimates/<name>.parquet,", "  drive.json, truth.parquet (simulated), export/ "
               "(with --export)", "", EXIT_CODES]
@@ -407,17 +412,8 @@ def cmd_export(args: argparse.Namespace) -> int:
 
 
 def cmd_list(args: argparse.Namespace) -> int:
-    from .estimators.base import available, describe
-    from .simulation import list_scenarios, scenario_description
-
-    names, scen = available(), list_scenarios()
-    width = max(len(n) for n in [*names, *scen]) + 2
-    print("estimators (vnav-graph run --estimators a,b):")
-    for n in names:
-        print(f"  {n:<{width}}{describe(n)}")
-    print("scenarios (vnav-graph run --scenario NAME):")
-    for s in scen:
-        print(f"  {s:<{width}}{scenario_description(s)}")
+    print("\n".join(_name_lines("estimators (vnav-graph run --estimators a,b):",
+                                "scenarios (vnav-graph run --scenario NAME):")))
     return 0
 
 

@@ -45,6 +45,7 @@ from .evaluation.holdout import (
     score,
     withhold,
 )
+from .evaluation.metrics import METRIC_KEYS
 from .evaluation.screening import screen_reference
 from .failures import MissingStream, failure_message
 from .jit import CompileTimer, Prewarm, family_of, mark_warm
@@ -229,11 +230,7 @@ def failed_block(error: str, runtime_s: float, status: str = "failed",
     document-specific keys (the holdout's ``alt_offset_m``, ``n_scored``, ``per_window``)."""
     null_param = {"est": None, "sd": None, "truth": None}
     return {
-        "status": status, "error": error, "alt_rmse_m": None, "alt_max_abs_m": None,
-        "horiz_rmse_m": None, "heading_rmse_deg": None, "heading_known_rmse_deg": None,
-        "heading_known_after_s": None, "outage_alt_max_m": None,
-        "outage_horiz_max_m": None, "vel_down_rmse_mps": None, "nees_mean": None,
-        "nees_dof": None, "runtime_s": runtime_s,
+        "status": status, "error": error, **dict.fromkeys(METRIC_KEYS), "runtime_s": runtime_s,
         "realtime_factor": None, "gnss_rejected": None, "warnings": [], "fallbacks": [],
         "solver": None, "isam2_final": None, "extensions": None, "self_check": None,
         "baro": {"scale": dict(null_param), "latency_s": dict(null_param),

@@ -149,6 +149,14 @@ def extra_variables_block(extra: Any) -> dict[str, Any] | None:
             for k, v in extra.items()}
 
 
+# The error metrics of a summary.json / bench.json block, in their order: null until scored
+# (``evaluate``), and null in the block of an estimator without a result
+# (``runner.failed_block``)
+METRIC_KEYS = ("alt_rmse_m", "alt_max_abs_m", "horiz_rmse_m", "heading_rmse_deg",
+               "heading_known_rmse_deg", "heading_known_after_s", "outage_alt_max_m",
+               "outage_horiz_max_m", "vel_down_rmse_mps", "nees_mean", "nees_dof")
+
+
 def evaluate(est: Estimate, drive: Drive,
              blocks: Sequence[tuple[float, float]] | None = None) -> dict[str, Any]:
     """Metric block for summary.json / bench.json (docs/design.md schema).
@@ -168,11 +176,8 @@ def evaluate(est: Estimate, drive: Drive,
     ``vnav_graph.evaluation.compare``), so the estimator block stays the bench row.
     """
     out: dict[str, Any] = {
-        "status": "ok", "error": None, "alt_rmse_m": None, "alt_max_abs_m": None,
-        "horiz_rmse_m": None, "heading_rmse_deg": None, "heading_known_rmse_deg": None,
-        "heading_known_after_s": None, "outage_alt_max_m": None,
-        "outage_horiz_max_m": None, "vel_down_rmse_mps": None, "nees_mean": None,
-        "nees_dof": None, "runtime_s": float(est.runtime_s),
+        "status": "ok", "error": None, **dict.fromkeys(METRIC_KEYS),
+        "runtime_s": float(est.runtime_s),
         "realtime_factor": (drive.duration_s / est.runtime_s) if est.runtime_s > 0 else None,
         "gnss_rejected": est.info.get("gnss_rejected"),
         # things the user should know about this result (e.g. a solver that stopped at its

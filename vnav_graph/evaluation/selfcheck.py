@@ -138,14 +138,15 @@ def self_check(est: Estimate, drive: Drive) -> SelfCheck:
     if not inside.any():
         return SelfCheck(False, None, None, 0)
     tg = g.t[inside]
-    at = tr.at(tg)
+    # heights and positions only: no attitude slerp (``Trajectory.at``) on this per-run path
+    lla = np.column_stack([np.interp(tg, tr.t, tr.lla[:, j]) for j in range(3)])
     from ..nav.error_state import component
 
     def est_var(comp: int) -> FloatArray:
         sd = est.sigma_at(tg, comp)
         return np.zeros(tg.size) if sd is None else np.nan_to_num(sd, nan=0.0) ** 2
 
-    r_v = at.alt - g.lla[inside, 2]
+    r_v = lla[:, 2] - g.lla[inside, 2]
     z_v = r_v / np.sqrt(g.pos_sd[inside, 2] ** 2 + est_var(component("pos_n", 2)))
     t0 = float(tr.t[0])
     wins = {"height": _window_medians(tg, z_v, r_v, t0)}
@@ -153,7 +154,7 @@ def self_check(est: Estimate, drive: Drive) -> SelfCheck:
     if "pos_h" in est.provides:
         from ..geo.frames import lla_to_ned
 
-        d = lla_to_ned(at.lla, drive.origin_lla)[:, :2] - lla_to_ned(
+        d = lla_to_ned(lla, drive.origin_lla)[:, :2] - lla_to_ned(
             g.lla[inside], drive.origin_lla)[:, :2]
         r_h = np.sqrt(np.sum(d**2, axis=1))
         var_h = (np.sum(g.pos_sd[inside, :2] ** 2, axis=1) + est_var(component("pos_n", 0))

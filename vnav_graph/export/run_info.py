@@ -20,18 +20,15 @@ DRIVE_INFO = "drive.json"
 TRUTH_TABLE = "truth.parquet"
 SCHEMA = "vnav_graph.drive_info/1"
 
-# a GNSS gap is an interval between fixes longer than both of these
+# a GNSS gap worth a placemark: a logging gap (``nav.gaps``' rule) of at least this long
 GAP_MIN_S = 2.0
-GAP_MIN_INTERVALS = 5.0
 
 def gnss_gaps(t: np.ndarray) -> list[list[float]]:
-    """Intervals [s] between consecutive fixes longer than ``GAP_MIN_S`` and
-    ``GAP_MIN_INTERVALS`` times the median fix interval."""
-    if t.size < 2:
-        return []
-    dt = np.diff(t)
-    limit = max(GAP_MIN_S, GAP_MIN_INTERVALS * float(np.median(dt)))
-    return [[float(t[i]), float(t[i + 1])] for i in np.flatnonzero(dt > limit)]
+    """Intervals [s] between consecutive fixes that are logging gaps by the shared rule
+    (``nav.gaps.imu_gaps``: over 5 × the median interval) and last over ``GAP_MIN_S``."""
+    from ..nav.gaps import imu_gaps
+
+    return [[float(t[i]), float(t[i + 1])] for i in imu_gaps(t) if t[i + 1] - t[i] > GAP_MIN_S]
 
 
 def drive_info(drive: Drive) -> dict[str, Any]:

@@ -137,8 +137,7 @@ def read_ulog(path: str | Path) -> Drive:
     baro, off = _read_baro(ulog, gnss, report)
     mag = _read_mag(ulog, report, t_imu)
     meta: dict[str, Any] = {
-        **year_meta(_gps_year(ulog)),
-        **_gps_t0_unix(ulog),
+        **_gps_time_meta(ulog),
         "source": "log", "name": path.stem, "format": "px4-ulog",
         "clock": "PX4 boot time [s]",
         "imu_frame": "PX4 body frame (forward-right-down), used as logged",
@@ -177,20 +176,14 @@ def _read_mag(ulog: Any, report: Report, t_imu: np.ndarray) -> MagStream | None:
     return None
 
 
-def _gps_t0_unix(ulog: Any) -> dict[str, float]:
-    """``t0_unix_meta`` from the receiver's UTC time (``time_utc_usec``, 0 before a fix)."""
+def _gps_time_meta(ulog: Any) -> dict[str, float]:
+    """What the receiver's UTC time (``time_utc_usec``, 0 before a fix) tells: the
+    ``decimal_year`` for the WMM epoch and ``t0_unix_s`` (``t0_unix_meta``); {} without it."""
     g = _topic(ulog, "sensor_gps") or _topic(ulog, "vehicle_gps_position")
     if g is None or "time_utc_usec" not in g:
         return {}
-    return t0_unix_meta(np.asarray(g["time_utc_usec"], dtype=float) * 1e-6, _stamp(g))
-
-
-def _gps_year(ulog: Any) -> float | None:
-    """Decimal year from the receiver's UTC time (``time_utc_usec``), for the WMM epoch."""
-    g = _topic(ulog, "sensor_gps") or _topic(ulog, "vehicle_gps_position")
-    if g is None or "time_utc_usec" not in g:
-        return None
-    return decimal_year_unix(np.asarray(g["time_utc_usec"], dtype=float) * 1e-6)
+    unix = np.asarray(g["time_utc_usec"], dtype=float) * 1e-6
+    return {**year_meta(decimal_year_unix(unix)), **t0_unix_meta(unix, _stamp(g))}
 
 
 def _read_gps(ulog: Any, path: Path, report: Report) -> tuple[GnssStream, str]:

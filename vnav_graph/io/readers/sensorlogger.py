@@ -399,8 +399,7 @@ def read_sensorlogger_folder(path: str | Path) -> Drive:
     report.notes.append(f"IMU from {acc_src} and {gyro_src}; clock = seconds_elapsed")
     report.notes.append("phone GNSS has no vertical velocity: vel_n not provided")
     meta = {
-        **year_meta(_year_of(loc["time"] if "time" in loc.columns else None, folder)),
-        **_t0_unix(loc["time"] if "time" in loc.columns else None, t_l, folder),
+        **_time_meta(loc["time"] if "time" in loc.columns else None, t_l, folder),
         "source": "log", "name": folder.name, "format": "sensorlogger-folder",
         "vehicle": "unknown",  # a phone: carried on anything
         "device": meta_csv.get("device name"), "platform": platform or None,
@@ -452,8 +451,7 @@ def read_merged_csv(path: str | Path) -> Drive:
                         "stamps at bin centres; Android sign convention assumed for acc")
     report.notes.append("phone GNSS has no vertical velocity: vel_n not provided")
     meta = {
-        **year_meta(_year_of(df["time"] if "time" in df.columns else None, path)),
-        **_t0_unix(df["time"] if "time" in df.columns else None, t, path, shift=0.5),
+        **_time_meta(df["time"] if "time" in df.columns else None, t, path, shift=0.5),
         "source": "log", "name": path.stem, "format": "sensorlogger-merged-1hz",
         "vehicle": "unknown",  # a phone: carried on anything
         "clock": "seconds since the first row's time + 0.5 s (bin centre)",
@@ -510,29 +508,22 @@ def _time_column(col: pd.Series, path: Path) -> tuple[np.ndarray, float] | None:
     return (ts - first).dt.total_seconds().to_numpy(dtype=float), float(first.timestamp())
 
 
-def _year_of(col: pd.Series | None, path: Path) -> float | None:
-    """Decimal year of the first time stamp of a Unix-epoch or ISO time column (None if it
-    has none): the date of the Earth's field for the magnetometer."""
-    if col is None:
-        return None
-    try:
-        tc = _time_column(col, path)
-    except ValueError:
-        return None
-    return None if tc is None else decimal_year_unix(tc[0] + tc[1])
-
-
-def _t0_unix(col: pd.Series | None, t: np.ndarray, path: Path,
-             shift: float = 0.0) -> dict[str, float]:
-    """``t0_unix_meta`` of a time column beside the stamps ``t`` (``shift``: 0.5 s for the
-    merged CSV's bin centres); {} when the column holds no absolute time."""
+def _time_meta(col: pd.Series | None, t: np.ndarray, path: Path,
+               shift: float = 0.0) -> dict[str, float]:
+    """What a Unix-epoch or ISO time column beside the stamps ``t`` tells, parsed once:
+    ``decimal_year`` of its first stamp (the date of the Earth's field for the magnetometer)
+    and ``t0_unix_s`` (``t0_unix_meta``; ``shift``: 0.5 s for the merged CSV's bin centres);
+    {} when it holds no absolute time."""
     if col is None:
         return {}
     try:
         tc = _time_column(col, path)
     except ValueError:
         return {}
-    return {} if tc is None else t0_unix_meta(tc[0] + tc[1] + shift, t)
+    if tc is None:
+        return {}
+    return {**year_meta(decimal_year_unix(tc[0] + tc[1])),
+            **t0_unix_meta(tc[0] + tc[1] + shift, t)}
 
 
 def _merged_time(df: pd.DataFrame, path: Path) -> np.ndarray:

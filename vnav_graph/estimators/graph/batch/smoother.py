@@ -354,13 +354,13 @@ class GraphBatch:
         out = outputs(P, res, pri, K(0) if drive.baro is not None else None)
         t4 = time.perf_counter()
         counts = added.counts if extensions else {}
+        fallbacks = fallback_notes(res, self.config, out["cov_damping"])
         info = {"keyframes": P.n_kf, "iterations": res.iterations, "final_cost": res.cost,
                 "extensions": counts,
                 "converged": res.converged, "stop": res.stop,
                 "predicted_decrease": res.predicted_decrease,
-                "warnings": [*solver_warnings(res, self.config),
-                             *fallback_notes(res, self.config, out["cov_damping"])],
-                "fallbacks": fallback_notes(res, self.config, out["cov_damping"]),
+                "warnings": [*solver_warnings(res, self.config), *fallbacks],
+                "fallbacks": fallbacks,
                 "singular_damping": res.singular_damping, "cov_damped": out["cov_damping"] > 0,
                 "baro_bias_lag_s": res.bias_lag, "solver": res.solver,
                 **P.init_info(),
