@@ -579,7 +579,14 @@ class Estimate:
     cov : (M, 18, 18) or None, error covariance in the ``ERROR_STATE`` layout at ``t_cov``
     baro : estimated baro errors with sigmas, or None
     runtime_s : wall time of ``run`` [s]
-    online : for incremental smoothers, the estimate known at each time (filter-like)
+    online : the causal estimate, each epoch's state right after its own update (filters:
+        the trajectory itself; graph-isam2: the newest keyframe after its update); None for
+        pure smoothers
+    online_cov : (M, 18, 18) or None, error covariance of ``online`` at ``online.t``
+        (``ERROR_STATE`` layout); None when the estimator does not report one
+    lag : graph-isam2's fixed-lag estimate: the state at t − L right after the update at t,
+        L = ``info["lag_s"]``; None elsewhere
+    lag_cov : (M, 18, 18) or None, error covariance of ``lag`` at ``lag.t``
     innovations : normalised innovations per measurement type
     info : free-form diagnostics (rejected GNSS count ``gnss_rejected``, observability, ...)
     config : the estimator's settings
@@ -595,6 +602,9 @@ class Estimate:
     baro: BaroEstimate | None = None
     runtime_s: float = 0.0
     online: Trajectory | None = None
+    online_cov: FloatArray | None = None
+    lag: Trajectory | None = None
+    lag_cov: FloatArray | None = None
     innovations: MappingProxyType[str, FloatArray] = field(
         default_factory=lambda: MappingProxyType({})
     )
@@ -615,6 +625,15 @@ class Estimate:
             _check_shape("estimate.cov", cov, (t_cov.size, ERROR_STATE_DIM, ERROR_STATE_DIM))
             object.__setattr__(self, "cov", cov)
             object.__setattr__(self, "t_cov", t_cov)
+        for name, tr in (("online", self.online), ("lag", self.lag)):
+            c = getattr(self, f"{name}_cov")
+            if c is None:
+                continue
+            if tr is None:
+                raise ValueError(f"estimate.{name}_cov: given without estimate.{name}")
+            c = _arr(c)
+            _check_shape(f"estimate.{name}_cov", c, (tr.t.size, ERROR_STATE_DIM, ERROR_STATE_DIM))
+            object.__setattr__(self, f"{name}_cov", c)
         for f in ("innovations", "info"):
             v = getattr(self, f)
             if not isinstance(v, MappingProxyType):
