@@ -34,11 +34,12 @@ from pathlib import Path
 from typing import Any
 
 from .ahrs_cache import Shared, sharing
-from .estimators.base import available, create
+from .estimators.base import available, create, with_online
 from .evaluation.holdout import (
     HoldoutResult,
     Scored,
     baro_block,
+    causal_score,
     choose_windows,
     holdout_doc,
     in_windows,
@@ -205,10 +206,11 @@ def run_estimators(drive: Drive, names: Sequence[str], progress: bool | Mode = T
 def run_captured(name: str, drive: Drive, config: Any = None) -> Estimate:
     """``create(name).run(drive)`` with Python warnings (numpy RuntimeWarnings: overflow,
     invalid value, ...) captured and appended to the estimate's ``info["warnings"]`` as one
-    line per distinct message with its count, instead of reaching the terminal unexplained."""
+    line per distinct message with its count, instead of reaching the terminal unexplained.
+    A causal estimator's ``online`` estimate is filled in here (``base.with_online``)."""
     with warnings.catch_warnings(record=True) as rec:
         warnings.simplefilter("always")
-        est = create(name, config).run(drive)
+        est = with_online(name, create(name, config).run(drive))
     if not rec:
         return est
     counts: dict[str, int] = {}
@@ -233,6 +235,7 @@ def failed_block(error: str, runtime_s: float, status: str = "failed",
         "status": status, "error": error, **dict.fromkeys(METRIC_KEYS), "runtime_s": runtime_s,
         "realtime_factor": None, "gnss_rejected": None, "warnings": [], "fallbacks": [],
         "solver": None, "isam2_final": None, "extensions": None, "self_check": None,
+        "online": None, "lag": None,
         "baro": {"scale": dict(null_param), "latency_s": dict(null_param),
                  "bias_m": dict(null_param)},
         **extra,
@@ -276,6 +279,9 @@ def run_holdout(drive: Drive, estimators: Sequence[str] | None = None, outage_s:
             s.block["baro_prior_conflict"] = [str(x) for x in
                                               info.get("baro_prior_conflict") or []]
             s.block["baro"] = baro_block(r.estimate)
+            s.block["online"] = causal_score(r.estimate, drive, reference, "online",
+                                             given=~withheld)
+            s.block["lag"] = causal_score(r.estimate, drive, reference, "lag", given=~withheld)
             results[r.name], series[r.name] = s.block, s
         except Exception as exc:  # one estimator's failure is data, not a crash
             if os.environ.get("VNAV_DEBUG"):

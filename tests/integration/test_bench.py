@@ -61,7 +61,8 @@ def test_bench_cli_writes_schema(tmp_path, fake, capsys):
     for r in doc["runs"]:
         assert set(r) >= {"scenario", "seed", "estimator", "status", "error", "alt_rmse_m",
                           "alt_max_abs_m", "vel_down_rmse_mps", "nees_mean", "runtime_s",
-                          "realtime_factor", "baro"}
+                          "realtime_factor", "baro", "online", "lag"}
+        assert r["online"] is None  # an estimator outside base.CAUSAL without an online one
         assert r["duration_s"] == pytest.approx(QUICK_DURATION_S)  # --quick drive length
         assert r["alt_rmse_m"] == pytest.approx(1.0, abs=1e-9)  # +1 m offset, float round-off
     for sc in ("hill-drive", "sortie"):

@@ -306,3 +306,60 @@ def against_baseline(summary: Mapping[str, Any], baseline: str) -> dict[str, Any
     comp["baseline"] = {"name": baseline, "metrics": res}
     comp["headline"] = [*lines, *(comp.get("headline") or [])]
     return out
+
+
+# (block key, label, unit) of the two rankings
+RANKING_METRICS = (("alt_rmse_m", "Altitude RMSE", "m"), ("horiz_rmse_m", "Horizontal RMSE", "m"),
+                   ("heading_rmse_deg", "Heading RMSE", "deg"))
+
+
+def rankings(estimators: Mapping[str, Mapping[str, Any]]) -> dict[str, Any]:
+    """``summary["rankings"]``: the estimators ordered per metric, lowest first, in two lists.
+
+    - ``real_time``: the causal estimates, from each block's ``online`` block (the filters,
+      loops and observer, and graph-isam2's online estimate as ``"graph-isam2 (online)"``).
+      An estimator that is not in ``base.CAUSAL`` but has an online block is labelled
+      ``"<name> (online)"``.
+    - ``offline``: every estimator's trajectory, from the block itself (the smoothers, and
+      graph-isam2's final trajectory as ``"graph-isam2 (final)"``; a filter's trajectory is
+      its online estimate and an offline answer too).
+
+    Only estimators with ``status`` ok are ranked; each entry is ``{"name", "estimator",
+    "value"}``. A ranking orders values; whether a difference is resolved is the paired
+    comparison's job (``comparison``, ``vnav-graph bench``).
+    """
+    from ..estimators.base import CAUSAL
+
+    def ordered(rows: list[tuple[str, str, Any]]) -> list[dict[str, Any]]:
+        have = [(v, label, n) for label, n, v in rows if v is not None and np.isfinite(v)]
+        return [{"name": label, "estimator": n, "value": float(v)}
+                for v, label, n in sorted(have)]
+
+    ok = {n: m for n, m in estimators.items() if m.get("status") == "ok"}
+    out: dict[str, Any] = {"real_time": {}, "offline": {}}
+    for key, _, _ in RANKING_METRICS:
+        out["real_time"][key] = ordered([
+            (n if n in CAUSAL else f"{n} (online)", n, (m.get("online") or {}).get(key))
+            for n, m in ok.items() if m.get("online")])
+        out["offline"][key] = ordered([
+            (f"{n} (final)" if m.get("online") and n not in CAUSAL else n, n, m.get(key))
+            for n, m in ok.items()])
+    return out
+
+
+def ranking_lines(summary: Mapping[str, Any]) -> list[str]:
+    """The two rankings of a summary as text lines, one per ranking and metric."""
+    rk = summary.get("rankings")
+    if not rk:
+        return []
+    lines = []
+    for kind, title in (("real_time", "REAL TIME (causal estimates)"),
+                        ("offline", "OFFLINE (smoothers and final trajectories)")):
+        for key, label, unit in RANKING_METRICS:
+            rows = rk.get(kind, {}).get(key) or []
+            if len(rows) < 2:
+                continue
+            spec = ".1f" if unit == "deg" else ".2f"
+            lines.append(f"{title} {label} [{unit}]: " + " < ".join(
+                f"{r['name']} {format(r['value'], spec)}" for r in rows))
+    return lines

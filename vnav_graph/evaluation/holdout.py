@@ -184,6 +184,32 @@ def score(est: Estimate, drive: Drive, withheld: np.ndarray,
     return Scored(block, t, err, w, sd, horiz_err, vd_err)
 
 
+def causal_score(est: Estimate, drive: Drive, withheld: np.ndarray, which: str,
+                 given: np.ndarray | None = None) -> dict[str, Any] | None:
+    """The ``online`` / ``lag`` block of the holdout: the causal (or fixed-lag) estimate scored
+    like the trajectory (``score``: its own datum offset, the same withheld fixes).
+    ``heading_rmse_deg`` and ``nees_*`` are null (GNSS gives neither a heading nor the full
+    state); the lag block has ``lag_s``. None when the estimate has none (``causal_view``);
+    null metrics when it covers no withheld fix."""
+    from .metrics import ONLINE_KEYS, causal_view
+
+    view = causal_view(est, which)
+    if view is None:
+        return None
+    out: dict[str, Any] = dict.fromkeys(ONLINE_KEYS)
+    out["from_s"] = float(view.trajectory.t[0] - drive.imu.t[0])
+    try:
+        b = score(view, drive, withheld, given=given).block
+    except ValueError:  # covers no withheld fix
+        b = {}
+    for k in ("alt_rmse_m", "horiz_rmse_m", "vel_down_rmse_mps"):
+        out[k] = b.get(k)
+    if which == "lag":
+        lag = est.info.get("lag_s")
+        out["lag_s"] = None if lag is None else float(lag)
+    return out
+
+
 def baro_block(est: Estimate) -> dict[str, Any] | None:
     """Baro parameters of the holdout run: {name: {"est", "sd"}} (s [-], τd [s], b [m])."""
     if est.baro is None:

@@ -40,8 +40,8 @@ from .magnetometer import initial_heading
 from .settings import EkfConfig
 
 # the initial position is the median of the first START_FIXES fixes, so the filter's
-# estimate before the last of them is not causal (benchmarks/online_accuracy.py scores
-# online estimates from there on)
+# estimate before the last of them is not causal (its online estimate starts there:
+# info["online_from_s"], with the end of the levelling window)
 START_FIXES = 9
 
 
@@ -232,6 +232,9 @@ class Alignment:
     g_latency: float  # GNSS latency [s] subtracted from the fix stamps
     lever: FloatArray  # GNSS antenna lever arm in b [m]
     heading_from_mag: bool  # the initial heading is the magnetometer's
+    # the last sample the alignment read [s]: the levelling window's end, the last of the
+    # START_FIXES fixes; the filter's estimate is causal from here on (``online_from_s``)
+    t_ready: float = -np.inf
 
 
 def initial_state(drive: Drive, cfg: EkfConfig, model: SensorModel, bp: BaroPrior,
@@ -290,7 +293,9 @@ def initial_state(drive: Drive, cfg: EkfConfig, model: SensorModel, bp: BaroPrio
             vel_var = np.full(3, 1.0)
         # motion between t0 and the fixes used
         pos_var = pos_var + (np.linalg.norm(v0) * abs(tg[j9 - 1] - t[0])) ** 2
+        t_fixes = float(gnss.t[j9 - 1])
     else:
+        t_fixes = -np.inf
         lla0 = drive.origin_lla.copy()
         pos_var = np.array([100.0**2, 100.0**2, bp.bias_sd**2])
         vel_var = np.full(3, 1.0)
@@ -326,4 +331,5 @@ def initial_state(drive: Drive, cfg: EkfConfig, model: SensorModel, bp: BaroPrio
             p0[2, 2] += gm.sd_m**2
             p0[2, km.IGH] = p0[km.IGH, 2] = -gm.sd_m**2
     return Alignment(lla0, v0, q0, par0, p0, heading_known, yaw_unknown_var, i_static,
-                    g_latency, lever, mag_yaw is not None)
+                    g_latency, lever, mag_yaw is not None,
+                    max(float(t[i_static - 1]), t_fixes))

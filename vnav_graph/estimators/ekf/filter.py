@@ -400,6 +400,8 @@ def _report(drive: Drive, res: tuple[Any, ...], gr: _Grids, gaps: NDArrayInt, in
         "accel_scale_estimated": bool(est_scale),
         "accel_scale": o_par[-1, km.PKA:km.PKA + 3].copy(),
         "static_align_s": float(t[ini.i_static - 1] - t[0]),
+        # the time from which the output is causal: the alignment read data up to here
+        "online_from_s": float(ini.t_ready),
         "heading_source": ("magnetometer" if ini.heading_from_mag else
                            "given" if ini.heading_known else
                            "accel-matching" if heading_accel else "gnss-track"),
