@@ -82,6 +82,39 @@ def paired_interval(d: Sequence[float], level: float = 0.95) -> tuple[float, flo
     return mean, mean - half, mean + half
 
 
+def paired_gain(xa: FloatArray, xb: FloatArray, level: float = 0.95) -> dict[str, Any]:
+    """Paired statistics of b against a over the same runs (seeds): the difference
+    d = a − b (positive: b lower) with its Student-t interval (``paired_interval``), and the
+    relative gain g = mean(d)/mean(a) = 1 − mean(b)/mean(a) with a delta-method interval
+    (the residuals (d_i − g·a_i)/mean(a) of the per-run pairs, same t quantile).
+
+    Returns ``{"n", "mean_a", "mean_b", "diff", "diff_ci95", "gain", "gain_ci95"}``; the
+    intervals are None with fewer than two pairs, everything but ``n`` with none."""
+    from scipy.stats import t as student_t
+
+    xa, xb = np.asarray(xa, dtype=float), np.asarray(xb, dtype=float)
+    n = int(xa.size)
+    out: dict[str, Any] = {"n": n, "mean_a": None, "mean_b": None, "diff": None,
+                           "diff_ci95": None, "gain": None, "gain_ci95": None}
+    if n == 0:
+        return out
+    d = xa - xb
+    ma = float(xa.mean())
+    out.update(mean_a=ma, mean_b=float(xb.mean()), diff=float(d.mean()))
+    if ma > 0:
+        out["gain"] = float(d.mean() / ma)
+    iv = paired_interval(d, level)
+    if iv is None:
+        return out
+    out["diff_ci95"] = [iv[1], iv[2]]
+    if ma > 0:
+        g = out["gain"]
+        tq = float(student_t.ppf(0.5 + level / 2, n - 1))
+        gh = tq * float(np.std((d - g * xa) / ma, ddof=1)) / math.sqrt(n)
+        out["gain_ci95"] = [g - gh, g + gh]
+    return out
+
+
 def _m(x: float) -> str:
     """A length [m] with the decimals its size needs (3 significant figures, at most 3
     decimals), so that a small difference never prints as 0.00."""
