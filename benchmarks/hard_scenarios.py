@@ -10,7 +10,8 @@ The study (Monte Carlo, then the representative-seed plots and the error attribu
 ``--quick`` runs 3 seeds of shortened drives (a smoke test, not a result).
 
 Writes into ``--out``: ``bench.json`` / ``bench.md`` (the ``vnav-graph bench`` document of
-the scenarios below), ``attribution.json`` and ``hard-<scenario>.png``.
+the scenarios below), ``study.json`` (the paired statistics and win-rule verdicts),
+``attribution.json`` (attribution and ablation) and ``hard-<scenario>.png``.
 
 What it measures
 ----------------
@@ -26,23 +27,34 @@ What it measures
   Student-t interval over seeds of the difference and of the ratio b/a; the goal of the
   study (graph-batch ≥ 20 % better than ekf-rts with the paired CI excluding zero) is checked
   per metric.
-- The cause, measured: on the representative seed of each scenario (the seed whose paired
-  ekf-rts − graph-batch difference of the first primary metric is the median) both
+- The win rule (``vnav_graph.evaluation.winrule``): a significant difference counts as a win
+  only on a metric where the loser's reported σ does not cover its error; the goal needs a
+  counted win.
+- Where and why, measured: on the representative seed of each scenario (the seed whose
+  paired ekf-rts − graph-batch difference of the first primary metric is the median) both
   estimators are re-run and the difference of their summed squared errors is split over the
   parts of the drive — the first 60 s (alignment), GNSS outages, multipath bursts and the
-  rest — so the page says where the difference comes from, not only how large it is.
+  rest — and an ablation (``ABLATION``: graph-batch with its GNSS loss off, its post-solve
+  gates off, both off; ekf-rts; ekf, i.e. smoothing off) is run on the same drive. The page
+  prints these numbers; it carries no explanation written in advance.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from vnav_graph.evaluation.winrule import (  # noqa: F401  (NEES_MAX, WIN_RULE: the page's)
+    NEES_MAX,
+    WIN_RULE,
+    paired_values,
+    win_rule,
+)
 
 REPO = Path(__file__).resolve().parent.parent
 CONFIG = REPO / "benchmarks" / "hard_scenarios.toml"
@@ -72,36 +84,8 @@ LABELS = {
 # the chain of the study: (a, b) pairs, d = a − b (positive: b better)
 CHAIN = (("ekf", "ekf-rts"), ("ekf-rts", "graph-batch"), ("ekf-rts", "graph-isam2"))
 GOAL_REL = 0.20
-# NEES/dof above which a winner counts as overconfident (unless the loser's is higher)
-NEES_MAX = 2.0
 QUICK_SEEDS, QUICK_DURATION_S = 3, 240.0
 START_S = 60.0
-
-
-def _value(row: dict[str, Any], key: str) -> float | None:
-    """A run's metric, or one derived from it (NEES/dof, baro errors), None if not finite."""
-    from vnav_graph.evaluation.montecarlo import derived_metrics
-
-    v = (row | derived_metrics(row)).get(key)
-    return None if v is None or not math.isfinite(v) else float(v)
-
-
-def paired_values(runs: list[dict[str, Any]], scenario: str, a: str, b: str, key: str
-                  ) -> tuple[np.ndarray, np.ndarray, list[int]]:
-    """Values of ``key`` for a and b over the seeds where both ran and have it."""
-    by = {(r["estimator"], r["seed"]): r for r in runs
-          if r["scenario"] == scenario and r["status"] == "ok"}
-    xa, xb, seeds = [], [], []
-    for (est, seed), ra in sorted(by.items(), key=lambda kv: kv[0][1]):
-        rb = by.get((b, seed))
-        if est != a or rb is None:
-            continue
-        va, vb = _value(ra, key), _value(rb, key)
-        if va is not None and vb is not None:
-            xa.append(va)
-            xb.append(vb)
-            seeds.append(int(seed))
-    return np.array(xa), np.array(xb), seeds
 
 
 def paired_stats(xa: np.ndarray, xb: np.ndarray) -> dict[str, Any]:
@@ -110,70 +94,6 @@ def paired_stats(xa: np.ndarray, xb: np.ndarray) -> dict[str, Any]:
     from vnav_graph.evaluation.compare import paired_gain
 
     return paired_gain(xa, xb)
-
-
-# The win rule: a win counts only on a metric where the loser's reported σ does not cover
-# its error (a loser that says honestly it does not know is not beaten by being more
-# accurate where it says so). Per metric, "covers" is measured from the same runs:
-# - heading: the win must hold on ``heading_known_rmse_deg`` too (each estimator scored only
-#   where its own σ_yaw ≤ 5°), paired CI excluding 0 with the same sign;
-# - baro parameters: the loser's mean (|estimate − truth| / σ)² over the seeds ≤ NEES_MAX;
-# - every other error metric (position, height, velocity, outage maxima): the loser's mean
-#   NEES/dof of position and velocity over the seeds ≤ NEES_MAX;
-# - runtime has no σ: a win counts.
-WIN_RULE = ("a win counts only on a metric where the loser's reported σ does not cover its "
-            "error: for heading the win must also hold on heading_known_rmse_deg (each "
-            "estimator scored only where its own σ_yaw ≤ 5°); for baro parameters the "
-            "loser's mean (|error|/σ)² over the seeds must exceed {n:g}; for position, height "
-            "and velocity errors the loser's mean NEES/dof must exceed {n:g}")
-BARO_KEYS = {"baro_scale_abs_err": "scale", "baro_latency_abs_err_s": "latency_s",
-             "baro_bias_abs_err_m": "bias_m"}
-
-
-def _loser_z2(runs: list[dict[str, Any]], scenario: str, loser: str, key: str
-              ) -> float | None:
-    """The loser's mean squared normalised error over the seeds: NEES/dof, or (|err|/σ)² of a
-    baro parameter."""
-    vals = []
-    for r in runs:
-        if r["scenario"] != scenario or r["estimator"] != loser or r["status"] != "ok":
-            continue
-        if key in BARO_KEYS:
-            p = (r.get("baro") or {}).get(BARO_KEYS[key]) or {}
-            if p.get("est") is not None and p.get("truth") is not None and p.get("sd"):
-                vals.append(((p["est"] - p["truth"]) / p["sd"]) ** 2)
-        else:
-            v = _value(r, "nees_per_dof")
-            if v is not None:
-                vals.append(v)
-    return float(np.mean(vals)) if vals else None
-
-
-def win_rule(runs: list[dict[str, Any]], scenario: str, a: str, b: str, key: str,
-             s: dict[str, Any]) -> dict[str, Any]:
-    """Whether a significant difference counts as a win (``WIN_RULE``): ``winner``,
-    ``loser``, ``counts`` (None when not significant), ``loser_z2`` (the loser's mean
-    NEES/dof or (|err|/σ)², heading: null) and, for heading, ``known`` (the paired statistics
-    on heading_known_rmse_deg)."""
-    out: dict[str, Any] = {"winner": None, "loser": None, "counts": None, "loser_z2": None}
-    ci = s.get("diff_ci95")
-    if ci is None or not (ci[0] > 0 or ci[1] < 0):
-        return out
-    winner, loser = (b, a) if ci[0] > 0 else (a, b)
-    out.update(winner=winner, loser=loser)
-    if key == "runtime_s":
-        out["counts"] = True
-    elif key.startswith("heading"):
-        xa, xb, _ = paired_values(runs, scenario, a, b, "heading_known_rmse_deg")
-        k = paired_stats(xa, xb)
-        kci = k["diff_ci95"]
-        out["known"] = k
-        out["counts"] = bool(kci is not None and ((kci[0] > 0) if winner == b else (kci[1] < 0)))
-    else:
-        z2 = _loser_z2(runs, scenario, loser, key)
-        out["loser_z2"] = z2
-        out["counts"] = bool(z2 is not None and z2 > NEES_MAX)
-    return out
 
 
 def study(doc: dict[str, Any]) -> dict[str, Any]:
