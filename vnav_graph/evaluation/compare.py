@@ -352,7 +352,7 @@ def rankings(estimators: Mapping[str, Mapping[str, Any]]) -> dict[str, Any]:
     - ``real_time``: the causal estimates, from each block's ``online`` block (the filters,
       loops and observer, and graph-isam2's online estimate as ``"graph-isam2 (online)"``).
       An estimator that is not in ``base.CAUSAL`` but has an online block is labelled
-      ``"<name> (online)"``.
+      ``"<name> (online)"``; each entry has the block's ``from_s`` (its first scored epoch).
     - ``offline``: every estimator's trajectory, from the block itself (the smoothers, and
       graph-isam2's final trajectory as ``"graph-isam2 (final)"``; a filter's trajectory is
       its online estimate and an offline answer too).
@@ -363,21 +363,29 @@ def rankings(estimators: Mapping[str, Mapping[str, Any]]) -> dict[str, Any]:
     """
     from ..estimators.base import CAUSAL
 
-    def ordered(rows: list[tuple[str, str, Any]]) -> list[dict[str, Any]]:
-        have = [(v, label, n) for label, n, v in rows if v is not None and np.isfinite(v)]
-        return [{"name": label, "estimator": n, "value": float(v)}
-                for v, label, n in sorted(have)]
+    def ordered(rows: list[tuple[str, str, Any, Any]]) -> list[dict[str, Any]]:
+        have = sorted(((v, label, n, f) for label, n, v, f in rows
+                       if v is not None and np.isfinite(v)), key=lambda x: x[:3])
+        return [{"name": label, "estimator": n, "value": float(v),
+                 **({} if f is None else {"from_s": float(f)})} for v, label, n, f in have]
 
     ok = {n: m for n, m in estimators.items() if m.get("status") == "ok"}
     out: dict[str, Any] = {"real_time": {}, "offline": {}}
     for key, _, _ in RANKING_METRICS:
         out["real_time"][key] = ordered([
-            (n if n in CAUSAL else f"{n} (online)", n, (m.get("online") or {}).get(key))
-            for n, m in ok.items() if m.get("online")])
+            (n if n in CAUSAL else f"{n} (online)", n, m["online"].get(key),
+             m["online"].get("from_s")) for n, m in ok.items() if m.get("online")])
         out["offline"][key] = ordered([
-            (f"{n} (final)" if m.get("online") and n not in CAUSAL else n, n, m.get(key))
+            (f"{n} (final)" if m.get("online") and n not in CAUSAL else n, n, m.get(key), None)
             for n, m in ok.items()])
     return out
+
+
+def ranked_name(entry: Mapping[str, Any]) -> str:
+    """A ranking entry's name, with the start of its scored span when that is not the drive's
+    start (the ekf's online estimate starts when it is aligned)."""
+    f = entry.get("from_s")
+    return entry["name"] + (f" (from {f:.0f} s)" if f is not None and f >= 0.5 else "")
 
 
 def ranking_lines(summary: Mapping[str, Any]) -> list[str]:
@@ -394,5 +402,5 @@ def ranking_lines(summary: Mapping[str, Any]) -> list[str]:
                 continue
             spec = ".1f" if unit == "deg" else ".2f"
             lines.append(f"{title} {label} [{unit}]: " + " < ".join(
-                f"{r['name']} {format(r['value'], spec)}" for r in rows))
+                f"{ranked_name(r)} {format(r['value'], spec)}" for r in rows))
     return lines

@@ -128,7 +128,7 @@ def comparison_table(summary: dict[str, Any]) -> str:
 def rankings_html(summary: dict[str, Any]) -> str:
     """The real-time and offline rankings (``summary["rankings"]``) side by side, a table per
     metric (``id="rankings"``)."""
-    from ..evaluation.compare import RANKING_METRICS
+    from ..evaluation.compare import RANKING_METRICS, ranked_name
 
     rk = summary.get("rankings")
     if not rk:
@@ -141,7 +141,7 @@ def rankings_html(summary: dict[str, Any]) -> str:
         spec = ".1f" if unit == "deg" else ".2f"
 
         def cell(rows: list[dict[str, Any]], i: int, spec: str = spec) -> str:
-            return (f"<td>{_e(rows[i]['name'])}</td><td>{_num(rows[i]['value'], spec)}</td>"
+            return (f"<td>{_e(ranked_name(rows[i]))}</td><td>{_num(rows[i]['value'], spec)}</td>"
                     if i < len(rows) else "<td></td><td></td>")
 
         body = "".join(f"<tr><td>{i + 1}</td>{cell(rt, i)}{cell(off, i)}</tr>"
