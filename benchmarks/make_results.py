@@ -230,10 +230,11 @@ def online_goal_section(results_dir: Path) -> list[str]:
     doc = json.loads(p.read_text())
     cfg = doc["config"]
     return ["## graph-isam2's accuracy goals: online and fixed lag", "",
-            f"`python benchmarks/online_accuracy.py --seeds {cfg['seeds']}` (configuration "
-            f"`{cfg['configuration']}`): online graph-isam2 against the forward ekf and "
-            "graph-isam2's fixed-lag estimate against graph-batch, each pair scored at its "
-            "common epochs; gain = 1 − mean(b)/mean(a) with its paired 95 % CI.", "",
+            f"`python benchmarks/online_accuracy.py --seeds {cfg['seeds']}` (drive length "
+            f"{'scenario default' if cfg.get('duration_s') is None else cfg['duration_s']}, "
+            f"configuration `{cfg['configuration']}`): online graph-isam2 against the "
+            "forward ekf and graph-isam2's fixed-lag estimate against graph-batch, each pair "
+            "scored at its common epochs; gain = 1 − mean(b)/mean(a) with its paired 95 % CI.", "",
             *[f"- {line}" for line in mod.goal_lines(doc["goals"])], ""]
 
 
