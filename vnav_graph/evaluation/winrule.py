@@ -56,12 +56,15 @@ def paired_values(runs: list[dict[str, Any]], scenario: str, a: str, b: str, key
 # - baro parameters: the loser's mean (|estimate − truth| / σ)² over the seeds ≤ NEES_MAX;
 # - every other error metric (position, height, velocity, outage maxima): the loser's mean
 #   NEES/dof of position and velocity over the seeds ≤ NEES_MAX;
-# - runtime has no σ: a win counts.
+# - runtime has no σ: a win counts, as does a win over a loser that reports no σ (no NEES);
+#   heading without ``heading_known_rmse_deg`` scores falls back on the NEES rule.
 WIN_RULE = ("a win counts only on a metric where the loser's reported σ does not cover its "
             "error: for heading the win must also hold on heading_known_rmse_deg (each "
             "estimator scored only where its own σ_yaw ≤ 5°); for baro parameters the "
             "loser's mean (|error|/σ)² over the seeds must exceed {n:g}; for position, height "
-            "and velocity errors the loser's mean NEES/dof must exceed {n:g}")
+            "and velocity errors (and heading without a heading_known score) the loser's "
+            "mean NEES/dof must exceed {n:g}; a loser that reports no σ claims nothing, and a "
+            "win over it counts")
 BARO_KEYS = {"baro_scale_abs_err": "scale", "baro_latency_abs_err_s": "latency_s",
              "baro_bias_abs_err_m": "bias_m"}
 
@@ -99,16 +102,21 @@ def win_rule(runs: list[dict[str, Any]], scenario: str, a: str, b: str, key: str
     out.update(winner=winner, loser=loser)
     if key == "runtime_s":
         out["counts"] = True
-    elif key.startswith("heading"):
+        return out
+    if key.startswith("heading"):
         xa, xb, _ = paired_values(runs, scenario, a, b, "heading_known_rmse_deg")
-        k = paired_gain(xa, xb)
-        kci = k["diff_ci95"]
-        out["known"] = k
-        out["counts"] = bool(kci is not None and ((kci[0] > 0) if winner == b else (kci[1] < 0)))
-    else:
-        z2 = _loser_z2(runs, scenario, loser, key)
-        out["loser_z2"] = z2
-        out["counts"] = bool(z2 is not None and z2 > NEES_MAX)
+        if xa.size:
+            k = paired_gain(xa, xb)
+            kci = k["diff_ci95"]
+            out["known"] = k
+            out["counts"] = bool(kci is not None
+                                 and ((kci[0] > 0) if winner == b else (kci[1] < 0)))
+            return out
+    # without a heading_known score, heading falls back on the NEES rule below
+    z2 = _loser_z2(runs, scenario, loser, key)
+    out["loser_z2"] = z2
+    # a loser that reports no σ for it claims nothing its error could be covered by
+    out["counts"] = bool(z2 is None or z2 > NEES_MAX)
     return out
 
 
