@@ -291,17 +291,19 @@ def format_markdown(doc: dict[str, Any]) -> str:
         f"{doc['gnss_withheld']} GNSS fixes withheld"
         f"{_screen_note(doc.get('reference_screening'))}; median GNSS vertical sigma in the "
         f"windows {f(doc['gnss_sd_v_median_m'])} m. Scoring: {doc['scoring']}.", "",
-        "| estimator | status | alt RMSE m | alt max m | horiz RMSE m | GNSS rejected "
-        "| offset m | run s |",
-        "|---|---|---|---|---|---|---|---|",
+        "| estimator | status | alt RMSE m | alt max m | horiz RMSE m | online alt RMSE m "
+        "| online horiz RMSE m | GNSS rejected | offset m | run s |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for name, b in doc["estimators"].items():
         status = b["status"] if b["error"] is None else f"{b['status']}: {b['error'][:60]}"
+        on = b.get("online") or {}
         lines.append(f"| {name} | {status} | {f(b['alt_rmse_m'])} | {f(b['alt_max_abs_m'])} | "
-                     f"{f(b['horiz_rmse_m'])} | {f(b['gnss_rejected'], 'd')} | "
+                     f"{f(b['horiz_rmse_m'])} | {f(on.get('alt_rmse_m'))} | "
+                     f"{f(on.get('horiz_rmse_m'))} | {f(b['gnss_rejected'], 'd')} | "
                      f"{f(b['alt_offset_m'])} | {f(b['runtime_s'])} |")
     ob = doc.get("onboard")
     if ob:
         lines.append(f"| onboard: {ob['name']} (had GNSS) | ok | {f(ob['alt_rmse_m'])} | "
-                     f"{f(ob['alt_max_abs_m'])} | — | — | — | — |")
+                     f"{f(ob['alt_max_abs_m'])} | — | — | — | — | — | — |")
     return "\n".join(lines) + "\n"
