@@ -322,6 +322,7 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
     mag_data = kernel_record(drive, ev.m_field, fm, cfg.gate_prob, cfg.mag_reaccept_s,
                              cfg.mag_interval_s, cfg.mag_heading_floor)
 
+    hk = cfg.huber_k()
     # scalars coerced to one numba type each (float64, int64, bool): one compiled kernel
     res = kernel.run_filter(
         kernel.Grids(t, imu.gyro_b, imu.accel_b, gr.grid_of, gr.out_of, int(gr.grid_idx.size),
@@ -344,7 +345,9 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
             align_chunk_s=float(cfg.align_chunk_s), align_forget_s=float(cfg.align_forget_s),
             align_sd_max=float(cfg.align_sd_max),
             align_acc_sd=float(np.sqrt(2.0) * ispec.accel_bias_sd),
-            gap_forget_s=float(cfg.gap_heading_forget_s), store_rts=bool(store_rts)),
+            gap_forget_s=float(cfg.gap_heading_forget_s), store_rts=bool(store_rts),
+            huber_pos=hk[0], huber_vel=hk[1], huber_baro=hk[2],
+            tilt_consider=bool(cfg.tilt_consider)),
     )
     innov, info = _report(drive, res, gr, gaps, ini, cfg, heading_accel, est_scale, ev.has_vel)
     info.update(mag_info)
