@@ -241,24 +241,28 @@ def start_position(lla: FloatArray, tg: FloatArray, t0: float, pos_sd: FloatArra
     """The initial position from the first fixes ``lla`` (K, 3) at times ``tg``.
 
     Standing or with GNSS velocity: the component-wise median (one outlier cannot become the
-    initial position), its variance σ² of the first fix plus the largest squared distance of
-    a fix from the median (the vehicle may move meanwhile); velocity zero with σ 1 m/s (the
-    caller replaces it by the GNSS velocity when there is one). Moving without GNSS velocity
-    (``moving_start`` found motion from positions): a car pulling away from rest at 2 m/s² is
-    20 m from the median of nine 1 Hz fixes at t0, so the first fix is taken, unless its
-    step to the second exceeds the next step by ``START_OUTLIER`` σ (an outlier); that step
-    over its interval bounds the speed ``u``, which sets the velocity σ (max(1 m/s, u)) and
-    adds (u·(t_fix − t0))² to the position variance. A parabola through the fixes was tried
-    and dropped: a ramp-then-cruise start is no parabola, and its velocity at t0 (4–6 m/s
-    for a car at rest, σ 0.6) sent the filter off on 3 of 10
+    initial position) with the variance σ² of the first fix; velocity zero with σ 1 m/s (the
+    caller replaces it by the GNSS velocity and adds the motion at that speed).
+
+    Moving without GNSS velocity (``moving_start`` found motion from positions): a car
+    pulling away from rest at 2 m/s² is 20 m from the median of nine 1 Hz fixes at t0, so
+    the first fix is taken, unless its step to the second exceeds the next step by
+    ``START_OUTLIER`` σ (an outlier); that step over its interval bounds the speed ``u``,
+    which sets the velocity σ (max(1 m/s, u)) and adds (u·(t_fix − t0))² to the position
+    variance. With an outlier first: the median, with the largest squared distance of a fix
+    from it added. A parabola through the fixes was tried and dropped: a ramp-then-cruise
+    start is no parabola, and its velocity at t0 (4–6 m/s for a car at rest, σ 0.6) sent
+    the filter off on 3 of 10
     cold-start-phone seeds.
     """
     med = np.median(lla, axis=0)
     ned = lla_to_ned(lla, med)
     var0 = pos_sd[0] ** 2
+    if not moving:
+        return StartPosition(med, var0, np.zeros(3), np.ones(3))
     step = np.linalg.norm(np.diff(ned[:3, :2], axis=0), axis=1)
-    if not moving or lla.shape[0] < 3 or step[0] > step[1] + START_OUTLIER * np.hypot(
-            pos_sd[0, 0], pos_sd[0, 1]):
+    if lla.shape[0] < 3 or step[0] > step[1] + START_OUTLIER * np.hypot(pos_sd[0, 0],
+                                                                         pos_sd[0, 1]):
         return StartPosition(med, var0 + np.max(ned**2, axis=0), np.zeros(3), np.ones(3))
     u = float(step[0] / max(tg[1] - tg[0], 1e-3))
     drift = (u * max(tg[0] - t0, 0.0)) ** 2

@@ -82,7 +82,7 @@ from ...types import (
     ParamEstimate,
     Trajectory,
 )
-from . import kernel, rts
+from . import carry, kernel, regate, rts
 from . import model as km
 from .alignment import Alignment, initial_state, track_heading
 from .magnetometer import kernel_record, one_per_interval
@@ -113,6 +113,8 @@ class _Run:
     latency_mean: float  # the baro latency's prior mean [s]
     tau: tuple[float, float, float, float]
     has_baro: bool
+    model: SensorModel  # the shared sensor model of the drive (post-smoothing gate)
+    g_latency: float  # GNSS latency subtracted from the fix stamps [s]
 
 
 def _white_var(density: float, dt: FloatArray) -> FloatArray:
@@ -371,7 +373,7 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
     rts = tuple(res[5:10]) if store_rts else None
     return _Run(t[gr.out_idx], *res[:4], t[gr.grid_idx], gr.grid_idx, gr.out_idx,
                 gr.cov_grid, res[4], rts, innov, info, prior, bp.latency_mean, tau,
-                baro is not None)
+                baro is not None, model, float(ini.g_latency))
 
 
 def _report(drive: Drive, res: tuple[Any, ...], gr: _Grids, gaps: NDArrayInt, ini: Alignment,
@@ -470,13 +472,44 @@ class EKF:
 
 class EKFRTS(EKF):
     """``ekf`` followed by a Rauch-Tung-Striebel smoother on the covariance grid (``run``
-    and its post-solve checks are ``EKF``'s)."""
+    and its post-solve checks are ``EKF``'s), and with ``EkfConfig.post_gate`` the
+    post-smoothing GNSS gate (``ekf.regate``)."""
 
     name = "ekf-rts"
 
     def _run(self, drive: Drive) -> Estimate:
         t0 = time.perf_counter()
-        run = run_forward(drive, self.config, store_rts=True)
+        run, est = self._smooth(drive, t0)
+        if not self.config.post_gate or drive.gnss is None:
+            return est
+        def again(d: Drive) -> tuple[SensorModel, Estimate]:
+            r, e = self._smooth(d, t0)
+            return r.model, e
+
+        return regate.regated(drive, est, run.model, run.g_latency, self.config, self.name,
+                              again, t0)
+
+    def _smooth(self, drive: Drive, t0: float) -> tuple[_Run, Estimate]:
+        """The forward pass and the RTS smoother over it (``t0``: start of the run's clock);
+        with ``carry_heading_back`` run again from t0 with the acquired heading given
+        (``ekf.carry``)."""
+        cfg = self.config
+        run, est = self._pass(drive, cfg, t0)
+        if not cfg.carry_heading_back:
+            return run, est
+        assert run.rts is not None
+        redo = carry.rerun_config(cfg, run.info, run.t_grid, run.rts[4], run.t_out, run.q,
+                                  est, run.model.imu.gyro_bias_sd)
+        if redo is None:
+            return run, est
+        run2, est2 = self._pass(drive, redo[0], t0)
+        info = {**run2.info, **redo[1]}
+        # the causal (online) estimate stays the first pass's: the re-run knows the future
+        return replace(run2, info=info), est2.replace(info=info, config=cfg, online=est.online)
+
+    def _pass(self, drive: Drive, cfg: EkfConfig, t0: float) -> tuple[_Run, Estimate]:
+        """One forward pass with ``cfg`` and the RTS smoother over it."""
+        run = run_forward(drive, cfg, store_rts=True)
         assert run.rts is not None
         rts_p, rts_ing, rts_q, corr, reset_at = run.rts
         cov_out_of = np.full(run.t_grid.size, -1, dtype=np.int64)
@@ -489,5 +522,5 @@ class EKFRTS(EKF):
         online = _trajectory(run, run.lla, run.vel, run.q, run.par)
         traj = _trajectory(run, lla, vel, q, par)
         cov = km.unpack_cov(cov_s, run.has_baro)
-        return _estimate(self.name, run, traj, par, cov, t0, online, self.config,
-                         float(np.sqrt(max(var_b, 0.0))))
+        return run, _estimate(self.name, run, traj, par, cov, t0, online, cfg,
+                              float(np.sqrt(max(var_b, 0.0))))

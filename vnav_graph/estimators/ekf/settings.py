@@ -62,6 +62,12 @@ class EkfConfig:
     loss_baro: robust loss of baro samples ("none" or "huber").
     loss_threshold_sd: Huber thresholds k [σ] (GNSS position, GNSS velocity, baro): the
         graph's rule (``GraphConfig.loss_threshold_sd``, a Mahalanobis norm in σ).
+    post_gate: ``ekf-rts`` only: remove the fixes that do not fit the smoothed trajectory and
+        run the forward and RTS passes again (``ekf.regate``; the graph's post-solve gate).
+    post_gate_rounds: at most this many post-smoothing gate rounds.
+    carry_heading_back: ``ekf-rts`` only: a heading acquired in motion is carried back to the
+        drive's start and the forward and RTS passes are run again from there with it
+        (``ekf.carry``).
     tilt_consider: while the heading is unknown, horizontal GNSS rows hold the attitude as
         Schmidt consider states (``ekf.steps.update_gnss``).
 
@@ -106,6 +112,9 @@ class EkfConfig:
     loss_gnss_vel: str = "none"
     loss_baro: str = "none"
     loss_threshold_sd: tuple[float, float, float] = (2.0, 2.0, 2.0)
+    post_gate: bool = False
+    post_gate_rounds: int = 3
+    carry_heading_back: bool = True
     tilt_consider: bool = True
 
     def huber_k(self) -> tuple[float, float, float]:
