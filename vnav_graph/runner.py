@@ -45,7 +45,7 @@ from .evaluation.holdout import (
     score,
     withhold,
 )
-from .evaluation.metrics import METRIC_KEYS
+from .evaluation.metrics import METRIC_KEYS, fb_separation_block
 from .evaluation.screening import screen_reference
 from .failures import MissingStream, failure_message
 from .jit import CompileTimer, Prewarm, family_of, mark_warm
@@ -233,6 +233,7 @@ def failed_block(error: str, runtime_s: float, status: str = "failed",
         "status": status, "error": error, **dict.fromkeys(METRIC_KEYS), "runtime_s": runtime_s,
         "realtime_factor": None, "gnss_rejected": None, "warnings": [], "fallbacks": [],
         "solver": None, "isam2_final": None, "extensions": None, "self_check": None,
+        "fb_separation": None,
         "baro": {"scale": dict(null_param), "latency_s": dict(null_param),
                  "bias_m": dict(null_param)},
         **extra,
@@ -276,6 +277,7 @@ def run_holdout(drive: Drive, estimators: Sequence[str] | None = None, outage_s:
             s.block["baro_prior_conflict"] = [str(x) for x in
                                               info.get("baro_prior_conflict") or []]
             s.block["baro"] = baro_block(r.estimate)
+            s.block["fb_separation"] = fb_separation_block(info.get("fb_separation"))
             results[r.name], series[r.name] = s.block, s
         except Exception as exc:  # one estimator's failure is data, not a crash
             if os.environ.get("VNAV_DEBUG"):

@@ -157,6 +157,14 @@ METRIC_KEYS = ("alt_rmse_m", "alt_max_abs_m", "horiz_rmse_m", "heading_rmse_deg"
                "outage_horiz_max_m", "vel_down_rmse_mps", "nees_mean", "nees_dof")
 
 
+def fb_separation_block(sep: Any) -> dict[str, float] | None:
+    """``{"alt_p95_m", "horiz_p95_m"}``: the 95th percentiles of the distance between the
+    forward filter and the filter run backward (``ekf.backward``); None when not computed."""
+    if not sep:
+        return None
+    return {"alt_p95_m": float(sep["alt_p95_m"]), "horiz_p95_m": float(sep["horiz_p95_m"])}
+
+
 def evaluate(est: Estimate, drive: Drive,
              blocks: Sequence[tuple[float, float]] | None = None) -> dict[str, Any]:
     """Metric block for summary.json / bench.json (docs/design.md schema).
@@ -192,6 +200,8 @@ def evaluate(est: Estimate, drive: Drive,
         # graph smoothers: factors and variables each extension added (null elsewhere)
         "extensions": est.info.get("extensions"),
         "extra_variables": extra_variables_block(est.info.get("extra_variables")),
+        # ekf-rts: forward/backward filter separation (null for the others)
+        "fb_separation": fb_separation_block(est.info.get("fb_separation")),
     }
     if drive.truth is not None:
         err = errors_vs_truth(est, drive)

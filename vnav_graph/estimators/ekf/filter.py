@@ -82,7 +82,7 @@ from ...types import (
     ParamEstimate,
     Trajectory,
 )
-from . import carry, kernel, regate, rts
+from . import backward, carry, kernel, regate, rts
 from . import model as km
 from .alignment import Alignment, initial_state, track_heading
 from .magnetometer import kernel_record, one_per_interval
@@ -479,6 +479,22 @@ class EKFRTS(EKF):
 
     def _run(self, drive: Drive) -> Estimate:
         t0 = time.perf_counter()
+        est = self._gated(drive, t0)
+        if not self.config.fb_separation:
+            return est
+        try:
+            sep = backward.fb_separation(drive, est, self.config,
+                                         lambda d, c: EKF(c).run(d))
+            note = None
+        except (ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:
+            sep, note = None, f"{self.name}: the backward pass failed ({exc}); no fb_separation"
+        info = {**est.info, "fb_separation": sep}
+        if note is not None:
+            info["warnings"] = [*(info.get("warnings") or []), note]
+        return est.replace(info=info, runtime_s=time.perf_counter() - t0)
+
+    def _gated(self, drive: Drive, t0: float) -> Estimate:
+        """The smoothed estimate, with ``post_gate`` after the post-smoothing gate rounds."""
         run, est = self._smooth(drive, t0)
         if not self.config.post_gate or drive.gnss is None:
             return est

@@ -68,6 +68,8 @@ class EkfConfig:
     carry_heading_back: ``ekf-rts`` only: a heading acquired in motion is carried back to the
         drive's start and the forward and RTS passes are run again from there with it
         (``ekf.carry``).
+    fb_separation: ``ekf-rts`` only: run the filter backward too and report the
+        forward/backward separation (``ekf.backward``; ``info["fb_separation"]``).
     tilt_consider: while the heading is unknown, horizontal GNSS rows hold the attitude as
         Schmidt consider states (``ekf.steps.update_gnss``).
 
@@ -115,6 +117,7 @@ class EkfConfig:
     post_gate: bool = False
     post_gate_rounds: int = 3
     carry_heading_back: bool = True
+    fb_separation: bool = True
     tilt_consider: bool = True
 
     def huber_k(self) -> tuple[float, float, float]:
