@@ -160,6 +160,7 @@ class MovingStart:
     i_end: int  # end (exclusive) of the levelling window, IMU samples
     accel_b: FloatArray  # (3,) acceleration of the vehicle in b to remove from f_b [m/s²]
     accel_sd: float  # one-sigma of that removal per axis [m/s²]
+    accel_sd_y: float | None = None  # its lateral one-sigma when it differs [m/s²]
 
 
 def moving_start(imu: ImuStream, gnss: GnssStream | None, i_static: int,
@@ -220,6 +221,15 @@ def moving_start(imu: ImuStream, gnss: GnssStream | None, i_static: int,
         # 2.0 m/s² where 0.3 was true, a 9.7° pitch error)
         a_along, v_mid = 0.0, 0.0
         a_sd = abs(2.0 * float(coef[0])) + 2.0 * float(np.sqrt(max(cov[0, 0], 0.0)))
+        # laterally only the centripetal v·ω_z is unknown (no sideslip): v bounded by the
+        # parabola's speed at the window's end + 2σ, ω_z measured. Seed 7 of
+        # cold-start-phone: 0.2 instead of 2.7 m/s², so the roll (16° σ before) no longer
+        # takes the lateral misfit of a 10° heading error at the acquisition
+        jv = np.array([2.0 * (t1 - t0), 1.0, 0.0])
+        v_max = abs(float(jv @ coef)) + 2.0 * float(np.sqrt(max(jv @ cov @ jv, 0.0)))
+        w_z = float(np.mean(imu.gyro_b[:i_end, 2]))
+        a_sd_y = max(v_max * abs(w_z), MOVING_ACCEL_SD_MIN)
+        return MovingStart(i_end, np.zeros(3), max(a_sd, MOVING_ACCEL_SD_MIN), a_sd_y)
     w_z = float(np.mean(imu.gyro_b[:i_end, 2]))
     accel_b = np.array([a_along, max(v_mid, 0.0) * w_z, 0.0])
     return MovingStart(i_end, accel_b, max(a_sd, MOVING_ACCEL_SD_MIN))
@@ -298,13 +308,15 @@ def initial_state(drive: Drive, cfg: EkfConfig, model: SensorModel, bp: BaroPrio
     t = imu.t
     i_static = static_window_end(imu, cfg.align_max_s)
     mv = moving_start(imu, gnss, i_static)
-    tilt_extra_var = 0.0
+    tilt_extra_var: float | FloatArray = 0.0
     if mv is None:
         roll, pitch = coarse_level(imu.accel_b[:i_static].mean(axis=0))
     else:  # moving from the start: level on f_b minus the GNSS-derived acceleration
         i_static = mv.i_end
         roll, pitch = coarse_level(imu.accel_b[:i_static].mean(axis=0) - mv.accel_b)
         tilt_extra_var = (mv.accel_sd / 9.81) ** 2
+        if mv.accel_sd_y is not None:  # pitch from the along-track, roll from the lateral
+            tilt_extra_var = np.array([(mv.accel_sd_y / 9.81) ** 2, tilt_extra_var])
     heading_known = cfg.initial_heading is not None
     yaw0 = float(cfg.initial_heading) if heading_known else 0.0
     heading_sd = cfg.initial_heading_sd
@@ -352,8 +364,15 @@ def initial_state(drive: Drive, cfg: EkfConfig, model: SensorModel, bp: BaroPrio
     p0[3:6, 3:6] = np.diag(vel_var)
     p_ba = ispec.accel_bias_sd**2 * np.eye(3)
     m_tilt = level_tilt_bias_jacobian(c0, float(gravity(lla0[0], lla0[2])))
-    p0[6:9, 6:9] = m_tilt @ p_ba @ m_tilt.T + (cfg.min_tilt_sd**2 + tilt_extra_var) * np.diag(
-        [1.0, 1.0, 0.0])
+    if np.ndim(tilt_extra_var):  # per body axis (roll, pitch), turned into n by the yaw
+        cy, sy = np.cos(yaw0), np.sin(yaw0)
+        rz = np.array([[cy, -sy], [sy, cy]])
+        p_tilt = np.zeros((3, 3))
+        p_tilt[:2, :2] = rz @ np.diag(tilt_extra_var) @ rz.T + cfg.min_tilt_sd**2 * np.eye(2)
+        p0[6:9, 6:9] = m_tilt @ p_ba @ m_tilt.T + p_tilt
+    else:
+        p0[6:9, 6:9] = m_tilt @ p_ba @ m_tilt.T + (
+            cfg.min_tilt_sd**2 + tilt_extra_var) * np.diag([1.0, 1.0, 0.0])
     yaw_unknown_var = np.pi**2 / 3.0
     p0[8, 8] = heading_sd**2 if heading_known else yaw_unknown_var
     p0[6:9, 12:15] = m_tilt @ p_ba

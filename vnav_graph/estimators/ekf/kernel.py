@@ -334,10 +334,11 @@ def run_filter(grids, init, noise, events, gnss, baro, mag, settings):
                 elif pend_type[e] == BARO:
                     update_gated(p, dx, heff, pend_y[e], pend_r[e], settings.gate_baro,
                                  settings.max_consec_baro, counts, C_BARO, inn_baro, rej_baro,
-                                 idx, settings.huber_baro)
+                                 idx, settings.huber_baro,
+                                 settings.tilt_consider and not pend_ok[e])
                 else:
                     update_gated(p, dx, heff, pend_y[e], pend_r[e], mag.gate, mag.max_consec,
-                                 counts, C_MAG, inn_mag, rej_mag, idx, 0.0)
+                                 counts, C_MAG, inn_mag, rej_mag, idx, 0.0, False)
             n_pend = 0
             apply_correction(lla, v, q, par, dx)
             if store_rts:

@@ -44,6 +44,13 @@ decoupled — its row and column of Φ and of H are zero and its variance stays 
 heading error. Two effects of the unknown heading are added as process noise: the horizontal
 Earth-rate compensation (tilt, rate ≤ 2Ω cos L, rms √2 Ω cos L, treated as a constant rate
 of unknown sign) and the rotation of the horizontal specific force (velocity, rms √2 |f_h|).
+The GNSS and baro updates hold the attitude as Schmidt consider states until the heading is
+known (``consider_update``; ``EkfConfig.tilt_consider``): the horizontal rows cannot tell
+tilt from heading then, and a levelling in motion can leave a tilt σ of 15–20° (position-only
+start, ``alignment.moving_start``), far outside the linear regime — on cold-start-phone a
+single baro sample moved the pitch by 16° (true error 3.8°) and a heading 10° off at its
+acquisition was taken up as 12° of roll, each sending the forward filter hundreds of metres
+off.
 The first GNSS fix with track speed above the threshold resets the nominal yaw to the track
 (q ← q_z(Δ) ⊗ q), rotates the tilt covariance with it (ψ' = R_z(Δ) ψ) and sets the yaw
 variance to the track's σ²; the RTS smoother sees this step as Φ_eff = J Φ with Q_eff[8] = σ².

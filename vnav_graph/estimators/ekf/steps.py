@@ -22,6 +22,7 @@ from .model import (
     PBG,
     PGH,
     build_f,
+    consider_update,
     huber_weight,
     reset_jacobian,
     scalar_update,
@@ -159,7 +160,10 @@ def update_gnss(p, dx, heff, y, r, mm, idx, te, k, settings, sd_v, has_baro, b_p
         if code == USE_INFLATE:
             p[IBB, IBB] += b_prior_var
         w = huber_weight(np.sqrt(nu_v * nu_v / s_v), settings.huber_pos)
-        scalar_update(p, dx, hv, y[2], rv if w >= 1.0 else rv / w)
+        if c1 > c0:
+            consider_update(p, dx, hv, y[2], rv if w >= 1.0 else rv / w, c0, c1)
+        else:
+            scalar_update(p, dx, hv, y[2], rv if w >= 1.0 else rv / w)
     else:
         rej_v[idx] = True
         rej_pos[idx] = True
@@ -172,7 +176,7 @@ def update_gnss(p, dx, heff, y, r, mm, idx, te, k, settings, sd_v, has_baro, b_p
         if use_v:
             ok, nis, nrm, w = vector_update(p, dx, heff[5:6].copy(), y[5:6].copy(),
                                             r[5:6].copy(), settings.gate_v, no_force,
-                                            settings.huber_vel, 0, 0)
+                                            settings.huber_vel, c0, c1)
             inn_vel[idx, 2] = nrm[0]
             rej_vel[idx] = rej_vel[idx] or not ok
         else:
@@ -180,12 +184,15 @@ def update_gnss(p, dx, heff, y, r, mm, idx, te, k, settings, sd_v, has_baro, b_p
 
 
 @njit(cache=True)
-def update_gated(p, dx, heff, y, r, gate, max_consec, counts, c, inn, rej, idx, huber_k):
+def update_gated(p, dx, heff, y, r, gate, max_consec, counts, c, inn, rej, idx, huber_k,
+                 hold_tilt):
     """A one-row measurement (baro, magnetometer heading) behind a χ²₁ gate, forced in after
     ``max_consec`` refusals in a row (counter ``counts[c]``); Huber re-weighting with
-    threshold ``huber_k`` (0: none)."""
+    threshold ``huber_k`` (0: none); ``hold_tilt``: the attitude as consider states."""
+    c0 = IATT if hold_tilt else 0
+    c1 = IATT + 3 if hold_tilt else 0
     ok, nis, nrm, w = vector_update(p, dx, heff[:1].copy(), y[:1].copy(), r[:1].copy(), gate,
-                                    counts[c] >= max_consec, huber_k, 0, 0)
+                                    counts[c] >= max_consec, huber_k, c0, c1)
     inn[idx] = nrm[0]
     rej[idx] = not ok
     counts[c] = 0 if nis <= gate else counts[c] + 1
