@@ -26,6 +26,13 @@ import numpy as np
 from ...types import Estimate, FloatArray
 from .settings import EkfConfig
 
+# the largest σ of a heading carried back [rad]: 5°, the "heading known" bound of the
+# metrics (evaluation.metrics.HEADING_KNOWN_SD_DEG). A heading that even the smoother knows
+# only to 11° (Loiter_RTL, a multicopter hovering for 40 s before its acquisition) turned
+# the re-run's yaw into a linear state that far off: withheld-GNSS altitude RMSE 1.05 →
+# 2.07 m (horizontal 42 → 24 m); cold-start and default carry 0.4° and 1.2°
+CARRY_SD_MAX = np.radians(5.0)
+
 
 @dataclass(frozen=True)
 class CarriedHeading:
@@ -80,7 +87,8 @@ def rerun_config(cfg: EkfConfig, info: dict[str, Any], t_grid: FloatArray,
     entries that report it, or None when there is nothing to carry back: the heading was
     given or from the compass, never acquired, or an IMU gap of at least
     ``gap_heading_forget_s`` lies before the acquisition (the vehicle may have turned in
-    it). Shorter gaps before it add their heading random walk (``gap_yaw_rw``) to the σ."""
+    it). Shorter gaps before it add their heading random walk (``gap_yaw_rw``) to the σ.
+    Nor when the carried σ exceeds ``CARRY_SD_MAX``."""
     if info["heading_source"] not in ("accel-matching", "gnss-track"):
         return None
     ch = carried_heading(t_grid, reset_at, t_out, q_fwd, smoothed, gyro_bias_sd)
@@ -90,6 +98,8 @@ def rerun_config(cfg: EkfConfig, info: dict[str, Any], t_grid: FloatArray,
     if any(g[1] >= cfg.gap_heading_forget_s for g in gaps):
         return None
     sd = float(np.hypot(ch.sd, cfg.gap_yaw_rw * np.sqrt(sum(g[1] for g in gaps))))
+    if sd > CARRY_SD_MAX:
+        return None
     report = {"heading_source": f"{info['heading_source']}, carried back",
               "heading_time_s": info["heading_time_s"],
               "heading_carried_back": {"yaw0_deg": float(np.degrees(ch.yaw0)),
