@@ -76,18 +76,16 @@ CHAIN = (("ekf", "ekf-rts"), ("ekf-rts", "graph-batch"), ("ekf-rts", "graph-isam
 # attribution (where in the drive the difference lies), so a reader can check one by the other
 MECHANISM = {
     "cold-start": "the EKF's heading is unknown until acceleration matching gives it, a few "
-    "seconds after the start; that acquisition is a state reset, and the RTS pass carries no "
-    "information back across it, so ekf-rts keeps the wrong heading of the first seconds; "
-    "the graph solves the whole trajectory at once and the gyro ties the first seconds to "
-    "the heading observed later",
+    "seconds after the start; that acquisition is a state reset the RTS pass cannot smooth "
+    "across, so ekf-rts carries the acquired heading back to the start and smooths the "
+    "drive again from there (ekf.carry); the graph solves the whole trajectory at once and "
+    "the gyro ties the first seconds to the heading observed later",
     "cold-start-posonly": "as in cold-start, with the course from the GNSS track (positions "
-    "only): the heading before the track is usable stays wrong in ekf-rts, not in the graph",
-    "cold-start-phone": "the EKF decides whether the car moves from a parabola through the "
-    "first 4 s of positions and needs 5 fixes there; a 1 Hz receiver has 4–5, so the launch "
-    "acceleration is levelled as gravity (degrees of pitch with a tight σ), the vertical is "
-    "inconsistent for the first seconds and the baro latency absorbs it, with too little "
-    "vertical motion later to move it back (the horizontal fails too); the graph solves the "
-    "whole drive at once",
+    "only)",
+    "cold-start-phone": "1 Hz positions give the EKF's in-motion levelling few fixes and no "
+    "velocity, so the launch acceleration stays in its tilt (σ up to 20°) until the heading "
+    "is known; the filter holds the attitude as consider states until then (ekf.model); the "
+    "graph solves the whole drive at once",
     "urban": "a burst fix that passes the EKF's χ² gate (its reported σ understates the "
     "error) is absorbed for good; the graph re-weights every fix against the smoothed "
     "trajectory at each iteration (Huber), so burst fixes lose their weight after the fact",
