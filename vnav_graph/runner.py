@@ -46,7 +46,7 @@ from .evaluation.holdout import (
     score,
     withhold,
 )
-from .evaluation.metrics import METRIC_KEYS
+from .evaluation.metrics import METRIC_KEYS, fb_separation_block
 from .evaluation.screening import screen_reference
 from .failures import MissingStream, failure_message
 from .jit import CompileTimer, Prewarm, family_of, mark_warm
@@ -236,6 +236,7 @@ def failed_block(error: str, runtime_s: float, status: str = "failed",
         "realtime_factor": None, "gnss_rejected": None, "warnings": [], "fallbacks": [],
         "solver": None, "isam2_final": None, "extensions": None, "self_check": None,
         "online": None, "lag": None,
+        "fb_separation": None,
         "baro": {"scale": dict(null_param), "latency_s": dict(null_param),
                  "bias_m": dict(null_param)},
         **extra,
@@ -282,6 +283,7 @@ def run_holdout(drive: Drive, estimators: Sequence[str] | None = None, outage_s:
             s.block["online"] = causal_score(r.estimate, drive, reference, "online",
                                              given=~withheld)
             s.block["lag"] = causal_score(r.estimate, drive, reference, "lag", given=~withheld)
+            s.block["fb_separation"] = fb_separation_block(info.get("fb_separation"))
             results[r.name], series[r.name] = s.block, s
         except Exception as exc:  # one estimator's failure is data, not a crash
             if os.environ.get("VNAV_DEBUG"):

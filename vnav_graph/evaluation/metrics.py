@@ -209,6 +209,14 @@ def _rms(x: FloatArray | None) -> float | None:
     return None if x is None or x.size == 0 else float(np.sqrt(np.mean(x**2)))
 
 
+def fb_separation_block(sep: Any) -> dict[str, float] | None:
+    """``{"alt_p95_m", "horiz_p95_m"}``: the 95th percentiles of the distance between the
+    forward filter and the filter run backward (``ekf.backward``); None when not computed."""
+    if not sep:
+        return None
+    return {"alt_p95_m": float(sep["alt_p95_m"]), "horiz_p95_m": float(sep["horiz_p95_m"])}
+
+
 def evaluate(est: Estimate, drive: Drive,
              blocks: Sequence[tuple[float, float]] | None = None) -> dict[str, Any]:
     """Metric block for summary.json / bench.json (docs/design.md schema).
@@ -250,6 +258,8 @@ def evaluate(est: Estimate, drive: Drive,
         # the causal estimate and graph-isam2's fixed-lag one, scored alike (causal_block)
         "online": causal_block(est, drive, "online"),
         "lag": causal_block(est, drive, "lag"),
+        # ekf-rts: forward/backward filter separation (null for the others)
+        "fb_separation": fb_separation_block(est.info.get("fb_separation")),
     }
     if drive.truth is not None:
         err = errors_vs_truth(est, drive)
