@@ -49,8 +49,9 @@ def test_online_estimate_is_the_filtering_optimum_in_an_outage():
 
 def test_own_estimate_is_returned_and_checked_by_the_batch_pass(monkeypatch):
     """graph-isam2 returns iSAM2's own smoothed estimate; the batch pass started from it is
-    reported in ``info["final_batch"]`` and replaces it only when it ends significantly
-    lower (forced here by a negative tolerance), with a warning."""
+    reported in ``info["final_batch"]``. When it ends significantly lower (forced here by a
+    negative tolerance) that is a warning naming both costs, and the answer stays iSAM2's
+    unless ``isam2_batch_fallback`` is set."""
     from vnav_graph.estimators.graph import GraphConfig, GraphISAM2
     from vnav_graph.estimators.graph.isam2 import smoother as gi
 
@@ -69,8 +70,15 @@ def test_own_estimate_is_returned_and_checked_by_the_batch_pass(monkeypatch):
     assert no_check.info["final_batch"] is None
     np.testing.assert_allclose(no_check.trajectory.alt, own.trajectory.alt, atol=1e-9)
     monkeypatch.setattr(gi, "OWN_GAP_FRACTION", -1.0)
-    fell = GraphISAM2().run(drive)
+    kept = GraphISAM2().run(drive)  # judged not at the optimum: a warning, its own answer
+    assert kept.info["trajectory_source"] == "isam2" and kept.info["isam2_final"] == "isam2"
+    warned = [w for w in kept.info["warnings"] if "not at the optimum" in w]
+    assert len(warned) == 1 and f"{kept.info['final_batch']['cost']:.1f}" in warned[0]
+    assert f"{kept.info['final_batch']['isam2_cost']:.1f}" in warned[0]
+    np.testing.assert_array_equal(kept.trajectory.alt, own.trajectory.alt)
+    fell = GraphISAM2(GraphConfig(isam2_batch_fallback=True)).run(drive)
     assert fell.info["trajectory_source"] == "final_batch"
+    assert fell.info["isam2_final"] == "batch"
     assert [w for w in fell.info["warnings"] if "not at the optimum" in w]
     assert np.max(np.abs(fell.trajectory.alt - batch.trajectory.alt)) < 2e-3
     assert np.max(np.abs(fell.trajectory.alt - own.trajectory.alt)) > 0.0

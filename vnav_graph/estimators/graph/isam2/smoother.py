@@ -38,8 +38,10 @@ estimate after the final rounds (``relin.settle``: the segments' (s, τd) tied i
 relinearisation with every term rebuilt until nothing is due), with covariances of the
 problem linearised there. With ``GraphConfig.final_batch`` the batch Gauss-Newton of
 ``solve`` also runs from that estimate as its check (``info["final_batch"]``); only when it
-ends significantly lower (``OWN_GAP_FRACTION``) is its solution returned instead, with a
-warning and ``info["trajectory_source"] = "final_batch"``.
+ends significantly lower (``OWN_GAP_FRACTION``) is that a warning naming both costs; its
+solution is returned instead only with ``GraphConfig.isam2_batch_fallback``
+(``info["isam2_final"]`` = "batch", ``info["trajectory_source"]`` = "final_batch"; otherwise
+"isam2").
 """
 
 from __future__ import annotations
@@ -230,10 +232,14 @@ class GraphISAM2:
                     restarted = final_batch["restarted"] = True
                     final_batch.update(cost=float(res.cost), iterations=int(res.iterations),
                                        stop=res.stop, cost_gap=float(own.cost - res.cost))
-                chosen, source = res, "final_batch"
+                if cfg.isam2_batch_fallback:
+                    chosen, source = res, "final_batch"
                 warn = [f"{self.name}: iSAM2's own smoothed estimate is not at the optimum "
                         f"(cost {own.cost:.1f} against {res.cost:.1f} for the final batch "
-                        f"pass); the trajectory is the final batch pass"]
+                        f"pass); the trajectory is "
+                        + ("the final batch pass (isam2_batch_fallback)"
+                           if cfg.isam2_batch_fallback else
+                           "iSAM2's own (isam2_batch_fallback = true returns the batch pass)")]
         t_final = time.perf_counter()
         del own_graph, own_vals
         if chosen is not own:
