@@ -29,6 +29,7 @@ from ....types import Drive
 from ..batch.linalg import trim_heap
 from ..model import interval_factors as gf
 from ..model.cpp_factors import (
+    PRIOR_ATT_SD,
     bias_link,
     bias_step,
     build_batch_graph,
@@ -45,6 +46,7 @@ from ..model.problem import gravity_delta, noise, preintegrate, setup
 from ..settings import GraphConfig
 from . import linear_factors as terms
 from . import relin
+from .answers import Answers
 from .setup import (
     extra_online_of,
     first_keyframe,
@@ -83,6 +85,7 @@ class OnlineResult:
     brk: np.ndarray
     relin_counts: dict[str, Any]
     gate0: tuple[Any, int]
+    answers: Answers
 
 
 class OnlinePass:
@@ -90,11 +93,15 @@ class OnlinePass:
     iSAM2 parameters). ``run()`` does the whole pass; ``update(k)`` is one keyframe."""
 
     def __init__(self, drive: Drive, cfg: GraphConfig, robust: bool,
-                 extensions: Sequence[GraphExtension]) -> None:
-        P = self.P = setup(drive, cfg)
+                 extensions: Sequence[GraphExtension], P: Any = None,
+                 init: tuple[Any, Any, Any] | None = None, causal: bool = False) -> None:
+        """``P``, ``init``: the problem and initial states when already set up (a pass
+        started again). ``causal``: keyframe 0 from ``P.start0`` (the causal start, its yaw
+        prior ``start0.yaw_sd``) instead of the initial states' keyframe 0."""
+        P = self.P = setup(drive, cfg) if P is None else P
         self.cfg = cfg
         self.has_baro = drive.baro is not None
-        self.init = initial_states(P)
+        self.init = initial_states(P) if init is None else init
         rot_i, pos_i, vel_i = self.init
         nk = P.n_kf
         self.seg = seg = segments(P)
@@ -111,10 +118,15 @@ class OnlinePass:
         self.bias, self.cb, self.gg = np.zeros((nk, 6)), np.zeros(nk), np.zeros(nk)
         self.arrays = (self.rot, self.pos, self.vel, self.bias, self.cb, self.gg)
         self.cal = {0: np.array([0.0, P.pri["tau0"]])}
-        self.rot[0], self.pos[0], self.vel[0] = rot_i[0], pos_i[0], vel_i[0]
+        st0 = P.start0
+        if causal:
+            self.rot[0], self.pos[0], self.vel[0] = st0.rot, st0.pos, st0.vel
+        else:
+            self.rot[0], self.pos[0], self.vel[0] = rot_i[0], pos_i[0], vel_i[0]
         self.gap_states = gap_start_states(P, rot_i, pos_i, vel_i) if P.gap.any() else None
-        graph0, vals0, fix_at0 = first_keyframe(P, self.rot[0], self.pos[0], self.vel[0],
-                                                self.cal[0])
+        graph0, vals0, fix_at0 = first_keyframe(
+            P, self.rot[0], self.pos[0], self.vel[0], self.cal[0],
+            st0.yaw_sd if causal else PRIOR_ATT_SD[2])
         if self.ext is not None:
             fs, nv_ext = self.ext.at_keyframe(0)
             for f in fs:
@@ -140,6 +152,8 @@ class OnlinePass:
         self.online_rot = np.zeros((nk, 3, 3))  # its attitude, as quaternions after the pass
         self.online[0, 0:6] = np.r_[self.pos[0], self.vel[0]]
         self.online_rot[0] = self.rot[0]
+        self.answers = Answers(P, seg, cfg.isam2_lag_s)
+        self.answers.online_cov[0] = self.answers.cov(self.isam, vals0, 0, 0)
         self.baro_next = 0
         self.calib_rw = np.asarray(cfg.calib_rw, float)
         self.s_max = 0.0  # the largest |s| of the online pass (sensors.baro scale check)
@@ -169,6 +183,11 @@ class OnlinePass:
         for k in range(self.P.n_kf - 1):
             self.update(k)
         return self.finish()
+
+    def run_to(self, m: int) -> None:
+        """The updates that create keyframes 1 … m."""
+        for k in range(m):
+            self.update(k)
 
     # -- one keyframe --------------------------------------------------------------------
 
@@ -327,6 +346,8 @@ class OnlinePass:
                 and np.linalg.norm(self.vel[k + 1]) < DIVERGED_SPEED):
             raise update_error(P, k, None, bool(P.gap[k]))
         self._read_calibration(k)
+        self.answers.after_update(self.isam, k, gtsam.Pose3(gtsam.Rot3(self.rot[k + 1]),
+                                                            self.pos[k + 1]))
         if self.win is not None and (m1 := self.win.due(k + 1)) > self.win.first:
             # keyframes older than the window leave iSAM2 (their conditionals are kept)
             gone = self.win.marginalise(self.isam, m1, self.b_last)
@@ -415,4 +436,42 @@ class OnlinePass:
                   **self.win_info,
                   "final_rounds_s": time.perf_counter() - t_online}
         return OnlineResult(P, est, extra_online, t_online, self.online, self.ext, self.init,
-                            self.pims, self.seg, self.upd_ms, self.brk, counts, gate0)
+                            self.pims, self.seg, self.upd_ms, self.brk, counts, gate0,
+                            self.answers)
+
+
+def causal_pass(drive: Drive, cfg: GraphConfig, robust: bool,
+                extensions: Sequence[GraphExtension]) -> tuple[OnlineResult, dict[str, Any]]:
+    """The online pass, strictly causal from keyframe 0 on (``initial_guess.CausalStart``).
+
+    When keyframe 0's heading is not known from the data around it (a standstill without a
+    compass: the initial states carry the first TRIAD heading back to it with the gyro), the
+    pass starts from the causal start with an uninformative yaw prior and runs up to the
+    anchor keyframe m, where that heading becomes known; then it starts again from the
+    initial states' keyframe 0 (the problem graph-batch solves) and runs the whole drive.
+    The online estimate of keyframes 0 … m − 1 is the first pass's, from m on the second's
+    (when the heading is never known, m is the last keyframe and the first pass is the whole
+    online estimate).
+    Returns the result and ``info["isam2_causal_start"]``."""
+    P = setup(drive, cfg)
+    init = initial_states(P)
+    st0 = P.start0
+    info: dict[str, Any] = {"anchor_keyframe": None, "anchor_t_s": None,
+                            "yaw_prior_sd_deg": float(np.degrees(st0.yaw_sd))}
+    if st0.anchor is None:
+        return OnlinePass(drive, cfg, robust, extensions, P, init, causal=True).run(), info
+    m = st0.anchor
+    first = OnlinePass(drive, cfg, robust, extensions, P, init, causal=True)
+    first.run_to(m)
+    # (m is the last keyframe when the heading never becomes known: the first pass is then
+    # the whole online estimate, the second one gives the final estimate)
+    n_kept = m + 1 if m == P.n_kf - 1 else m
+    kept, kept_rot = first.online[:n_kept].copy(), first.online_rot[:n_kept].copy()
+    answers = first.answers
+    del first  # its iSAM2 is not alive under the second pass
+    again = OnlinePass(drive, cfg, robust, extensions, P, init)
+    again.run_to(P.n_kf - 1)
+    again.online[:n_kept], again.online_rot[:n_kept] = kept, kept_rot
+    again.answers.keep(answers, n_kept)
+    info.update(anchor_keyframe=m, anchor_t_s=float(P.t_kf[m] - P.t_kf[0]))
+    return again.finish(), info
