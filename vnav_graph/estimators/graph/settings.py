@@ -124,6 +124,9 @@ class GraphConfig:
         if not (np.isfinite(self.isam2_lag_s) and self.isam2_lag_s >= 0):
             raise ValueError("GraphConfig.isam2_lag_s must be a finite lag ≥ 0 [s], not "
                              f"{self.isam2_lag_s!r}")
+        if self.isam2_window_s is not None and self.isam2_lag_s >= self.isam2_window_s:
+            raise ValueError(f"GraphConfig.isam2_lag_s ({self.isam2_lag_s:g} s) must be shorter "
+                             f"than isam2_window_s ({self.isam2_window_s:g} s)")
         if self.init_attitude not in INIT_ATTITUDES:
             raise ValueError(f"GraphConfig.init_attitude must be one of {INIT_ATTITUDES}, "
                              f"not {self.init_attitude!r}")

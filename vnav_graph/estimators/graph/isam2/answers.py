@@ -12,6 +12,7 @@ that ends at it.
 
 from __future__ import annotations
 
+import time
 from typing import Any
 
 import gtsam
@@ -50,6 +51,7 @@ class Answers:
         self.lag_state: list[FloatArray] = []
         self.lag_rot: list[FloatArray] = []
         self.lag_cov: list[FloatArray] = []
+        self.seconds = 0.0  # time spent here [s]
 
     def cov(self, isam: Any, vals: Any, k: int, kb: int) -> FloatArray:
         return cov_18(self.P, IsamMarginals(isam), vals, k, kb, int(self.seg[k]))
@@ -57,6 +59,11 @@ class Answers:
     def after_update(self, isam: Any, k: int, pose_new: Any) -> None:
         """After the update that created keyframe k + 1 (``pose_new``: its Pose3 as read
         back): its covariance, and the lag record due at t_{k+1}."""
+        t0 = time.perf_counter()
+        self._after_update(isam, k, pose_new)
+        self.seconds += time.perf_counter() - t0
+
+    def _after_update(self, isam: Any, k: int, pose_new: Any) -> None:
         P = self.P
         vals = gtsam.Values()
         vals.insert(X(k + 1), pose_new)

@@ -329,6 +329,7 @@ class GraphISAM2:
         """``Estimate.lag`` and ``lag_cov`` from the pass's records, and their info."""
         a = on.answers
         info = {"lag_s": float(cfg.isam2_lag_s), "lag_epochs": len(a.lag_kf),
+                "isam2_marginals_s": a.seconds,
                 "online_cov_epochs": int(np.sum(np.isfinite(a.online_cov[:, 0, 0])))}
         if not a.lag_kf:
             return None, None, info
