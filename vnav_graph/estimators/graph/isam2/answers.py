@@ -30,9 +30,8 @@ class IsamMarginals:
         self.isam = isam
 
     def joint(self, keys: list[int]) -> FloatArray:
-        jm = self.isam.jointMarginalCovariance(keys)
-        blocks = [[jm.at(a, b) for b in keys] for a in keys]
-        return np.block(blocks)
+        # its full matrix is in the order of ``keys`` (checked against the blocks ``at``)
+        return np.asarray(self.isam.jointMarginalCovariance(keys).fullMatrix())
 
 
 class Answers:
