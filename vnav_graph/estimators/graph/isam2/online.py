@@ -430,6 +430,7 @@ class OnlinePass:
         counts = {"isam2_relinearized": book.relinearized,
                   "isam2_relinearized_factors": book.swapped_factors,
                   "isam2_calibration_steps_halved": book.damped,
+                  "isam2_baro_samples_left_window": book.dropped_at_floor,
                   "baro_scale_max_abs": self.s_max if self.has_baro else None,
                   "isam2_final_rounds": rounds,
                   "isam2_gnss_rejected_postsolve": P.g_rej_post - gate0[1],
