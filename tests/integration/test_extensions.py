@@ -80,6 +80,7 @@ def test_load_configs_sets_graph_isam2s_answer_settings(tmp_path):
     ("[loop3]\nahrs = { tilt_omegaa = 1.0 }\n", "unknown key 'ahrs.tilt_omegaa'"),
     ("[ekf]\ngate_prob = 2.0\n", "[ekf]: EkfConfig.gate_prob: must be in (0.5, 1)"),
     ("[graph-isam2]\nisam2_lag_s = -1.0\n", "isam2_lag_s must be a finite lag"),
+    ("[graph-isam2]\nisam2_lag_s = 700.0\n", "must be shorter than isam2_window_s"),
     ("max_iterations = 3\n", "top-level key 'max_iterations' is not an [estimator] table"),
     ("[graph-batch\n", "not valid TOML"),
 ])
