@@ -68,7 +68,8 @@ from ..model.extend import GraphExtension, check_extensions
 from ..model.magnetometer import builtin_extensions, mag_info
 from ..model.problem import states_from_values
 from ..settings import LOW_RATE_DT, LOW_RATE_KEYFRAME_DT, GraphConfig
-from .online import OnlineResult, causal_pass
+from .causal import causal_pass
+from .online import OnlineResult
 from .setup import estimate_info
 
 # averaged low-rate IMU logs (median spacing ≥ LOW_RATE_DT, e.g. the 1 Hz phone logs): a
