@@ -64,6 +64,12 @@ def test_load_configs_overrides_only_the_given_keys(tmp_path):
     assert ekf.max_consecutive_rejects == EkfConfig().max_consecutive_rejects
 
 
+def test_load_configs_sets_graph_isam2s_answer_settings(tmp_path):
+    cfg = load_configs(_toml(tmp_path, "[graph-isam2]\nisam2_batch_fallback = true\n"
+                                       "isam2_lag_s = 5\n"))["graph-isam2"]
+    assert cfg.isam2_batch_fallback is True and cfg.isam2_lag_s == 5.0
+
+
 @pytest.mark.parametrize("text, needle", [
     ("[graph-batchx]\nmax_iterations = 3\n", "unknown estimator [graph-batchx] (did you mean"),
     ("[graph-batch]\nmax_iter = 3\n", "[graph-batch] unknown key 'max_iter' (did you mean "
@@ -73,6 +79,8 @@ def test_load_configs_overrides_only_the_given_keys(tmp_path):
     ("[loop3]\ngains = [1.0, 2.0]\n", "gains: expected 3 values, got 2"),
     ("[loop3]\nahrs = { tilt_omegaa = 1.0 }\n", "unknown key 'ahrs.tilt_omegaa'"),
     ("[ekf]\ngate_prob = 2.0\n", "[ekf]: EkfConfig.gate_prob: must be in (0.5, 1)"),
+    ("[graph-isam2]\nisam2_lag_s = -1.0\n", "isam2_lag_s must be a finite lag"),
+    ("[graph-isam2]\nisam2_lag_s = 700.0\n", "must be shorter than isam2_window_s"),
     ("max_iterations = 3\n", "top-level key 'max_iterations' is not an [estimator] table"),
     ("[graph-batch\n", "not valid TOML"),
 ])

@@ -508,10 +508,11 @@ def test_a_too_short_isam2_window_is_caught_by_the_batch_check(problem):
     """A 30 s window (``isam2_window_s``) on this 90 s problem, whose heading only the
     accelerometer biases hold: keyframes leave iSAM2 before their heading has converged and
     are not relinearised after, so iSAM2's own estimate is not the optimum (measured: 0.5°
-    of heading off, ½χ² 6003 against 597). The batch check must see it: the batch pass is
-    returned, with a warning, and its heights are graph-batch's to 1 mm."""
+    of heading off, ½χ² 6003 against 597). The batch check must see it: with
+    ``isam2_batch_fallback`` the batch pass is returned, with a warning, and its heights are
+    graph-batch's to 1 mm."""
     drive, est, _, _ = problem
-    cfg = g.GraphConfig(segment_s=15.0, isam2_window_s=30.0)
+    cfg = g.GraphConfig(segment_s=15.0, isam2_window_s=30.0, isam2_batch_fallback=True)
     e2 = g.GraphISAM2(cfg).run(drive)
     assert e2.info["isam2_marginalised_keyframes"] > drive.duration_s / 2
     fb = e2.info["final_batch"]

@@ -71,3 +71,45 @@ def test_window_and_full_history_online_agree_before_the_outage(drive, windowed)
 def test_window_shorter_than_two_segments_is_refused(window):
     with pytest.raises(ValueError, match="isam2_window_s"):
         GraphConfig(isam2_window_s=window)
+
+
+def test_a_rebuilt_baro_sample_never_lands_before_the_window():
+    """A baro sample enters the interval of its delayed time t_s − τd. Rebuilt after τd
+    grew, the delayed time of a sample at the window's first keyframe can fall into the
+    interval before it, whose keys have left iSAM2: a factor there made the update fail with
+    'key "b599" does not exist' (a 20-minute drive with a 600 s window). With ``floor`` (the
+    first keyframe iSAM2 holds) such samples are left out; without it (floor 0) the same call
+    builds a factor on the interval before: the test can fail."""
+    import gtsam
+
+    from vnav_graph.estimators.graph import GraphConfig
+    from vnav_graph.estimators.graph.isam2 import linear_factors as terms
+    from vnav_graph.estimators.graph.isam2.setup import segments
+    from vnav_graph.estimators.graph.model.initial_guess import initial_states
+    from vnav_graph.estimators.graph.model.problem import setup
+    from vnav_graph.simulation.scenario import load_scenario, simulate
+
+    drive = simulate(load_scenario("hill-drive", duration_s=60.0), seed=0)
+    P = setup(drive, GraphConfig())
+    rot, pos, vel = initial_states(P)
+    nk = P.n_kf
+    bias, cb, gg = np.zeros((nk, 6)), np.zeros(nk), np.zeros(nk)
+    floor, k = 20, 30
+    st = terms.keyframe_states(P, list(range(floor, k + 1)), rot, pos, vel, bias, cb, gg)
+    bt, bz = drive.baro.t, drive.baro.altitude
+    t_f = P.t_kf[floor]
+    sel = np.flatnonzero((bt >= t_f) & (bt < t_f + 0.5))  # the first 0.5 s of interval 20
+    cal = {0: np.array([0.0, 0.4])}  # τd 0.4 s: half of them delayed into interval 19
+    seg = segments(P)
+    assert np.any(bt[sel] - 0.4 < t_f)
+
+    def intervals(floor_arg):
+        out = terms.baro_terms(P, k, st, bias, cal, seg, bt, bz, sel, P.pri, floor=floor_arg)
+        keys = {gtsam.Symbol(key) for _, _, f in out for key in f.keys()}
+        return {int(s.index()) for s in keys if chr(s.chr()) == "x"}, out
+
+    xs, out = intervals(floor)
+    assert min(xs) == floor
+    kept = np.concatenate([s_m for _, s_m, _ in out])
+    assert np.all(bt[kept] - 0.4 >= t_f) and kept.size < sel.size
+    assert min(intervals(0)[0]) == floor - 1

@@ -34,7 +34,10 @@ class GraphConfig:
     partial_relinearization_check: iSAM2 option of that name.
     relinearize_typed: iSAM2 thresholds (rot [rad], trans [m], vel [m/s], b_a [m/s²], b_g [rad/s]).
     wildfire_threshold: iSAM2 back-substitution threshold (None: GTSAM's 1e-3).
-    final_batch: also run the batch solver from iSAM2's estimate, as its check and fallback.
+    final_batch: also run the batch solver from iSAM2's estimate, as its check.
+    isam2_batch_fallback: return the check's solution when it ends significantly lower than
+        iSAM2's own (otherwise that is a warning and iSAM2's estimate is returned).
+    isam2_lag_s: lag L of graph-isam2's fixed-lag estimate ``Estimate.lag`` [s].
     final_rounds: at most this many forced-relinearisation updates after the last keyframe.
     isam2_window_s: seconds of keyframes kept in iSAM2 (None: all; at least two segments).
     observable_ratio: posterior/prior σ below which a baro parameter counts as observed.
@@ -78,6 +81,8 @@ class GraphConfig:
         0.002, 0.1, 0.05, 0.01, 0.0005)
     wildfire_threshold: float | None = 0.01
     final_batch: bool = True
+    isam2_batch_fallback: bool = False
+    isam2_lag_s: float = 10.0
     final_rounds: int = 8
     isam2_window_s: float | None = 600.0
     observable_ratio: float = 0.8
@@ -116,6 +121,12 @@ class GraphConfig:
             raise ValueError("GraphConfig.isam2_window_s must be None or at least two segments "
                              f"(2 × segment_s = {2 * self.segment_s:g} s), not "
                              f"{self.isam2_window_s!r}")
+        if not (np.isfinite(self.isam2_lag_s) and self.isam2_lag_s >= 0):
+            raise ValueError("GraphConfig.isam2_lag_s must be a finite lag ≥ 0 [s], not "
+                             f"{self.isam2_lag_s!r}")
+        if self.isam2_window_s is not None and self.isam2_lag_s >= self.isam2_window_s:
+            raise ValueError(f"GraphConfig.isam2_lag_s ({self.isam2_lag_s:g} s) must be shorter "
+                             f"than isam2_window_s ({self.isam2_window_s:g} s)")
         if self.init_attitude not in INIT_ATTITUDES:
             raise ValueError(f"GraphConfig.init_attitude must be one of {INIT_ATTITUDES}, "
                              f"not {self.init_attitude!r}")

@@ -145,17 +145,23 @@ def trajectory(P: Problem, st: gf.KeyframeStates, vals: Any, t_q: FloatArray) ->
     return Trajectory(t_q, lla, vel_n, q, bg, ba, bb if P.drive.baro is not None else None)
 
 
-def cov_18(P: Problem, cov_of: Any, vals: Any, k: int) -> FloatArray:
+def cov_18(P: Problem, cov_of: Any, vals: Any, k: int, kb: int | None = None,
+           seg: int = 0) -> FloatArray:
     """18×18 ERROR_STATE covariance at keyframe k from the selected inverse of the final
     normal equations (joint marginal of X_k, V_k, B_k, C_k and the global (s, τd);
-    ``cov_of``: ``layout.BandedCovariance`` or ``general.GeneralCovariance``).
+    ``cov_of``: ``layout.BandedCovariance``, ``general.GeneralCovariance`` or anything with
+    ``joint(keys)``, e.g. graph-isam2's marginals ``isam2.answers.IsamMarginals``).
+    ``kb``: the bias variable B(kb) (default k; graph-isam2's newest keyframe k + 1 has B(k)
+    until the next update); ``seg``: the (s, τd) K(seg) and k_a A(seg) (graph-isam2's
+    segment; the batch's one global variable is 0).
 
     Pose3 tangent (ω_b, v_b): att_t = R ω_b, δp_t = R v_b; then t → local NED with C_nt.
     ConstantBias (accel, gyro) → bias_gyro 9:12, bias_accel 12:15 (body frame); with the
     accelerometer scale factors, b_a = B_a(k) − diag(ā_k)·k_a (A(0) joins the marginal)."""
-    keys = [X(k), V(k), B(k)] + ([C(k), K(0)] if P.drive.baro is not None else [])
+    kb = k if kb is None else kb
+    keys = [X(k), V(k), B(kb)] + ([C(k), K(seg)] if P.drive.baro is not None else [])
     if P.ka is not None:
-        keys.append(A(0))
+        keys.append(A(seg))
     full = cov_of.joint(keys)
     n = full.shape[0]
     r = vals.atPose3(X(k)).rotation().matrix()
@@ -169,7 +175,7 @@ def cov_18(P: Problem, cov_of: Any, vals: Any, k: int) -> FloatArray:
     tmat[es["bias_accel"], 9:12] = np.eye(3)
     tmat[es["bias_gyro"], 12:15] = np.eye(3)
     if P.ka is not None:
-        tmat[es["bias_accel"], n - 3:n] = -np.diag(P.ka.f_mean[k])
+        tmat[es["bias_accel"], n - 3:n] = -np.diag(P.ka.f_mean[kb])
     if P.drive.baro is not None:  # C(k), then K(0) = (s, τd); without a baro: NaN rows
         tmat[component("baro_bias"), 15] = 1.0
         tmat[component("baro_scale"), 16] = 1.0

@@ -160,8 +160,8 @@ def baro_factors(P: Any, k: int, st: gf.KeyframeStates, bias: Any, cal: dict[int
 
 def baro_terms(P: Any, k: int, st: gf.KeyframeStates, bias: Any, cal: dict[int, Any],
                seg: Any, bt: Any, bz: Any, sel: np.ndarray, pri: dict[str, float],
-               lag: float | None = None, extra: dict[int, Any] | None = None
-               ) -> list[tuple[int, np.ndarray, Any]]:
+               lag: float | None = None, extra: dict[int, Any] | None = None,
+               floor: int = 0) -> list[tuple[int, np.ndarray, Any]]:
     """Baro samples ``sel`` linearised at ``st`` (keyframe k+1: its prediction) with each
     keyframe's segment calibration (later segments: the newest, K(seg[k])): one
     (interval m, its samples, LinearContainerFactor) per interval of their delayed time
@@ -169,7 +169,10 @@ def baro_terms(P: Any, k: int, st: gf.KeyframeStates, bias: Any, cal: dict[int, 
     included). ``lag``: the time the bias is read before t_s (default: each sample's τd of
     this linearisation, as in the batch solve). ``extra``: more rows (r, J) in the same
     columns by interval (the GNSS rows of a rebuilt interval, ``relin``), summed into that
-    interval's factor (one without baro samples if it has none)."""
+    interval's factor (one without baro samples if it has none). ``floor``: the first
+    keyframe iSAM2 still holds (``window``); a sample whose delayed time moved before it
+    (τd grew since it entered) is left out: its interval's keys have left iSAM2, and a factor
+    on them failed the update ("key b599 does not exist")."""
     cfg, ks = P.cfg, P.cfg.loss_threshold_sd
     j_now = int(seg[k])
     # each keyframe's (s, τd): its segment's current estimate (later ones: the newest)
@@ -180,6 +183,12 @@ def baro_terms(P: Any, k: int, st: gf.KeyframeStates, bias: Any, cal: dict[int, 
     bias_lag: Any = (tau_kf[gf.interval_of(P.t_kf, bt[sel])] if lag is None else lag)
     rows = gf.baro_rows(P.dense, st, bt[sel], bz[sel], pri["noise"], P.h0, P.origin,
                         bias_lag=bias_lag)
+    if floor > 0 and np.any(rows.k < floor):
+        keep = rows.k >= floor
+        rows = gf.IntervalRows(rows.k[keep], rows.r[keep], rows.jac[keep])
+        sel = sel[keep]
+        if not sel.size and not extra:
+            return []
     # delayed times past the newest keyframe (none but at the end) are clipped into it
     m_of = np.minimum(rows.k, k)
     # robust losses: IRLS weights at this linearisation (one per sample)

@@ -91,6 +91,8 @@ class TermBook:
         # step (``_damped_calibration``)
         self.seg_lin: dict[int, np.ndarray] = {}
         self.seg_step: dict[int, np.ndarray] = {}
+        # baro samples left out of a rebuild: their delayed time moved before the window
+        self.dropped_at_floor = 0
         self.damped = 0  # rebuilds whose (s, τd) step was halved
         # with a window (``graph.window``): the oldest keyframe and segment still in iSAM2;
         # intervals before ``floor`` were marginalised and are never rebuilt
@@ -265,11 +267,14 @@ class TermBook:
         baro_ms: set[int] = set()
         if (samples or extra) and cal is not None:
             sel = np.sort(np.concatenate(samples)) if samples else np.zeros(0, dtype=int)
+            n_in = 0
             for m, s_m, f in terms.baro_terms(P, k, st, bias, cal, self.seg, bt, bz, sel, pri,
-                                              extra=extra):
+                                              extra=extra, floor=self.floor):
+                n_in += s_m.size
                 nf.add(f)
                 tags.append(("gb" if m in extra else "b", m, s_m))
                 baro_ms.add(m)
+            self.dropped_at_floor += sel.size - n_in
         for m in sorted(set(ks) | baro_ms):
             # a sample that moved into an interval not rebuilt here leaves its point alone
             self._note(m, st, cal if m in baro_ms else None)

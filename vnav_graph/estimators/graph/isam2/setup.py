@@ -134,11 +134,11 @@ def extra_online_of(isam: Any, est: Any, ext: Collected | None) -> dict[str, dic
     return out
 
 
-def first_keyframe(P: Any, r0: Any, p0: Any, v0: Any, k0: Any
+def first_keyframe(P: Any, r0: Any, p0: Any, v0: Any, k0: Any, yaw_sd: float
                    ) -> tuple[Any, Any, list[tuple[int, int]]]:
     """Factors (priors, fixes) and values of keyframe 0 for the first iSAM2 update, and
     (fix index, position in that graph) of its keyframe-fix factors."""
-    graph0 = prior_factors(P, r0, p0, v0, P.pri, K(0))
+    graph0 = prior_factors(P, r0, p0, v0, P.pri, K(0), yaw_sd)
     vals0 = gtsam.Values()
     vals0.insert(X(0), gtsam.Pose3(gtsam.Rot3(r0), p0))
     vals0.insert(V(0), v0)

@@ -38,8 +38,10 @@ estimate after the final rounds (``relin.settle``: the segments' (s, τd) tied i
 relinearisation with every term rebuilt until nothing is due), with covariances of the
 problem linearised there. With ``GraphConfig.final_batch`` the batch Gauss-Newton of
 ``solve`` also runs from that estimate as its check (``info["final_batch"]``); only when it
-ends significantly lower (``OWN_GAP_FRACTION``) is its solution returned instead, with a
-warning and ``info["trajectory_source"] = "final_batch"``.
+ends significantly lower (``OWN_GAP_FRACTION``) is that a warning naming both costs; its
+solution is returned instead only with ``GraphConfig.isam2_batch_fallback``
+(``info["isam2_final"]`` = "batch", ``info["trajectory_source"]`` = "final_batch"; otherwise
+"isam2").
 """
 
 from __future__ import annotations
@@ -66,7 +68,8 @@ from ..model.extend import GraphExtension, check_extensions
 from ..model.magnetometer import builtin_extensions, mag_info
 from ..model.problem import states_from_values
 from ..settings import LOW_RATE_DT, LOW_RATE_KEYFRAME_DT, GraphConfig
-from .online import OnlinePass, OnlineResult
+from .causal import causal_pass
+from .online import OnlineResult
 from .setup import estimate_info
 
 # averaged low-rate IMU logs (median spacing ≥ LOW_RATE_DT, e.g. the 1 Hz phone logs): a
@@ -152,7 +155,8 @@ class GraphISAM2:
     def _run_pass(self, drive: Drive, cfg: GraphConfig, robust: bool, t_start: float,
                   fallback: str | None) -> Estimate:
         extensions = (*self.extensions, *builtin_extensions(drive, cfg))
-        on = OnlinePass(drive, cfg, robust, extensions).run()
+        on, start_info = causal_pass(drive, cfg, robust, extensions)
+        on.relin_counts["isam2_causal_start"] = start_info
         return self._finish(drive, cfg, on, robust, fallback, t_start)
 
     def _finish(self, drive: Drive, cfg: GraphConfig, on: OnlineResult, robust: bool,
@@ -230,10 +234,14 @@ class GraphISAM2:
                     restarted = final_batch["restarted"] = True
                     final_batch.update(cost=float(res.cost), iterations=int(res.iterations),
                                        stop=res.stop, cost_gap=float(own.cost - res.cost))
-                chosen, source = res, "final_batch"
+                if cfg.isam2_batch_fallback:
+                    chosen, source = res, "final_batch"
                 warn = [f"{self.name}: iSAM2's own smoothed estimate is not at the optimum "
                         f"(cost {own.cost:.1f} against {res.cost:.1f} for the final batch "
-                        f"pass); the trajectory is the final batch pass"]
+                        f"pass); the trajectory is "
+                        + ("the final batch pass (isam2_batch_fallback)"
+                           if cfg.isam2_batch_fallback else
+                           "iSAM2's own (isam2_batch_fallback = true returns the batch pass)")]
         t_final = time.perf_counter()
         del own_graph, own_vals
         if chosen is not own:
@@ -271,9 +279,12 @@ class GraphISAM2:
         info["extra_variables_online"] = on.extra_online
         info.update(mag_info(drive, cfg))
         info.update(gnss_gm_info(P))
+        lag, lag_cov, lag_info = self._lag_outputs(P, on, cfg)
+        info.update(lag_info)
         return Estimate(self.name, out["trajectory"], provides(drive), out["cov"],
                         out["t_cov"], out["baro"], time.perf_counter() - t_start,
-                        online=online_traj, info=info, config=self.config)
+                        online=online_traj, online_cov=on.answers.online_cov, lag=lag,
+                        lag_cov=lag_cov, info=info, config=self.config)
 
     @classmethod
     def _restart(cls, P: Any, init: tuple[Any, Any, Any], ext: Any, gate0: tuple[Any, int],
@@ -305,12 +316,30 @@ class GraphISAM2:
         return gauss_newton(P, g2, v2, calib0, P.pri)
 
     @staticmethod
-    def _online_trajectory(P: Any, online: Any) -> Trajectory:
+    def _online_trajectory(P: Any, online: Any, t: Any = None) -> Trajectory:
+        """(n, 10) p, v (t frame), quaternion at ``t`` (default: the keyframes)."""
         lla = ned_to_lla(online[:, 0:3], P.origin)
         c_tn = gf.rot_t_n(lla, P.origin)
         vel_n = np.einsum("nji,nj->ni", c_tn, online[:, 3:6])
         q = mat_to_quat(np.swapaxes(c_tn, 1, 2) @ quat_to_mat(online[:, 6:10]))
-        return Trajectory(P.t_kf, lla, vel_n, q)
+        return Trajectory(P.t_kf if t is None else t, lla, vel_n, q)
+
+    @classmethod
+    def _lag_outputs(cls, P: Any, on: OnlineResult, cfg: GraphConfig
+                     ) -> tuple[Trajectory | None, Any, dict[str, Any]]:
+        """``Estimate.lag`` and ``lag_cov`` from the pass's records, and their info."""
+        a = on.answers
+        info = {"lag_s": float(cfg.isam2_lag_s), "lag_epochs": len(a.lag_kf),
+                "isam2_marginals_s": a.seconds,
+                "online_cov_epochs": int(np.sum(np.isfinite(a.online_cov[:, 0, 0])))}
+        if not a.lag_kf:
+            return None, None, info
+        arr = np.column_stack([np.asarray(a.lag_state),
+                               mat_to_quat(np.asarray(a.lag_rot))])
+        tr = cls._online_trajectory(P, arr, P.t_kf[np.asarray(a.lag_kf)])
+        # the lag actually realised: update time minus the keyframe's [s]
+        info["lag_realised_max_s"] = float(np.max(np.asarray(a.lag_t) - tr.t))
+        return tr, np.asarray(a.lag_cov), info
 
     @staticmethod
     def _batch_from(P: Any, est: Any, pims: list[Any], pri: dict[str, float],

@@ -38,12 +38,19 @@ def _floor(x: float, lo: float) -> float:
     return float(max(x, lo))
 
 
+# σ of keyframe 0's prior on roll, pitch and yaw (body axes) [rad]
+PRIOR_ATT_SD = (0.05, 0.05, 0.5)
+
+
 def prior_factors(P: Problem, r0: FloatArray, p0: FloatArray, v0: FloatArray,
-                   pri: dict[str, float], calib_key: int) -> gtsam.NonlinearFactorGraph:
+                  pri: dict[str, float], calib_key: int,
+                  yaw_sd: float = PRIOR_ATT_SD[2]) -> gtsam.NonlinearFactorGraph:
+    """Keyframe 0's priors; ``yaw_sd``: its yaw σ (graph-isam2's causal start before the
+    heading is known: ``initial_guess.UNKNOWN_YAW_SD``)."""
     g = gtsam.NonlinearFactorGraph()
     s = P.imu_spec
     g.add(gtsam.PriorFactorPose3(X(0), gtsam.Pose3(gtsam.Rot3(r0), p0),
-                                 noise([0.05, 0.05, 0.5, 10.0, 10.0, 10.0])))
+                                 noise([*PRIOR_ATT_SD[:2], yaw_sd, 10.0, 10.0, 10.0])))
     g.add(gtsam.PriorFactorVector(V(0), v0, noise([2.0, 2.0, 2.0])))
     sd_b = noise([_floor(s.accel_bias_sd, 1e-4)] * 3 + [_floor(s.gyro_bias_sd, 1e-6)] * 3)
     if P.ka is None:

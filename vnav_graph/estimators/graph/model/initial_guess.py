@@ -4,6 +4,8 @@ without one the forward ekf's attitude), IMU propagation and baro-bridged gaps."
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from ....geo.frames import ned_to_lla, quat_to_mat, skew
@@ -11,7 +13,7 @@ from ....nav.arrays import nearest_index
 from ....nav.rotations import so3_exp
 from ....types import ERROR_STATE, FloatArray
 from . import interval_factors as gf
-from .cpp_factors import level
+from .cpp_factors import PRIOR_ATT_SD, level
 from .problem import Problem
 
 # TRIAD (specific force + course) needs a clear course: moving faster than this [m/s]
@@ -140,13 +142,63 @@ def initial_states(P: Problem) -> tuple[FloatArray, FloatArray, FloatArray]:
         elif v_bridge[k + 1]:
             p1[2], v1[2] = pos_kf[k + 1, 2], vel_kf[k + 1, 2]
         rot[k + 1], p_out[k + 1], v_out[k + 1] = r1, p1, v1
+    # keyframe 0's attitude from the data around keyframe 0 alone: graph-isam2's causal start
+    r_c = level(f_b[0])
+    if tilt_ok[0]:
+        r_c = _retilt(r_c, f_b[0], f_t[0])
+    # the keyframe from which the heading is known: the first TRIAD keyframe's once the data
+    # of its window has arrived (with none, the last keyframe: the heading is never known)
+    anchor = nk - 1
+    if k0 >= 0:
+        look = 2 * POS_ONLY_BASE_S if vel is None else 0.5
+        anchor = int(np.searchsorted(P.t_kf, P.t_kf[k0] + look - 1e-9)) if k0 > 0 else 0
     if compass_heading(P, rot):
         P.init_attitude = "compass"
+        r_c, anchor = _with_yaw_of(r_c, rot[0]), 0  # the compass's heading at keyframe 0
     elif filter_attitude(P, rot):
-        P.init_attitude = "ekf"
+        P.init_attitude = "ekf"  # the ekf is causal: its heading from the keyframe it is good
+        anchor = P.ekf_heading_kf
+    if anchor == 0 and P.init_attitude != "compass":
+        r_c = rot[0]  # keyframe 0's own heading (TRIAD's or the ekf's there)
     if P.init_attitude != "triad" and np.any(P.lever):
         p_out[has] = pos_kf[has] - np.einsum("nij,j->ni", rot[has], P.lever)
+    p_c = pos_kf[0] - r_c @ P.lever if has[0] else pos_kf[0]
+    P.start0 = CausalStart(r_c, p_c, v_out[0].copy(),
+                           PRIOR_ATT_SD[2] if anchor == 0 else UNKNOWN_YAW_SD,
+                           None if anchor == 0 else min(anchor, nk - 1))
     return rot, p_out, v_out
+
+
+# yaw σ of graph-isam2's causal start before the heading is known [rad] (a prior that only
+# keeps the yaw regular: the heading is unknown on a standstill without a compass)
+UNKNOWN_YAW_SD = np.pi
+
+
+@dataclass(frozen=True)
+class CausalStart:
+    """Keyframe 0 of graph-isam2's online pass from the data around keyframe 0 alone.
+
+    rot, pos, vel: R_tb, p_t, v_t (tilt from the specific force against the GNSS
+    acceleration, heading from TRIAD, the compass or the forward ekf there; yaw 0 of the
+    levelled specific force when none of them has it); yaw_sd: the σ of keyframe 0's yaw prior
+    (``UNKNOWN_YAW_SD`` without a heading); anchor: the keyframe from which the heading is
+    known (the data of the first TRIAD keyframe's window has arrived, or the ekf's heading σ
+    is below ``FILTER_YAW_SD_MAX``; the last keyframe when neither ever happens), after which
+    the online pass starts again from ``initial_states``' keyframe 0 (the heading carried
+    back to it by the gyro, or yaw 0); None when keyframe 0's own heading is that one."""
+
+    rot: FloatArray
+    pos: FloatArray
+    vel: FloatArray
+    yaw_sd: float
+    anchor: int | None
+
+
+def _with_yaw_of(r: FloatArray, r_yaw: FloatArray) -> FloatArray:
+    """``r`` turned about the down axis to the heading of ``r_yaw`` (of their x axes)."""
+    d = (np.arctan2(r_yaw[1, 0], r_yaw[0, 0]) - np.arctan2(r[1, 0], r[0, 0]))
+    c, s = np.cos(d), np.sin(d)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) @ r
 
 
 # vehicles whose GNSS course is not their heading (they hover and fly sideways)
@@ -200,6 +252,7 @@ def filter_attitude(P: Problem, rot: FloatArray) -> bool:
         # ekf's tilt — levelled by its accelerometer and GNSS updates — with its best heading.)
         dr_t = P.dense.end()[0]
         first = int(np.argmax(good))
+        P.ekf_heading_kf = first
         for k in range(first + 1, P.n_kf):
             if not good[k]:
                 out[k] = _gyro_forward(P, out[k - 1], k - 1, dr_t)

@@ -43,6 +43,13 @@ from ....types import FloatArray
 from .extend import GraphView, Terms, Variable, X
 
 KEY = H(0)
+# graph-isam2's relinearisation threshold of H(0) [µT per component]. Every heading factor
+# holds H(0), a Python CustomFactor that iSAM2's C++ linearises with a copy of the whole
+# Values each time: with the default 0.05 every change of H(0) early in a drive
+# relinearised all of them at every update. hill-drive-mag, 300 s: online pass 43.3 → 29.3 s,
+# online horizontal RMSE 0.1497 m either way, final cost gap to the batch check 0.42 → 0.41
+# (never relinearising H: 13.7 s but a gap of 16.4).
+RELIN_THRESHOLD_UT = 1.0
 
 
 def _heading_factor(k: int, z_b: FloatArray, d_ref: float, sd: float, loss_sd: float) -> Any:
@@ -97,7 +104,8 @@ class MagnetometerExtension:
             sd = float(heading_sd(mag.sd_ut, hor, cfg.mag_heading_floor))
             factors.append(_heading_factor(int(k), z, float(np.arctan2(ref[1], ref[0])), sd,
                                            cfg.mag_loss_sd))
-        return Terms(factors, [Variable(KEY, np.zeros(3), cfg.mag_bias_sd)])
+        return Terms(factors, [Variable(KEY, np.zeros(3), cfg.mag_bias_sd,
+                                        relinearize_threshold=RELIN_THRESHOLD_UT)])
 
 
 def builtin_extensions(drive: Any, config: Any) -> list[Any]:

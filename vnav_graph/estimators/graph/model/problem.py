@@ -93,6 +93,10 @@ class Problem:
     # "compass" or "ekf"; and why not the ekf's where it was due but failed
     init_attitude: str = "triad"
     init_note: str = ""
+    # graph-isam2's causal start (``initial_guess.CausalStart``), set by ``initial_states``
+    start0: Any = None
+    # the first keyframe whose initial heading is the forward ekf's own (``filter_attitude``)
+    ekf_heading_kf: int = 0
 
     def init_info(self) -> dict[str, str]:
         """``info["init_attitude"]`` (and ``init_note`` when there is one) of both smoothers."""

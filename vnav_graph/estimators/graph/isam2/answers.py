@@ -1,0 +1,92 @@
+"""graph-isam2's causal answers, recorded during the online pass (``online.OnlinePass``):
+the newest keyframe's covariance after each update (``Estimate.online_cov``) and the
+fixed-lag estimate (``Estimate.lag``, ``Estimate.lag_cov``): after the update at t, the
+latest keyframe at or before t − L (L = ``GraphConfig.isam2_lag_s``) and its covariance.
+
+Both covariances are iSAM2's marginals (``ISAM2.jointMarginalCovariance`` of the keyframe's
+X, V, B, C and its segment's K, A) put into the ERROR_STATE layout by the batch outputs'
+``cov_18``. The newest keyframe k + 1 has no bias variable of its own until the next update
+(B(k + 1) enters with interval k + 1): its bias block is B(k)'s, the bias over the interval
+that ends at it.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import gtsam
+import numpy as np
+from gtsam.symbol_shorthand import B, C, V, X
+
+from ....types import ERROR_STATE_DIM, FloatArray
+from ..batch.smoother import cov_18
+
+
+class IsamMarginals:
+    """``joint(keys)`` of iSAM2's current Bayes tree (the interface ``cov_18`` reads)."""
+
+    def __init__(self, isam: Any) -> None:
+        self.isam = isam
+
+    def joint(self, keys: list[int]) -> FloatArray:
+        # its full matrix is in the order of ``keys`` (checked against the blocks ``at``)
+        return np.asarray(self.isam.jointMarginalCovariance(keys).fullMatrix())
+
+
+class Answers:
+    """The online covariances and the fixed-lag records of one pass over ``P``.
+
+    online_cov: (n_kf, 18, 18), NaN where not computed; lag_kf: keyframe of each lag record;
+    lag_t: the update time it was read at; lag_state: (n, 10) p, v (t frame), quaternion;
+    lag_cov: (n, 18, 18)."""
+
+    def __init__(self, P: Any, seg: np.ndarray, lag_s: float) -> None:
+        self.P, self.seg, self.lag_s = P, seg, lag_s
+        nk = P.n_kf
+        self.online_cov = np.full((nk, ERROR_STATE_DIM, ERROR_STATE_DIM), np.nan)
+        self.lag_kf: list[int] = []
+        self.lag_t: list[float] = []
+        self.lag_state: list[FloatArray] = []
+        self.lag_rot: list[FloatArray] = []
+        self.lag_cov: list[FloatArray] = []
+        self.seconds = 0.0  # time spent here [s]
+
+    def cov(self, isam: Any, vals: Any, k: int, kb: int) -> FloatArray:
+        return cov_18(self.P, IsamMarginals(isam), vals, k, kb, int(self.seg[k]))
+
+    def after_update(self, isam: Any, k: int, pose_new: Any) -> None:
+        """After the update that created keyframe k + 1 (``pose_new``: its Pose3 as read
+        back): its covariance, and the lag record due at t_{k+1}."""
+        t0 = time.perf_counter()
+        self._after_update(isam, k, pose_new)
+        self.seconds += time.perf_counter() - t0
+
+    def _after_update(self, isam: Any, k: int, pose_new: Any) -> None:
+        P = self.P
+        vals = gtsam.Values()
+        vals.insert(X(k + 1), pose_new)
+        self.online_cov[k + 1] = self.cov(isam, vals, k + 1, k)
+        t = float(P.t_kf[k + 1])
+        j = int(np.searchsorted(P.t_kf, t - self.lag_s, side="right")) - 1
+        if j < 0 or (self.lag_kf and j <= self.lag_kf[-1]) or j > k:
+            return  # before the lag's first keyframe, or already recorded
+        keys = [X(j), V(j), B(j)] + ([C(j)] if P.drive.baro is not None else [])
+        est = isam.calculateEstimate(gtsam.KeyVector(keys))
+        pose = est.atPose3(X(j))
+        self.lag_kf.append(j)
+        self.lag_t.append(t)
+        self.lag_state.append(np.r_[pose.translation(), est.atVector(V(j))])
+        self.lag_rot.append(pose.rotation().matrix())
+        self.lag_cov.append(self.cov(isam, est, j, j))
+
+    def keep(self, other: Answers, n: int) -> None:
+        """Keyframes 0 … n − 1 and the lag records of the updates that created them from
+        ``other`` (the causal start's pass, ``online.causal_pass``)."""
+        self.online_cov[:n] = other.online_cov[:n]
+        t_n = float(self.P.t_kf[n]) if n < self.P.n_kf else np.inf
+        a = sum(1 for t in other.lag_t if t < t_n)
+        b = sum(1 for t in self.lag_t if t < t_n)
+        for name in ("lag_kf", "lag_t", "lag_state", "lag_rot", "lag_cov"):
+            setattr(self, name, getattr(other, name)[:a] + getattr(self, name)[b:])
+
