@@ -47,3 +47,14 @@ class MissingStream(ValueError):
     @property
     def reason(self) -> str:
         return f"no {self.stream}"
+
+
+class ExtensionError(ValueError):
+    """A graph extension (user code handed to a smoother) is malformed: a factor on an unknown
+    key, a reserved letter, a Jacobian of the wrong shape, ... The message names the
+    extension.
+
+    Bad input, not an estimator failure: ``vnav_graph.runner`` lets it through, so ``run``,
+    ``bench`` and ``holdout`` stop with the one-line error and exit 2 instead of reporting
+    the variant ``failed`` (or, for a wrong Jacobian shape, GTSAM crashing the process).
+    """

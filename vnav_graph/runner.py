@@ -10,6 +10,8 @@ local or on Dask (``vnav_graph.bench.run_task``), all call :func:`run_one`:
   machine only: the compiled code is cached);
 - an estimator that raises is returned as data, ``error`` = ``failure_message(exc, typed=True)``
   (never empty), and the others still run (docs/design.md);
+- a malformed graph extension (``failures.ExtensionError``) is bad input and propagates (the
+  CLI's one-line error, exit 2);
 - an estimator that needs a stream the drive lacks (``failures.MissingStream``) is returned
   as skipped, ``error`` = the reason (``"no barometer"``): not a failure;
 - the first Ctrl-C stops after the current estimator (:func:`interrupt_flag`).
@@ -47,7 +49,7 @@ from .evaluation.holdout import (
 )
 from .evaluation.metrics import METRIC_KEYS
 from .evaluation.screening import screen_reference
-from .failures import MissingStream, failure_message
+from .failures import ExtensionError, MissingStream, failure_message
 from .jit import CompileTimer, Prewarm, family_of, mark_warm
 from .progress import Mode, mode_for, say, steps
 from .types import Drive, Estimate
@@ -141,6 +143,8 @@ def run_one(name: str, drive: Drive, config: Any = None, waited_s: float = 0.0,
             err = None
         except MissingStream as exc:  # the drive cannot feed this estimator: not a failure
             est, err, skipped = None, exc.reason, True
+        except ExtensionError:  # a malformed user extension is bad input: the run stops
+            raise
         except Exception as exc:  # an estimator failure is data, not a crash
             if interrupted:
                 raise KeyboardInterrupt from exc
