@@ -54,7 +54,8 @@ class ExtensionError(ValueError):
     key, a reserved letter, a Jacobian of the wrong shape, ... The message names the
     extension.
 
-    Bad input, not an estimator failure: ``vnav_graph.runner`` lets it through, so ``run``,
-    ``bench`` and ``holdout`` stop with the one-line error and exit 2 instead of reporting
-    the variant ``failed`` (or, for a wrong Jacobian shape, GTSAM crashing the process).
+    Bad input, not an estimator failure: ``vnav_graph.runner`` lets it through, so ``run`` and
+    ``holdout`` stop with the one-line error and exit 2 instead of reporting the variant
+    ``failed`` (or, for a wrong Jacobian shape, GTSAM crashing the process). A bench worker
+    never raises: its row is ``failed`` with this error.
     """

@@ -46,7 +46,8 @@ a declared new variable, a keyframe index out of range, a reserved letter, a dup
 variable, a prior of the wrong size, a factor whose error or Jacobians have the wrong shape at
 the initial values (each factor is evaluated once in Python before GTSAM linearises it: a wrong
 Jacobian shape would crash GTSAM's C++) — is a one-line ``failures.ExtensionError`` (a
-``ValueError``) naming the extension; ``run``, ``bench`` and ``holdout`` stop on it with exit 2.
+``ValueError``) naming the extension; ``run`` and ``holdout`` stop on it with exit 2, a bench
+row is ``failed`` with it.
 
 Worked examples: ``examples/ex_graph_factor_zupt.py`` (zero-velocity factor at standstills),
 ``ex_graph_factor_mag.py`` (magnetometer with a hard-iron bias variable),
