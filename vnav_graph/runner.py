@@ -8,6 +8,8 @@ local or on Dask (``vnav_graph.bench.run_task``), all call :func:`run_one`:
   ``info["warnings"]`` (:func:`run_captured`);
 - ``runtime_s`` excludes ``jit_s``, the time numba spent compiling kernels (first run on a
   machine only: the compiled code is cached);
+- a sensor left out or a re-solve without it (the magnetometer, the baro scale) is a warning
+  and an entry of ``fallbacks`` (:func:`flag_sensor_fallbacks`);
 - an estimator that raises is returned as data, ``error`` = ``failure_message(exc, typed=True)``
   (never empty), and the others still run (docs/design.md);
 - a malformed graph extension (``failures.ExtensionError``) is bad input and propagates (the
@@ -212,7 +214,7 @@ def run_captured(name: str, drive: Drive, config: Any = None) -> Estimate:
     line per distinct message with its count, instead of reaching the terminal unexplained."""
     with warnings.catch_warnings(record=True) as rec:
         warnings.simplefilter("always")
-        est = create(name, config).run(drive)
+        est = flag_sensor_fallbacks(create(name, config).run(drive))
     if not rec:
         return est
     counts: dict[str, int] = {}
@@ -223,6 +225,29 @@ def run_captured(name: str, drive: Drive, config: Any = None) -> Estimate:
     lines = [f"{k} x{n}" if n > 1 else k for k, n in counts.items()]
     info = dict(est.info)
     info["warnings"] = [*list(info.get("warnings") or []), *lines]
+    return est.replace(info=info)
+
+
+# ``info`` notes of a sensor left out or a re-solve without (or with less of) a sensor: the
+# magnetometer not used (``sensors.magnetometer``: its field strength varies beyond the
+# hard-iron model, or its hard iron contradicted the prior and the estimator solved again
+# without it) and the baro scale held at 0 after an implausible one (``sensors.baro``)
+SENSOR_FALLBACK_NOTES = ("mag_note", "baro_scale_note")
+
+
+def flag_sensor_fallbacks(est: Estimate) -> Estimate:
+    """Every sensor fallback of ``est`` (``SENSOR_FALLBACK_NOTES``) as a warning and an entry
+    of ``info["fallbacks"]`` (``summary.json`` and bench rows), each once. A ``mag_note``
+    that only says the drive has no date (the field's year assumed) is not a fallback."""
+    notes = [str(est.info[k]) for k in SENSOR_FALLBACK_NOTES if est.info.get(k)]
+    notes = [n for n in notes if not n.startswith("drive has no date")]
+    if not notes:
+        return est
+    warned = [str(w) for w in est.info.get("warnings") or []]
+    fell = [str(f) for f in est.info.get("fallbacks") or []]
+    info = dict(est.info)
+    info["warnings"] = warned + [n for n in notes if n not in warned]
+    info["fallbacks"] = fell + [n for n in notes if n not in fell]
     return est.replace(info=info)
 
 
@@ -276,6 +301,7 @@ def run_holdout(drive: Drive, estimators: Sequence[str] | None = None, outage_s:
             s = score(r.estimate, drive, reference, windows, given=~withheld)
             info = r.estimate.info or {}
             s.block["warnings"] = [str(x) for x in info.get("warnings") or []]
+            s.block["fallbacks"] = [str(x) for x in info.get("fallbacks") or []]
             # of those, the baro calibration's prior conflicts (sensors.baro): data, not solver
             s.block["baro_prior_conflict"] = [str(x) for x in
                                               info.get("baro_prior_conflict") or []]
