@@ -153,7 +153,7 @@ def simulate(scenario: ScenarioConfig | str, seed: int = 0, **overrides: Any) ->
     baro, baro_truth, bias_b = simulate_baro(
         t_baro, t, kin_truth.alt, float(origin[2]), cfg.baro, rng
     )
-    # the truth's read-only arrays are shared with kin_truth, not copied (types._arr)
+    # the truth's read-only arrays are shared with kin_truth, not copied (streams.as_array)
     truth = Trajectory(
         t, kin_truth.lla, kin_truth.vel_n, kin_truth.q_nb, imu_err.bias_gyro,
         imu_err.bias_accel, np.interp(t, t_baro, bias_b),

@@ -169,7 +169,7 @@ def kinematics(
         accel_b[a:b] = np.einsum("nji,nj->ni", c_nb, f_n)
         gyro_b[a:b] = omega_nb_b[a:b] + np.einsum("nji,nj->ni", c_nb, w_ie + w_en)
     for a in (lla, vel_n, q_nb):
-        a.setflags(write=False)  # shared with the Trajectory instead of copied (types._arr)
+        a.setflags(write=False)  # shared with the Trajectory instead of copied (streams.as_array)
     truth = Trajectory(t, lla, vel_n, q_nb)
     return Kinematics(truth, gyro_b, accel_b, omega_nb_b)
 
