@@ -2,20 +2,23 @@
 
 A per-sample cost model per estimator, seconds = a·(IMU samples / 10⁴) + b·(keyframes / 100)
 + c·(keyframes × heading factors / 10⁵), fitted by non-negative least squares to runs of
-every estimator on three simulated scenarios, four shared real logs and five hill-drive
-lengths with and without a magnetometer (``benchmarks/runtime_model.py`` measures the runs,
-fits the table and writes the predicted/measured ratio of every run). Keyframes: one per
-second, one per 5 s on averaged ≤ 2 Hz IMU logs (the graph smoothers' rule); heading factors:
-one per second of a drive whose magnetometer is usable. The last term is graph-isam2's: each
-magnetometer heading factor is a Python ``CustomFactor`` that iSAM2's C++ relinearisation
-calls with a copy of all the variables, so its cost grows as keyframes × factors
-(hill-drive-mag 120 / 240 / 480 s: 17 / 53 / 192 s, against 20 / 19 / 48 s without the
-magnetometer).
+every estimator on the default, cold-start-phone and sortie scenarios, hill-drive (120, 480 s),
+hill-drive-mag (120, 240, 480 s) and four shared real logs (``benchmarks/runtime_model.py``
+measures the runs, fits the table and writes the predicted/measured ratio of every run).
+Keyframes: one per second, one per 5 s on averaged ≤ 2 Hz IMU logs (the graph smoothers'
+rule); heading factors: one per second of a drive whose magnetometer is usable. The last
+term is graph-isam2's: each magnetometer heading factor is a Python ``CustomFactor`` that
+iSAM2's C++ relinearisation calls with a copy of all the variables, so its cost grows as
+keyframes × factors
+(hill-drive-mag 120 / 240 / 480 s: 11.6 / 37.0 / 107 s, against 8.8 / 36.1 s for
+hill-drive 120 / 480 s without the magnetometer).
 
-The coefficients were measured on a 2-core machine shared with other jobs; the predictions
-are within a factor of 0.3–3 of the measured runtimes (graph-isam2: 0.26 on the ski log,
-1.45 on the default drive, 0.7–1.2 elsewhere), which is what a hint needs: on a real log
-graph-isam2 takes most of the run (75 of 78 s on 218.BIN, 128 of 135 s on the ski log).
+The coefficients were measured on a 2-core machine shared with other jobs (one measurement of
+each run, so the load shows: graph-isam2 on 218.BIN took 75 s in one session and 154 s in
+another). The fitted model is within a factor 0.32–1.62 of every measured graph-isam2 run
+(0.32 on the ski log, 1.62 on the default drive) and 0.4–3.3 of the much shorter other
+runs, which is what a hint needs: on every real log graph-isam2 takes most of the run
+(154 of 164 s on 218.BIN, 57 of 61 s on the ski log, 43 of 52 s on the 93-min car log).
 """
 
 from __future__ import annotations
@@ -28,16 +31,16 @@ from .types import Drive
 
 # seconds per (10⁴ IMU samples, 100 keyframes, 10⁵ keyframe × heading-factor pairs)
 COST: dict[str, tuple[float, float, float]] = {
-    "observer1d": (0.0914, 0.0282, 0.0),
-    "loop2": (0.122, 0.0206, 0.0),
-    "loop3": (0.123, 0.0194, 0.0),
-    "loop3-adaptive": (0.123, 0.0209, 0.0),
-    "vkf4": (0.104, 0.0425, 0.0),
-    "vekf7": (0.225, 0.00609, 0.0),
-    "ekf": (0.113, 0.0667, 0.0),
-    "ekf-rts": (0.151, 0.0923, 0.0),
-    "graph-isam2": (1.83, 7.49, 41.5),
-    "graph-batch": (0.196, 0.332, 0.0),
+    "observer1d": (0.0953, 0.0136, 0.0),
+    "loop2": (0.101, 0.0118, 0.0),
+    "loop3": (0.103, 0.0114, 0.0),
+    "loop3-adaptive": (0.102, 0.0118, 0.0),
+    "vkf4": (0.102, 0.0335, 0.0),
+    "vekf7": (0.13, 0.0982, 0.0),
+    "ekf": (0.101, 0.0484, 0.0),
+    "ekf-rts": (0.0891, 0.127, 0.0),
+    "graph-isam2": (0.109, 4.93, 43.1),
+    "graph-batch": (0.0957, 0.348, 0.0),
 }
 LOW_RATE_DT = 0.5  # median IMU spacing [s] from which keyframes are 5 s apart (graph settings)
 LONG_RUN_S = 60.0  # a predicted run at least this long gets the hint
