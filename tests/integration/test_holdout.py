@@ -82,9 +82,9 @@ class _Broken:
         raise RuntimeError("planted failure")
 
 
-def test_holdout_scores_planted_errors_exactly(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setitem(base._REGISTRY, "planted", _Planted)
-    monkeypatch.setitem(base._REGISTRY, "broken", _Broken)
+def test_holdout_scores_planted_errors_exactly(monkeypatch: pytest.MonkeyPatch, registry) -> None:
+    registry("planted", _Planted)
+    registry("broken", _Broken)
     res = run_holdout(_flat_drive(), ["broken", "planted"], outage_s=60.0)
     doc = res.doc
     # span 599 s: lead = max(89.85, 60) = 89.85; spacing = max(120, (599−89.85−65)/4) = 120
@@ -196,10 +196,10 @@ def _flat_drive_with_baro(rng: np.random.Generator) -> Drive:
 
 
 def test_spike_in_withheld_window_leaves_scores_unchanged(
-        monkeypatch: pytest.MonkeyPatch, rng: np.random.Generator) -> None:
+        monkeypatch: pytest.MonkeyPatch, rng: np.random.Generator, registry) -> None:
     """8 withheld fixes jumping to +15…17 m while the baro stays flat are not a
     height the vehicle had; scored against them every estimator would look worse."""
-    monkeypatch.setitem(base._REGISTRY, "planted", _Planted)
+    registry("planted", _Planted)
     clean = _flat_drive_with_baro(rng)
     g = clean.gnss
     lla = g.lla.copy()
@@ -226,11 +226,11 @@ def test_spike_in_withheld_window_leaves_scores_unchanged(
 
 
 def test_plateau_in_withheld_window_leaves_scores_unchanged(
-        monkeypatch: pytest.MonkeyPatch, rng: np.random.Generator) -> None:
+        monkeypatch: pytest.MonkeyPatch, rng: np.random.Generator, registry) -> None:
     """A 40 s plateau (GNSS height +25 m, the baro flat) carries its own running median, so
     the baro-climb check passes it; the height-excursion check sees d jump away and back.
     Scored against it, the planted estimator's 2 m outage error would read ~13 m."""
-    monkeypatch.setitem(base._REGISTRY, "planted", _Planted)
+    registry("planted", _Planted)
     clean = _flat_drive_with_baro(rng)
     g = clean.gnss
     lla = g.lla.copy()

@@ -164,7 +164,7 @@ class VEKF7Config:
 
 
 @njit(cache=True)
-def _propagate(k0, k1, t, f_down, g_lat, c33, f_z, cor, rho2, phi_b, q_b, phi_ab, q_ab,
+def propagate(k0, k1, t, f_down, g_lat, c33, f_z, cor, rho2, phi_b, q_b, phi_ab, q_ab,
                q_acc, gap_dt, gap_q, nom, p, h_out, v_out):
     """Propagate nominal and covariance from IMU epoch k0 to k1 (trapezoid; Φ = I + F·dt).
 
@@ -228,7 +228,7 @@ def _propagate(k0, k1, t, f_down, g_lat, c33, f_z, cor, rho2, phi_b, q_b, phi_ab
 
 
 @njit(cache=True)
-def _update(nom, p, hrow, r, var_r):
+def scalar_update(nom, p, hrow, r, var_r):
     """Scalar closed-loop update (Joseph form). Returns the normalised innovation."""
     ph = p @ hrow
     s = hrow @ ph + var_r
@@ -271,14 +271,14 @@ def _gnss_update(nom: FloatArray, p: FloatArray, gate: FloatArray, t_m: float, i
                    cfg.gnss_probation_s, NO_LIMIT, 0.0, False) == REFUSE:
         out.rejected += 1
         return
-    out.innov["gnss_alt"].append(_update(nom, p, hz.copy(), r, var_r))
+    out.innov["gnss_alt"].append(scalar_update(nom, p, hz.copy(), r, var_r))
     if cfg.use_gnss_velocity and gn.vel_n is not None and g_vsd is not None:
         hz[:] = 0.0
         hz[IV] = 1.0
         var_v = float(g_vsd[i, 2]) ** 2
         rv = -float(gn.vel_n[i, 2]) - nom[IV]
         if rv**2 <= cfg.gnss_gate_sigma**2 * _innovation_var(p, hz, var_v):
-            out.innov["gnss_vel"].append(_update(nom, p, hz.copy(), rv, var_v))
+            out.innov["gnss_vel"].append(scalar_update(nom, p, hz.copy(), rv, var_v))
 
 
 def _filter_pass(drive: Drive, vi: VerticalInputs, model: SensorModel, nz: Noise,
@@ -308,7 +308,7 @@ def _filter_pass(drive: Drive, vi: VerticalInputs, model: SensorModel, nz: Noise
     for j in range(et.size):
         k = int(kk[j])
         if k > k_cur:
-            _propagate(k_cur, k, *args, nom, p, h_out, v_out)
+            propagate(k_cur, k, *args, nom, p, h_out, v_out)
             k_cur = k
         lag = t[k] - et[j]  # evaluate the model at the measurement stamp
         h_m = nom[IH] - nom[IV] * lag
@@ -319,7 +319,7 @@ def _filter_pass(drive: Drive, vi: VerticalInputs, model: SensorModel, nz: Noise
             jac = baro_jacobian(h_m, nom[IV], nom[IS], nom[ITD], h0)
             hz[:] = 0.0
             hz[IH], hz[IV], hz[IS], hz[ITD], hz[IBB] = jac
-            out.innov["baro"].append(_update(nom, p, hz.copy(), z - zhat, nz.r_baro))
+            out.innov["baro"].append(scalar_update(nom, p, hz.copy(), z - zhat, nz.r_baro))
         else:
             assert g_psd is not None
             _gnss_update(nom, p, gate, float(et[j]), int(ei[j]), h_m, float(lever_dz[k]),
@@ -330,7 +330,7 @@ def _filter_pass(drive: Drive, vi: VerticalInputs, model: SensorModel, nz: Noise
             out.p_cov.append(p.copy())
             next_cov = t[k] + cov_dt
     if k_cur < n - 1:
-        _propagate(k_cur, n - 1, *args, nom, p, h_out, v_out)
+        propagate(k_cur, n - 1, *args, nom, p, h_out, v_out)
     if out.t_cov and out.t_cov[-1] >= t[-1]:  # the last epoch holds the final covariance
         out.t_cov.pop()
         out.p_cov.pop()

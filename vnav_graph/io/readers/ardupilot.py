@@ -180,7 +180,7 @@ CLOCK_CHOICES = ("auto", "gps", "boot")
 HELI_FRAME_CLASSES = (6, 11, 13)  # FRAME_CLASS: helicopter, dual heli, heli quad
 
 
-def _vehicle(firmware: str | None, msg_records: list[Any], params: dict[str, Any]) -> str:
+def vehicle_kind(firmware: str | None, msg_records: list[Any], params: dict[str, Any]) -> str:
     """The vehicle type from the firmware banner: "multirotor" (Copter that is not a
     helicopter by ``FRAME_CLASS`` or an older log's "Frame: HELI" message), "helicopter",
     "fixed-wing" (Plane), "ground" (Rover), else "unknown"."""
@@ -254,7 +254,7 @@ def read_dataflash(path: str | Path, clock: str = "auto") -> Drive:
         "name": path.stem,
         "format": "ardupilot-dataflash",
         "firmware": firmware,
-        "vehicle": _vehicle(firmware, msgs["MSG"], params),
+        "vehicle": vehicle_kind(firmware, msgs["MSG"], params),
         "clock": clock_meta,
         "imu_frame": "ArduPilot body frame (forward-right-down), used as logged",
         "height_reference": "msl",
