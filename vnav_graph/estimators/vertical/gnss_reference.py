@@ -41,7 +41,7 @@ def ned_offsets(lla: FloatArray) -> FloatArray:
 
 def velocity_from_positions(t: FloatArray, lla: FloatArray, pos_sd: FloatArray,
                             window_s: float, gap_s: float) -> tuple[FloatArray, FloatArray]:
-    """Reference velocity from GNSS positions alone (step 3b).
+    """Reference velocity from GNSS positions alone (``vertical.inputs`` step 3b).
 
     Parameters
     ----------

@@ -129,7 +129,7 @@ class Fixes:
 
 
 def read_gnss(msgs: dict[str, list[dict[str, Any]]], name: str, report: Report) -> Fixes:
-    """3-D fixes of ``GPS`` (instance 0) with their sigmas (module docstring)."""
+    """3-D fixes of ``GPS`` (instance 0) with their sigmas (``ardupilot`` module docstring)."""
     gps_rows = [r for r in msgs["GPS"] if instance0(r)]
     if not gps_rows:
         raise ValueError(f"{name}: DataFlash log has no GPS records")

@@ -35,13 +35,13 @@ DEG = np.pi / 180.0
 SD_FLOOR_H_M = 0.5
 SD_FLOOR_V_M = 1.0
 R68_OVER_SIGMA_2D = 1.5
-MAG_SD_UT = 5.0  # phone magnetometer white-noise σ per axis [µT] (module docstring)
+MAG_SD_UT = 5.0  # phone magnetometer white-noise σ per axis [µT] (``sensorlogger`` docstring)
 
 
 # --------------------------------------------------------------------- mounting alignment
 def mounting_rotation(f_d_mean: np.ndarray) -> np.ndarray:
     """R_bd (3×3) of the documented phone mounting alignment from the mean specific force
-    f_d_mean (3,) in device axes [m/s²]; see the module docstring."""
+    f_d_mean (3,) in device axes [m/s²]; see the ``sensorlogger`` module docstring."""
     n = float(np.linalg.norm(f_d_mean))
     if not n > 0.5 * G0:
         raise ValueError(f"mean specific force {n:.2f} m/s^2 is far from 1 g: cannot find the "
