@@ -19,7 +19,27 @@ GRAPH_PERF_ADDITIVE = {"peak_rss_mb_by_stage", "isam2_relinearized"}  # newer be
 REPRO_KEYS = {"seed003_steady_sd_m", "seed003_gps_only_sd_m", "seed003_settling_s",
               "seed001_rmse_m", "seed001_calibration", "seed004_outage_alt_rmse_m"}
 METRIC_KEYS = {"status", "error", "alt_rmse_m", "alt_max_abs_m", "vel_down_rmse_mps",
-               "nees_mean", "runtime_s", "realtime_factor", "baro"}
+               "nees_mean", "runtime_s", "realtime_factor", "baro", "online", "lag"}
+# the online block of every estimator with a causal estimate (null for the pure smoothers),
+# and graph-isam2's fixed-lag block (the same keys and lag_s)
+ONLINE_KEYS = {"alt_rmse_m", "horiz_rmse_m", "heading_rmse_deg", "vel_down_rmse_mps",
+               "nees_mean", "nees_dof"}
+CAUSAL = {"observer1d", "loop2", "loop3", "loop3-adaptive", "vkf4", "vekf7", "ekf",
+          "graph-isam2"}
+PURE_SMOOTHERS = {"ekf-rts", "graph-batch"}
+
+
+def causal_problems(where: str, name: str, m: dict) -> list[str]:
+    """The online / lag blocks of one ok estimator block (summary, bench row)."""
+    out = []
+    on, lag = m.get("online"), m.get("lag")
+    if name in CAUSAL and (not isinstance(on, dict) or not ONLINE_KEYS <= set(on)):
+        out.append(f"{where}: {name} has no online block with {sorted(ONLINE_KEYS)}")
+    if name in PURE_SMOOTHERS and on is not None:
+        out.append(f"{where}: {name} is a pure smoother but has an online block")
+    if lag is not None and not (ONLINE_KEYS | {"lag_s"}) <= set(lag):
+        out.append(f"{where}: {name}'s lag block lacks {sorted(ONLINE_KEYS | {'lag_s'})}")
+    return out
 
 
 def check(root: Path) -> list[str]:
@@ -41,6 +61,8 @@ def check(root: Path) -> list[str]:
                 problems.append(f"summary.json: {name} lacks {sorted(METRIC_KEYS - set(m))}")
             if m.get("status") != "ok":
                 problems.append(f"summary.json: {name} failed: {m.get('error')}")
+            else:
+                problems += causal_problems("summary.json", name, m)
         if not s.get("estimators"):
             problems.append("summary.json: no estimator ran")
     b = load("bench/bench.json")
@@ -48,9 +70,11 @@ def check(root: Path) -> list[str]:
         if b.get("schema") != "vnav_graph.bench/1" or not b.get("runs"):
             problems.append("bench.json: wrong schema or no runs")
         for r in b.get("runs", []):
+            where = f"bench.json: {r.get('scenario')}/{r.get('seed')}"
             if r.get("status") != "ok":
-                problems.append(f"bench.json: {r.get('scenario')}/{r.get('seed')}/"
-                                f"{r.get('estimator')} failed: {r.get('error')}")
+                problems.append(f"{where}/{r.get('estimator')} failed: {r.get('error')}")
+            else:
+                problems += causal_problems(where, str(r.get("estimator")), r)
     r = load("reproductions.json")
     if r is not None and not REPRO_KEYS <= set(r):
         problems.append(f"reproductions.json lacks {sorted(REPRO_KEYS - set(r))}")

@@ -78,7 +78,7 @@ def summarize(drive: Drive, results: Sequence[RunResult]) -> dict[str, Any]:
     until ``apply_holdout`` scores a real log).
     """
     from . import __version__
-    from .evaluation.compare import comparison, time_blocks
+    from .evaluation.compare import comparison, rankings, time_blocks
 
     blocks = None
     if drive.truth is not None:
@@ -117,6 +117,8 @@ def summarize(drive: Drive, results: Sequence[RunResult]) -> dict[str, Any]:
         "repairs": reader_repairs(meta),
         "estimators": ests,
         "comparison": comp,
+        # the real-time and offline rankings (vnav_graph.evaluation.compare.rankings)
+        "rankings": rankings(ests),
     }
 
 
@@ -130,7 +132,7 @@ def apply_holdout(summary: dict[str, Any], holdout_doc: dict[str, Any]) -> dict[
     ``evaluation``; ``comparison`` is recomputed over the windows (its ``per_block`` = the
     holdout ``per_window``). NEES stays null (no reference for the full state).
     """
-    from .evaluation.compare import comparison
+    from .evaluation.compare import comparison, rankings
 
     out = json.loads(json.dumps(summary))
     per_block: dict[str, list[dict[str, Any]]] = {}
@@ -141,6 +143,8 @@ def apply_holdout(summary: dict[str, Any], holdout_doc: dict[str, Any]) -> dict[
         for k in ("alt_rmse_m", "alt_max_abs_m", "horiz_rmse_m", "vel_down_rmse_mps",
                   "nees_mean", "nees_dof"):
             block[k] = None
+        # the causal and fixed-lag estimates, scored on the same withheld fixes
+        block["online"], block["lag"] = h.get("online"), h.get("lag")
         if h["status"] != "ok":
             block["holdout_error"] = h.get("error")
             continue
@@ -162,6 +166,7 @@ def apply_holdout(summary: dict[str, Any], holdout_doc: dict[str, Any]) -> dict[
         f"Scored against GNSS withheld in {len(windows)} windows of "
         f"{holdout_doc['outage_s']:g} s (a second run of each estimator without those fixes); "
         "the CI treats the windows as independent (each is preceded by GNSS).")
+    out["rankings"] = rankings(out["estimators"])
     return out
 
 
@@ -237,7 +242,7 @@ TABLE_COLUMNS = (("estimator", 15), ("status", 7), ("alt RMSE m", 11), ("alt max
 
 def format_table(summary: dict[str, Any]) -> str:
     """Plain-text comparison table of a summary: headline, table with units, notes."""
-    from .evaluation.compare import headline_lines
+    from .evaluation.compare import headline_lines, ranking_lines
 
     def row(cells: Sequence[str]) -> str:
         return "".join(f"{c:<{w}}" if k == 0 else f"{c:>{w}}"
@@ -250,6 +255,7 @@ def format_table(summary: dict[str, Any]) -> str:
     lines = [f"drive {d['name']} ({origin}, {d['duration_s']:.0f} s), "
              f"vnav_graph {summary.get('version', '?')}"]
     lines += [f"HEADLINE {h}" for h in headline_lines(summary)]
+    lines += ranking_lines(summary)
     lines += [head, "-" * len(head)]
 
     def pe(p: dict[str, Any], scale: float, spec: str) -> str:

@@ -38,18 +38,19 @@ from pathlib import Path
 from typing import Any
 
 from .ahrs_cache import Shared, sharing
-from .estimators.base import available, create
+from .estimators.base import available, create, with_online
 from .evaluation.holdout import (
     HoldoutResult,
     Scored,
     baro_block,
+    causal_score,
     choose_windows,
     holdout_doc,
     in_windows,
     score,
     withhold,
 )
-from .evaluation.metrics import METRIC_KEYS
+from .evaluation.metrics import METRIC_KEYS, fb_separation_block
 from .evaluation.screening import screen_reference
 from .failures import ExtensionError, MissingStream, failure_message
 from .jit import CompileTimer, Prewarm, family_of, mark_warm
@@ -211,10 +212,11 @@ def run_estimators(drive: Drive, names: Sequence[str], progress: bool | Mode = T
 def run_captured(name: str, drive: Drive, config: Any = None) -> Estimate:
     """``create(name).run(drive)`` with Python warnings (numpy RuntimeWarnings: overflow,
     invalid value, ...) captured and appended to the estimate's ``info["warnings"]`` as one
-    line per distinct message with its count, instead of reaching the terminal unexplained."""
+    line per distinct message with its count, instead of reaching the terminal unexplained.
+    A causal estimator's ``online`` estimate is filled in here (``base.with_online``)."""
     with warnings.catch_warnings(record=True) as rec:
         warnings.simplefilter("always")
-        est = flag_sensor_fallbacks(create(name, config).run(drive))
+        est = flag_sensor_fallbacks(with_online(name, create(name, config).run(drive)))
     if not rec:
         return est
     counts: dict[str, int] = {}
@@ -262,6 +264,8 @@ def failed_block(error: str, runtime_s: float, status: str = "failed",
         "status": status, "error": error, **dict.fromkeys(METRIC_KEYS), "runtime_s": runtime_s,
         "realtime_factor": None, "gnss_rejected": None, "warnings": [], "fallbacks": [],
         "solver": None, "isam2_final": None, "extensions": None, "self_check": None,
+        "online": None, "lag": None,
+        "fb_separation": None,
         "baro": {"scale": dict(null_param), "latency_s": dict(null_param),
                  "bias_m": dict(null_param)},
         **extra,
@@ -306,6 +310,10 @@ def run_holdout(drive: Drive, estimators: Sequence[str] | None = None, outage_s:
             s.block["baro_prior_conflict"] = [str(x) for x in
                                               info.get("baro_prior_conflict") or []]
             s.block["baro"] = baro_block(r.estimate)
+            s.block["online"] = causal_score(r.estimate, drive, reference, "online",
+                                             given=~withheld)
+            s.block["lag"] = causal_score(r.estimate, drive, reference, "lag", given=~withheld)
+            s.block["fb_separation"] = fb_separation_block(info.get("fb_separation"))
             results[r.name], series[r.name] = s.block, s
         except Exception as exc:  # one estimator's failure is data, not a crash
             if os.environ.get("VNAV_DEBUG"):

@@ -28,8 +28,16 @@ def test_simulate_then_run_writes_summary(tmp_path, capsys):
                           "duration_s": pytest.approx(40.0)}
     for m in s["estimators"].values():
         assert set(m) >= {"status", "error", "alt_rmse_m", "alt_max_abs_m", "vel_down_rmse_mps",
-                          "nees_mean", "runtime_s", "realtime_factor", "baro"}
+                          "nees_mean", "runtime_s", "realtime_factor", "baro", "online", "lag"}
         assert set(m["baro"]) == {"scale", "latency_s", "bias_m"}
+        # every causal estimator is scored online too; none of these has a fixed-lag answer
+        assert set(m["online"]) >= {"alt_rmse_m", "horiz_rmse_m", "heading_rmse_deg",
+                                    "vel_down_rmse_mps", "nees_mean", "nees_dof"}
+        assert m["online"]["alt_rmse_m"] > 0 and m["lag"] is None
+    if "vkf4" in s["estimators"]:  # a filter's online estimate is its trajectory
+        m = s["estimators"]["vkf4"]
+        assert m["online"]["nees_mean"] == pytest.approx(m["nees_mean"], rel=1e-12)
+    assert set(s["rankings"]) == {"real_time", "offline"}
 
 
 @pytest.mark.parametrize(

@@ -82,6 +82,42 @@ class _Broken:
         raise RuntimeError("planted failure")
 
 
+class _PlantedOnline(_Planted):
+    """``_Planted`` with an online estimate 4 m high and a fixed-lag one 1 m high inside the
+    windows (each its own datum offset, −3 m), L = 10 s."""
+
+    name = "planted-online"
+
+    def run(self, drive: Drive) -> Estimate:
+        e = super().run(drive)
+        tr = e.trajectory
+        inside = tr.lla[:, 2] - (500.0 + 0.05 * tr.t + 3.0) > 1.0
+
+        def high(dh: float) -> Trajectory:
+            lla = tr.lla.copy()
+            lla[:, 2] += (dh - 2.0) * inside
+            return Trajectory(tr.t, lla, tr.vel_n)
+
+        info = {**e.info, "lag_s": 10.0}
+        return e.replace(online=high(4.0), lag=high(1.0), info=info)
+
+
+def test_holdout_scores_the_online_and_lag_estimates(registry) -> None:
+    """The online and fixed-lag estimates are scored on the same withheld fixes as the
+    trajectory, each with its own datum offset: the planted 4 m and 1 m come out exactly;
+    heading and NEES are null (GNSS gives neither)."""
+    registry("planted-online", _PlantedOnline)
+    doc = run_holdout(_flat_drive(), ["planted-online"], outage_s=60.0).doc
+    p = doc["estimators"]["planted-online"]
+    assert p["alt_rmse_m"] == pytest.approx(2.0, abs=1e-9)
+    assert p["online"]["alt_rmse_m"] == pytest.approx(4.0, abs=1e-9)
+    assert p["lag"]["alt_rmse_m"] == pytest.approx(1.0, abs=1e-9)
+    assert p["lag"]["lag_s"] == 10.0
+    for b in (p["online"], p["lag"]):
+        assert b["horiz_rmse_m"] == pytest.approx(1.0, abs=1e-3)
+        assert b["heading_rmse_deg"] is None and b["nees_mean"] is None
+
+
 def test_holdout_scores_planted_errors_exactly(monkeypatch: pytest.MonkeyPatch, registry) -> None:
     registry("planted", _Planted)
     registry("broken", _Broken)

@@ -156,3 +156,31 @@ def test_against_baseline_puts_everyone_against_one() -> None:
     missing = against_baseline({"estimators": ests, "comparison": comp}, "broken")
     assert missing["comparison"]["headline"][0] == ("Altitude RMSE: the baseline broken has "
                                                     "no result (failed).")
+
+
+def test_rankings_real_time_from_online_blocks_offline_from_trajectories():
+    """Real time ranks the online blocks (graph-isam2 labelled "(online)"), offline every
+    trajectory (graph-isam2 labelled "(final)"); a failed estimator and a null value are
+    left out; the lines name both rankings."""
+    from vnav_graph.evaluation.compare import ranking_lines, rankings
+
+    def blk(alt, online=None, status="ok"):
+        return {"status": status, "alt_rmse_m": alt, "horiz_rmse_m": None,
+                "heading_rmse_deg": None,
+                "online": None if online is None else {"alt_rmse_m": online,
+                                                       "horiz_rmse_m": None,
+                                                       "heading_rmse_deg": None}}
+
+    ests = {"ekf": blk(0.30, 0.30), "ekf-rts": blk(0.10), "graph-batch": blk(0.11),
+            "graph-isam2": blk(0.12, 0.25), "vkf4": blk(0.5, 0.5, status="failed")}
+    rk = rankings(ests)
+    assert [(r["name"], r["value"]) for r in rk["real_time"]["alt_rmse_m"]] == [
+        ("graph-isam2 (online)", 0.25), ("ekf", 0.30)]
+    assert [r["name"] for r in rk["offline"]["alt_rmse_m"]] == [
+        "ekf-rts", "graph-batch", "graph-isam2 (final)", "ekf"]
+    assert rk["real_time"]["horiz_rmse_m"] == []
+    lines = ranking_lines({"rankings": rk})
+    assert lines == ["REAL TIME (causal estimates) Altitude RMSE [m]: graph-isam2 (online) "
+                     "0.25 < ekf 0.30",
+                     "OFFLINE (smoothers and final trajectories) Altitude RMSE [m]: ekf-rts "
+                     "0.10 < graph-batch 0.11 < graph-isam2 (final) 0.12 < ekf 0.30"]

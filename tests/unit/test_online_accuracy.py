@@ -1,4 +1,4 @@
-"""The scoring of benchmarks/online_accuracy.py: common epochs, RMSE, aggregate verdicts."""
+"""The scoring of benchmarks/online_accuracy.py: common epochs, RMSE, paired goal verdicts."""
 
 from __future__ import annotations
 
@@ -6,6 +6,7 @@ import importlib.util
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from vnav_graph.geo.frames import lla_to_ned, ned_to_lla
 from vnav_graph.simulation import simulate
@@ -17,34 +18,55 @@ oa = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(oa)
 
 
-def test_error_at_common_epochs_is_the_known_offset():
-    """A trajectory = truth + (3 m N, 4 m E, 2 m D), given at other epochs than the scoring
-    ones: the interpolated horizontal / vertical RMSE are 5 m / 2 m (closed form)."""
+def test_common_epochs_are_the_shared_stamps():
+    """5 Hz and 1 Hz grids (the second with 1e-9 s round-off) share the whole seconds."""
+    a = np.arange(0.0, 10.0, 0.2)
+    b = np.arange(0.0, 10.0, 1.0) + 1e-9
+    ia, ib = oa.common_epochs(a, b)
+    np.testing.assert_allclose(a[ia], np.arange(10.0), atol=1e-9)
+    np.testing.assert_array_equal(ib, np.arange(10))
+
+
+def test_score_pair_is_the_known_offset_at_common_epochs():
+    """Truth + (3 m N, 4 m E, 2 m D) against truth + (0, 0, −1 m), at 1 Hz and 0.5 Hz: 5 m /
+    2 m and 0 m / 1 m (closed form), over the 0.5 Hz epochs."""
     d = simulate("hill-drive", 0, duration_s=30.0)
-    t = d.truth.t[::7]
-    ned = lla_to_ned(d.truth.at(t).lla, d.origin_lla) + np.array([3.0, 4.0, 2.0])
-    tr = Trajectory(t, ned_to_lla(ned, d.origin_lla), d.truth.at(t).vel_n)
-    t_score = np.arange(2.0, 28.0, 1.0)
-    h, v = oa._rmse(oa._ned_err(d, tr, t_score))
-    assert abs(h - 5.0) < 0.01 and abs(v - 2.0) < 0.01
+
+    def shifted(t, dn):
+        ned = lla_to_ned(d.truth.at(t).lla, d.origin_lla) + np.asarray(dn)
+        return Trajectory(t, ned_to_lla(ned, d.origin_lla), d.truth.at(t).vel_n)
+
+    s = oa.score_pair(d, shifted(np.arange(0.0, 30.0, 1.0), [3.0, 4.0, 2.0]),
+                      shifted(np.arange(0.0, 30.0, 2.0), [0.0, 0.0, 1.0]))
+    assert s["epochs"] == 15
+    assert s["a"]["horiz_rmse_m"] == pytest.approx(5.0, abs=0.01)
+    assert s["a"]["alt_rmse_m"] == pytest.approx(2.0, abs=0.01)
+    assert s["b"]["horiz_rmse_m"] == pytest.approx(0.0, abs=0.01)
+    assert s["b"]["alt_rmse_m"] == pytest.approx(1.0, abs=0.01)
 
 
-def test_aggregate_counts_seeds_and_goal():
-    def run(seed, g, e):
-        out = {"scenario": "x", "seed": seed}
-        for name, (hh, vv) in (("graph-isam2", g), ("ekf", e)):
-            out[name] = {"horiz_rmse_m": hh, "vert_rmse_m": vv,
-                         "horiz_rmse_all_m": hh, "vert_rmse_all_m": vv}
-        return out
+def _run(sc, seed, a, b, comp="online"):
+    out = {"scenario": sc, "seed": seed, "online": None, "lag": None}
+    out[comp] = {"a": {"horiz_rmse_m": a}, "b": {"horiz_rmse_m": b}}
+    return out
 
-    runs = [run(0, (1.0, 0.5), (2.0, 0.4)), run(1, (3.0, 0.2), (2.0, 0.4))]
-    a = oa.aggregate(runs)["x"]
-    assert a["horiz_rmse_m"]["seeds_graph_le_ekf"] == 1
-    assert abs(a["horiz_rmse_m"]["ratio"] - 1.0) < 1e-12  # means 2.0 / 2.0
-    assert abs(a["vert_rmse_m"]["ratio"] - 0.35 / 0.4) < 1e-12
-    assert a["goal_met"]
-    # paired differences −1 and +1: mean 0, standard error sd/√n = √2/√2 = 1
-    assert abs(a["horiz_rmse_m"]["diff_mean"]) < 1e-12
-    assert abs(a["horiz_rmse_m"]["diff_se"] - 1.0) < 1e-12
-    runs[1]["graph-isam2"]["vert_rmse_m"] = 0.5
-    assert not oa.aggregate(runs)["x"]["goal_met"]  # vertical mean 0.5 > 0.4
+
+def test_goal_verdicts():
+    """urban: b = a/2 on 4 seeds, gain 50 % with the CI of the difference above 0: met.
+    hill-drive: b 1 % above a on every seed: within +2 %, met and resolved (zero spread).
+    sortie: b 5 % above a: missed. long-outage: no lag → the lag goals are not measured."""
+    a = np.array([1.0, 2.0, 3.0, 4.0])
+    runs = [_run("urban", k, x, x / 2) for k, x in enumerate(a)]
+    runs += [_run("hill-drive", k, x, 1.01 * x) for k, x in enumerate(a)]
+    runs += [_run("sortie", k, x, 1.05 * x) for k, x in enumerate(a)]
+    g = {(x["scenario"], x["comparison"]): x for x in oa.goals(runs)}
+    u = g[("urban", "online")]
+    assert u["gain"] == pytest.approx(0.5) and u["met"] and u["resolved"]
+    assert u["seeds_b_lower"] == 4 and u["n"] == 4
+    h = g[("hill-drive", "online")]
+    assert h["gain"] == pytest.approx(-0.01) and h["met"] and h["resolved"]
+    assert not g[("sortie", "online")]["met"]
+    assert g[("hill-drive", "lag")]["status"] == "not measured"
+    assert g[("hill-drive", "lag")]["met"] is None
+    assert ("long-outage", "online") not in g  # no runs of it
+    assert all(line for line in oa.goal_lines(list(g.values())))

@@ -17,8 +17,10 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Protocol
 
+import numpy as np
+
 from ..failures import failure_message
-from ..types import Drive, Estimate
+from ..types import Drive, Estimate, Trajectory
 
 
 class Estimator(Protocol):
@@ -35,6 +37,13 @@ FAMILIES: tuple[tuple[str, str, tuple[str, ...]], ...] = (
      ("observer1d", "loop2", "loop3", "loop3-adaptive")),
 )
 OTHER_FAMILY = ("other", "other estimator")
+
+# Estimators whose trajectory is causal (the state at t uses data up to t only): their
+# ``Estimate.online`` is the trajectory itself (``with_online``). graph-isam2 returns its own
+# online (and fixed-lag) estimate. The pure smoothers have no scored online estimate: ekf-rts's
+# forward pass is the ekf row, and scoring it twice would rank one filter twice.
+CAUSAL = frozenset({"observer1d", "loop2", "loop3", "loop3-adaptive", "vkf4", "vekf7", "ekf"})
+PURE_SMOOTHERS = frozenset({"ekf-rts", "graph-batch"})
 
 
 # one line per core estimator for ``vnav-graph list`` (the seed papers: README)
@@ -200,3 +209,44 @@ def load_plugin(spec: str) -> str:
                          f"register it under another name (NAME={target})")
     register(name, f"{mod}:{attr}")
     return name
+
+
+def _take(tr: Trajectory, idx: np.ndarray) -> Trajectory:
+    def k(a: np.ndarray | None) -> np.ndarray | None:
+        return None if a is None else a[idx]
+
+    return Trajectory(tr.t[idx], tr.lla[idx], tr.vel_n[idx], k(tr.q_nb), k(tr.bias_gyro),
+                      k(tr.bias_accel), k(tr.bias_baro))
+
+
+def with_online(name: str, est: Estimate) -> Estimate:
+    """``est`` with its causal estimate filled in for a ``CAUSAL`` estimator that left
+    ``online`` empty (others are returned unchanged).
+
+    - ``online`` is the trajectory from ``info["online_from_s"]`` on: the ekf's alignment reads
+      the levelling window and its first fixes, so its states before the last of them are not
+      causal (a real-time filter has no output before it is aligned); from the drive's start
+      when the estimator does not say.
+    - With a covariance, ``online`` is the trajectory at the covariance epochs (every one of
+      them is a trajectory epoch: the states are taken, not interpolated) and ``online_cov``
+      the covariance there; a covariance epoch that is not a trajectory epoch leaves
+      ``online_cov`` None (the online block's NEES is then null).
+    """
+    if name not in CAUSAL or est.online is not None:
+        return est
+    tr = est.trajectory
+    t_from = est.info.get("online_from_s")
+    keep = np.ones(tr.t.size, dtype=bool) if t_from is None else tr.t >= float(t_from)
+    cov = None
+    if est.cov is not None and est.t_cov is not None:
+        j = np.clip(np.searchsorted(tr.t, est.t_cov), 0, tr.t.size - 1)
+        if np.all(tr.t[j] == est.t_cov):
+            use = keep[j]
+            keep = np.zeros(tr.t.size, dtype=bool)
+            keep[j[use]] = True
+            cov = est.cov[use]
+    idx = np.flatnonzero(keep)
+    if idx.size == 0:
+        return est
+    online = tr if idx.size == tr.t.size else _take(tr, idx)
+    return est.replace(online=online, online_cov=cov)

@@ -82,6 +82,39 @@ def paired_interval(d: Sequence[float], level: float = 0.95) -> tuple[float, flo
     return mean, mean - half, mean + half
 
 
+def paired_gain(xa: FloatArray, xb: FloatArray, level: float = 0.95) -> dict[str, Any]:
+    """Paired statistics of b against a over the same runs (seeds): the difference
+    d = a − b (positive: b lower) with its Student-t interval (``paired_interval``), and the
+    relative gain g = mean(d)/mean(a) = 1 − mean(b)/mean(a) with a delta-method interval
+    (the residuals (d_i − g·a_i)/mean(a) of the per-run pairs, same t quantile).
+
+    Returns ``{"n", "mean_a", "mean_b", "diff", "diff_ci95", "gain", "gain_ci95"}``; the
+    intervals are None with fewer than two pairs, everything but ``n`` with none."""
+    from scipy.stats import t as student_t
+
+    xa, xb = np.asarray(xa, dtype=float), np.asarray(xb, dtype=float)
+    n = int(xa.size)
+    out: dict[str, Any] = {"n": n, "mean_a": None, "mean_b": None, "diff": None,
+                           "diff_ci95": None, "gain": None, "gain_ci95": None}
+    if n == 0:
+        return out
+    d = xa - xb
+    ma = float(xa.mean())
+    out.update(mean_a=ma, mean_b=float(xb.mean()), diff=float(d.mean()))
+    if ma > 0:
+        out["gain"] = float(d.mean() / ma)
+    iv = paired_interval(d, level)
+    if iv is None:
+        return out
+    out["diff_ci95"] = [iv[1], iv[2]]
+    if ma > 0:
+        g = out["gain"]
+        tq = float(student_t.ppf(0.5 + level / 2, n - 1))
+        gh = tq * float(np.std((d - g * xa) / ma, ddof=1)) / math.sqrt(n)
+        out["gain_ci95"] = [g - gh, g + gh]
+    return out
+
+
 def _m(x: float) -> str:
     """A length [m] with the decimals its size needs (3 significant figures, at most 3
     decimals), so that a small difference never prints as 0.00."""
@@ -306,3 +339,68 @@ def against_baseline(summary: Mapping[str, Any], baseline: str) -> dict[str, Any
     comp["baseline"] = {"name": baseline, "metrics": res}
     comp["headline"] = [*lines, *(comp.get("headline") or [])]
     return out
+
+
+# (block key, label, unit) of the two rankings
+RANKING_METRICS = (("alt_rmse_m", "Altitude RMSE", "m"), ("horiz_rmse_m", "Horizontal RMSE", "m"),
+                   ("heading_rmse_deg", "Heading RMSE", "deg"))
+
+
+def rankings(estimators: Mapping[str, Mapping[str, Any]]) -> dict[str, Any]:
+    """``summary["rankings"]``: the estimators ordered per metric, lowest first, in two lists.
+
+    - ``real_time``: the causal estimates, from each block's ``online`` block (the filters,
+      loops and observer, and graph-isam2's online estimate as ``"graph-isam2 (online)"``).
+      An estimator that is not in ``base.CAUSAL`` but has an online block is labelled
+      ``"<name> (online)"``; each entry has the block's ``from_s`` (its first scored epoch).
+    - ``offline``: every estimator's trajectory, from the block itself (the smoothers, and
+      graph-isam2's final trajectory as ``"graph-isam2 (final)"``; a filter's trajectory is
+      its online estimate and an offline answer too).
+
+    Only estimators with ``status`` ok are ranked; each entry is ``{"name", "estimator",
+    "value"}``. A ranking orders values; whether a difference is resolved is the paired
+    comparison's job (``comparison``, ``vnav-graph bench``).
+    """
+    from ..estimators.base import CAUSAL
+
+    def ordered(rows: list[tuple[str, str, Any, Any]]) -> list[dict[str, Any]]:
+        have = sorted(((v, label, n, f) for label, n, v, f in rows
+                       if v is not None and np.isfinite(v)), key=lambda x: x[:3])
+        return [{"name": label, "estimator": n, "value": float(v),
+                 **({} if f is None else {"from_s": float(f)})} for v, label, n, f in have]
+
+    ok = {n: m for n, m in estimators.items() if m.get("status") == "ok"}
+    out: dict[str, Any] = {"real_time": {}, "offline": {}}
+    for key, _, _ in RANKING_METRICS:
+        out["real_time"][key] = ordered([
+            (n if n in CAUSAL else f"{n} (online)", n, m["online"].get(key),
+             m["online"].get("from_s")) for n, m in ok.items() if m.get("online")])
+        out["offline"][key] = ordered([
+            (f"{n} (final)" if m.get("online") and n not in CAUSAL else n, n, m.get(key), None)
+            for n, m in ok.items()])
+    return out
+
+
+def ranked_name(entry: Mapping[str, Any]) -> str:
+    """A ranking entry's name, with the start of its scored span when that is not the drive's
+    start (the ekf's online estimate starts when it is aligned)."""
+    f = entry.get("from_s")
+    return entry["name"] + (f" (from {f:.0f} s)" if f is not None and f >= 0.5 else "")
+
+
+def ranking_lines(summary: Mapping[str, Any]) -> list[str]:
+    """The two rankings of a summary as text lines, one per ranking and metric."""
+    rk = summary.get("rankings")
+    if not rk:
+        return []
+    lines = []
+    for kind, title in (("real_time", "REAL TIME (causal estimates)"),
+                        ("offline", "OFFLINE (smoothers and final trajectories)")):
+        for key, label, unit in RANKING_METRICS:
+            rows = rk.get(kind, {}).get(key) or []
+            if len(rows) < 2:
+                continue
+            spec = ".1f" if unit == "deg" else ".2f"
+            lines.append(f"{title} {label} [{unit}]: " + " < ".join(
+                f"{ranked_name(r)} {format(r['value'], spec)}" for r in rows))
+    return lines

@@ -184,6 +184,32 @@ def score(est: Estimate, drive: Drive, withheld: np.ndarray,
     return Scored(block, t, err, w, sd, horiz_err, vd_err)
 
 
+def causal_score(est: Estimate, drive: Drive, withheld: np.ndarray, which: str,
+                 given: np.ndarray | None = None) -> dict[str, Any] | None:
+    """The ``online`` / ``lag`` block of the holdout: the causal (or fixed-lag) estimate scored
+    like the trajectory (``score``: its own datum offset, the same withheld fixes).
+    ``heading_rmse_deg`` and ``nees_*`` are null (GNSS gives neither a heading nor the full
+    state); the lag block has ``lag_s``. None when the estimate has none (``causal_view``);
+    null metrics when it covers no withheld fix."""
+    from .metrics import ONLINE_KEYS, causal_view
+
+    view = causal_view(est, which)
+    if view is None:
+        return None
+    out: dict[str, Any] = dict.fromkeys(ONLINE_KEYS)
+    out["from_s"] = float(view.trajectory.t[0] - drive.imu.t[0])
+    try:
+        b = score(view, drive, withheld, given=given).block
+    except ValueError:  # covers no withheld fix
+        b = {}
+    for k in ("alt_rmse_m", "horiz_rmse_m", "vel_down_rmse_mps"):
+        out[k] = b.get(k)
+    if which == "lag":
+        lag = est.info.get("lag_s")
+        out["lag_s"] = None if lag is None else float(lag)
+    return out
+
+
 def baro_block(est: Estimate) -> dict[str, Any] | None:
     """Baro parameters of the holdout run: {name: {"est", "sd"}} (s [-], τd [s], b [m])."""
     if est.baro is None:
@@ -265,17 +291,19 @@ def format_markdown(doc: dict[str, Any]) -> str:
         f"{doc['gnss_withheld']} GNSS fixes withheld"
         f"{_screen_note(doc.get('reference_screening'))}; median GNSS vertical sigma in the "
         f"windows {f(doc['gnss_sd_v_median_m'])} m. Scoring: {doc['scoring']}.", "",
-        "| estimator | status | alt RMSE m | alt max m | horiz RMSE m | GNSS rejected "
-        "| offset m | run s |",
-        "|---|---|---|---|---|---|---|---|",
+        "| estimator | status | alt RMSE m | alt max m | horiz RMSE m | online alt RMSE m "
+        "| online horiz RMSE m | GNSS rejected | offset m | run s |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for name, b in doc["estimators"].items():
         status = b["status"] if b["error"] is None else f"{b['status']}: {b['error'][:60]}"
+        on = b.get("online") or {}
         lines.append(f"| {name} | {status} | {f(b['alt_rmse_m'])} | {f(b['alt_max_abs_m'])} | "
-                     f"{f(b['horiz_rmse_m'])} | {f(b['gnss_rejected'], 'd')} | "
+                     f"{f(b['horiz_rmse_m'])} | {f(on.get('alt_rmse_m'))} | "
+                     f"{f(on.get('horiz_rmse_m'))} | {f(b['gnss_rejected'], 'd')} | "
                      f"{f(b['alt_offset_m'])} | {f(b['runtime_s'])} |")
     ob = doc.get("onboard")
     if ob:
         lines.append(f"| onboard: {ob['name']} (had GNSS) | ok | {f(ob['alt_rmse_m'])} | "
-                     f"{f(ob['alt_max_abs_m'])} | — | — | — | — |")
+                     f"{f(ob['alt_max_abs_m'])} | — | — | — | — | — | — |")
     return "\n".join(lines) + "\n"

@@ -157,6 +157,66 @@ METRIC_KEYS = ("alt_rmse_m", "alt_max_abs_m", "horiz_rmse_m", "heading_rmse_deg"
                "outage_horiz_max_m", "vel_down_rmse_mps", "nees_mean", "nees_dof")
 
 
+# The keys of the ``online`` block (and, with ``lag_s``, the ``lag`` block) of every
+# summary.json / holdout.json / bench.json estimator block
+ONLINE_KEYS = ("alt_rmse_m", "horiz_rmse_m", "heading_rmse_deg", "vel_down_rmse_mps",
+               "nees_mean", "nees_dof")
+
+
+def causal_view(est: Estimate, which: str) -> Estimate | None:
+    """``est``'s causal (``which="online"``) or fixed-lag (``"lag"``) estimate as an Estimate
+    of its own (trajectory and covariance), or None when it has none. The pure smoothers'
+    online estimate is not scored (``base.PURE_SMOOTHERS``: ekf-rts's forward pass is the ekf
+    row)."""
+    from ..estimators.base import PURE_SMOOTHERS
+
+    tr = getattr(est, which)
+    if tr is None or (which == "online" and est.estimator in PURE_SMOOTHERS):
+        return None
+    cov = getattr(est, f"{which}_cov")
+    return Estimate(est.estimator, tr, est.provides, cov=cov,
+                    t_cov=None if cov is None else tr.t, info=est.info)
+
+
+def causal_block(est: Estimate, drive: Drive, which: str) -> dict[str, Any] | None:
+    """The ``online`` / ``lag`` block: ``ONLINE_KEYS`` of the causal or fixed-lag estimate
+    against truth over its own epochs (null without truth or where the estimate lacks the
+    quantity), ``from_s`` (its first epoch, s after the drive's start), ``lag_s``
+    (``info["lag_s"]``) in the lag block; None when the estimate has none (``causal_view``)."""
+    view = causal_view(est, which)
+    if view is None:
+        return None
+    out: dict[str, Any] = dict.fromkeys(ONLINE_KEYS)
+    # its first epoch [s after the drive's start]: the ekf's starts when it is aligned
+    out["from_s"] = float(view.trajectory.t[0] - drive.imu.t[0])
+    if drive.truth is not None:
+        err = errors_vs_truth(view, drive)
+        if err.t.size:
+            out["alt_rmse_m"] = _rms(err.alt)
+            out["horiz_rmse_m"] = _rms(err.horiz)
+            out["heading_rmse_deg"] = _rms(err.heading)
+            out["vel_down_rmse_mps"] = _rms(err.vel_down)
+        ne = nees(view, drive)
+        if ne is not None and ne[0].size:
+            out["nees_mean"], out["nees_dof"] = float(np.mean(ne[0])), ne[1]
+    if which == "lag":
+        lag = est.info.get("lag_s")
+        out["lag_s"] = None if lag is None else float(lag)
+    return out
+
+
+def _rms(x: FloatArray | None) -> float | None:
+    return None if x is None or x.size == 0 else float(np.sqrt(np.mean(x**2)))
+
+
+def fb_separation_block(sep: Any) -> dict[str, float] | None:
+    """``{"alt_p95_m", "horiz_p95_m"}``: the 95th percentiles of the distance between the
+    forward filter and the filter run backward (``ekf.backward``); None when not computed."""
+    if not sep:
+        return None
+    return {"alt_p95_m": float(sep["alt_p95_m"]), "horiz_p95_m": float(sep["horiz_p95_m"])}
+
+
 def evaluate(est: Estimate, drive: Drive,
              blocks: Sequence[tuple[float, float]] | None = None) -> dict[str, Any]:
     """Metric block for summary.json / bench.json (docs/design.md schema).
@@ -170,10 +230,13 @@ def evaluate(est: Estimate, drive: Drive,
     (max |error| inside the drive's GNSS outages, ``meta["gnss_outages"]``; null without
     outages), ``warnings`` and ``extra_variables`` (the
     variables a graph extension added, ``{"m0": {"est": [...], "sd": [...]}}`` from
-    ``info["extra_variables"]``; null for an estimator without them). With ``blocks`` (time blocks
-    ``[(t0, t1), ...]`` [s]) the block also has ``per_block``, the RMS values per block, which
-    ``pipeline.summarize`` moves to ``summary["comparison"]`` (the paired comparison of
-    ``vnav_graph.evaluation.compare``), so the estimator block stays the bench row.
+    ``info["extra_variables"]``; null for an estimator without them), ``online`` and ``lag``
+    (``causal_block``: the same errors of the causal estimate, ``Estimate.online``, and of
+    graph-isam2's fixed-lag estimate, ``Estimate.lag``; null where there is none). With
+    ``blocks`` (time blocks ``[(t0, t1), ...]`` [s]) the block also has ``per_block``, the
+    RMS values per block, which ``pipeline.summarize`` moves to ``summary["comparison"]``
+    (the paired comparison of ``vnav_graph.evaluation.compare``), so the estimator block
+    stays the bench row.
     """
     out: dict[str, Any] = {
         "status": "ok", "error": None, **dict.fromkeys(METRIC_KEYS),
@@ -192,6 +255,11 @@ def evaluate(est: Estimate, drive: Drive,
         # graph smoothers: factors and variables each extension added (null elsewhere)
         "extensions": est.info.get("extensions"),
         "extra_variables": extra_variables_block(est.info.get("extra_variables")),
+        # the causal estimate and graph-isam2's fixed-lag one, scored alike (causal_block)
+        "online": causal_block(est, drive, "online"),
+        "lag": causal_block(est, drive, "lag"),
+        # ekf-rts: forward/backward filter separation (null for the others)
+        "fb_separation": fb_separation_block(est.info.get("fb_separation")),
     }
     if drive.truth is not None:
         err = errors_vs_truth(est, drive)

@@ -49,6 +49,9 @@ AGG_METRICS = (
     "baro_bias_abs_err_m", "horiz_rmse_m", "heading_rmse_deg", "heading_known_rmse_deg",
     "heading_known_after_s", "outage_alt_max_m",
     "outage_horiz_max_m", "gnss_rejected",
+    # the causal estimate's and graph-isam2's fixed-lag estimate's (the online / lag blocks)
+    "online_alt_rmse_m", "online_horiz_rmse_m", "online_heading_rmse_deg",
+    "online_nees_per_dof", "lag_alt_rmse_m", "lag_horiz_rmse_m",
 )
 
 # `bench --quick`: CI-sized. Short drives, two scenarios, three seeds (the smallest number
@@ -132,6 +135,12 @@ def derived_metrics(row: dict[str, Any]) -> dict[str, float | None]:
         p = baro.get(key) or {}
         est, tru = p.get("est"), p.get("truth")
         out[name] = abs(est - tru) if est is not None and tru is not None else None
+    for block in ("online", "lag"):  # flattened: online_alt_rmse_m, ...
+        b = row.get(block) or {}
+        for k in ("alt_rmse_m", "horiz_rmse_m", "heading_rmse_deg"):
+            out[f"{block}_{k}"] = b.get(k)
+        nm, nd = b.get("nees_mean"), b.get("nees_dof")
+        out[f"{block}_nees_per_dof"] = nm / nd if nm is not None and nd else None
     return out
 
 
@@ -196,6 +205,18 @@ def format_bench_md(doc: dict[str, Any]) -> str:
                 f"{_fmt_ci(c['baro_bias_abs_err_m'], '.2f')} | "
                 f"{_fmt_ci(c['runtime_s'], '.2f')} |")
         lines.append("")
+        online = {e: c for e, c in by_est.items()
+                  if (c.get("online_alt_rmse_m") or {}).get("mean") is not None}
+        if online:
+            lines += [f"Real time ({sc}): the causal estimates (online blocks)", "",
+                      "| estimator | alt RMSE [m] | horiz RMSE [m] | heading RMSE [deg] | "
+                      "NEES/dof |", "| --- | --- | --- | --- | --- |"]
+            lines += [f"| {e} | {_fmt_ci(c['online_alt_rmse_m'], '.2f')} | "
+                      f"{_fmt_ci(c['online_horiz_rmse_m'], '.2f')} | "
+                      f"{_fmt_ci(c['online_heading_rmse_deg'], '.2f')} | "
+                      f"{_fmt_ci(c['online_nees_per_dof'], '.2f')} |"
+                      for e, c in online.items()]
+            lines.append("")
     for status, title, what in (("failed", "Failed runs", "error"),
                                 ("skipped", "Skipped runs (a stream the drive lacks)", "reason")):
         rows = [r for r in doc["runs"] if (r["status"] == "skipped") == (status == "skipped")

@@ -67,6 +67,10 @@ def captions(es: Any, summary: dict[str, Any]) -> dict[str, str]:
                                     shade if es.basis in (TRUTH, GIVEN) else
                                     "the run with all GNSS over the whole log; shaded: the "
                                     "windows in which the scoring run withheld GNSS") + ".",
+        "fb_separation.png": "Forward/backward separation of ekf-rts: the distance between "
+                             "its forward filter and the same filter run backward in time "
+                             "(altitude and horizontal; dashed: the 95th percentiles in "
+                             "fb_separation), a quality check that needs no truth.",
     }
 
 
@@ -106,6 +110,7 @@ def write_report(out_dir: str | Path, summary: dict[str, Any], results: Sequence
         ("baro_parameters.png", lambda: plots.plot_baro_parameters(drive, results)),
         ("baro_convergence.png", lambda: plots.plot_baro_convergence(drive, results,
                                                                      es.windows)),
+        ("fb_separation.png", lambda: plots.plot_fb_separation(results, es.windows)),
     ]
     written: list[Path] = []
     images: list[tuple[str, bytes]] = []

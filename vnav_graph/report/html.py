@@ -125,6 +125,38 @@ def comparison_table(summary: dict[str, Any]) -> str:
     return f'<table id="comparison">{head}{"".join(rows)}</table>'
 
 
+def rankings_html(summary: dict[str, Any]) -> str:
+    """The real-time and offline rankings (``summary["rankings"]``) side by side, a table per
+    metric (``id="rankings"``)."""
+    from ..evaluation.compare import RANKING_METRICS, ranked_name
+
+    rk = summary.get("rankings")
+    if not rk:
+        return '<p class="note" id="rankings">No ranking: no estimator has a score.</p>'
+    parts = []
+    for key, label, unit in RANKING_METRICS:
+        rt, off = rk["real_time"].get(key) or [], rk["offline"].get(key) or []
+        if not rt and not off:
+            continue
+        spec = ".1f" if unit == "deg" else ".2f"
+
+        def cell(rows: list[dict[str, Any]], i: int, spec: str = spec) -> str:
+            return (f"<td>{_e(ranked_name(rows[i]))}</td><td>{_num(rows[i]['value'], spec)}</td>"
+                    if i < len(rows) else "<td></td><td></td>")
+
+        body = "".join(f"<tr><td>{i + 1}</td>{cell(rt, i)}{cell(off, i)}</tr>"
+                       for i in range(max(len(rt), len(off))))
+        parts.append(f'<table data-key="{key}"><tr><th colspan="5">{_e(label)} [{unit}]'
+                     "</th></tr><tr><th>#</th><th>real time</th><th></th><th>offline</th>"
+                     f"<th></th></tr>{body}</table>")
+    return ('<div id="rankings"><p class="note">Real time: the causal estimates (each '
+            "epoch from data up to it: filters, loops, observer, graph-isam2's online "
+            "estimate; the ekf's from the end of its alignment). Offline: every trajectory, "
+            "the smoothers' and graph-isam2's final one included. Lowest first; the paired "
+            "comparison above says which differences are resolved.</p>"
+            + "".join(parts) + "</div>")
+
+
 def baro_table(summary: dict[str, Any]) -> str:
     """HTML table of the baro parameters (estimate ± σ) per estimator, truth in the last row."""
     head = ("<tr><th>estimator</th><th>scale s [%]</th><th>latency τ<sub>d</sub> [ms]</th>"
@@ -240,6 +272,8 @@ def render_html(summary: dict[str, Any], drive: Drive,
 <h2>Comparison</h2>
 {comparison_table(summary)}
 {ob_html}
+<h3>Rankings: real time and offline</h3>
+{rankings_html(summary)}
 {f'<h3>Failed estimators</h3><ul>{fail_html}</ul>' if failed else ''}
 {f'<h3>Warnings</h3><ul>{warn_html}</ul>' if warned else ''}
 <h2>Run and drive</h2>

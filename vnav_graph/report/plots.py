@@ -195,3 +195,33 @@ def plot_baro_convergence(drive: Drive, results: Sequence[Any],
     fig.suptitle("Baro parameter convergence (band: ±1σ; σ panels from the covariance)",
                  fontsize=10)
     return canvas.png(fig)
+
+
+def plot_fb_separation(results: Sequence[Any],
+                       windows: Sequence[tuple[float, float]] = ()) -> bytes | None:
+    """Forward/backward separation over time (``info["fb_separation"]["series"]``, from
+    ``ekf-rts``): altitude and horizontal, with their 95th percentiles dashed."""
+    ests = [e for e in _ok(results) if (e.info or {}).get("fb_separation")]
+    if not ests:
+        return None
+    fig = canvas.figure(11.0, 4.2, left=0.08)
+    axes = fig.subplots(2, 1, sharex=True)
+    for est in ests:
+        sep = est.info["fb_separation"]
+        ser = sep["series"]
+        t = np.asarray(ser["t"], dtype=float)
+        for ax, key, p95 in ((axes[0], "alt_m", sep["alt_p95_m"]),
+                             (axes[1], "horiz_m", sep["horiz_p95_m"])):
+            k = decimate(t.size)
+            tt, y = t[k], np.asarray(ser[key], dtype=float)[k]
+            color = estimator_color(est.estimator)
+            ax.plot(tt, y, lw=0.8, color=color, label=f"{est.estimator} (p95 {p95:.2f} m)")
+            ax.axhline(p95, color=color, ls="--", lw=0.8)
+    for ax, label in zip(axes, ("altitude [m]", "horizontal [m]"), strict=True):
+        _shade(ax, windows)
+        ax.set_ylabel(label, fontsize=9)
+        ax.tick_params(labelsize=8)
+        ax.legend(fontsize=7, loc="upper right")
+    axes[1].set_xlabel("time [s]", fontsize=9)
+    fig.suptitle("Forward/backward filter separation", fontsize=10)
+    return canvas.png(fig)

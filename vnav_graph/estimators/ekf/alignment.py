@@ -40,9 +40,12 @@ from .magnetometer import initial_heading
 from .settings import EkfConfig
 
 # the initial position is the median of the first START_FIXES fixes, so the filter's
-# estimate before the last of them is not causal (benchmarks/online_accuracy.py scores
-# online estimates from there on)
+# estimate before the last of them is not causal (its online estimate starts there:
+# info["online_from_s"], with the end of the levelling window)
 START_FIXES = 9
+# ``start_position``: a first fix whose step to the second exceeds the next step by this
+# many σ is an outlier
+START_OUTLIER = 5.0
 
 
 def static_window_end(imu: ImuStream, max_s: float, min_s: float = 0.5,
@@ -86,6 +89,10 @@ TRACK_SNR = 5.0
 # in-motion levelling (``moving_start``): window [s] and the floor of its acceleration σ
 MOVING_LEVEL_S = 1.0
 MOVING_ACCEL_SD_MIN = 0.2
+# position-only motion test: the parabola is fitted over the first MOVING_FIT_S seconds, or
+# longer until it holds MOVING_FIT_FIXES fixes (a 1 Hz receiver has 4 fixes in 4 s, too few)
+MOVING_FIT_S = 4.0
+MOVING_FIT_FIXES = 6
 
 
 @dataclass(frozen=True)
@@ -153,6 +160,7 @@ class MovingStart:
     i_end: int  # end (exclusive) of the levelling window, IMU samples
     accel_b: FloatArray  # (3,) acceleration of the vehicle in b to remove from f_b [m/s²]
     accel_sd: float  # one-sigma of that removal per axis [m/s²]
+    accel_sd_y: float | None = None  # its lateral one-sigma when it differs [m/s²]
 
 
 def moving_start(imu: ImuStream, gnss: GnssStream | None, i_static: int,
@@ -196,8 +204,10 @@ def moving_start(imu: ImuStream, gnss: GnssStream | None, i_static: int,
         # the distance from the first fix; moving when the fitted parabola's increase over
         # 4 s exceeds 3 σ of that increase (a standstill's noise gives none; P = 0.13 %)
         dist = np.hypot(*lla_to_ned(gnss.lla, gnss.lla[0])[:, :2].T)
-        fit_m = (gnss.t >= t0) & (gnss.t <= t0 + 4.0)
-        if fit_m.sum() < 5:
+        j0 = int(np.searchsorted(gnss.t, t0))
+        t_fit = max(t0 + MOVING_FIT_S, gnss.t[min(j0 + MOVING_FIT_FIXES, gnss.t.size) - 1])
+        fit_m = (gnss.t >= t0) & (gnss.t <= t_fit)
+        if fit_m.sum() < MOVING_FIT_FIXES:
             return None
         tt = gnss.t[fit_m] - t0
         coef, cov = np.polyfit(tt, dist[fit_m], 2, cov=True)
@@ -211,9 +221,63 @@ def moving_start(imu: ImuStream, gnss: GnssStream | None, i_static: int,
         # 2.0 m/s² where 0.3 was true, a 9.7° pitch error)
         a_along, v_mid = 0.0, 0.0
         a_sd = abs(2.0 * float(coef[0])) + 2.0 * float(np.sqrt(max(cov[0, 0], 0.0)))
+        # laterally only the centripetal v·ω_z is unknown (no sideslip): v bounded by the
+        # parabola's speed at the window's end + 2σ, ω_z measured. Seed 7 of
+        # cold-start-phone: 0.2 instead of 2.7 m/s², so the roll (16° σ before) no longer
+        # takes the lateral misfit of a 10° heading error at the acquisition
+        jv = np.array([2.0 * (t1 - t0), 1.0, 0.0])
+        v_max = abs(float(jv @ coef)) + 2.0 * float(np.sqrt(max(jv @ cov @ jv, 0.0)))
+        w_z = float(np.mean(imu.gyro_b[:i_end, 2]))
+        a_sd_y = max(v_max * abs(w_z), MOVING_ACCEL_SD_MIN)
+        return MovingStart(i_end, np.zeros(3), max(a_sd, MOVING_ACCEL_SD_MIN), a_sd_y)
     w_z = float(np.mean(imu.gyro_b[:i_end, 2]))
     accel_b = np.array([a_along, max(v_mid, 0.0) * w_z, 0.0])
     return MovingStart(i_end, accel_b, max(a_sd, MOVING_ACCEL_SD_MIN))
+
+
+@dataclass(frozen=True)
+class StartPosition:
+    """Antenna position (lla, height not yet moved to the IMU) and velocity at the first IMU
+    epoch, with their variances per NED axis."""
+
+    lla: FloatArray
+    pos_var: FloatArray
+    vel: FloatArray
+    vel_var: FloatArray
+
+
+def start_position(lla: FloatArray, tg: FloatArray, t0: float, pos_sd: FloatArray,
+                   moving: bool) -> StartPosition:
+    """The initial position from the first fixes ``lla`` (K, 3) at times ``tg``.
+
+    Standing or with GNSS velocity: the component-wise median (one outlier cannot become the
+    initial position) with the variance σ² of the first fix; velocity zero with σ 1 m/s (the
+    caller replaces it by the GNSS velocity and adds the motion at that speed).
+
+    Moving without GNSS velocity (``moving_start`` found motion from positions): a car
+    pulling away from rest at 2 m/s² is 20 m from the median of nine 1 Hz fixes at t0, so
+    the first fix is taken, unless its step to the second exceeds the next step by
+    ``START_OUTLIER`` σ (an outlier); that step over its interval bounds the speed ``u``,
+    which sets the velocity σ (max(1 m/s, u)) and adds (u·(t_fix − t0))² to the position
+    variance. With an outlier first: the median, with the largest squared distance of a fix
+    from it added. A parabola through the fixes was tried and dropped: a ramp-then-cruise
+    start is no parabola, and its velocity at t0 (4–6 m/s for a car at rest, σ 0.6) sent
+    the filter off on 3 of 10
+    cold-start-phone seeds.
+    """
+    med = np.median(lla, axis=0)
+    ned = lla_to_ned(lla, med)
+    var0 = pos_sd[0] ** 2
+    if not moving:
+        return StartPosition(med, var0, np.zeros(3), np.ones(3))
+    step = np.linalg.norm(np.diff(ned[:3, :2], axis=0), axis=1)
+    if lla.shape[0] < 3 or step[0] > step[1] + START_OUTLIER * np.hypot(pos_sd[0, 0],
+                                                                         pos_sd[0, 1]):
+        return StartPosition(med, var0 + np.max(ned**2, axis=0), np.zeros(3), np.ones(3))
+    u = float(step[0] / max(tg[1] - tg[0], 1e-3))
+    drift = (u * max(tg[0] - t0, 0.0)) ** 2
+    return StartPosition(lla[0].copy(), var0 + np.array([drift, drift, 0.0]), np.zeros(3),
+                         np.full(3, max(1.0, u * u)))
 
 
 @dataclass(frozen=True)
@@ -232,6 +296,9 @@ class Alignment:
     g_latency: float  # GNSS latency [s] subtracted from the fix stamps
     lever: FloatArray  # GNSS antenna lever arm in b [m]
     heading_from_mag: bool  # the initial heading is the magnetometer's
+    # the last sample the alignment read [s]: the levelling window's end, the last of the
+    # START_FIXES fixes; the filter's estimate is causal from here on (``online_from_s``)
+    t_ready: float = -np.inf
 
 
 def initial_state(drive: Drive, cfg: EkfConfig, model: SensorModel, bp: BaroPrior,
@@ -244,13 +311,15 @@ def initial_state(drive: Drive, cfg: EkfConfig, model: SensorModel, bp: BaroPrio
     t = imu.t
     i_static = static_window_end(imu, cfg.align_max_s)
     mv = moving_start(imu, gnss, i_static)
-    tilt_extra_var = 0.0
+    tilt_extra_var: float | FloatArray = 0.0
     if mv is None:
         roll, pitch = coarse_level(imu.accel_b[:i_static].mean(axis=0))
     else:  # moving from the start: level on f_b minus the GNSS-derived acceleration
         i_static = mv.i_end
         roll, pitch = coarse_level(imu.accel_b[:i_static].mean(axis=0) - mv.accel_b)
         tilt_extra_var = (mv.accel_sd / 9.81) ** 2
+        if mv.accel_sd_y is not None:  # pitch from the along-track, roll from the lateral
+            tilt_extra_var = np.array([(mv.accel_sd_y / 9.81) ** 2, tilt_extra_var])
     heading_known = cfg.initial_heading is not None
     yaw0 = float(cfg.initial_heading) if heading_known else 0.0
     heading_sd = cfg.initial_heading_sd
@@ -274,23 +343,25 @@ def initial_state(drive: Drive, cfg: EkfConfig, model: SensorModel, bp: BaroPrio
     if gnss is not None:
         tg = gnss.t - g_latency
         j0 = int(min(np.searchsorted(tg, t[0]), tg.size - 1))
-        # robust start: component-wise median of the first (up to) START_FIXES fixes, so that one
-        # outlier cannot become the initial position (the vehicle may move meanwhile: the
-        # spread of these fixes is added to the variance below)
         j9 = min(j0 + START_FIXES, tg.size)
-        lla0 = np.median(gnss.lla[j0:j9], axis=0)
+        assert model.gnss_pos_sd is not None
+        has_vel = gnss.vel_n is not None and model.gnss_vel_sd is not None
+        sp = start_position(gnss.lla[j0:j9], tg[j0:j9], float(t[0]),
+                            model.gnss_pos_sd[j0:j9], mv is not None and not has_vel)
+        lla0 = sp.lla
         d_n = c0 @ lever
         lla0[2] += d_n[2]  # antenna → IMU, vertical part (heading may be unknown)
-        assert model.gnss_pos_sd is not None
-        pos_var = model.gnss_pos_sd[j0] ** 2 + (0.0 if heading_known else lever @ lever)
-        if gnss.vel_n is not None and model.gnss_vel_sd is not None:
+        pos_var = sp.pos_var + (0.0 if heading_known else lever @ lever)
+        if has_vel:
             v0 = gnss.vel_n[j0].copy()
             vel_var = model.gnss_vel_sd[j0] ** 2
+            # motion between t0 and the fixes used
+            pos_var = pos_var + (np.linalg.norm(v0) * abs(tg[j9 - 1] - t[0])) ** 2
         else:
-            vel_var = np.full(3, 1.0)
-        # motion between t0 and the fixes used
-        pos_var = pos_var + (np.linalg.norm(v0) * abs(tg[j9 - 1] - t[0])) ** 2
+            v0, vel_var = sp.vel, sp.vel_var
+        t_fixes = float(gnss.t[j9 - 1])
     else:
+        t_fixes = -np.inf
         lla0 = drive.origin_lla.copy()
         pos_var = np.array([100.0**2, 100.0**2, bp.bias_sd**2])
         vel_var = np.full(3, 1.0)
@@ -298,8 +369,15 @@ def initial_state(drive: Drive, cfg: EkfConfig, model: SensorModel, bp: BaroPrio
     p0[3:6, 3:6] = np.diag(vel_var)
     p_ba = ispec.accel_bias_sd**2 * np.eye(3)
     m_tilt = level_tilt_bias_jacobian(c0, float(gravity(lla0[0], lla0[2])))
-    p0[6:9, 6:9] = m_tilt @ p_ba @ m_tilt.T + (cfg.min_tilt_sd**2 + tilt_extra_var) * np.diag(
-        [1.0, 1.0, 0.0])
+    if np.ndim(tilt_extra_var):  # per body axis (roll, pitch), turned into n by the yaw
+        cy, sy = np.cos(yaw0), np.sin(yaw0)
+        rz = np.array([[cy, -sy], [sy, cy]])
+        p_tilt = np.zeros((3, 3))
+        p_tilt[:2, :2] = rz @ np.diag(tilt_extra_var) @ rz.T + cfg.min_tilt_sd**2 * np.eye(2)
+        p0[6:9, 6:9] = m_tilt @ p_ba @ m_tilt.T + p_tilt
+    else:
+        p0[6:9, 6:9] = m_tilt @ p_ba @ m_tilt.T + (
+            cfg.min_tilt_sd**2 + tilt_extra_var) * np.diag([1.0, 1.0, 0.0])
     yaw_unknown_var = np.pi**2 / 3.0
     p0[8, 8] = heading_sd**2 if heading_known else yaw_unknown_var
     p0[6:9, 12:15] = m_tilt @ p_ba
@@ -326,4 +404,5 @@ def initial_state(drive: Drive, cfg: EkfConfig, model: SensorModel, bp: BaroPrio
             p0[2, 2] += gm.sd_m**2
             p0[2, km.IGH] = p0[km.IGH, 2] = -gm.sd_m**2
     return Alignment(lla0, v0, q0, par0, p0, heading_known, yaw_unknown_var, i_static,
-                    g_latency, lever, mag_yaw is not None)
+                    g_latency, lever, mag_yaw is not None,
+                    max(float(t[i_static - 1]), t_fixes))

@@ -82,7 +82,7 @@ from ...types import (
     ParamEstimate,
     Trajectory,
 )
-from . import kernel, rts
+from . import backward, carry, kernel, regate, rts
 from . import model as km
 from .alignment import Alignment, initial_state, track_heading
 from .magnetometer import kernel_record, one_per_interval
@@ -113,6 +113,8 @@ class _Run:
     latency_mean: float  # the baro latency's prior mean [s]
     tau: tuple[float, float, float, float]
     has_baro: bool
+    model: SensorModel  # the shared sensor model of the drive (post-smoothing gate)
+    g_latency: float  # GNSS latency subtracted from the fix stamps [s]
 
 
 def _white_var(density: float, dt: FloatArray) -> FloatArray:
@@ -322,6 +324,7 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
     mag_data = kernel_record(drive, ev.m_field, fm, cfg.gate_prob, cfg.mag_reaccept_s,
                              cfg.mag_interval_s, cfg.mag_heading_floor)
 
+    hk = cfg.huber_k()
     # scalars coerced to one numba type each (float64, int64, bool): one compiled kernel
     res = kernel.run_filter(
         kernel.Grids(t, imu.gyro_b, imu.accel_b, gr.grid_of, gr.out_of, int(gr.grid_idx.size),
@@ -344,7 +347,9 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
             align_chunk_s=float(cfg.align_chunk_s), align_forget_s=float(cfg.align_forget_s),
             align_sd_max=float(cfg.align_sd_max),
             align_acc_sd=float(np.sqrt(2.0) * ispec.accel_bias_sd),
-            gap_forget_s=float(cfg.gap_heading_forget_s), store_rts=bool(store_rts)),
+            gap_forget_s=float(cfg.gap_heading_forget_s), store_rts=bool(store_rts),
+            huber_pos=hk[0], huber_vel=hk[1], huber_baro=hk[2],
+            tilt_consider=bool(cfg.tilt_consider)),
     )
     innov, info = _report(drive, res, gr, gaps, ini, cfg, heading_accel, est_scale, ev.has_vel)
     info.update(mag_info)
@@ -368,7 +373,7 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
     rts = tuple(res[5:10]) if store_rts else None
     return _Run(t[gr.out_idx], *res[:4], t[gr.grid_idx], gr.grid_idx, gr.out_idx,
                 gr.cov_grid, res[4], rts, innov, info, prior, bp.latency_mean, tau,
-                baro is not None)
+                baro is not None, model, float(ini.g_latency))
 
 
 def _report(drive: Drive, res: tuple[Any, ...], gr: _Grids, gaps: NDArrayInt, ini: Alignment,
@@ -400,6 +405,8 @@ def _report(drive: Drive, res: tuple[Any, ...], gr: _Grids, gaps: NDArrayInt, in
         "accel_scale_estimated": bool(est_scale),
         "accel_scale": o_par[-1, km.PKA:km.PKA + 3].copy(),
         "static_align_s": float(t[ini.i_static - 1] - t[0]),
+        # the time from which the output is causal: the alignment read data up to here
+        "online_from_s": float(ini.t_ready),
         "heading_source": ("magnetometer" if ini.heading_from_mag else
                            "given" if ini.heading_known else
                            "accel-matching" if heading_accel else "gnss-track"),
@@ -467,13 +474,60 @@ class EKF:
 
 class EKFRTS(EKF):
     """``ekf`` followed by a Rauch-Tung-Striebel smoother on the covariance grid (``run``
-    and its post-solve checks are ``EKF``'s)."""
+    and its post-solve checks are ``EKF``'s), and with ``EkfConfig.post_gate`` the
+    post-smoothing GNSS gate (``ekf.regate``)."""
 
     name = "ekf-rts"
 
     def _run(self, drive: Drive) -> Estimate:
         t0 = time.perf_counter()
-        run = run_forward(drive, self.config, store_rts=True)
+        est = self._gated(drive, t0)
+        if not self.config.fb_separation:
+            return est
+        try:
+            sep = backward.fb_separation(drive, est, self.config,
+                                         lambda d, c: EKF(c).run(d))
+            note = None
+        except (ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:
+            sep, note = None, f"{self.name}: the backward pass failed ({exc}); no fb_separation"
+        info = {**est.info, "fb_separation": sep}
+        if note is not None:
+            info["warnings"] = [*(info.get("warnings") or []), note]
+        return est.replace(info=info, runtime_s=time.perf_counter() - t0)
+
+    def _gated(self, drive: Drive, t0: float) -> Estimate:
+        """The smoothed estimate, with ``post_gate`` after the post-smoothing gate rounds."""
+        run, est = self._smooth(drive, t0)
+        if not self.config.post_gate or drive.gnss is None:
+            return est
+        def again(d: Drive) -> tuple[SensorModel, Estimate]:
+            r, e = self._smooth(d, t0)
+            return r.model, e
+
+        return regate.regated(drive, est, run.model, run.g_latency, self.config, self.name,
+                              again, t0)
+
+    def _smooth(self, drive: Drive, t0: float) -> tuple[_Run, Estimate]:
+        """The forward pass and the RTS smoother over it (``t0``: start of the run's clock);
+        with ``carry_heading_back`` run again from t0 with the acquired heading given
+        (``ekf.carry``)."""
+        cfg = self.config
+        run, est = self._pass(drive, cfg, t0)
+        if not cfg.carry_heading_back:
+            return run, est
+        assert run.rts is not None
+        redo = carry.rerun_config(cfg, run.info, run.t_grid, run.rts[4], run.t_out, run.q,
+                                  est, run.model.imu.gyro_bias_sd)
+        if redo is None:
+            return run, est
+        run2, est2 = self._pass(drive, redo[0], t0)
+        info = {**run2.info, **redo[1]}
+        # the causal (online) estimate stays the first pass's: the re-run knows the future
+        return replace(run2, info=info), est2.replace(info=info, config=cfg, online=est.online)
+
+    def _pass(self, drive: Drive, cfg: EkfConfig, t0: float) -> tuple[_Run, Estimate]:
+        """One forward pass with ``cfg`` and the RTS smoother over it."""
+        run = run_forward(drive, cfg, store_rts=True)
         assert run.rts is not None
         rts_p, rts_ing, rts_q, corr, reset_at = run.rts
         cov_out_of = np.full(run.t_grid.size, -1, dtype=np.int64)
@@ -486,5 +540,5 @@ class EKFRTS(EKF):
         online = _trajectory(run, run.lla, run.vel, run.q, run.par)
         traj = _trajectory(run, lla, vel, q, par)
         cov = km.unpack_cov(cov_s, run.has_baro)
-        return _estimate(self.name, run, traj, par, cov, t0, online, self.config,
-                         float(np.sqrt(max(var_b, 0.0))))
+        return run, _estimate(self.name, run, traj, par, cov, t0, online, cfg,
+                              float(np.sqrt(max(var_b, 0.0))))

@@ -152,6 +152,10 @@ class Settings(NamedTuple):
     align_acc_sd: float  # specific-force error of a chunk [m/s²]
     gap_forget_s: float  # IMU gaps this long make the heading unknown [s]
     store_rts: bool  # keep what the RTS smoother needs
+    huber_pos: float  # Huber threshold of GNSS positions [σ] (0: no loss)
+    huber_vel: float  # Huber threshold of GNSS velocities [σ] (0: no loss)
+    huber_baro: float  # Huber threshold of baro samples [σ] (0: no loss)
+    tilt_consider: bool  # horizontal GNSS rows hold the attitude while the heading is unknown
 
 
 @njit(cache=True)
@@ -210,6 +214,7 @@ def run_filter(grids, init, noise, events, gnss, baro, mag, settings):
     pend_h = np.zeros((max_pending, 6, NX))
     pend_r = np.zeros((max_pending, 6))
     pend_m = np.zeros(max_pending, dtype=np.int64)
+    pend_ok = np.zeros(max_pending, dtype=np.bool_)  # heading known when the rows were made
     n_pend = 0
     acc_fn, acc_fb, acc_n = np.zeros(3), np.zeros(3), 0  # interval's mean specific force
     t_prev_grid = t[0]
@@ -296,6 +301,7 @@ def run_filter(grids, init, noise, events, gnss, baro, mag, settings):
                 put(pend_h[n_pend], hm)
                 put(pend_r[n_pend], r)
                 pend_m[n_pend] = mm
+                pend_ok[n_pend] = heading_ok
                 n_pend += 1
             je += 1
 
@@ -324,14 +330,15 @@ def run_filter(grids, init, noise, events, gnss, baro, mag, settings):
                     update_gnss(p, dx, heff, pend_y[e], pend_r[e], mm, idx, pend_t[e], k,
                                 settings, gnss.pos_sd[idx, 2], baro.has_baro,
                                 noise.b_prior_var, v_gate, counts, rts_q, inn_pos, inn_vel,
-                                rej_pos, rej_vel, rej_v)
+                                rej_pos, rej_vel, rej_v, pend_ok[e])
                 elif pend_type[e] == BARO:
                     update_gated(p, dx, heff, pend_y[e], pend_r[e], settings.gate_baro,
                                  settings.max_consec_baro, counts, C_BARO, inn_baro, rej_baro,
-                                 idx)
+                                 idx, settings.huber_baro,
+                                 settings.tilt_consider and not pend_ok[e])
                 else:
                     update_gated(p, dx, heff, pend_y[e], pend_r[e], mag.gate, mag.max_consec,
-                                 counts, C_MAG, inn_mag, rej_mag, idx)
+                                 counts, C_MAG, inn_mag, rej_mag, idx, 0.0, False)
             n_pend = 0
             apply_correction(lla, v, q, par, dx)
             if store_rts:

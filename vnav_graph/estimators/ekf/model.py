@@ -44,6 +44,13 @@ decoupled — its row and column of Φ and of H are zero and its variance stays 
 heading error. Two effects of the unknown heading are added as process noise: the horizontal
 Earth-rate compensation (tilt, rate ≤ 2Ω cos L, rms √2 Ω cos L, treated as a constant rate
 of unknown sign) and the rotation of the horizontal specific force (velocity, rms √2 |f_h|).
+The GNSS and baro updates hold the attitude as Schmidt consider states until the heading is
+known (``consider_update``; ``EkfConfig.tilt_consider``): the horizontal rows cannot tell
+tilt from heading then, and a levelling in motion can leave a tilt σ of 15–20° (position-only
+start, ``alignment.moving_start``), far outside the linear regime — on cold-start-phone a
+single baro sample moved the pitch by 16° (true error 3.8°) and a heading 10° off at its
+acquisition was taken up as 12° of roll, each sending the forward filter hundreds of metres
+off.
 The first GNSS fix with track speed above the threshold resets the nominal yaw to the track
 (q ← q_z(Δ) ⊗ q), rotates the tilt covariance with it (ψ' = R_z(Δ) ψ) and sets the yaw
 variance to the track's σ²; the RTS smoother sees this step as Φ_eff = J Φ with Q_eff[8] = σ².
@@ -290,10 +297,43 @@ def scalar_update(p, dx, hrow, y, r):
 
 
 @njit(cache=True)
-def vector_update(p, dx, hm, y, rdiag, gate, force):
+def consider_update(p, dx, hrow, y, r, c0, c1):
+    """``scalar_update`` with the states [c0, c1) held as Schmidt "consider" states: their
+    gain is zero, so neither they nor their estimate change, while P keeps their
+    correlations (the expanded Joseph form holds for any gain)."""
+    a = p @ hrow
+    s = hrow @ a + r
+    k = a / s
+    for i in range(c0, c1):
+        k[i] = 0.0
+    dx += k * (y - hrow @ dx)
+    for i in range(NX):
+        for j in range(NX):
+            p[i, j] = p[i, j] - k[i] * a[j] - a[i] * k[j] + s * k[i] * k[j]
+    for i in range(NX):
+        for j in range(i + 1, NX):
+            m = 0.5 * (p[i, j] + p[j, i])
+            p[i, j] = m
+            p[j, i] = m
+
+
+@njit(cache=True)
+def huber_weight(e, k):
+    """Huber's IRLS weight of a Mahalanobis norm e with threshold k [σ]: 1 for e ≤ k, k/e
+    above (``graph.model.robust``); k ≤ 0: no loss, weight 1."""
+    if k <= 0.0 or e <= k:
+        return 1.0
+    return k / e
+
+
+@njit(cache=True)
+def vector_update(p, dx, hm, y, rdiag, gate, force, huber_k, c0, c1):
     """Gate the m-vector y = h(x̃) − z on its NIS, then update sequentially.
 
-    Returns (accepted, NIS, normalised innovations (m,)); ``force`` skips the gate."""
+    Huber re-weighting (``huber_k`` > 0): with e = √NIS the rows' variances are R/w,
+    w = ``huber_weight``(e, k). States [c0, c1) are consider states (``consider_update``;
+    c0 = c1: none). Returns (accepted, NIS, normalised innovations (m,), w); ``force`` skips
+    the gate."""
     m = y.size
     nu = y - hm @ dx
     s = hm @ p @ hm.T
@@ -307,10 +347,16 @@ def vector_update(p, dx, hm, y, rdiag, gate, force):
     for i in range(m):
         norm[i] = -nu[i] / np.sqrt(s[i, i])  # sign of z − h(x̃)
     if nis > gate and not force:
-        return False, nis, norm
+        return False, nis, norm, 1.0
+    w = huber_weight(np.sqrt(max(nis, 0.0)), huber_k)
     for i in range(m):
-        scalar_update(p, dx, hm[i].copy(), y[i], rdiag[i])
-    return True, nis, norm
+        if c1 > c0:
+            consider_update(p, dx, hm[i].copy(), y[i], rdiag[i] / w, c0, c1)
+        elif w < 1.0:
+            scalar_update(p, dx, hm[i].copy(), y[i], rdiag[i] / w)
+        else:
+            scalar_update(p, dx, hm[i].copy(), y[i], rdiag[i])
+    return True, nis, norm, w
 
 
 @njit(cache=True)

@@ -8,9 +8,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
 from ...config import DEG
 from ...sensors.magnetometer import MAG_BIAS_SD_UT, MAG_HEADING_FLOOR, MAG_INTERVAL_S
 from ...sensors.model import GnssHeightGM, gnss_gm
+
+# the EKF's robust losses (the graph has "cauchy" too)
+LOSSES = ("none", "huber")
 
 
 @dataclass(frozen=True)
@@ -50,6 +55,23 @@ class EkfConfig:
     gnss_gm_sd_v: σ of the Gauss-Markov GNSS height error state [m] (0: no state).
     gnss_gm_tau_s: time constant of that state [s].
     baro_scale_sd: prior σ of the baro scale (None: the shared sensor model's).
+    loss_gnss_pos: robust loss of GNSS positions: "none" or "huber" (``ekf.model.huber_weight``:
+        rows' variances R/w, w = min(1, k/e) with e = √NIS of the horizontal pair and of the
+        height, each on its own).
+    loss_gnss_vel: robust loss of GNSS velocities ("none" or "huber").
+    loss_baro: robust loss of baro samples ("none" or "huber").
+    loss_threshold_sd: Huber thresholds k [σ] (GNSS position, GNSS velocity, baro): the
+        graph's rule (``GraphConfig.loss_threshold_sd``, a Mahalanobis norm in σ).
+    post_gate: ``ekf-rts`` only: remove the fixes that do not fit the smoothed trajectory and
+        run the forward and RTS passes again (``ekf.regate``; the graph's post-solve gate).
+    post_gate_rounds: at most this many post-smoothing gate rounds.
+    carry_heading_back: ``ekf-rts`` only: a heading acquired in motion is carried back to the
+        drive's start and the forward and RTS passes are run again from there with it
+        (``ekf.carry``).
+    fb_separation: ``ekf-rts`` only: run the filter backward too and report the
+        forward/backward separation (``ekf.backward``; ``info["fb_separation"]``).
+    tilt_consider: while the heading is unknown, horizontal GNSS rows hold the attitude as
+        Schmidt consider states (``ekf.steps.update_gnss``).
 
     Magnetometer headings are thinned to one per ``mag_interval_s`` because their errors
     (interference, soft iron) are correlated over seconds: 10 Hz of them would be trusted
@@ -88,6 +110,22 @@ class EkfConfig:
     gnss_gm_sd_v: float = 0.0
     gnss_gm_tau_s: float = 300.0
     baro_scale_sd: float | None = None
+    loss_gnss_pos: str = "none"
+    loss_gnss_vel: str = "none"
+    loss_baro: str = "none"
+    loss_threshold_sd: tuple[float, float, float] = (2.0, 2.0, 2.0)
+    post_gate: bool = False
+    post_gate_rounds: int = 3
+    carry_heading_back: bool = True
+    fb_separation: bool = True
+    tilt_consider: bool = True
+
+    def huber_k(self) -> tuple[float, float, float]:
+        """The kernel's Huber thresholds (GNSS position, velocity, baro) [σ], 0 where the
+        loss is "none"."""
+        losses = (self.loss_gnss_pos, self.loss_gnss_vel, self.loss_baro)
+        return tuple(float(k) if loss == "huber" else 0.0  # type: ignore[return-value]
+                     for loss, k in zip(losses, self.loss_threshold_sd, strict=True))
 
     @property
     def gnss_gm(self) -> GnssHeightGM | None:
@@ -97,5 +135,12 @@ class EkfConfig:
         self.gnss_gm  # noqa: B018 -- validates the Gauss-Markov GNSS height settings
         if not (self.cov_rate_hz > 0 and self.cov_output_hz > 0):
             raise ValueError("EkfConfig.cov_rate_hz / cov_output_hz: must be > 0")
+        for what in ("loss_gnss_pos", "loss_gnss_vel", "loss_baro"):
+            if getattr(self, what) not in LOSSES:
+                raise ValueError(f"EkfConfig.{what} must be one of {', '.join(LOSSES)}, not "
+                                 f"{getattr(self, what)!r}")
+        if len(self.loss_threshold_sd) != 3 or not all(
+                np.isfinite(k) and k > 0 for k in self.loss_threshold_sd):
+            raise ValueError("EkfConfig.loss_threshold_sd: three thresholds > 0 [σ]")
         if not 0.5 < self.gate_prob < 1.0:
             raise ValueError("EkfConfig.gate_prob: must be in (0.5, 1)")

@@ -22,6 +22,8 @@ from .model import (
     PBG,
     PGH,
     build_f,
+    consider_update,
+    huber_weight,
     reset_jacobian,
     scalar_update,
     step_phi,
@@ -122,12 +124,17 @@ def delayed_rows(h, r, mm, fmat, qd, lag, dtg):
 
 @njit(cache=True)
 def update_gnss(p, dx, heff, y, r, mm, idx, te, k, settings, sd_v, has_baro, b_prior_var,
-                v_gate, counts, rts_q, inn_pos, inn_vel, rej_pos, rej_vel, rej_v):
+                v_gate, counts, rts_q, inn_pos, inn_vel, rej_pos, rej_vel, rej_v, heading_ok):
     """A GNSS fix: the horizontal position pair (χ²₂ gate; after ``max_consec`` refusals a
     jump of the observed size is added to P and forced in), the height through the fault
     detection of ``nav.gnss_gate.height_gate``, then the velocity (pair, then down, which
-    follows the height's verdict)."""
+    follows the height's verdict). Huber re-weighting per ``settings.huber_*`` (pair, height
+    and vertical velocity each on its own NIS). While the heading is unknown the horizontal
+    pairs hold the attitude as consider states (``model`` docstring, "Heading before it is
+    known")."""
     no_force = mm < 0  # False as a typed bool: a literal compiles vector_update again
+    c0 = IATT if (settings.tilt_consider and not heading_ok) else 0
+    c1 = IATT + 3 if c0 > 0 else 0
     force_h = counts[C_POS] >= settings.max_consec
     if force_h:
         for a in range(2):
@@ -135,8 +142,8 @@ def update_gnss(p, dx, heff, y, r, mm, idx, te, k, settings, sd_v, has_baro, b_p
             p[IPOS + a, IPOS + a] += nu_a * nu_a
             if settings.store_rts:
                 rts_q[k, IPOS + a] += nu_a * nu_a
-    ok, nis, nrm = vector_update(p, dx, heff[:2].copy(), y[:2].copy(), r[:2].copy(),
-                                 settings.gate_pos, force_h)
+    ok, nis, nrm, w = vector_update(p, dx, heff[:2].copy(), y[:2].copy(), r[:2].copy(),
+                                    settings.gate_pos, force_h, settings.huber_pos, c0, c1)
     put(inn_pos[idx, :2], nrm)
     rej_pos[idx] = not ok
     counts[C_POS] = 0 if nis <= settings.gate_pos else counts[C_POS] + 1
@@ -152,18 +159,24 @@ def update_gnss(p, dx, heff, y, r, mm, idx, te, k, settings, sd_v, has_baro, b_p
     if use_v:
         if code == USE_INFLATE:
             p[IBB, IBB] += b_prior_var
-        scalar_update(p, dx, hv, y[2], rv)
+        w = huber_weight(np.sqrt(nu_v * nu_v / s_v), settings.huber_pos)
+        if c1 > c0:
+            consider_update(p, dx, hv, y[2], rv if w >= 1.0 else rv / w, c0, c1)
+        else:
+            scalar_update(p, dx, hv, y[2], rv if w >= 1.0 else rv / w)
     else:
         rej_v[idx] = True
         rej_pos[idx] = True
     if mm == 6:
-        ok, nis, nrm = vector_update(p, dx, heff[3:5].copy(), y[3:5].copy(), r[3:5].copy(),
-                                     settings.gate_vel, no_force)
+        ok, nis, nrm, w = vector_update(p, dx, heff[3:5].copy(), y[3:5].copy(),
+                                        r[3:5].copy(), settings.gate_vel, no_force,
+                                        settings.huber_vel, c0, c1)
         put(inn_vel[idx, :2], nrm)
         rej_vel[idx] = not ok
         if use_v:
-            ok, nis, nrm = vector_update(p, dx, heff[5:6].copy(), y[5:6].copy(),
-                                         r[5:6].copy(), settings.gate_v, no_force)
+            ok, nis, nrm, w = vector_update(p, dx, heff[5:6].copy(), y[5:6].copy(),
+                                            r[5:6].copy(), settings.gate_v, no_force,
+                                            settings.huber_vel, c0, c1)
             inn_vel[idx, 2] = nrm[0]
             rej_vel[idx] = rej_vel[idx] or not ok
         else:
@@ -171,11 +184,15 @@ def update_gnss(p, dx, heff, y, r, mm, idx, te, k, settings, sd_v, has_baro, b_p
 
 
 @njit(cache=True)
-def update_gated(p, dx, heff, y, r, gate, max_consec, counts, c, inn, rej, idx):
+def update_gated(p, dx, heff, y, r, gate, max_consec, counts, c, inn, rej, idx, huber_k,
+                 hold_tilt):
     """A one-row measurement (baro, magnetometer heading) behind a χ²₁ gate, forced in after
-    ``max_consec`` refusals in a row (counter ``counts[c]``)."""
-    ok, nis, nrm = vector_update(p, dx, heff[:1].copy(), y[:1].copy(), r[:1].copy(), gate,
-                                 counts[c] >= max_consec)
+    ``max_consec`` refusals in a row (counter ``counts[c]``); Huber re-weighting with
+    threshold ``huber_k`` (0: none); ``hold_tilt``: the attitude as consider states."""
+    c0 = IATT if hold_tilt else 0
+    c1 = IATT + 3 if hold_tilt else 0
+    ok, nis, nrm, w = vector_update(p, dx, heff[:1].copy(), y[:1].copy(), r[:1].copy(), gate,
+                                    counts[c] >= max_consec, huber_k, c0, c1)
     inn[idx] = nrm[0]
     rej[idx] = not ok
     counts[c] = 0 if nis <= gate else counts[c] + 1

@@ -1,0 +1,78 @@
+"""ekf-rts's post-smoothing GNSS gate (``ekf.regate``): the whitened residual χ² of a fix
+against the smoothed trajectory in closed form, the graph's threshold rule, and the re-run
+with the misfits removed (counted in ``info`` and warned about)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.stats import chi2
+
+from vnav_graph.estimators.ekf import regate
+from vnav_graph.estimators.ekf.filter import EKFRTS, EkfConfig
+from vnav_graph.geo.earth import radii
+from vnav_graph.geo.frames import quat_to_mat
+from vnav_graph.sensors.model import sensor_model
+from vnav_graph.simulation.scenario import simulate
+from vnav_graph.types import GnssStream
+
+CFG = EkfConfig(fb_separation=False, carry_heading_back=False)
+
+
+@pytest.fixture(scope="module")
+def smoothed():
+    d = simulate("hill-drive", 2, duration_s=60.0)
+    return d, EKFRTS(CFG).run(d)
+
+
+def _fixes_on(d, est, offset_n):
+    """GNSS fixes placed exactly on the smoothed antenna track, moved north by offset_n (G,)."""
+    g, tr = d.gnss, est.trajectory
+    j = np.clip(np.searchsorted(tr.t, g.t), 0, tr.t.size - 1)
+    lla = np.column_stack([np.interp(g.t, tr.t, tr.lla[:, a]) for a in range(3)])
+    d_n = np.einsum("kij,j->ki", quat_to_mat(tr.q_nb[j]), np.asarray(g.lever_arm_b, float))
+    rn, re = radii(lla[:, 0])
+    lla[:, 0] += (d_n[:, 0] + offset_n) / (rn + lla[:, 2])
+    lla[:, 1] += d_n[:, 1] / ((re + lla[:, 2]) * np.cos(lla[:, 0]))
+    lla[:, 2] -= d_n[:, 2]
+    vel = np.column_stack([np.interp(g.t, tr.t, tr.vel_n[:, a]) for a in range(3)])
+    return d.replace(gnss=GnssStream(g.t, lla, g.pos_sd, vel, g.vel_sd, g.lever_arm_b, g.spec))
+
+
+def test_fix_chi2_closed_form(smoothed):
+    d, est = smoothed
+    offset = np.zeros(d.gnss.t.size)
+    offset[[100, 300]] = [4.0, -12.0]  # metres north
+    d2 = _fixes_on(d, est, offset)
+    model = sensor_model(d2)
+    c2, dof = regate.fix_chi2(d2, est, model, 0.0)
+    assert dof == 6
+    expect = (offset / model.gnss_pos_sd[:, 0]) ** 2
+    # the output trajectory is interpolated at 50 Hz: residuals of a fix on it are round-off
+    np.testing.assert_allclose(c2, expect, atol=1e-6)
+    thr = regate.post_gate_threshold(0.9995, 6)
+    assert thr == pytest.approx(chi2.ppf(1 - 0.0005**2, 6))
+    used = np.ones(c2.size, dtype=bool)
+    bad = regate.misfits(d2, est, model, 0.0, used, 0.9995)
+    assert np.flatnonzero(bad).tolist() == [i for i in (100, 300) if expect[i] > thr]
+
+
+def test_regated_removes_counts_and_warns(smoothed):
+    d, est = smoothed
+    offset = np.zeros(d.gnss.t.size)
+    offset[[150, 450]] = 30.0
+    d2 = _fixes_on(d, est, offset)
+    model = sensor_model(d2)
+    calls = []
+
+    def again(sub):
+        calls.append(sub.gnss.t.size)
+        return sensor_model(sub), est  # the same trajectory: nothing else misfits
+
+    out = regate.regated(d2, est, model, 0.0, CFG, "ekf-rts", again, 0.0)
+    assert calls == [d2.gnss.t.size - 2]
+    assert out.info["gnss_rejected_postsmooth"] == 2
+    assert out.info["post_gate_rounds"] == 1
+    assert out.info["gnss_rejected"] == est.info["gnss_rejected"] + 2
+    assert set(d2.gnss.t[[150, 450]]) <= set(out.info["gnss_rejected_t"])
+    assert any("did not fit the smoothed trajectory" in w for w in out.info["warnings"])

@@ -1,0 +1,110 @@
+"""Post-smoothing GNSS gate of ``ekf-rts`` (``EkfConfig.post_gate``): the counterpart of the
+graph's post-solve gate (``graph.model.problem.post_solve_rejections``).
+
+After the forward pass and the RTS smoother, every fix the filter used is compared with the
+smoothed trajectory: its whitened residual χ² — position (antenna = IMU position + C l) and,
+when the receiver gives velocity, velocity, each row divided by the fix's σ of the shared
+sensor model (``sensors.model``) — is tested against the χ² quantile of 1 − (1 − p)² with
+p = ``EkfConfig.gate_prob`` and 3 (6 with velocity) degrees of freedom: the graph's rule
+(the squared tail probability: a false rejection costs a whole re-run, a glitch has χ² in
+the thousands either way). Fixes above it are removed from the drive and the forward and RTS
+passes are run again, at most ``post_gate_rounds`` times; nothing is removed when none or
+every fix fails. The residual of a fix that took part in the fit is smaller than its
+innovation, so the gate is conservative (Groves §17.3).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+import numpy as np
+from scipy.stats import chi2
+
+from ...geo.earth import radii
+from ...geo.frames import quat_to_mat
+from ...sensors.model import SensorModel
+from ...types import Drive, Estimate, FloatArray
+from .settings import EkfConfig
+
+
+def post_gate_threshold(gate_prob: float, dof: int) -> float:
+    """χ² threshold of the post-smoothing gate: the 1 − (1 − p)² quantile (the graph's)."""
+    return float(chi2.ppf(1.0 - (1.0 - gate_prob) ** 2, dof))
+
+
+def fix_chi2(drive: Drive, est: Estimate, model: SensorModel,
+             g_latency: float) -> tuple[FloatArray, int]:
+    """Whitened residual χ² (G,) of every GNSS fix against the smoothed trajectory of
+    ``est`` (module docstring) and its degrees of freedom."""
+    gnss, traj = drive.gnss, est.trajectory
+    assert gnss is not None and model.gnss_pos_sd is not None
+    tg = gnss.t - g_latency
+    lat = np.interp(tg, traj.t, traj.lla[:, 0])
+    lon = np.interp(tg, traj.t, traj.lla[:, 1])
+    h = np.interp(tg, traj.t, traj.lla[:, 2])
+    j = np.clip(np.searchsorted(traj.t, tg), 0, traj.t.size - 1)
+    lever = np.asarray(gnss.lever_arm_b, dtype=float)
+    d_n = np.einsum("kij,j->ki", quat_to_mat(traj.q_nb[j]), lever)
+    rn, re = radii(lat)
+    res = np.column_stack([(gnss.lla[:, 0] - lat) * (rn + h) - d_n[:, 0],
+                           (gnss.lla[:, 1] - lon) * (re + h) * np.cos(lat) - d_n[:, 1],
+                           -(gnss.lla[:, 2] - h) - d_n[:, 2]]) / model.gnss_pos_sd
+    c2 = np.sum(res**2, axis=1)
+    dof = 3
+    if gnss.vel_n is not None and model.gnss_vel_sd is not None:
+        vel = np.column_stack([np.interp(tg, traj.t, traj.vel_n[:, a]) for a in range(3)])
+        c2 = c2 + np.sum(((gnss.vel_n - vel) / model.gnss_vel_sd) ** 2, axis=1)
+        dof = 6
+    return c2, dof
+
+
+def misfits(drive: Drive, est: Estimate, model: SensorModel, g_latency: float,
+            used: np.ndarray, gate_prob: float) -> np.ndarray:
+    """Mask (G,) of the used fixes that fail the post-smoothing gate; all False when none or
+    every used fix fails (module docstring)."""
+    c2, dof = fix_chi2(drive, est, model, g_latency)
+    bad = used & (c2 > post_gate_threshold(gate_prob, dof))
+    if bad.sum() == used.sum():
+        return np.zeros_like(bad)
+    return bad
+
+
+def warning(name: str, removed: int, rounds: int, gate_prob: float) -> str:
+    """The user-facing line of a post-smoothing gate that removed fixes."""
+    return (f"{name}: {removed} GNSS fixes did not fit the smoothed trajectory (whitened "
+            f"χ² above the {1.0 - (1.0 - gate_prob) ** 2:.8g} quantile) and were removed; "
+            f"the forward and RTS passes were run again ({rounds} round"
+            f"{'s' if rounds != 1 else ''})")
+
+
+def regated(drive: Drive, est: Estimate, model: SensorModel, g_latency: float, cfg: EkfConfig,
+            name: str, smooth: Callable[[Drive], tuple[SensorModel, Estimate]],
+            t0: float) -> Estimate:
+    """The post-smoothing gate rounds (module docstring) from the smoothed ``est`` of
+    ``drive`` (``model``: its sensor model); ``smooth`` re-runs the forward and RTS passes on a
+    drive and returns its sensor model and estimate. ``info`` gets
+    ``gnss_rejected_postsmooth`` (fixes removed, also counted in ``gnss_rejected`` and
+    listed in ``gnss_rejected_t``) and ``post_gate_rounds``; a warning when any was removed."""
+    assert drive.gnss is not None
+    keep = np.ones(drive.gnss.t.size, dtype=bool)
+    rounds = 0
+    for _ in range(cfg.post_gate_rounds):
+        sub = drive if keep.all() else drive.replace(gnss=drive.gnss.select(keep))
+        assert sub.gnss is not None
+        used = ~np.isin(sub.gnss.t, est.info["gnss_rejected_t"])
+        bad = misfits(sub, est, model, g_latency, used, cfg.gate_prob)
+        if not bad.any():
+            break
+        keep[np.flatnonzero(keep)[bad]] = False
+        rounds += 1
+        model, est = smooth(drive.replace(gnss=drive.gnss.select(keep)))
+    removed = int((~keep).sum())
+    info = dict(est.info)
+    info.update(gnss_rejected_postsmooth=removed, post_gate_rounds=rounds,
+                gnss_rejected=int(info["gnss_rejected"]) + removed,
+                gnss_rejected_t=np.sort(np.r_[info["gnss_rejected_t"], drive.gnss.t[~keep]]))
+    if removed:
+        info["warnings"] = [*(info.get("warnings") or []),
+                            warning(name, removed, rounds, cfg.gate_prob)]
+    return est.replace(info=info, runtime_s=time.perf_counter() - t0)
