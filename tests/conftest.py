@@ -46,3 +46,13 @@ def data_dir() -> Path:
     if d is None:
         pytest.skip("real logs not found: set VNAV_DATA or place them in ../shared/data")
     return d
+
+
+@pytest.fixture
+def registry():
+    """``register`` for one test: its registrations are undone afterwards
+    (``estimators.base.registry_snapshot``)."""
+    from vnav_graph.estimators.base import register, registry_snapshot
+
+    with registry_snapshot():
+        yield register

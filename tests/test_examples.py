@@ -55,9 +55,8 @@ def test_ex_simulate_drive():
     assert abs(np.std(res.baro_residual_m) - sd) < 5 * sd / math.sqrt(2 * n)
 
 
-def test_ex_custom_estimator(monkeypatch):
+def test_ex_custom_estimator(registry):  # undoes the example's register() afterwards
     mod = load("ex_custom_estimator")
-    monkeypatch.setattr(base, "_REGISTRY", dict(base._REGISTRY))  # undo register() afterwards
     doc = mod.main(duration_s=60.0, seeds=2, workers=1)
     rows = [r for r in doc["runs"] if r["estimator"] == "baro-only"]
     assert [r["seed"] for r in rows] == [0, 1] and all(r["status"] == "ok" for r in rows)

@@ -48,6 +48,7 @@ Contents: ``BaroCalibration`` (frozen result), ``calibrate_baro(drive)``,
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -124,6 +125,54 @@ def _outliers(t: FloatArray, r: FloatArray) -> np.ndarray:
     return np.abs(dev) > OUTLIER_K * max(sc, 1e-9)
 
 
+def _gls_epochs(hg: FloatArray, vg: FloatArray, hb: FloatArray, ok: Any, t: FloatArray,
+                white_sd: Any) -> tuple[Any, FloatArray, FloatArray, int]:
+    """Epochs of the GLS fit: finite ones without the spikes (residuals of a first OLS fit
+    against their running median, ``_outliers``), thinned to at most ``MAX_GLS_EPOCHS``.
+    Returns the mask, their times and white-noise σ, and the number of spikes removed."""
+    n_out = 0
+    tt = np.asarray(t, dtype=float)
+    w_sd = np.broadcast_to(np.asarray(white_sd, dtype=float), hg.shape)
+    ok = ok & np.isfinite(tt) & np.isfinite(w_sd)
+    if ok.sum() >= 10:
+        m0 = np.column_stack([hg[ok], -vg[ok], np.ones(int(ok.sum()))])
+        th0, *_ = np.linalg.lstsq(m0, hb[ok] - hg[ok], rcond=None)
+        bad = _outliers(tt[ok], hb[ok] - hg[ok] - m0 @ th0)
+        n_out = int(bad.sum())
+        idx = np.flatnonzero(ok)
+        ok[idx[bad]] = False
+    stride = max(1, int(np.ceil(ok.sum() / MAX_GLS_EPOCHS)))
+    keep = np.flatnonzero(ok)[::stride]
+    ok = np.zeros(hg.size, dtype=bool)
+    ok[keep] = True
+    return ok, tt[ok], w_sd[ok], n_out
+
+
+def _warnings(sd: FloatArray, cond: float, fit_ratio: float | None, n_out: int,
+              velocity_source: str) -> list[str]:
+    """What the user should know about a calibration: a poorly observable parameter, an
+    ill-conditioned design, a poor fit, removed spikes, a differentiated V_G."""
+    warns: list[str] = []
+    names = (("scale", "dSF", "altitude change"), ("latency_s", "Td", "vertical speed"),
+             ("bias_m", "B", "data"))
+    for (key, label, needs), se in zip(names, sd, strict=True):
+        if se > WARN_FRACTION * TYPICAL[key]:
+            warns.append(f"{label} poorly observable: standard error {se:.3g} exceeds "
+                         f"{WARN_FRACTION:g} x typical {TYPICAL[key]:g} (needs more {needs})")
+    if cond > MAX_CONDITION:
+        warns.append(f"design ill-conditioned (condition number {cond:.3g} > {MAX_CONDITION:g}):"
+                     " dSF, Td and B cannot be separated by this data")
+    if fit_ratio is not None and fit_ratio > POOR_FIT_S2:
+        warns.append(f"poor fit: the residuals scatter {np.sqrt(fit_ratio):.2g}x more than the "
+                     "baro/GNSS noise model allows (standard errors scaled up by that factor)")
+    if n_out:
+        warns.append(f"{n_out} epochs removed as outliers (GNSS/baro spikes)")
+    if velocity_source == "differentiated_height":
+        warns.append("V_G differentiated from GNSS heights (no GNSS velocity): Td is noisy and "
+                     "biased toward zero")
+    return warns
+
+
 def calibrate_arrays(
     h_gnss_rel: FloatArray, v_up: FloatArray, h_baro_rel: FloatArray,
     velocity_source: str = "gnss_velocity", t: FloatArray | None = None,
@@ -150,22 +199,7 @@ def calibrate_arrays(
     n_out = 0
     if gls:
         assert t is not None and noise is not None
-        tt = np.asarray(t, dtype=float)
-        w_sd = np.broadcast_to(np.asarray(noise[2], dtype=float), hg.shape)
-        ok &= np.isfinite(tt) & np.isfinite(w_sd)
-        if ok.sum() >= 10:
-            # spikes: residuals of a first OLS fit against their running median
-            m0 = np.column_stack([hg[ok], -vg[ok], np.ones(int(ok.sum()))])
-            th0, *_ = np.linalg.lstsq(m0, hb[ok] - hg[ok], rcond=None)
-            bad = _outliers(tt[ok], hb[ok] - hg[ok] - m0 @ th0)
-            n_out = int(bad.sum())
-            idx = np.flatnonzero(ok)
-            ok[idx[bad]] = False
-        stride = max(1, int(np.ceil(ok.sum() / MAX_GLS_EPOCHS)))
-        keep = np.flatnonzero(ok)[::stride]
-        ok = np.zeros(hg.size, dtype=bool)
-        ok[keep] = True
-        tt, w_sd = tt[ok], w_sd[ok]
+        ok, tt, w_sd, n_out = _gls_epochs(hg, vg, hb, ok, t, noise[2])
     hg, vg, hb = hg[ok], vg[ok], hb[ok]
     n = hg.size
     if n < 10:
@@ -219,24 +253,7 @@ def calibrate_arrays(
                   [0.0, 0.0, 1.0]])
     cov = j @ cov @ j.T
     sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
-    warns: list[str] = []
-    names = (("scale", "dSF", "altitude change"), ("latency_s", "Td", "vertical speed"),
-             ("bias_m", "B", "data"))
-    for (key, label, needs), se in zip(names, sd, strict=True):
-        if se > WARN_FRACTION * TYPICAL[key]:
-            warns.append(f"{label} poorly observable: standard error {se:.3g} exceeds "
-                         f"{WARN_FRACTION:g} x typical {TYPICAL[key]:g} (needs more {needs})")
-    if cond > MAX_CONDITION:
-        warns.append(f"design ill-conditioned (condition number {cond:.3g} > {MAX_CONDITION:g}):"
-                     " dSF, Td and B cannot be separated by this data")
-    if fit_ratio is not None and fit_ratio > POOR_FIT_S2:
-        warns.append(f"poor fit: the residuals scatter {np.sqrt(fit_ratio):.2g}x more than the "
-                     "baro/GNSS noise model allows (standard errors scaled up by that factor)")
-    if n_out:
-        warns.append(f"{n_out} epochs removed as outliers (GNSS/baro spikes)")
-    if velocity_source == "differentiated_height":
-        warns.append("V_G differentiated from GNSS heights (no GNSS velocity): Td is noisy and "
-                     "biased toward zero")
+    warns = _warnings(sd, cond, fit_ratio, n_out, velocity_source)
     return BaroCalibration(
         scale=s_hat, latency_s=td_hat, bias_m=b_hat, scale_sd=float(sd[0]),
         latency_sd=float(sd[1]), bias_sd=float(sd[2]), cov=cov, residual_sd=float(np.sqrt(

@@ -252,6 +252,8 @@ def cmd_run(args: argparse.Namespace) -> int:
             pre.close()
         raise
     configs = getattr(args, "configs", None)  # --config, read by _load_extensions
+    _say_hint(drive, names, drive.truth is None and drive.gnss is not None
+              and not args.no_holdout, mode)
     results = run_estimators(drive, names, progress=mode, configs=configs, prewarm=pre)
     summary = summarize(drive, results)
     holdout = None  # a real log's holdout run: its errors are what the report draws
@@ -297,6 +299,16 @@ def cmd_run(args: argparse.Namespace) -> int:
     if line:
         print(f"vnav-graph: {line}", file=sys.stderr)
     return code
+
+
+def _say_hint(drive: Any, names: list[str], holdout: bool, mode: Any) -> None:
+    """The predicted runtime when the run will be long (``runtime_estimate.run_hint``)."""
+    from .progress import say
+    from .runtime_estimate import run_hint
+
+    hint = run_hint(drive, names, holdout)
+    if hint:
+        say(f"hint: {hint}", mode)
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
@@ -362,12 +374,13 @@ def cmd_holdout(args: argparse.Namespace) -> int:
     from .outputs import check_out_dir, publish
     from .progress import mode_for, stage
     from .report.error_plots import plot_holdout_errors
-    from .runner import run_holdout
+    from .runner import resolve_estimators, run_holdout
 
     out = check_out_dir(args.out)
     mode = mode_for(not args.no_progress)
     with stage(f"reading {Path(args.log).name}", mode):
         drive = load_drive(args.log)
+    _say_hint(drive, resolve_estimators(args.estimators), False, mode)
     res = run_holdout(drive, args.estimators, args.outage, args.spacing, progress=mode,
                       configs=getattr(args, "configs", None))
     md = format_markdown(res.doc)

@@ -309,9 +309,22 @@ class ScenarioConfig:
     description: str = ""
     # opt-in: a simulated magnetometer (TOML section [magnetometer]); None = no mag stream
     magnetometer: MagSpec | None = None
+    # car side-slip β = side_slip_gain·a_lat [rad per m/s²] (simulation.trajectories); 0 = none
+    side_slip_gain: float = 0.0
+    # IMU mounting misalignment: roll, pitch, yaw of the IMU axes in the vehicle frame [deg]
+    imu_mount_rph_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     def __post_init__(self) -> None:
         if self.kind not in ("hill-drive", "sortie", "vertical"):
             raise ValueError(f"ScenarioConfig.kind: unknown trajectory kind {self.kind!r}")
         if not self.duration_s > 0 or not self.imu_rate_hz > 0:
             raise ValueError("ScenarioConfig.duration_s / imu_rate_hz: must be > 0")
+        mount = tuple(float(x) for x in self.imu_mount_rph_deg)
+        object.__setattr__(self, "imu_mount_rph_deg", mount)
+        if len(mount) != 3 or not all(np.isfinite(mount) & (np.abs(mount) < 90.0)):
+            raise ValueError("ScenarioConfig.imu_mount_rph_deg: three finite angles in "
+                             f"(-90, 90) degrees, got {self.imu_mount_rph_deg!r}")
+        if not np.isfinite(self.side_slip_gain) or (self.kind == "vertical" and (
+                self.side_slip_gain or any(mount))):
+            raise ValueError("ScenarioConfig.side_slip_gain / imu_mount_rph_deg: finite, and "
+                             "only for the hill-drive and sortie kinds")

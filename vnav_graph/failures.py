@@ -47,3 +47,15 @@ class MissingStream(ValueError):
     @property
     def reason(self) -> str:
         return f"no {self.stream}"
+
+
+class ExtensionError(ValueError):
+    """A graph extension (user code handed to a smoother) is malformed: a factor on an unknown
+    key, a reserved letter, a Jacobian of the wrong shape, ... The message names the
+    extension.
+
+    Bad input, not an estimator failure: ``vnav_graph.runner`` lets it through, so ``run`` and
+    ``holdout`` stop with the one-line error and exit 2 instead of reporting the variant
+    ``failed`` (or, for a wrong Jacobian shape, GTSAM crashing the process). A bench worker
+    never raises: its row is ``failed`` with this error.
+    """

@@ -8,8 +8,12 @@ local or on Dask (``vnav_graph.bench.run_task``), all call :func:`run_one`:
   ``info["warnings"]`` (:func:`run_captured`);
 - ``runtime_s`` excludes ``jit_s``, the time numba spent compiling kernels (first run on a
   machine only: the compiled code is cached);
+- a sensor left out or a re-solve without it (the magnetometer, the baro scale) is a warning
+  and an entry of ``fallbacks`` (:func:`flag_sensor_fallbacks`);
 - an estimator that raises is returned as data, ``error`` = ``failure_message(exc, typed=True)``
   (never empty), and the others still run (docs/design.md);
+- a malformed graph extension (``failures.ExtensionError``) is bad input and propagates (the
+  CLI's one-line error, exit 2);
 - an estimator that needs a stream the drive lacks (``failures.MissingStream``) is returned
   as skipped, ``error`` = the reason (``"no barometer"``): not a failure;
 - the first Ctrl-C stops after the current estimator (:func:`interrupt_flag`).
@@ -48,7 +52,7 @@ from .evaluation.holdout import (
 )
 from .evaluation.metrics import METRIC_KEYS, fb_separation_block
 from .evaluation.screening import screen_reference
-from .failures import MissingStream, failure_message
+from .failures import ExtensionError, MissingStream, failure_message
 from .jit import CompileTimer, Prewarm, family_of, mark_warm
 from .progress import Mode, mode_for, say, steps
 from .types import Drive, Estimate
@@ -142,6 +146,8 @@ def run_one(name: str, drive: Drive, config: Any = None, waited_s: float = 0.0,
             err = None
         except MissingStream as exc:  # the drive cannot feed this estimator: not a failure
             est, err, skipped = None, exc.reason, True
+        except ExtensionError:  # a malformed user extension is bad input: the run stops
+            raise
         except Exception as exc:  # an estimator failure is data, not a crash
             if interrupted:
                 raise KeyboardInterrupt from exc
@@ -210,7 +216,7 @@ def run_captured(name: str, drive: Drive, config: Any = None) -> Estimate:
     A causal estimator's ``online`` estimate is filled in here (``base.with_online``)."""
     with warnings.catch_warnings(record=True) as rec:
         warnings.simplefilter("always")
-        est = with_online(name, create(name, config).run(drive))
+        est = flag_sensor_fallbacks(with_online(name, create(name, config).run(drive)))
     if not rec:
         return est
     counts: dict[str, int] = {}
@@ -221,6 +227,29 @@ def run_captured(name: str, drive: Drive, config: Any = None) -> Estimate:
     lines = [f"{k} x{n}" if n > 1 else k for k, n in counts.items()]
     info = dict(est.info)
     info["warnings"] = [*list(info.get("warnings") or []), *lines]
+    return est.replace(info=info)
+
+
+# ``info`` notes of a sensor left out or a re-solve without (or with less of) a sensor: the
+# magnetometer not used (``sensors.magnetometer``: its field strength varies beyond the
+# hard-iron model, or its hard iron contradicted the prior and the estimator solved again
+# without it) and the baro scale held at 0 after an implausible one (``sensors.baro``)
+SENSOR_FALLBACK_NOTES = ("mag_note", "baro_scale_note")
+
+
+def flag_sensor_fallbacks(est: Estimate) -> Estimate:
+    """Every sensor fallback of ``est`` (``SENSOR_FALLBACK_NOTES``) as a warning and an entry
+    of ``info["fallbacks"]`` (``summary.json`` and bench rows), each once. A ``mag_note``
+    that only says the drive has no date (the field's year assumed) is not a fallback."""
+    notes = [str(est.info[k]) for k in SENSOR_FALLBACK_NOTES if est.info.get(k)]
+    notes = [n for n in notes if not n.startswith("drive has no date")]
+    if not notes:
+        return est
+    warned = [str(w) for w in est.info.get("warnings") or []]
+    fell = [str(f) for f in est.info.get("fallbacks") or []]
+    info = dict(est.info)
+    info["warnings"] = warned + [n for n in notes if n not in warned]
+    info["fallbacks"] = fell + [n for n in notes if n not in fell]
     return est.replace(info=info)
 
 
@@ -276,6 +305,7 @@ def run_holdout(drive: Drive, estimators: Sequence[str] | None = None, outage_s:
             s = score(r.estimate, drive, reference, windows, given=~withheld)
             info = r.estimate.info or {}
             s.block["warnings"] = [str(x) for x in info.get("warnings") or []]
+            s.block["fallbacks"] = [str(x) for x in info.get("fallbacks") or []]
             # of those, the baro calibration's prior conflicts (sensors.baro): data, not solver
             s.block["baro_prior_conflict"] = [str(x) for x in
                                               info.get("baro_prior_conflict") or []]

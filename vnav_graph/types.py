@@ -1,4 +1,5 @@
-"""Core data types: immutable sensor streams on one clock, drives, trajectories, estimates.
+"""Core data types: drives, trajectories and estimates on one clock, and the sensor streams
+(``vnav_graph.streams``, re-exported here).
 
 Conventions (see also the package docstring)
 --------------------------------------------
@@ -22,9 +23,18 @@ from types import MappingProxyType
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
-FloatArray = NDArray[np.float64]
+from .streams import (  # noqa: F401  (re-exported: the streams are part of the core types)
+    BaroStream,
+    FloatArray,
+    GnssStream,
+    ImuStream,
+    MagStream,
+    as_array,
+    check_lla,
+    check_shape,
+    check_time,
+)
 
 # Error-state layout shared by every estimator that reports a covariance. Rows/columns an
 # estimator does not estimate are NaN. Position and velocity errors are NED [m], [m/s];
@@ -65,282 +75,6 @@ SD_COLUMNS: tuple[str, ...] = (
 # Quantities an Estimate may provide (``Estimate.provides``).
 QUANTITIES = frozenset({"alt", "vel_d", "pos_h", "vel_h", "att", "baro", "cov"})
 
-# Physical plausibility limits used by validation (generous; they catch unit mistakes).
-_MAX_GYRO = 50.0  # rad/s (≈ 2900 deg/s): larger means degrees were passed as radians
-_MAX_ACCEL = 2000.0  # m/s^2 (≈ 200 g)
-_PRESSURE_RANGE = (2.0e3, 1.2e5)  # Pa: 20 hPa (≈ 26 km) .. 1200 hPa
-_ALT_RANGE = (-1000.0, 60000.0)  # m
-
-
-def _arr(x: Any, dtype: Any = np.float64) -> FloatArray:
-    # an array that is already read-only, of this dtype and owns its memory (another record's
-    # field, e.g. a drive rebuilt with ``Drive.replace``) cannot change: shared, not copied
-    # (the copies doubled the truth arrays while a simulated drive was assembled)
-    if (isinstance(x, np.ndarray) and x.dtype == dtype and x.base is None
-            and not x.flags.writeable and x.flags.c_contiguous):
-        return x
-    a = np.array(x, dtype=dtype, copy=True)
-    a.setflags(write=False)
-    return a
-
-
-def _check_time(name: str, t: FloatArray) -> None:
-    if t.ndim != 1:
-        raise ValueError(f"{name}.t: expected shape (N,), got {t.shape}")
-    if t.size == 0:
-        raise ValueError(f"{name}.t: stream is empty")
-    if not np.all(np.isfinite(t)):
-        raise ValueError(f"{name}.t: contains NaN or inf")
-    d = np.diff(t)
-    if np.any(d == 0):
-        i = int(np.flatnonzero(d == 0)[0])
-        raise ValueError(f"{name}.t: duplicated time stamp {t[i]!r} at index {i + 1}")
-    if np.any(d < 0):
-        i = int(np.flatnonzero(d < 0)[0])
-        raise ValueError(f"{name}.t: not monotonic (t[{i + 1}] = {t[i + 1]!r} < {t[i]!r})")
-
-
-def _check_shape(name: str, a: FloatArray | None, shape: tuple[int, ...]) -> None:
-    if a is None:
-        return
-    if a.shape != shape:
-        raise ValueError(f"{name}: expected shape {shape}, got {a.shape}")
-
-
-def _check_finite(name: str, a: FloatArray | None) -> None:
-    if a is not None and not np.all(np.isfinite(a)):
-        n_bad = int(np.sum(~np.isfinite(a)))
-        raise ValueError(f"{name}: contains {n_bad} NaN or inf value(s)")
-
-
-def _check_lla(name: str, lla: FloatArray) -> None:
-    if np.any(np.abs(lla[:, 0]) > np.pi / 2 + 1e-12) or np.any(np.abs(lla[:, 1]) > 2 * np.pi):
-        raise ValueError(
-            f"{name}: latitude/longitude out of range for radians (degrees passed as radians?)"
-        )
-    lo, hi = _ALT_RANGE
-    if np.any(lla[:, 2] < lo) or np.any(lla[:, 2] > hi):
-        raise ValueError(f"{name}: height outside [{lo:g}, {hi:g}] m")
-
-
-@dataclass(frozen=True)
-class ImuStream:
-    """Inertial samples, instantaneous (point) values at ``t``.
-
-    Parameters
-    ----------
-    t : (N,) [s]
-    gyro_b : (N, 3) angular rate of b relative to inertial space, resolved in b [rad/s]
-    accel_b : (N, 3) specific force (gravity included: a level IMU at rest reads
-        about (0, 0, -9.8)) resolved in b [m/s^2]
-    spec : the ``ImuSpec`` the data were generated with or are believed to follow
-    """
-
-    t: FloatArray
-    gyro_b: FloatArray
-    accel_b: FloatArray
-    spec: Any = None
-
-    def __post_init__(self) -> None:
-        for f in ("t", "gyro_b", "accel_b"):
-            object.__setattr__(self, f, _arr(getattr(self, f)))
-        _check_time("imu", self.t)
-        n = self.t.size
-        _check_shape("imu.gyro_b", self.gyro_b, (n, 3))
-        _check_shape("imu.accel_b", self.accel_b, (n, 3))
-        _check_finite("imu.gyro_b", self.gyro_b)
-        _check_finite("imu.accel_b", self.accel_b)
-        if np.max(np.abs(self.gyro_b)) > _MAX_GYRO:
-            raise ValueError(
-                f"imu.gyro_b: |rate| up to {np.max(np.abs(self.gyro_b)):.1f} rad/s "
-                "(degrees/s passed as rad/s?)"
-            )
-        if np.max(np.abs(self.accel_b)) > _MAX_ACCEL:
-            raise ValueError("imu.accel_b: specific force above 200 g (wrong unit?)")
-
-    def __len__(self) -> int:
-        return int(self.t.size)
-
-    @property
-    def rate_hz(self) -> float:
-        return float(1.0 / np.median(np.diff(self.t))) if self.t.size > 1 else float("nan")
-
-    def slice(self, t0: float, t1: float) -> ImuStream:
-        m = (self.t >= t0) & (self.t <= t1)
-        return ImuStream(self.t[m], self.gyro_b[m], self.accel_b[m], self.spec)
-
-
-@dataclass(frozen=True)
-class GnssStream:
-    """GNSS position (and optionally velocity) fixes of the antenna.
-
-    Parameters
-    ----------
-    t : (N,) [s] time of validity on the common clock
-    lla : (N, 3) antenna latitude [rad], longitude [rad], ellipsoidal height [m]
-    pos_sd : (N, 3) one-sigma of the fix along north, east, down [m]
-    vel_n : (N, 3) or None, antenna velocity in NED [m/s]
-    vel_sd : (N, 3) or None [m/s]
-    lever_arm_b : (3,) antenna position relative to the IMU, resolved in b [m]
-    spec : the ``GnssSpec``
-    """
-
-    t: FloatArray
-    lla: FloatArray
-    pos_sd: FloatArray
-    vel_n: FloatArray | None = None
-    vel_sd: FloatArray | None = None
-    lever_arm_b: FloatArray = field(default_factory=lambda: np.zeros(3))
-    spec: Any = None
-
-    def __post_init__(self) -> None:
-        for f in ("t", "lla", "pos_sd", "lever_arm_b"):
-            object.__setattr__(self, f, _arr(getattr(self, f)))
-        for f in ("vel_n", "vel_sd"):
-            if getattr(self, f) is not None:
-                object.__setattr__(self, f, _arr(getattr(self, f)))
-        _check_time("gnss", self.t)
-        n = self.t.size
-        _check_shape("gnss.lla", self.lla, (n, 3))
-        _check_shape("gnss.pos_sd", self.pos_sd, (n, 3))
-        _check_shape("gnss.vel_n", self.vel_n, (n, 3))
-        _check_shape("gnss.vel_sd", self.vel_sd, (n, 3))
-        _check_shape("gnss.lever_arm_b", self.lever_arm_b, (3,))
-        for f in ("lla", "pos_sd", "vel_n", "vel_sd", "lever_arm_b"):
-            _check_finite(f"gnss.{f}", getattr(self, f))
-        _check_lla("gnss.lla", self.lla)
-        if np.any(self.pos_sd <= 0):
-            raise ValueError("gnss.pos_sd: standard deviations must be > 0")
-        if (self.vel_n is None) != (self.vel_sd is None):
-            raise ValueError("gnss.vel_sd: must be given exactly when vel_n is given")
-        if self.vel_sd is not None and np.any(self.vel_sd <= 0):
-            raise ValueError("gnss.vel_sd: standard deviations must be > 0")
-        if self.vel_n is not None and np.max(np.abs(self.vel_n)) > 1000.0:
-            raise ValueError("gnss.vel_n: speed above 1000 m/s (wrong unit?)")
-
-    def __len__(self) -> int:
-        return int(self.t.size)
-
-    @property
-    def alt(self) -> FloatArray:
-        """Antenna height [m, +up]: ``lla[:, 2]``, in the drive's height datum
-        (``Drive.height_reference``)."""
-        return self.lla[:, 2]
-
-    def select(self, mask: NDArray[np.bool_]) -> GnssStream:
-        """Sub-stream of the fixes where ``mask`` is True (used for outages and holdout)."""
-        return GnssStream(
-            self.t[mask],
-            self.lla[mask],
-            self.pos_sd[mask],
-            None if self.vel_n is None else self.vel_n[mask],
-            None if self.vel_sd is None else self.vel_sd[mask],
-            self.lever_arm_b,
-            self.spec,
-        )
-
-
-@dataclass(frozen=True)
-class BaroStream:
-    """Barometric altimeter samples: static pressure and/or the altimeter's altitude.
-
-    Parameters
-    ----------
-    t : (N,) [s]
-    pressure : (N,) or None, static pressure [Pa]
-    alt : (N,) or None, barometric altitude [m, +up]. When only ``pressure`` is given the
-        standard-atmosphere altitude is used (``vnav_graph.geo.atmosphere``).
-    spec : the ``BaroSpec``
-    """
-
-    t: FloatArray
-    pressure: FloatArray | None = None
-    alt: FloatArray | None = None
-    spec: Any = None
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "t", _arr(self.t))
-        _check_time("baro", self.t)
-        n = self.t.size
-        if self.pressure is None and self.alt is None:
-            raise ValueError("baro: needs pressure or alt")
-        if self.pressure is not None:
-            object.__setattr__(self, "pressure", _arr(self.pressure))
-            _check_shape("baro.pressure", self.pressure, (n,))
-            _check_finite("baro.pressure", self.pressure)
-            lo, hi = _PRESSURE_RANGE
-            if np.any(self.pressure < lo) or np.any(self.pressure > hi):
-                hint = " (hPa passed as Pa?)" if np.max(self.pressure) < 1200 else ""
-                raise ValueError(f"baro.pressure: outside [{lo:g}, {hi:g}] Pa{hint}")
-        if self.alt is not None:
-            object.__setattr__(self, "alt", _arr(self.alt))
-            _check_shape("baro.alt", self.alt, (n,))
-            _check_finite("baro.alt", self.alt)
-            lo, hi = _ALT_RANGE
-            if np.any(self.alt < lo) or np.any(self.alt > hi):
-                raise ValueError(f"baro.alt: outside [{lo:g}, {hi:g}] m (feet or Pa passed?)")
-
-    def __len__(self) -> int:
-        return int(self.t.size)
-
-    @property
-    def altitude(self) -> FloatArray:
-        """Barometric altitude [m, +up]: ``alt`` if given, else ISA altitude of ``pressure``."""
-        if self.alt is not None:
-            return self.alt
-        from .geo.atmosphere import isa_altitude
-
-        assert self.pressure is not None
-        return isa_altitude(self.pressure)
-
-    def select(self, mask: NDArray[np.bool_]) -> BaroStream:
-        return BaroStream(
-            self.t[mask],
-            None if self.pressure is None else self.pressure[mask],
-            None if self.alt is None else self.alt[mask],
-            self.spec,
-        )
-
-
-_MAX_FIELD_UT = 1000.0  # µT: the Earth's field is 22–67 µT; larger means nT or mG passed
-
-
-@dataclass(frozen=True)
-class MagStream:
-    """Three-axis magnetometer samples in body axes (forward-right-down, as the IMU).
-
-    Parameters
-    ----------
-    t : (N,) [s], on the drive's clock
-    field_b : (N, 3) magnetic flux density in b [µT]; calibration the log applied (offsets)
-        stays applied, what is left is the estimators' hard-iron bias state
-    sd_ut : white noise σ per axis [µT] (sensor noise plus unmodelled interference)
-    """
-
-    t: FloatArray
-    field_b: FloatArray
-    sd_ut: float = 1.0
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "t", _arr(self.t))
-        _check_time("mag", self.t)
-        object.__setattr__(self, "field_b", _arr(self.field_b))
-        _check_shape("mag.field_b", self.field_b, (self.t.size, 3))
-        _check_finite("mag.field_b", self.field_b)
-        if np.any(np.abs(self.field_b) > _MAX_FIELD_UT):
-            raise ValueError(f"mag.field_b: |component| above {_MAX_FIELD_UT:g} µT "
-                             "(nT or milligauss passed as µT?)")
-        if not (np.isfinite(self.sd_ut) and self.sd_ut > 0):
-            raise ValueError(f"mag.sd_ut: must be a positive number of µT, got {self.sd_ut!r}")
-        object.__setattr__(self, "sd_ut", float(self.sd_ut))
-
-    def __len__(self) -> int:
-        return int(self.t.size)
-
-    def select(self, mask: NDArray[np.bool_]) -> MagStream:
-        return MagStream(self.t[mask], self.field_b[mask], self.sd_ut)
-
-
 AT_MEMO = 2  # Trajectory.at results kept per trajectory
 
 
@@ -370,15 +104,15 @@ class Trajectory:
     def __post_init__(self) -> None:
         for f in ("t", "lla", "vel_n", "q_nb", "bias_gyro", "bias_accel", "bias_baro"):
             if getattr(self, f) is not None:
-                object.__setattr__(self, f, _arr(getattr(self, f)))
-        _check_time("trajectory", self.t)
+                object.__setattr__(self, f, as_array(getattr(self, f)))
+        check_time("trajectory", self.t)
         n = self.t.size
-        _check_shape("trajectory.lla", self.lla, (n, 3))
-        _check_shape("trajectory.vel_n", self.vel_n, (n, 3))
-        _check_shape("trajectory.q_nb", self.q_nb, (n, 4))
-        _check_shape("trajectory.bias_gyro", self.bias_gyro, (n, 3))
-        _check_shape("trajectory.bias_accel", self.bias_accel, (n, 3))
-        _check_shape("trajectory.bias_baro", self.bias_baro, (n,))
+        check_shape("trajectory.lla", self.lla, (n, 3))
+        check_shape("trajectory.vel_n", self.vel_n, (n, 3))
+        check_shape("trajectory.q_nb", self.q_nb, (n, 4))
+        check_shape("trajectory.bias_gyro", self.bias_gyro, (n, 3))
+        check_shape("trajectory.bias_accel", self.bias_accel, (n, 3))
+        check_shape("trajectory.bias_baro", self.bias_baro, (n,))
         if not np.all(np.isfinite(self.lla[:, 2])):
             raise ValueError("trajectory.lla: height contains NaN or inf")
 
@@ -500,9 +234,9 @@ class Drive:
     mag: MagStream | None = None  # magnetometer, when the log or simulation has one
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "origin_lla", _arr(self.origin_lla))
-        _check_shape("drive.origin_lla", self.origin_lla, (3,))
-        _check_lla("drive.origin_lla", self.origin_lla[None, :])
+        object.__setattr__(self, "origin_lla", as_array(self.origin_lla))
+        check_shape("drive.origin_lla", self.origin_lla, (3,))
+        check_lla("drive.origin_lla", self.origin_lla[None, :])
         if not isinstance(self.meta, MappingProxyType):
             object.__setattr__(self, "meta", MappingProxyType(dict(self.meta)))
         t0, t1 = self.imu.t[0], self.imu.t[-1]
@@ -618,11 +352,11 @@ class Estimate:
             raise ValueError(f"estimate.provides: unknown quantities {sorted(unknown)}")
         object.__setattr__(self, "provides", frozenset(self.provides))
         if self.cov is not None:
-            cov = _arr(self.cov)
+            cov = as_array(self.cov)
             if self.t_cov is None:
                 raise ValueError("estimate.t_cov: required when cov is given")
-            t_cov = _arr(self.t_cov)
-            _check_shape("estimate.cov", cov, (t_cov.size, ERROR_STATE_DIM, ERROR_STATE_DIM))
+            t_cov = as_array(self.t_cov)
+            check_shape("estimate.cov", cov, (t_cov.size, ERROR_STATE_DIM, ERROR_STATE_DIM))
             object.__setattr__(self, "cov", cov)
             object.__setattr__(self, "t_cov", t_cov)
         for name, tr in (("online", self.online), ("lag", self.lag)):
@@ -631,8 +365,8 @@ class Estimate:
                 continue
             if tr is None:
                 raise ValueError(f"estimate.{name}_cov: given without estimate.{name}")
-            c = _arr(c)
-            _check_shape(f"estimate.{name}_cov", c, (tr.t.size, ERROR_STATE_DIM, ERROR_STATE_DIM))
+            c = as_array(c)
+            check_shape(f"estimate.{name}_cov", c, (tr.t.size, ERROR_STATE_DIM, ERROR_STATE_DIM))
             object.__setattr__(self, f"{name}_cov", c)
         for f in ("innovations", "info"):
             v = getattr(self, f)

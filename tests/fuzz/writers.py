@@ -97,11 +97,11 @@ def npz_arrays(raw: Raw, drive: Any = None) -> tuple[dict[str, np.ndarray], dict
         from dataclasses import asdict
 
         header["baro_truth"] = asdict(drive.baro_truth)
-        from vnav_graph.io.drive_io import _spec_to_json
+        from vnav_graph.io.drive_io import spec_to_json
 
-        header["imu_spec"] = _spec_to_json(drive.imu.spec)
-        header["gnss_spec"] = _spec_to_json(drive.gnss.spec)
-        header["baro_spec"] = _spec_to_json(drive.baro.spec)
+        header["imu_spec"] = spec_to_json(drive.imu.spec)
+        header["gnss_spec"] = spec_to_json(drive.gnss.spec)
+        header["baro_spec"] = spec_to_json(drive.baro.spec)
     return arrays, header
 
 

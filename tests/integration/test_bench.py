@@ -45,9 +45,9 @@ class Broken:
 
 
 @pytest.fixture
-def fake(monkeypatch):
-    monkeypatch.setitem(base._REGISTRY, "truth-plus-one", TruthPlusOne)
-    monkeypatch.setitem(base._REGISTRY, "broken", Broken)
+def fake(monkeypatch, registry):
+    registry("truth-plus-one", TruthPlusOne)
+    registry("broken", Broken)
 
 
 def test_bench_cli_writes_schema(tmp_path, fake, capsys):

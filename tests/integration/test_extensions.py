@@ -24,9 +24,8 @@ TOO_SHORT = "fewer than 2 GNSS fixes"  # BaroOnly's error when calib_s holds < 2
 
 
 @pytest.fixture(autouse=True)
-def _clean_registry(monkeypatch):
+def _clean_registry(monkeypatch, registry):
     """Plugins register into process-global state: undo it after each test."""
-    monkeypatch.setattr(base, "_REGISTRY", dict(base._REGISTRY))
     monkeypatch.setattr(sys, "path", list(sys.path))
 
 

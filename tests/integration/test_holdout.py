@@ -102,11 +102,11 @@ class _PlantedOnline(_Planted):
         return e.replace(online=high(4.0), lag=high(1.0), info=info)
 
 
-def test_holdout_scores_the_online_and_lag_estimates(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_holdout_scores_the_online_and_lag_estimates(registry) -> None:
     """The online and fixed-lag estimates are scored on the same withheld fixes as the
     trajectory, each with its own datum offset: the planted 4 m and 1 m come out exactly;
     heading and NEES are null (GNSS gives neither)."""
-    monkeypatch.setitem(base._REGISTRY, "planted-online", _PlantedOnline)
+    registry("planted-online", _PlantedOnline)
     doc = run_holdout(_flat_drive(), ["planted-online"], outage_s=60.0).doc
     p = doc["estimators"]["planted-online"]
     assert p["alt_rmse_m"] == pytest.approx(2.0, abs=1e-9)
@@ -118,9 +118,9 @@ def test_holdout_scores_the_online_and_lag_estimates(monkeypatch: pytest.MonkeyP
         assert b["heading_rmse_deg"] is None and b["nees_mean"] is None
 
 
-def test_holdout_scores_planted_errors_exactly(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setitem(base._REGISTRY, "planted", _Planted)
-    monkeypatch.setitem(base._REGISTRY, "broken", _Broken)
+def test_holdout_scores_planted_errors_exactly(monkeypatch: pytest.MonkeyPatch, registry) -> None:
+    registry("planted", _Planted)
+    registry("broken", _Broken)
     res = run_holdout(_flat_drive(), ["broken", "planted"], outage_s=60.0)
     doc = res.doc
     # span 599 s: lead = max(89.85, 60) = 89.85; spacing = max(120, (599−89.85−65)/4) = 120
@@ -232,10 +232,10 @@ def _flat_drive_with_baro(rng: np.random.Generator) -> Drive:
 
 
 def test_spike_in_withheld_window_leaves_scores_unchanged(
-        monkeypatch: pytest.MonkeyPatch, rng: np.random.Generator) -> None:
+        monkeypatch: pytest.MonkeyPatch, rng: np.random.Generator, registry) -> None:
     """8 withheld fixes jumping to +15…17 m while the baro stays flat are not a
     height the vehicle had; scored against them every estimator would look worse."""
-    monkeypatch.setitem(base._REGISTRY, "planted", _Planted)
+    registry("planted", _Planted)
     clean = _flat_drive_with_baro(rng)
     g = clean.gnss
     lla = g.lla.copy()
@@ -262,11 +262,11 @@ def test_spike_in_withheld_window_leaves_scores_unchanged(
 
 
 def test_plateau_in_withheld_window_leaves_scores_unchanged(
-        monkeypatch: pytest.MonkeyPatch, rng: np.random.Generator) -> None:
+        monkeypatch: pytest.MonkeyPatch, rng: np.random.Generator, registry) -> None:
     """A 40 s plateau (GNSS height +25 m, the baro flat) carries its own running median, so
     the baro-climb check passes it; the height-excursion check sees d jump away and back.
     Scored against it, the planted estimator's 2 m outage error would read ~13 m."""
-    monkeypatch.setitem(base._REGISTRY, "planted", _Planted)
+    registry("planted", _Planted)
     clean = _flat_drive_with_baro(rng)
     g = clean.gnss
     lla = g.lla.copy()

@@ -110,7 +110,7 @@ def _graph_used(drive, name: str, monkeypatch: pytest.MonkeyPatch) -> dict:
 
 def _vekf7_used(drive, monkeypatch: pytest.MonkeyPatch) -> dict:
     got: dict = {"var_baro": set(), "var_gnss": []}
-    prop, upd = vekf7_mod._propagate, vekf7_mod._update
+    prop, upd = vekf7_mod.propagate, vekf7_mod.scalar_update
 
     def first(nom, p):  # the state before the first propagation or update: the prior
         if "p0" not in got:
@@ -131,8 +131,8 @@ def _vekf7_used(drive, monkeypatch: pytest.MonkeyPatch) -> dict:
             got["var_gnss"].append(float(var_r))
         return upd(nom, p, hrow, r, var_r)
 
-    monkeypatch.setattr(vekf7_mod, "_propagate", cap_prop)
-    monkeypatch.setattr(vekf7_mod, "_update", cap_upd)
+    monkeypatch.setattr(vekf7_mod, "propagate", cap_prop)
+    monkeypatch.setattr(vekf7_mod, "scalar_update", cap_upd)
     create("vekf7").run(drive)
     monkeypatch.undo()
     d = np.sqrt(np.diag(got["p0"]))

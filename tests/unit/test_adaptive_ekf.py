@@ -13,8 +13,8 @@ from vnav_graph.estimators.vertical.adaptive import (
     IS,
     IV,
     AdaptiveConfig,
-    _to_error_state,
     run_adaptive_ekf,
+    to_error_state,
 )
 from vnav_graph.estimators.vertical.loops import LoopInputs, discrete_model
 from vnav_graph.types import ERROR_STATE
@@ -152,7 +152,7 @@ def test_covariance_in_error_state_layout():
     inp, t_fix, z_fix, r_fix, cfgd, *_ = _synthetic(3, duration=60.0)
     out = run_adaptive_ekf(inp, AdaptiveConfig(**cfgd), t_fix, z_fix, r_fix, baro_dt=DT)
     p = out[5]
-    c18 = _to_error_state(p)
+    c18 = to_error_state(p)
     assert c18.shape == (p.shape[0], 18, 18)
     dn = ERROR_STATE["pos_n"].start + 2
     vd = ERROR_STATE["vel_n"].start + 2

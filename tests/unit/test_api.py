@@ -51,11 +51,10 @@ def test_api_round_trip_registers_and_creates():
         def __init__(self, config=None):
             self.config = config
 
-    register("api-dummy", Dummy)
-    try:
+    from vnav_graph.estimators.base import registry_snapshot
+
+    with registry_snapshot():
+        register("api-dummy", Dummy)
         assert "api-dummy" in available()
         assert create("api-dummy", {"k": 1}).config == {"k": 1}
-    finally:
-        from vnav_graph.estimators import base
-
-        base._REGISTRY.pop("api-dummy", None)
+    assert "api-dummy" not in available()  # the snapshot undid the registration

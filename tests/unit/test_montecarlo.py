@@ -16,7 +16,6 @@ import numpy as np
 import pytest
 
 from vnav_graph.bench import BenchTask, bench, run_task, run_tasks
-from vnav_graph.estimators import base
 from vnav_graph.evaluation.montecarlo import (
     aggregate,
     format_bench_md,
@@ -51,10 +50,10 @@ class AlwaysFails:
 
 
 @pytest.fixture
-def test_estimators(monkeypatch):
+def test_estimators(monkeypatch, registry):
     """Register the two test estimators for this test only (the registry is restored)."""
-    monkeypatch.setitem(base._REGISTRY, "gnss-fix", GnssFix)
-    monkeypatch.setitem(base._REGISTRY, "always-fails", AlwaysFails)
+    registry("gnss-fix", GnssFix)
+    registry("always-fails", AlwaysFails)
 
 
 def test_mean_ci95_closed_form():

@@ -10,8 +10,8 @@ import pytest
 
 from vnav_graph.estimators.vertical.observer1d import (
     Observer1D,
-    _gate_var,
     gate_threshold,
+    gate_var,
     observer_kernel_gated,
     steady_state,
 )
@@ -25,7 +25,7 @@ def test_gate_variance_equals_lyapunov_prior():
     ss = steady_state(gps_sd=2.0, accel_noise_density=QA, accel_bias_rw=1e-4)
     # S(τ = T) from the post-fix covariance is the a-priori Lyapunov covariance + R; both are
     # the same polynomial in T, so only round-off separates them
-    s = _gate_var(ss.p_post, 1.0, QA, 1e-4, 4.0)
+    s = gate_var(ss.p_post, 1.0, QA, 1e-4, 4.0)
     assert s == pytest.approx(ss.p_prior[0, 0] + 4.0, rel=1e-12)
     # 1-dof χ² quantile at 1 − 1e-3: 3.2905² (tables)
     assert np.sqrt(gate_threshold(1e-3)) == pytest.approx(3.2905, abs=1e-4)

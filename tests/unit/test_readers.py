@@ -252,16 +252,16 @@ def test_ardupilot_218(data_dir: Path) -> None:
 
 
 def test_ardupilot_vehicle_type_from_the_banner() -> None:
-    from vnav_graph.io.readers.ardupilot import _vehicle
+    from vnav_graph.io.readers.ardupilot import vehicle_kind
 
     quad = [{"Message": "Frame: QUAD"}]
-    assert _vehicle("ArduCopter V3.3-dev (834f90e8)", quad, {}) == "multirotor"
-    assert _vehicle("ArduCopter V4.5.7 (1234)", [], {"FRAME_CLASS": 1.0}) == "multirotor"
-    assert _vehicle("ArduCopter V4.5.7 (1234)", [], {"FRAME_CLASS": 6.0}) == "helicopter"
-    assert _vehicle("ArduCopter V3.2.1", [{"Message": "Frame: HELI"}], {}) == "helicopter"
-    assert _vehicle("ArduPlane V4.3.0", [], {}) == "fixed-wing"
-    assert _vehicle("ArduRover V4.2.0", [], {}) == "ground"
-    assert _vehicle(None, [], {}) == "unknown"
+    assert vehicle_kind("ArduCopter V3.3-dev (834f90e8)", quad, {}) == "multirotor"
+    assert vehicle_kind("ArduCopter V4.5.7 (1234)", [], {"FRAME_CLASS": 1.0}) == "multirotor"
+    assert vehicle_kind("ArduCopter V4.5.7 (1234)", [], {"FRAME_CLASS": 6.0}) == "helicopter"
+    assert vehicle_kind("ArduCopter V3.2.1", [{"Message": "Frame: HELI"}], {}) == "helicopter"
+    assert vehicle_kind("ArduPlane V4.3.0", [], {}) == "fixed-wing"
+    assert vehicle_kind("ArduRover V4.2.0", [], {}) == "ground"
+    assert vehicle_kind(None, [], {}) == "unknown"
 
 
 def test_px4_vehicle_type_from_mav_type() -> None:

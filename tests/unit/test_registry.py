@@ -23,13 +23,11 @@ def test_every_design_name_creates_the_estimator_of_that_name() -> None:
 def test_unknown_and_missing_modules() -> None:
     with pytest.raises(ValueError, match="unknown estimator 'nope'"):
         create("nope")
-    register("not-built", "vnav_graph.estimators.no_such_module:X")
-    try:
-        assert "not-built" not in available()
-    finally:
-        from vnav_graph.estimators import base
+    from vnav_graph.estimators.base import registry_snapshot
 
-        base._REGISTRY.pop("not-built")
+    with registry_snapshot():
+        register("not-built", "vnav_graph.estimators.no_such_module:X")
+        assert "not-built" not in available()
 
 
 def test_listing_imports_no_estimator_module() -> None:

@@ -13,7 +13,6 @@ import numpy as np
 import pytest
 
 from vnav_graph.cli import main
-from vnav_graph.estimators import base
 from vnav_graph.evaluation.montecarlo import shorten_scenario
 from vnav_graph.geo.earth import radii
 from vnav_graph.io import save_npz
@@ -297,10 +296,10 @@ class _Planted:
                         runtime_s=0.01)
 
 
-def test_log_run_is_scored_and_drawn_against_withheld_gnss(tmp_path, monkeypatch):
-    monkeypatch.setitem(base._REGISTRY, "ekf-rts", lambda: _Planted("ekf-rts", [2.0]))
+def test_log_run_is_scored_and_drawn_against_withheld_gnss(tmp_path, monkeypatch, registry):
+    registry("ekf-rts", lambda: _Planted("ekf-rts", [2.0]))
     # per window 3, 1, 3, 1 m: RMSE sqrt(5) = 2.24 m overall, paired differences +1, −1, +1, −1
-    monkeypatch.setitem(base._REGISTRY, "graph-batch", lambda: _Planted("graph-batch", [3, 1]))
+    registry("graph-batch", lambda: _Planted("graph-batch", [3, 1]))
     out = tmp_path / "out"
     assert main(["run", str(_flat_log(tmp_path)), "--estimators", "ekf-rts,graph-batch",
                  "--out", str(out), "--no-progress"]) == 0
@@ -333,8 +332,8 @@ def test_log_run_is_scored_and_drawn_against_withheld_gnss(tmp_path, monkeypatch
     assert 'data-name="onboard"><td>onboard: ctun.alt (planted)*</td>' in page
 
 
-def test_log_run_without_holdout_claims_no_score(tmp_path, monkeypatch):
-    monkeypatch.setitem(base._REGISTRY, "ekf-rts", lambda: _Planted("ekf-rts", [2.0]))
+def test_log_run_without_holdout_claims_no_score(tmp_path, monkeypatch, registry):
+    registry("ekf-rts", lambda: _Planted("ekf-rts", [2.0]))
     out = tmp_path / "out"
     assert main(["run", str(_flat_log(tmp_path)), "--estimators", "ekf-rts", "--no-holdout",
                  "--out", str(out), "--no-progress"]) == 0
@@ -347,7 +346,7 @@ def test_log_run_without_holdout_claims_no_score(tmp_path, monkeypatch):
     assert "withheld from it" not in page
 
 
-def test_plotted_errors_are_the_scored_ones(tmp_path, monkeypatch):
+def test_plotted_errors_are_the_scored_ones(tmp_path, monkeypatch, registry):
     """The series the report draws for a log are the holdout errors at the withheld fixes:
     their RMS is the summary's number (the old report drew residuals against the GNSS the
     estimator had been given: 0.0 m here)."""
@@ -356,7 +355,7 @@ def test_plotted_errors_are_the_scored_ones(tmp_path, monkeypatch):
     from vnav_graph.report.errors import error_set
     from vnav_graph.runner import run_holdout
 
-    monkeypatch.setitem(base._REGISTRY, "ekf-rts", lambda: _Planted("ekf-rts", [2.0, 4.0]))
+    registry("ekf-rts", lambda: _Planted("ekf-rts", [2.0, 4.0]))
     drive = load_drive(_flat_log(tmp_path))
     results = run_estimators(drive, ["ekf-rts"], progress=False)
     hold = run_holdout(drive, ["ekf-rts"])
@@ -371,8 +370,8 @@ def test_plotted_errors_are_the_scored_ones(tmp_path, monkeypatch):
     assert np.sqrt(np.mean(s.alt**2)) == pytest.approx(np.sqrt(10.0), abs=1e-9)
 
 
-def test_cli_run_writes_report(tmp_path, monkeypatch):
-    monkeypatch.setitem(base._REGISTRY, "shifted", lambda: _Shifted())
+def test_cli_run_writes_report(tmp_path, monkeypatch, registry):
+    registry("shifted", lambda: _Shifted())
     out = tmp_path / "out"
     assert main(["run", "--scenario", "default", "--duration", "30", "--estimators", "shifted",
                  "--out", str(out), "--no-progress"]) == 0

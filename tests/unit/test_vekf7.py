@@ -17,7 +17,7 @@ from vnav_graph.estimators.vertical.vekf7 import (
     IV,
     NX,
     VEKF7,
-    _propagate,
+    propagate,
 )
 from vnav_graph.evaluation.metrics import errors_vs_truth, evaluate, nees
 from vnav_graph.geo.earth import gravity, radii
@@ -66,8 +66,8 @@ def test_error_dynamics_match_nominal_perturbation() -> None:
         h_out, v_out = np.empty(n), np.empty(n)
         args = (t, f_down, lat, c33, f_z, cor, rho2, phi_b, zeros, ones, zeros, np.zeros(n),
                 np.inf, 0.0)  # no IMU gap
-        _propagate(0, n - 1, *args, ref, np.zeros((NX, NX)), h_out, v_out)
-        _propagate(0, n - 1, *args, pert, p, h_out, v_out)
+        propagate(0, n - 1, *args, ref, np.zeros((NX, NX)), h_out, v_out)
+        propagate(0, n - 1, *args, pert, p, h_out, v_out)
         diff = (pert - ref)[[IH, IV]]
         pred = p[[IH, IV], II]
         np.testing.assert_allclose(diff, pred, rtol=0.02, atol=1e-9, err_msg=f"state {i}")

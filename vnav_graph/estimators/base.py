@@ -12,7 +12,8 @@ from __future__ import annotations
 import importlib
 import importlib.util
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -103,6 +104,18 @@ _CORE: dict[str, str] = {
 def register(name: str, factory: str | Callable[..., Estimator]) -> None:
     """Register an estimator factory (``"pkg.module:Class"`` or a callable) under ``name``."""
     _REGISTRY[name] = factory
+
+
+@contextmanager
+def registry_snapshot() -> Iterator[None]:
+    """Registrations (``register``, ``load_plugin``) made inside the block are undone when it
+    ends: a test's or a notebook's temporary estimators leave the registry as it was."""
+    saved = dict(_REGISTRY)
+    try:
+        yield
+    finally:
+        _REGISTRY.clear()
+        _REGISTRY.update(saved)
 
 
 def registered_factories() -> dict[str, str | Callable[..., Estimator]]:

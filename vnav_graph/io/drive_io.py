@@ -25,7 +25,7 @@ FORMAT = "vnav_graph.drive/1"
 _SPECS = {"ImuSpec": ImuSpec, "GnssSpec": GnssSpec, "BaroSpec": BaroSpec}
 
 
-def _spec_to_json(spec: Any) -> Any:
+def spec_to_json(spec: Any) -> Any:
     if spec is None:
         return None
     if is_dataclass(spec) and type(spec).__name__ in _SPECS:
@@ -53,7 +53,7 @@ def save_npz(drive: Drive, path: str | Path) -> Path:
         "origin_lla": drive.origin_lla,
     }
     header: dict[str, Any] = {
-        "format": FORMAT, "meta": dict(drive.meta), "imu_spec": _spec_to_json(drive.imu.spec),
+        "format": FORMAT, "meta": dict(drive.meta), "imu_spec": spec_to_json(drive.imu.spec),
     }
     if drive.gnss is not None:
         g = drive.gnss
@@ -61,7 +61,7 @@ def save_npz(drive: Drive, path: str | Path) -> Path:
                       gnss_lever_arm_b=g.lever_arm_b)
         if g.vel_n is not None:
             arrays.update(gnss_vel_n=g.vel_n, gnss_vel_sd=g.vel_sd)
-        header["gnss_spec"] = _spec_to_json(g.spec)
+        header["gnss_spec"] = spec_to_json(g.spec)
     if drive.baro is not None:
         b = drive.baro
         arrays["baro_t"] = b.t
@@ -69,7 +69,7 @@ def save_npz(drive: Drive, path: str | Path) -> Path:
             arrays["baro_pressure"] = b.pressure
         if b.alt is not None:
             arrays["baro_alt"] = b.alt
-        header["baro_spec"] = _spec_to_json(b.spec)
+        header["baro_spec"] = spec_to_json(b.spec)
     if drive.mag is not None:
         arrays.update(mag_t=drive.mag.t, mag_field_b=drive.mag.field_b)
         header["mag_sd_ut"] = drive.mag.sd_ut

@@ -34,6 +34,7 @@ from . import SCENARIO_DIR, list_scenarios  # noqa: F401  (re-exported)
 from .trajectories import (
     hill_drive_profiles,
     kinematics,
+    mount_imu,
     sortie_profiles,
     vertical_kinematics,
 )
@@ -50,6 +51,8 @@ def scenario_from_dict(d: dict[str, Any]) -> ScenarioConfig:
     gnss_d = dict(d.pop("gnss", {}))
     if "outages" in gnss_d:
         gnss_d["outages"] = tuple(tuple(float(x) for x in w) for w in gnss_d["outages"])
+    if "imu_mount_rph_deg" in d:
+        d["imu_mount_rph_deg"] = tuple(float(x) for x in d["imu_mount_rph_deg"])
     for key in ("lever_arm_b", "burst_len_s", "burst_err_m", "random_outage_len_s"):
         if key in gnss_d:
             gnss_d[key] = tuple(float(x) for x in gnss_d[key])
@@ -100,8 +103,10 @@ def load_scenario(name_or_path: str | Path, **overrides: Any) -> ScenarioConfig:
 def simulate(scenario: ScenarioConfig | str, seed: int = 0, **overrides: Any) -> Drive:
     """Simulate one drive. Deterministic given ``(scenario, seed)``.
 
-    The truth (``Drive.truth``) is sampled at the IMU epochs and carries the realised IMU
-    biases and the baro Gauss-Markov bias (interpolated to IMU epochs). A scenario with a
+    The truth (``Drive.truth``) is sampled at the IMU epochs; its attitude is the IMU's (with
+    ``imu_mount_rph_deg`` not the vehicle's: ``meta["imu_mount_rph_deg"]``), and it carries
+    the realised IMU biases and the baro Gauss-Markov bias (interpolated to IMU epochs). A
+    ``side_slip_gain`` or ``imu_mount_rph_deg`` is recorded in ``meta``. A scenario with a
     ``[magnetometer]`` section also gives ``Drive.mag`` and ``meta["mag_truth"]``: the
     hard-iron bias ``hard_iron_ut`` (3,) in b [µT] and the World Magnetic Model field at the
     origin (``field_ned_ut`` (3,) µT north-east-down, ``declination_rad``,
@@ -126,7 +131,10 @@ def simulate(scenario: ScenarioConfig | str, seed: int = 0, **overrides: Any) ->
         else:
             prof = sortie_profiles(cfg.duration_s, traj_rng, **p)
             turns = True
-        kin = kinematics(t, *prof, origin, coordinated_turns=turns)
+        kin = kinematics(t, *prof, origin, coordinated_turns=turns,
+                         slip_gain=float(cfg.side_slip_gain))
+        if any(cfg.imu_mount_rph_deg):
+            kin = mount_imu(kin, np.radians(cfg.imu_mount_rph_deg))
     imu, imu_err = apply_imu_errors(t, kin.gyro_b, kin.accel_b, cfg.imu, rng)
     # only the truth and ω_nb are needed from here on: the ideal IMU readings are dropped
     # (each per-sample array is 17 MB on a 1-hour 200 Hz drive)
@@ -145,7 +153,7 @@ def simulate(scenario: ScenarioConfig | str, seed: int = 0, **overrides: Any) ->
     baro, baro_truth, bias_b = simulate_baro(
         t_baro, t, kin_truth.alt, float(origin[2]), cfg.baro, rng
     )
-    # the truth's read-only arrays are shared with kin_truth, not copied (types._arr)
+    # the truth's read-only arrays are shared with kin_truth, not copied (streams.as_array)
     truth = Trajectory(
         t, kin_truth.lla, kin_truth.vel_n, kin_truth.q_nb, imu_err.bias_gyro,
         imu_err.bias_accel, np.interp(t, t_baro, bias_b),
@@ -169,6 +177,9 @@ def simulate(scenario: ScenarioConfig | str, seed: int = 0, **overrides: Any) ->
         "gnss_outliers": int(gnss_log.outlier.sum()),
         "accel_scale_true": imu_err.accel_scale.tolist(),
     }
+    if cfg.side_slip_gain or any(cfg.imu_mount_rph_deg):
+        meta["side_slip_gain"] = float(cfg.side_slip_gain)
+        meta["imu_mount_rph_deg"] = list(cfg.imu_mount_rph_deg)
     if mag_truth is not None:
         meta["mag_truth"] = mag_truth
         meta["decimal_year"] = mag_truth["year"]  # the drive's date, as a log reader gives it

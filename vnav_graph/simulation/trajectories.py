@@ -6,7 +6,8 @@ with analytic first and second derivatives. From them, exactly:
 
     v_n  = v·[cosγ cosψ, cosγ sinψ, −sinγ]                       (NED velocity)
     v̇_n  = analytic derivative of the above
-    roll = atan(v·ψ̇/g) (coordinated turn, aircraft) or 0 (car), pitch = γ + α, yaw = ψ
+    roll = atan(v·ψ̇/g) (coordinated turn, aircraft) or 0 (car), pitch = γ + α, yaw = ψ − β
+    β = k_β·a_lat, a_lat = v·cosγ·ψ̇  (side-slip, off by default: k_β = 0)
     ω_nb^b from Euler-angle rates, ω_ib^b = ω_nb^b + C_bn(ω_ie^n + ω_en^n)
     f_n  = v̇_n + (2ω_ie^n + ω_en^n) × v_n − [0, 0, γ_g(lat, h)]     (Groves eq. 5.54)
     f_b  = C_bn f_n
@@ -14,6 +15,12 @@ with analytic first and second derivatives. From them, exactly:
 Latitude, longitude and height follow from integrating v_n (trapezoidal on the dense truth
 grid, with the radii of curvature), so truth, IMU and the mechanisation of
 ``vnav_graph.nav.strapdown`` agree to integration accuracy.
+
+Side-slip β (``slip_gain`` k_β [rad per m/s²]): the body points β to the left of the velocity
+(β > 0 in a right turn), so the body-frame lateral velocity is v·cosγ·sinβ instead of the
+zero a non-holonomic constraint assumes. ``mount_imu`` turns the IMU by a fixed mounting
+misalignment relative to the vehicle: the readings and the truth attitude are then the
+sensor's (what every estimator estimates), the vehicle's attitude is C_nb·C_vbᵀ.
 """
 
 from __future__ import annotations
@@ -23,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..geo.earth import G0, earth_rate_n, gravity, radii, transport_rate_n
-from ..geo.frames import rph_to_quat
+from ..geo.frames import mat_to_quat, rph_to_quat
 from ..types import FloatArray, Trajectory
 
 
@@ -82,8 +89,10 @@ def kinematics(
     *,
     coordinated_turns: bool,
     alpha: float = 0.0,
+    slip_gain: float = 0.0,
 ) -> Kinematics:
-    """Evaluate the trajectory defined by speed, heading and flight-path-angle profiles."""
+    """Evaluate the trajectory defined by speed, heading and flight-path-angle profiles;
+    ``slip_gain``: side-slip per lateral acceleration k_β [rad per m/s²] (module docstring)."""
     v, vd, _ = speed.eval(t)
     psi, psid, psidd = heading.eval(t)
     gam, gamd, _ = fpa.eval(t)
@@ -142,6 +151,9 @@ def kinematics(
             rolld = np.zeros(b - a)
         pitch, pitchd = gam[a:b] + alpha, gd
         yaw, yawd = psi[a:b], pd
+        if slip_gain:
+            beta, betad = side_slip(slip_gain, vv, vdd, gam[a:b], gd, pd, psidd[a:b])
+            yaw, yawd = yaw - beta, yawd - betad
         sr, cr, sth, cth = np.sin(roll), np.cos(roll), np.sin(pitch), np.cos(pitch)
         omega_nb_b[a:b] = np.column_stack(
             [rolld - yawd * sth, pitchd * cr + yawd * sr * cth, -pitchd * sr + yawd * cr * cth]
@@ -157,12 +169,34 @@ def kinematics(
         accel_b[a:b] = np.einsum("nji,nj->ni", c_nb, f_n)
         gyro_b[a:b] = omega_nb_b[a:b] + np.einsum("nji,nj->ni", c_nb, w_ie + w_en)
     for a in (lla, vel_n, q_nb):
-        a.setflags(write=False)  # shared with the Trajectory instead of copied (types._arr)
+        a.setflags(write=False)  # shared with the Trajectory instead of copied (streams.as_array)
     truth = Trajectory(t, lla, vel_n, q_nb)
     return Kinematics(truth, gyro_b, accel_b, omega_nb_b)
 
 
 KIN_CHUNK = 1 << 16  # samples per chunk of ``kinematics``
+
+
+def side_slip(gain: float, v: FloatArray, vd: FloatArray, gam: FloatArray, gamd: FloatArray,
+              psid: FloatArray, psidd: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """β = k_β·v·cosγ·ψ̇ [rad] and its exact time derivative [rad/s]."""
+    cg = np.cos(gam)
+    beta = gain * v * cg * psid
+    betad = gain * (vd * cg * psid - v * np.sin(gam) * gamd * psid + v * cg * psidd)
+    return beta, betad
+
+
+def mount_imu(kin: Kinematics, rph_vb: FloatArray) -> Kinematics:
+    """The same motion sensed by an IMU turned by the fixed mounting misalignment ``rph_vb``
+    (roll, pitch, yaw [rad] of the IMU axes in the vehicle frame, C_vb): readings and
+    ω_nb^b become C_bv·(vehicle's), the truth attitude C_nb = C_nv·C_vb."""
+    from ..geo.frames import quat_to_mat
+
+    c_vb = _rph_to_mat(*(np.array([x], float) for x in rph_vb))[0]
+    c_nb = quat_to_mat(kin.truth.q_nb) @ c_vb
+    tr = kin.truth
+    truth = Trajectory(tr.t, tr.lla, tr.vel_n, mat_to_quat(c_nb))
+    return Kinematics(truth, kin.gyro_b @ c_vb, kin.accel_b @ c_vb, kin.omega_nb_b @ c_vb)
 
 
 def _chunks(n: int) -> list[tuple[int, int]]:

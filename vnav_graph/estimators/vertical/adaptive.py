@@ -408,7 +408,7 @@ _TO_ERROR_STATE = selection((("pos_n", 2, IH, -1.0), ("vel_n", 2, IV, -1.0),
                              ("baro_bias", 0, IB, 1.0)), NX)
 
 
-def _to_error_state(p: FloatArray) -> FloatArray:
+def to_error_state(p: FloatArray) -> FloatArray:
     """(M, 5, 5) filter covariances -> (M, 18, 18) ERROR_STATE layout, NaN where absent."""
     return embed_error_state(p, _TO_ERROR_STATE)
 
@@ -466,7 +466,7 @@ class AdaptiveLoop3:
         return Estimate(
             estimator=self.name, trajectory=traj,
             provides=frozenset({"alt", "vel_d", "baro", "cov"}),
-            cov=_to_error_state(p_cov), t_cov=t_cov, baro=baro,
+            cov=to_error_state(p_cov), t_cov=t_cov, baro=baro,
             runtime_s=time.perf_counter() - t0, config=cfg,
             innovations={"gnss_alt": nu[np.isfinite(nu)]},
             info={"uses": "imu+baro+gnss", "variant": "ekf_control",

@@ -28,6 +28,44 @@ def _clamp(x, m):
 
 
 @njit(cache=True)
+def _across_gap(q_k, relevel_k):
+    """Attitude after an IMU logging gap: roll/pitch re-levelled from the static samples after
+    it (``relevel_k`` finite) with the yaw kept, else the attitude held."""
+    if np.isfinite(relevel_k[0]):
+        c0 = quat_to_dcm(q_k)
+        return _rpy_quat(relevel_k[0], relevel_k[1], np.arctan2(c0[1, 0], c0[0, 0]))
+    return q_k
+
+
+@njit(cache=True)
+def _tilt_update(psi, f_ref, d, r_j, r_nom, dtg, t_filt, max_corr, max_fb):
+    """Velocity-matching tilt feedback (R3), in place on ψ_x, ψ_y: the tilt that turns the
+    reference specific force ``f_ref`` by the residual ``d``, low-passed with gain dtg/T_f
+    scaled by the inverse-variance weight r_nom / r_j."""
+    cr = np.array([f_ref[1] * d[2] - f_ref[2] * d[1],
+                   f_ref[2] * d[0] - f_ref[0] * d[2]])
+    nf2 = f_ref[0] ** 2 + f_ref[1] ** 2 + f_ref[2] ** 2
+    w = r_nom / r_j if r_j > r_nom else 1.0
+    alpha = (dtg / t_filt if dtg < t_filt else 1.0) * w
+    for i in range(2):
+        p = _clamp(cr[i] / nf2, max_corr)
+        psi[i] = _clamp(psi[i] + alpha * (p - psi[i]), max_fb)
+
+
+@njit(cache=True)
+def _accel_level(psi, fm, g_nom, alpha, max_corr, max_fb):
+    """Accelerometer levelling (step 6), in place on ψ_x, ψ_y: the mean specific force ``fm``
+    of a static window against the reference (0, 0, −g): ψ_x = d_E/g, ψ_y = −d_N/g
+    (horizontal residual only), with gain min(alpha, 1)."""
+    if alpha > 1.0:
+        alpha = 1.0
+    p0 = _clamp(fm[1] / g_nom, max_corr)
+    p1 = _clamp(-fm[0] / g_nom, max_corr)
+    psi[0] = _clamp(psi[0] + alpha * (p0 - psi[0]), max_fb)
+    psi[1] = _clamp(psi[1] + alpha * (p1 - psi[1]), max_fb)
+
+
+@njit(cache=True)
 def ahrs_kernel(t, gyro, accel, q0, lla_i, vel_i, sdv_i, t_g, v_g, g_g, cor_g, ok_g, r_g, vert_g,
           use_g, kp, ki, k_yaw, ki_yaw, v_min, max_corr, max_fb, a_static, t_filt, gap,
           gate2, sd0, sd_bg, sd_yaw, r_nom, reinit_s, fb_after, lvl_win, lvl_tau, st_rate,
@@ -101,12 +139,7 @@ def ahrs_kernel(t, gyro, accel, q0, lla_i, vel_i, sdv_i, t_g, v_g, g_g, cor_g, o
             # samples after the gap when they are static (relevel[k+1] finite), keep the yaw
             # and the bias; otherwise hold the attitude. No velocity matching over any
             # interval that touches the gap.
-            if np.isfinite(relevel[k + 1, 0]):
-                c0 = quat_to_dcm(q[k])
-                put(q[k + 1], _rpy_quat(relevel[k + 1, 0], relevel[k + 1, 1],
-                                        np.arctan2(c0[1, 0], c0[0, 0])))
-            else:
-                put(q[k + 1], q[k])
+            put(q[k + 1], _across_gap(q[k], relevel[k + 1]))
             psi[0] = 0.0
             psi[1] = 0.0
             t_gap_end = t[k + 1]
@@ -192,15 +225,8 @@ def ahrs_kernel(t, gyro, accel, q0, lla_i, vel_i, sdv_i, t_g, v_g, g_g, cor_g, o
                     if accept:
                         n_rej = 0
                         cnt[0] += 1
-                        cr = np.array([f_ref[1] * d[2] - f_ref[2] * d[1],
-                                       f_ref[2] * d[0] - f_ref[0] * d[2]])
-                        nf2 = f_ref[0] ** 2 + f_ref[1] ** 2 + f_ref[2] ** 2
-                        # R3: low-pass gain dtg/T_f, scaled by the inverse-variance weight
-                        w = r_nom / r_g[j] if r_g[j] > r_nom else 1.0
-                        alpha = (dtg / t_filt if dtg < t_filt else 1.0) * w
-                        for i in range(2):
-                            p = _clamp(cr[i] / nf2, max_corr)
-                            psi[i] = _clamp(psi[i] + alpha * (p - psi[i]), max_fb)
+                        _tilt_update(psi, f_ref, d, r_g[j], r_nom, dtg, t_filt, max_corr,
+                                     max_fb)
                         psi_until = t_g[j] + gap * dtg
                         t_acc = t_g[j]
                         t_gnss_acc = t_g[j]
@@ -229,15 +255,8 @@ def ahrs_kernel(t, gyro, accel, q0, lla_i, vel_i, sdv_i, t_g, v_g, g_g, cor_g, o
             fbn = np.sqrt(f_b[0] ** 2 + f_b[1] ** 2 + f_b[2] ** 2)
             wn = np.sqrt(w_m[0] ** 2 + w_m[1] ** 2 + w_m[2] ** 2)
             if wn < st_rate and abs(fbn - g_nom) < st_acc:
-                fm = (cum_arr[k + 1] - cum_arr[ks]) / span
-                # reference (0, 0, −g): ψ_x = d_E/g, ψ_y = −d_N/g (horizontal residual only)
-                alpha = 0.2 * lvl_win / lvl_tau
-                if alpha > 1.0:
-                    alpha = 1.0
-                p0 = _clamp(fm[1] / g_nom, max_corr)
-                p1 = _clamp(-fm[0] / g_nom, max_corr)
-                psi[0] = _clamp(psi[0] + alpha * (p0 - psi[0]), max_fb)
-                psi[1] = _clamp(psi[1] + alpha * (p1 - psi[1]), max_fb)
+                _accel_level(psi, (cum_arr[k + 1] - cum_arr[ks]) / span, g_nom,
+                             0.2 * lvl_win / lvl_tau, max_corr, max_fb)
                 psi_until = tk + 0.4 * lvl_win
                 t_acc = tk
                 cnt[5] += 1

@@ -124,7 +124,8 @@ from ...ahrs_cache import shared_call
 from ...geo.earth import OMEGA_IE, gravity, radii
 from ...nav.gaps import gap_threshold
 from ...types import Drive, FloatArray
-from .ahrs import ahrs_kernel, poly_velocity
+from .ahrs import ahrs_kernel
+from .gnss_reference import baro_rate, matching_inputs, velocity_from_positions
 
 
 @dataclass(frozen=True)
@@ -269,16 +270,6 @@ class VerticalInputs:
         return self.f_down + self.gravity + self.coriolis_down
 
 
-def _thin(t: FloatArray, min_dt: float) -> FloatArray:
-    """Indices of a greedy subset of the increasing times ``t`` spaced at least ``min_dt``
-    (within 1 % to tolerate stamp jitter)."""
-    keep = [0]
-    for i in range(1, t.size):
-        if t[i] - t[keep[-1]] >= 0.99 * min_dt:
-            keep.append(i)
-    return np.asarray(keep, dtype=np.int64)
-
-
 def _coarse_level(accel_b: FloatArray) -> FloatArray:
     """Roll/pitch from a mean specific force at rest (Groves eq. 5.101), yaw 0; returns q_nb."""
     from ...geo.frames import rph_to_quat
@@ -302,107 +293,6 @@ def _relevel_after_gaps(t, gyro, accel, gap_dt, level_s, g_nom, tol_acc, tol_rat
         if abs(np.linalg.norm(f) - g_nom) < 3 * tol_acc and rate < 3 * tol_rate:
             out[k] = np.arctan2(-f[1], -f[2]), np.arctan2(f[0], np.hypot(f[1], f[2]))
     return out
-
-
-def _ned(lla: FloatArray) -> FloatArray:
-    """Local NED metres of (lat, lon, h) rows about the first row (radii at each row)."""
-    rn, re = radii(lla[:, 0])
-    return np.column_stack([
-        (lla[:, 0] - lla[0, 0]) * (rn + lla[:, 2]),
-        (lla[:, 1] - lla[0, 1]) * (re + lla[:, 2]) * np.cos(lla[:, 0]),
-        -(lla[:, 2] - lla[0, 2]),
-    ])
-
-
-def velocity_from_positions(t: FloatArray, lla: FloatArray, pos_sd: FloatArray,
-                            window_s: float, gap_s: float) -> tuple[FloatArray, FloatArray]:
-    """Reference velocity from GNSS positions alone (step 3b).
-
-    Parameters
-    ----------
-    t : (M,) fix times [s]; lla : (M, 3) (lat rad, lon rad, h m); pos_sd : (M, 3) NED σ [m]
-    window_s : fit window [s] (centred where the segment allows)
-    gap_s : a fix spacing above this starts a new segment (no fit across outages)
-
-    Returns
-    -------
-    v : (M, 3) NED velocity [m/s], the slope at t_j of p(τ) = a + b τ + c τ² fitted with
-        weights 1/σ² to the fixes of the same segment with |t_i − t_j| ≤ window_s/2 (NaN with
-        fewer than 3 fixes); exact for a quadratic trajectory; a cubic term c3·τ³ biases it by
-        c3·Στ⁴/Στ² (≈ 3c3W²/20 in a symmetric window of length W)
-    sd : (M, 3) its σ [m/s], √[(XᵀWX)⁻¹]₁₁ (uncorrelated fix errors assumed); for N equally
-        spaced fixes spanning W, ≈ σ_p·√(12/N)/W
-    """
-    seg = np.concatenate([[0], np.cumsum(np.diff(t) > gap_s)]).astype(np.int64)
-    sd = np.where(np.isfinite(pos_sd) & (pos_sd > 0), pos_sd, 1e6)
-    return poly_velocity(np.ascontiguousarray(t, dtype=float), _ned(lla),
-                          np.ascontiguousarray(sd, dtype=float), 0.5 * window_s, seg)
-
-
-def baro_rate(t_q: FloatArray, t_b: FloatArray, alt_b: FloatArray,
-              half_s: float = 1.0) -> tuple[FloatArray, FloatArray]:
-    """Climb rate of the baro altitude at times ``t_q`` (slope of a straight line fitted over
-    ±half_s, at least 3 samples) and its σ from the baro noise estimated robustly as
-    1.4826·MAD(second differences)/√6. Returns (rate (Q,) [m/s, +up], σ (Q,)); NaN/inf where
-    the window holds fewer than 3 samples."""
-    t_b = np.asarray(t_b, float)
-    z = np.asarray(alt_b, float)
-    tc = t_b - t_b[0]
-    d2 = np.diff(z, 2)
-    sd_b = max(1.4826 * float(np.median(np.abs(d2 - np.median(d2)))) / np.sqrt(6.0), 0.02) \
-        if d2.size > 4 else 0.5
-    c1 = np.concatenate([[0.0], np.cumsum(np.ones_like(tc))])
-    ct = np.concatenate([[0.0], np.cumsum(tc)])
-    ct2 = np.concatenate([[0.0], np.cumsum(tc * tc)])
-    cz = np.concatenate([[0.0], np.cumsum(z)])
-    ctz = np.concatenate([[0.0], np.cumsum(tc * z)])
-    a = np.searchsorted(t_b, t_q - half_s, side="left")
-    b = np.searchsorted(t_b, t_q + half_s, side="right")
-    n = c1[b] - c1[a]
-    st, st2 = ct[b] - ct[a], ct2[b] - ct2[a]
-    sz, stz = cz[b] - cz[a], ctz[b] - ctz[a]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        sxx = st2 - st * st / n
-        rate = (stz - st * sz / n) / sxx
-        sd = sd_b / np.sqrt(sxx)
-    bad = (n < 3) | ~(sxx > 0)
-    rate[bad] = np.nan
-    sd[bad] = np.inf
-    return rate, sd
-
-
-def _gnss_reference(drive: Drive, cfg: AhrsConfig):
-    """Reference velocities, their σ and the vertical-trust flags at the fixes."""
-    gn = drive.gnss
-    t_g, lla_g = gn.t, gn.lla
-    dt_nom = float(np.median(np.diff(t_g)))
-    if gn.vel_n is not None:
-        source = "receiver"
-        v_g = np.asarray(gn.vel_n, float)
-        if gn.vel_sd is not None:
-            sd_v = np.where(np.isfinite(gn.vel_sd), gn.vel_sd, np.inf)
-        else:
-            sd_v = np.full((t_g.size, 3), cfg.sd_v_default)
-        window = 0.0
-    else:
-        source = "positions"
-        window = max(cfg.pos_vel_window_s, (cfg.pos_vel_min_fixes - 1) * dt_nom)
-        v_g, sd_v = velocity_from_positions(t_g, lla_g, gn.pos_sd, window,
-                                            cfg.gap_factor * dt_nom)
-    sd_h = np.max(sd_v[:, :2], axis=1)
-    use = np.isfinite(v_g).all(axis=1) & (sd_h <= cfg.sd_v_max)
-    v_g = np.where(np.isfinite(v_g), v_g, 0.0)
-    # R5: vertical component of the reference trusted only from a receiver velocity that
-    # agrees with the baro climb rate (3σ + 0.3 m/s + 10 % for baro scale/latency)
-    if source == "positions" and not cfg.pos_vel_vertical:
-        vert = np.zeros(t_g.size, dtype=bool)
-    elif cfg.baro_check and drive.baro is not None and len(drive.baro) > 5:
-        rate, sd_r = baro_rate(t_g, drive.baro.t, drive.baro.altitude)
-        tol = 3.0 * np.sqrt(sd_v[:, 2] ** 2 + sd_r**2) + 0.3 + 0.1 * np.abs(rate)
-        vert = np.abs(-v_g[:, 2] - rate) <= tol  # NaN rate (no baro there) -> False
-    else:
-        vert = np.ones(t_g.size, dtype=bool)
-    return source, dt_nom, v_g, sd_v, sd_h, use, vert, window
 
 
 def vertical_inputs(drive: Drive, config: AhrsConfig | None = None) -> VerticalInputs:
@@ -431,67 +321,12 @@ def _vertical_inputs(drive: Drive, cfg: AhrsConfig) -> VerticalInputs:
     t0 = time.perf_counter()
     imu = drive.imu
     t = imu.t
-    n = t.size
     lev = t <= t[0] + cfg.level_s
     q0 = _coarse_level(imu.accel_b[lev])
-    gn = drive.gnss
     info: dict = {"velocity_source": "none"}
-    if gn is not None and gn.t.size >= 3:
-        source, dt_nom, v_g, sd_v, sd_h, use, vert, window = _gnss_reference(drive, cfg)
-        info["velocity_source"] = source
-        if window:
-            info["position_velocity_window_s"] = window
-        t_g, lla_g = gn.t, gn.lla
-        ok = np.concatenate([[False], np.diff(t_g) <= cfg.gap_factor * dt_nom])
-        lla_i = np.column_stack([np.interp(t, t_g, lla_g[:, i]) for i in range(3)])
-        vel_i = np.column_stack([np.interp(t, t_g, v_g[:, i]) for i in range(3)])
-        sdv_i = np.interp(t, t_g, np.where(use, sd_h, 1e9))
-        # inside outages the interpolated velocity is not a measurement: no course there
-        in_gap = np.zeros(n, dtype=bool)
-        for i in np.flatnonzero(~ok[1:]) + 1:
-            in_gap |= (t > t_g[i - 1]) & (t < t_g[i])
-        vel_i[in_gap, :2] = 0.0
-        sdv_i[in_gap] = np.inf
-        # velocity matching over intervals of at least match_interval_s (fewer, longer Δv);
-        # with position-derived velocities at least half the fit window
-        match = cfg.match_interval_s if source == "receiver" else max(
-            cfg.match_interval_s, 0.5 * window)
-        keep = _thin(t_g, match)
-        t_g, lla_g, v_g = t_g[keep], lla_g[keep], v_g[keep]
-        sd_h, use, vert = sd_h[keep], use[keep], vert[keep]
-        ok = np.concatenate(
-            [[False], np.diff(t_g) <= cfg.gap_factor * max(dt_nom, match)])
-        vert_iv = np.concatenate([[False], vert[1:] & vert[:-1]])
-        dtg = np.concatenate([[np.inf], np.diff(t_g)])
-        with np.errstate(invalid="ignore"):
-            r_g = (sd_h**2 + np.concatenate([[np.inf], sd_h[:-1] ** 2])) / dtg**2
-        r_g = np.where(np.isfinite(r_g), r_g, 1e12)
-        r_nom = 2.0 * cfg.sd_v_nominal**2 / match**2
-        g_g = gravity(lla_g[:, 0], lla_g[:, 2])
-        w_ie = np.column_stack([OMEGA_IE * np.cos(lla_g[:, 0]), np.zeros(t_g.size),
-                                -OMEGA_IE * np.sin(lla_g[:, 0])])
-        rn, re = radii(lla_g[:, 0])
-        w_en = np.column_stack([v_g[:, 1] / (re + lla_g[:, 2]), -v_g[:, 0] / (rn + lla_g[:, 2]),
-                                -v_g[:, 1] * np.tan(lla_g[:, 0]) / (re + lla_g[:, 2])])
-        cor_g = np.cross(2 * w_ie + w_en, v_g)
-        sd_med = float(np.median(sd_h[use])) if np.any(use) else cfg.sd_v_default
-    else:
-        t_g = np.empty(0)
-        v_g = np.zeros((0, 3))
-        g_g = np.empty(0)
-        cor_g = np.zeros((0, 3))
-        ok = np.zeros(0, dtype=bool)
-        r_g = np.empty(0)
-        vert_iv = np.zeros(0, dtype=bool)
-        use = np.zeros(0, dtype=bool)
-        lla_i = np.tile(drive.origin_lla, (n, 1))
-        vel_i = np.zeros((n, 3))
-        sdv_i = np.full(n, np.inf)
-        sd_med = 0.0
-        match = cfg.match_interval_s
-        r_nom = 1.0
+    m = matching_inputs(drive, cfg, t, info)
     # "quasi-static" threshold raised by 3σ of the differenced velocity noise per interval
-    a_static_eff = cfg.a_static + 3.0 * np.sqrt(2.0) * sd_med / match
+    a_static_eff = cfg.a_static + 3.0 * np.sqrt(2.0) * m.sd_med / m.match
     kp = 2.0 * cfg.tilt_zeta * cfg.tilt_omega
     ki = cfg.tilt_omega**2
     # χ²₂ quantile; no gate on position-derived velocities: their smoothing kernel differs
@@ -505,14 +340,14 @@ def _vertical_inputs(drive: Drive, cfg: AhrsConfig) -> VerticalInputs:
     # a writable copy of the specific force: its rows reach the shared strapdown step, which
     # then keeps the EKF's compiled specialisation (a read-only row would compile a second)
     q, f_n, bg, vp, cnt = ahrs_kernel(
-        t, imu.gyro_b, np.array(imu.accel_b), q0, np.ascontiguousarray(lla_i),
-        np.ascontiguousarray(vel_i), np.ascontiguousarray(sdv_i),
-        np.ascontiguousarray(t_g, dtype=float), np.ascontiguousarray(v_g, dtype=float),
-        np.ascontiguousarray(g_g, dtype=float), np.ascontiguousarray(cor_g, dtype=float), ok,
-        np.ascontiguousarray(r_g, dtype=float), vert_iv, use, kp, ki, cfg.yaw_gain,
+        t, imu.gyro_b, np.array(imu.accel_b), q0, np.ascontiguousarray(m.lla_i),
+        np.ascontiguousarray(m.vel_i), np.ascontiguousarray(m.sdv_i),
+        np.ascontiguousarray(m.t_g, dtype=float), np.ascontiguousarray(m.v_g, dtype=float),
+        np.ascontiguousarray(m.g_g, dtype=float), np.ascontiguousarray(m.cor_g, dtype=float), m.ok,
+        np.ascontiguousarray(m.r_g, dtype=float), m.vert_iv, m.use, kp, ki, cfg.yaw_gain,
         0.25 * cfg.yaw_gain**2, cfg.v_course_min, cfg.max_correction, cfg.max_tilt_feedback,
         a_static_eff, cfg.tilt_filter_s, cfg.gap_factor, gate2, cfg.tilt_sd0, cfg.gyro_bias_sd,
-        cfg.heading_sd, r_nom, cfg.reinit_s, cfg.fallback_after_s, cfg.accel_level_window_s,
+        cfg.heading_sd, m.r_nom, cfg.reinit_s, cfg.fallback_after_s, cfg.accel_level_window_s,
         cfg.accel_level_tau_s, cfg.static_rate, cfg.static_accel, g_nom,
         gap_threshold(t), relevel,
     )
@@ -520,8 +355,8 @@ def _vertical_inputs(drive: Drive, cfg: AhrsConfig) -> VerticalInputs:
                          "levelling_unusable", "vertical_dropped", "accel_level_updates",
                          "imu_gaps"), cnt, strict=True):
         info[key] = int(val)
-    lat = lla_i[:, 0]
-    h_ref = lla_i[:, 2]
+    lat = m.lla_i[:, 0]
+    h_ref = m.lla_i[:, 2]
     x, y = q[:, 1], q[:, 2]
     c33 = 1.0 - 2.0 * (x * x + y * y)
     # cor_D = −[(2ω_ie + ω_en) × v]_D with the propagated horizontal velocity (step 8)

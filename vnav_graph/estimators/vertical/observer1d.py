@@ -143,7 +143,7 @@ def gate_threshold(gate_prob: float | None) -> float:
 
 
 @njit(cache=True)
-def _gate_var(p, tau, qa, qb, r):
+def gate_var(p, tau, qa, qb, r):
     """Innovation variance of a fix τ seconds after the last accepted one, from the
     post-fix covariance p (3, 3): [Φ(τ) p Φ(τ)ᵀ + Q(τ)]₀₀ + r (``_phi_q``, module docstring)."""
     t2 = tau * tau
@@ -158,7 +158,7 @@ def _fix_update(zf, tf, z, v, c, gain, gate2, p_gate, qa, qb, r_gate, t_warm, re
     t_first_rej] (float64 (4,), updated in place). Returns z, v, c, innovation, code
     (0 accepted, 1 rejected, 2 re-initialised)."""
     innov = zf - z
-    if tf >= st[1] and innov * innov > gate2 * _gate_var(p_gate, tf - st[0], qa, qb, r_gate):
+    if tf >= st[1] and innov * innov > gate2 * gate_var(p_gate, tf - st[0], qa, qb, r_gate):
         if st[2] == 0.0:
             st[3] = tf
         st[2] += 1.0
@@ -185,7 +185,7 @@ def observer_kernel_gated(t, a_up, t_fix, z_fix, gain, tustin, x0, grav_grad, h_
     grav_grad = 2g/R [1/s²]: the INS adds grav_grad·(ẑ − h_ref) to a_up (gravity decreases
     with height — the positive feedback of the vertical channel; 0 for the seed's model).
     Gate (module docstring, "GNSS gating"): a fix with innovation δy is rejected when
-    δy² > gate2 · S(τ), S(τ) = ``_gate_var(p_gate, τ, qa, qb, r_gate)``, τ the time since the
+    δy² > gate2 · S(τ), S(τ) = ``gate_var(p_gate, τ, qa, qb, r_gate)``, τ the time since the
     last accepted fix; fixes earlier than t_fix[0] + t_warm are never gated (gate2 = inf: no
     gate); rejections spanning ≥ reinit_s [s] re-initialise the state (``_fix_update``).
     An IMU step longer than gap_dt [s] is a logging gap: the vertical acceleration is taken

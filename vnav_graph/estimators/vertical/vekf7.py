@@ -65,17 +65,15 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
-from numpy.typing import NDArray
 
 from ...failures import MissingStream
-from ...geo.earth import gravity_scalar, radii, radii_scalar
+from ...geo.earth import gravity_scalar, radii_scalar
 from ...nav.arrays import outer, put
 from ...nav.error_state import embed_error_state, selection
 from ...nav.gaps import GAP_ACCEL_SD, cv_bridge_noise, gap_threshold
 from ...nav.gnss_gate import NO_LIMIT, REFUSE, height_gate, new_gate_state
 from ...sensors.baro import baro_jacobian, measure_baro, with_prior_conflict_notes
 from ...sensors.model import SensorModel, sensor_model
-from ...sensors.noise import gm_process_var, gm_transition
 from ...types import (
     BaroEstimate,
     Drive,
@@ -85,10 +83,25 @@ from ...types import (
     Trajectory,
 )
 from .inputs import AhrsConfig, VerticalInputs, vertical_inputs
-
-IntArray = NDArray[np.int64]
-NX = 8  # 7 filter states + the accumulator I = ∫ b dt
-IH, IV, IB, IK, IS, ITD, IBB, II = range(NX)
+from .vekf7_setup import (  # noqa: F401  (the state indices and input_error_psd: this module's API)
+    IB,
+    IBB,
+    IH,
+    II,
+    IK,
+    IS,
+    ITD,
+    IV,
+    NX,
+    Noise,
+    given,
+    initial_state,
+    input_error_psd,
+    lever_arm_dz,
+    measurement_events,
+    noise_densities,
+    transport_rate2,
+)
 
 
 @dataclass(frozen=True)
@@ -150,48 +163,8 @@ class VEKF7Config:
     ahrs: AhrsConfig | None = None
 
 
-def input_error_psd(
-    drive: Drive, vi: VerticalInputs, base_psd: float, tilt_sd: float, gyro_bias_sd: float,
-    corr_s: float,
-) -> FloatArray:
-    """PSD of the vertical specific-force input error at the IMU epochs [(m/s²)²/Hz], (N,).
-
-    The attitude reference (``vertical.inputs``) is GNSS-aided: with fixes its tilt error is
-    ≈ ``tilt_sd``; in a GNSS outage it grows with the gyro bias, σ_ψ = tilt_sd + σ_bg·t_gap,
-    and it has no Coriolis term there (no horizontal velocity). The f_D error is then
-    σ_f² = (σ_ψ·|f_h|)² + (2Ω_ie·|v_h|)²·[in outage], |f_h| the horizontal specific force, and
-    is treated as white with PSD base_psd + 2·corr_s·σ_f² (first-order Markov of correlation
-    time corr_s and variance σ_f², integrated over its correlation time).
-    """
-    from ...geo.earth import OMEGA_IE
-    from ...geo.frames import quat_to_mat
-
-    t = vi.t
-    f_n = np.einsum("nij,nj->ni", quat_to_mat(vi.q_nb), drive.imu.accel_b)
-    f_h = np.hypot(f_n[:, 0], f_n[:, 1])
-    gn = drive.gnss
-    if gn is None or gn.t.size < 2:
-        t_gap = t - t[0]
-        v_h = np.zeros(t.size)
-    else:
-        nominal = float(np.median(np.diff(gn.t)))
-        i = np.searchsorted(gn.t, t, side="right") - 1
-        t_last = np.where(i >= 0, gn.t[np.maximum(i, 0)], t[0])
-        t_gap = np.maximum(t - t_last - nominal, 0.0)
-        v_h = np.zeros(t.size) if gn.vel_n is None else np.hypot(
-            gn.vel_n[np.maximum(i, 0), 0], gn.vel_n[np.maximum(i, 0), 1])
-    sig_psi = tilt_sd + gyro_bias_sd * t_gap
-    var_f = (sig_psi * f_h) ** 2 + np.where(t_gap > 0, (2 * OMEGA_IE * v_h) ** 2, 0.0)
-    return base_psd + 2.0 * corr_s * var_f
-
-
-def _given(value: float | None, shared: float) -> float:
-    """A config override when set, else the shared sensor model's value."""
-    return float(shared if value is None else value)
-
-
 @njit(cache=True)
-def _propagate(k0, k1, t, f_down, g_lat, c33, f_z, cor, rho2, phi_b, q_b, phi_ab, q_ab,
+def propagate(k0, k1, t, f_down, g_lat, c33, f_z, cor, rho2, phi_b, q_b, phi_ab, q_ab,
                q_acc, gap_dt, gap_q, nom, p, h_out, v_out):
     """Propagate nominal and covariance from IMU epoch k0 to k1 (trapezoid; Φ = I + F·dt).
 
@@ -255,7 +228,7 @@ def _propagate(k0, k1, t, f_down, g_lat, c33, f_z, cor, rho2, phi_b, q_b, phi_ab
 
 
 @njit(cache=True)
-def _update(nom, p, hrow, r, var_r):
+def scalar_update(nom, p, hrow, r, var_r):
     """Scalar closed-loop update (Joseph form). Returns the normalised innovation."""
     ph = p @ hrow
     s = hrow @ ph + var_r
@@ -268,132 +241,6 @@ def _update(nom, p, hrow, r, var_r):
 
 def _innovation_var(p: FloatArray, hrow: FloatArray, var_r: float) -> float:
     return float(hrow @ p @ hrow + var_r)
-
-
-@dataclass(frozen=True)
-class _Noise:
-    """Process noise per IMU step and priors of one run (discrete values from sensors.noise)."""
-
-    q_acc: FloatArray  # vertical specific-force PSD at the IMU epochs [(m/s²)²/Hz]
-    phi_b: FloatArray  # baro-bias transition per IMU step
-    q_b: FloatArray  # baro-bias process variance per IMU step [m²]
-    phi_ab: FloatArray  # B_z transition per IMU step
-    q_ab: FloatArray  # B_z process variance per IMU step [(m/s²)²]
-    r_baro: float  # baro noise variance [m²]
-    ab_sd: float  # prior σ of B_z [m/s²]
-    k_sd: float  # prior σ of K_z
-    s_sd: float  # prior σ of dSF
-    td0: float  # prior mean of Td [s]
-    td_sd: float  # prior σ of Td [s]
-    b_sd: float  # prior σ of the baro bias [m]
-
-
-def _noise(drive: Drive, vi: VerticalInputs, model: SensorModel, cfg: VEKF7Config) -> _Noise:
-    """The shared sensor model (``sensors.model``) with ``cfg``'s overrides."""
-    ims = model.imu
-    bp = model.baro
-    assert bp is not None
-    t = drive.imu.t
-    dt = np.diff(t)
-    if cfg.accel_psd is not None:
-        q_acc = np.full(t.size, cfg.accel_psd)
-    else:
-        q_acc = input_error_psd(
-            drive, vi, ims.accel_noise_density**2 + cfg.input_error_psd, cfg.tilt_sd,
-            ims.gyro_bias_sd, cfg.input_corr_s)
-    ab_sd = _given(cfg.accel_bias_sd, ims.accel_bias_sd)
-    ab_tau = _given(cfg.accel_bias_tau, ims.accel_bias_tau)
-    ab_rw = max(cfg.accel_bias_rw, ims.accel_bias_rw)
-    b_sd = _given(cfg.bias_prior_sd, bp.bias_sd)
-    b_tau = _given(cfg.bias_tau, bp.bias_tau)
-    return _Noise(
-        q_acc=q_acc,
-        phi_b=gm_transition(dt, b_tau),
-        q_b=gm_process_var(dt, b_tau, b_sd),
-        phi_ab=gm_transition(dt, ab_tau),
-        q_ab=gm_process_var(dt, ab_tau, ab_sd) + ab_rw**2 * dt,
-        r_baro=_given(cfg.baro_noise_sd, bp.noise_sd) ** 2,
-        ab_sd=ab_sd,
-        k_sd=_given(cfg.accel_scale_sd, ims.accel_scale_sd),
-        s_sd=_given(cfg.scale_prior_sd, bp.scale_sd),
-        td0=_given(cfg.latency_prior, bp.latency_mean),
-        td_sd=_given(cfg.latency_prior_sd, bp.latency_sd),
-        b_sd=b_sd,
-    )
-
-
-def _transport_rate2(drive: Drive, vi: VerticalInputs) -> FloatArray:
-    """ρ_E² + ρ_N² at the IMU epochs from the GNSS horizontal velocity (0 without it)."""
-    t = drive.imu.t
-    h0 = float(drive.origin_lla[2])
-    gn = drive.gnss
-    rho2 = np.zeros(t.size)
-    if gn is not None and gn.vel_n is not None:
-        vn = np.interp(t, gn.t, gn.vel_n[:, 0])
-        ve = np.interp(t, gn.t, gn.vel_n[:, 1])
-        rn, re = radii(vi.lat)
-        rho2 = (ve / (re + h0)) ** 2 + (vn / (rn + h0)) ** 2
-    return rho2
-
-
-def _initial_state(drive: Drive, g_psd: FloatArray | None,
-                   nz: _Noise) -> tuple[FloatArray, FloatArray]:
-    """Nominal state and covariance at the first IMU epoch: GNSS height and vertical velocity
-    when a fix comes within 5 s, else the baro altitude with the bias prior."""
-    assert drive.baro is not None
-    t0 = drive.imu.t[0]
-    gn = drive.gnss
-    nom = np.zeros(NX)
-    p = np.zeros((NX, NX))
-    if gn is not None and gn.t[0] <= t0 + 5.0:
-        assert g_psd is not None
-        nom[IH] = float(gn.lla[0, 2])
-        p[IH, IH] = float(g_psd[0, 2]) ** 2
-    else:
-        nom[IH] = float(np.interp(t0, drive.baro.t, drive.baro.altitude))
-        p[IH, IH] = nz.b_sd**2 + 1.0
-    if gn is not None and gn.vel_n is not None and gn.t[0] <= t0 + 5.0:
-        nom[IV] = -float(gn.vel_n[0, 2])
-    p[IV, IV] = 0.5**2
-    nom[ITD] = nz.td0
-    np.fill_diagonal(p, np.diag(p) + np.array(
-        [0.0, 0.0, nz.ab_sd**2 + 1e-12, nz.k_sd**2 + 1e-12, nz.s_sd**2 + 1e-12,
-         nz.td_sd**2, nz.b_sd**2, 0.0]))
-    return nom, p
-
-
-def _events(drive: Drive) -> tuple[FloatArray, IntArray, IntArray, IntArray]:
-    """Measurement events inside the IMU span sorted by time (baro first on a tie): stamp,
-    kind (0 baro, 1 GNSS), sample index, and the first IMU epoch at or after the stamp (where
-    the event is processed)."""
-    assert drive.baro is not None
-    t = drive.imu.t
-    gn = drive.gnss
-    ev_t = [drive.baro.t]
-    ev_kind = [np.zeros(drive.baro.t.size, dtype=np.int64)]
-    ev_idx = [np.arange(drive.baro.t.size)]
-    if gn is not None:
-        ev_t.append(gn.t)
-        ev_kind.append(np.ones(gn.t.size, dtype=np.int64))
-        ev_idx.append(np.arange(gn.t.size))
-    et = np.concatenate(ev_t)
-    ek = np.concatenate(ev_kind)
-    ei = np.concatenate(ev_idx)
-    order = np.lexsort((ek, et))
-    et, ek, ei = et[order], ek[order], ei[order]
-    keep = (et >= t[0]) & (et <= t[-1])
-    et, ek, ei = et[keep], ek[keep], ei[keep]
-    return et, ek, ei, np.searchsorted(t, et, side="left")
-
-
-def _lever_dz(drive: Drive, vi: VerticalInputs) -> FloatArray:
-    """Antenna height offset −[C_nb l]_D from the attitude reference (zero lever arm: 0)."""
-    gn = drive.gnss
-    if gn is not None and np.any(gn.lever_arm_b != 0):
-        from ...geo.frames import quat_to_mat
-
-        return -(quat_to_mat(vi.q_nb) @ gn.lever_arm_b)[:, 2]
-    return np.zeros(drive.imu.t.size)
 
 
 @dataclass
@@ -424,17 +271,17 @@ def _gnss_update(nom: FloatArray, p: FloatArray, gate: FloatArray, t_m: float, i
                    cfg.gnss_probation_s, NO_LIMIT, 0.0, False) == REFUSE:
         out.rejected += 1
         return
-    out.innov["gnss_alt"].append(_update(nom, p, hz.copy(), r, var_r))
+    out.innov["gnss_alt"].append(scalar_update(nom, p, hz.copy(), r, var_r))
     if cfg.use_gnss_velocity and gn.vel_n is not None and g_vsd is not None:
         hz[:] = 0.0
         hz[IV] = 1.0
         var_v = float(g_vsd[i, 2]) ** 2
         rv = -float(gn.vel_n[i, 2]) - nom[IV]
         if rv**2 <= cfg.gnss_gate_sigma**2 * _innovation_var(p, hz, var_v):
-            out.innov["gnss_vel"].append(_update(nom, p, hz.copy(), rv, var_v))
+            out.innov["gnss_vel"].append(scalar_update(nom, p, hz.copy(), rv, var_v))
 
 
-def _filter_pass(drive: Drive, vi: VerticalInputs, model: SensorModel, nz: _Noise,
+def _filter_pass(drive: Drive, vi: VerticalInputs, model: SensorModel, nz: Noise,
                  nom: FloatArray, p: FloatArray, cfg: VEKF7Config) -> _Pass:
     """Propagate through the IMU epochs and update at each event (module docstring); ``nom``
     and ``p`` end as the final state."""
@@ -444,8 +291,8 @@ def _filter_pass(drive: Drive, vi: VerticalInputs, model: SensorModel, nz: _Nois
     n = t.size
     h0 = float(drive.origin_lla[2])
     baro_alt = drive.baro.altitude
-    et, ek, ei, kk = _events(drive)
-    lever_dz = _lever_dz(drive, vi)
+    et, ek, ei, kk = measurement_events(drive)
+    lever_dz = lever_arm_dz(drive, vi)
     out = _Pass(np.empty(n), np.empty(n), [], [],
                 {"baro": [], "gnss_alt": [], "gnss_vel": []}, 0)
     h_out, v_out = out.h, out.v
@@ -455,13 +302,13 @@ def _filter_pass(drive: Drive, vi: VerticalInputs, model: SensorModel, nz: _Nois
     next_cov = t[0]
     hz = np.zeros(NX)
     args = (t, vi.f_down, vi.lat, vi.c33, vi.f_z_b, vi.coriolis_down,
-            _transport_rate2(drive, vi), nz.phi_b, nz.q_b, nz.phi_ab, nz.q_ab, nz.q_acc,
+            transport_rate2(drive, vi), nz.phi_b, nz.q_b, nz.phi_ab, nz.q_ab, nz.q_acc,
             gap_threshold(t), GAP_ACCEL_SD**2)
     gate = new_gate_state()
     for j in range(et.size):
         k = int(kk[j])
         if k > k_cur:
-            _propagate(k_cur, k, *args, nom, p, h_out, v_out)
+            propagate(k_cur, k, *args, nom, p, h_out, v_out)
             k_cur = k
         lag = t[k] - et[j]  # evaluate the model at the measurement stamp
         h_m = nom[IH] - nom[IV] * lag
@@ -472,7 +319,7 @@ def _filter_pass(drive: Drive, vi: VerticalInputs, model: SensorModel, nz: _Nois
             jac = baro_jacobian(h_m, nom[IV], nom[IS], nom[ITD], h0)
             hz[:] = 0.0
             hz[IH], hz[IV], hz[IS], hz[ITD], hz[IBB] = jac
-            out.innov["baro"].append(_update(nom, p, hz.copy(), z - zhat, nz.r_baro))
+            out.innov["baro"].append(scalar_update(nom, p, hz.copy(), z - zhat, nz.r_baro))
         else:
             assert g_psd is not None
             _gnss_update(nom, p, gate, float(et[j]), int(ei[j]), h_m, float(lever_dz[k]),
@@ -483,7 +330,7 @@ def _filter_pass(drive: Drive, vi: VerticalInputs, model: SensorModel, nz: _Nois
             out.p_cov.append(p.copy())
             next_cov = t[k] + cov_dt
     if k_cur < n - 1:
-        _propagate(k_cur, n - 1, *args, nom, p, h_out, v_out)
+        propagate(k_cur, n - 1, *args, nom, p, h_out, v_out)
     if out.t_cov and out.t_cov[-1] >= t[-1]:  # the last epoch holds the final covariance
         out.t_cov.pop()
         out.p_cov.pop()
@@ -508,8 +355,8 @@ class VEKF7:
             raise MissingStream("barometer", "vekf7: the drive has no baro stream")
         vi: VerticalInputs = vertical_inputs(drive, cfg.ahrs)
         model = sensor_model(drive)  # shared with ekf and the graphs (sensors.model)
-        nz = _noise(drive, vi, model, cfg)
-        nom, p = _initial_state(drive, model.gnss_pos_sd, nz)
+        nz = noise_densities(drive, vi, model, cfg)
+        nom, p = initial_state(drive, model.gnss_pos_sd, nz)
         res = _filter_pass(drive, vi, model, nz, nom, p, cfg)
 
         t = drive.imu.t

@@ -78,7 +78,7 @@ from ...types import (
     Trajectory,
 )
 from .inputs import AhrsConfig, vertical_inputs
-from .vekf7 import input_error_psd
+from .vekf7_setup import input_error_psd
 
 NX = 4
 

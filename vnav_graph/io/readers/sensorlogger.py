@@ -79,27 +79,24 @@ import numpy as np
 import pandas as pd
 
 from ...failures import failure_message
-from ...types import BaroStream, Drive, GnssStream, ImuStream, MagStream
+from ...types import Drive
 from ._common import (
     Report,
-    baro_alt_aligned,
-    decimal_year_unix,
-    find_gaps,
     finite_rows,
-    mag_stream,
     monotonic_mask,
-    pressure_altitude,
-    t0_unix_meta,
-    valid_pressure,
-    year_meta,
+)
+from .phone_streams import (  # noqa: F401  (MAG_SD_UT, mounting_rotation: this reader's API)
+    G0,
+    MAG_SD_UT,
+    aligned_imu,
+    baro_from_pressure,
+    gnss_from_fixes,
+    mag_from_phone,
+    mounting_rotation,
+    time_column,
+    time_meta,
 )
 
-G0 = 9.80665
-DEG = np.pi / 180.0
-SD_FLOOR_H_M = 0.5
-SD_FLOOR_V_M = 1.0
-R68_OVER_SIGMA_2D = 1.5
-MAG_SD_UT = 5.0  # phone magnetometer white-noise σ per axis [µT] (module docstring)
 _FOLDER_HEADER = ("time", "seconds_elapsed")
 
 
@@ -129,93 +126,6 @@ def is_merged_csv(head: bytes) -> bool:
     cols = set(_header(first))
     return {"time", "latitude", "longitude"} <= cols and (
         {"acc_x", "acc_y", "acc_z"} <= cols or "pressure" in cols)
-
-
-# --------------------------------------------------------------------- mounting alignment
-def mounting_rotation(f_d_mean: np.ndarray) -> np.ndarray:
-    """R_bd (3×3) of the documented phone mounting alignment from the mean specific force
-    f_d_mean (3,) in device axes [m/s²]; see the module docstring."""
-    n = float(np.linalg.norm(f_d_mean))
-    if not n > 0.5 * G0:
-        raise ValueError(f"mean specific force {n:.2f} m/s^2 is far from 1 g: cannot find the "
-                         "phone's down axis (accelerometer unit or sign wrong?)")
-    z_b = -f_d_mean / n
-    for cand in (np.array([0.0, 1.0, 0.0]), np.array([0.0, 0.0, -1.0])):
-        h = cand - np.dot(cand, z_b) * z_b
-        if np.linalg.norm(h) > 0.5:  # the candidate is more than 30° away from the vertical
-            break
-    x_b = h / np.linalg.norm(h)
-    y_b = np.cross(z_b, x_b)
-    return np.vstack([x_b, y_b, z_b])
-
-
-def _aligned_imu(t: np.ndarray, f_d: np.ndarray, w_d: np.ndarray,
-                 report: Report) -> tuple[ImuStream, dict[str, Any]]:
-    ok = finite_rows(f_d, w_d)
-    report.drop("imu", "non-finite sample", int((~ok).sum()))
-    t, f_d, w_d = t[ok], f_d[ok], w_d[ok]
-    keep = monotonic_mask(t, "imu", report)
-    t, f_d, w_d = t[keep], f_d[keep], w_d[keep]
-    if t.size < 10:
-        raise ValueError(f"only {t.size} valid IMU samples")
-    find_gaps(t, "imu", report)
-    r_bd = mounting_rotation(f_d.mean(axis=0))
-    mount = {"mat_bd": r_bd.tolist(),
-             "method": "z_b = -mean specific force; x_b = horizontal part of the phone's top "
-                       "(or back) axis; device axes x right, y top, z out of screen"}
-    return ImuStream(t, w_d @ r_bd.T, f_d @ r_bd.T), mount
-
-
-def _mag(t: np.ndarray, mag_d: np.ndarray, mount: dict[str, Any], imu: ImuStream,
-         report: Report, source: str) -> MagStream | None:
-    """Phone magnetometer [µT, device axes] → MagStream in b with the IMU's mounting matrix
-    (``B_b = R_bd B_d``); cleaning by :func:`._common.mag_stream`."""
-    r_bd = np.asarray(mount["mat_bd"], dtype=float)
-    return mag_stream(t, mag_d @ r_bd.T, MAG_SD_UT, report, imu.t, source)
-
-
-# ------------------------------------------------------------------------------- GNSS
-def _gnss(t: np.ndarray, lat_deg: np.ndarray, lon_deg: np.ndarray, h: np.ndarray,
-          hacc: np.ndarray, vacc: np.ndarray, report: Report) -> GnssStream:
-    pos = np.column_stack([lat_deg, lon_deg, h])
-    t_ok = np.isfinite(t)  # rows already rejected by the caller carry NaN stamps
-    ok = finite_rows(pos) & t_ok
-    report.drop("gnss", "missing position", int((t_ok & ~ok).sum()))
-    bad_acc = ok & ~((hacc > 0) & (vacc > 0))  # NaN compares False → dropped too
-    report.drop("gnss", "accuracy missing or invalid (<= 0)", int(bad_acc.sum()))
-    ok &= ~bad_acc
-    zero = ok & (lat_deg == 0) & (lon_deg == 0)
-    report.drop("gnss", "position (0, 0)", int(zero.sum()))
-    ok &= ~zero
-    idx = np.flatnonzero(ok)
-    keep = monotonic_mask(t[idx], "gnss", report)
-    idx = idx[keep]
-    if idx.size < 2:
-        raise ValueError("fewer than 2 valid GNSS fixes")
-    tg = t[idx]
-    find_gaps(tg, "gnss", report)
-    lla = np.column_stack([lat_deg[idx] * DEG, lon_deg[idx] * DEG, h[idx]])
-    sh = np.maximum(hacc[idx] / R68_OVER_SIGMA_2D, SD_FLOOR_H_M)
-    sv = np.maximum(vacc[idx], SD_FLOOR_V_M)
-    return GnssStream(tg, lla, np.column_stack([sh, sh, sv]))
-
-
-def _baro(t: np.ndarray, p_hpa: np.ndarray, gnss: GnssStream,
-          report: Report) -> tuple[BaroStream | None, float | None]:
-    p = p_hpa * 100.0  # hPa → Pa
-    ok = valid_pressure(p) & np.isfinite(t)
-    report.drop("baro", "missing or implausible pressure", int((~ok).sum()))
-    t, p = t[ok], p[ok]
-    keep = monotonic_mask(t, "baro", report)
-    t, p = t[keep], p[keep]
-    if t.size < 2:
-        report.notes.append("fewer than 2 valid pressure samples: drive has no barometer")
-        return None, None
-    find_gaps(t, "baro", report)
-    alt, off = baro_alt_aligned(t, pressure_altitude(p), gnss.t, gnss.lla[:, 2])
-    report.notes.append(f"baro alt = ISA pressure altitude + {off:.2f} m (datum aligned to GNSS "
-                        "height over the first 10 s of fixes); pressure converted hPa -> Pa")
-    return BaroStream(t, p, alt), off
 
 
 def well_formed_rows(text: str) -> tuple[str, int]:
@@ -308,7 +218,74 @@ def read_sensorlogger_folder(path: str | Path) -> Drive:
     def stamped(df: pd.DataFrame) -> np.ndarray:
         return _num(df, "seconds_elapsed")
 
-    # accelerometer: raw (gravity included) preferred; else user acceleration + gravity
+    t_a, a, acc_src = _folder_accel(load, stamped, folder, report, ios_sign)
+    gyro_df = load("GyroscopeUncalibrated")
+    gyro_src = "GyroscopeUncalibrated"
+    if gyro_df is None:
+        gyro_df, gyro_src = load("Gyroscope"), "Gyroscope"
+    if gyro_df is None:
+        raise ValueError(f"{folder.name}: Sensor Logger folder has no gyroscope CSV")
+    t_w = stamped(gyro_df)
+    w = _xyz(gyro_df, folder / f"{gyro_src}.csv")
+    okw = finite_rows(w) & np.isfinite(t_w)
+    kw = np.flatnonzero(okw)[monotonic_mask(t_w[okw], "gyro", report)]
+    t_w, w = t_w[kw], w[kw]
+    if t_w.size < 2:
+        raise ValueError(f"{folder.name}: gyroscope CSV has no valid samples")
+    # gyro onto accelerometer stamps (both ~100 Hz, offsets of a few ms)
+    inside = (t_a >= t_w[0]) & (t_a <= t_w[-1])
+    report.drop("imu", "accelerometer sample outside the gyro time span", int((~inside).sum()))
+    t_a, a = t_a[inside], a[inside]
+    w_i = np.column_stack([np.interp(t_a, t_w, w[:, j]) for j in range(3)])
+    report.repair("imu", "gyro linearly interpolated onto accelerometer stamps", int(t_a.size))
+    imu, mount = aligned_imu(t_a, a, w_i, report)
+
+    loc = load("Location")
+    if loc is None:
+        raise ValueError(f"{folder.name}: Sensor Logger folder has no Location.csv (no GNSS)")
+    t_l, vals = _fixes(stamped(loc), loc, report)
+    gnss = gnss_from_fixes(t_l, *(vals[:, j] for j in range(5)), report)
+
+    bar = load("Barometer")
+    baro, off = (None, None)
+    if bar is not None:
+        baro, off = baro_from_pressure(stamped(bar), _num(bar, "pressure"), gnss, report)
+    else:
+        report.notes.append("no Barometer.csv: drive has no barometer")
+    mag = None
+    for name in ("Magnetometer", "MagnetometerUncalibrated"):
+        mag_df = load(name)
+        if mag_df is None:
+            continue
+        if {"x", "y", "z"} <= set(mag_df.columns):
+            mag = mag_from_phone(stamped(mag_df), _xyz(mag_df, folder / f"{name}.csv"), mount, imu,
+                       report, f"{name}.csv")
+        else:
+            report.notes.append(f"{name}.csv has no x, y, z columns: drive has no "
+                                "magnetometer")
+        break
+    else:
+        report.notes.append("no Magnetometer.csv: drive has no magnetometer")
+    report.notes.append(f"IMU from {acc_src} and {gyro_src}; clock = seconds_elapsed")
+    report.notes.append("phone GNSS has no vertical velocity: vel_n not provided")
+    meta = {
+        **time_meta(loc["time"] if "time" in loc.columns else None, t_l, folder),
+        "source": "log", "name": folder.name, "format": "sensorlogger-folder",
+        "vehicle": "unknown",  # a phone: carried on anything
+        "device": meta_csv.get("device name"), "platform": platform or None,
+        "clock": "Sensor Logger seconds_elapsed [s]",
+        "imu_frame": "phone mounting alignment (see imu_mounting)", "imu_mounting": mount,
+        "height_reference": "ellipsoid", "baro_alt_offset_m": off, "averaged_1s": False,
+        **report.as_meta(),
+    }
+    return Drive(imu, gnss, baro, gnss.lla[0].copy(), meta=meta, mag=mag)
+
+
+def _folder_accel(load: Any, stamped: Any, folder: Path, report: Report,
+                  ios_sign: bool) -> tuple[np.ndarray, np.ndarray, str]:
+    """Accelerometer stamps, samples [m/s², gravity included] and source of a folder export:
+    the raw ``AccelerometerUncalibrated`` preferred, else ``Accelerometer`` + ``Gravity``;
+    samples in g converted, the iOS sign convention undone."""
     acc_df = load("AccelerometerUncalibrated")
     if acc_df is not None:
         t_a = stamped(acc_df)
@@ -334,31 +311,13 @@ def read_sensorlogger_folder(path: str | Path) -> Drive:
     if ios_sign:
         a = -a
         report.notes.append("iOS sign convention (standardisation off): acceleration negated")
-    gyro_df = load("GyroscopeUncalibrated")
-    gyro_src = "GyroscopeUncalibrated"
-    if gyro_df is None:
-        gyro_df, gyro_src = load("Gyroscope"), "Gyroscope"
-    if gyro_df is None:
-        raise ValueError(f"{folder.name}: Sensor Logger folder has no gyroscope CSV")
-    t_w = stamped(gyro_df)
-    w = _xyz(gyro_df, folder / f"{gyro_src}.csv")
-    okw = finite_rows(w) & np.isfinite(t_w)
-    kw = np.flatnonzero(okw)[monotonic_mask(t_w[okw], "gyro", report)]
-    t_w, w = t_w[kw], w[kw]
-    if t_w.size < 2:
-        raise ValueError(f"{folder.name}: gyroscope CSV has no valid samples")
-    # gyro onto accelerometer stamps (both ~100 Hz, offsets of a few ms)
-    inside = (t_a >= t_w[0]) & (t_a <= t_w[-1])
-    report.drop("imu", "accelerometer sample outside the gyro time span", int((~inside).sum()))
-    t_a, a = t_a[inside], a[inside]
-    w_i = np.column_stack([np.interp(t_a, t_w, w[:, j]) for j in range(3)])
-    report.repair("imu", "gyro linearly interpolated onto accelerometer stamps", int(t_a.size))
-    imu, mount = _aligned_imu(t_a, a, w_i, report)
+    return t_a, a, acc_src
 
-    loc = load("Location")
-    if loc is None:
-        raise ValueError(f"{folder.name}: Sensor Logger folder has no Location.csv (no GNSS)")
-    t_l = stamped(loc)
+
+def _fixes(t_l: np.ndarray, loc: pd.DataFrame, report: Report) -> tuple[np.ndarray, np.ndarray]:
+    """``Location.csv`` stamps (NaN for a stale fix from before the recording and for a
+    re-delivered one, every field identical to the previous row) and the columns latitude,
+    longitude, altitude, horizontal and vertical accuracy."""
     stale = t_l < 0
     report.drop("gnss", "stale fix from before the recording start (seconds_elapsed < 0)",
                 int(stale.sum()))
@@ -374,41 +333,7 @@ def read_sensorlogger_folder(path: str | Path) -> Drive:
     report.drop("gnss", "repeated fix (all fields identical to the previous row)",
                 int(rep.sum()))
     t_l = np.where(stale | rep, np.nan, t_l)
-    gnss = _gnss(t_l, *(vals[:, j] for j in range(5)), report)
-
-    bar = load("Barometer")
-    baro, off = (None, None)
-    if bar is not None:
-        baro, off = _baro(stamped(bar), _num(bar, "pressure"), gnss, report)
-    else:
-        report.notes.append("no Barometer.csv: drive has no barometer")
-    mag = None
-    for name in ("Magnetometer", "MagnetometerUncalibrated"):
-        mag_df = load(name)
-        if mag_df is None:
-            continue
-        if {"x", "y", "z"} <= set(mag_df.columns):
-            mag = _mag(stamped(mag_df), _xyz(mag_df, folder / f"{name}.csv"), mount, imu,
-                       report, f"{name}.csv")
-        else:
-            report.notes.append(f"{name}.csv has no x, y, z columns: drive has no "
-                                "magnetometer")
-        break
-    else:
-        report.notes.append("no Magnetometer.csv: drive has no magnetometer")
-    report.notes.append(f"IMU from {acc_src} and {gyro_src}; clock = seconds_elapsed")
-    report.notes.append("phone GNSS has no vertical velocity: vel_n not provided")
-    meta = {
-        **_time_meta(loc["time"] if "time" in loc.columns else None, t_l, folder),
-        "source": "log", "name": folder.name, "format": "sensorlogger-folder",
-        "vehicle": "unknown",  # a phone: carried on anything
-        "device": meta_csv.get("device name"), "platform": platform or None,
-        "clock": "Sensor Logger seconds_elapsed [s]",
-        "imu_frame": "phone mounting alignment (see imu_mounting)", "imu_mounting": mount,
-        "height_reference": "ellipsoid", "baro_alt_offset_m": off, "averaged_1s": False,
-        **report.as_meta(),
-    }
-    return Drive(imu, gnss, baro, gnss.lla[0].copy(), meta=meta, mag=mag)
+    return t_l, vals
 
 
 # ---------------------------------------------------------------------- the merged CSV
@@ -433,25 +358,25 @@ def read_merged_csv(path: str | Path) -> Drive:
     t = t - t0 + 0.5  # stamp each 1 s mean at its bin centre (labels are bin starts)
     f_d = np.column_stack([_num(df, c) for c in ("acc_x", "acc_y", "acc_z")])
     w_d = np.column_stack([_num(df, c) for c in ("gyro_x", "gyro_y", "gyro_z")])
-    imu, mount = _aligned_imu(t, f_d, w_d, report)
-    gnss = _gnss(t, _num(df, "latitude"), _num(df, "longitude"), _num(df, "altitude"),
+    imu, mount = aligned_imu(t, f_d, w_d, report)
+    gnss = gnss_from_fixes(t, _num(df, "latitude"), _num(df, "longitude"), _num(df, "altitude"),
                  _num(df, "horizontalAccuracy"), _num(df, "verticalAccuracy"), report)
     baro, off = (None, None)
     if "pressure" in df.columns:
-        baro, off = _baro(t, _num(df, "pressure"), gnss, report)
+        baro, off = baro_from_pressure(t, _num(df, "pressure"), gnss, report)
     else:
         report.notes.append("no pressure column: drive has no barometer")
     mag = None
     if {"mag_x", "mag_y", "mag_z"} <= set(df.columns):
         mag_d = np.column_stack([_num(df, c) for c in ("mag_x", "mag_y", "mag_z")])
-        mag = _mag(t, mag_d, mount, imu, report, "mag_x/y/z columns (1 s means)")
+        mag = mag_from_phone(t, mag_d, mount, imu, report, "mag_x/y/z columns (1 s means)")
     else:
         report.notes.append("no mag_x/y/z columns: drive has no magnetometer")
     report.notes.append("every row is a 1 s mean (IMU, GNSS and baro averaged over the bin); "
                         "stamps at bin centres; Android sign convention assumed for acc")
     report.notes.append("phone GNSS has no vertical velocity: vel_n not provided")
     meta = {
-        **_time_meta(df["time"] if "time" in df.columns else None, t, path, shift=0.5),
+        **time_meta(df["time"] if "time" in df.columns else None, t, path, shift=0.5),
         "source": "log", "name": path.stem, "format": "sensorlogger-merged-1hz",
         "vehicle": "unknown",  # a phone: carried on anything
         "clock": "seconds since the first row's time + 0.5 s (bin centre)",
@@ -476,60 +401,10 @@ def _read_csv_text(text: str, path: Path) -> pd.DataFrame:
     return df
 
 
-# Unix epochs of 1973..2286 in each unit span [1e8, 1e10) s; the decade tells the unit (a
-# single "> 1e14 means ns" rule read µs as ns and ms as s). Below 1e8: plain seconds (a
-# relative clock); the sanity checks refuse it when its row interval is implausible.
-_EPOCH_UNITS = ((0.0, 1e8, 1.0), (1e8, 1e10, 1.0), (1e11, 1e13, 1e-3), (1e14, 1e16, 1e-6),
-                (1e17, 1e19, 1e-9))
-
-
-def _epoch_scale(median: float, path: Path) -> float:
-    """Seconds per unit of a numeric epoch column, told from its magnitude."""
-    for lo, hi, scale in _EPOCH_UNITS:
-        if lo <= abs(median) < hi:
-            return scale
-    raise ValueError(f"{path.name}: numeric time column (median {median:.6g}) is not a Unix "
-                     "epoch in s, ms, µs or ns")
-
-
-def _time_column(col: pd.Series, path: Path) -> tuple[np.ndarray, float] | None:
-    """Stamps [s] of a time column and the Unix time [s] of their zero: a numeric epoch in
-    s, ms, µs or ns (Sensor Logger: ns; absolute, zero 0; ``ValueError`` when its magnitude
-    is none of these) or ISO UTC text (seconds since its first stamp, exact; None when more
-    than half of it does not parse)."""
-    num = pd.to_numeric(col, errors="coerce")
-    if num.notna().mean() > 0.9:
-        v = num.to_numpy(dtype=float)
-        return v * _epoch_scale(float(np.nanmedian(v)), path), 0.0
-    ts = pd.to_datetime(col, errors="coerce", utc=True)
-    if ts.isna().mean() > 0.5:
-        return None
-    first = ts.dropna().iloc[0]
-    return (ts - first).dt.total_seconds().to_numpy(dtype=float), float(first.timestamp())
-
-
-def _time_meta(col: pd.Series | None, t: np.ndarray, path: Path,
-               shift: float = 0.0) -> dict[str, float]:
-    """What a Unix-epoch or ISO time column beside the stamps ``t`` tells, parsed once:
-    ``decimal_year`` of its first stamp (the date of the Earth's field for the magnetometer)
-    and ``t0_unix_s`` (``t0_unix_meta``; ``shift``: 0.5 s for the merged CSV's bin centres);
-    {} when it holds no absolute time."""
-    if col is None:
-        return {}
-    try:
-        tc = _time_column(col, path)
-    except ValueError:
-        return {}
-    if tc is None:
-        return {}
-    return {**year_meta(decimal_year_unix(tc[0] + tc[1])),
-            **t0_unix_meta(tc[0] + tc[1] + shift, t)}
-
-
 def _merged_time(df: pd.DataFrame, path: Path) -> np.ndarray:
     if "seconds_elapsed" in df.columns:
         return _num(df, "seconds_elapsed")
-    tc = _time_column(df["time"], path)
+    tc = time_column(df["time"], path)
     if tc is None:
         raise ValueError(f"{path.name}: cannot parse the time column")
     return tc[0]  # the caller shifts the stamps to the first row

@@ -43,7 +43,11 @@ custom factors on a long drive slow ``graph-isam2`` down; C++ built-ins cost not
 Bad input — an extension that is not callable or returns something else than ``Terms``, a
 factor that is not a ``gtsam.NonlinearFactor``, a key that is neither a keyframe variable nor
 a declared new variable, a keyframe index out of range, a reserved letter, a duplicate
-variable, a prior of the wrong size — is a one-line ``ValueError`` naming the extension.
+variable, a prior of the wrong size, a factor whose error or Jacobians have the wrong shape at
+the initial values (each factor is evaluated once in Python before GTSAM linearises it: a wrong
+Jacobian shape would crash GTSAM's C++) — is a one-line ``failures.ExtensionError`` (a
+``ValueError``) naming the extension; ``run`` and ``holdout`` stop on it with exit 2, a bench
+row is ``failed`` with it.
 
 Worked examples: ``examples/ex_graph_factor_zupt.py`` (zero-velocity factor at standstills),
 ``ex_graph_factor_mag.py`` (magnetometer with a hard-iron bias variable),
@@ -61,9 +65,11 @@ import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import B, C, V, X
 
+from ....failures import ExtensionError
 from ....geo.frames import lla_to_ned
 from ....types import Drive, FloatArray
 from .interval_factors import rot_t_n
+from .jacobians import factor_shapes
 
 __all__ = ["RESERVED", "GraphExtension", "GraphView", "Terms", "Variable", "B", "C", "V", "X"]
 
@@ -204,7 +210,7 @@ class Collected:
             thr = default if var.relinearize_threshold is None else var.relinearize_threshold
             vec = np.full(tangent_dim(value), float(thr))
             if ch in out and out[ch].size != vec.size:
-                raise ValueError(
+                raise ExtensionError(
                     f"graph extension: variables with the letter {ch!r} have different "
                     f"dimensions ({out[ch].size} and {vec.size}); graph-isam2's typed "
                     "relinearisation thresholds need one dimension per letter — use "
@@ -249,13 +255,14 @@ def key_name(key: int) -> str:
 def _normalise(var: Any, who: str) -> tuple[Any, Any]:
     """(value, prior factor) of a declared variable, or a one-line ValueError."""
     if not isinstance(var, Variable):
-        raise ValueError(f"{who}: variables must be graph.extend.Variable, not "
+        raise ExtensionError(f"{who}: variables must be graph.extend.Variable, not "
                          f"{type(var).__name__}")
     key = int(var.key)
     ch = chr(gtsam.Symbol(key).chr())
     if ch in RESERVED:
-        raise ValueError(f"{who}: variable {key_name(key)} uses the letter {ch!r}, reserved for "
-                         f"the smoother's own variables ({', '.join(RESERVED)}); pick another")
+        raise ExtensionError(f"{who}: variable {key_name(key)} uses the letter {ch!r}, reserved "
+                             f"for the smoother's own variables ({', '.join(RESERVED)}); pick "
+                             "another")
     value = var.value
     if not isinstance(value, (gtsam.Pose3, gtsam.Rot3)):
         try:
@@ -263,7 +270,7 @@ def _normalise(var: Any, who: str) -> tuple[Any, Any]:
         except (TypeError, ValueError):
             value = np.array([np.nan])
         if value.ndim != 1 or not np.all(np.isfinite(value)):
-            raise ValueError(f"{who}: variable {key_name(key)}: value must be a finite vector, "
+            raise ExtensionError(f"{who}: variable {key_name(key)}: value must be a finite vector, "
                              f"a float, gtsam.Pose3 or gtsam.Rot3")
     mean = value if var.prior_mean is None else var.prior_mean
     if not isinstance(value, (gtsam.Pose3, gtsam.Rot3)):
@@ -272,10 +279,10 @@ def _normalise(var: Any, who: str) -> tuple[Any, Any]:
         except (TypeError, ValueError):
             mean = np.array([np.nan])
         if mean.shape != value.shape or not np.all(np.isfinite(mean)):
-            raise ValueError(f"{who}: variable {key_name(key)}: prior_mean must be a finite "
+            raise ExtensionError(f"{who}: variable {key_name(key)}: prior_mean must be a finite "
                              f"vector of the value's shape {value.shape}")
     elif type(mean) is not type(value):
-        raise ValueError(f"{who}: variable {key_name(key)}: prior_mean must be a "
+        raise ExtensionError(f"{who}: variable {key_name(key)}: prior_mean must be a "
                          f"{type(value).__name__} like its value")
     n = tangent_dim(value)
     try:
@@ -285,7 +292,7 @@ def _normalise(var: Any, who: str) -> tuple[Any, Any]:
     if sd.size == 1:
         sd = np.full(n, float(sd[0]))
     if sd.shape != (n,) or not np.all(np.isfinite(sd) & (sd > 0)):
-        raise ValueError(f"{who}: variable {key_name(key)}: prior_sd must be {n} positive "
+        raise ExtensionError(f"{who}: variable {key_name(key)}: prior_sd must be {n} positive "
                          f"finite σ (one per tangent component), not {var.prior_sd!r}")
     return value, prior_factor(key, mean, gtsam.noiseModel.Diagonal.Sigmas(sd))
 
@@ -300,12 +307,12 @@ def check_extensions(extensions: Any) -> tuple[Callable[[GraphView], Terms], ...
     if extensions is None:
         return ()
     if callable(extensions) or isinstance(extensions, (str, bytes)):
-        raise ValueError("extensions must be a list of callables view -> Terms, not a single "
+        raise ExtensionError("extensions must be a list of callables view -> Terms, not a single "
                          f"{type(extensions).__name__}; wrap it: extensions=[f]")
     out = tuple(extensions)
     for i, e in enumerate(out):
         if not callable(e):
-            raise ValueError(f"graph extension {i}: {type(e).__name__} is not callable "
+            raise ExtensionError(f"graph extension {i}: {type(e).__name__} is not callable "
                              "(expected a function view -> Terms)")
     return out
 
@@ -322,7 +329,7 @@ def collect(extensions: Sequence[Callable[[GraphView], Terms]], view: GraphView)
         who = _name(ext, i)
         terms = ext(view)
         if not isinstance(terms, Terms):
-            raise ValueError(f"{who}: returned {type(terms).__name__}, expected "
+            raise ExtensionError(f"{who}: returned {type(terms).__name__}, expected "
                              "graph.extend.Terms(factors=[...], variables=[...])")
         name = who[who.index("(") + 1:-1] if who.endswith(")") else who
         col.counts[name if name not in col.counts else f"{name} {i}"] = {
@@ -331,12 +338,12 @@ def collect(extensions: Sequence[Callable[[GraphView], Terms]], view: GraphView)
             value, prior = _normalise(var, who)
             key = int(var.key)
             if key in col.variables:
-                raise ValueError(f"{who}: variable {key_name(key)} is declared twice")
+                raise ExtensionError(f"{who}: variable {key_name(key)} is declared twice")
             col.variables[key] = (var, value)
             col.prior[key] = prior
         for f in terms.factors:
             if not isinstance(f, gtsam.NonlinearFactor):
-                raise ValueError(f"{who}: factors must be gtsam.NonlinearFactor (a C++ factor "
+                raise ExtensionError(f"{who}: factors must be gtsam.NonlinearFactor (a C++ factor "
                                  f"or gtsam.CustomFactor), not {type(f).__name__}")
             pending.append((f, [int(k) for k in f.keys()], who))
     for f, keys, who in pending:
@@ -347,14 +354,14 @@ def collect(extensions: Sequence[Callable[[GraphView], Terms]], view: GraphView)
             sym = gtsam.Symbol(key)
             ch, idx = chr(sym.chr()), int(sym.index())
             if ch == "k":
-                raise ValueError(f"{who}: a factor on {key_name(key)}: the baro calibration K "
+                raise ExtensionError(f"{who}: a factor on {key_name(key)}: the baro calibration K "
                                  "cannot take user factors")
             if ch not in template:
-                raise ValueError(f"{who}: a factor on {key_name(key)}, which is neither a "
+                raise ExtensionError(f"{who}: a factor on {key_name(key)}, which is neither a "
                                  "keyframe variable (X, V, B" + (", C" if view.has_baro else "")
                                  + ") nor a declared Variable")
             if not 0 <= idx < template[ch]:
-                raise ValueError(f"{who}: a factor on {key_name(key)}: keyframe index out of "
+                raise ExtensionError(f"{who}: a factor on {key_name(key)}: keyframe index out of "
                                  f"range 0..{nk - 1}")
             ready = max(ready, idx)
         col.factors.append(f)
@@ -364,7 +371,25 @@ def collect(extensions: Sequence[Callable[[GraphView], Terms]], view: GraphView)
                 col.first[key] = min(col.first.get(key, ready), ready)
     for key in col.variables:
         col.first.setdefault(key, 0)
+    _check_shapes(col, [(f, who) for f, _, who in pending], view)
     return col
+
+
+def _check_shapes(col: Collected, factors: list[tuple[Any, str]], view: GraphView) -> None:
+    """Each factor evaluated once at the initial values with its Jacobians' shapes checked
+    (``jacobians.factor_shapes``): a wrong shape would crash GTSAM's C++ in ``linearize``."""
+    vals = gtsam.Values(view.values)
+    for key, (_, value) in col.variables.items():
+        if not vals.exists(key):
+            vals.insert(key, value)
+    for f, who in factors:
+        if not all(vals.exists(k) for k in f.keys()):
+            continue  # a key the view does not hold (cannot be evaluated here)
+        try:
+            factor_shapes(f, vals)
+        except ValueError as exc:
+            keys = ", ".join(key_name(k) for k in f.keys())
+            raise ExtensionError(f"{who}: its factor on {keys}: {exc}") from None
 
 
 def make_view(P: Any, vals: Any) -> GraphView:

@@ -7,9 +7,12 @@ retraction the solvers use), one column at a time. Use it with a Gaussian noise 
 robust model re-weights the linearisation but not ``whitenedError``.
 
 A ``CustomFactor`` callback that fills a Jacobian of the wrong shape crashes GTSAM's C++ (a
-segmentation fault in ``linearize``, measured with gtsam 4.3), so pass the callback as
-``error_func``: it is called first with the expected shapes checked in Python, and a wrong
-one is a one-line ValueError naming the variable.
+segmentation fault in ``linearize``, measured with gtsam 4.3). ``factor_shapes`` therefore
+evaluates the factor once through ``unwhitenedError(values, H)`` with a Python-owned
+``gtsam.JacobianVector`` (GTSAM only copies the callback's matrices into it) and checks the
+shapes before anything linearises: a wrong one is a one-line ValueError naming the variable.
+``check_jacobians`` does it first, and the smoothers do it for every extension factor at the
+initial values (``extend.collect``).
 """
 
 from __future__ import annotations
@@ -48,12 +51,16 @@ def check_jacobians(factor: Any, values: Any, eps: float = 1e-6, tol: float = 1e
                     error_func: Any = None) -> JacobianCheck:
     """Compare ``factor``'s Jacobians at ``values`` with central differences (module
     docstring). ``eps``: the tangent step; ``tol``: the largest accepted difference, relative
-    to max(1, |entry|); ``error_func``: the ``CustomFactor`` callback, whose Jacobian shapes
-    are then checked before GTSAM sees them (ValueError naming the variable)."""
+    to max(1, |entry|); ``error_func``: the ``CustomFactor`` callback, called once more on its
+    own (the factor's shapes are checked by ``factor_shapes`` in any case)."""
     keys = list(factor.keys())
     dims = values.dims()
     if error_func is not None:
         check_shapes(factor, values, error_func)
+    try:
+        factor_shapes(factor, values)
+    except ValueError as exc:
+        raise ValueError(f"check_jacobians: {exc}") from None
     lin = factor.linearize(values)
     a_full, _ = lin.jacobian()
     analytic, numerical, err = {}, {}, {}
@@ -114,3 +121,27 @@ def check_shapes(factor: Any, values: Any, error_func: Any) -> None:
         if got != want:
             raise ValueError(f"check_jacobians: the Jacobian of {gtsam.DefaultKeyFormatter(k)} "
                              f"has shape {got}, expected {want}")
+
+
+def factor_shapes(factor: Any, values: Any) -> None:
+    """Evaluate a noise-model factor once at ``values`` with Jacobians requested, outside
+    GTSAM's linearisation, and check the error's length (the noise model's dimension) and
+    each Jacobian's shape (that dimension, the variable's tangent dimension); a one-line
+    ValueError names what is wrong. Factors without ``unwhitenedError`` (not noise-model
+    factors) and inactive ones are not checked."""
+    if not hasattr(factor, "unwhitenedError") or not factor.active(values):
+        return
+    keys = list(factor.keys())
+    dims = values.dims()
+    jac = gtsam.JacobianVector()
+    for _ in keys:
+        jac.append(np.zeros((0, 0)))
+    e = np.asarray(factor.unwhitenedError(values, jac), dtype=float)
+    m = int(factor.dim())
+    if e.shape != (m,):
+        raise ValueError(f"the error has shape {e.shape}, the noise model dimension is {m}")
+    for k, blk in zip(keys, jac, strict=True):
+        want = (m, int(dims[k]))
+        if np.shape(blk) != want:
+            raise ValueError(f"the Jacobian of {gtsam.DefaultKeyFormatter(k)} has shape "
+                             f"{np.shape(blk)}, expected {want}")
