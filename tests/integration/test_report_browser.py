@@ -218,3 +218,29 @@ def test_report_in_headless_chromium(tmp_path: Path) -> None:
     bad = [i for i in images if i["w"] <= 0 or i["err"]]
     assert bad == [], bad
     assert shot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and shot.stat().st_size > 20_000
+
+
+@needs_chromium
+@pytest.mark.slow
+def test_real_log_report_in_headless_chromium(tmp_path: Path, data_dir: Path) -> None:
+    """A real log's report (holdout windows, no truth, the drive's own clock and datum)
+    loads as cleanly as a simulated one: ``vnav-graph run`` on Loiter_RTL.bin with two fast
+    estimators."""
+    import sys
+
+    log = data_dir / "erle_pxf_loiter_rtl" / "Loiter_RTL.bin"
+    out = tmp_path / "out"
+    proc = subprocess.run([sys.executable, "-m", "vnav_graph", "run", str(log), "--estimators",
+                           "ekf,loop2", "--out", str(out), "--no-progress"],
+                          capture_output=True, text=True, timeout=900)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    art = Path(os.environ.get("VNAV_ARTIFACTS") or tmp_path / "artifacts")
+    art.mkdir(parents=True, exist_ok=True)
+    images, errors = load_report(out / "report.html", art / "report_real_log_screenshot.png",
+                                 tmp_path)
+    assert errors == []
+    n_png = len(list((out / "plots").glob("*.png")))
+    assert len(images) == n_png >= 2
+    bad = [i for i in images if i["w"] <= 0 or i["err"]]
+    assert bad == [], bad
+    assert "withheld" in (out / "report.html").read_text().lower()

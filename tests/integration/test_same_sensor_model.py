@@ -20,7 +20,7 @@ from vnav_graph.estimators.base import create
 from vnav_graph.estimators.ekf import kernel as kernel_mod
 from vnav_graph.estimators.ekf import model as km
 from vnav_graph.estimators.graph.batch import smoother as batch_mod
-from vnav_graph.estimators.graph.isam2 import online as isam2_mod
+from vnav_graph.estimators.graph.isam2 import causal as isam2_mod
 from vnav_graph.estimators.graph.model import problem as problem_mod
 from vnav_graph.estimators.vertical import vekf7 as vekf7_mod
 from vnav_graph.nav.gaps import gap_threshold

@@ -41,6 +41,7 @@ from .steps import (
     delayed_rows,
     grid_predict,
     heading_reset,
+    tilt_held,
     update_gated,
     update_gnss,
 )
@@ -335,7 +336,7 @@ def run_filter(grids, init, noise, events, gnss, baro, mag, settings):
                     update_gated(p, dx, heff, pend_y[e], pend_r[e], settings.gate_baro,
                                  settings.max_consec_baro, counts, C_BARO, inn_baro, rej_baro,
                                  idx, settings.huber_baro,
-                                 settings.tilt_consider and not pend_ok[e])
+                                 tilt_held(p, settings, pend_ok[e]))
                 else:
                     update_gated(p, dx, heff, pend_y[e], pend_r[e], mag.gate, mag.max_consec,
                                  counts, C_MAG, inn_mag, rej_mag, idx, 0.0, False)

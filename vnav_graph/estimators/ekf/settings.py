@@ -70,8 +70,9 @@ class EkfConfig:
         (``ekf.carry``).
     fb_separation: ``ekf-rts`` only: run the filter backward too and report the
         forward/backward separation (``ekf.backward``; ``info["fb_separation"]``).
-    tilt_consider: while the heading is unknown, horizontal GNSS rows hold the attitude as
-        Schmidt consider states (``ekf.steps.update_gnss``).
+    tilt_consider: while the heading is unknown and the tilt σ exceeds 5° (a levelling in
+        motion), the GNSS and baro updates hold the attitude as Schmidt consider states
+        (``ekf.steps.tilt_held``).
 
     Magnetometer headings are thinned to one per ``mag_interval_s`` because their errors
     (interference, soft iron) are correlated over seconds: 10 Hz of them would be trusted
