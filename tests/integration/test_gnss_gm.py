@@ -1,5 +1,5 @@
 """The optional Gauss-Markov GNSS height error state, ``ekf-rts`` and
-``graph-batch`` (the same model: ``sensors.model.GnssHeightGM``; the graph's G(k) chain).
+``graph-batch`` (the same model: ``sensors.gnss_model.GnssGM``; the graph's G(k) chain).
 
 Drive: hill-drive, 300 s, GNSS height error = white 0.5 m + Gauss-Markov σ 3 m, τ 120 s (the
 receiver reports σ_v = √(0.5² + 3²), as ``sensors.gnss`` does). Treated as white, 10 Hz of
@@ -18,7 +18,7 @@ import pytest
 from vnav_graph.estimators.ekf import model as km
 from vnav_graph.estimators.ekf.filter import EKFRTS, EkfConfig
 from vnav_graph.estimators.graph import GraphBatch, GraphConfig
-from vnav_graph.sensors.model import GM_WHITE_MIN_FRACTION, GnssHeightGM, gnss_gm_split
+from vnav_graph.sensors.gnss_model import GM_WHITE_MIN_FRACTION, GnssGM, white_rest
 from vnav_graph.simulation.scenario import load_scenario, simulate
 
 GM_SD, GM_TAU = 3.0, 120.0
@@ -26,12 +26,16 @@ N_SEEDS = 6
 
 
 def test_split_closed_form():
-    gm = GnssHeightGM(3.0, 120.0)
     sd = np.array([np.hypot(0.5, 3.0), 3.0, 10.0, np.nan])
-    out = gnss_gm_split(sd, gm)
+    out = white_rest(sd, 3.0)
     np.testing.assert_allclose(out[:3], [0.5, GM_WHITE_MIN_FRACTION * 3.0, np.sqrt(91.0)])
     assert np.isnan(out[3])
-    np.testing.assert_array_equal(gnss_gm_split(sd[:3], None), sd[:3])
+    # per axis: the height-only state splits the down column only, the 3-axis one all three
+    pos_sd = np.tile([np.hypot(0.5, 2.0), np.hypot(0.5, 2.0), np.hypot(1.0, 3.0)], (2, 1))
+    np.testing.assert_allclose(GnssGM(0.0, 3.0, 120.0).split(pos_sd)[:, 2], 1.0)
+    np.testing.assert_array_equal(GnssGM(0.0, 3.0, 120.0).split(pos_sd)[:, :2], pos_sd[:, :2])
+    np.testing.assert_allclose(GnssGM(2.0, 3.0, 120.0).split(pos_sd), [[0.5, 0.5, 1.0]] * 2)
+    assert GnssGM(2.0, 3.0, 60.0).axes == (0, 1, 2) and GnssGM(2.0, 0.0, 60.0).axes == (0, 1)
 
 
 def test_config_rejects_bad_settings():
@@ -44,6 +48,8 @@ def test_config_rejects_bad_settings():
         GraphConfig(gnss_gm_sd_v=float("nan"))
     with pytest.raises(ValueError, match="GraphConfig.gnss_gm_sd_v"):
         GraphConfig(gnss_gm_sd_v=2.0, gnss_gm_tau_s=-1.0)
+    with pytest.raises(ValueError, match="gnss_gm_sd_h"):
+        EkfConfig(gnss_gm_sd_h=-2.0)
     assert GraphConfig().gnss_gm is None
 
 
@@ -51,9 +57,10 @@ def test_error_dynamics_entry():
     ing = np.zeros(km.NING)
     ing[0:9] = np.eye(3).ravel()
     f = km.build_f(ing, np.inf, np.inf, np.inf, 120.0)
-    assert f[km.IGH, km.IGH] == pytest.approx(-1.0 / 120.0)
-    assert np.count_nonzero(f[km.IGH]) == 1 and np.count_nonzero(f[:, km.IGH]) == 1
-    assert np.all(km.build_f(ing, np.inf, np.inf, np.inf, np.inf)[km.IGH] == 0.0)
+    for i in range(km.IGE, km.IGE + 3):
+        assert f[i, i] == pytest.approx(-1.0 / 120.0)
+        assert np.count_nonzero(f[i]) == 1 and np.count_nonzero(f[:, i]) == 1
+        assert np.all(km.build_f(ing, np.inf, np.inf, np.inf, np.inf)[i] == 0.0)
 
 
 @pytest.fixture(scope="module")
@@ -139,7 +146,7 @@ def test_gm_link_is_the_exact_discrete_process():
 
     from vnav_graph.estimators.graph.model.cpp_factors import gnss_gm_factor
 
-    gm = GnssHeightGM(3.0, 120.0)
+    gm = GnssGM(0.0, 3.0, 120.0)
     f = gnss_gm_factor(4, 2.0, gm)
     vals = gtsam.Values()
     vals.insert(G(4), np.array([1.3]))

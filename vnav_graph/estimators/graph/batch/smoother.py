@@ -294,11 +294,11 @@ def accel_scale_info(P: Problem, vals: Any, cov_of: Any) -> dict[str, Any]:
 
 
 def gnss_gm_info(P: Problem) -> dict[str, Any]:
-    """``info["gnss_height_gm"]`` (σ, τ of the GNSS height state, as the EKF reports it) when
-    the solve carried it, else nothing."""
+    """``info["gnss_gm"]`` (and ``gnss_height_gm``: ``GnssGM.info``, as the EKF reports it)
+    when the solve carried the GNSS error state, else nothing."""
     if P.gm is None:
         return {}
-    return {"gnss_height_gm": {"sd_m": P.gm.sd_m, "tau_s": P.gm.tau_s}}
+    return P.gm.info()
 
 
 def provides(drive: Drive) -> frozenset[str]:

@@ -106,9 +106,11 @@ class OnlinePass:
             self.ext = collect(extensions, make_view(P, vals_i))
         self.isam: Any = gtsam.ISAM2(isam2_params(cfg, robust, self.ext))
         # running linearisation arrays (keyframe states as last estimated); gg: the GNSS
-        # height error G(k) (GraphConfig.gnss_gm_sd_v), if carried
+        # error state G(k) (GraphConfig.gnss_gm_*; (K,) for the height alone), if carried
         self.rot, self.pos, self.vel = np.zeros((nk, 3, 3)), np.zeros((nk, 3)), np.zeros((nk, 3))
-        self.bias, self.cb, self.gg = np.zeros((nk, 6)), np.zeros(nk), np.zeros(nk)
+        gm_dim = 1 if P.gm is None else P.gm.dim
+        self.bias, self.cb = np.zeros((nk, 6)), np.zeros(nk)
+        self.gg = np.zeros(nk) if gm_dim == 1 else np.zeros((nk, gm_dim))
         self.arrays = (self.rot, self.pos, self.vel, self.bias, self.cb, self.gg)
         self.cal = {0: np.array([0.0, P.pri["tau0"]])}
         self.rot[0], self.pos[0], self.vel[0] = rot_i[0], pos_i[0], vel_i[0]
@@ -236,7 +238,7 @@ class OnlinePass:
         else:
             dt = float(P.t_kf[k + 1] - P.t_kf[k])
             self.gg[k + 1] = self.gg[k] * gm_transition(dt, P.gm.tau_s)
-            nv.insert(G(k + 1), np.array([self.gg[k + 1]]))
+            nv.insert(G(k + 1), np.array(self.gg[k + 1], ndmin=1))
             nf.add(gnss_gm_factor(k, dt, P.gm))
         return fix_at
 

@@ -298,7 +298,8 @@ def read_states(est: Any, keys_k: Any, arrays: tuple[Any, ...], P: Any,
         if has_baro:
             cb[k] = est.atVector(C(k))[0]
         if has_gm:
-            gg[k] = est.atVector(G(k))[0]
+            g = est.atVector(G(k))
+            gg[k] = g[0] if gg.ndim == 1 else g
 
 
 def state_keys(keys_k: Any, P: Any, b_last: int | None = None) -> Any:

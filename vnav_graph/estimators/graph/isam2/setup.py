@@ -147,7 +147,7 @@ def first_keyframe(P: Any, r0: Any, p0: Any, v0: Any, k0: Any
         vals0.insert(C(0), np.zeros(1))
         vals0.insert(K(0), k0)
     if P.gm is not None:
-        vals0.insert(G(0), np.zeros(1))
+        vals0.insert(G(0), np.zeros(P.gm.dim))
     if P.ka is not None:
         vals0.insert(A(0), np.zeros(3))
     fix_at: list[tuple[int, int]] = []

@@ -30,10 +30,11 @@ calibration (s, τd) — the 16 "core" columns — and the accelerometer bias of
 (Δp(τ) − ½τ²b_a), so ∂p(t)/∂b_a = ½τ(T − τ)·R_k and ∂v(t)/∂b_a = (½T − τ)·R_k; leaving these
 columns out makes the Jacobian disagree with the cost and Gauss-Newton converge only linearly.
 The gyro-bias dependence of the interpolant (second order over one interval) is not modelled.
-With the optional Gauss-Markov GNSS height error (``GraphConfig.gnss_gm_sd_v``) the rows have
-two more columns, that error at keyframes k and k+1 (``COL_G0``, ``COL_G1``; linear in time
-between them, like the baro bias): the GNSS down coordinate is predicted as
-p_D(t) + (C l)_D + g(t) (the EKF's model, ``ekf.model``).
+The GNSS rows are the shared measurement model (``sensors.gnss_model``: antenna p + C l + e,
+attitude Jacobian −[(C l)×] in t turned into the body rotation's by ``body_tilt``). With the
+optional Gauss-Markov GNSS error state (``GraphConfig.gnss_gm_sd_h`` / ``gnss_gm_sd_v``,
+G(k) of dimension d = 1 (down), 2 (north, east) or 3) the rows have 2d more columns, that
+error at keyframes k and k+1 (``gm_cols``; linear in time between them, like the baro bias).
 """
 
 from __future__ import annotations
@@ -48,6 +49,7 @@ from ....geo.frames import lla_to_ned, ned_to_lla, skew
 from ....nav.arrays import put
 from ....nav.rotations import dcm_to_quat_into, quat_to_dcm_into, so3_exp_into
 from ....sensors.baro import baro_jacobian, measure_baro
+from ....sensors.gnss_model import GM_AXES, antenna_position_batch, body_tilt
 from ....types import FloatArray
 from .interp import increments_at, interpolant
 
@@ -65,6 +67,23 @@ COL_G0 = 19
 COL_G1 = 20
 # key blocks of a group: (first column, width)
 BLOCKS = ((0, 6), (6, 6), (12, 1), (13, 1), (14, 2))
+
+
+def n_cols_of(gm_dim: int) -> int:
+    """Columns of the rows with a GNSS error state of dimension ``gm_dim`` (0: none)."""
+    return N_COLS + 2 * gm_dim
+
+
+def gm_cols(gm_dim: int) -> tuple[slice, slice]:
+    """Columns of the GNSS error state at keyframes k and k+1 (after ``N_COLS``); for the
+    height-only state (d = 1) they are ``COL_G0`` and ``COL_G1``."""
+    return slice(N_COLS, N_COLS + gm_dim), slice(N_COLS + gm_dim, N_COLS + 2 * gm_dim)
+
+
+def gm_dim_of(st: KeyframeStates) -> int:
+    """Dimension of the GNSS error state of ``st`` (0 when not carried)."""
+    g = st.gnss_gm
+    return 0 if g is None else (1 if g.ndim == 1 else int(g.shape[1]))
 
 
 def rot_n_e(lat: FloatArray, lon: FloatArray) -> FloatArray:
@@ -254,8 +273,9 @@ class KeyframeStates:
     rot (K, 3, 3) R_tb; pos (K, 3) tangent NED [m]; vel (K, 3) [m/s]; bias_accel (K, 3)
     [m/s²]; baro_bias (K,) [m]; scale, latency (K,) baro calibration per keyframe (constant
     for the batch graph, per segment for the incremental front end); accel_t (K, 3): the
-    unmeasured nav-frame acceleration g + δg − 2Ω×v over each interval [m/s²]; gnss_gm (K,)
-    the GNSS height Gauss-Markov error (down) [m], None when the graph has no such state."""
+    unmeasured nav-frame acceleration g + δg − 2Ω×v over each interval [m/s²]; gnss_gm (K, d)
+    the GNSS Gauss-Markov error on its axes (``GM_AXES``; (K,) for the height alone) [m],
+    None when the graph has no such state."""
 
     rot: FloatArray
     pos: FloatArray
@@ -271,8 +291,8 @@ class KeyframeStates:
 @dataclass(frozen=True)
 class IntervalRows:
     """Whitened rows ``r + J δ`` of the interval terms: interval index ``k`` (M,), residual
-    ``r`` (M,) and Jacobian ``jac`` (M, 19, or 21 with the GNSS height Gauss-Markov error) in
-    the column order of this module."""
+    ``r`` (M,) and Jacobian ``jac`` (M, 19, or 19 + 2d with a GNSS error state of dimension d)
+    in the column order of this module."""
 
     k: np.ndarray
     r: FloatArray
@@ -346,18 +366,18 @@ def bridge_sd(dense: DenseIncrements, t: FloatArray, k: np.ndarray
 
 
 def _pos_jacobian(st: KeyframeStates, k: np.ndarray, ip: dict[str, FloatArray],
-                  lever_b: FloatArray | None) -> FloatArray:
-    """∂(p(t) + R(t)·l)/∂(X_k, X_{k+1}) in Pose3 tangent coordinates, (M, 3, 12)."""
+                  h_att: FloatArray | None) -> FloatArray:
+    """∂(p(t) + R(t)·l)/∂(X_k, X_{k+1}) in Pose3 tangent coordinates, (M, 3, 12); ``h_att``:
+    the shared model's ∂(R(t) l)/∂ψ (M, 3, 3), None without a lever arm."""
     m = k.size
     rk = st.rot[k]
     alpha = ip["alpha"][:, None, None]
     jac = np.zeros((m, 3, 12))
-    vec = ip["d"]
-    if lever_b is not None:
-        # R(t)·l = R_k ΔR(τ) l: the lever arm rotates with the perturbation of R_k
-        vec = vec + np.einsum("nji,nj->ni", rk, np.einsum("nij,j->ni", ip["rot"], lever_b))
     # R_k Exp(ω) x ≈ R_k x − R_k [x×] ω
-    jac[:, :, 0:3] = -rk @ skew(vec)
+    jac[:, :, 0:3] = -rk @ skew(ip["d"])
+    if h_att is not None:
+        # R(t)·l = R_k ΔR(τ) l rotates with R_k: ψ = R_k ω
+        jac[:, :, 0:3] += body_tilt(h_att, rk)
     jac[:, :, 3:6] = (1 - alpha) * rk
     jac[:, :, 9:12] = alpha * st.rot[k + 1]
     return jac
@@ -433,7 +453,7 @@ def gnss_rows(
     lever-arm rotation term is omitted) against ``vel_t`` (M, 3) [m/s]. ``incr``: the
     increments ``dense.at`` at the fixes (cached by the caller; they do not change);
     ``out``: an (n_rows, n_cols) array to hold the Jacobian (overwritten), else a new one
-    (n_cols: ``N_COLS_GM`` when ``st.gnss_gm`` is set, else ``N_COLS``); ``k``: the interval
+    (n_cols: ``n_cols_of`` the GNSS error state's dimension); ``k``: the interval
     of each fix (default: the one holding it; a fix on keyframe k+1 can be given interval k,
     where the interpolant at τ = T is exactly that keyframe).
     The Jacobian is written in place (position rows, then velocity rows): building the
@@ -448,23 +468,32 @@ def gnss_rows(
         pos_sd = np.sqrt(pos_sd**2 + bp[:, None] ** 2)
         if vel_sd is not None:
             vel_sd = np.sqrt(vel_sd**2 + bv[:, None] ** 2)
-    p_ant = ip["p"] + (0.0 if lever is None else np.einsum("nij,j->ni", ip["rot"], lever))
+    h_att = None
+    if lever is None:
+        p_ant = ip["p"].copy()
+    else:  # the shared model: antenna = p + C l
+        d_l, h_att = antenna_position_batch(ip["rot"], lever)
+        p_ant = ip["p"] + d_l
     with_vel = vel_t is not None and vel_sd is not None
     n_blk = 2 if with_vel else 1
-    n_cols = N_COLS if st.gnss_gm is None else N_COLS_GM
+    gm_dim = gm_dim_of(st)
+    n_cols = n_cols_of(gm_dim)
     if out is None:
         out = np.zeros((n_blk * 3 * m, n_cols))
     else:
         out[...] = 0.0
     jac_all = out.reshape(n_blk * m, 3, n_cols)  # a view: fix-major rows of each block
     jac = jac_all[:m]
-    jac[:, :, 0:12] = _pos_jacobian(st, k, ip, lever)
+    jac[:, :, 0:12] = _pos_jacobian(st, k, ip, h_att)
     jac[:, :, 0:12] /= pos_sd[:, :, None]
-    if st.gnss_gm is not None:  # GNSS height error g(t), linear between the keyframes
+    if gm_dim:  # GNSS error e(t) on its axes, linear between the keyframes
         a_g = ip["alpha"]
-        p_ant[:, 2] += (1 - a_g) * st.gnss_gm[k] + a_g * st.gnss_gm[k + 1]
-        jac[:, 2, COL_G0] = (1 - a_g) / pos_sd[:, 2]
-        jac[:, 2, COL_G1] = a_g / pos_sd[:, 2]
+        g = st.gnss_gm.reshape(st.gnss_gm.shape[0], gm_dim)
+        c0, c1 = gm_cols(gm_dim)
+        for j, ax in enumerate(GM_AXES[gm_dim]):
+            p_ant[:, ax] += (1 - a_g) * g[k, j] + a_g * g[k + 1, j]
+            jac[:, ax, c0.start + j] = (1 - a_g) / pos_sd[:, ax]
+            jac[:, ax, c1.start + j] = a_g / pos_sd[:, ax]
     rows_r = [((p_ant - pos_t) / pos_sd).reshape(-1)]
     rk_all = st.rot[k]
     jac[:, :, COL_BA] = (0.5 * ip["tau"] * (ip["T"] - ip["tau"]) * ip["imu"])[:, None, None] \
