@@ -11,6 +11,10 @@ GNSS error model ``--model`` ("off", or "σ_h,σ_v,τ" [m, m, s] given to both f
 (``evaluation.gnss_residuals``) of each model-off run: what on a real log, without truth,
 says the GNSS errors are correlated.
 
+``--diagnostic``: the residual diagnostic alone (ekf-rts, model off) on drives whose GNSS
+errors are white (``default``, ``hill-drive``), on the urban ones and on every shared real log
+present (``$VNAV_DATA``), written to ``DIR/gnss_residual_autocorr.json``.
+
 Writes ``DIR/gnss_error_study.json``: per scenario, model and estimator the per-seed rows
 (``horiz_rmse_m``, ``alt_rmse_m``, ``nees_mean``, ``nees_dof``, ``gnss_rejected``,
 ``runtime_s``) and the aggregate (means over seeds; ``nees_per_dof`` = mean NEES / dof, as
@@ -34,6 +38,7 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))  # this checkout's package, not another installed one
+sys.path.insert(0, str(REPO / "benchmarks"))
 CONFIG = REPO / "benchmarks" / "hard_scenarios.toml"
 SCENARIOS = ("urban", "urban-dense")
 ESTIMATORS = ("ekf-rts", "graph-batch")
@@ -53,8 +58,10 @@ def parse_model(text: str) -> tuple[float, float, float] | None:
     return parts[0], parts[1], parts[2]
 
 
-def configs(model: tuple[float, float, float] | None) -> dict[str, Any]:
-    """Both estimators' configs: hard_scenarios.toml's, plus the GNSS error model."""
+def configs(model: tuple[float, float, float] | None, ekf_max_rejects: int | None = None
+            ) -> dict[str, Any]:
+    """Both estimators' configs: hard_scenarios.toml's, plus the GNSS error model
+    (``ekf_max_rejects``: the EKF's ``max_consecutive_rejects``, None: its own)."""
     from vnav_graph.estimators.configfile import load_configs
 
     base = load_configs(CONFIG)
@@ -68,12 +75,14 @@ def configs(model: tuple[float, float, float] | None) -> dict[str, Any]:
         if model is not None:
             cfg = replace(cfg, gnss_gm_sd_h=model[0], gnss_gm_sd_v=model[1],
                           gnss_gm_tau_s=model[2])
+        if ekf_max_rejects is not None and name.startswith("ekf"):
+            cfg = replace(cfg, max_consecutive_rejects=ekf_max_rejects)
         out[name] = cfg
     return out
 
 
-def run_seed(scenario: str, seed: int, models: list[str], duration: float | None
-             ) -> dict[str, Any]:
+def run_seed(scenario: str, seed: int, models: list[str], duration: float | None,
+             ekf_max_rejects: int | None = None) -> dict[str, Any]:
     from vnav_graph.evaluation.gnss_residuals import gnss_residual_autocorr
     from vnav_graph.evaluation.metrics import evaluate
     from vnav_graph.runner import run_one
@@ -83,7 +92,7 @@ def run_seed(scenario: str, seed: int, models: list[str], duration: float | None
     drive = simulate(scenario, seed, **over)
     out: dict[str, Any] = {}
     for m in models:
-        cfgs = configs(parse_model(m))
+        cfgs = configs(parse_model(m), ekf_max_rejects)
         for name in ESTIMATORS:
             res = run_one(name, drive, cfgs[name], interrupts=False)
             if res.estimate is None:
@@ -131,6 +140,43 @@ def goals(agg: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
+DIAG_SCENARIOS = ("default", "hill-drive", "urban", "urban-dense")
+
+
+def diagnostic(seeds: int, out: Path) -> int:
+    """The residual autocorrelation of ekf-rts (model off) on simulated and real drives."""
+    from bench_real_logs import LOGS, data_root
+
+    from vnav_graph.evaluation.gnss_residuals import gnss_residual_autocorr
+    from vnav_graph.io import load_drive
+    from vnav_graph.runner import run_one
+    from vnav_graph.simulation.scenario import simulate
+
+    doc: dict[str, Any] = {"simulated": {}, "logs": {}}
+    for sc in DIAG_SCENARIOS:
+        vals = []
+        for s in range(seeds):
+            d = simulate(sc, s)
+            res = run_one("ekf-rts", d, interrupts=False)
+            vals.append(None if res.estimate is None
+                        else gnss_residual_autocorr(res.estimate, d))
+        doc["simulated"][sc] = vals
+        print(sc, vals, file=sys.stderr, flush=True)
+    root = data_root(None)
+    for rel in LOGS:
+        p = root / rel
+        if not p.exists():
+            continue
+        d = load_drive(p)
+        res = run_one("ekf-rts", d, interrupts=False)
+        doc["logs"][rel.split("/")[0]] = (None if res.estimate is None
+                                          else gnss_residual_autocorr(res.estimate, d))
+        print(rel, doc["logs"][rel.split("/")[0]], file=sys.stderr, flush=True)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "gnss_residual_autocorr.json").write_text(json.dumps(doc, indent=1) + "\n")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=10)
@@ -139,7 +185,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--model", action="append", default=None,
                     help="'off' or 'sd_h,sd_v,tau' (repeatable; default: off, 2.5,4,30, 2,3,60)")
     ap.add_argument("--scenarios", default=",".join(SCENARIOS))
+    ap.add_argument("--ekf-max-rejects", type=int, default=None,
+                    help="the EKF's max_consecutive_rejects (default: its own)")
+    ap.add_argument("--diagnostic", action="store_true",
+                    help="only the residual autocorrelation on simulated and real drives")
     args = ap.parse_args(argv)
+    if args.diagnostic:
+        return diagnostic(2 if args.quick else args.seeds, Path(args.out))
     models = args.model or list(DEFAULT_MODELS)
     try:
         for m in models:
@@ -156,12 +208,14 @@ def main(argv: list[str] | None = None) -> int:
     for sc in scenarios:
         for s in range(seeds):
             t0 = time.perf_counter()
-            runs.setdefault(sc, []).append(run_seed(sc, s, models, duration))
+            runs.setdefault(sc, []).append(run_seed(sc, s, models, duration,
+                                                    args.ekf_max_rejects))
             print(f"{sc} seed {s}: {time.perf_counter() - t0:.0f} s", file=sys.stderr,
                   flush=True)
     agg = {sc: {m: {e: aggregate([r[m][e] for r in runs[sc]]) for e in ESTIMATORS}
                 for m in models} for sc in scenarios}
     doc = {"schema": "vnav_graph.gnss_error_study/1", "seeds": seeds, "quick": args.quick,
+           "ekf_max_consecutive_rejects": args.ekf_max_rejects,
            "config": tomllib.loads(CONFIG.read_text()), "models": models, "aggregate": agg,
            "goals": goals(agg), "runs": runs}
     out = Path(args.out)

@@ -119,11 +119,17 @@ def test_gnss_rows_jacobian_matches_finite_differences(lever):
     pos = rng.normal(size=(5, 3)) * 10
     vel = rng.normal(size=(5, 3))
     sd = np.full((5, 3), 1.5)
+    # the body rate at the fixes: the lever arm's velocity C(ω × l) (shared GNSS model)
+    w = rng.normal(0.0, 0.3, (5, 3))
 
     def rows(s):
-        return gf.gnss_rows(dense, s, t_g, pos, sd, vel, np.full((5, 3), 0.1), lever)
+        return gf.gnss_rows(dense, s, t_g, pos, sd, vel, np.full((5, 3), 0.1), lever,
+                            omega_b=w)
 
     _fd_check_strict(rows, st, exclude=(), tol=1e-4)
+    if np.any(lever):  # the term is there: velocity rows differ from those without ω
+        r0 = gf.gnss_rows(dense, st, t_g, pos, sd, vel, np.full((5, 3), 0.1), lever)
+        assert np.max(np.abs(rows(st).r[15:] - r0.r[15:])) > 0.1
 
 
 def test_interpolant_hits_keyframes_and_is_exact_for_constant_acceleration():

@@ -93,7 +93,8 @@ def gnss_interval_rows(P: Any, ks: list[int], st: gf.KeyframeStates,
         P.dense, st, P.g_t[g_idx], P.g_pos[g_idx], P.g_pos_sd[g_idx],
         None if P.g_vel is None else P.g_vel[g_idx],
         None if P.g_vel_sd is None else P.g_vel_sd[g_idx], P.lever,
-        k=np.repeat(np.asarray(ks, dtype=int), n_of))
+        k=np.repeat(np.asarray(ks, dtype=int), n_of),
+        omega_b=None if P.g_omega is None else P.g_omega[g_idx])
     n = 3 * g_idx.size  # position rows, then velocity rows
     # per fix (3 rows each, position then velocity): its reweighted rows
     r_parts, j_parts = [], []

@@ -49,7 +49,12 @@ from ....geo.frames import lla_to_ned, ned_to_lla, skew
 from ....nav.arrays import put
 from ....nav.rotations import dcm_to_quat_into, quat_to_dcm_into, so3_exp_into
 from ....sensors.baro import baro_jacobian, measure_baro
-from ....sensors.gnss_model import GM_AXES, antenna_position_batch, body_tilt
+from ....sensors.gnss_model import (
+    GM_AXES,
+    antenna_position_batch,
+    antenna_velocity_batch,
+    body_tilt,
+)
 from ....types import FloatArray
 from .interp import increments_at, interpolant
 
@@ -447,10 +452,13 @@ def gnss_rows(
     pos_sd: FloatArray, vel_t: FloatArray | None, vel_sd: FloatArray | None,
     lever_b: FloatArray, incr: tuple[FloatArray, FloatArray, FloatArray] | None = None,
     out: FloatArray | None = None, k: np.ndarray | None = None,
+    omega_b: FloatArray | None = None,
 ) -> IntervalRows:
     """Whitened GNSS position (and velocity) rows for fixes at ``t_g`` (M,) strictly inside
-    intervals: antenna p(t) + R(t)·l against ``pos_t`` (M, 3) in t [m]; velocity v(t) (the
-    lever-arm rotation term is omitted) against ``vel_t`` (M, 3) [m/s]. ``incr``: the
+    intervals: antenna p(t) + R(t)·l against ``pos_t`` (M, 3) in t [m]; velocity
+    v(t) + R(t)(ω × l) against ``vel_t`` (M, 3) [m/s], ω = ``omega_b`` (M, 3) the body rate at
+    the fixes [rad/s] (None: the lever-arm rotation term is left out; the gyro-bias column of
+    that term, |l|·δb_g, is not modelled). ``incr``: the
     increments ``dense.at`` at the fixes (cached by the caller; they do not change);
     ``out``: an (n_rows, n_cols) array to hold the Jacobian (overwritten), else a new one
     (n_cols: ``n_cols_of`` the GNSS error state's dimension); ``k``: the interval
@@ -509,8 +517,13 @@ def gnss_rows(
         jv[:, :, 3:6] = -rk / big_t
         jv[:, :, 9:12] = st.rot[k + 1] / big_t
         jv[:, :, COL_BA] = ((0.5 * ip["T"] - ip["tau"]) * ip["imu"])[:, None, None] * rk
+        v_ant = ip["v"]
+        if lever is not None and omega_b is not None:  # the shared model: + C (ω × l)
+            u, hv_att = antenna_velocity_batch(ip["rot"], lever, omega_b)
+            v_ant = v_ant + u
+            jv[:, :, 0:3] += body_tilt(hv_att, rk)
         jv /= vel_sd[:, :, None]
-        rows_r.append(((ip["v"] - vel_t) / vel_sd).reshape(-1))
+        rows_r.append(((v_ant - vel_t) / vel_sd).reshape(-1))
         ks.append(np.repeat(k, 3))
     return IntervalRows(np.concatenate(ks), np.concatenate(rows_r), out)
 

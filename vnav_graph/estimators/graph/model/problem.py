@@ -83,6 +83,8 @@ class Problem:
     g_rej_vel: int = 0  # of those, refused by the velocity screen (nav.velocity_screen)
     g_rej_post: int = 0  # rejected by the post-solve residual gate
     g_incr: Any = None  # (fix indices, dense increments at them), see gnss_rows_of
+    # body rate at each fix [rad/s] for the lever arm's velocity (None without a lever arm)
+    g_omega: FloatArray | None = None
     pri: dict[str, float] = field(default_factory=dict)  # baro priors (_baro_priors)
     gm: GnssGM | None = None  # the GNSS Gauss-Markov error state G(k), if carried
     # interval k spans an IMU logging gap (``imu_gaps``; computed once in ``setup``)
@@ -174,6 +176,8 @@ def setup(drive: Drive, cfg: GraphConfig) -> Problem:
                 np.asarray(gn.lever_arm_b, float),
                  g_kf, use)
     P.gap = gaps
+    if np.any(P.lever):
+        P.g_omega = np.column_stack([np.interp(t_g, imu.t, imu.gyro_b[:, a]) for a in range(3)])
     P.g_rej_pre = P.gnss_rejected
     P.g_rej_vel = n_vel
     P.pri = pri
@@ -393,7 +397,8 @@ def _gnss_rows(P: Problem, st: gf.KeyframeStates, idx: np.ndarray, incr: Any,
     return gf.gnss_rows(
         P.dense, st, P.g_t[idx], P.g_pos[idx], P.g_pos_sd[idx],
         None if P.g_vel is None else P.g_vel[idx],
-        None if P.g_vel_sd is None else P.g_vel_sd[idx], P.lever, incr=incr, out=out)
+        None if P.g_vel_sd is None else P.g_vel_sd[idx], P.lever, incr=incr, out=out,
+        omega_b=None if P.g_omega is None else P.g_omega[idx])
 
 
 def interval_rows(P: Problem, st: gf.KeyframeStates, pri: dict[str, float],
