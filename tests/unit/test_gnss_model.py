@@ -138,3 +138,46 @@ def test_filter_and_graph_give_the_same_residual_and_jacobian(dim):
     # and both use the shared model's lever-arm column (not a zero one): −[(C l)×]
     np.testing.assert_allclose(hm[:3, km.IATT:km.IATT + 3], antenna_position(c, LEVER)[1],
                                rtol=0, atol=0)
+
+
+def test_magnetometer_filter_row_and_graph_factor_agree():
+    """The same shared model for the magnetometer: the graph's heading factor on X(k), H(0)
+    against the EKF's row at the same attitude, hard iron and sample."""
+    import gtsam
+    from gtsam.symbol_shorthand import H, X
+
+    from vnav_graph.estimators.ekf.heading import new_state
+    from vnav_graph.estimators.ekf.rows import mag_rows
+    from vnav_graph.estimators.graph.model.magnetometer import heading_factor
+
+    rng = np.random.default_rng(21)
+    c = _attitude(rng)
+    bias = rng.normal(0.0, 2.0, 3)
+    z = c.T @ np.array([21.0, 1.5, 42.0]) + bias + rng.normal(0.0, 0.5, 3)
+    decl, sd = 0.05, 0.02
+    par = np.zeros(km.NPAR)
+    par[km.PMB:km.PMB + 3] = bias
+    y, hm, _, mm = mag_rows(z, par, c, decl, 0.5, 1e-4, True, np.eye(km.NX) * 1e-4,
+                            new_state())
+    assert mm == 1
+    f = heading_factor(3, z, decl, sd, 100.0)  # Huber at 100 σ: no re-weighting here
+    vals = gtsam.Values()
+    vals.insert(X(3), gtsam.Pose3(gtsam.Rot3(c), np.zeros(3)))
+    vals.insert(H(0), bias)
+    a = f.linearize(vals).jacobian()[0] * sd  # whitened [∂/∂X(3) | ∂/∂H(0)] times σ
+    np.testing.assert_allclose(f.unwhitenedError(vals), [y[0]], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(a[0, 0:3], hm[0, km.IATT:km.IATT + 3] @ c, atol=1e-12)
+    assert np.all(a[0, 3:6] == 0.0)
+    np.testing.assert_allclose(a[0, 6:9], hm[0, km.IMB:km.IMB + 3], atol=1e-12)
+    # and it is the derivative: the rotation column against central differences of the error
+    eps = 1e-6
+    for j in range(3):
+        e = np.zeros(3)
+        e[j] = eps
+        vp, vm = gtsam.Values(), gtsam.Values()
+        for v, s in ((vp, 1.0), (vm, -1.0)):
+            v.insert(X(3), gtsam.Pose3(gtsam.Rot3(c @ _so3(s * e)), np.zeros(3)))
+            v.insert(H(0), bias)
+        fd = (f.unwhitenedError(vp)[0] - f.unwhitenedError(vm)[0]) / (2 * eps)
+        # central difference, O(ε²) truncation, ~1e-10 round-off over 2ε
+        assert a[0, j] == pytest.approx(fd, abs=1e-7)

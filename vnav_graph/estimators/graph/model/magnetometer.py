@@ -13,7 +13,9 @@ most one per ``mag_interval_s`` (the errors are correlated over seconds). D_k is
 azimuth, in the tangent frame, of the World Magnetic Model's field at the start
 (``geo.magfield``; it is the declination up to the tangent frame's convergence, < 0.05°
 over a few km). Jacobians: ∂e/∂ω_k = g · (−R_k [(z − b_m)×]) for the Pose3 retraction
-R Exp(ω), ∂e/∂b_m = −g R_k, g = (−m̂_E, m̂_N, 0)/H² (module ``sensors.magnetometer``).
+R Exp(ω), ∂e/∂b_m = −g R_k, g = (−m̂_E, m̂_N, 0)/H²: the EKF's row ``mag_heading_row``
+(module ``sensors.magnetometer``) evaluated at R_k, its tilt column turned into the body
+rotation's by ·R_k (``sensors.gnss_model.body_tilt``).
 σ = √((σ_m/H)² + floor²); a Huber loss at ``mag_loss_sd`` σ stands in for the EKF's gate
 (motor-current and soft-iron bursts).
 
@@ -30,14 +32,14 @@ import numpy as np
 from gtsam.symbol_shorthand import H
 
 from ....nav.arrays import nearest_index
-from ....nav.rotations import skew3
+from ....sensors.gnss_model import body_tilt
 from ....sensors.magnetometer import (
     MIN_HORIZONTAL_UT,
     drive_field,
     field_and_info,
     heading_sd,
+    mag_heading_row,
     usable,
-    wrap_pi,
 )
 from ....types import FloatArray
 from .extend import GraphView, Terms, Variable, X
@@ -45,21 +47,20 @@ from .extend import GraphView, Terms, Variable, X
 KEY = H(0)
 
 
-def _heading_factor(k: int, z_b: FloatArray, d_ref: float, sd: float, loss_sd: float) -> Any:
+def heading_factor(k: int, z_b: FloatArray, d_ref: float, sd: float, loss_sd: float) -> Any:
+    """Keyframe k's heading factor on X(k) and H(0): sample ``z_b`` (3,) [µT], reference
+    azimuth ``d_ref`` [rad], σ ``sd`` [rad], Huber at ``loss_sd`` σ (module docstring)."""
     base = gtsam.noiseModel.Isotropic.Sigma(1, sd)
     noise = gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Huber.Create(loss_sd),
                                            base)
 
     def error(this: Any, values: Any, jac: Any) -> FloatArray:
         r_k = values.atPose3(this.keys()[0]).rotation().matrix()
-        d = z_b - values.atVector(this.keys()[1])
-        m = r_k @ d
-        h2 = m[0] * m[0] + m[1] * m[1]
-        e = wrap_pi(np.arctan2(m[1], m[0]) - d_ref)
+        # the shared model (the EKF's row): residual, ∂/∂ψ (tilt in t), ∂/∂b_m
+        e, h_psi, h_bias, _ = mag_heading_row(z_b, values.atVector(this.keys()[1]), r_k, d_ref)
         if jac is not None:
-            g = np.array([-m[1], m[0], 0.0]) / h2
-            jac[0] = np.hstack([g @ (-r_k @ skew3(d)), np.zeros(3)])[None, :]
-            jac[1] = (-g @ r_k)[None, :]
+            jac[0] = np.hstack([body_tilt(h_psi, r_k), np.zeros(3)])[None, :]
+            jac[1] = h_bias[None, :]
         return np.array([e])
 
     return gtsam.CustomFactor(noise, [X(k), KEY], error)
@@ -95,7 +96,7 @@ class MagnetometerExtension:
             last = slot[k]
             ref = fm.ned_ut  # tangent ≈ local level at the start (module docstring)
             sd = float(heading_sd(mag.sd_ut, hor, cfg.mag_heading_floor))
-            factors.append(_heading_factor(int(k), z, float(np.arctan2(ref[1], ref[0])), sd,
+            factors.append(heading_factor(int(k), z, float(np.arctan2(ref[1], ref[0])), sd,
                                            cfg.mag_loss_sd))
         return Terms(factors, [Variable(KEY, np.zeros(3), cfg.mag_bias_sd)])
 
