@@ -188,3 +188,28 @@ def test_graph_isam2_carries_the_state_online_and_in_its_final_pass(runs, graph_
     # 38–64 m) without claiming more than was measured
     assert rms[0] < 1.25 * rms[1], rms
     assert rms[0] < 1.5 * rms[2], rms
+
+
+def test_three_axis_state_in_every_graph_path():
+    """G(k) with north, east and down (``gnss_gm_sd_h`` > 0): the general sparse path solves
+    the banded path's system, graph-isam2's final pass graph-batch's problem, and both report
+    the model (urban 150 s, the scenario's own σ and τ)."""
+    from vnav_graph.estimators.graph import GraphISAM2
+
+    d = simulate("urban", 1, duration_s=150.0)
+    cfg = GraphConfig(gnss_gm_sd_h=2.5, gnss_gm_sd_v=4.0, gnss_gm_tau_s=30.0)
+    a = GraphBatch(cfg).run(d)
+    b = GraphBatch(replace(cfg, solver="general")).run(d)
+    assert a.info["solver"] == "banded" and b.info["solver"] == "general"
+    # measured 3e-9 m: two factorisations of one system, stopped by the same rule
+    np.testing.assert_allclose(b.trajectory.pos_n(d.origin_lla), a.trajectory.pos_n(d.origin_lla),
+                               rtol=0, atol=1e-6)
+    np.testing.assert_allclose(b.cov[:, 0, 0], a.cov[:, 0, 0], rtol=1e-6)
+    i = GraphISAM2(cfg).run(d)
+    # measured 4.6 mm (the two solves start apart and stop at a ½χ² step of 0.05)
+    np.testing.assert_allclose(i.trajectory.alt, a.trajectory.alt, rtol=0, atol=0.05)
+    want = {"sd_h_m": 2.5, "sd_v_m": 4.0, "tau_s": 30.0}
+    assert a.info["gnss_gm"] == want and i.info["gnss_gm"] == want
+    ekf = EKFRTS(EkfConfig(gnss_gm_sd_h=2.5, gnss_gm_sd_v=4.0, gnss_gm_tau_s=30.0)).run(d)
+    assert ekf.info["gnss_gm"] == want and ekf.info["gnss_height_gm"] == {"sd_m": 4.0,
+                                                                          "tau_s": 30.0}
