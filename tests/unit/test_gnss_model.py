@@ -181,3 +181,21 @@ def test_magnetometer_filter_row_and_graph_factor_agree():
         fd = (f.unwhitenedError(vp)[0] - f.unwhitenedError(vm)[0]) / (2 * eps)
         # central difference, O(ε²) truncation, ~1e-10 round-off over 2ε
         assert a[0, j] == pytest.approx(fd, abs=1e-7)
+
+
+def test_the_flat_config_keys_set_one_model_in_both_families(tmp_path):
+    """``--config`` keys: the height-only ``gnss_gm_sd_v`` / ``gnss_gm_tau_s`` keep their
+    meaning, ``gnss_gm_sd_h`` adds north and east; both families read the same fields."""
+    from vnav_graph.estimators.configfile import load_configs
+    from vnav_graph.sensors.gnss_model import GnssGM
+
+    p = tmp_path / "c.toml"
+    p.write_text("[ekf-rts]\ngnss_gm_sd_v = 3.0\ngnss_gm_tau_s = 120.0\n"
+                 "[graph-batch]\ngnss_gm_sd_v = 3.0\ngnss_gm_tau_s = 120.0\n"
+                 "[graph-isam2]\ngnss_gm_sd_h = 2.0\ngnss_gm_sd_v = 3.0\ngnss_gm_tau_s = 60.0\n"
+                 "[ekf]\ngnss_gm_sd_h = 2.0\n")
+    c = load_configs(p)
+    assert c["ekf-rts"].gnss_gm == c["graph-batch"].gnss_gm == GnssGM(0.0, 3.0, 120.0)
+    assert c["graph-batch"].gnss_gm.axes == (2,)
+    assert c["graph-isam2"].gnss_gm == GnssGM(2.0, 3.0, 60.0)
+    assert c["ekf"].gnss_gm.axes == (0, 1) and c["ekf"].gnss_gm.tau_s == 300.0
