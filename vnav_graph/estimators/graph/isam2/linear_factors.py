@@ -1,7 +1,7 @@
 """Custom terms of ``graph-isam2``'s online pass: the baro samples and GNSS fixes between
 keyframes as ``LinearContainerFactor``s, linearised once (numpy, ``factors``) at the current
 estimate as soon as they have arrived, with the accelerometer-bias columns on B(k) and,
-when carried, the GNSS height error G(k) (``docs/graph.md``). No Python callback runs inside
+when carried, the GNSS error state G(k) (``docs/graph.md``). No Python callback runs inside
 iSAM2."""
 
 from __future__ import annotations
@@ -65,7 +65,7 @@ def gnss_factor(P: Any, k: int, st: gf.KeyframeStates, bias: Any, g_idx: Any) ->
     """The GNSS fixes ``g_idx`` of interval k (strictly inside it; with the GNSS height
     state also the one on keyframe k+1) as one LinearContainerFactor on X(k), X(k+1) and
     B(k) (the accelerometer-bias columns of the interpolant included), and G(k), G(k+1)
-    with the GNSS height state, linearised at ``st`` (``keyframe_states``; X(k+1): its
+    with the GNSS error state, linearised at ``st`` (``keyframe_states``; X(k+1): its
     prediction)."""
     return gnss_factors(P, [k], st, bias, [g_idx])[0]
 

@@ -154,7 +154,7 @@ class OnlinePass:
 
     def _fixes_of(self) -> list[np.ndarray]:
         """The fixes of each interval, once (fixes and keyframes are in time order): strictly
-        inside it, and — with the GNSS height state — on the keyframe that ends it (the one on
+        inside it, and — with the GNSS error state — on the keyframe that ends it (the one on
         keyframe 0 goes with interval 0)."""
         P = self.P
         g_between = np.flatnonzero((P.g_kf == -1) & P.g_use)
@@ -227,7 +227,7 @@ class OnlinePass:
         self.cb[k + 1] = self.cb[k]
 
     def _keyframe_fixes(self, k: int, nf: Any, nv: Any) -> list[tuple[int, int]]:
-        """Keyframe k + 1's GNSS fixes, or its GNSS height state G and link (the fix on
+        """Keyframe k + 1's GNSS fixes, or its GNSS error state G and link (the fix on
         keyframe k + 1 then ends interval k's rows). Returns (fix, index in ``nf``) pairs."""
         P = self.P
         fix_at: list[tuple[int, int]] = []

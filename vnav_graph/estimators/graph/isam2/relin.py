@@ -237,7 +237,7 @@ class TermBook:
         removed: list[int] = []
         samples = []
         g_ks = [m for m in ks if self.gnss_idx[m] >= 0]
-        # with a baro (and no GNSS height state: other keys) an interval's GNSS rows go
+        # with a baro (and no GNSS error state: other keys) an interval's GNSS rows go
         # into its baro factor: one factor per rebuilt interval
         merge = cal is not None and P.gm is None
         extra: dict[int, Any] = {}

@@ -66,7 +66,7 @@ COL_B1 = 13
 COL_S = 14
 COL_TAU = 15
 COL_BA = slice(16, 19)
-N_COLS_GM = 21  # with the GNSS height Gauss-Markov error at keyframes k, k+1 (last)
+N_COLS_GM = 21  # with the height-only GNSS error state at keyframes k, k+1 (``n_cols_of(1)``)
 COL_G0 = 19
 COL_G1 = 20
 # key blocks of a group: (first column, width)
