@@ -14,8 +14,7 @@ azimuth, in the tangent frame, of the World Magnetic Model's field at the start
 (``geo.magfield``; it is the declination up to the tangent frame's convergence, < 0.05°
 over a few km). Jacobians: ∂e/∂ω_k = g · (−R_k [(z − b_m)×]) for the Pose3 retraction
 R Exp(ω), ∂e/∂b_m = −g R_k, g = (−m̂_E, m̂_N, 0)/H²: the EKF's row ``mag_heading_row``
-(module ``sensors.magnetometer``) evaluated at R_k, its tilt column turned into the body
-rotation's by ·R_k (``sensors.gnss_model.body_tilt``).
+(module ``sensors.magnetometer``) at R_k, its tilt column times R_k (the body rotation's).
 σ = √((σ_m/H)² + floor²); a Huber loss at ``mag_loss_sd`` σ stands in for the EKF's gate
 (motor-current and soft-iron bursts).
 
@@ -32,14 +31,14 @@ import numpy as np
 from gtsam.symbol_shorthand import H
 
 from ....nav.arrays import nearest_index
-from ....sensors.gnss_model import body_tilt
+from ....nav.rotations import skew3
 from ....sensors.magnetometer import (
     MIN_HORIZONTAL_UT,
     drive_field,
     field_and_info,
     heading_sd,
-    mag_heading_row,
     usable,
+    wrap_pi,
 )
 from ....types import FloatArray
 from .extend import GraphView, Terms, Variable, X
@@ -56,11 +55,17 @@ def heading_factor(k: int, z_b: FloatArray, d_ref: float, sd: float, loss_sd: fl
 
     def error(this: Any, values: Any, jac: Any) -> FloatArray:
         r_k = values.atPose3(this.keys()[0]).rotation().matrix()
-        # the shared model (the EKF's row): residual, ∂/∂ψ (tilt in t), ∂/∂b_m
-        e, h_psi, h_bias, _ = mag_heading_row(z_b, values.atVector(this.keys()[1]), r_k, d_ref)
+        # ``sensors.magnetometer.mag_heading_row`` (the EKF's row) in numpy: the same model,
+        # tested equal to 1e-12 (tests/unit/test_gnss_model.py); calling the compiled row
+        # here rounds differently and moves the graph's results by ~1e-12 relative
+        d = z_b - values.atVector(this.keys()[1])
+        m = r_k @ d
+        h2 = m[0] * m[0] + m[1] * m[1]
+        e = wrap_pi(np.arctan2(m[1], m[0]) - d_ref)
         if jac is not None:
-            jac[0] = np.hstack([body_tilt(h_psi, r_k), np.zeros(3)])[None, :]
-            jac[1] = h_bias[None, :]
+            g = np.array([-m[1], m[0], 0.0]) / h2
+            jac[0] = np.hstack([g @ (-r_k @ skew3(d)), np.zeros(3)])[None, :]
+            jac[1] = (-g @ r_k)[None, :]
         return np.array([e])
 
     return gtsam.CustomFactor(noise, [X(k), KEY], error)
