@@ -1,5 +1,5 @@
 """The optional Gauss-Markov GNSS height error state, ``ekf-rts`` and
-``graph-batch`` (the same model: ``sensors.model.GnssHeightGM``; the graph's G(k) chain).
+``graph-batch`` (the same model: ``sensors.gnss_model.GnssGM``; the graph's G(k) chain).
 
 Drive: hill-drive, 300 s, GNSS height error = white 0.5 m + Gauss-Markov σ 3 m, τ 120 s (the
 receiver reports σ_v = √(0.5² + 3²), as ``sensors.gnss`` does). Treated as white, 10 Hz of
@@ -18,7 +18,7 @@ import pytest
 from vnav_graph.estimators.ekf import model as km
 from vnav_graph.estimators.ekf.filter import EKFRTS, EkfConfig
 from vnav_graph.estimators.graph import GraphBatch, GraphConfig
-from vnav_graph.sensors.model import GM_WHITE_MIN_FRACTION, GnssHeightGM, gnss_gm_split
+from vnav_graph.sensors.gnss_model import GM_WHITE_MIN_FRACTION, GnssGM, white_rest
 from vnav_graph.simulation.scenario import load_scenario, simulate
 
 GM_SD, GM_TAU = 3.0, 120.0
@@ -26,12 +26,16 @@ N_SEEDS = 6
 
 
 def test_split_closed_form():
-    gm = GnssHeightGM(3.0, 120.0)
     sd = np.array([np.hypot(0.5, 3.0), 3.0, 10.0, np.nan])
-    out = gnss_gm_split(sd, gm)
+    out = white_rest(sd, 3.0)
     np.testing.assert_allclose(out[:3], [0.5, GM_WHITE_MIN_FRACTION * 3.0, np.sqrt(91.0)])
     assert np.isnan(out[3])
-    np.testing.assert_array_equal(gnss_gm_split(sd[:3], None), sd[:3])
+    # per axis: the height-only state splits the down column only, the 3-axis one all three
+    pos_sd = np.tile([np.hypot(0.5, 2.0), np.hypot(0.5, 2.0), np.hypot(1.0, 3.0)], (2, 1))
+    np.testing.assert_allclose(GnssGM(0.0, 3.0, 120.0).split(pos_sd)[:, 2], 1.0)
+    np.testing.assert_array_equal(GnssGM(0.0, 3.0, 120.0).split(pos_sd)[:, :2], pos_sd[:, :2])
+    np.testing.assert_allclose(GnssGM(2.0, 3.0, 120.0).split(pos_sd), [[0.5, 0.5, 1.0]] * 2)
+    assert GnssGM(2.0, 3.0, 60.0).axes == (0, 1, 2) and GnssGM(2.0, 0.0, 60.0).axes == (0, 1)
 
 
 def test_config_rejects_bad_settings():
@@ -44,6 +48,8 @@ def test_config_rejects_bad_settings():
         GraphConfig(gnss_gm_sd_v=float("nan"))
     with pytest.raises(ValueError, match="GraphConfig.gnss_gm_sd_v"):
         GraphConfig(gnss_gm_sd_v=2.0, gnss_gm_tau_s=-1.0)
+    with pytest.raises(ValueError, match="gnss_gm_sd_h"):
+        EkfConfig(gnss_gm_sd_h=-2.0)
     assert GraphConfig().gnss_gm is None
 
 
@@ -51,9 +57,10 @@ def test_error_dynamics_entry():
     ing = np.zeros(km.NING)
     ing[0:9] = np.eye(3).ravel()
     f = km.build_f(ing, np.inf, np.inf, np.inf, 120.0)
-    assert f[km.IGH, km.IGH] == pytest.approx(-1.0 / 120.0)
-    assert np.count_nonzero(f[km.IGH]) == 1 and np.count_nonzero(f[:, km.IGH]) == 1
-    assert np.all(km.build_f(ing, np.inf, np.inf, np.inf, np.inf)[km.IGH] == 0.0)
+    for i in range(km.IGE, km.IGE + 3):
+        assert f[i, i] == pytest.approx(-1.0 / 120.0)
+        assert np.count_nonzero(f[i]) == 1 and np.count_nonzero(f[:, i]) == 1
+        assert np.all(km.build_f(ing, np.inf, np.inf, np.inf, np.inf)[i] == 0.0)
 
 
 @pytest.fixture(scope="module")
@@ -139,7 +146,7 @@ def test_gm_link_is_the_exact_discrete_process():
 
     from vnav_graph.estimators.graph.model.cpp_factors import gnss_gm_factor
 
-    gm = GnssHeightGM(3.0, 120.0)
+    gm = GnssGM(0.0, 3.0, 120.0)
     f = gnss_gm_factor(4, 2.0, gm)
     vals = gtsam.Values()
     vals.insert(G(4), np.array([1.3]))
@@ -181,3 +188,28 @@ def test_graph_isam2_carries_the_state_online_and_in_its_final_pass(runs, graph_
     # 38–64 m) without claiming more than was measured
     assert rms[0] < 1.25 * rms[1], rms
     assert rms[0] < 1.5 * rms[2], rms
+
+
+def test_three_axis_state_in_every_graph_path():
+    """G(k) with north, east and down (``gnss_gm_sd_h`` > 0): the general sparse path solves
+    the banded path's system, graph-isam2's final pass graph-batch's problem, and both report
+    the model (urban 150 s, the scenario's own σ and τ)."""
+    from vnav_graph.estimators.graph import GraphISAM2
+
+    d = simulate("urban", 1, duration_s=150.0)
+    cfg = GraphConfig(gnss_gm_sd_h=2.5, gnss_gm_sd_v=4.0, gnss_gm_tau_s=30.0)
+    a = GraphBatch(cfg).run(d)
+    b = GraphBatch(replace(cfg, solver="general")).run(d)
+    assert a.info["solver"] == "banded" and b.info["solver"] == "general"
+    # measured 3e-9 m: two factorisations of one system, stopped by the same rule
+    np.testing.assert_allclose(b.trajectory.pos_n(d.origin_lla), a.trajectory.pos_n(d.origin_lla),
+                               rtol=0, atol=1e-6)
+    np.testing.assert_allclose(b.cov[:, 0, 0], a.cov[:, 0, 0], rtol=1e-6)
+    i = GraphISAM2(cfg).run(d)
+    # measured 4.6 mm (the two solves start apart and stop at a ½χ² step of 0.05)
+    np.testing.assert_allclose(i.trajectory.alt, a.trajectory.alt, rtol=0, atol=0.05)
+    want = {"sd_h_m": 2.5, "sd_v_m": 4.0, "tau_s": 30.0}
+    assert a.info["gnss_gm"] == want and i.info["gnss_gm"] == want
+    ekf = EKFRTS(EkfConfig(gnss_gm_sd_h=2.5, gnss_gm_sd_v=4.0, gnss_gm_tau_s=30.0)).run(d)
+    assert ekf.info["gnss_gm"] == want and ekf.info["gnss_height_gm"] == {"sd_m": 4.0,
+                                                                          "tau_s": 30.0}

@@ -119,11 +119,17 @@ def test_gnss_rows_jacobian_matches_finite_differences(lever):
     pos = rng.normal(size=(5, 3)) * 10
     vel = rng.normal(size=(5, 3))
     sd = np.full((5, 3), 1.5)
+    # the body rate at the fixes: the lever arm's velocity C(ω × l) (shared GNSS model)
+    w = rng.normal(0.0, 0.3, (5, 3))
 
     def rows(s):
-        return gf.gnss_rows(dense, s, t_g, pos, sd, vel, np.full((5, 3), 0.1), lever)
+        return gf.gnss_rows(dense, s, t_g, pos, sd, vel, np.full((5, 3), 0.1), lever,
+                            omega_b=w)
 
     _fd_check_strict(rows, st, exclude=(), tol=1e-4)
+    if np.any(lever):  # the term is there: velocity rows differ from those without ω
+        r0 = gf.gnss_rows(dense, st, t_g, pos, sd, vel, np.full((5, 3), 0.1), lever)
+        assert np.max(np.abs(rows(st).r[15:] - r0.r[15:])) > 0.1
 
 
 def test_interpolant_hits_keyframes_and_is_exact_for_constant_acceleration():
@@ -266,14 +272,20 @@ def test_gap_interval_is_interpolated_linearly_and_its_jacobians_match():
     _fd_check_strict(gnss, st, exclude=(), tol=1e-4)
 
 
-def test_gnss_rows_with_the_gnss_height_error_match_finite_differences():
-    """With G(k) (the GNSS height Gauss-Markov error, linear between keyframes) the rows have
-    two more columns; every column matches central differences, the G columns touch only the
-    down rows (1 − α, α over σ_D), and the first 19 columns are those of the rows without G."""
+@pytest.mark.parametrize("dim", [1, 2, 3])
+def test_gnss_rows_with_the_gnss_error_state_match_finite_differences(dim):
+    """With G(k) (the GNSS Gauss-Markov error on the axes ``GM_AXES[dim]``, linear between
+    keyframes) the rows have 2·dim more columns; every column matches central differences,
+    the G columns touch only their axes' position rows (1 − α, α over σ), and the first 19
+    columns are those of the rows without G."""
     from dataclasses import replace
 
+    from vnav_graph.sensors.gnss_model import GM_AXES
+
     dense, st0, rng = _setup(3)
-    st = replace(st0, gnss_gm=rng.normal(size=st0.pos.shape[0]))
+    nk = st0.pos.shape[0]
+    g0 = rng.normal(size=nk) if dim == 1 else rng.normal(size=(nk, dim))
+    st = replace(st0, gnss_gm=g0)
     t_g = np.array([0.3, 0.9, 1.45, 2.05, 2.7])
     pos = rng.normal(size=(5, 3)) * 10
     vel = rng.normal(size=(5, 3))
@@ -284,16 +296,23 @@ def test_gnss_rows_with_the_gnss_height_error_match_finite_differences():
         return gf.gnss_rows(dense, s, t_g, pos, sd, vel, np.full((5, 3), 0.1), lever)
 
     r = rows(st)
-    assert r.jac.shape[1] == gf.N_COLS_GM
-    for col in range(gf.N_COLS_GM):
+    assert r.jac.shape[1] == gf.n_cols_of(dim)
+    if dim == 1:
+        assert gf.n_cols_of(1) == gf.N_COLS_GM and gf.gm_cols(1)[0].start == gf.COL_G0
+    for col in range(gf.n_cols_of(dim)):
         for k in np.unique(r.k):
             m = r.k == k
             eps = 1e-4
             if col >= gf.N_COLS:
                 g_p, g_m = st.gnss_gm.copy(), st.gnss_gm.copy()
-                j = k + (col - gf.COL_G0)
-                g_p[j] += eps
-                g_m[j] -= eps
+                j = k + (col - gf.N_COLS) // dim
+                ax = (col - gf.N_COLS) % dim
+                if dim == 1:
+                    g_p[j] += eps
+                    g_m[j] -= eps
+                else:
+                    g_p[j, ax] += eps
+                    g_m[j, ax] -= eps
                 sp, sm = replace(st, gnss_gm=g_p), replace(st, gnss_gm=g_m)
             else:
                 sp = replace(_perturb(st, col, eps, k), gnss_gm=st.gnss_gm)
@@ -302,17 +321,20 @@ def test_gnss_rows_with_the_gnss_height_error_match_finite_differences():
             np.testing.assert_allclose(r.jac[m, col], fd, atol=1e-4 * max(1, np.abs(fd).max()),
                                        err_msg=f"col {col} k {k}")
     n = 3 * t_g.size
-    down = np.zeros(r.r.size, bool)
-    down[2:n:3] = True
-    assert np.all(r.jac[~down][:, gf.N_COLS:] == 0.0)
     k_fix = gf.interval_of(dense.t_kf, t_g)
     alpha = (t_g - dense.t_kf[k_fix]) / (dense.t_kf[k_fix + 1] - dense.t_kf[k_fix])
-    np.testing.assert_allclose(r.jac[down][:, gf.COL_G0], (1 - alpha) / 1.5, rtol=1e-12)
-    np.testing.assert_allclose(r.jac[down][:, gf.COL_G1], alpha / 1.5, rtol=1e-12)
+    c0, c1 = gf.gm_cols(dim)
+    g2 = st.gnss_gm.reshape(nk, dim)
     r0 = rows(st0)
+    for j, ax in enumerate(GM_AXES[dim]):
+        on = np.zeros(r.r.size, bool)
+        on[ax:n:3] = True
+        assert np.all(r.jac[~on][:, c0.start + j] == 0.0)
+        np.testing.assert_allclose(r.jac[on][:, c0.start + j], (1 - alpha) / 1.5, rtol=1e-12)
+        np.testing.assert_allclose(r.jac[on][:, c1.start + j], alpha / 1.5, rtol=1e-12)
+        g_at = (1 - alpha) * g2[k_fix, j] + alpha * g2[k_fix + 1, j]
+        np.testing.assert_allclose(r.r[:n][ax::3] - r0.r[:n][ax::3], g_at / 1.5, rtol=1e-9)
     np.testing.assert_allclose(r.jac[:, :gf.N_COLS], r0.jac, rtol=0, atol=1e-12)
-    g_at = (1 - alpha) * st.gnss_gm[k_fix] + alpha * st.gnss_gm[k_fix + 1]
-    np.testing.assert_allclose(r.r[:n][2::3] - r0.r[:n][2::3], g_at / 1.5, rtol=1e-9)
 
 
 def test_preintegrated_velocity_increment_exact_in_a_turn():

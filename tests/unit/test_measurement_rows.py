@@ -27,6 +27,7 @@ def _state(rng):
     par[km.PSC], par[km.PTD], par[km.PBB] = 0.012, 0.21, 3.4
     par[km.PBG:km.PBG + 3] = rng.normal(0.0, 1e-3, 3)
     par[km.PMB:km.PMB + 3] = rng.normal(0.0, 2.0, 3)
+    par[km.PGE:km.PGE + 3] = rng.normal(0.0, 2.0, 3)
     return lla, v, q, par
 
 
@@ -78,14 +79,14 @@ def test_gnss_rows_match_finite_differences(has_vel):
         lla, v, q, par = s
         c = quat_to_dcm(q)
         rn, re = radii_scalar(lla[0])
-        out = gnss_rows(lla, v, c, rn, re, par[km.PGH], lever, fix, np.full(3, 1.0),
+        out = gnss_rows(lla, v, c, rn, re, par[km.PGE:km.PGE + 3], lever, fix, np.full(3, 1.0),
                         fix_vel, np.full(3, 0.1), has_vel, True, w, w)
         return out if full else out[0][:out[3]]
 
     y, hm, r, mm = f(state, full=True)
     assert mm == (6 if has_vel else 3)
     cols = [*range(km.IPOS, km.IPOS + 3), *range(km.IVEL, km.IVEL + 3),
-            *range(km.IATT, km.IATT + 3), km.IGH]
+            *range(km.IATT, km.IATT + 3), *range(km.IGE, km.IGE + 3)]
     # the velocity rows leave out the Earth and transport rates' path through C in the lever
     # arm's velocity C(ω_nb × l): |Ω_ie| |l| ≈ 7e-5 m/s per rad of attitude error
     for j, d in _fd_columns(f, state, cols, 1e-6).items():

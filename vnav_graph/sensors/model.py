@@ -10,8 +10,8 @@
   log, from the package-wide ``REAL_LOG_BARO``.
 - ``gnss_pos_sd`` / ``gnss_vel_sd``: the per-fix GNSS σ [m, m/s] every estimator weights the
   fixes with (the receiver's σ, floored at ``GNSS_SD_FLOOR``). With an estimator's optional
-  Gauss-Markov GNSS height error state (``gnss_gm``: a :class:`GnssHeightGM`), the height σ
-  is only the white rest of the receiver's σ (:func:`gnss_gm_split`).
+  Gauss-Markov GNSS error state (``gnss_gm``: a :class:`~vnav_graph.sensors.gnss_model.GnssGM`),
+  the σ of each carried axis is only the white rest of the receiver's (``GnssGM.split``).
 - ``gaps``: the IMU logging gaps (:mod:`vnav_graph.nav.gaps`).
 
 ekf, ekf-rts, vekf7 and both graph smoothers take every noise parameter from here; the test
@@ -32,6 +32,7 @@ import numpy as np
 from ..config import DEG, IMU_PRESETS, REAL_LOG_BARO, BaroSpec, ImuSpec
 from ..nav.gaps import imu_gaps
 from ..types import FloatArray
+from .gnss_model import GNSS_SD_FLOOR, GnssGM
 
 # Real-log IMU prior (a phone / autopilot MEMS IMU of unknown make): the consumer preset's
 # densities, generous turn-on biases (a phone's uncalibrated gyro bias reaches 0.5 °/s, its
@@ -90,50 +91,8 @@ MIN_SCALE_SD = 1e-4  # –
 MIN_LATENCY_SD = 0.01  # s
 MIN_BARO_NOISE_SD = 1e-3  # m
 MIN_BARO_BIAS_SD = 1e-3  # m
-GNSS_SD_FLOOR = 0.01  # m, m/s
-# With the Gauss-Markov GNSS height state, the white part of a fix's height σ keeps at least
-# this fraction of the receiver's σ_v (a σ_gm at or above σ_v would otherwise leave white
-# noise 0 and let one fix pin the height)
-GM_WHITE_MIN_FRACTION = 0.1
-
-
-@dataclass(frozen=True)
-class GnssHeightGM:
-    """Time-correlated GNSS height error (atmosphere, orbit, diffuse multipath) modelled as a
-    first-order Gauss-Markov state: steady-state σ ``sd_m`` [m], correlation time ``tau_s``
-    [s]. The receiver's σ_v is taken to cover its whole error, so the fixes keep only its white
-    rest (:func:`gnss_gm_split`). ``EkfConfig`` and ``GraphConfig`` build it from their
-    ``gnss_gm_sd_v`` / ``gnss_gm_tau_s``; None (σ 0) is the default: off."""
-
-    sd_m: float
-    tau_s: float
-
-    def __post_init__(self) -> None:
-        if not (np.isfinite(self.sd_m) and self.sd_m > 0):
-            raise ValueError(f"GNSS height Gauss-Markov σ must be > 0 m, not {self.sd_m}")
-        if not self.tau_s > 0:
-            raise ValueError(f"GNSS height Gauss-Markov τ must be > 0 s, not {self.tau_s}")
-
-
-def gnss_gm(sd_m: float, tau_s: float, who: str) -> GnssHeightGM | None:
-    """The estimator config's (σ, τ) as a :class:`GnssHeightGM`, None when σ is 0 (off);
-    ``ValueError`` naming ``who`` (the config class) on a bad value."""
-    if sd_m == 0:
-        return None
-    try:
-        return GnssHeightGM(float(sd_m), float(tau_s))
-    except ValueError as e:
-        raise ValueError(f"{who}.gnss_gm_sd_v / gnss_gm_tau_s: {e}") from None
-
-
-def gnss_gm_split(sd_v: FloatArray, gm: GnssHeightGM | None) -> FloatArray:
-    """White part of the GNSS height σ [m] when a Gauss-Markov state carries σ_gm of it:
-    √(σ_v² − σ_gm²), at least ``GM_WHITE_MIN_FRACTION``·σ_v (σ_v itself without ``gm``)."""
-    sd_v = np.asarray(sd_v, dtype=float)
-    if gm is None:
-        return sd_v
-    white2 = np.maximum(sd_v**2 - gm.sd_m**2, (GM_WHITE_MIN_FRACTION * sd_v) ** 2)
-    return np.maximum(np.sqrt(white2), GNSS_SD_FLOOR)
+# GNSS_SD_FLOOR (the per-fix σ floor, m and m/s) and the Gauss-Markov GNSS error state
+# (``GnssGM``) live with the GNSS measurement model (``sensors.gnss_model``)
 
 
 @dataclass(frozen=True)
@@ -340,9 +299,10 @@ def _gnss_sd(a: Any) -> FloatArray | None:
     return np.where(np.isfinite(a), np.maximum(a, GNSS_SD_FLOOR), a)
 
 
-def sensor_model(drive: Any, gnss_gm: GnssHeightGM | None = None) -> SensorModel:
+def sensor_model(drive: Any, gnss_gm: GnssGM | None = None) -> SensorModel:
     """The shared sensor model of ``drive`` (module docstring); ``gnss_gm``: the estimator's
-    Gauss-Markov GNSS height state, if any (the fixes' height σ is then its white rest)."""
+    Gauss-Markov GNSS error state, if any (the fixes' σ is then its white rest on the axes it
+    carries)."""
     from ..geo.earth import gravity
 
     imu = drive.imu
@@ -356,8 +316,7 @@ def sensor_model(drive: Any, gnss_gm: GnssHeightGM | None = None) -> SensorModel
     gn = drive.gnss
     pos_sd = None if gn is None else _gnss_sd(gn.pos_sd)
     if pos_sd is not None and gnss_gm is not None:
-        pos_sd = pos_sd.copy()
-        pos_sd[:, 2] = gnss_gm_split(pos_sd[:, 2], gnss_gm)
+        pos_sd = gnss_gm.split(pos_sd)
     return SensorModel(
         imu=floor_imu_spec(spec), imu_inferred=inferred,
         baro=None if bspec is None else baro_prior(bspec),

@@ -398,11 +398,13 @@ def initial_state(drive: Drive, cfg: EkfConfig, model: SensorModel, bp: BaroPrio
     p0[17, 17] = bp.bias_sd**2
     gm = cfg.gnss_gm
     if gm is not None:
-        p0[km.IGH, km.IGH] = gm.sd_m**2
-        if gnss is not None:
-            # the first fixes carry the correlated error g (down): δr_D = g + w, δg = −g
-            p0[2, 2] += gm.sd_m**2
-            p0[2, km.IGH] = p0[km.IGH, 2] = -gm.sd_m**2
+        for ax, sd in zip(gm.axes, gm.sd, strict=True):
+            i = km.IGE + ax
+            p0[i, i] = sd**2
+            if gnss is not None:
+                # the first fixes carry the correlated error e: δr = e + w, δe = −e
+                p0[ax, ax] += sd**2
+                p0[ax, i] = p0[i, ax] = -(sd**2)
     return Alignment(lla0, v0, q0, par0, p0, heading_known, yaw_unknown_var, i_static,
                     g_latency, lever, mag_yaw is not None,
                     max(float(t[i_static - 1]), t_fixes))

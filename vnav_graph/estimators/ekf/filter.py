@@ -188,7 +188,8 @@ def _process_noise(t: FloatArray, grid_idx: NDArrayInt, gaps: NDArrayInt, ispec:
     qd[:, km.IBB] = gm_process_var(dtg, bp.bias_tau, bp.bias_sd)
     gm = cfg.gnss_gm
     if gm is not None:
-        qd[:, km.IGH] = gm_process_var(dtg, gm.tau_s, gm.sd_m)
+        for ax, sd in zip(gm.axes, gm.sd, strict=True):
+            qd[:, km.IGE + ax] = gm_process_var(dtg, gm.tau_s, float(sd))
     qd[:, km.IMB:km.IMB + 3] = _white_var(cfg.mag_bias_rw, dtg)[:, None]
     # IMU gaps: the grid interval ending at gap end i+1 is exactly the gap (ekf.model docstring)
     kg = np.searchsorted(grid_idx, gaps + 1)
@@ -364,7 +365,7 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
                     extra_variables={"h0": {"est": res[3][-1, km.PMB:km.PMB + 3].tolist(),
                                             "sd": sd_mb.tolist()}})
     if gm is not None:
-        info["gnss_height_gm"] = {"sd_m": gm.sd_m, "tau_s": gm.tau_s}
+        info.update(gm.info())
     if baro is not None:  # for the post-solve scale check (sensors.baro)
         info["baro_scale_max_abs"] = float(np.max(np.abs(res[3][:, km.PSC])))
     # the bias's is the prior σ of its time average over the drive, as graph-batch's

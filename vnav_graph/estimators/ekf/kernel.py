@@ -33,7 +33,7 @@ from .heading import (
     restart_matching,
     track_heading,
 )
-from .model import NING, NPACK, NPAR, NX, PBA, PBG, PGH, PKA, apply_correction, pack
+from .model import NING, NPACK, NPAR, NX, PBA, PBG, PGE, PKA, apply_correction, pack
 from .rows import BARO, GNSS, baro_rows, gnss_rows, mag_rows
 from .steps import (
     C_BARO,
@@ -277,7 +277,7 @@ def run_filter(grids, init, noise, events, gnss, baro, mag, settings):
             idx = events.idx[je]
             kind = events.kind[je]
             if kind == GNSS:
-                y, hm, r, mm = gnss_rows(lm, vm, cm, rn, re, par[PGH], gnss.lever,
+                y, hm, r, mm = gnss_rows(lm, vm, cm, rn, re, par[PGE:PGE + 3], gnss.lever,
                                          gnss.lla[idx], gnss.pos_sd[idx], gnss.vel[idx],
                                          gnss.vel_sd[idx], gnss.has_vel, heading_ok, w0, w1)
                 if not heading_ok and settings.heading_accel and gnss.has_vel:

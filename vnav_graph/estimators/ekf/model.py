@@ -1,14 +1,15 @@
 """Numba kernels of the INS/GNSS/baro error-state EKF and its RTS smoother.
 
-Error state δx (25), every component "estimated minus true" (types.ERROR_STATE convention;
+Error state δx (27), every component "estimated minus true" (types.ERROR_STATE convention;
 the first 18 are exactly the shared layout):
 
     0:3 δr (NED position [m]), 3:6 δv (NED [m/s]), 6:9 ψ (tilt in n [rad], C̃ = (I+[ψ×]) C),
     9:12 δb_g [rad/s], 12:15 δb_a [m/s²], 15 δs (baro scale), 16 δτ_d [s], 17 δb (baro bias
     [m]), 18:21 δk_a (accelerometer scale factors, f̃ = (1+k_a)∘f + b_a + n), 21:24 δb_m
-    (magnetometer hard-iron bias in b [µT], a random walk; ``sensors.magnetometer``), 24 δg
-    (time-correlated GNSS height error [m, down], first-order Gauss-Markov; zero variance
-    unless ``EkfConfig.gnss_gm_sd_v`` > 0: ``sensors.model.gnss_gm_split``).
+    (magnetometer hard-iron bias in b [µT], a random walk; ``sensors.magnetometer``), 24:27 δe
+    (time-correlated GNSS position error, NED [m], first-order Gauss-Markov per axis; zero
+    variance on the axes ``EkfConfig.gnss_gm_sd_h`` / ``gnss_gm_sd_v`` leave at 0:
+    ``sensors.gnss_model``).
 
 Error dynamics (Groves, 2nd ed., eqs. 14.64-14.65 reduced to local-level NED; Titterton &
 Weston §12.3), with f_n the specific force in n and ω_in = ω_ie + ω_en:
@@ -17,11 +18,12 @@ Weston §12.3), with f_n the specific force in n and ω_in = ω_ie + ω_en:
     δv̇ = −[f_n×] ψ − C δb_a − C diag(f_b) δk_a − [(2ω_ie + ω_en)×] δv + (2g/R) δr_D e_D
     ψ̇  = −[ω_in×] ψ − C δb_g − (∂ω_en/∂v) δv − (∂ω_ie/∂L) δr_N/(R_N+h)
     δḃ_g = −δb_g/τ_g + w,  δḃ_a = −δb_a/τ_a + w,  δḃ = −δb/τ_b + w,  δṡ = δτ̇ = δk̇_a = 0,
-    δḃ_m = w,  δġ = −δg/τ_h + w.
+    δḃ_m = w,  δė = −δe/τ_e + w.
 
-GNSS height with the Gauss-Markov error state: the antenna's down coordinate is predicted as
-−h + (C l)_D + ĝ, so the height row carries ∂/∂δg = 1; the fix's own σ_v is then split into
-that state's σ and the white rest (``sensors.model.gnss_gm_split``, shared with the graph).
+GNSS with the Gauss-Markov error state: the antenna position is predicted as r + C l + ê
+(``sensors.gnss_model``, shared with the graph), so each position row carries ∂/∂δe = 1 on
+its axis; the fix's own σ is then split into that state's σ and the white rest
+(``GnssGM.split``).
 
 The nominal state runs at the IMU rate through the shared ``strapdown.strapdown_step``. The
 covariance is propagated on a coarser grid (every M IMU samples, ≈ 10 Hz): Φ = I + FΔt +
@@ -143,14 +145,16 @@ from ...nav.rotations import quat_exp, quat_mul, skew3
 from ...nav.strapdown import nav_rates
 from ...types import ERROR_STATE_DIM
 
-NX = 25  # internal error-state dimension
+NX = 27  # internal error-state dimension
 NPACK = NX * (NX + 1) // 2
 NING = 23  # ingredients of F per grid interval (22: IMU-gap flag)
-IPOS, IVEL, IATT, IBG, IBA, ISC, ITD, IBB, IKA, IMB, IGH = (0, 3, 6, 9, 12, 15, 16, 17, 18,
+IPOS, IVEL, IATT, IBG, IBA, ISC, ITD, IBB, IKA, IMB, IGE = (0, 3, 6, 9, 12, 15, 16, 17, 18,
                                                             21, 24)
+IGH = IGE + 2  # the GNSS error state's down axis
 # indices of the nominal parameter vector ``par`` (NPAR,)
-PBG, PBA, PKA, PSC, PTD, PBB, PMB, PGH = 0, 3, 6, 9, 10, 11, 12, 15
-NPAR = 16
+PBG, PBA, PKA, PSC, PTD, PBB, PMB, PGE = 0, 3, 6, 9, 10, 11, 12, 15
+PGH = PGE + 2
+NPAR = 18
 
 
 @njit(cache=True)
@@ -225,7 +229,8 @@ def build_f(ing, tau_g, tau_a, tau_b, tau_h):
     if np.isfinite(tau_b):
         f[IBB, IBB] = -1.0 / tau_b
     if np.isfinite(tau_h):
-        f[IGH, IGH] = -1.0 / tau_h
+        for i in range(3):
+            f[IGE + i, IGE + i] = -1.0 / tau_h
     if ing[22] > 0.5:
         # IMU gap (module docstring): no inertial data, constant-velocity nominal; only
         # δṙ = δv and the Gauss-Markov decays remain
@@ -235,7 +240,8 @@ def build_f(ing, tau_g, tau_a, tau_b, tau_h):
             g2[IBG + i, IBG + i] = f[IBG + i, IBG + i]
             g2[IBA + i, IBA + i] = f[IBA + i, IBA + i]
         g2[IBB, IBB] = f[IBB, IBB]
-        g2[IGH, IGH] = f[IGH, IGH]
+        for i in range(3):
+            g2[IGE + i, IGE + i] = f[IGE + i, IGE + i]
         f = g2
     if ing[20] > 0.5:  # heading unknown: decouple the yaw error
         for j in range(NX):
@@ -377,10 +383,10 @@ def apply_correction(lla, v, q, par, dx):
         par[PBA + i] -= dx[IBA + i]
         par[PKA + i] -= dx[IKA + i]
         par[PMB + i] -= dx[IMB + i]
+        par[PGE + i] -= dx[IGE + i]
     par[PSC] -= dx[ISC]
     par[PTD] -= dx[ITD]
     par[PBB] -= dx[IBB]
-    par[PGH] -= dx[IGH]
 
 
 def unpack_cov(packed: Any, has_baro: bool) -> Any:

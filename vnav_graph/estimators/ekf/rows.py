@@ -4,7 +4,7 @@ innovation ``y = h(x̃) − z`` (6,), the Jacobian rows ``H`` (6, NX) and the no
 
 The nominal state at the event (``lm``, ``vm``, ``cm`` = C_nb and the radii ``rn``, ``re``) is
 interpolated by ``kernel.run_filter``; the rows follow the shared sensor models
-(``sensors.gnss``, ``sensors.baro`` through ``model.baro_predict`` / ``model.baro_row``,
+(``sensors.gnss_model``, ``sensors.baro`` through ``model.baro_predict`` / ``model.baro_row``,
 ``sensors.magnetometer.mag_heading_row``). Adding a sensor to the filter means a row function
 here, an event kind in ``kernel`` and its gated update in ``steps``.
 """
@@ -14,15 +14,15 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ...nav.rotations import cross3, skew3
 from ...nav.strapdown import nav_rates
+from ...sensors.gnss_model import antenna_position, antenna_velocity
 from ...sensors.magnetometer import MIN_HORIZONTAL_UT, mag_heading_row
 from .heading import RESET_DELTA, RESET_SD
 from .model import (
     IATT,
     IBB,
     IBG,
-    IGH,
+    IGE,
     IMB,
     IPOS,
     ISC,
@@ -42,43 +42,41 @@ GNSS, BARO, MAG = 0, 1, 2
 
 
 @njit(cache=True)
-def gnss_rows(lm, vm, cm, rn, re, gh, lever, lla_g, pos_sd, vel_g, vel_sd, has_vel,
+def gnss_rows(lm, vm, cm, rn, re, ge, lever, lla_g, pos_sd, vel_g, vel_sd, has_vel,
               heading_ok, w0, w1):
     """GNSS antenna position (rows 0-2, NED metres) and, with ``has_vel``, velocity (3-5):
-    r + C l and v + C (ω_nb × l); ``gh`` is the GNSS height error state (zero when off).
+    r + C l + e and v + C (ω_nb × l), the shared model ``sensors.gnss_model``; ``ge`` (3,)
+    is the GNSS error state (zero, of zero variance, on the axes not carried).
     While the heading is unknown the yaw column is zeroed and the lever arm's length is
     added to the position variance."""
-    d = cm @ lever
+    d, h_att = antenna_position(cm, lever)
     y = np.zeros(6)
     hm = np.zeros((6, NX))
     r = np.zeros(6)
-    y[0] = -(lla_g[0] - lm[0]) * (rn + lm[2]) + d[0]
-    y[1] = -(lla_g[1] - lm[1]) * (re + lm[2]) * np.cos(lm[0]) + d[1]
-    # down: −h + (C l)_D + ĝ (GNSS height error state, zero variance when off)
-    y[2] = (lla_g[2] - lm[2]) + d[2] + gh
-    sk = skew3(d)
+    # the fix's NED offset from the nominal IMU position (north, east, down)
+    y[0] = -(lla_g[0] - lm[0]) * (rn + lm[2]) + d[0] + ge[0]
+    y[1] = -(lla_g[1] - lm[1]) * (re + lm[2]) * np.cos(lm[0]) + d[1] + ge[1]
+    y[2] = (lla_g[2] - lm[2]) + d[2] + ge[2]
     lev2 = 0.0 if heading_ok else lever @ lever
     for a in range(3):
         hm[a, IPOS + a] = 1.0
         for b in range(3):
-            hm[a, IATT + b] = -sk[a, b]
+            hm[a, IATT + b] = h_att[a, b]
+        hm[a, IGE + a] = 1.0
         r[a] = pos_sd[a] ** 2 + lev2
-    hm[2, IGH] = 1.0
     mm = 3
     if has_vel:
         w_ie, w_en = nav_rates(lm[0], lm[2], vm)
         # (w_ie + w_en) @ cm is cm.T @ (...) and cross3 np.cross: the same numbers without
         # two more compiled specialisations (~4 s of a first run)
         wnb = 0.5 * (w0 + w1) - (w_ie + w_en) @ cm
-        u = cm @ cross3(wnb, lever)
-        su = skew3(u)
-        cl = cm @ skew3(lever)
+        u, hv_att, hv_bg = antenna_velocity(cm, lever, wnb)
         for a in range(3):
             y[3 + a] = vm[a] + u[a] - vel_g[a]
             hm[3 + a, IVEL + a] = 1.0
             for b in range(3):
-                hm[3 + a, IATT + b] = -su[a, b]
-                hm[3 + a, IBG + b] = cl[a, b]
+                hm[3 + a, IATT + b] = hv_att[a, b]
+                hm[3 + a, IBG + b] = hv_bg[a, b]
             r[3 + a] = vel_sd[a] ** 2
         mm = 6
     if not heading_ok:

@@ -30,7 +30,7 @@ from .model import (
     IBA,
     IBB,
     IBG,
-    IGH,
+    IGE,
     IKA,
     IMB,
     ISC,
@@ -41,7 +41,7 @@ from .model import (
     PBA,
     PBB,
     PBG,
-    PGH,
+    PGE,
     PKA,
     PMB,
     PSC,
@@ -171,5 +171,5 @@ def apply_error(lla: FloatArray, vel: FloatArray, q: FloatArray, par: FloatArray
     par2[:, PSC] -= e[:, ISC]
     par2[:, PTD] -= e[:, ITD]
     par2[:, PBB] -= e[:, IBB]
-    par2[:, PGH] -= e[:, IGH]
+    par2[:, PGE:PGE + 3] -= e[:, IGE:IGE + 3]
     return lla2, vel2, q2, par2

@@ -11,15 +11,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...config import DEG
+from ...sensors.gnss_model import GnssErrorSettings
 from ...sensors.magnetometer import MAG_BIAS_SD_UT, MAG_HEADING_FLOOR, MAG_INTERVAL_S
-from ...sensors.model import GnssHeightGM, gnss_gm
 
 # the EKF's robust losses (the graph has "cauchy" too)
 LOSSES = ("none", "huber")
 
 
 @dataclass(frozen=True)
-class EkfConfig:
+class EkfConfig(GnssErrorSettings):
     """Settings of ``ekf`` / ``ekf-rts`` (SI units); the gates and gap rules are described in
     the ``ekf.model`` docstring.
 
@@ -52,8 +52,9 @@ class EkfConfig:
     mag_bias_sd: prior σ of each hard-iron component [µT].
     mag_bias_rw: hard-iron random walk [µT/√s].
     mag_reaccept_s: after this long of refused headings the next is forced in [s].
-    gnss_gm_sd_v: σ of the Gauss-Markov GNSS height error state [m] (0: no state).
-    gnss_gm_tau_s: time constant of that state [s].
+    gnss_gm_sd_h, gnss_gm_sd_v, gnss_gm_tau_s: the Gauss-Markov GNSS error state (σ north/east,
+    σ down [m], 0: not carried; correlation time [s]), shared with the other family
+    (``sensors.gnss_model.GnssErrorSettings``).
     baro_scale_sd: prior σ of the baro scale (None: the shared sensor model's).
     loss_gnss_pos: robust loss of GNSS positions: "none" or "huber" (``ekf.model.huber_weight``:
         rows' variances R/w, w = min(1, k/e) with e = √NIS of the horizontal pair and of the
@@ -108,8 +109,6 @@ class EkfConfig:
     mag_bias_sd: float = MAG_BIAS_SD_UT
     mag_bias_rw: float = 0.01
     mag_reaccept_s: float = 20.0
-    gnss_gm_sd_v: float = 0.0
-    gnss_gm_tau_s: float = 300.0
     baro_scale_sd: float | None = None
     loss_gnss_pos: str = "none"
     loss_gnss_vel: str = "none"
@@ -128,12 +127,8 @@ class EkfConfig:
         return tuple(float(k) if loss == "huber" else 0.0  # type: ignore[return-value]
                      for loss, k in zip(losses, self.loss_threshold_sd, strict=True))
 
-    @property
-    def gnss_gm(self) -> GnssHeightGM | None:
-        return gnss_gm(self.gnss_gm_sd_v, self.gnss_gm_tau_s, "EkfConfig")
-
     def __post_init__(self) -> None:
-        self.gnss_gm  # noqa: B018 -- validates the Gauss-Markov GNSS height settings
+        self.gnss_gm  # noqa: B018 -- validates the Gauss-Markov GNSS error settings
         if not (self.cov_rate_hz > 0 and self.cov_output_hz > 0):
             raise ValueError("EkfConfig.cov_rate_hz / cov_output_hz: must be > 0")
         for what in ("loss_gnss_pos", "loss_gnss_vel", "loss_baro"):

@@ -20,7 +20,7 @@ from .model import (
     PBA,
     PBB,
     PBG,
-    PGH,
+    PGE,
     build_f,
     consider_update,
     huber_weight,
@@ -51,7 +51,7 @@ def tilt_held(p, settings, heading_ok):
 @njit(cache=True)
 def decay_gm(par, dt, tau_g, tau_a, tau_b, tau_h):
     """The nominal Gauss-Markov states over ``dt``: gyro and accelerometer biases, baro bias
-    and the GNSS height error each times exp(−dt/τ) (τ = inf: unchanged)."""
+    and the GNSS error state each times exp(−dt/τ) (τ = inf: unchanged)."""
     if np.isfinite(tau_g):
         f = np.exp(-dt / tau_g)
         for a in range(3):
@@ -63,7 +63,9 @@ def decay_gm(par, dt, tau_g, tau_a, tau_b, tau_h):
     if np.isfinite(tau_b):
         par[PBB] *= np.exp(-dt / tau_b)
     if np.isfinite(tau_h):
-        par[PGH] *= np.exp(-dt / tau_h)
+        f = np.exp(-dt / tau_h)
+        for a in range(3):
+            par[PGE + a] *= f
 
 
 @njit(cache=True)

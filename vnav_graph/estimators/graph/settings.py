@@ -7,14 +7,14 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ...sensors.gnss_model import GnssErrorSettings
 from ...sensors.magnetometer import MAG_BIAS_SD_UT, MAG_HEADING_FLOOR, MAG_INTERVAL_S
-from ...sensors.model import GnssHeightGM, gnss_gm
 from ...types import Drive
 from .model.robust import check_loss
 
 
 @dataclass(frozen=True)
-class GraphConfig:
+class GraphConfig(GnssErrorSettings):
     """Settings of the factor-graph smoothers (SI units); docs/graph.md gives the measurements
     behind the defaults.
 
@@ -55,8 +55,9 @@ class GraphConfig:
     mag_heading_floor: heading σ floor [rad].
     mag_bias_sd: prior σ of each hard-iron component [µT].
     mag_loss_sd: Huber threshold of the heading factors [σ].
-    gnss_gm_sd_v: σ of the Gauss-Markov GNSS height error state [m] (0: no state).
-    gnss_gm_tau_s: time constant of that state [s].
+    gnss_gm_sd_h, gnss_gm_sd_v, gnss_gm_tau_s: the Gauss-Markov GNSS error state (σ north/east,
+    σ down [m], 0: not carried; correlation time [s]), shared with the other family
+    (``sensors.gnss_model.GnssErrorSettings``).
     accel_scale: carry accelerometer scale factors (None: the shared rule of sensors.model).
     accel_scale_rw: online per-segment k_a random walk, times k_a's prior σ [1/√s].
     baro_scale_sd: prior σ of the baro scale (None: the shared sensor model's).
@@ -100,19 +101,13 @@ class GraphConfig:
     mag_heading_floor: float = MAG_HEADING_FLOOR
     mag_bias_sd: float = MAG_BIAS_SD_UT
     mag_loss_sd: float = 3.0
-    gnss_gm_sd_v: float = 0.0
-    gnss_gm_tau_s: float = 300.0
     accel_scale: bool | None = None
     accel_scale_rw: float = 2e-3
     baro_scale_sd: float | None = None
     init_attitude: str = "auto"
 
-    @property
-    def gnss_gm(self) -> GnssHeightGM | None:
-        return gnss_gm(self.gnss_gm_sd_v, self.gnss_gm_tau_s, "GraphConfig")
-
     def __post_init__(self) -> None:
-        self.gnss_gm  # noqa: B018 -- validates the Gauss-Markov GNSS height settings
+        self.gnss_gm  # noqa: B018 -- validates the Gauss-Markov GNSS error settings
         if self.solver not in ("auto", "banded", "general"):
             raise ValueError(f"GraphConfig.solver must be 'auto', 'banded' or 'general', not "
                              f"{self.solver!r}")

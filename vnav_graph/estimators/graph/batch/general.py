@@ -104,13 +104,13 @@ def group_pieces(lay: Layout, info: IntervalInfo) -> list[Any]:
     groups, lam, eta = info.groups, info.lam, info.eta
     g_n, c = lam.shape[0], lam.shape[1]
     n = c + 3  # + the zero gyro-bias columns of B_k
-    n_gm = 2 if lay.has_gm else 0  # G_k, G_k+1: after B_k's zero gyro columns
+    n_gm = 2 * lay.gm_dim  # G_k, G_k+1: after B_k's zero gyro columns
     n_main = c - n_gm
     idx = np.r_[np.arange(n_main), n_main + 3 + np.arange(n_gm)]
     lam_p, eta_p = pad_information(lam, eta, np.arange(c), idx, n)
     blocks = _BLOCKS_BARO if lay.has_baro else _BLOCKS_NO_BARO
     if lay.has_gm:
-        blocks = (*blocks, (n_main + 3, 1), (n_main + 4, 1))
+        blocks = (*blocks, (n_main + 3, lay.gm_dim), (n_main + 3 + lay.gm_dim, lay.gm_dim))
     cover = _cover(len(blocks))
     sl = [slice(a, a + w) for a, w in blocks]
     plan = _plan(blocks, cover)
@@ -168,7 +168,7 @@ def elimination_ordering(lay: Layout) -> Any:
     hill-drive (3601 keyframes, 32 405 factors), one solve: ``optimize()`` (COLAMD at every
     call) 0.36 s, METIS ordering 0.17 s (and METIS crashed on an extension's graph), this
     ordering 0.13 s; steps equal to 1.5e-9."""
-    tmpl = template_keys(lay.nk, lay.has_baro, lay.has_gm)
+    tmpl = template_keys(lay.nk, lay.has_baro, lay.gm_dim)
     per_kf = len(tmpl) // max(lay.nk, 1)
     o = gtsam.Ordering()
     for k in _dissect(0, lay.nk):

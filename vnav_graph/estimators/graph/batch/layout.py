@@ -5,9 +5,9 @@ The variables of the linearised C++ graph (``GaussianFactorGraph.keys()``, sorte
 also the column order of ``sparseJacobian_``) are split into
 
 - the keyframe *template*: X(k) Pose3 (6), V(k) velocity (3), B(k) IMU bias (6, accel then
-  gyro), C(k) baro bias (1, with a barometer), G(k) GNSS height Gauss-Markov error (1, when
-  ``GraphConfig.gnss_gm_sd_v`` > 0) for k = 0 … K−1, ordered keyframe by keyframe:
-  keyframe k owns columns k·bs + [0, bs) (bs = 15 + 1 with baro + 1 with G);
+  gyro), C(k) baro bias (1, with a barometer), G(k) GNSS Gauss-Markov error (d = 1, 2 or 3,
+  when ``GraphConfig.gnss_gm_sd_h`` or ``gnss_gm_sd_v`` > 0) for k = 0 … K−1, ordered
+  keyframe by keyframe: keyframe k owns columns k·bs + [0, bs) (bs = 15 + 1 with baro + d);
 - the *global* variables: every other key — K(0) = (s, τd) first, then any variable a user
   added, in key order — in columns n_band = K·bs onwards.
 
@@ -52,12 +52,16 @@ class Layout:
     pattern: Any = None  # SparsePattern of the graph last linearised with this layout
     banded: bool | None = None  # path of the solver, decided at the first linearisation
     ordering: Any = None  # elimination ordering of the general path, computed once
-    has_gm: bool = False  # G(k), the GNSS height Gauss-Markov error, in the template
+    gm_dim: int = 0  # dimension of G(k), the GNSS Gauss-Markov error, in the template
+
+    @property
+    def has_gm(self) -> bool:
+        return self.gm_dim > 0
 
     @property
     def gm_col(self) -> int:
-        """Column of G(k) inside keyframe k's block: its last (``template_keys``)."""
-        return self.bs - 1
+        """First column of G(k) inside keyframe k's block: its last d (``template_keys``)."""
+        return self.bs - self.gm_dim
 
     @property
     def bandwidth(self) -> int:
@@ -73,12 +77,12 @@ class Layout:
     def term_cols(self) -> np.ndarray:
         """Interval-term columns (``factors`` order) present in this layout."""
         core = np.arange(gf.N_CORE if self.has_baro else 12)
-        gm = np.array([gf.COL_G0, gf.COL_G1]) if self.has_gm else np.zeros(0, int)
+        gm = np.arange(gf.N_COLS, gf.n_cols_of(self.gm_dim))
         return np.r_[core, np.arange(gf.N_CORE, gf.N_COLS), gm]
 
     def block_cols(self, k: np.ndarray) -> np.ndarray:
         """Our columns of the interval-term blocks (X_k, X_k+1, [C_k, C_k+1, K,] accel bias
-        of B_k, [G_k, G_k+1]), in the order of ``term_cols`` (G, 19|15 [+2])."""
+        of B_k, [G_k, G_k+1]), in the order of ``term_cols`` (G, 19|15 [+2d])."""
         k = np.asarray(k)[:, None]
         six = np.arange(6)[None, :]
         parts = [k * self.bs + six, (k + 1) * self.bs + six]
@@ -88,7 +92,8 @@ class Layout:
                       np.full_like(k, kc), np.full_like(k, kc + 1)]
         parts.append(k * self.bs + 9 + np.arange(3)[None, :])
         if self.has_gm:
-            parts += [k * self.bs + self.gm_col, (k + 1) * self.bs + self.gm_col]
+            g = self.gm_col + np.arange(self.gm_dim)[None, :]
+            parts += [k * self.bs + g, (k + 1) * self.bs + g]
         return np.concatenate(parts, axis=1)
 
     def cols_of(self, keys: list[int]) -> np.ndarray:
@@ -108,7 +113,7 @@ class Layout:
             if self.has_baro:
                 ins(C(k), row[15:16])
             if self.has_gm:
-                ins(G(k), row[self.gm_col:self.gm_col + 1])
+                ins(G(k), row[self.gm_col:self.bs])
         for key in self.globals_:
             c, n = self.key_cols[key]
             ins(key, delta[c:c + n])
@@ -139,30 +144,30 @@ class Layout:
                 and self.pattern.band_ok)
 
 
-def template_keys(nk: int, has_baro: bool, has_gm: bool = False
+def template_keys(nk: int, has_baro: bool, gm_dim: int = 0
                   ) -> list[tuple[int, int, int]]:
-    """(key, dim, column) of the keyframe template."""
-    bs = 15 + int(has_baro) + int(has_gm)
+    """(key, dim, column) of the keyframe template (``gm_dim``: dimension of G(k), 0: none)."""
+    bs = 15 + int(has_baro) + gm_dim
     items = []
     for k in range(nk):
         o = k * bs
         items += [(X(k), 6, o), (V(k), 3, o + 6), (B(k), 6, o + 9)]
         if has_baro:
             items.append((C(k), 1, o + 15))
-        if has_gm:
-            items.append((G(k), 1, o + bs - 1))
+        if gm_dim:
+            items.append((G(k), gm_dim, o + bs - gm_dim))
     return items
 
 
 def make_layout(nk: int, has_baro: bool, graph_keys: Any, dims: dict[int, int],
-                has_gm: bool = False) -> Layout:
+                gm_dim: int = 0) -> Layout:
     """Layout of a graph with the variables ``graph_keys`` (``dims``: tangent dimension of
-    every key, from ``Values.dims()``); ``has_gm``: G(k) is in the template. Raises
-    ``RuntimeError`` naming a missing template variable."""
+    every key, from ``Values.dims()``); ``gm_dim``: dimension of G(k) in the template (0:
+    none). Raises ``RuntimeError`` naming a missing template variable."""
     keys = sorted(int(k) for k in graph_keys)
-    bs = 15 + int(has_baro) + int(has_gm)
+    bs = 15 + int(has_baro) + gm_dim
     n_band = nk * bs
-    items = template_keys(nk, has_baro, has_gm)
+    items = template_keys(nk, has_baro, gm_dim)
     have = set(keys)
     for key, _, _ in items:
         if key not in have:
@@ -181,7 +186,7 @@ def make_layout(nk: int, has_baro: bool, graph_keys: Any, dims: dict[int, int],
         col += int(dims[key])
     key_cols = {key: (off, dim) for key, dim, off in items}
     g2m = np.concatenate([key_cols[k][0] + np.arange(key_cols[k][1]) for k in keys])
-    return Layout(nk, bs, has_baro, n_band, col, g2m, keys, key_cols, glob, has_gm=has_gm)
+    return Layout(nk, bs, has_baro, n_band, col, g2m, keys, key_cols, glob, gm_dim=gm_dim)
 
 
 @dataclass

@@ -10,8 +10,9 @@ Only the modules of this subpackage import gtsam. Design (details and measuremen
   the specific force fed to the preintegration, rotated with the keyframe attitude estimate.
   Outputs are converted to geodetic lla (ellipsoidal heights) and local-level NED.
 - Variables per keyframe k: X(k) Pose3, V(k) velocity, B(k) IMU bias, C(k) baro
-  Gauss-Markov bias, G(k) GNSS height Gauss-Markov error (optional,
-  ``GraphConfig.gnss_gm_sd_v``, the EKF's model; a linear chain like C); K(j) = (s, τd) baro
+  Gauss-Markov bias, G(k) GNSS Gauss-Markov error on 1-3 NED axes (optional,
+  ``GraphConfig.gnss_gm_sd_h`` / ``gnss_gm_sd_v``, the EKF's model ``sensors.gnss_model``; a
+  linear chain like C); K(j) = (s, τd) baro
   calibration (one for the batch, one per segment in the incremental front end).
 - C++ factors: ImuFactor (Forster et al. 2017) on B(k), GPSFactorArm and velocity priors for
   fixes at keyframe epochs, priors, and as linear factors the IMU biases' Gauss-Markov step
@@ -300,11 +301,11 @@ def accel_scale_info(P: Problem, vals: Any, cov_of: Any) -> dict[str, Any]:
 
 
 def gnss_gm_info(P: Problem) -> dict[str, Any]:
-    """``info["gnss_height_gm"]`` (σ, τ of the GNSS height state, as the EKF reports it) when
-    the solve carried it, else nothing."""
+    """``info["gnss_gm"]`` (and ``gnss_height_gm``: ``GnssGM.info``, as the EKF reports it)
+    when the solve carried the GNSS error state, else nothing."""
     if P.gm is None:
         return {}
-    return {"gnss_height_gm": {"sd_m": P.gm.sd_m, "tau_s": P.gm.tau_s}}
+    return P.gm.info()
 
 
 def provides(drive: Drive) -> frozenset[str]:

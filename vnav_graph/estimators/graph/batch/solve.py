@@ -79,7 +79,7 @@ class BatchResult:
 def batch_layout(P: Problem, graph: Any, vals: Any) -> Layout:
     """Column layout from the keys of the graph (``layout.make_layout``)."""
     return make_layout(P.n_kf, P.drive.baro is not None, graph.keyVector(), vals.dims(),
-                       has_gm=P.gm is not None)
+                       gm_dim=0 if P.gm is None else P.gm.dim)
 
 
 def linear_system(P: Problem, lay: Layout, graph: Any, vals: Any,

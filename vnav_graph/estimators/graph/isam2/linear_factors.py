@@ -1,7 +1,7 @@
 """Custom terms of ``graph-isam2``'s online pass: the baro samples and GNSS fixes between
 keyframes as ``LinearContainerFactor``s, linearised once (numpy, ``factors``) at the current
 estimate as soon as they have arrived, with the accelerometer-bias columns on B(k) and,
-when carried, the GNSS height error G(k) (``docs/graph.md``). No Python callback runs inside
+when carried, the GNSS error state G(k) (``docs/graph.md``). No Python callback runs inside
 iSAM2."""
 
 from __future__ import annotations
@@ -20,9 +20,15 @@ from ..model.robust import reweight
 
 # key blocks (first column, width) of the factors, in their padded columns (B's gyro part
 # zero): baro — X(m), X(m+1), C(m), C(m+1), K(j), B(m) over the 19 ``factors`` columns + 3;
-# GNSS with the height state — X(k), X(k+1), B(k), G(k), G(k+1)
+# GNSS with the error state of dimension d — X(k), X(k+1), B(k), G(k), G(k+1)
 BARO_BLOCKS = (*gf.BLOCKS, (16, 6))
-GNSS_GM_BLOCKS = ((0, 6), (6, 6), (12, 6), (18, 1), (19, 1))
+
+
+def gnss_gm_blocks(d: int) -> tuple[tuple[int, int], ...]:
+    """Key blocks (first column, width) of a GNSS factor with G(k), G(k+1) of dimension d."""
+    return ((0, 6), (6, 6), (12, 6), (18, d), (18 + d, d))
+
+
 
 
 def keyframe_states(P: Any, k: int | list[int], rot: Any, pos: Any, vel: Any, bias: Any,
@@ -59,7 +65,7 @@ def gnss_factor(P: Any, k: int, st: gf.KeyframeStates, bias: Any, g_idx: Any) ->
     """The GNSS fixes ``g_idx`` of interval k (strictly inside it; with the GNSS height
     state also the one on keyframe k+1) as one LinearContainerFactor on X(k), X(k+1) and
     B(k) (the accelerometer-bias columns of the interpolant included), and G(k), G(k+1)
-    with the GNSS height state, linearised at ``st`` (``keyframe_states``; X(k+1): its
+    with the GNSS error state, linearised at ``st`` (``keyframe_states``; X(k+1): its
     prediction)."""
     return gnss_factors(P, [k], st, bias, [g_idx])[0]
 
@@ -87,7 +93,8 @@ def gnss_interval_rows(P: Any, ks: list[int], st: gf.KeyframeStates,
         P.dense, st, P.g_t[g_idx], P.g_pos[g_idx], P.g_pos_sd[g_idx],
         None if P.g_vel is None else P.g_vel[g_idx],
         None if P.g_vel_sd is None else P.g_vel_sd[g_idx], P.lever,
-        k=np.repeat(np.asarray(ks, dtype=int), n_of))
+        k=np.repeat(np.asarray(ks, dtype=int), n_of),
+        omega_b=None if P.g_omega is None else P.g_omega[g_idx])
     n = 3 * g_idx.size  # position rows, then velocity rows
     # per fix (3 rows each, position then velocity): its reweighted rows
     r_parts, j_parts = [], []
@@ -115,13 +122,14 @@ def _gnss_lcf(P: Any, k: int, st: gf.KeyframeStates, bias: Any, r: Any, jac: Any
         rows_g = gf.IntervalRows(np.zeros(r.size, dtype=np.intp), r, jac)
         _, lam, eta, _ = gf.group_information(rows_g, 1)
         # X_k, X_k+1, b_a (+ 3 zero gyro columns), G_k, G_k+1
+        d = P.gm.dim
         lam_p, eta_p = pad_information(lam[0], eta[0],
-                                       np.r_[0:12, gf.COL_BA, gf.COL_G0, gf.COL_G1],
-                                       np.r_[0:15, 18, 19], 20)
-        lin.insert(G(k), np.array([st.gnss_gm[k]]))
-        lin.insert(G(k + 1), np.array([st.gnss_gm[k + 1]]))
+                                       np.r_[0:12, gf.COL_BA, gf.N_COLS:gf.n_cols_of(d)],
+                                       np.r_[0:15, 18:18 + 2 * d], 18 + 2 * d)
+        lin.insert(G(k), np.array(st.gnss_gm[k], ndmin=1))
+        lin.insert(G(k + 1), np.array(st.gnss_gm[k + 1], ndmin=1))
         return information_factor([X(k), X(k + 1), B(k), G(k), G(k + 1)], lam_p, eta_p,
-                                  GNSS_GM_BLOCKS, lin)
+                                  gnss_gm_blocks(d), lin)
     # the same information in ≤ 16 rows (QR of [J | r] over X(k), X(k+1), b_a): 9 fixes
     # with velocity are 54 rows; kept whole they held ~200 MB more on a 1-hour drive
     a_r = np.hstack([jac[:, gf.COL_X0], jac[:, gf.COL_X1], jac[:, gf.COL_BA], r[:, None]])

@@ -117,9 +117,11 @@ class OnlinePass:
             self.ext = collect(extensions, make_view(P, vals_i))
         self.isam: Any = gtsam.ISAM2(isam2_params(cfg, robust, self.ext))
         # running linearisation arrays (keyframe states as last estimated); gg: the GNSS
-        # height error G(k) (GraphConfig.gnss_gm_sd_v), if carried
+        # error state G(k) (GraphConfig.gnss_gm_*; (K,) for the height alone), if carried
         self.rot, self.pos, self.vel = np.zeros((nk, 3, 3)), np.zeros((nk, 3)), np.zeros((nk, 3))
-        self.bias, self.cb, self.gg = np.zeros((nk, 6)), np.zeros(nk), np.zeros(nk)
+        gm_dim = 1 if P.gm is None else P.gm.dim
+        self.bias, self.cb = np.zeros((nk, 6)), np.zeros(nk)
+        self.gg = np.zeros(nk) if gm_dim == 1 else np.zeros((nk, gm_dim))
         self.arrays = (self.rot, self.pos, self.vel, self.bias, self.cb, self.gg)
         self.cal = {0: np.array([0.0, P.pri["tau0"]])}
         st0 = P.start0
@@ -172,7 +174,7 @@ class OnlinePass:
 
     def _fixes_of(self) -> list[np.ndarray]:
         """The fixes of each interval, once (fixes and keyframes are in time order): strictly
-        inside it, and — with the GNSS height state — on the keyframe that ends it (the one on
+        inside it, and — with the GNSS error state — on the keyframe that ends it (the one on
         keyframe 0 goes with interval 0)."""
         P = self.P
         g_between = np.flatnonzero((P.g_kf == -1) & P.g_use)
@@ -250,7 +252,7 @@ class OnlinePass:
         self.cb[k + 1] = self.cb[k]
 
     def _keyframe_fixes(self, k: int, nf: Any, nv: Any) -> list[tuple[int, int]]:
-        """Keyframe k + 1's GNSS fixes, or its GNSS height state G and link (the fix on
+        """Keyframe k + 1's GNSS fixes, or its GNSS error state G and link (the fix on
         keyframe k + 1 then ends interval k's rows). Returns (fix, index in ``nf``) pairs."""
         P = self.P
         fix_at: list[tuple[int, int]] = []
@@ -261,7 +263,7 @@ class OnlinePass:
         else:
             dt = float(P.t_kf[k + 1] - P.t_kf[k])
             self.gg[k + 1] = self.gg[k] * gm_transition(dt, P.gm.tau_s)
-            nv.insert(G(k + 1), np.array([self.gg[k + 1]]))
+            nv.insert(G(k + 1), np.array(self.gg[k + 1], ndmin=1))
             nf.add(gnss_gm_factor(k, dt, P.gm))
         return fix_at
 

@@ -239,7 +239,7 @@ class TermBook:
         removed: list[int] = []
         samples = []
         g_ks = [m for m in ks if self.gnss_idx[m] >= 0]
-        # with a baro (and no GNSS height state: other keys) an interval's GNSS rows go
+        # with a baro (and no GNSS error state: other keys) an interval's GNSS rows go
         # into its baro factor: one factor per rebuilt interval
         merge = cal is not None and P.gm is None
         extra: dict[int, Any] = {}
@@ -303,7 +303,8 @@ def read_states(est: Any, keys_k: Any, arrays: tuple[Any, ...], P: Any,
         if has_baro:
             cb[k] = est.atVector(C(k))[0]
         if has_gm:
-            gg[k] = est.atVector(G(k))[0]
+            g = est.atVector(G(k))
+            gg[k] = g[0] if gg.ndim == 1 else g
 
 
 def state_keys(keys_k: Any, P: Any, b_last: int | None = None) -> Any:

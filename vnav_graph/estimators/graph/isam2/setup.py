@@ -80,7 +80,8 @@ def threshold_map(cfg: GraphConfig, ext: Collected | None = None) -> Any:
     m.insert(("b", np.array([ba] * 3 + [bg] * 3)))
     m.insert(("c", np.full(1, 1e9)))
     m.insert(("k", np.full(2, 1e9)))
-    m.insert(("g", np.full(1, 1e9)))  # the GNSS height error G(k): linear factors only
+    gm = cfg.gnss_gm  # the GNSS error state G(k) (1 to 3 axes): linear factors only
+    m.insert(("g", np.full(1 if gm is None else gm.dim, 1e9)))
     m.insert(("a", np.full(3, 1e9)))  # the accelerometer scale factors: linear factors only
     if ext is not None:
         for ch, thr in ext.threshold_entries(cfg.relinearize_threshold).items():
@@ -147,7 +148,7 @@ def first_keyframe(P: Any, r0: Any, p0: Any, v0: Any, k0: Any, yaw_sd: float
         vals0.insert(C(0), np.zeros(1))
         vals0.insert(K(0), k0)
     if P.gm is not None:
-        vals0.insert(G(0), np.zeros(1))
+        vals0.insert(G(0), np.zeros(P.gm.dim))
     if P.ka is not None:
         vals0.insert(A(0), np.zeros(3))
     fix_at: list[tuple[int, int]] = []

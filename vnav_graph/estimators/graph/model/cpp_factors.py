@@ -14,7 +14,7 @@ from gtsam.symbol_shorthand import A, B, C, G, K, V, X
 
 from ....config import ImuSpec
 from ....nav.levelling import coarse_level
-from ....sensors.model import GnssHeightGM
+from ....sensors.gnss_model import GnssGM
 from ....sensors.noise import gm_process_var, gm_transition, imu_bias_step
 from ....types import FloatArray
 from ..batch.general import information_factor
@@ -65,8 +65,8 @@ def prior_factors(P: Problem, r0: FloatArray, p0: FloatArray, v0: FloatArray,
         g.add(gtsam.PriorFactorVector(C(0), np.zeros(1), noise([pri["b_sd"]])))
         g.add(gtsam.PriorFactorVector(calib_key, np.array([0.0, pri["tau0"]]),
                                       noise([pri["s_sd"], pri["tau_sd"]])))
-    if P.gm is not None:  # the stationary Gauss-Markov prior of the GNSS height error
-        g.add(gtsam.PriorFactorVector(G(0), np.zeros(1), noise([P.gm.sd_m])))
+    if P.gm is not None:  # the stationary Gauss-Markov prior of the GNSS error state
+        g.add(gtsam.PriorFactorVector(G(0), np.zeros(P.gm.dim), noise(list(P.gm.sd))))
     return g
 
 
@@ -175,9 +175,17 @@ def gm_factor(k: int, dt: float, pri: dict[str, float], zeros: Any = None) -> An
     return gm_link(C(k), C(k + 1), dt, pri["b_tau"], pri["b_sd"], zeros)
 
 
-def gnss_gm_factor(k: int, dt: float, gm: GnssHeightGM, zeros: Any = None) -> Any:
-    """The GNSS height error's Gauss-Markov link G(k) → G(k+1)."""
-    return gm_link(G(k), G(k + 1), dt, gm.tau_s, gm.sd_m, zeros)
+def gnss_gm_factor(k: int, dt: float, gm: GnssGM, zeros: Any = None) -> Any:
+    """The GNSS error state's Gauss-Markov link G(k) → G(k+1), one exact discrete step per
+    carried axis (``gm_link``; a diagonal vector link when more than one axis is carried)."""
+    if gm.dim == 1:
+        return gm_link(G(k), G(k + 1), dt, gm.tau_s, gm.sd_m, zeros)
+    phi = float(gm_transition(dt, gm.tau_s))
+    sd_w = [float(np.sqrt(max(gm_process_var(dt, gm.tau_s, float(s)), 1e-12))) for s in gm.sd]
+    eye = np.eye(gm.dim)
+    return _linear(gtsam.JacobianFactor(G(k), -phi * eye, G(k + 1), eye, np.zeros(gm.dim),
+                                        noise(sd_w)), [(G(k), gm.dim), (G(k + 1), gm.dim)],
+                   zeros)
 
 
 
@@ -268,7 +276,7 @@ def build_batch_graph(P: Problem, rot: FloatArray, pos: FloatArray, vel: FloatAr
         if has_baro:
             vals.insert(C(k), np.zeros(1))
         if P.gm is not None:
-            vals.insert(G(k), np.zeros(1))
+            vals.insert(G(k), np.zeros(P.gm.dim))
     if P.ka is not None:
         vals.insert(A(0), np.zeros(3))
     dts = np.diff(P.t_kf)

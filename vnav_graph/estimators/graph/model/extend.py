@@ -31,9 +31,9 @@ accelerometer scale factors ``A(0)`` (``GraphConfig.accel_scale``) its accelerom
 the effective bias b_a + diag(ā_k)·k_a), plus ``C(k)`` (baro Gauss-Markov bias [m]) when the
 drive has a barometer, for k = 0 … ``view.n_keyframes`` − 1 (``gtsam.symbol_shorthand``).
 The letters ``RESERVED`` (x, v, b, c, k, g, a) belong to the smoother (g: the optional GNSS
-height Gauss-Markov error ``G(k)``, ``GraphConfig.gnss_gm_sd_v``; a: ``A(0)``): new variables
-take another letter, and factors may not touch ``K`` (the baro calibration, one variable in
-the batch but one per segment in iSAM2).
+Gauss-Markov error ``G(k)``, ``GraphConfig.gnss_gm_sd_h`` / ``gnss_gm_sd_v``; a: ``A(0)``): new
+variables take another letter, and factors may not touch ``K`` (the baro calibration, one
+variable in the batch but one per segment in iSAM2).
 
 Cost: a ``CustomFactor`` is linearised from Python by ``graph-batch`` (``graph.linearize``,
 ≈ 0.1 ms per factor), but inside iSAM2's C++ relinearisation each callback copies the whole

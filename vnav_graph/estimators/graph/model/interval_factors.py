@@ -6,8 +6,9 @@ Contents
   at ``Drive.origin_lla``); ``rot_t_n`` rotates local-level NED at any (lat, lon) into ``t``,
   ``gravity_t`` gives the WGS-84 normal gravity vector resolved in ``t`` (its tilt and
   magnitude change over the drive are folded into the preintegration, see ``docs/graph.md``).
-- ``dense_preintegration``: body-frame increments ΔR, Δv, Δp from each keyframe to every IMU
-  sample inside its interval (numba), used to interpolate the state at any sample time.
+- ``dense_preintegration`` (module ``dense_increments``): body-frame increments ΔR, Δv, Δp
+  from each keyframe to every IMU sample inside its interval (numba), used to interpolate the
+  state at any sample time.
 - ``interval_terms``: residuals and Jacobians of baro samples and GNSS fixes that fall between
   keyframes, through the interpolant
 
@@ -30,10 +31,11 @@ calibration (s, τd) — the 16 "core" columns — and the accelerometer bias of
 (Δp(τ) − ½τ²b_a), so ∂p(t)/∂b_a = ½τ(T − τ)·R_k and ∂v(t)/∂b_a = (½T − τ)·R_k; leaving these
 columns out makes the Jacobian disagree with the cost and Gauss-Newton converge only linearly.
 The gyro-bias dependence of the interpolant (second order over one interval) is not modelled.
-With the optional Gauss-Markov GNSS height error (``GraphConfig.gnss_gm_sd_v``) the rows have
-two more columns, that error at keyframes k and k+1 (``COL_G0``, ``COL_G1``; linear in time
-between them, like the baro bias): the GNSS down coordinate is predicted as
-p_D(t) + (C l)_D + g(t) (the EKF's model, ``ekf.model``).
+The GNSS rows are the shared measurement model (``sensors.gnss_model``: antenna p + C l + e,
+attitude Jacobian −[(C l)×] in t turned into the body rotation's by ``body_tilt``). With the
+optional Gauss-Markov GNSS error state (``GraphConfig.gnss_gm_sd_h`` / ``gnss_gm_sd_v``,
+G(k) of dimension d = 1 (down), 2 (north, east) or 3) the rows have 2d more columns, that
+error at keyframes k and k+1 (``gm_cols``; linear in time between them, like the baro bias).
 """
 
 from __future__ import annotations
@@ -41,15 +43,19 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 
 from ....geo.earth import OMEGA_IE, gravity
 from ....geo.frames import lla_to_ned, ned_to_lla, skew
-from ....nav.arrays import put
-from ....nav.rotations import dcm_to_quat_into, quat_to_dcm_into, so3_exp_into
 from ....sensors.baro import baro_jacobian, measure_baro
+from ....sensors.gnss_model import (
+    GM_AXES,
+    antenna_position_batch,
+    antenna_velocity_batch,
+    body_tilt,
+)
 from ....types import FloatArray
-from .interp import increments_at, interpolant
+from .dense_increments import DenseIncrements, dense_preintegration  # noqa: F401 (gf.*)
+from .interp import interpolant
 
 N_COLS = 19
 N_CORE = 16  # columns of the five key blocks below (the baro-bias/calibration part)
@@ -60,11 +66,28 @@ COL_B1 = 13
 COL_S = 14
 COL_TAU = 15
 COL_BA = slice(16, 19)
-N_COLS_GM = 21  # with the GNSS height Gauss-Markov error at keyframes k, k+1 (last)
+N_COLS_GM = 21  # with the height-only GNSS error state at keyframes k, k+1 (``n_cols_of(1)``)
 COL_G0 = 19
 COL_G1 = 20
 # key blocks of a group: (first column, width)
 BLOCKS = ((0, 6), (6, 6), (12, 1), (13, 1), (14, 2))
+
+
+def n_cols_of(gm_dim: int) -> int:
+    """Columns of the rows with a GNSS error state of dimension ``gm_dim`` (0: none)."""
+    return N_COLS + 2 * gm_dim
+
+
+def gm_cols(gm_dim: int) -> tuple[slice, slice]:
+    """Columns of the GNSS error state at keyframes k and k+1 (after ``N_COLS``); for the
+    height-only state (d = 1) they are ``COL_G0`` and ``COL_G1``."""
+    return slice(N_COLS, N_COLS + gm_dim), slice(N_COLS + gm_dim, N_COLS + 2 * gm_dim)
+
+
+def gm_dim_of(st: KeyframeStates) -> int:
+    """Dimension of the GNSS error state of ``st`` (0 when not carried)."""
+    g = st.gnss_gm
+    return 0 if g is None else (1 if g.ndim == 1 else int(g.shape[1]))
 
 
 def rot_n_e(lat: FloatArray, lon: FloatArray) -> FloatArray:
@@ -112,141 +135,6 @@ def height_and_up(pos_t: FloatArray, origin_lla: FloatArray) -> tuple[FloatArray
     return lla[:, 2], -c[:, :, 2]
 
 
-@njit(cache=True)
-def _dense(t, gyro, accel, kf_idx):
-    # one pass over the IMU samples without allocating per sample (3×3 products written
-    # out): graph set-up (`problem.setup`) 0.97 → 0.31–0.38 s on a 1-hour 200 Hz drive, the
-    # increments equal to 2e-14
-    n = t.size
-    nk = kf_idx.size
-    m = max(nk - 1, 0)
-    qr = np.empty((n, 4))
-    dv = np.empty((n, 3))
-    dp = np.empty((n, 3))
-    dr_end = np.empty((m, 3, 3))
-    dv_end = np.empty((m, 3))
-    dp_end = np.empty((m, 3))
-    r = np.empty((3, 3))
-    r_new = np.empty((3, 3))
-    e = np.empty((3, 3))
-    phi = np.empty(3)
-    v = np.empty(3)
-    p = np.empty(3)
-    a0 = np.empty(3)
-    a1 = np.empty(3)
-    for k in range(nk - 1):
-        for i in range(3):
-            v[i] = 0.0
-            p[i] = 0.0
-            for c in range(3):
-                r[i, c] = 1.0 if i == c else 0.0
-        for j in range(kf_idx[k], kf_idx[k + 1]):
-            dcm_to_quat_into(r, qr[j])
-            dt = t[j + 1] - t[j]
-            for i in range(3):
-                dv[j, i] = v[i]
-                dp[j, i] = p[i]
-                phi[i] = 0.5 * (gyro[j, i] + gyro[j + 1, i]) * dt
-            so3_exp_into(phi, e)
-            for i in range(3):
-                for c in range(3):
-                    r_new[i, c] = r[i, 0] * e[0, c] + r[i, 1] * e[1, c] + r[i, 2] * e[2, c]
-            for i in range(3):
-                a0[i] = r[i, 0] * accel[j, 0] + r[i, 1] * accel[j, 1] + r[i, 2] * accel[j, 2]
-                a1[i] = (r_new[i, 0] * accel[j + 1, 0] + r_new[i, 1] * accel[j + 1, 1]
-                         + r_new[i, 2] * accel[j + 1, 2])
-            for i in range(3):
-                p[i] = p[i] + v[i] * dt + (a0[i] / 3.0 + a1[i] / 6.0) * dt * dt
-                v[i] = v[i] + 0.5 * (a0[i] + a1[i]) * dt
-            r, r_new = r_new, r
-        put(dr_end[k], r)
-        put(dv_end[k], v)
-        put(dp_end[k], p)
-    last = kf_idx[-1]
-    for j in range(last, n):
-        qr[j, 0] = 1.0
-        for i in range(3):
-            qr[j, i + 1] = 0.0
-            dv[j, i] = 0.0
-            dp[j, i] = 0.0
-    return qr, dv, dp, dr_end, dv_end, dp_end
-
-
-@njit(cache=True)
-def _rot_of(qr):  # pragma: no cover - jit
-    out = np.empty((qr.shape[0], 3, 3))
-    for i in range(qr.shape[0]):
-        quat_to_dcm_into(qr[i], out[i])
-    return out
-
-
-@dataclass(frozen=True)
-class DenseIncrements:
-    """Body-frame increments from keyframe k(j) to IMU sample j (``qr, dv, dp``; shapes
-    (N, 4) / (N, 3): ΔR as a unit quaternion (w, x, y, z), w ≥ 0, ``rot`` gives matrices)
-    and over each whole interval (``*_end``: ΔR, Δv, ΔP over T, shapes (K−1, 3, 3) /
-    (K−1, 3)); computed with the biases given to ``dense_preintegration``.
-    The increment to sample j+1 is sample j+1's own, or the interval's end when j+1 starts
-    the next interval (``interp.increments_at``): a second per-sample copy of them was half
-    of the graph's memory for the IMU (173 MB on a 1-hour 200 Hz drive, 87 MB with ΔR as
-    matrices, 58 MB as quaternions)."""
-
-    t: FloatArray
-    kf_idx: np.ndarray
-    qr: FloatArray
-    dv: FloatArray
-    dp: FloatArray
-    dr_end: FloatArray
-    dv_end: FloatArray
-    dp_end: FloatArray
-    gap: np.ndarray | None = None  # (K−1,) bool: interval holds an IMU logging gap
-
-    @property
-    def t_kf(self) -> FloatArray:
-        return self.t[self.kf_idx]
-
-    def rot(self, j0: int, j1: int) -> FloatArray:
-        """ΔR of samples j0 … j1−1 as rotation matrices, (j1 − j0, 3, 3)."""
-        return _rot_of(self.qr[j0:j1])
-
-    def end(self) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """ΔR_T, Δv_T, ΔP_T per interval, shapes (K−1, 3, 3), (K−1, 3), (K−1, 3)."""
-        return self.dr_end, self.dv_end, self.dp_end
-
-    def at(self, t_q: FloatArray, k: np.ndarray) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """Increments of interval ``k`` at times ``t_q``: Δp is the cubic Hermite through
-        (Δp, Δv) at the two neighbouring IMU samples — exactly the trapezoidal integrator's
-        linear-acceleration motion — and Δv is its time derivative, so Δp is C¹ in time and
-        the latency Jacobian (−v_up) is the exact derivative of the baro prediction.
-        Attitude from the nearest earlier sample."""
-        return increments_at(self.t, self.kf_idx, self.qr, self.dv, self.dp, self.dv_end,
-                             self.dp_end, np.ascontiguousarray(t_q, dtype=float),
-                             np.ascontiguousarray(np.broadcast_to(k, np.shape(t_q)),
-                                                  dtype=np.intp))
-
-
-def dense_preintegration(
-    t: FloatArray, gyro_b: FloatArray, accel_b: FloatArray, kf_idx: np.ndarray,
-    bias_gyro: FloatArray | None = None, bias_accel: FloatArray | None = None,
-) -> DenseIncrements:
-    """Integrate ΔR, Δv, Δp from each keyframe (IMU sample index ``kf_idx``) to every sample
-    of its interval. Trapezoidal, resolved in the keyframe's body frame; Earth rate is
-    ignored inside an interval (≤ 7e-5 rad per second of interval — it only shapes the interpolant).
-
-    Parameters
-    ----------
-    t : (N,) [s]; gyro_b (N, 3) [rad/s]; accel_b (N, 3) [m/s²]
-    kf_idx : (K,) int, increasing IMU sample indices of the keyframes
-    bias_gyro, bias_accel : (3,) or (N, 3) biases removed before integration
-    """
-    # no bias: the samples themselves (x − 0.0 would be a copy of the same values)
-    g = gyro_b if bias_gyro is None else gyro_b - bias_gyro
-    a = accel_b if bias_accel is None else accel_b - bias_accel
-    out = _dense(np.ascontiguousarray(t), np.ascontiguousarray(g), np.ascontiguousarray(a),
-                 np.ascontiguousarray(kf_idx.astype(np.int64)))
-    return DenseIncrements(t, kf_idx, *out)
-
-
 @dataclass(frozen=True)
 class KeyframeStates:
     """Linearisation point of the interval terms at the K keyframes.
@@ -254,8 +142,9 @@ class KeyframeStates:
     rot (K, 3, 3) R_tb; pos (K, 3) tangent NED [m]; vel (K, 3) [m/s]; bias_accel (K, 3)
     [m/s²]; baro_bias (K,) [m]; scale, latency (K,) baro calibration per keyframe (constant
     for the batch graph, per segment for the incremental front end); accel_t (K, 3): the
-    unmeasured nav-frame acceleration g + δg − 2Ω×v over each interval [m/s²]; gnss_gm (K,)
-    the GNSS height Gauss-Markov error (down) [m], None when the graph has no such state."""
+    unmeasured nav-frame acceleration g + δg − 2Ω×v over each interval [m/s²]; gnss_gm (K, d)
+    the GNSS Gauss-Markov error on its axes (``GM_AXES``; (K,) for the height alone) [m],
+    None when the graph has no such state."""
 
     rot: FloatArray
     pos: FloatArray
@@ -271,8 +160,8 @@ class KeyframeStates:
 @dataclass(frozen=True)
 class IntervalRows:
     """Whitened rows ``r + J δ`` of the interval terms: interval index ``k`` (M,), residual
-    ``r`` (M,) and Jacobian ``jac`` (M, 19, or 21 with the GNSS height Gauss-Markov error) in
-    the column order of this module."""
+    ``r`` (M,) and Jacobian ``jac`` (M, 19, or 19 + 2d with a GNSS error state of dimension d)
+    in the column order of this module."""
 
     k: np.ndarray
     r: FloatArray
@@ -346,18 +235,18 @@ def bridge_sd(dense: DenseIncrements, t: FloatArray, k: np.ndarray
 
 
 def _pos_jacobian(st: KeyframeStates, k: np.ndarray, ip: dict[str, FloatArray],
-                  lever_b: FloatArray | None) -> FloatArray:
-    """∂(p(t) + R(t)·l)/∂(X_k, X_{k+1}) in Pose3 tangent coordinates, (M, 3, 12)."""
+                  h_att: FloatArray | None) -> FloatArray:
+    """∂(p(t) + R(t)·l)/∂(X_k, X_{k+1}) in Pose3 tangent coordinates, (M, 3, 12); ``h_att``:
+    the shared model's ∂(R(t) l)/∂ψ (M, 3, 3), None without a lever arm."""
     m = k.size
     rk = st.rot[k]
     alpha = ip["alpha"][:, None, None]
     jac = np.zeros((m, 3, 12))
-    vec = ip["d"]
-    if lever_b is not None:
-        # R(t)·l = R_k ΔR(τ) l: the lever arm rotates with the perturbation of R_k
-        vec = vec + np.einsum("nji,nj->ni", rk, np.einsum("nij,j->ni", ip["rot"], lever_b))
     # R_k Exp(ω) x ≈ R_k x − R_k [x×] ω
-    jac[:, :, 0:3] = -rk @ skew(vec)
+    jac[:, :, 0:3] = -rk @ skew(ip["d"])
+    if h_att is not None:
+        # R(t)·l = R_k ΔR(τ) l rotates with R_k: ψ = R_k ω
+        jac[:, :, 0:3] += body_tilt(h_att, rk)
     jac[:, :, 3:6] = (1 - alpha) * rk
     jac[:, :, 9:12] = alpha * st.rot[k + 1]
     return jac
@@ -427,13 +316,16 @@ def gnss_rows(
     pos_sd: FloatArray, vel_t: FloatArray | None, vel_sd: FloatArray | None,
     lever_b: FloatArray, incr: tuple[FloatArray, FloatArray, FloatArray] | None = None,
     out: FloatArray | None = None, k: np.ndarray | None = None,
+    omega_b: FloatArray | None = None,
 ) -> IntervalRows:
     """Whitened GNSS position (and velocity) rows for fixes at ``t_g`` (M,) strictly inside
-    intervals: antenna p(t) + R(t)·l against ``pos_t`` (M, 3) in t [m]; velocity v(t) (the
-    lever-arm rotation term is omitted) against ``vel_t`` (M, 3) [m/s]. ``incr``: the
+    intervals: antenna p(t) + R(t)·l against ``pos_t`` (M, 3) in t [m]; velocity
+    v(t) + R(t)(ω × l) against ``vel_t`` (M, 3) [m/s], ω = ``omega_b`` (M, 3) the body rate at
+    the fixes [rad/s] (None: the lever-arm rotation term is left out; the gyro-bias column of
+    that term, |l|·δb_g, is not modelled). ``incr``: the
     increments ``dense.at`` at the fixes (cached by the caller; they do not change);
     ``out``: an (n_rows, n_cols) array to hold the Jacobian (overwritten), else a new one
-    (n_cols: ``N_COLS_GM`` when ``st.gnss_gm`` is set, else ``N_COLS``); ``k``: the interval
+    (n_cols: ``n_cols_of`` the GNSS error state's dimension); ``k``: the interval
     of each fix (default: the one holding it; a fix on keyframe k+1 can be given interval k,
     where the interpolant at τ = T is exactly that keyframe).
     The Jacobian is written in place (position rows, then velocity rows): building the
@@ -448,23 +340,32 @@ def gnss_rows(
         pos_sd = np.sqrt(pos_sd**2 + bp[:, None] ** 2)
         if vel_sd is not None:
             vel_sd = np.sqrt(vel_sd**2 + bv[:, None] ** 2)
-    p_ant = ip["p"] + (0.0 if lever is None else np.einsum("nij,j->ni", ip["rot"], lever))
+    h_att = None
+    if lever is None:
+        p_ant = ip["p"].copy()
+    else:  # the shared model: antenna = p + C l
+        d_l, h_att = antenna_position_batch(ip["rot"], lever)
+        p_ant = ip["p"] + d_l
     with_vel = vel_t is not None and vel_sd is not None
     n_blk = 2 if with_vel else 1
-    n_cols = N_COLS if st.gnss_gm is None else N_COLS_GM
+    gm_dim = gm_dim_of(st)
+    n_cols = n_cols_of(gm_dim)
     if out is None:
         out = np.zeros((n_blk * 3 * m, n_cols))
     else:
         out[...] = 0.0
     jac_all = out.reshape(n_blk * m, 3, n_cols)  # a view: fix-major rows of each block
     jac = jac_all[:m]
-    jac[:, :, 0:12] = _pos_jacobian(st, k, ip, lever)
+    jac[:, :, 0:12] = _pos_jacobian(st, k, ip, h_att)
     jac[:, :, 0:12] /= pos_sd[:, :, None]
-    if st.gnss_gm is not None:  # GNSS height error g(t), linear between the keyframes
+    if gm_dim:  # GNSS error e(t) on its axes, linear between the keyframes
         a_g = ip["alpha"]
-        p_ant[:, 2] += (1 - a_g) * st.gnss_gm[k] + a_g * st.gnss_gm[k + 1]
-        jac[:, 2, COL_G0] = (1 - a_g) / pos_sd[:, 2]
-        jac[:, 2, COL_G1] = a_g / pos_sd[:, 2]
+        g = st.gnss_gm.reshape(st.gnss_gm.shape[0], gm_dim)
+        c0, c1 = gm_cols(gm_dim)
+        for j, ax in enumerate(GM_AXES[gm_dim]):
+            p_ant[:, ax] += (1 - a_g) * g[k, j] + a_g * g[k + 1, j]
+            jac[:, ax, c0.start + j] = (1 - a_g) / pos_sd[:, ax]
+            jac[:, ax, c1.start + j] = a_g / pos_sd[:, ax]
     rows_r = [((p_ant - pos_t) / pos_sd).reshape(-1)]
     rk_all = st.rot[k]
     jac[:, :, COL_BA] = (0.5 * ip["tau"] * (ip["T"] - ip["tau"]) * ip["imu"])[:, None, None] \
@@ -480,15 +381,15 @@ def gnss_rows(
         jv[:, :, 3:6] = -rk / big_t
         jv[:, :, 9:12] = st.rot[k + 1] / big_t
         jv[:, :, COL_BA] = ((0.5 * ip["T"] - ip["tau"]) * ip["imu"])[:, None, None] * rk
+        v_ant = ip["v"]
+        if lever is not None and omega_b is not None:  # the shared model: + C (ω × l)
+            u, hv_att = antenna_velocity_batch(ip["rot"], lever, omega_b)
+            v_ant = v_ant + u
+            jv[:, :, 0:3] += body_tilt(hv_att, rk)
         jv /= vel_sd[:, :, None]
-        rows_r.append(((ip["v"] - vel_t) / vel_sd).reshape(-1))
+        rows_r.append(((v_ant - vel_t) / vel_sd).reshape(-1))
         ks.append(np.repeat(k, 3))
     return IntervalRows(np.concatenate(ks), np.concatenate(rows_r), out)
-
-
-def concat_rows(*rows: IntervalRows) -> IntervalRows:
-    return IntervalRows(np.concatenate([r.k for r in rows]), np.concatenate([r.r for r in rows]),
-                        np.vstack([r.jac for r in rows]))
 
 
 GROUP_CHUNK = 256  # keyframe intervals per padded block of ``group_information``

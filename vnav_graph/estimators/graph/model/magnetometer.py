@@ -13,7 +13,8 @@ most one per ``mag_interval_s`` (the errors are correlated over seconds). D_k is
 azimuth, in the tangent frame, of the World Magnetic Model's field at the start
 (``geo.magfield``; it is the declination up to the tangent frame's convergence, < 0.05°
 over a few km). Jacobians: ∂e/∂ω_k = g · (−R_k [(z − b_m)×]) for the Pose3 retraction
-R Exp(ω), ∂e/∂b_m = −g R_k, g = (−m̂_E, m̂_N, 0)/H² (module ``sensors.magnetometer``).
+R Exp(ω), ∂e/∂b_m = −g R_k, g = (−m̂_E, m̂_N, 0)/H²: the EKF's row ``mag_heading_row``
+(module ``sensors.magnetometer``) at R_k, its tilt column times R_k (the body rotation's).
 σ = √((σ_m/H)² + floor²); a Huber loss at ``mag_loss_sd`` σ stands in for the EKF's gate
 (motor-current and soft-iron bursts).
 
@@ -52,13 +53,18 @@ KEY = H(0)
 RELIN_THRESHOLD_UT = 1.0
 
 
-def _heading_factor(k: int, z_b: FloatArray, d_ref: float, sd: float, loss_sd: float) -> Any:
+def heading_factor(k: int, z_b: FloatArray, d_ref: float, sd: float, loss_sd: float) -> Any:
+    """Keyframe k's heading factor on X(k) and H(0): sample ``z_b`` (3,) [µT], reference
+    azimuth ``d_ref`` [rad], σ ``sd`` [rad], Huber at ``loss_sd`` σ (module docstring)."""
     base = gtsam.noiseModel.Isotropic.Sigma(1, sd)
     noise = gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Huber.Create(loss_sd),
                                            base)
 
     def error(this: Any, values: Any, jac: Any) -> FloatArray:
         r_k = values.atPose3(this.keys()[0]).rotation().matrix()
+        # ``sensors.magnetometer.mag_heading_row`` (the EKF's row) in numpy: the same model,
+        # tested equal to 1e-12 (tests/unit/test_gnss_model.py); calling the compiled row
+        # here rounds differently and moves the graph's results by ~1e-12 relative
         d = z_b - values.atVector(this.keys()[1])
         m = r_k @ d
         h2 = m[0] * m[0] + m[1] * m[1]
@@ -102,7 +108,7 @@ class MagnetometerExtension:
             last = slot[k]
             ref = fm.ned_ut  # tangent ≈ local level at the start (module docstring)
             sd = float(heading_sd(mag.sd_ut, hor, cfg.mag_heading_floor))
-            factors.append(_heading_factor(int(k), z, float(np.arctan2(ref[1], ref[0])), sd,
+            factors.append(heading_factor(int(k), z, float(np.arctan2(ref[1], ref[0])), sd,
                                            cfg.mag_loss_sd))
         return Terms(factors, [Variable(KEY, np.zeros(3), cfg.mag_bias_sd,
                                         relinearize_threshold=RELIN_THRESHOLD_UT)])

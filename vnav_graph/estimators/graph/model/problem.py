@@ -20,12 +20,11 @@ from ....nav.arrays import nearest_index
 from ....nav.gaps import imu_gaps as nav_imu_gaps
 from ....nav.gnss_glitch import glitch_mask
 from ....nav.velocity_screen import velocity_screen
+from ....sensors.gnss_model import GnssGM
 from ....sensors.model import (
     BaroPrior,
-    GnssHeightGM,
     accel_scale_sd,
     baro_prior,
-    gnss_gm_split,
     sensor_model,
 )
 from ....types import (
@@ -84,8 +83,10 @@ class Problem:
     g_rej_vel: int = 0  # of those, refused by the velocity screen (nav.velocity_screen)
     g_rej_post: int = 0  # rejected by the post-solve residual gate
     g_incr: Any = None  # (fix indices, dense increments at them), see gnss_rows_of
+    # body rate at each fix [rad/s] for the lever arm's velocity (None without a lever arm)
+    g_omega: FloatArray | None = None
     pri: dict[str, float] = field(default_factory=dict)  # baro priors (_baro_priors)
-    gm: GnssHeightGM | None = None  # the GNSS height Gauss-Markov state G(k), if carried
+    gm: GnssGM | None = None  # the GNSS Gauss-Markov error state G(k), if carried
     # interval k spans an IMU logging gap (``imu_gaps``; computed once in ``setup``)
     gap: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     ka: AccelScale | None = None  # the accelerometer scale factors A(0), if carried
@@ -179,6 +180,8 @@ def setup(drive: Drive, cfg: GraphConfig) -> Problem:
                 np.asarray(gn.lever_arm_b, float),
                  g_kf, use)
     P.gap = gaps
+    if np.any(P.lever):
+        P.g_omega = np.column_stack([np.interp(t_g, imu.t, imu.gyro_b[:, a]) for a in range(3)])
     P.g_rej_pre = P.gnss_rejected
     P.g_rej_vel = n_vel
     P.pri = pri
@@ -186,8 +189,7 @@ def setup(drive: Drive, cfg: GraphConfig) -> Problem:
     if gm is not None:
         # the pre-gate above used the receiver's whole σ (it models no GNSS error state)
         P.gm = gm  # g_pos_sd becomes the white rest of the receiver's σ
-        P.g_pos_sd = P.g_pos_sd.copy()
-        P.g_pos_sd[:, 2] = gnss_gm_split(P.g_pos_sd[:, 2], gm)
+        P.g_pos_sd = gm.split(P.g_pos_sd)
     ka_sd = accel_scale_sd(model, cfg.accel_scale)  # the rule every estimator shares
     if ka_sd > 0:
         P.ka = AccelScale(ka_sd, interval_mean_force(imu.t, imu.accel_b, kf_idx, gaps))
@@ -337,7 +339,10 @@ def states_from_values(P: Problem, vals: Any, calib_of_kf: np.ndarray) -> gf.Key
         cb = np.zeros(nk)
         s = np.zeros(nk)
         tau = np.zeros(nk)
-    g_gm = gtsam.utilities.extractVectors(vals, "g")[:, 0] if P.gm is not None else None
+    g_gm = None
+    if P.gm is not None:  # (K,) for the height alone, else (K, d)
+        g_gm = gtsam.utilities.extractVectors(vals, "g")
+        g_gm = g_gm[:, 0] if P.gm.dim == 1 else g_gm
     return gf.KeyframeStates(rot, pos, vel, ba, cb, s, tau, nav_accel(P, pos, vel), g_gm)
 
 
@@ -396,7 +401,8 @@ def _gnss_rows(P: Problem, st: gf.KeyframeStates, idx: np.ndarray, incr: Any,
     return gf.gnss_rows(
         P.dense, st, P.g_t[idx], P.g_pos[idx], P.g_pos_sd[idx],
         None if P.g_vel is None else P.g_vel[idx],
-        None if P.g_vel_sd is None else P.g_vel_sd[idx], P.lever, incr=incr, out=out)
+        None if P.g_vel_sd is None else P.g_vel_sd[idx], P.lever, incr=incr, out=out,
+        omega_b=None if P.g_omega is None else P.g_omega[idx])
 
 
 def interval_rows(P: Problem, st: gf.KeyframeStates, pri: dict[str, float],
@@ -420,7 +426,7 @@ def interval_rows(P: Problem, st: gf.KeyframeStates, pri: dict[str, float],
     idx = gnss_batch_idx(P)
     n = 3 * idx.size  # position rows (fix-major, 3 per fix), then velocity rows
     with_vel = P.g_vel is not None and P.g_vel_sd is not None
-    n_cols = gf.N_COLS_GM if P.gm is not None else gf.N_COLS
+    n_cols = gf.n_cols_of(0 if P.gm is None else P.gm.dim)
     jac = np.empty((n_baro + (2 * n if with_vel else n), n_cols))
 
     def put(part: FloatArray, j: FloatArray) -> None:
