@@ -13,7 +13,6 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[2] / "vnav_graph"
 MAX_FILE, MAX_FUNCTION, MAX_KERNEL = 500, 100, 200
 PENDING = {
-    "estimators/graph/isam2/smoother.py:_finish",
 }
 
 
