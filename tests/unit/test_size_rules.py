@@ -12,8 +12,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2] / "vnav_graph"
 MAX_FILE, MAX_FUNCTION, MAX_KERNEL = 500, 100, 200
-PENDING = {
-}
+PENDING: set[str] = set()
 
 
 def _jitted(node: ast.FunctionDef) -> bool:
