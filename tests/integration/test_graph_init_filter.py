@@ -116,18 +116,18 @@ def test_sideways_vehicle_starts_near_the_truth_from_the_ekf(drive):
 
 
 def test_retilt_puts_the_specific_force_on_the_tangent_one_and_keeps_the_heading():
-    """``init._retilt``: the smallest rotation taking R·f_b onto f_t. From an attitude tilted
+    """``retilt``: the smallest rotation taking R·f_b onto f_t. From an attitude tilted
     20° off (about a horizontal axis), the down axis returns exactly; the heading moves by
     the second-order amount only."""
-    from vnav_graph.estimators.graph.model.initial_guess import _retilt
+    from vnav_graph.estimators.graph.model.initial_guess import retilt
     from vnav_graph.nav.rotations import so3_exp
 
     truth = _rz(np.radians(70.0)) @ so3_exp(np.radians([3.0, -2.0, 0.0]))
     f_t = np.array([0.4, -0.3, -9.8])
     f_b = truth.T @ f_t
-    np.testing.assert_allclose(_retilt(truth, f_b, f_t), truth, atol=1e-12)
+    np.testing.assert_allclose(retilt(truth, f_b, f_t), truth, atol=1e-12)
     off = so3_exp(np.radians([14.0, -14.0, 0.0])) @ truth
-    r = _retilt(off, f_b, f_t)
+    r = retilt(off, f_b, f_t)
     u, v = r @ f_b, f_t
     assert np.degrees(np.arctan2(np.linalg.norm(np.cross(u, v)), u @ v)) < 1e-6
     yaw = np.degrees(wrap_pi(np.arctan2(r[1, 0], r[0, 0]) - np.arctan2(truth[1, 0],

@@ -291,11 +291,11 @@ def test_height_step_without_return_is_kept(rng: np.random.Generator) -> None:
     """A step of d that never comes back (a datum change, or a receiver that stays wrong)
     has no level to return to: the log alone cannot say which side is wrong, so the
     excursion check excludes nothing (the baro-climb check still judges each fix)."""
-    from vnav_graph.evaluation.screening import _excursion_check
+    from vnav_graph.evaluation.screening import excursion_check
 
     clean = _flat_drive_with_baro(rng)
     g = clean.gnss
     lla = g.lla.copy()
     lla[g.t >= 300.0, 2] += 25.0
-    ok = _excursion_check(clean.replace(gnss=GnssStream(g.t, lla, g.pos_sd)))
+    ok = excursion_check(clean.replace(gnss=GnssStream(g.t, lla, g.pos_sd)))
     assert ok is not None and ok.all()

@@ -214,14 +214,14 @@ def test_group_information_in_chunks_equals_one_block(monkeypatch):
 def test_nearest_fix_gap_equals_the_brute_force_distance():
     """The initialiser's distance from each keyframe to the nearest GNSS fix (searchsorted,
     no (keyframes × fixes) matrix) equals the brute-force minimum, unsorted fixes included."""
-    from vnav_graph.estimators.graph.model.initial_guess import _nearest_gap
+    from vnav_graph.estimators.graph.model.initial_guess import nearest_gap
 
     rng = np.random.default_rng(3)
     for _ in range(100):
         fixes = rng.uniform(0.0, 100.0, rng.integers(1, 60))
         q = rng.uniform(-10.0, 110.0, rng.integers(1, 90))
         brute = np.min(np.abs(fixes[None, :] - q[:, None]), axis=1)
-        np.testing.assert_array_equal(_nearest_gap(fixes, q), brute)
+        np.testing.assert_array_equal(nearest_gap(fixes, q), brute)
 
 
 def test_gap_interval_is_interpolated_linearly_and_its_jacobians_match():

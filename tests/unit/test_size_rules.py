@@ -12,13 +12,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2] / "vnav_graph"
 MAX_FILE, MAX_FUNCTION, MAX_KERNEL = 500, 100, 200
-PENDING = {
-    "estimators/ekf/filter.py",
-    "estimators/ekf/alignment.py:initial_state",
-    "estimators/graph/model/interval_factors.py",
-    "estimators/graph/model/initial_guess.py:initial_states",
-    "estimators/graph/isam2/smoother.py:_finish",
-}
+PENDING: set[str] = set()
 
 
 def _jitted(node: ast.FunctionDef) -> bool:

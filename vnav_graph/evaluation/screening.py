@@ -116,7 +116,7 @@ def _velocity_check(drive: Drive) -> np.ndarray | None:
     return ok
 
 
-def _excursion_check(drive: Drive) -> np.ndarray | None:
+def excursion_check(drive: Drive) -> np.ndarray | None:
     """Bool (N,) over all fixes: not inside a height excursion (module docstring)."""
     got = _gnss_minus_baro(drive, 2 * LEVEL_FIXES + 2)
     if got is None:
@@ -163,7 +163,7 @@ def screen_reference(drive: Drive, withheld: np.ndarray) -> tuple[np.ndarray, di
     assert g is not None
     checks = {"baro_climb": _baro_check(drive), "vertical_speed": _vspeed_check(drive),
               "reported_velocity": _velocity_check(drive),
-              "height_excursion": _excursion_check(drive)}
+              "height_excursion": excursion_check(drive)}
     keep = withheld.copy()
     by_check: dict[str, int | None] = {}
     for name, ok in checks.items():

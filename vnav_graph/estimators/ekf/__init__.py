@@ -2,8 +2,9 @@
 (the same pass plus a Rauch-Tung-Striebel smoother).
 
 Modules: ``filter`` (set-up from the shared sensor model, the estimators, RTS output),
-``model`` (the compiled error-state model and forward kernel), ``strapdown`` (mechanisation),
-``alignment`` (static levelling window, heading from the GNSS track). The public names are
+``inputs`` (grids, process noise, event list), ``model`` (the compiled error-state model and
+forward kernel), ``strapdown`` (mechanisation), ``alignment`` (static levelling window,
+heading from the GNSS track). The public names are
 imported on first use, so that ``import vnav_graph.estimators.ekf`` compiles nothing.
 """
 

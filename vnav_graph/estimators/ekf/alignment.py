@@ -301,6 +301,43 @@ class Alignment:
     t_ready: float = -np.inf
 
 
+def _start_from_fixes(drive: Drive, model: SensorModel, bp: BaroPrior, c0: FloatArray,
+                      lever: FloatArray, heading_known: bool, moving: bool, g_latency: float,
+                      ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, float]:
+    """IMU position, its variance, velocity and its variance at the first IMU epoch from the
+    first ``START_FIXES`` fixes (``start_position``), and the stamp of the last fix read;
+    ``c0``: the initial attitude (b → n), ``lever``: the antenna lever arm in b. Without GNSS
+    the drive's origin with a 100 m horizontal σ and the baro bias σ vertically."""
+    gnss, t = drive.gnss, drive.imu.t
+    v0 = np.zeros(3)
+    if gnss is not None:
+        tg = gnss.t - g_latency
+        j0 = int(min(np.searchsorted(tg, t[0]), tg.size - 1))
+        j9 = min(j0 + START_FIXES, tg.size)
+        assert model.gnss_pos_sd is not None
+        has_vel = gnss.vel_n is not None and model.gnss_vel_sd is not None
+        sp = start_position(gnss.lla[j0:j9], tg[j0:j9], float(t[0]),
+                            model.gnss_pos_sd[j0:j9], moving and not has_vel)
+        lla0 = sp.lla
+        d_n = c0 @ lever
+        lla0[2] += d_n[2]  # antenna → IMU, vertical part (heading may be unknown)
+        pos_var = sp.pos_var + (0.0 if heading_known else lever @ lever)
+        if has_vel:
+            v0 = gnss.vel_n[j0].copy()
+            vel_var = model.gnss_vel_sd[j0] ** 2
+            # motion between t0 and the fixes used
+            pos_var = pos_var + (np.linalg.norm(v0) * abs(tg[j9 - 1] - t[0])) ** 2
+        else:
+            v0, vel_var = sp.vel, sp.vel_var
+        t_fixes = float(gnss.t[j9 - 1])
+    else:
+        t_fixes = -np.inf
+        lla0 = drive.origin_lla.copy()
+        pos_var = np.array([100.0**2, 100.0**2, bp.bias_sd**2])
+        vel_var = np.full(3, 1.0)
+    return lla0, pos_var, v0, vel_var, t_fixes
+
+
 def initial_state(drive: Drive, cfg: EkfConfig, model: SensorModel, bp: BaroPrior,
                    ka_sd: float, fm: Any = None) -> Alignment:
     """Coarse levelling over the static start, position and velocity from the first fixes
@@ -336,35 +373,11 @@ def initial_state(drive: Drive, cfg: EkfConfig, model: SensorModel, bp: BaroPrio
     # helper it reaches in the kernel (skew3, the products; ~1 s of a first run)
     lever = np.zeros(3) if gnss is None else np.array(gnss.lever_arm_b, dtype=float)
     p0 = np.zeros((km.NX, km.NX))
-    v0 = np.zeros(3)
     g_latency = 0.0
     if gnss is not None and gnss.spec is not None:
         g_latency = float(getattr(gnss.spec, "latency_s", 0.0))
-    if gnss is not None:
-        tg = gnss.t - g_latency
-        j0 = int(min(np.searchsorted(tg, t[0]), tg.size - 1))
-        j9 = min(j0 + START_FIXES, tg.size)
-        assert model.gnss_pos_sd is not None
-        has_vel = gnss.vel_n is not None and model.gnss_vel_sd is not None
-        sp = start_position(gnss.lla[j0:j9], tg[j0:j9], float(t[0]),
-                            model.gnss_pos_sd[j0:j9], mv is not None and not has_vel)
-        lla0 = sp.lla
-        d_n = c0 @ lever
-        lla0[2] += d_n[2]  # antenna → IMU, vertical part (heading may be unknown)
-        pos_var = sp.pos_var + (0.0 if heading_known else lever @ lever)
-        if has_vel:
-            v0 = gnss.vel_n[j0].copy()
-            vel_var = model.gnss_vel_sd[j0] ** 2
-            # motion between t0 and the fixes used
-            pos_var = pos_var + (np.linalg.norm(v0) * abs(tg[j9 - 1] - t[0])) ** 2
-        else:
-            v0, vel_var = sp.vel, sp.vel_var
-        t_fixes = float(gnss.t[j9 - 1])
-    else:
-        t_fixes = -np.inf
-        lla0 = drive.origin_lla.copy()
-        pos_var = np.array([100.0**2, 100.0**2, bp.bias_sd**2])
-        vel_var = np.full(3, 1.0)
+    lla0, pos_var, v0, vel_var, t_fixes = _start_from_fixes(
+        drive, model, bp, c0, lever, heading_known, mv is not None, g_latency)
     p0[0:3, 0:3] = np.diag(pos_var)
     p0[3:6, 3:6] = np.diag(vel_var)
     p_ba = ispec.accel_bias_sd**2 * np.eye(3)

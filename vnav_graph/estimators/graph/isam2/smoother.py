@@ -168,10 +168,9 @@ class GraphISAM2:
         start begins with the GNSS gate decisions ``on.gate0`` (before iSAM2's own post-solve
         gate)."""
         P, est, ext, init, pims, seg = on.P, on.est, on.ext, on.init, on.pims, on.seg
-        gate0, t_online = on.gate0, on.t_online
+        t_online = on.t_online
         pri = P.pri
         has_baro = drive.baro is not None
-        rot_i, pos_i, vel_i = init
         calib0 = np.zeros(P.n_kf, dtype=int)
         online_traj = self._online_trajectory(P, on.online)
         # iSAM2's own estimate as a point of the batch problem (one global (s, τd): the
@@ -180,68 +179,13 @@ class GraphISAM2:
         pims.clear()  # the graph's IMU factors hold their own copies (3601: ~4 MB an hour)
         if ext is not None:
             ext.add_to_batch(own_graph, own_vals, values_from=est)
-        res = None
-        restarted = False
-        if cfg.final_batch:
-            if robust:
-                # the online pass needed the retry: its estimate is a poor starting point
-                # (ski holdout: 22 m withheld-height RMSE after 12 iterations), so the batch
-                # pass starts where graph-batch starts and therefore equals it
-                graph, res_vals = build_batch_graph(P, rot_i, pos_i, vel_i,
-                                                    pims_for(P, rot_i, pos_i), pri, calib0)
-                if ext is not None:
-                    ext.add_to_batch(graph, res_vals)
-            else:
-                graph, res_vals = own_graph, own_vals
-            res = gauss_newton(P, graph, res_vals, calib0, pri)
-            if not robust and not res.converged:
-                # the online estimate can sit outside Gauss-Newton's basin after a long
-                # outage with a MEMS IMU (long-outage seed 1: 100 iterations, 466 m
-                # horizontal RMSE, 202 fixes gated out): solve again from graph-batch's
-                # starting point and keep that solution when it converges or ends lower
-                res = self._restart(P, init, ext, gate0, res, take_converged=True)
-                restarted = True
+        res, restarted = self._check_pass(P, cfg, on, robust, own_graph, own_vals, calib0)
         # iSAM2's own estimate under the batch's cost (after its post-solve GNSS gate: the
         # same fixes), and the choice: iSAM2's own unless the batch pass found a point
         # significantly lower (OWN_GAP_FRACTION)
-        if res is not None:
-            # the check pass's system and the rows' Jacobian (~55 MB on a 1-hour drive) are
-            # not alive under iSAM2's own rows: ``outputs`` rebuilds them if the check pass
-            # is the one chosen (stage script: graph-isam2 peak 667 -> 650 MB)
-            res.system = None
-            res.rows = res.rows.without_jac()
         own = evaluate_at(P, own_graph, own_vals, calib0, pri)
-        chosen, source, warn = own, "isam2", []
-        final_batch = None
-        if res is not None:
-            gap = own.cost - res.cost
-            d_p = (states_from_values(P, own.values, calib0).pos
-                   - states_from_values(P, res.values, calib0).pos)
-            final_batch = {"cost": float(res.cost), "isam2_cost": float(own.cost),
-                           "cost_gap": float(gap), "iterations": int(res.iterations),
-                           "stop": res.stop, "restarted": restarted,
-                           # iSAM2's own keyframe positions minus the batch pass's [m]
-                           "max_horizontal_diff_m": float(np.max(np.hypot(d_p[:, 0],
-                                                                          d_p[:, 1]))),
-                           "max_alt_diff_m": float(np.max(np.abs(d_p[:, 2])))}
-            final_batch["dimension"] = int(own.values.dim())
-            if 2.0 * gap > OWN_GAP_FRACTION * own.values.dim():
-                if not robust and not restarted:
-                    # iSAM2's estimate is not the optimum, so it was a poor start too:
-                    # the batch pass from graph-batch's start, when it ends lower
-                    # (loiter_rtl: 11 m horizontal against 22 m from iSAM2's estimate)
-                    res = self._restart(P, init, ext, gate0, res, take_converged=False)
-                    restarted = final_batch["restarted"] = True
-                    final_batch.update(cost=float(res.cost), iterations=int(res.iterations),
-                                       stop=res.stop, cost_gap=float(own.cost - res.cost))
-                if cfg.isam2_batch_fallback:
-                    chosen, source = res, "final_batch"
-                warn = [f"{self.name}: iSAM2's own smoothed estimate is not at the optimum "
-                        f"(cost {own.cost:.1f} against {res.cost:.1f} for the final batch "
-                        f"pass); the trajectory is "
-                        + ("the final batch pass (isam2_batch_fallback)"
-                           if cfg.isam2_batch_fallback else
-                           "iSAM2's own (isam2_batch_fallback = true returns the batch pass)")]
+        chosen, source, warn, final_batch, res, restarted = self._choose(
+            P, cfg, on, robust, own, res, restarted, calib0)
         t_final = time.perf_counter()
         del own_graph, own_vals
         if chosen is not own:
@@ -285,6 +229,83 @@ class GraphISAM2:
                         out["t_cov"], out["baro"], time.perf_counter() - t_start,
                         online=online_traj, online_cov=on.answers.online_cov, lag=lag,
                         lag_cov=lag_cov, info=info, config=self.config)
+
+    @classmethod
+    def _check_pass(cls, P: Any, cfg: GraphConfig, on: OnlineResult, robust: bool,
+                    own_graph: Any, own_vals: Any, calib0: Any) -> tuple[Any, bool]:
+        """With ``final_batch``, the batch pass (Gauss-Newton) from iSAM2's own estimate, or
+        from graph-batch's start after a robust retry or when it does not converge; its result
+        (None without ``final_batch``) and whether it was restarted."""
+        ext, init, gate0, pri = on.ext, on.init, on.gate0, P.pri
+        rot_i, pos_i, vel_i = init
+        res = None
+        restarted = False
+        if cfg.final_batch:
+            if robust:
+                # the online pass needed the retry: its estimate is a poor starting point
+                # (ski holdout: 22 m withheld-height RMSE after 12 iterations), so the batch
+                # pass starts where graph-batch starts and therefore equals it
+                graph, res_vals = build_batch_graph(P, rot_i, pos_i, vel_i,
+                                                    pims_for(P, rot_i, pos_i), pri, calib0)
+                if ext is not None:
+                    ext.add_to_batch(graph, res_vals)
+            else:
+                graph, res_vals = own_graph, own_vals
+            res = gauss_newton(P, graph, res_vals, calib0, pri)
+            if not robust and not res.converged:
+                # the online estimate can sit outside Gauss-Newton's basin after a long
+                # outage with a MEMS IMU (long-outage seed 1: 100 iterations, 466 m
+                # horizontal RMSE, 202 fixes gated out): solve again from graph-batch's
+                # starting point and keep that solution when it converges or ends lower
+                res = cls._restart(P, init, ext, gate0, res, take_converged=True)
+                restarted = True
+        if res is not None:
+            # the check pass's system and the rows' Jacobian (~55 MB on a 1-hour drive) are
+            # not alive under iSAM2's own rows: ``outputs`` rebuilds them if the check pass
+            # is the one chosen (stage script: graph-isam2 peak 667 -> 650 MB)
+            res.system = None
+            res.rows = res.rows.without_jac()
+        return res, restarted
+
+    def _choose(self, P: Any, cfg: GraphConfig, on: OnlineResult, robust: bool, own: Any,
+                res: Any, restarted: bool, calib0: Any,
+                ) -> tuple[Any, str, list[str], dict[str, Any] | None, Any, bool]:
+        """iSAM2's own estimate ``own`` against the batch pass ``res`` (None without one):
+        the chosen solution, its source, the warnings, ``info["final_batch"]``, and the batch
+        pass and its restart flag after a restart from graph-batch's start."""
+        init, ext, gate0 = on.init, on.ext, on.gate0
+        chosen, source, warn = own, "isam2", []
+        final_batch = None
+        if res is not None:
+            gap = own.cost - res.cost
+            d_p = (states_from_values(P, own.values, calib0).pos
+                   - states_from_values(P, res.values, calib0).pos)
+            final_batch = {"cost": float(res.cost), "isam2_cost": float(own.cost),
+                           "cost_gap": float(gap), "iterations": int(res.iterations),
+                           "stop": res.stop, "restarted": restarted,
+                           # iSAM2's own keyframe positions minus the batch pass's [m]
+                           "max_horizontal_diff_m": float(np.max(np.hypot(d_p[:, 0],
+                                                                          d_p[:, 1]))),
+                           "max_alt_diff_m": float(np.max(np.abs(d_p[:, 2])))}
+            final_batch["dimension"] = int(own.values.dim())
+            if 2.0 * gap > OWN_GAP_FRACTION * own.values.dim():
+                if not robust and not restarted:
+                    # iSAM2's estimate is not the optimum, so it was a poor start too:
+                    # the batch pass from graph-batch's start, when it ends lower
+                    # (loiter_rtl: 11 m horizontal against 22 m from iSAM2's estimate)
+                    res = self._restart(P, init, ext, gate0, res, take_converged=False)
+                    restarted = final_batch["restarted"] = True
+                    final_batch.update(cost=float(res.cost), iterations=int(res.iterations),
+                                       stop=res.stop, cost_gap=float(own.cost - res.cost))
+                if cfg.isam2_batch_fallback:
+                    chosen, source = res, "final_batch"
+                warn = [f"{self.name}: iSAM2's own smoothed estimate is not at the optimum "
+                        f"(cost {own.cost:.1f} against {res.cost:.1f} for the final batch "
+                        f"pass); the trajectory is "
+                        + ("the final batch pass (isam2_batch_fallback)"
+                           if cfg.isam2_batch_fallback else
+                           "iSAM2's own (isam2_batch_fallback = true returns the batch pass)")]
+        return chosen, source, warn, final_batch, res, restarted
 
     @classmethod
     def _restart(cls, P: Any, init: tuple[Any, Any, Any], ext: Any, gate0: tuple[Any, int],

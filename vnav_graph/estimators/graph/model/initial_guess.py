@@ -39,10 +39,93 @@ def initial_states(P: Problem) -> tuple[FloatArray, FloatArray, FloatArray]:
     imu = P.drive.imu
     nk = P.n_kf
     dr_t, dv_t, dp_t = P.dense.end()
+    gt, vel, has, pos_kf, vel_kf, acc_kf, acc_ok = _gnss_at_keyframes(P)
+    in_gap, v_bridge = _baro_bridge(P, gt, has, pos_kf, vel_kf)
+    g_kf = gf.gravity_t(pos_kf, P.origin)
+    f_b = _mean_specific_force(imu.t, imu.accel_b, P.t_kf)
+    f_t = acc_kf - g_kf + 2 * np.cross(P.omega_t, vel_kf)
+    speed = np.linalg.norm(vel_kf[:, :2], axis=1)
+    triad_ok = has & acc_ok & (speed > TRIAD_SPEED)
+    rot_triad = np.zeros((nk, 3, 3))
+    ok = np.flatnonzero(triad_ok)
+    rot_triad[ok] = _triad(f_b[ok], np.array([1.0, 0.0, 0.0]), f_t[ok], vel_kf[ok])
+    k0 = int(ok[0]) if ok.size else -1
+    # where TRIAD has no course, the tilt still comes from the specific force against the
+    # GNSS acceleration at every keyframe that has both (``retilt``); only the heading is
+    # carried by the gyro
+    tilt_ok = has & acc_ok & ~triad_ok
+    if k0 < 0:
+        r = level(f_b[0])
+    else:
+        r = rot_triad[k0]
+        for k in range(k0 - 1, -1, -1):
+            r = _gyro_back(P, r, k, dr_t)
+            if tilt_ok[k]:
+                r = retilt(r, f_b[k], f_t[k])
+    rot = np.zeros((nk, 3, 3))
+    p_out = np.zeros((nk, 3))
+    v_out = np.zeros((nk, 3))
+    rot[0] = r
+    p_out[0] = pos_kf[0] - r @ P.lever if has[0] else pos_kf[0]
+    v_out[0] = vel_kf[0]
+    omega_x = skew(P.omega_t)  # Ω× as a matrix (np.cross costs ~30 µs per call)
+    for k in range(nk - 1):
+        T = P.t_kf[k + 1] - P.t_kf[k]
+        a = g_kf[k] - 2 * (omega_x @ v_out[k])
+        rr = rot[k]
+        p1 = p_out[k] + v_out[k] * T + 0.5 * a * T * T + rr @ dp_t[k]
+        v1 = v_out[k] + a * T + rr @ dv_t[k]
+        r1 = _gyro_forward(P, rr, k, dr_t)
+        if triad_ok[k + 1]:
+            r1 = rot_triad[k + 1]
+        elif tilt_ok[k + 1]:
+            r1 = retilt(r1, f_b[k + 1], f_t[k + 1])
+        if has[k + 1]:
+            p1 = pos_kf[k + 1] - r1 @ P.lever
+            v1 = vel_kf[k + 1]
+        elif in_gap[k + 1]:
+            # long gap between kept fixes (outage or rejected fixes): IMU propagation from
+            # unknown biases drifts far outside Gauss-Newton's basin; bridge it instead
+            p1, v1 = pos_kf[k + 1], vel_kf[k + 1]
+        elif v_bridge[k + 1]:
+            p1[2], v1[2] = pos_kf[k + 1, 2], vel_kf[k + 1, 2]
+        rot[k + 1], p_out[k + 1], v_out[k + 1] = r1, p1, v1
+    # keyframe 0's attitude from the data around keyframe 0 alone: graph-isam2's causal start
+    r_c = level(f_b[0])
+    if tilt_ok[0]:
+        r_c = retilt(r_c, f_b[0], f_t[0])
+    # the keyframe from which the heading is known: the first TRIAD keyframe's once the data
+    # of its window has arrived (with none, the last keyframe: the heading is never known)
+    anchor = nk - 1
+    if k0 >= 0:
+        look = 2 * POS_ONLY_BASE_S if vel is None else 0.5
+        anchor = int(np.searchsorted(P.t_kf, P.t_kf[k0] + look - 1e-9)) if k0 > 0 else 0
+    if compass_heading(P, rot):
+        P.init_attitude = "compass"
+        r_c, anchor = _with_yaw_of(r_c, rot[0]), 0  # the compass's heading at keyframe 0
+    elif filter_attitude(P, rot):
+        P.init_attitude = "ekf"  # the ekf is causal: its heading from the keyframe it is good
+        anchor = P.ekf_heading_kf
+    if anchor == 0 and P.init_attitude != "compass":
+        r_c = rot[0]  # keyframe 0's own heading (TRIAD's or the ekf's there)
+    if P.init_attitude != "triad" and np.any(P.lever):
+        p_out[has] = pos_kf[has] - np.einsum("nij,j->ni", rot[has], P.lever)
+    p_c = pos_kf[0] - r_c @ P.lever if has[0] else pos_kf[0]
+    P.start0 = CausalStart(r_c, p_c, v_out[0].copy(),
+                           PRIOR_ATT_SD[2] if anchor == 0 else UNKNOWN_YAW_SD,
+                           None if anchor == 0 else min(anchor, nk - 1))
+    return rot, p_out, v_out
+
+
+def _gnss_at_keyframes(P: Problem) -> tuple[FloatArray, FloatArray | None, FloatArray,
+                                             FloatArray, FloatArray, FloatArray, FloatArray]:
+    """The kept fixes' times, their velocities (None for a position-only receiver), and at
+    every keyframe: whether a fix is near, the interpolated position and velocity, the
+    GNSS acceleration and whether it is usable (``initial_states``)."""
     u = P.g_use
     gt, pos = P.g_t[u], P.g_pos[u]
     vel = None if P.g_vel is None else P.g_vel[u]
-    near = _nearest_gap(gt, P.t_kf)
+    near = nearest_gap(gt, P.t_kf)
     rate = 1.0 / max(float(np.median(np.diff(gt))), 1e-3) if gt.size > 1 else 1.0
     has = near <= max(0.6 / rate, 0.02)
     pos_kf = np.column_stack([np.interp(P.t_kf, gt, pos[:, i]) for i in range(3)])
@@ -66,6 +149,15 @@ def initial_states(P: Problem) -> tuple[FloatArray, FloatArray, FloatArray]:
         vm = np.column_stack([np.interp(P.t_kf - w, gt, vel[:, i]) for i in range(3)])
         acc_kf = (vp - vm) / (2 * w)
         acc_ok = has & (np.abs(P.t_kf + w - P.t_kf.clip(gt[0], gt[-1])) >= 0)
+    return gt, vel, has, pos_kf, vel_kf, acc_kf, acc_ok
+
+
+def _baro_bridge(P: Problem, gt: FloatArray, has: FloatArray, pos_kf: FloatArray,
+                 vel_kf: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Keyframes inside long gaps between kept fixes (``in_gap``), and those whose height and
+    vertical speed come from the baro (``v_bridge``; ``pos_kf``, ``vel_kf`` set in place)."""
+    nk = P.n_kf
+    pos = P.g_pos[P.g_use]
     # inside gaps > 5 s between kept fixes: linear bridge horizontally, baro height
     # (plus the median GNSS − baro offset) vertically when a barometer is present
     gap_len = np.zeros(nk)
@@ -89,84 +181,15 @@ def initial_states(P: Problem) -> tuple[FloatArray, FloatArray, FloatArray]:
         pos_kf[v_bridge, 2] = -(hb - P.h0)
         vz = -np.gradient(np.interp(P.t_kf, baro.t, baro.altitude), P.t_kf)
         vel_kf[v_bridge, 2] = vz[v_bridge]
-    g_kf = gf.gravity_t(pos_kf, P.origin)
-    # mean measured specific force over ±0.25 s
-    cs = np.vstack([np.zeros((1, 3)), np.cumsum(imu.accel_b, axis=0)])
-    lo = np.searchsorted(imu.t, P.t_kf - 0.25)
-    hi = np.searchsorted(imu.t, P.t_kf + 0.25, side="right")
-    f_b = (cs[hi] - cs[lo]) / np.maximum(hi - lo, 1)[:, None]
-    f_t = acc_kf - g_kf + 2 * np.cross(P.omega_t, vel_kf)
-    speed = np.linalg.norm(vel_kf[:, :2], axis=1)
-    triad_ok = has & acc_ok & (speed > TRIAD_SPEED)
-    rot_triad = np.zeros((nk, 3, 3))
-    ok = np.flatnonzero(triad_ok)
-    rot_triad[ok] = _triad(f_b[ok], np.array([1.0, 0.0, 0.0]), f_t[ok], vel_kf[ok])
-    k0 = int(ok[0]) if ok.size else -1
-    # where TRIAD has no course, the tilt still comes from the specific force against the
-    # GNSS acceleration at every keyframe that has both (``_retilt``); only the heading is
-    # carried by the gyro
-    tilt_ok = has & acc_ok & ~triad_ok
-    if k0 < 0:
-        r = level(f_b[0])
-    else:
-        r = rot_triad[k0]
-        for k in range(k0 - 1, -1, -1):
-            r = _gyro_back(P, r, k, dr_t)
-            if tilt_ok[k]:
-                r = _retilt(r, f_b[k], f_t[k])
-    rot = np.zeros((nk, 3, 3))
-    p_out = np.zeros((nk, 3))
-    v_out = np.zeros((nk, 3))
-    rot[0] = r
-    p_out[0] = pos_kf[0] - r @ P.lever if has[0] else pos_kf[0]
-    v_out[0] = vel_kf[0]
-    omega_x = skew(P.omega_t)  # Ω× as a matrix (np.cross costs ~30 µs per call)
-    for k in range(nk - 1):
-        T = P.t_kf[k + 1] - P.t_kf[k]
-        a = g_kf[k] - 2 * (omega_x @ v_out[k])
-        rr = rot[k]
-        p1 = p_out[k] + v_out[k] * T + 0.5 * a * T * T + rr @ dp_t[k]
-        v1 = v_out[k] + a * T + rr @ dv_t[k]
-        r1 = _gyro_forward(P, rr, k, dr_t)
-        if triad_ok[k + 1]:
-            r1 = rot_triad[k + 1]
-        elif tilt_ok[k + 1]:
-            r1 = _retilt(r1, f_b[k + 1], f_t[k + 1])
-        if has[k + 1]:
-            p1 = pos_kf[k + 1] - r1 @ P.lever
-            v1 = vel_kf[k + 1]
-        elif in_gap[k + 1]:
-            # long gap between kept fixes (outage or rejected fixes): IMU propagation from
-            # unknown biases drifts far outside Gauss-Newton's basin; bridge it instead
-            p1, v1 = pos_kf[k + 1], vel_kf[k + 1]
-        elif v_bridge[k + 1]:
-            p1[2], v1[2] = pos_kf[k + 1, 2], vel_kf[k + 1, 2]
-        rot[k + 1], p_out[k + 1], v_out[k + 1] = r1, p1, v1
-    # keyframe 0's attitude from the data around keyframe 0 alone: graph-isam2's causal start
-    r_c = level(f_b[0])
-    if tilt_ok[0]:
-        r_c = _retilt(r_c, f_b[0], f_t[0])
-    # the keyframe from which the heading is known: the first TRIAD keyframe's once the data
-    # of its window has arrived (with none, the last keyframe: the heading is never known)
-    anchor = nk - 1
-    if k0 >= 0:
-        look = 2 * POS_ONLY_BASE_S if vel is None else 0.5
-        anchor = int(np.searchsorted(P.t_kf, P.t_kf[k0] + look - 1e-9)) if k0 > 0 else 0
-    if compass_heading(P, rot):
-        P.init_attitude = "compass"
-        r_c, anchor = _with_yaw_of(r_c, rot[0]), 0  # the compass's heading at keyframe 0
-    elif filter_attitude(P, rot):
-        P.init_attitude = "ekf"  # the ekf is causal: its heading from the keyframe it is good
-        anchor = P.ekf_heading_kf
-    if anchor == 0 and P.init_attitude != "compass":
-        r_c = rot[0]  # keyframe 0's own heading (TRIAD's or the ekf's there)
-    if P.init_attitude != "triad" and np.any(P.lever):
-        p_out[has] = pos_kf[has] - np.einsum("nij,j->ni", rot[has], P.lever)
-    p_c = pos_kf[0] - r_c @ P.lever if has[0] else pos_kf[0]
-    P.start0 = CausalStart(r_c, p_c, v_out[0].copy(),
-                           PRIOR_ATT_SD[2] if anchor == 0 else UNKNOWN_YAW_SD,
-                           None if anchor == 0 else min(anchor, nk - 1))
-    return rot, p_out, v_out
+    return in_gap, v_bridge
+
+
+def _mean_specific_force(t: FloatArray, accel_b: FloatArray, t_kf: FloatArray) -> FloatArray:
+    """Mean measured specific force over ±0.25 s around every keyframe."""
+    cs = np.vstack([np.zeros((1, 3)), np.cumsum(accel_b, axis=0)])
+    lo = np.searchsorted(t, t_kf - 0.25)
+    hi = np.searchsorted(t, t_kf + 0.25, side="right")
+    return (cs[hi] - cs[lo]) / np.maximum(hi - lo, 1)[:, None]
 
 
 # yaw σ of graph-isam2's causal start before the heading is known [rad] (a prior that only
@@ -318,7 +341,7 @@ def _circular_median(a: FloatArray) -> float:
     return float(mean + np.median((a - mean + np.pi) % (2 * np.pi) - np.pi))
 
 
-def _nearest_gap(t_ref: FloatArray, t_q: FloatArray) -> FloatArray:
+def nearest_gap(t_ref: FloatArray, t_q: FloatArray) -> FloatArray:
     """|t_q − nearest t_ref| for every t_q, in O((n + m) log n) memory-light steps (the
     (m, n) difference matrix it replaces took 520 MB transient on a 30-min drive)."""
     if t_ref.size == 0:
@@ -341,7 +364,7 @@ def _gyro_back(P: Problem, r: FloatArray, k: int, dr_t: FloatArray) -> FloatArra
     return so3_exp(P.omega_t * (P.t_kf[k + 1] - P.t_kf[k])) @ r @ dr_t[k].T
 
 
-def _retilt(r: FloatArray, f_b: FloatArray, f_t: FloatArray) -> FloatArray:
+def retilt(r: FloatArray, f_b: FloatArray, f_t: FloatArray) -> FloatArray:
     """``r`` turned by the smallest rotation that takes r·f_b onto f_t: the tilt of the
     specific force, the heading (nearly) kept, as TRIAD's first vector does. Propagated
     through 181.BIN's vibrating gyro (2°/s/√Hz) for the 40 s before its first TRIAD keyframe,
