@@ -1,10 +1,14 @@
-"""The reference EKF family: ``ekf`` (forward, 21-state error-state filter) and ``ekf-rts``
-(the same pass plus a Rauch-Tung-Striebel smoother).
+"""The reference EKF family: ``ekf`` (forward error-state filter; 27 error states with the
+GNSS error state) and ``ekf-rts`` (the same pass plus a Rauch-Tung-Striebel smoother).
 
-Modules: ``filter`` (set-up from the shared sensor model, the estimators, RTS output),
-``inputs`` (grids, process noise, event list), ``model`` (the compiled error-state model and
-forward kernel), ``strapdown`` (mechanisation), ``alignment`` (static levelling window,
-heading from the GNSS track). The public names are
+Modules: ``settings`` (``EkfConfig``), ``filter`` (set-up from the shared sensor model, the
+estimators, outputs), ``inputs`` (grids, process noise, event list), ``alignment`` (levelling,
+start position), ``model`` (the compiled error-state model, whose docstring describes the
+filter), ``kernel`` (the forward pass), ``steps`` (prediction and one gated update per
+measurement kind), ``rows`` (the measurement rows per sensor), ``heading`` (heading
+acquisition), ``magnetometer`` (compass set-up), ``rts`` (the smoother), ``carry`` (the
+acquired heading carried back), ``regate`` (post-smoothing gate), ``backward`` and
+``twofilter`` (the filter run backward, forward/backward separation). The public names are
 imported on first use, so that ``import vnav_graph.estimators.ekf`` compiles nothing.
 """
 
