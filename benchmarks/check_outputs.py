@@ -14,7 +14,8 @@ from pathlib import Path
 GRAPH_PERF_KEYS = {"drive_duration_s", "keyframes", "batch_s", "builtin_floor_s",
                    "batch_over_floor", "isam2_s", "isam2_realtime_factor",
                    "isam2_update_p99_ms", "ekf_s", "ekf_realtime_factor", "peak_rss_mb",
-                   "general_over_floor"}
+                   "general_over_floor", "isam2_lag_s", "isam2_peak_rss_mb", "isam2_final",
+                   "isam2_online_s", "isam2_marginals_s"}
 GRAPH_PERF_ADDITIVE = {"peak_rss_mb_by_stage", "isam2_relinearized"}  # newer bench_graph.py
 REPRO_KEYS = {"seed003_steady_sd_m", "seed003_gps_only_sd_m", "seed003_settling_s",
               "seed001_rmse_m", "seed001_calibration", "seed004_outage_alt_rmse_m"}
