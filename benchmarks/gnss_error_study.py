@@ -58,10 +58,11 @@ def parse_model(text: str) -> tuple[float, float, float] | None:
     return parts[0], parts[1], parts[2]
 
 
-def configs(model: tuple[float, float, float] | None, ekf_max_rejects: int | None = None
-            ) -> dict[str, Any]:
+def configs(model: tuple[float, float, float] | None, ekf_max_rejects: int | None = None,
+            ekf_max_rejected_s: float | None = None) -> dict[str, Any]:
     """Both estimators' configs: hard_scenarios.toml's, plus the GNSS error model
-    (``ekf_max_rejects``: the EKF's ``max_consecutive_rejects``, None: its own)."""
+    (``ekf_max_rejects``: the EKF's ``max_consecutive_rejects``, ``ekf_max_rejected_s`` its
+    ``max_rejected_s``; None: its own)."""
     from vnav_graph.estimators.configfile import load_configs
 
     base = load_configs(CONFIG)
@@ -77,12 +78,15 @@ def configs(model: tuple[float, float, float] | None, ekf_max_rejects: int | Non
                           gnss_gm_tau_s=model[2])
         if ekf_max_rejects is not None and name.startswith("ekf"):
             cfg = replace(cfg, max_consecutive_rejects=ekf_max_rejects)
+        if ekf_max_rejected_s is not None and name.startswith("ekf"):
+            cfg = replace(cfg, max_rejected_s=ekf_max_rejected_s)
         out[name] = cfg
     return out
 
 
 def run_seed(scenario: str, seed: int, models: list[str], duration: float | None,
-             ekf_max_rejects: int | None = None) -> dict[str, Any]:
+             ekf_max_rejects: int | None = None,
+             ekf_max_rejected_s: float | None = None) -> dict[str, Any]:
     from vnav_graph.evaluation.gnss_residuals import gnss_residual_autocorr
     from vnav_graph.evaluation.metrics import evaluate
     from vnav_graph.runner import run_one
@@ -92,7 +96,7 @@ def run_seed(scenario: str, seed: int, models: list[str], duration: float | None
     drive = simulate(scenario, seed, **over)
     out: dict[str, Any] = {}
     for m in models:
-        cfgs = configs(parse_model(m), ekf_max_rejects)
+        cfgs = configs(parse_model(m), ekf_max_rejects, ekf_max_rejected_s)
         for name in ESTIMATORS:
             res = run_one(name, drive, cfgs[name], interrupts=False)
             if res.estimate is None:
@@ -187,6 +191,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--scenarios", default=",".join(SCENARIOS))
     ap.add_argument("--ekf-max-rejects", type=int, default=None,
                     help="the EKF's max_consecutive_rejects (default: its own)")
+    ap.add_argument("--ekf-max-rejected-s", type=float, default=None,
+                    help="the EKF's max_rejected_s [s] (default: its own)")
     ap.add_argument("--diagnostic", action="store_true",
                     help="only the residual autocorrelation on simulated and real drives")
     args = ap.parse_args(argv)
@@ -209,13 +215,15 @@ def main(argv: list[str] | None = None) -> int:
         for s in range(seeds):
             t0 = time.perf_counter()
             runs.setdefault(sc, []).append(run_seed(sc, s, models, duration,
-                                                    args.ekf_max_rejects))
+                                                    args.ekf_max_rejects,
+                                                    args.ekf_max_rejected_s))
             print(f"{sc} seed {s}: {time.perf_counter() - t0:.0f} s", file=sys.stderr,
                   flush=True)
     agg = {sc: {m: {e: aggregate([r[m][e] for r in runs[sc]]) for e in ESTIMATORS}
                 for m in models} for sc in scenarios}
     doc = {"schema": "vnav_graph.gnss_error_study/1", "seeds": seeds, "quick": args.quick,
            "ekf_max_consecutive_rejects": args.ekf_max_rejects,
+           "ekf_max_rejected_s": args.ekf_max_rejected_s,
            "config": tomllib.loads(CONFIG.read_text()), "models": models, "aggregate": agg,
            "goals": goals(agg), "runs": runs}
     out = Path(args.out)

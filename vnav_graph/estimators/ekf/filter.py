@@ -165,7 +165,7 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
         mag_data,
         kernel.Settings(
             gate_pos=gate2, gate_vel=gate2, gate_v=gate1, gate_baro=gate1,
-            max_consec=int(cfg.max_consecutive_rejects), max_consec_baro=int(max_consec_baro),
+            max_consec=max_rejects(cfg, drive), max_consec_baro=int(max_consec_baro),
             max_sd_v=float(cfg.max_gnss_sd_v), probation_s=float(cfg.gnss_probation_s),
             heading_v_min=float(cfg.heading_speed_min), heading_accel=bool(heading_accel),
             align_chunk_s=float(cfg.align_chunk_s), align_forget_s=float(cfg.align_forget_s),
@@ -366,3 +366,12 @@ class EKFRTS(EKF):
         cov = km.unpack_cov(cov_s, run.has_baro)
         return run, _estimate(self.name, run, traj, par, cov, t0, online, cfg,
                               float(np.sqrt(max(var_b, 0.0))))
+
+
+def max_rejects(cfg: EkfConfig, drive: Drive) -> int:
+    """Refusals in a row after which the next GNSS pair is forced in:
+    ``EkfConfig.max_consecutive_rejects``, or ``max_rejected_s`` over the median fix interval."""
+    g = drive.gnss
+    if cfg.max_rejected_s is None or g is None or g.t.size < 2:
+        return int(cfg.max_consecutive_rejects)
+    return max(1, int(round(float(cfg.max_rejected_s) / float(np.median(np.diff(g.t))))))

@@ -28,6 +28,8 @@ class EkfConfig(GnssErrorSettings):
     traj_rate_hz: output trajectory rate [Hz] (None: every IMU epoch).
     gate_prob: χ² gate probability of GNSS position, GNSS velocity and baro innovations.
     max_consecutive_rejects: after this many refusals in a row the next GNSS pair is forced in.
+    max_rejected_s: when set, that limit as a span of GNSS time [s] instead of a count (the
+        count is this span over the median fix interval, so it does not depend on the rate).
     align_max_s: longest static levelling window [s].
     initial_heading: given initial heading [rad] (None: from GNSS or the magnetometer).
     initial_heading_sd: σ of the given heading [rad].
@@ -85,6 +87,7 @@ class EkfConfig(GnssErrorSettings):
     traj_rate_hz: float | None = 50.0
     gate_prob: float = 0.9995
     max_consecutive_rejects: int = 50
+    max_rejected_s: float | None = None
     align_max_s: float = 20.0
     initial_heading: float | None = None
     initial_heading_sd: float = 2.0 * DEG
