@@ -35,7 +35,7 @@ def small_pages() -> Iterator[None]:
     first touch of such an array waits for memory compaction: on this machine the first
     1-hour graph-batch solve in a process took 2.2–2.5 s (0.9 s of it in the kernel) with huge
     pages and 1.6–1.7 s (0.2 s) without; warm, 1.6–1.9 s against 1.5–1.6 s
-    (``docs/graph.md``, "Performance"). GTSAM's C++ allocations never ask for huge pages. Every
+    (``docs/graph_performance.md``). GTSAM's C++ allocations never ask for huge pages. Every
     estimator runs inside it (the ekf's first 1-hour run: 3.2 → 2.3 s). A no-op where numpy
     has no such switch."""
     global _HUGEPAGE_USERS, _HUGEPAGE_PREVIOUS

@@ -247,7 +247,7 @@ def trim_heap() -> None:
     """Give the C heap's free pages back to the operating system (glibc ``malloc_trim(0)``;
     a no-op elsewhere). Freed small C++ objects (GTSAM's) stay resident otherwise: releasing
     graph-isam2's Bayes tree before its final batch pass left RSS at 671 MB on a 1-hour drive,
-    trimmed 446 MB, and the pass's peak fell 866 → 700 MB (``docs/graph.md``, memory)."""
+    trimmed 446 MB, and the pass's peak fell 866 → 700 MB (``docs/graph_performance.md``)."""
     global _MALLOC_TRIM
     if _MALLOC_TRIM is None:
         import ctypes
