@@ -288,19 +288,9 @@ def reset_jacobian(delta):
 
 @njit(cache=True)
 def scalar_update(p, dx, hrow, y, r):
-    """Sequential scalar update, Joseph form expanded (module docstring). y = h(x̃) − z."""
-    a = p @ hrow
-    s = hrow @ a + r
-    k = a / s
-    dx += k * (y - hrow @ dx)
-    for i in range(NX):
-        for j in range(NX):
-            p[i, j] = p[i, j] - k[i] * a[j] - a[i] * k[j] + s * k[i] * k[j]
-    for i in range(NX):
-        for j in range(i + 1, NX):
-            m = 0.5 * (p[i, j] + p[j, i])
-            p[i, j] = m
-            p[j, i] = m
+    """Sequential scalar update, Joseph form expanded (module docstring). y = h(x̃) − z:
+    ``consider_update`` with no consider states."""
+    consider_update(p, dx, hrow, y, r, 0, 0)
 
 
 @njit(cache=True)
