@@ -18,11 +18,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_real_logs import data_root  # noqa: E402
 
 SIMULATED = [("default", None), ("cold-start-phone", None), ("sortie", None),
              ("hill-drive", 120.0), ("hill-drive", 480.0), ("hill-drive-mag", 120.0),
@@ -30,13 +32,6 @@ SIMULATED = [("default", None), ("cold-start-phone", None), ("sortie", None),
 QUICK = [("default", None), ("hill-drive-mag", 120.0)]
 LOGS = ("erle_pxf_218/218.BIN", "erle_pxf_loiter_rtl/Loiter_RTL.bin", "ski_iphone_100hz",
         "car_phone_1hz_2025-07-18/2025-07-18_23-13-43.csv")
-
-
-def data_root(arg: str | None) -> Path:
-    if arg:
-        return Path(arg)
-    env = os.environ.get("VNAV_DATA")
-    return Path(env) if env else Path(__file__).resolve().parents[1].parent / "shared" / "data"
 
 
 def drives(quick: bool, root: Path):
