@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import importlib.util
 from pathlib import Path
 
@@ -70,3 +71,37 @@ def test_goal_verdicts():
     assert g[("hill-drive", "lag")]["met"] is None
     assert ("long-outage", "online") not in g  # no runs of it
     assert all(line for line in oa.goal_lines(list(g.values())))
+
+
+def test_away_from_outages_closed_form():
+    """Fixes at 1 Hz over 0-100 s with a 30 s outage (fixes at 40 and 70 s, none between) and
+    L = 10 s: kept are the epochs with [t − 10, t + 10] inside [0, 100] and clear of (40, 70),
+    i.e. 10 ≤ t ≤ 30 and 80 ≤ t ≤ 90. A single missing fix (a 2 s gap) is no outage."""
+    t_fix = np.concatenate([np.arange(0.0, 41.0), np.arange(70.0, 101.0)])
+    t_fix = t_fix[t_fix != 85.0]
+    t = np.arange(0.0, 101.0)
+    keep = oa.away_from_outages(t, t_fix, 10.0)
+    expect = ((t >= 10) & (t <= 30)) | ((t >= 80) & (t <= 90))
+    np.testing.assert_array_equal(keep, expect)
+    assert not oa.away_from_outages(t, t_fix[:1], 10.0).any()
+
+
+def test_lag_gnss_scores_only_epochs_away_from_outages():
+    """hill-drive with its GNSS cut between 20 and 50 s, L = 5 s, 1 Hz grids: the lag_gnss
+    pair scores the epochs t with [t − 5, t + 5] inside the fixes before the cut or inside
+    those after it, and the score is the known offset there."""
+    d = simulate("hill-drive", 0, duration_s=80.0)
+    t0 = d.imu.t[0]
+    d = dataclasses.replace(d, gnss=d.gnss.select((d.gnss.t < t0 + 20.0) | (d.gnss.t > t0 + 50.0)))
+    tf = d.gnss.t
+    before, after = tf[tf < t0 + 35.0], tf[tf > t0 + 35.0]
+    t = np.arange(t0, t0 + 80.0, 1.0)
+    inside = (((t - 5.0 >= before[0]) & (t + 5.0 <= before[-1]))
+              | ((t - 5.0 >= after[0]) & (t + 5.0 <= after[-1])))
+    ned = lla_to_ned(d.truth.at(t).lla, d.origin_lla) + np.array([3.0, 4.0, 0.0])
+    a = Trajectory(t, ned_to_lla(ned, d.origin_lla), d.truth.at(t).vel_n)
+    b = Trajectory(t, d.truth.at(t).lla, d.truth.at(t).vel_n)
+    s = oa.score_pair(d, a, b, lag_s=5.0)
+    assert s["epochs"] == int(inside.sum()) and 15 <= s["epochs"] <= 50
+    assert s["from_s"] == pytest.approx(t[inside][0] - t0)
+    assert s["a"]["horiz_rmse_m"] == pytest.approx(5.0, abs=0.01)
