@@ -4,7 +4,8 @@
   ``examples/`` or ``README.md`` (a dated diary belongs in git history, not in the product);
 - every relative link of ``README.md``, ``CHANGELOG.md`` and ``docs/*.md`` resolves (file, and
   heading when the link has an anchor), and every ``.py`` path those pages name exists;
-- the README's Layout section names every top-level module and package of ``vnav_graph/``.
+- the README's Layout section names every top-level module and package of ``vnav_graph/``;
+- the README's set-up commands are the ones ``.ci/run`` runs.
 
 Each finder is also run on a small bad sample, so a finder that sees nothing fails.
 """
@@ -114,6 +115,19 @@ def layout_gaps(root: Path) -> list[str]:
     return out
 
 
+def readme_commands(root: Path) -> list[str]:
+    """The README's ```bash blocks that ``.ci/run`` does not run verbatim (continuation lines
+    joined, runs of blanks collapsed)."""
+    flat = " ".join(re.sub(r"\\\n", " ", (root / ".ci" / "run").read_text()).split())
+    blocks = re.findall(r"```bash\n(.*?)```", (root / "README.md").read_text(), re.S)
+    return [b.strip() for b in blocks if " ".join(b.split()) not in flat] + (
+        [] if blocks else ["no ```bash block in README.md"])
+
+
+def test_readme_commands_are_the_ci_commands():
+    assert not readme_commands(REPO), f"README commands not in .ci/run: {readme_commands(REPO)}"
+
+
 def test_no_development_history_wording():
     found = history_wording(REPO)
     assert not found, "history wording (say what the code does; history goes in git):\n" + \
@@ -146,3 +160,8 @@ def test_the_finders_see_bad_text(tmp_path):
         "docs/a.md: link b.md (no such file)", "docs/a.md: link #nowhere (no such heading)",
         "docs/a.md: `graph/init.py` (no such file)"]
     assert layout_gaps(tmp_path) == ["pkg"]
+    (tmp_path / ".ci").mkdir()
+    (tmp_path / ".ci" / "run").write_text("time (pip install . \\\n     && vnav-graph run)\n")
+    (tmp_path / "README.md").write_text("```bash\npip install . && vnav-graph run\n```\n"
+                                        "```bash\npip install -e .\n```\n")
+    assert readme_commands(tmp_path) == ["pip install -e ."]
