@@ -57,10 +57,16 @@ def _range(obj: Any, *names: str) -> None:
 class ImuSpec:
     """IMU error model, identical on the three axes.
 
-    gyro_noise_density [rad/s/√Hz], gyro_bias_sd [rad/s] (Gauss-Markov, tau gyro_bias_tau [s]),
-    gyro_bias_rw [rad/s/√s], accel_noise_density [m/s²/√Hz], accel_bias_sd [m/s²],
-    accel_bias_tau [s], accel_bias_rw [m/s²/√s], accel_scale_sd [-] (random constant).
-    ``gyro_bias_tau = inf`` makes the bias a random constant.
+    name: the preset's name (``IMU_PRESETS``) or "custom".
+    gyro_noise_density: gyro white noise [rad/s/√Hz].
+    gyro_bias_sd: steady-state σ of the Gauss-Markov gyro bias [rad/s].
+    gyro_bias_tau: its correlation time [s] (inf: a random constant).
+    gyro_bias_rw: gyro bias random walk on top of it [rad/s/√s].
+    accel_noise_density: accelerometer white noise [m/s²/√Hz].
+    accel_bias_sd: steady-state σ of the Gauss-Markov accelerometer bias [m/s²].
+    accel_bias_tau: its correlation time [s] (inf: a random constant).
+    accel_bias_rw: accelerometer bias random walk on top of it [m/s²/√s].
+    accel_scale_sd: σ of the random-constant accelerometer scale factor per axis [-].
     """
 
     name: str = "custom"
@@ -130,42 +136,25 @@ IMU_PRESETS: dict[str, ImuSpec] = {
 
 @dataclass(frozen=True)
 class GnssSpec:
-    """GNSS receiver error model.
+    """GNSS receiver error model; the urban part (``gm_*``, ``burst_*``, ``random_outage*``,
+    ``vnav_graph.sensors.gnss``) is off at its defaults and draws from its own generator.
 
-    pos_sd_h / pos_sd_v: white position noise per fix, horizontal / vertical [m];
-    vel_sd [m/s] (0 disables velocity output); rate_hz; latency_s (fix time of validity is
-    ``latency_s`` earlier than its stamp; 0 = perfectly stamped); lever_arm_b [m];
-    outages: ((t0, t1), ...) windows without fixes [s]; outlier_prob per fix and
-    outlier_sd [m] of the added error when a fix is an outlier.
-
-    Urban error model (``vnav_graph.sensors.gnss``; every part is off at its default, and its
-    random numbers come from a separate generator, so a spec without it simulates exactly as
-    before):
-
-    gm_sd_h / gm_sd_v : float
-        Steady-state sigma of a first-order Gauss-Markov position error per axis (north and
-        east / down) [m]; 0 = off. It models the slowly varying residual of atmosphere, orbit
-        and diffuse multipath. With it on, the reported ``GnssStream.pos_sd`` is
-        sqrt(pos_sd² + gm_sd²): the receiver's accuracy estimate covers its ordinary errors.
-    gm_tau_s : float
-        Correlation time of that error [s] (> 0).
-    burst_fraction : float
-        Fraction of the drive (hence of the fixes) inside multipath bursts, in [0, 0.9];
-        0 = off.
-    burst_len_s : (float, float)
-        Range of burst durations [s], drawn uniformly.
-    burst_err_m : (float, float)
-        Range of the magnitude of a burst's position offset [m], drawn uniformly per burst.
-        Inside a burst a fix gets that offset along a random direction (azimuth uniform,
-        elevation uniform in ±30°: mostly horizontal) plus a correlated jitter of 20 % of it.
-        The reported ``pos_sd`` does not change in a burst: it understates the error there.
-    burst_vel_sd : float
-        Sigma of the white velocity error added per axis to fixes in a burst [m/s] (Doppler is
-        hit less than code ranges by multipath; the reported ``vel_sd`` does not change).
-    random_outages_per_hour : float
-        Mean rate of random outages (Poisson count over the drive) [1/h]; 0 = off.
-    random_outage_len_s : (float, float)
-        Range of random-outage durations [s], drawn uniformly.
+    rate_hz: fix rate [Hz].
+    pos_sd_h, pos_sd_v: white position noise per fix, horizontal / vertical [m].
+    vel_sd: white velocity noise per axis [m/s] (0: no velocity output).
+    latency_s: a fix is valid this long before its stamp [s] (0: perfectly stamped).
+    lever_arm_b: antenna position in the body frame [m].
+    outages: ((t0, t1), ...) windows without fixes [s].
+    outlier_prob: probability that a fix is an outlier.
+    outlier_sd: σ of the error added to an outlier [m].
+    gm_sd_h, gm_sd_v: σ of the Gauss-Markov position error, north/east and down [m] (0: off).
+    gm_tau_s: correlation time of that error [s].
+    burst_fraction: fraction of the drive inside multipath bursts, in [0, 0.9] (0: off).
+    burst_len_s: range of burst durations [s], drawn uniformly.
+    burst_err_m: range of a burst's position offset [m], drawn uniformly per burst.
+    burst_vel_sd: σ of the white velocity error per axis inside a burst [m/s].
+    random_outages_per_hour: mean rate of random outages (Poisson) [1/h] (0: off).
+    random_outage_len_s: range of random-outage durations [s], drawn uniformly.
     """
 
     rate_hz: float = 10.0
@@ -177,12 +166,19 @@ class GnssSpec:
     outages: tuple[tuple[float, float], ...] = ()
     outlier_prob: float = 0.0
     outlier_sd: float = 30.0
+    # the slowly varying residual of atmosphere, orbit and diffuse multipath; with it on the
+    # reported GnssStream.pos_sd is sqrt(pos_sd² + gm_sd²): the receiver's accuracy estimate
+    # covers its ordinary errors
     gm_sd_h: float = 0.0
     gm_sd_v: float = 0.0
     gm_tau_s: float = 60.0
     burst_fraction: float = 0.0
     burst_len_s: tuple[float, float] = (5.0, 30.0)
+    # inside a burst a fix gets the offset along a random direction (azimuth uniform, elevation
+    # uniform in ±30°: mostly horizontal) plus a correlated jitter of 20 % of it; the reported
+    # pos_sd does not change, so it understates the error there
     burst_err_m: tuple[float, float] = (5.0, 50.0)
+    # Doppler is hit less than code ranges by multipath; the reported vel_sd does not change
     burst_vel_sd: float = 0.5
     random_outages_per_hour: float = 0.0
     random_outage_len_s: tuple[float, float] = (5.0, 20.0)
@@ -208,23 +204,21 @@ class GnssSpec:
 
 @dataclass(frozen=True)
 class BaroSpec:
-    """Barometric altimeter error model (docs/design.md "One barometer model").
+    """Barometric altimeter error model (docs/design.md "One barometer model"):
+    h_baro(t) = h0 + (1 + s)·(h(t − τd) − h0) + b(t) + v,  ḃ = −b/τb + w,
+    with h0 = ``Drive.origin_lla[2]``, as everywhere in the package (``sensors.baro``).
 
-    h_baro(t) = (1 + s)·h(t − τd) + b(t) + v,  ḃ = −b/τb + w.
-
-    scale_sd: sigma of the random-constant scale error s [-] (``scale`` fixes it instead);
-    latency_s: τd [s] (fixed), or drawn uniformly in ``latency_range_s`` when given;
-    bias_sd [m] / bias_tau [s]: steady-state sigma and correlation time of b;
-    noise_sd [m]: white noise v; rate_hz. The scale acts on the height above the drive
-    origin ``h0 = Drive.origin_lla[2]`` (``h`` in the formula is ``h - h0``, plus h0 back),
-    as everywhere in the package (see ``vnav_graph.sensors.baro``).
-    ``physical`` = True generates pressure through the ISA with a temperature offset (that
-    makes s) and a drifting sea-level pressure (that makes b) instead of adding s and b.
-    isa_offset_k [K]: the day's temperature offset from the ISA (hot day > 0), ``physical``
-    mode only. The atmosphere is then ISA + dT with T0/(T0 + dT) = (1 + s)·T0/(T0 +
-    isa_offset_k), so the altimeter's effective scale is (1 + s)·T0/(T0 + isa_offset_k) − 1
-    (≈ s − 0.35 %/K · isa_offset_k); ``s`` is the sensor's part and ``BaroTruth.scale`` the
-    effective one.
+    rate_hz: sample rate [Hz].
+    scale_sd: σ of the random-constant scale error s [-].
+    scale: s itself [-] (None: drawn with ``scale_sd``).
+    latency_s: τd [s], fixed.
+    latency_range_s: (lo, hi): τd drawn uniformly in it instead [s] (None: ``latency_s``).
+    bias_sd: steady-state σ of the Gauss-Markov bias b [m].
+    bias_tau: correlation time τb of b [s].
+    bias_init: b at t = 0 [m] (None: drawn with ``bias_sd``).
+    noise_sd: σ of the white noise v [m].
+    physical: pressure through the ISA, s from a temperature offset, b from a drifting QNH.
+    isa_offset_k: the day's temperature offset from the ISA, hot > 0 [K] (``physical`` only).
     """
 
     rate_hz: float = 25.0
@@ -237,6 +231,9 @@ class BaroSpec:
     bias_init: float | None = None
     noise_sd: float = 0.3
     physical: bool = False
+    # the atmosphere is ISA + dT with T0/(T0 + dT) = (1 + s)·T0/(T0 + isa_offset_k), so the
+    # altimeter's effective scale is (1 + s)·T0/(T0 + isa_offset_k) − 1 (≈ s − 0.35 %/K ·
+    # isa_offset_k); s is the sensor's part and BaroTruth.scale the effective one
     isa_offset_k: float = 0.0
 
     def __post_init__(self) -> None:
@@ -265,7 +262,7 @@ class BaroSpec:
 # 6 K off the ISA alone makes 2 %; seed 001), 0.5 m of noise, and an unknown latency
 # N(0.1 s, 0.1 s) — expressed as a uniform range of that mean and σ (σ = width/√12), which
 # is how every estimator reads a latency prior.
-# Checked by benchmarks/prior_study.py (docs/real_logs.md "Default real-log baro prior"):
+# Checked by benchmarks/prior_study.py (docs/baro_prior.md):
 # on the simulated scenarios, whose biases drift 4–6× slower (q = 2σ²/τ 0.010–0.014 m²/s
 # against 0.056 here), the σ come out too wide (sortie rms z 0.5–0.6). A slower default
 # (τ 4 h) fixed that but made every shared log's withheld-GNSS altitude worse (218: 0.67 →
@@ -293,10 +290,23 @@ def replace_fields(obj: Any, **changes: Any) -> Any:
 
 @dataclass(frozen=True)
 class ScenarioConfig:
-    """A simulated test drive: trajectory kind, duration, rates and sensor error models."""
+    """A simulated test drive: trajectory kind, duration, rates and sensor error models.
+
+    name: the scenario's name (``vnav-graph run --scenario NAME``).
+    kind: trajectory kind, "hill-drive", "sortie" or "vertical".
+    duration_s: length of the drive [s].
+    imu_rate_hz: IMU sample rate [Hz].
+    imu, gnss, baro: the sensors' error models (``ImuSpec``, ``GnssSpec``, ``BaroSpec``).
+    origin_lat_deg, origin_lon_deg, origin_alt_m: the drive's origin [deg, deg, m].
+    params: kind-specific trajectory parameters (``simulation.trajectories``).
+    description: one line for ``vnav-graph list``.
+    magnetometer: a simulated magnetometer (TOML ``[magnetometer]``; None: none).
+    side_slip_gain: car side-slip β = side_slip_gain·a_lat [rad per m/s²] (0: none).
+    imu_mount_rph_deg: roll, pitch, yaw of the IMU axes in the vehicle frame [deg].
+    """
 
     name: str
-    kind: str  # "hill-drive" | "sortie" | "vertical"
+    kind: str
     duration_s: float
     imu_rate_hz: float = 200.0
     imu: ImuSpec = field(default_factory=lambda: IMU_PRESETS["consumer"])
@@ -305,13 +315,10 @@ class ScenarioConfig:
     origin_lat_deg: float = 47.0
     origin_lon_deg: float = 11.0
     origin_alt_m: float = 500.0
-    params: dict[str, Any] = field(default_factory=dict)  # kind-specific trajectory params
+    params: dict[str, Any] = field(default_factory=dict)
     description: str = ""
-    # opt-in: a simulated magnetometer (TOML section [magnetometer]); None = no mag stream
     magnetometer: MagSpec | None = None
-    # car side-slip β = side_slip_gain·a_lat [rad per m/s²] (simulation.trajectories); 0 = none
     side_slip_gain: float = 0.0
-    # IMU mounting misalignment: roll, pitch, yaw of the IMU axes in the vehicle frame [deg]
     imu_mount_rph_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     def __post_init__(self) -> None:

@@ -104,7 +104,9 @@ def test_isam2_final_equals_batch_and_online_is_causal():
     assert abs(ei.baro.scale.est - eb.baro.scale.est) < 0.1 * eb.baro.scale.sd
     assert ei.online is not None and ei.online.t.size == eb.info["keyframes"]
     # causal: the online estimate at a keyframe uses no later data, so a run on the first
-    # half of the drive gives the same online states over that half
+    # half of the drive gives the same online states over that half (height, horizontal
+    # position, down velocity and heading; tests/integration/test_causality.py does this for
+    # every online estimator at two cuts)
     t0, t1 = d.imu.t[0], d.imu.t[0] + 45.0
     cut = d.replace(imu=d.imu.slice(t0, t1), gnss=d.gnss.select(d.gnss.t <= t1),
                     baro=d.baro.select(d.baro.t <= t1), truth=d.truth.slice(t0, t1))
@@ -113,6 +115,11 @@ def test_isam2_final_equals_batch_and_online_is_causal():
     assert n > 5
     np.testing.assert_allclose(half.online.t[:n], ei.online.t[:n])
     np.testing.assert_allclose(half.online.alt[:n], ei.online.alt[:n], atol=1e-6)
+    np.testing.assert_allclose(half.online.vel_down[:n], ei.online.vel_down[:n], atol=1e-6)
+    # 1e-10 rad of latitude/longitude is 0.6 mm
+    np.testing.assert_allclose(half.online.lla[:n, :2], ei.online.lla[:n, :2], rtol=0, atol=1e-10)
+    dyaw = half.online.to_rph()[:n, 2] - ei.online.to_rph()[:n, 2]
+    assert np.max(np.abs((dyaw + np.pi) % (2 * np.pi) - np.pi)) < 1e-6
 
 
 def test_iteration_cap_is_reported_as_a_warning():

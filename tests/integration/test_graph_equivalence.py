@@ -434,8 +434,8 @@ def test_equivalence_check_detects_a_wrong_gauss_markov_variance(problem):
 
 def test_equivalence_check_detects_a_missing_accel_bias_column(problem):
     """The baro/GNSS interval rows carry ∂/∂(accel bias) (½τ(T−τ)·R_k); a KF/RTS without that
-    column disagrees with the graph measurably more than the exact one does (sensitivity of
-    the mean test above to this term, which the graph omitted until the 2nd session)."""
+    column disagrees with the graph measurably more than the exact one does: the mean test
+    above is sensitive to this term."""
     _, _, vp, (ms0, ps0) = problem
     ms1, _ = kf_rts(vp, baro_accel_bias=False)
     sd0 = np.sqrt(np.einsum("kii->ki", ps0))

@@ -3,7 +3,7 @@
 A reduced run of benchmarks/prior_study.py: the 240 s ``default`` scenario, 8 seeds, ekf-rts
 and graph-batch, each drive handed over as a real log (no IMU/baro spec, so
 ``REAL_LOG_BARO`` is the prior). The full study (3 scenarios × 20 seeds, goal 0.8–1.25) is in
-docs/real_logs.md "Default real-log baro prior".
+docs/baro_prior.md.
 
 Band 0.5–2.0: with 8 seeds the rms z of an exactly calibrated σ scatters over 0.52–1.47
 (95 %, χ²(8)), so the band admits an honest σ and fails a σ that is wrong by a factor of two

@@ -108,6 +108,6 @@ def test_averaged_car_drive_kept(data_dir: Path) -> None:
     """1 Hz averaged car drive: ekf-rts bridges 60 s outages at the GNSS noise level."""
     drive = _read(data_dir, "car_phone_1hz_2025-07-18/2025-07-18_23-13-43.csv")
     blk = run_holdout(drive, ["ekf-rts"]).doc["estimators"]["ekf-rts"]
-    # measured 1.4 m (1.2 m with the old consumer default); GNSS σ_v median ≈ 3 m
+    # measured 1.4 m; GNSS σ_v median ≈ 3 m
     assert blk["alt_rmse_m"] < 2.0
     assert blk["horiz_rmse_m"] < 10.0  # measured 2.2 m

@@ -20,8 +20,12 @@ def _drive(rate_hz: float) -> SimpleNamespace:
 
 
 def test_low_rate_imu_gets_long_keyframes() -> None:
+    """The documented rule (GraphConfig.keyframe_dt, docs/graph.md): 5 s keyframes on IMU logs
+    averaged to 2 Hz or less, the 1 s default above that."""
     cfg = GraphConfig()
-    assert low_rate_config(cfg, _drive(1.0)).keyframe_dt == LOW_RATE_KEYFRAME_DT
+    assert cfg.keyframe_dt == 1.0 and LOW_RATE_KEYFRAME_DT == 5.0
+    for rate_hz, keyframe_dt in ((1.0, 5.0), (2.0, 5.0), (2.5, 1.0), (100.0, 1.0)):
+        assert low_rate_config(cfg, _drive(rate_hz)).keyframe_dt == keyframe_dt, rate_hz
     assert low_rate_config(cfg, _drive(100.0)) is cfg
     # a user's own keyframe spacing is kept
     own = replace(cfg, keyframe_dt=2.0)

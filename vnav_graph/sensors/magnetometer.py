@@ -236,8 +236,7 @@ class MagSpec:
     rate_hz : sample rate [Hz]; samples at 0, 1/rate_hz, … over the truth span
     sd_ut : white noise σ per axis [µT] (also the stream's ``sd_ut``)
     hard_iron_ut : (3,) hard-iron bias in body axes forward-right-down [µT], constant
-    year : decimal year of the drive, picks the World Magnetic Model epoch and its secular
-        variation (:func:`vnav_graph.geo.magfield.earth_field`)
+    year : decimal year of the drive: the World Magnetic Model's epoch (``geo.magfield``)
     """
 
     rate_hz: float = 10.0

@@ -28,8 +28,7 @@ class EkfConfig(GnssErrorSettings):
     traj_rate_hz: output trajectory rate [Hz] (None: every IMU epoch).
     gate_prob: χ² gate probability of GNSS position, GNSS velocity and baro innovations.
     max_consecutive_rejects: after this many refusals in a row the next GNSS pair is forced in.
-    max_rejected_s: when set, that limit as a span of GNSS time [s] instead of a count (the
-        count is this span over the median fix interval, so it does not depend on the rate).
+    max_rejected_s: that limit as a span of GNSS time instead of a count [s] (None: the count).
     align_max_s: longest static levelling window [s].
     initial_heading: given initial heading [rad] (None: from GNSS or the magnetometer).
     initial_heading_sd: σ of the given heading [rad].
@@ -54,32 +53,17 @@ class EkfConfig(GnssErrorSettings):
     mag_bias_sd: prior σ of each hard-iron component [µT].
     mag_bias_rw: hard-iron random walk [µT/√s].
     mag_reaccept_s: after this long of refused headings the next is forced in [s].
-    gnss_gm_sd_h, gnss_gm_sd_v, gnss_gm_tau_s: the Gauss-Markov GNSS error state (σ north/east,
-    σ down [m], 0: not carried; correlation time [s]), shared with the other family
-    (``sensors.gnss_model.GnssErrorSettings``).
+    gnss_gm_sd_h, gnss_gm_sd_v, gnss_gm_tau_s: the GNSS error state (``GnssErrorSettings``).
     baro_scale_sd: prior σ of the baro scale (None: the shared sensor model's).
-    loss_gnss_pos: robust loss of GNSS positions: "none" or "huber" (``ekf.model.huber_weight``:
-        rows' variances R/w, w = min(1, k/e) with e = √NIS of the horizontal pair and of the
-        height, each on its own).
+    loss_gnss_pos: robust loss of GNSS positions: "none" or "huber" (``ekf.model.huber_weight``).
     loss_gnss_vel: robust loss of GNSS velocities ("none" or "huber").
     loss_baro: robust loss of baro samples ("none" or "huber").
-    loss_threshold_sd: Huber thresholds k [σ] (GNSS position, GNSS velocity, baro): the
-        graph's rule (``GraphConfig.loss_threshold_sd``, a Mahalanobis norm in σ).
-    post_gate: ``ekf-rts`` only: remove the fixes that do not fit the smoothed trajectory and
-        run the forward and RTS passes again (``ekf.regate``; the graph's post-solve gate).
+    loss_threshold_sd: Huber thresholds k (GNSS position, GNSS velocity, baro) [σ].
+    post_gate: ``ekf-rts``: drop fixes that misfit the smoothed trajectory, rerun (``ekf.regate``).
     post_gate_rounds: at most this many post-smoothing gate rounds.
-    carry_heading_back: ``ekf-rts`` only: a heading acquired in motion is carried back to the
-        drive's start and the forward and RTS passes are run again from there with it
-        (``ekf.carry``).
-    fb_separation: ``ekf-rts`` only: run the filter backward too and report the
-        forward/backward separation (``ekf.backward``; ``info["fb_separation"]``).
-    tilt_consider: while the heading is unknown and the tilt σ exceeds 5° (a levelling in
-        motion), the GNSS and baro updates hold the attitude as Schmidt consider states
-        (``ekf.steps.tilt_held``).
-
-    Magnetometer headings are thinned to one per ``mag_interval_s`` because their errors
-    (interference, soft iron) are correlated over seconds: 10 Hz of them would be trusted
-    10× too much.
+    carry_heading_back: ``ekf-rts``: rerun from the start with a heading acquired in motion.
+    fb_separation: ``ekf-rts``: run the filter backward too (``info["fb_separation"]``).
+    tilt_consider: hold the attitude as consider states while heading is unknown and tilt σ > 5°.
     """
 
     cov_rate_hz: float = 10.0
@@ -87,6 +71,7 @@ class EkfConfig(GnssErrorSettings):
     traj_rate_hz: float | None = 50.0
     gate_prob: float = 0.9995
     max_consecutive_rejects: int = 50
+    # the count is this span over the median fix interval, so it does not depend on the rate
     max_rejected_s: float | None = None
     align_max_s: float = 20.0
     initial_heading: float | None = None
@@ -107,20 +92,32 @@ class EkfConfig(GnssErrorSettings):
     align_sd_max: float = 15.0 * DEG
     gap_heading_forget_s: float = 5.0
     use_mag: bool = True
+    # magnetometer errors (interference, soft iron) are correlated over seconds: 10 Hz of
+    # headings would be trusted 10× too much
     mag_interval_s: float = MAG_INTERVAL_S
     mag_heading_floor: float = MAG_HEADING_FLOOR
     mag_bias_sd: float = MAG_BIAS_SD_UT
     mag_bias_rw: float = 0.01
     mag_reaccept_s: float = 20.0
     baro_scale_sd: float | None = None
+    # Huber: rows' variances R/w, w = min(1, k/e), e = √NIS of the horizontal pair and of the
+    # height, each on its own
     loss_gnss_pos: str = "none"
     loss_gnss_vel: str = "none"
     loss_baro: str = "none"
+    # the graph's rule (GraphConfig.loss_threshold_sd): a Mahalanobis norm in σ
     loss_threshold_sd: tuple[float, float, float] = (2.0, 2.0, 2.0)
+    # the graph's post-solve gate for ekf-rts: remove the fixes that do not fit the smoothed
+    # trajectory and run the forward and RTS passes again
     post_gate: bool = False
     post_gate_rounds: int = 3
+    # a heading acquired in motion is carried back to the drive's start and the forward and RTS
+    # passes run again from there with it (ekf.carry)
     carry_heading_back: bool = True
+    # forward/backward separation (ekf.backward)
     fb_separation: bool = True
+    # a levelling in motion: the GNSS and baro updates hold the attitude as Schmidt consider
+    # states (ekf.steps.tilt_held)
     tilt_consider: bool = True
 
     def huber_k(self) -> tuple[float, float, float]:

@@ -35,8 +35,7 @@ class GraphConfig(GnssErrorSettings):
     relinearize_typed: iSAM2 thresholds (rot [rad], trans [m], vel [m/s], b_a [m/s²], b_g [rad/s]).
     wildfire_threshold: iSAM2 back-substitution threshold (None: GTSAM's 1e-3).
     final_batch: also run the batch solver from iSAM2's estimate, as its check.
-    isam2_batch_fallback: return the check's solution when it ends significantly lower than
-        iSAM2's own (otherwise that is a warning and iSAM2's estimate is returned).
+    isam2_batch_fallback: return the check's solution when it ends significantly lower.
     isam2_lag_s: lag L of graph-isam2's fixed-lag estimate ``Estimate.lag`` [s].
     final_rounds: at most this many forced-relinearisation updates after the last keyframe.
     isam2_window_s: seconds of keyframes kept in iSAM2 (None: all; at least two segments).
@@ -55,9 +54,7 @@ class GraphConfig(GnssErrorSettings):
     mag_heading_floor: heading σ floor [rad].
     mag_bias_sd: prior σ of each hard-iron component [µT].
     mag_loss_sd: Huber threshold of the heading factors [σ].
-    gnss_gm_sd_h, gnss_gm_sd_v, gnss_gm_tau_s: the Gauss-Markov GNSS error state (σ north/east,
-    σ down [m], 0: not carried; correlation time [s]), shared with the other family
-    (``sensors.gnss_model.GnssErrorSettings``).
+    gnss_gm_sd_h, gnss_gm_sd_v, gnss_gm_tau_s: the GNSS error state (``GnssErrorSettings``).
     accel_scale: carry accelerometer scale factors (None: the shared rule of sensors.model).
     accel_scale_rw: online per-segment k_a random walk, times k_a's prior σ [1/√s].
     baro_scale_sd: prior σ of the baro scale (None: the shared sensor model's).
@@ -82,6 +79,7 @@ class GraphConfig(GnssErrorSettings):
         0.002, 0.1, 0.05, 0.01, 0.0005)
     wildfire_threshold: float | None = 0.01
     final_batch: bool = True
+    # otherwise a check that ends lower is a warning and iSAM2's own estimate is returned
     isam2_batch_fallback: bool = False
     isam2_lag_s: float = 10.0
     final_rounds: int = 8

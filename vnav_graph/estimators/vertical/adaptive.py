@@ -86,20 +86,16 @@ class AdaptiveConfig:
     t_avg : time constant T_a of the error-magnitude low-pass [s]
     ahrs : attitude-reference gains
     ekf_control : run the EKF-with-control-signals variant (docs/adaptive_loop.md)
-
-    EKF-with-control-signals variant (``ekf_control=True``):
-    gains : explicit base gains (k1, k2, k3) [1/s, 1/s², 1/s³] instead of the triple pole
-        at −1/τ (the adaptation scales them as k1·s, (k2 − ω_s²)·s² + ω_s², k3·s³);
-        (0, 0, 0) removes the loop (the filter is then a plain GNSS-aided vertical KF)
+    gains : base gains (k1, k2, k3) [1/s, 1/s², 1/s³] (None: the triple pole at −1/τ)
     gate_prob : false-alarm probability of the χ²₁ innovation gate on GNSS (None: no gate)
-    reinit_s : consecutive rejections spanning this long [s] reset the covariance to its
-        prior (so the gate cannot lock GNSS out forever)
-    accel_psd : vertical acceleration input noise PSD [m²/s³]; None: the IMU spec's
-        accel_noise_density² (fallback 3e-3²) + 1e-4 for the attitude-reference input error
+    reinit_s : consecutive rejections spanning this long reset the covariance to its prior [s]
+    accel_psd : vertical acceleration input noise PSD [m²/s³] (None: from the IMU spec)
     accel_bias_rw : random walk of the acceleration correction c [m/s²/√s]
-    baro_noise_sd, baro_bias_sd [m], baro_bias_tau [s], baro_scale_sd [-]: baro model
-        (``sensors.baro``); None: the baro stream's spec, else 0.5 m, 10 m, 3600 s, 0.02
-    cov_rate_hz : rate of the stored covariances [Hz]"""
+    baro_noise_sd, baro_bias_sd : baro white noise and bias σ [m] (None: the stream's spec)
+    baro_bias_tau, baro_scale_sd : baro bias τ [s] and scale σ [-] (None: the stream's spec)
+    cov_rate_hz : rate of the stored covariances [Hz]
+
+    The fields from ``gains`` on act in the EKF-with-control-signals variant only."""
 
     tau: float = 20.0
     s_max: float = 4.0
@@ -110,11 +106,17 @@ class AdaptiveConfig:
     t_avg: float = 2.0
     ahrs: AhrsConfig = field(default_factory=AhrsConfig)
     ekf_control: bool = False
+    # the adaptation scales the gains as k1·s, (k2 − ω_s²)·s² + ω_s², k3·s³; (0, 0, 0) removes
+    # the loop (the filter is then a plain GNSS-aided vertical KF)
     gains: tuple[float, float, float] | None = None
     gate_prob: float | None = 1e-3
+    # so that the gate cannot lock GNSS out forever
     reinit_s: float = 30.0
+    # None: the IMU spec's accel_noise_density² (fallback 3e-3²) + 1e-4 for the
+    # attitude-reference input error
     accel_psd: float | None = None
     accel_bias_rw: float = 1e-4
+    # the baro model of sensors.baro; None: the baro stream's spec, else 0.5 m, 10 m, 3600 s, 0.02
     baro_noise_sd: float | None = None
     baro_bias_sd: float | None = None
     baro_bias_tau: float | None = None

@@ -130,90 +130,85 @@ from .gnss_reference import baro_rate, matching_inputs, velocity_from_positions
 
 @dataclass(frozen=True)
 class AhrsConfig:
-    """Gains and robustness rules of the GNSS-aided attitude reference.
+    """Gains and robustness rules of the GNSS-aided attitude reference (steps and rules R1-R5:
+    the module docstring).
 
     level_s : duration of the initial coarse-levelling average [s]
-    tilt_omega : natural frequency ω_t of the tilt PI loop [rad/s]; k_p = 2ζω_t, k_i = ω_t²
+    tilt_omega : natural frequency ω_t of the tilt PI loop, k_p = 2ζω_t, k_i = ω_t² [rad/s]
     tilt_zeta : damping ζ of the tilt loop [-]
-    yaw_gain : proportional gain k_y of the course-over-ground heading correction [1/s]; the
-        z-gyro bias integrator gain is k_y²/4 (critically damped heading loop)
+    yaw_gain : gain k_y of the course-over-ground heading correction [1/s]
     v_course_min : ground speed above which the GNSS course is trusted as heading [m/s]
-        (raised per fix to 5σ of that fix's horizontal velocity)
-    max_correction : clamp on each raw tilt observation |ψ̂| per update [rad], only against
-        gross errors (a tight clamp would break the telescoping of the velocity noise)
-    max_tilt_feedback : clamp on the low-passed tilt error ψ fed back as a rate [rad]
-        (step 5, rule R4): the feedback rate never exceeds k_p·max_tilt_feedback
-    gap_factor : a fix pair further apart than gap_factor × the nominal fix interval is an
-        outage; no correction is made across it
-    a_static : before the heading is initialised, tilt is corrected only over fix intervals
-        whose horizontal reference acceleration is below this [m/s²] (plus 3σ of the
-        differenced GNSS velocity noise, 3·√2·σ_v/``match_interval_s``)
-    match_interval_s : minimum length of a velocity-matching interval [s]; faster fixes are
-        thinned (at 10 Hz with σ_v = 0.1 m/s, matching every fix gave 3-5× larger tilt noise
-        on the simulated hill-drive than matching every 0.5 s)
-    tilt_filter_s : time constant T_f of the first-order low-pass on the raw tilt
-        observation ψ̂ [s]
-    gate_prob : false-alarm probability p of the χ²₂ gate on the horizontal velocity-matching
-        residual (rule R2); threshold −2 ln p (13.8 at 10⁻³); None: no gate
-    tilt_sd0 : σ of the tilt error of an aligned reference [rad] used in the gate (covers the
-        consumer accelerometer-bias floor of ≈ 7 mrad with margin)
-    gyro_bias_sd : σ of the residual gyro bias [rad/s]; the gate's tilt σ grows by
-        gyro_bias_sd per second since the last accepted update
-    heading_sd : σ of the heading error once initialised [rad] (couples ψ_z × a_h into the
-        horizontal residual)
+    max_correction : clamp on each raw tilt observation |ψ̂| per update, gross errors only [rad]
+    max_tilt_feedback : clamp on the low-passed tilt error ψ fed back as a rate (R4) [rad]
+    gap_factor : fixes further apart than this × the nominal interval are an outage [-]
+    a_static : before heading, tilt is corrected only below this horizontal acceleration [m/s²]
+    match_interval_s : minimum length of a velocity-matching interval [s]
+    tilt_filter_s : time constant T_f of the low-pass on the raw tilt observation ψ̂ [s]
+    gate_prob : false-alarm probability p of the χ²₂ velocity-matching gate (R2; None: no gate)
+    tilt_sd0 : σ of the tilt error of an aligned reference, used in the gate [rad]
+    gyro_bias_sd : σ of the residual gyro bias; the gate's tilt σ grows by it per second [rad/s]
+    heading_sd : σ of the heading error once initialised, used in the gate [rad]
     sd_v_default : σ of a receiver velocity without ``vel_sd`` [m/s]
-    sd_v_nominal : velocity σ at and below which a fix interval gets the full filter gain;
-        noisier intervals get the inverse-variance weight R_nom/R (rule R3) [m/s]
-    sd_v_max : a fix whose horizontal velocity σ exceeds this is unusable for levelling and
-        heading [m/s] (rule R1)
-    reinit_s : consecutive gate rejections spanning at least this long [s] let the next
-        usable interval through (the gate cannot lock the GNSS out after a real drift)
-    baro_check : compare the receiver's vertical velocity with the baro climb rate and drop the
-        vertical component of the levelling residual where they disagree (rule R5)
-    pos_vel_window_s, pos_vel_min_fixes : without receiver velocity, the reference velocity at
-        each fix is the slope of a σ-weighted quadratic least-squares fit of the GNSS
-        positions over a window of max(pos_vel_window_s, (pos_vel_min_fixes − 1) × nominal
-        fix interval) [s] (step 3b)
-    fallback_after_s : without an accepted GNSS levelling update for this long [s] the
-        accelerometer levelling fallback (step 6) runs
+    sd_v_nominal : velocity σ up to which an interval gets the full gain, else R_nom/R (R3) [m/s]
+    sd_v_max : fixes with a horizontal velocity σ above this are not used (R1) [m/s]
+    reinit_s : gate rejections spanning this long let the next usable interval through [s]
+    baro_check : drop the vertical levelling residual where receiver and baro climb disagree (R5)
+    pos_vel_window_s, pos_vel_min_fixes : without receiver velocity, the position-fit window [s]
+    pos_vel_vertical : trust the vertical component of the position-fit velocity
+    fallback_after_s : without a GNSS levelling update this long, the accelerometer fallback [s]
     accel_level_window_s : averaging window of the fallback [s]
-    accel_level_tau_s : time constant of the fallback's tilt correction [s] (slow: it assumes
-        no sustained horizontal acceleration)
-    static_rate : the fallback runs only when |mean(ω̃ − b̂_g)| over its window is below this
-        [rad/s] (no turn: a turn carries a centripetal acceleration)
+    accel_level_tau_s : time constant of the fallback's tilt correction [s]
+    static_rate : the fallback runs only when |mean(ω̃ − b̂_g)| is below this [rad/s]
     static_accel : ... and | |mean f̃_b| − g | is below this [m/s²]
-    IMU logging gaps (``nav.gaps``): attitude held across them, no velocity matching over
-    them (step 7)
     """
 
     level_s: float = 2.0
     tilt_omega: float = 0.05
     tilt_zeta: float = 1.0
+    # the z-gyro bias integrator gain is k_y²/4 (critically damped heading loop)
     yaw_gain: float = 0.1
+    # raised per fix to 5σ of that fix's horizontal velocity
     v_course_min: float = 5.0
+    # a tight clamp would break the telescoping of the velocity noise
     max_correction: float = 1.0
+    # step 5, rule R4: the feedback rate never exceeds k_p·max_tilt_feedback
     max_tilt_feedback: float = 0.2
+    # no correction is made across an outage
     gap_factor: float = 2.5
+    # plus 3σ of the differenced GNSS velocity noise, 3·√2·σ_v/match_interval_s
     a_static: float = 0.3
+    # faster fixes are thinned: at 10 Hz with σ_v = 0.1 m/s, matching every fix gave 3-5×
+    # larger tilt noise on the simulated hill-drive than matching every 0.5 s
     match_interval_s: float = 0.5
     tilt_filter_s: float = 2.0
+    # rule R2: threshold −2 ln p (13.8 at 10⁻³)
     gate_prob: float | None = 1e-3
+    # covers the consumer accelerometer-bias floor of ≈ 7 mrad with margin
     tilt_sd0: float = 0.03
     gyro_bias_sd: float = 0.002
+    # couples ψ_z × a_h into the horizontal residual
     heading_sd: float = 0.05
     sd_v_default: float = 0.2
     sd_v_nominal: float = 1.0
     sd_v_max: float = 3.0
+    # the gate cannot lock the GNSS out after a real drift
     reinit_s: float = 20.0
     baro_check: bool = True
+    # step 3b: the reference velocity at each fix is the slope of a σ-weighted quadratic
+    # least-squares fit of the GNSS positions over max(pos_vel_window_s,
+    # (pos_vel_min_fixes − 1) × nominal fix interval)
     pos_vel_window_s: float = 4.0
     pos_vel_min_fixes: int = 7
     pos_vel_vertical: bool = False
+    # step 6: the accelerometer levelling fallback
     fallback_after_s: float = 90.0
     accel_level_window_s: float = 10.0
+    # slow: the fallback assumes no sustained horizontal acceleration
     accel_level_tau_s: float = 30.0
+    # no turn: a turn carries a centripetal acceleration
     static_rate: float = 0.03
     static_accel: float = 0.3
+    # IMU logging gaps (nav.gaps, step 7): attitude held across them, no velocity matching
 
     def __post_init__(self) -> None:
         for n in ("level_s", "tilt_omega", "tilt_zeta", "v_course_min", "max_correction",

@@ -219,7 +219,13 @@ def loop_estimate(name: str, t: FloatArray, h: FloatArray, v_up: FloatArray, run
 
 @dataclass(frozen=True)
 class Loop2Config:
-    """omega_n [rad/s], zeta [-]; or explicit (k1, k2) in ``gains`` (then used as given)."""
+    """Settings of ``loop2``.
+
+    omega_n: natural frequency of the loop [rad/s].
+    zeta: damping ratio [-].
+    gains: explicit (k1, k2) [1/s, 1/s²], used as given (None: from omega_n and zeta).
+    ahrs: attitude-reference gains.
+    """
 
     omega_n: float = 0.05
     zeta: float = float(1 / np.sqrt(2))
@@ -229,7 +235,12 @@ class Loop2Config:
 
 @dataclass(frozen=True)
 class Loop3Config:
-    """tau [s] of the triple pole; or explicit (k1, k2, k3) in ``gains``."""
+    """Settings of ``loop3``.
+
+    tau: time constant of the triple pole at −1/τ [s].
+    gains: explicit (k1, k2, k3) [1/s, 1/s², 1/s³], used as given (None: from tau).
+    ahrs: attitude-reference gains.
+    """
 
     tau: float = 20.0
     gains: tuple[float, float, float] | None = None

@@ -100,27 +100,27 @@ class ObserverConfig:
 
     gain : L (3,) applied at each GPS fix [-, 1/s, 1/s²]
     discretisation : "zoh" | "tustin"
-    gate_prob : false-alarm probability of the GNSS innovation gate; the gate is
-        δy² > χ²₁(1 − gate_prob) · S(τ) (module docstring, "GNSS gating"); None: no gate
-    gnss_sd : σ of the GNSS altitude used in S [m]; None: median of the drive's vertical
-        ``pos_sd``
-    accel_noise_density : white accelerometer noise used in S [m/s²/√Hz] (default the
-        consumer preset, 300 µg/√Hz)
+    gate_prob : false-alarm probability of the GNSS innovation gate (None: no gate)
+    gnss_sd : σ of the GNSS altitude used in S [m] (None: the drive's median vertical ``pos_sd``)
+    accel_noise_density : white accelerometer noise used in S [m/s²/√Hz]
     accel_bias_rw : accelerometer bias random walk used in S [m/s²/√s]
-    warmup_s : fixes before t_first_fix + warmup_s are never gated [s]; None: the analytic
-        settling time of the loop at the drive's fix period (``analytic_settling``)
-    reinit_s : consecutive rejections spanning at least this long [s] re-initialise the
-        observer at the current fix (so the gate cannot lock the GNSS out forever)
+    warmup_s : fixes before t_first_fix + warmup_s are never gated [s] (None: the settling time)
+    reinit_s : rejections spanning this long re-initialise the observer at the current fix [s]
     ahrs : attitude reference for the vertical specific force
     """
 
     gain: tuple[float, float, float] = SEED003_GAIN
     discretisation: str = "zoh"
+    # the gate is δy² > χ²₁(1 − gate_prob) · S(τ) (module docstring, "GNSS gating")
     gate_prob: float | None = 1e-3
     gnss_sd: float | None = None
+    # the consumer preset, 300 µg/√Hz
     accel_noise_density: float = 300e-6 * G0
     accel_bias_rw: float = 0.0
+    # None: the analytic settling time of the loop at the drive's fix period
+    # (analytic_settling)
     warmup_s: float | None = None
+    # so that the gate cannot lock the GNSS out forever
     reinit_s: float = 20.0
     ahrs: AhrsConfig = field(default_factory=AhrsConfig)
 

@@ -106,46 +106,40 @@ from .vekf7_setup import (  # noqa: F401  (the state indices and input_error_psd
 
 @dataclass(frozen=True)
 class VEKF7Config:
-    """Tuning of the 7-state vertical EKF. ``None`` takes the value from the stream's spec
-    (``drive.imu.spec`` / ``drive.baro.spec``) or the stated fallback.
+    """Tuning of the 7-state vertical EKF. From ``accel_bias_sd`` on, ``None`` takes the drive's
+    shared sensor model (``sensors.model``, the values ekf and the graphs use).
 
-    accel_psd : vertical specific-force white-noise PSD [(m/s²)²/Hz]; None: spec noise
-        density² + ``input_error_psd``
-    input_error_psd : floor PSD of the attitude-reference error in f_D [(m/s²)²/Hz]. Measured
-        on the sortie scenario (industrial IMU): with GNSS the AHRS makes f_D err by ≈ 2 mm/s²
-        rms with ≈ 10 s correlation, PSD ≈ 2σ²τ ≈ 1e-4; without it the vertical-velocity
-        NEES is ≈ 2.5× too large
-    tilt_sd, input_corr_s : AHRS tilt σ with GNSS [rad] and correlation time [s] of the
-        manoeuvre-dependent f_D error, see ``input_error_psd``
-    Every ``None`` below takes the drive's shared sensor model (``sensors.model``, the
-    same values ekf and the graphs use); a number overrides it for this filter only.
-    accel_bias_sd, accel_bias_tau : Gauss-Markov σ [m/s²] / τ [s] of B_z
-    accel_bias_rw : random walk floor of B_z [m/s²/√s] for other-axis, attitude and Coriolis
-        errors of the vertical specific force (not in eq. 5's state); the shared model's
-        (vibration) walk when larger
+    accel_psd : vertical specific-force white-noise PSD [(m/s²)²/Hz] (None: from the IMU spec)
+    input_error_psd : floor PSD of the attitude-reference error in f_D [(m/s²)²/Hz]
+    tilt_sd, input_corr_s : AHRS tilt σ with GNSS [rad] and correlation time of its f_D error [s]
+    accel_bias_sd, accel_bias_tau : Gauss-Markov σ [m/s²] and τ [s] of B_z
+    accel_bias_rw : random walk floor of B_z [m/s²/√s]
     accel_scale_sd : prior σ of K_z [-]
     scale_prior_sd : prior σ of dSF [-]
     latency_prior, latency_prior_sd : prior mean and σ of Td [s]
     bias_prior_sd, bias_tau : σ [m] and τ [s] of the baro Gauss-Markov bias
     baro_noise_sd : white baro noise [m]
-    gnss_vertical_sd : GNSS height σ [m] when the stream gives none (it always does)
+    gnss_vertical_sd : GNSS height σ when the stream gives none [m]
     use_gnss_velocity : use the GNSS vertical velocity when the receiver gives it
     gnss_gate_sigma : reject GNSS innovations beyond this many σ
-    max_gnss_sd_v, gnss_probation_s : GNSS heights with σ_v above this [m] are not used; after
-        two consecutive refusals a height is used again only after ``gnss_probation_s`` [s] of
-        consistent fixes (``nav.gnss_gate.height_gate``)
-    IMU logging gaps (the shared rule, ``nav.gaps``) are bridged at constant vertical velocity
-    with the shared unknown acceleration ``GAP_ACCEL_SD`` [m/s²/√s].
-    cov_rate_hz : rate at which covariances are stored in the Estimate
+    max_gnss_sd_v, gnss_probation_s : GNSS σ_v limit [m]; consistent span to reuse heights [s]
+    cov_rate_hz : rate at which covariances are stored in the Estimate [Hz]
     ahrs : attitude-reference gains for ``vertical_inputs``
     """
 
+    # None: the IMU spec's noise density² + input_error_psd
     accel_psd: float | None = None
+    # measured on the sortie scenario (industrial IMU): with GNSS the AHRS makes f_D err by
+    # ≈ 2 mm/s² rms with ≈ 10 s correlation, PSD ≈ 2σ²τ ≈ 1e-4; without it the
+    # vertical-velocity NEES is ≈ 2.5× too large
     input_error_psd: float = 1e-4
+    # the manoeuvre-dependent part of the f_D error (see input_error_psd)
     tilt_sd: float = 5e-4
     input_corr_s: float = 20.0
     accel_bias_sd: float | None = None
     accel_bias_tau: float | None = None
+    # for other-axis, attitude and Coriolis errors of the vertical specific force (not in
+    # eq. 5's state); the shared model's (vibration) walk when larger
     accel_bias_rw: float = 2e-4
     accel_scale_sd: float | None = None
     scale_prior_sd: float | None = None
@@ -154,9 +148,14 @@ class VEKF7Config:
     bias_prior_sd: float | None = None
     bias_tau: float | None = None
     baro_noise_sd: float | None = None
+    # the streams always give one
     gnss_vertical_sd: float = 3.0
     use_gnss_velocity: bool = True
     gnss_gate_sigma: float = 5.0
+    # GNSS heights with σ_v above max_gnss_sd_v are not used; after two consecutive refusals a
+    # height is used again only after gnss_probation_s of consistent fixes
+    # (nav.gnss_gate.height_gate). IMU logging gaps (nav.gaps) are bridged at constant vertical
+    # velocity with the shared unknown acceleration GAP_ACCEL_SD [m/s²/√s].
     max_gnss_sd_v: float = 15.0
     gnss_probation_s: float = 10.0
     cov_rate_hz: float = 1.0

@@ -87,31 +87,31 @@ NX = 4
 class VKF4Config:
     """Tuning of the 4-state baro-inertial filter (``None``: from the stream specs).
 
-    accel_psd : A, PSD of the vertical specific-force error [(m/s²)²/Hz]; None: spec noise
-        density² + spec accel_bias_sd²·``bias_corr_s`` + the attitude-reference input error
-        of ``vekf7.input_error_psd`` (time-varying: larger in manoeuvres and GNSS outages)
+    accel_psd : A, PSD of the vertical specific-force error [(m/s²)²/Hz] (None: from the specs)
     bias_corr_s : time over which an unmodelled accelerometer bias is treated as white [s]
-    input_error_psd, tilt_sd, input_corr_s : see ``vekf7.VEKF7Config``
-    baro_slow_sd, baro_slow_tau : σ₃ [m], τ₃ [s] of Δh_baro; None: √(bias_sd² +
-        (scale_sd·``alt_span_m``)²) and bias_tau of the shared baro prior
+    input_error_psd, tilt_sd, input_corr_s : as in ``vekf7.VEKF7Config``
+    baro_slow_sd, baro_slow_tau : σ₃ [m], τ₃ [s] of Δh_baro (None: from the shared baro prior)
     alt_span_m : altitude span over which the scale error accumulates into Δh_baro [m]
     baro_fast_sd, baro_fast_tau : σ₄ [m], τ₄ [s] of the fast Markov state Δh_m
-    baro_noise_sd : white baro noise [m]; None: the shared baro prior's
-    use_gnss : use GNSS heights when available (False: pure seed-004 baro-inertial loop)
+    baro_noise_sd : white baro noise [m] (None: the shared baro prior's)
+    use_gnss : use GNSS heights when available (False: the seed-004 baro-inertial loop alone)
     gnss_gate_sigma : reject GNSS innovations beyond this many σ
     max_gnss_sd_v, gnss_probation_s : as in ``VEKF7Config``
-    The IMU and baro noise come from the shared sensor model (``sensors.model``); on a log
-    without an IMU spec its inferred accelerometer bias walk q_rw is added to A as its white
-    equivalent over ``bias_corr_s``, q_rw²·bias_corr_s²/3; IMU gaps follow ``nav.gaps``.
-    cov_rate_hz : rate at which covariances are stored
+    cov_rate_hz : rate at which covariances are stored [Hz]
     ahrs : attitude-reference gains
     """
 
+    # None: the IMU spec's noise density² + accel_bias_sd²·bias_corr_s + the attitude-reference
+    # input error of vekf7.input_error_psd (time-varying: larger in manoeuvres and GNSS
+    # outages). The IMU and baro noise come from the shared sensor model (sensors.model); on a
+    # log without an IMU spec its inferred accelerometer bias walk q_rw is added to A as its
+    # white equivalent over bias_corr_s, q_rw²·bias_corr_s²/3; IMU gaps follow nav.gaps.
     accel_psd: float | None = None
     bias_corr_s: float = 60.0
     input_error_psd: float = 1e-4
     tilt_sd: float = 5e-4
     input_corr_s: float = 20.0
+    # None: √(bias_sd² + (scale_sd·alt_span_m)²) and bias_tau of the shared baro prior
     baro_slow_sd: float | None = None
     baro_slow_tau: float | None = None
     alt_span_m: float = 1000.0
