@@ -53,8 +53,8 @@ def configure_cache() -> str:
     path = os.environ.get("NUMBA_CACHE_DIR")
     if not path:
         base = cache_root() / "numba"
-        path = str(base / _source_key())
-        _prune(base, Path(path))
+        path = str(base / source_key())
+        prune_old(base, Path(path))
     os.environ["NUMBA_CACHE_DIR"] = path
     cfg = sys.modules.get("numba.core.config")
     if cfg is not None and not getattr(cfg, "CACHE_DIR", ""):
@@ -83,7 +83,7 @@ def configure_opt() -> str | None:
     return NUMBA_OPT_LEVEL
 
 
-def _prune(base: Path, current: Path) -> None:
+def prune_old(base: Path, current: Path) -> None:
     """Remove all but the ``KEEP_CACHES`` most recently used source-version directories."""
     try:
         dirs = [d for d in base.iterdir() if d.is_dir() and d != current]
@@ -169,7 +169,7 @@ def family_of(name: str) -> str | None:
     return next((f for f, names in FAMILIES.items() if name in names), None)
 
 
-def _source_key() -> str:
+def source_key() -> str:
     """Changes whenever a kernel's source may have changed (numba then recompiles)."""
     import hashlib
 
@@ -185,7 +185,7 @@ def _source_key() -> str:
 
 def stamp(family: str, key: str | None = None) -> Path:
     d = Path(configure_cache()) / "vnav-stamps"
-    return d / f"{family}-{key or _source_key()}"
+    return d / f"{family}-{key or source_key()}"
 
 
 def is_warm(family: str, key: str | None = None) -> bool:
@@ -233,7 +233,7 @@ class Prewarm:
         at most one family is cold. ``VNAV_PREWARM=0`` turns it off."""
         if os.environ.get("VNAV_PREWARM", "1") == "0":
             return None
-        key = _source_key()
+        key = source_key()
         cold: list[str] = []
         for n in names:
             f = family_of(n)
@@ -260,7 +260,7 @@ class Prewarm:
             for member in warm_ups_of(f):
                 if member not in self._warmed:
                     self._warmed.add(member)
-                    _run_warm_up(member)
+                    run_warm_up(member)
         self._until(stamp(f, self.key), t0, timeout_s)
         if name in WARMUPS and name not in self._warmed:
             self._until(stamp(f"warmup.{name}", self.key), t0, timeout_s)
@@ -280,7 +280,7 @@ class Prewarm:
         self.proc.wait()
 
 
-def _run_warm_up(name: str) -> None:
+def run_warm_up(name: str) -> None:
     """Run estimator ``name``'s ``WARMUPS`` hook (errors ignored: the real run reports them)."""
     hook = WARMUPS.get(name)
     if hook is None:
@@ -320,13 +320,13 @@ def _compile_families(key: str, families: list[str]) -> None:
         p.parent.mkdir(parents=True, exist_ok=True)
         p.touch()
         for name in warm_ups_of(fam):  # whether or not the parent has taken them (WARMUPS)
-            _run_warm_up(name)
+            run_warm_up(name)
             stamp(f"warmup.{name}", key).touch()
 
 
 def mark_warm(names: list[str]) -> None:
     """After a run in this process: the families all of whose estimators ran are compiled."""
-    key = _source_key()
+    key = source_key()
     for fam, members in FAMILIES.items():
         if set(members) <= set(names):
             try:

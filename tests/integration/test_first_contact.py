@@ -155,7 +155,7 @@ def test_numba_cache_goes_to_the_user_cache_dir(tmp_path: Path) -> None:
     # smoother failed with ModuleNotFoundError)
     cfg_dir, env_dir = r.stdout.split()
     assert cfg_dir == env_dir and Path(cfg_dir).parent == tmp_path / "c" / "numba"
-    assert Path(cfg_dir).name == jit._source_key()
+    assert Path(cfg_dir).name == jit.source_key()
     env["NUMBA_CACHE_DIR"] = str(tmp_path / "mine")  # the user's own setting wins
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                        env=env, check=True)
@@ -188,7 +188,7 @@ def test_old_source_versions_are_pruned(tmp_path: Path) -> None:
         old.append(d)
     cur = base / "current"
     cur.mkdir()
-    jit._prune(base, cur)
+    jit.prune_old(base, cur)
     kept = sorted(p.name for p in base.iterdir())
     # the current directory and the KEEP_CACHES − 1 most recently used others
     assert kept == ["current", "v3", "v4"] and jit.KEEP_CACHES == 3

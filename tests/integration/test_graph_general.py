@@ -190,8 +190,8 @@ def test_elimination_ordering_is_a_nested_dissection_of_every_key(span_case, mon
     from vnav_graph.estimators.graph.batch import general as general
 
     for n in (1, general.ND_LEAF, general.ND_LEAF + 1, 100, 3601):
-        assert sorted(general._dissect(0, n)) == list(range(n))
-    o = general._dissect(0, 100)
+        assert sorted(general.dissection_order(0, n)) == list(range(n))
+    o = general.dissection_order(0, 100)
     assert o[-1] == 50 and max(o[:o.index(25) + 1]) < 50  # left half, then its separator
     d, _, _, extend = span_case
     seen = []

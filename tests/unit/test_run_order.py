@@ -61,7 +61,7 @@ def _prewarm(alive: bool) -> jit.Prewarm:
 
 def test_warm_ups_run_here_when_the_child_is_still_compiling(monkeypatch) -> None:
     warmed: list[str] = []
-    monkeypatch.setattr(jit, "_run_warm_up", warmed.append)
+    monkeypatch.setattr(jit, "run_warm_up", warmed.append)
     pre = _prewarm(alive=True)
     done = {"ekf": False}
 
@@ -81,7 +81,7 @@ def test_warm_ups_run_here_when_the_child_is_still_compiling(monkeypatch) -> Non
 def test_warm_ups_are_left_to_the_child_once_it_has_the_family(monkeypatch) -> None:
     warmed: list[str] = []
     waited_for: list[str] = []
-    monkeypatch.setattr(jit, "_run_warm_up", warmed.append)
+    monkeypatch.setattr(jit, "run_warm_up", warmed.append)
     monkeypatch.setattr(jit, "is_warm", lambda family, key=None: True)
     pre = _prewarm(alive=True)
     monkeypatch.setattr(pre, "_until", lambda path, t0, timeout_s: waited_for.append(path.name))

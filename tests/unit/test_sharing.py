@@ -72,7 +72,7 @@ def test_the_vertical_filters_of_a_run_share_one_ahrs_and_each_is_charged_for_it
     from vnav_graph.simulation import simulate
 
     drive = simulate("default", 0, duration_s=30.0)
-    real = inputs._vertical_inputs
+    real = inputs.compute_vertical_inputs
     seconds: list[float] = []
 
     def counted(drive, cfg):
@@ -80,7 +80,7 @@ def test_the_vertical_filters_of_a_run_share_one_ahrs_and_each_is_charged_for_it
         seconds.append(vi.runtime_s)
         return vi
 
-    monkeypatch.setattr(inputs, "_vertical_inputs", counted)
+    monkeypatch.setattr(inputs, "compute_vertical_inputs", counted)
     alone = runner.run_one("loop3", drive)
     assert len(seconds) == 1
     out = runner.run_estimators(drive, ["loop2", "loop3", "vkf4"], progress=False,

@@ -309,10 +309,10 @@ def vertical_inputs(drive: Drive, config: AhrsConfig | None = None) -> VerticalI
     """
     cfg = config or AhrsConfig()
     # computed once per run for all vertical estimators, time charged to each (sharing.py)
-    return shared_call("vertical_inputs", drive, cfg, lambda: _vertical_inputs(drive, cfg))
+    return shared_call("vertical_inputs", drive, cfg, lambda: compute_vertical_inputs(drive, cfg))
 
 
-def _vertical_inputs(drive: Drive, cfg: AhrsConfig) -> VerticalInputs:
+def compute_vertical_inputs(drive: Drive, cfg: AhrsConfig) -> VerticalInputs:
     t0 = time.perf_counter()
     imu = drive.imu
     t = imu.t

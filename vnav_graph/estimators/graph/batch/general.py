@@ -150,12 +150,12 @@ def group_pieces(lay: Layout, info: IntervalInfo) -> list[Any]:
 ND_LEAF = 8  # keyframes per leaf of the nested dissection (4–16 measured alike)
 
 
-def _dissect(a: int, b: int) -> list[int]:
+def dissection_order(a: int, b: int) -> list[int]:
     """Keyframes a … b−1 in nested-dissection order: both halves, then the middle one."""
     if b - a <= ND_LEAF:
         return list(range(a, b))
     m = (a + b) // 2
-    return _dissect(a, m) + _dissect(m + 1, b) + [m]
+    return dissection_order(a, m) + dissection_order(m + 1, b) + [m]
 
 
 def elimination_ordering(lay: Layout) -> Any:
@@ -171,7 +171,7 @@ def elimination_ordering(lay: Layout) -> Any:
     tmpl = template_keys(lay.nk, lay.has_baro, lay.gm_dim)
     per_kf = len(tmpl) // max(lay.nk, 1)
     o = gtsam.Ordering()
-    for k in _dissect(0, lay.nk):
+    for k in dissection_order(0, lay.nk):
         for key, _, _ in tmpl[k * per_kf:(k + 1) * per_kf]:
             if key in lay.key_cols:
                 o.push_back(key)
