@@ -47,6 +47,7 @@ from ..settings import GraphConfig
 from . import linear_factors as terms
 from . import relin
 from .answers import Answers
+from .py_factors import book_of
 from .setup import (
     extra_online_of,
     first_keyframe,
@@ -115,7 +116,11 @@ class OnlinePass:
             vals_i = build_batch_graph(P, rot_i, pos_i, vel_i, None, P.pri,
                                        np.zeros(nk, dtype=int))[1]
             self.ext = collect(extensions, make_view(P, vals_i))
-        self.isam: Any = gtsam.ISAM2(isam2_params(cfg, robust, self.ext))
+        # the extensions' CustomFactors: linearised here, relinearised by the book
+        self.pyf = book_of(self.ext, cfg)
+        self.pyf_new: tuple[list[int], list[int]] = ([], [])  # slots, positions in the update
+        self.isam: Any = gtsam.ISAM2(isam2_params(
+            cfg, robust, self.ext, self.pyf.linear_only() if self.pyf is not None else None))
         # running linearisation arrays (keyframe states as last estimated); gg: the GNSS
         # error state G(k) (GraphConfig.gnss_gm_*; (K,) for the height alone), if carried
         self.rot, self.pos, self.vel = np.zeros((nk, 3, 3)), np.zeros((nk, 3)), np.zeros((nk, 3))
@@ -135,10 +140,10 @@ class OnlinePass:
             st0.yaw_sd if causal else PRIOR_ATT_SD[2])
         if self.ext is not None:
             fs, nv_ext = self.ext.at_keyframe(0)
-            for f in fs:
-                graph0.add(f)
+            self._add_ext(fs, graph0)
             vals0.insert(nv_ext)
         new0 = self.isam.update(graph0, vals0).getNewFactorsIndices()
+        self._record_ext(new0, 0)
         self.bt = drive.baro.t if self.has_baro else np.zeros(0)
         self.bz = drive.baro.altitude if self.has_baro else np.zeros(0)
         self.book = relin.TermBook(P, seg, self._fixes_of())
@@ -291,9 +296,43 @@ class OnlinePass:
                 [self.ka_rw * np.sqrt(segment_span(P, seg, j))] * 3)))
         if self.ext is not None:
             fs, nv_ext = self.ext.at_keyframe(k + 1)
-            for f in fs:
-                nf.add(f)
+            self._add_ext(fs, nf)
             nv.insert(nv_ext)
+
+    def _add_ext(self, fs: list[Any], nf: Any) -> None:
+        """The extensions' factors into ``nf``: a CustomFactor linearised by the book (its
+        slot and position noted in ``pyf_new``), any other as it is."""
+        for f in fs:
+            if self.pyf is not None and isinstance(f, gtsam.CustomFactor):
+                self.pyf_new[0].append(self.pyf.slot[id(f)])
+                self.pyf_new[1].append(nf.size())
+                nf.add(self.pyf.build(f, self.arrays))
+            else:
+                nf.add(f)
+
+    def _record_ext(self, new_idx: Any, offset: int) -> None:
+        """iSAM2 indices of the book's factors added by the last update (``pyf_new``, at
+        positions after the update's first ``offset`` factors)."""
+        if self.pyf is not None and self.pyf_new[0]:
+            slots, at = self.pyf_new
+            self.pyf.record(slots, new_idx, [offset + a for a in at])
+        self.pyf_new = ([], [])
+
+    def _rebuild_ext(self, nf: Any, base: int) -> list[int]:
+        """The book's due factors rebuilt into ``nf``, which follows ``base`` factors of the
+        update (noted in ``pyf_new``); the iSAM2 indices they replace."""
+        if self.pyf is None or not self.pyf.pending.size:
+            return []
+        slots, at, removed = self.pyf.rebuild(nf, self.arrays)
+        self.pyf_new[0].extend(slots)
+        self.pyf_new[1].extend(base + a for a in at)
+        return removed
+
+    def _check_ext(self, k_new: int) -> None:
+        """The extension variables' estimates, and the book's factors now due."""
+        if self.pyf is not None:
+            self.pyf.read_ext(self.isam.calculateEstimate(self.pyf.ext_keys(k_new)))
+            self.pyf.pending = self.pyf.due(self.arrays)
 
     def update(self, k: int) -> None:
         """The iSAM2 update that creates keyframe k + 1."""
@@ -321,6 +360,11 @@ class OnlinePass:
         new_baro, self.baro_next = terms.baro_factors(P, k, st, self.bias, self.cal, self.seg,
                                                       self.bt, self.bz, self.baro_next, P.pri)
         tags += book.new_terms(k, gcf, new_baro, st, self._cal(), nf_t)
+        # the extensions' due CustomFactors, rebuilt after everything else
+        nf_p = gtsam.NonlinearFactorGraph()
+        ext_removed = self._rebuild_ext(nf_p, nf.size())
+        if ext_removed:
+            removed = sorted(set(removed) | set(ext_removed))
         last = None
         if removed:
             # the keys of the new factors go last in the ordering (iSAM2's default), not
@@ -334,6 +378,7 @@ class OnlinePass:
                 for key in nf.at(i).keys():
                     last.insert2(key, 1)
         nf_t.push_back(nf)
+        nf_t.push_back(nf_p)
         t_lcf = time.perf_counter()
         try:
             ures = self.isam.update(nf_t, nv, removed, last)
@@ -343,6 +388,7 @@ class OnlinePass:
             self.rw_idx += [int(new_idx[len(tags) + i]) for i in self.rw_at]
             self.rw_at = []
             book.record_fixes(fix_at, new_idx, len(tags))
+            self._record_ext(new_idx, len(tags))
             marked = relin.marked_keyframes(ures.getMarkedKeys())
             read = np.r_[np.arange(max(k - 1, 0), k + 2), marked - 1, marked, marked + 1]
             keys_k = np.unique(read[(read >= book.floor) & (read <= k + 1)])
@@ -362,9 +408,12 @@ class OnlinePass:
             # keyframes older than the window leave iSAM2 (their conditionals are kept)
             gone = self.win.marginalise(self.isam, m1, self.b_last)
             book.freeze(self.win.first, self.win.first_seg, gone)
+            if self.pyf is not None:
+                self.pyf.freeze(gone)
             gone_set = set(gone)
             self.rw_idx = [i for i in self.rw_idx if i not in gone_set]
         book.pending = book.due(marked, k + 1, self.rot, self.pos, self._cal())
+        self._check_ext(k + 1)
         self.online[k + 1, 0:6] = np.r_[self.pos[k + 1], self.vel[k + 1]]
         self.online_rot[k + 1] = self.rot[k + 1]
         t_end = time.perf_counter()
@@ -396,11 +445,16 @@ class OnlinePass:
         for _ in range(RETURN_ROUNDS):
             book.pending = book.due(marked, k + 1, self.rot, self.pos, self._cal())
             nf = gtsam.NonlinearFactorGraph()
+            self._check_ext(k + 1)
             tags, removed = book.rebuild(nf, k, *self.arrays, self._cal(), self.bt, self.bz,
                                          P.pri, self.dg_kf)
+            ext_removed = self._rebuild_ext(nf, 0)
+            n_ext = len(ext_removed)
+            removed = sorted(set(removed) | set(ext_removed))
             try:
                 ures = self.isam.update(nf, gtsam.Values(), removed)
                 book.record(tags, ures.getNewFactorsIndices())
+                self._record_ext(ures.getNewFactorsIndices(), 0)
                 m2 = relin.marked_keyframes(ures.getMarkedKeys())
                 read = np.r_[np.arange(max(k - 1, 0), k + 2), m2 - 1, m2, m2 + 1]
                 keys_k = np.unique(read[(read >= book.floor) & (read <= k + 1)])
@@ -411,7 +465,7 @@ class OnlinePass:
                 raise update_error(P, k, exc, bool(P.gap[k])) from exc
             self.return_rounds += 1
             marked = np.union1d(marked, m2).astype(int)
-            if not tags and ures.getVariablesRelinearized() == 0:
+            if not tags and not n_ext and ures.getVariablesRelinearized() == 0:
                 break
         return marked
 
@@ -456,7 +510,10 @@ class OnlinePass:
         t_online = time.perf_counter()
         extra_online = extra_online_of(self.isam, self.isam.calculateEstimate(), self.ext)
         args = (P, self.seg, self.rw_idx, self.arrays, self.cal, self.bt, self.bz, self.dg_kf)
-        rounds = relin.settle(self.isam, book, *args) if cfg.final_rounds > 0 else []
+        if self.pyf is not None:
+            self.pyf.skip = 1  # the final rounds check at every round, as iSAM2's forced ones
+        rounds = (relin.settle(self.isam, book, *args, pyf=self.pyf)
+                  if cfg.final_rounds > 0 else [])
         gate0 = (P.g_use.copy(), P.g_rej_post)
         if cfg.final_rounds > 0:
             # the batch's post-solve GNSS gate at iSAM2's estimate, then final rounds without
@@ -469,7 +526,8 @@ class OnlinePass:
                                               relin.estimate_states(P, self.arrays, k_cal))
                 if not book.pending.size and not kf_rm:
                     break
-                rounds += relin.settle(self.isam, book, *args, tie=False, removed=kf_rm)
+                rounds += relin.settle(self.isam, book, *args, tie=False, removed=kf_rm,
+                                       pyf=self.pyf)
         est = self.isam.calculateBestEstimate()  # full back-substitution (no wildfire)
         if self.win is not None:  # and of the keyframes that left iSAM2
             est = self.win.complete(est)
