@@ -542,6 +542,8 @@ class OnlinePass:
                   "isam2_calibration_steps_halved": book.damped,
                   "isam2_baro_samples_left_window": book.dropped_at_floor,
                   "isam2_gnss_return_rounds": self.return_rounds,
+                  # the extensions' CustomFactors linearised again (``py_factors``)
+                  "isam2_relinearized_custom": self.pyf.rebuilt if self.pyf else 0,
                   "baro_scale_max_abs": self.s_max if self.has_baro else None,
                   "isam2_final_rounds": rounds,
                   "isam2_gnss_rejected_postsolve": P.g_rej_post - gate0[1],
