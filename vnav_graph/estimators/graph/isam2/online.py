@@ -47,11 +47,12 @@ from ..settings import GraphConfig
 from . import linear_factors as terms
 from . import relin
 from .answers import Answers
-from .py_factors import book_of
+from .py_factors import PyFactorBook
 from .setup import (
     extra_online_of,
     first_keyframe,
     isam2_params,
+    newest_last,
     segment_span,
     segments,
     update_error,
@@ -117,10 +118,9 @@ class OnlinePass:
                                        np.zeros(nk, dtype=int))[1]
             self.ext = collect(extensions, make_view(P, vals_i))
         # the extensions' CustomFactors: linearised here, relinearised by the book
-        self.pyf = book_of(self.ext, cfg)
-        self.pyf_new: tuple[list[int], list[int]] = ([], [])  # slots, positions in the update
-        self.isam: Any = gtsam.ISAM2(isam2_params(
-            cfg, robust, self.ext, self.pyf.linear_only() if self.pyf is not None else None))
+        self.pyf = PyFactorBook(self.ext or Collected(), cfg)
+        self.isam: Any = gtsam.ISAM2(isam2_params(cfg, robust, self.ext,
+                                                  self.pyf.linear_only()))
         # running linearisation arrays (keyframe states as last estimated); gg: the GNSS
         # error state G(k) (GraphConfig.gnss_gm_*; (K,) for the height alone), if carried
         self.rot, self.pos, self.vel = np.zeros((nk, 3, 3)), np.zeros((nk, 3)), np.zeros((nk, 3))
@@ -140,10 +140,10 @@ class OnlinePass:
             st0.yaw_sd if causal else PRIOR_ATT_SD[2])
         if self.ext is not None:
             fs, nv_ext = self.ext.at_keyframe(0)
-            self._add_ext(fs, graph0)
+            self.pyf.add(fs, graph0, self.arrays)
             vals0.insert(nv_ext)
         new0 = self.isam.update(graph0, vals0).getNewFactorsIndices()
-        self._record_ext(new0, 0)
+        self.pyf.record_new(new0, 0)
         self.bt = drive.baro.t if self.has_baro else np.zeros(0)
         self.bz = drive.baro.altitude if self.has_baro else np.zeros(0)
         self.book = relin.TermBook(P, seg, self._fixes_of())
@@ -296,43 +296,8 @@ class OnlinePass:
                 [self.ka_rw * np.sqrt(segment_span(P, seg, j))] * 3)))
         if self.ext is not None:
             fs, nv_ext = self.ext.at_keyframe(k + 1)
-            self._add_ext(fs, nf)
+            self.pyf.add(fs, nf, self.arrays)
             nv.insert(nv_ext)
-
-    def _add_ext(self, fs: list[Any], nf: Any) -> None:
-        """The extensions' factors into ``nf``: a CustomFactor linearised by the book (its
-        slot and position noted in ``pyf_new``), any other as it is."""
-        for f in fs:
-            if self.pyf is not None and isinstance(f, gtsam.CustomFactor):
-                self.pyf_new[0].append(self.pyf.slot[id(f)])
-                self.pyf_new[1].append(nf.size())
-                nf.add(self.pyf.build(f, self.arrays))
-            else:
-                nf.add(f)
-
-    def _record_ext(self, new_idx: Any, offset: int) -> None:
-        """iSAM2 indices of the book's factors added by the last update (``pyf_new``, at
-        positions after the update's first ``offset`` factors)."""
-        if self.pyf is not None and self.pyf_new[0]:
-            slots, at = self.pyf_new
-            self.pyf.record(slots, new_idx, [offset + a for a in at])
-        self.pyf_new = ([], [])
-
-    def _rebuild_ext(self, nf: Any, base: int) -> list[int]:
-        """The book's due factors rebuilt into ``nf``, which follows ``base`` factors of the
-        update (noted in ``pyf_new``); the iSAM2 indices they replace."""
-        if self.pyf is None or not self.pyf.pending.size:
-            return []
-        slots, at, removed = self.pyf.rebuild(nf, self.arrays)
-        self.pyf_new[0].extend(slots)
-        self.pyf_new[1].extend(base + a for a in at)
-        return removed
-
-    def _check_ext(self, k_new: int) -> None:
-        """The extension variables' estimates, and the book's factors now due."""
-        if self.pyf is not None:
-            self.pyf.read_ext(self.isam.calculateEstimate(self.pyf.ext_keys(k_new)))
-            self.pyf.pending = self.pyf.due(self.arrays)
 
     def update(self, k: int) -> None:
         """The iSAM2 update that creates keyframe k + 1."""
@@ -362,7 +327,7 @@ class OnlinePass:
         tags += book.new_terms(k, gcf, new_baro, st, self._cal(), nf_t)
         # the extensions' due CustomFactors, rebuilt after everything else
         nf_p = gtsam.NonlinearFactorGraph()
-        ext_removed = self._rebuild_ext(nf_p, nf.size())
+        ext_removed = self.pyf.rebuild_into(nf_p, nf.size(), arr)
         if ext_removed:
             removed = sorted(set(removed) | set(ext_removed))
         last = None
@@ -388,7 +353,7 @@ class OnlinePass:
             self.rw_idx += [int(new_idx[len(tags) + i]) for i in self.rw_at]
             self.rw_at = []
             book.record_fixes(fix_at, new_idx, len(tags))
-            self._record_ext(new_idx, len(tags))
+            self.pyf.record_new(new_idx, len(tags))
             marked = relin.marked_keyframes(ures.getMarkedKeys())
             read = np.r_[np.arange(max(k - 1, 0), k + 2), marked - 1, marked, marked + 1]
             keys_k = np.unique(read[(read >= book.floor) & (read <= k + 1)])
@@ -408,12 +373,11 @@ class OnlinePass:
             # keyframes older than the window leave iSAM2 (their conditionals are kept)
             gone = self.win.marginalise(self.isam, m1, self.b_last)
             book.freeze(self.win.first, self.win.first_seg, gone)
-            if self.pyf is not None:
-                self.pyf.freeze(gone)
+            self.pyf.freeze(gone)
             gone_set = set(gone)
             self.rw_idx = [i for i in self.rw_idx if i not in gone_set]
         book.pending = book.due(marked, k + 1, self.rot, self.pos, self._cal())
-        self._check_ext(k + 1)
+        self.pyf.check(self.isam, k + 1, arr)
         self.online[k + 1, 0:6] = np.r_[self.pos[k + 1], self.vel[k + 1]]
         self.online_rot[k + 1] = self.rot[k + 1]
         t_end = time.perf_counter()
@@ -445,10 +409,10 @@ class OnlinePass:
         for _ in range(RETURN_ROUNDS):
             book.pending = book.due(marked, k + 1, self.rot, self.pos, self._cal())
             nf = gtsam.NonlinearFactorGraph()
-            self._check_ext(k + 1)
+            self.pyf.check(self.isam, k + 1, self.arrays)
             tags, removed = book.rebuild(nf, k, *self.arrays, self._cal(), self.bt, self.bz,
                                          P.pri, self.dg_kf)
-            ext_removed = self._rebuild_ext(nf, 0)
+            ext_removed = self.pyf.rebuild_into(nf, 0, self.arrays)
             n_ext = len(ext_removed)
             removed = sorted(set(removed) | set(ext_removed))
             try:
@@ -456,9 +420,10 @@ class OnlinePass:
                 # terms (iSAM2's default: after a return nearly all of them, one dense root
                 # clique of hundreds of variables; ski holdout drive 58 → 24 s, plain COLAMD
                 # 29 s, holdout scores equal to 0.2 %)
-                ures = self.isam.update(nf, gtsam.Values(), removed, self._newest_last(k))
+                ures = self.isam.update(nf, gtsam.Values(), removed,
+                                        newest_last(P, self.seg, k + 1, self.b_last))
                 book.record(tags, ures.getNewFactorsIndices())
-                self._record_ext(ures.getNewFactorsIndices(), 0)
+                self.pyf.record_new(ures.getNewFactorsIndices(), 0)
                 m2 = relin.marked_keyframes(ures.getMarkedKeys())
                 read = np.r_[np.arange(max(k - 1, 0), k + 2), m2 - 1, m2, m2 + 1]
                 keys_k = np.unique(read[(read >= book.floor) & (read <= k + 1)])
@@ -472,18 +437,6 @@ class OnlinePass:
             if not tags and not n_ext and ures.getVariablesRelinearized() == 0:
                 break
         return marked
-
-    def _newest_last(self, k: int) -> Any:
-        """iSAM2's constraint map putting keyframe k + 1's variables (and its segment's K, A)
-        last in the ordering of a re-elimination."""
-        P = self.P
-        last = gtsam.KeyGroupMap()
-        keys = list(relin.state_keys([k + 1], P, self.b_last))
-        j = int(self.seg[k + 1])
-        keys += ([K(j)] if self.has_baro else []) + ([A(j)] if P.ka is not None else [])
-        for key in keys:
-            last.insert2(key, 1)
-        return last
 
     def _read_calibration(self, k: int) -> None:
         """The (s, τd) of keyframe k + 1's segment and the one before, and its k_a."""
@@ -526,8 +479,7 @@ class OnlinePass:
         t_online = time.perf_counter()
         extra_online = extra_online_of(self.isam, self.isam.calculateEstimate(), self.ext)
         args = (P, self.seg, self.rw_idx, self.arrays, self.cal, self.bt, self.bz, self.dg_kf)
-        if self.pyf is not None:
-            self.pyf.skip = 1  # the final rounds check at every round, as iSAM2's forced ones
+        self.pyf.skip = 1  # the final rounds check at every round, as iSAM2's forced ones
         rounds = (relin.settle(self.isam, book, *args, pyf=self.pyf)
                   if cfg.final_rounds > 0 else [])
         gate0 = (P.g_use.copy(), P.g_rej_post)
@@ -559,7 +511,7 @@ class OnlinePass:
                   "isam2_baro_samples_left_window": book.dropped_at_floor,
                   "isam2_gnss_return_rounds": self.return_rounds,
                   # the extensions' CustomFactors linearised again (``py_factors``)
-                  "isam2_relinearized_custom": self.pyf.rebuilt if self.pyf else 0,
+                  "isam2_relinearized_custom": self.pyf.rebuilt,
                   "baro_scale_max_abs": self.s_max if self.has_baro else None,
                   "isam2_final_rounds": rounds,
                   "isam2_gnss_rejected_postsolve": P.g_rej_post - gate0[1],

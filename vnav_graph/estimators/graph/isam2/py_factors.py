@@ -39,13 +39,6 @@ _IDX_MASK = (1 << _KEY_BITS) - 1
 _POSE, _VEC = 0, 1  # kinds of a (factor, key) pair's value
 
 
-def book_of(ext: Collected | None, cfg: GraphConfig) -> PyFactorBook | None:
-    """The book of ``ext``'s ``CustomFactor``s, or None when it has none."""
-    if ext is None or not any(isinstance(f, gtsam.CustomFactor) for f in ext.factors):
-        return None
-    return PyFactorBook(ext, cfg)
-
-
 class PyFactorBook:
     """Linearisation points and iSAM2 indices of the extensions' ``CustomFactor``s (module
     docstring). ``now``: the current value of each extension variable."""
@@ -81,6 +74,8 @@ class PyFactorBook:
         self.checks = 0
         self.pending = np.zeros(0, dtype=int)
         self.rebuilt = 0  # factors linearised again and swapped in
+        # the factors the next update adds: slots and positions in its graph (``note``)
+        self.new: tuple[list[int], list[int]] = ([], [])
 
     # -- keys and values -----------------------------------------------------------------
 
@@ -162,6 +157,43 @@ class PyFactorBook:
             vals.insert(key, v)
             self.lin_r[p], self.lin_v[p] = _flat(v, self.dim)
         return gtsam.LinearContainerFactor(f.linearize(vals), vals)
+
+    def add(self, fs: list[Any], nf: Any, arrays: tuple[Any, ...]) -> None:
+        """An extension's factors into ``nf``: one of ``factors`` linearised here (its slot
+        and position noted for ``record_new``), any other as it is."""
+        for f in fs:
+            if id(f) in self.slot:
+                self.new[0].append(self.slot[id(f)])
+                self.new[1].append(nf.size())
+                nf.add(self.build(f, arrays))
+            else:
+                nf.add(f)
+
+    def rebuild_into(self, nf: Any, base: int, arrays: tuple[Any, ...]) -> list[int]:
+        """The pending factors rebuilt into ``nf``, which follows ``base`` factors of the
+        update (noted for ``record_new``); the iSAM2 indices they replace."""
+        if not self.pending.size:
+            return []
+        slots, at, removed = self.rebuild(nf, arrays)
+        self.new[0].extend(slots)
+        self.new[1].extend(base + a for a in at)
+        return removed
+
+    def record_new(self, new_idx: Any, offset: int) -> None:
+        """iSAM2 indices of the factors the last update added (``add``, ``rebuild_into``; at
+        positions after its first ``offset`` factors)."""
+        if self.new[0]:
+            self.record(self.new[0], new_idx, [offset + a for a in self.new[1]])
+        self.new = ([], [])
+
+    def check(self, isam: Any, k_new: int, arrays: tuple[Any, ...]) -> None:
+        """After an update: the extension variables' estimates, and the factors now due."""
+        if not self.factors:
+            return
+        keys = self.ext_keys(k_new)
+        if len(keys):
+            self.read_ext(isam.calculateEstimate(keys))
+        self.pending = self.due(arrays)
 
     def record(self, slots: list[int], new_idx: Any, positions: list[int]) -> None:
         """iSAM2 indices of the factors ``slots`` just added at ``positions`` of the update."""

@@ -69,6 +69,21 @@ def segment_span(P: Any, seg: np.ndarray, j: int) -> float:
     return max(float(P.cfg.segment_s), t1 - t0)
 
 
+def newest_last(P: Any, seg: np.ndarray, k: int, b_last: int) -> Any:
+    """iSAM2's constraint map putting keyframe k's variables (X, V, its B — B(b_last) while
+    B(k) has not entered —, C, G) and its segment's K, A last in a re-elimination's
+    ordering."""
+    last = gtsam.KeyGroupMap()
+    j = int(seg[k])
+    keys = [X(k), V(k), B(min(k, b_last))]
+    keys += [C(k), K(j)] if P.drive.baro is not None else []
+    keys += [G(k)] if P.gm is not None else []
+    keys += [A(j)] if P.ka is not None else []
+    for key in keys:
+        last.insert2(key, 1)
+    return last
+
+
 def threshold_map(cfg: GraphConfig, ext: Collected | None = None,
                   linear: set[str] | None = None) -> Any:
     """Per-variable-type relinearisation thresholds (tangent-space components); the letters
