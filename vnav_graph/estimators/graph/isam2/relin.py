@@ -317,13 +317,16 @@ def state_keys(keys_k: Any, P: Any, b_last: int | None = None) -> Any:
 
 def settle(isam: Any, book: TermBook, P: Any, seg: Any, rw_idx: list[int],
             arrays: tuple[Any, ...], cal: dict[int, Any], bt: Any, bz: Any,
-            dg: Any, tie: bool = True, removed: list[int] | None = None) -> list[list[int]]:
+            dg: Any, tie: bool = True, removed: list[int] | None = None,
+            pyf: Any = None) -> list[list[int]]:
     """Final rounds after the last keyframe, so that iSAM2's own estimate is the smoothed
     optimum of the batch's model: the segments' (s, τd) and accelerometer scale factors are
     tied into one (their random walks removed, ``TIE_SD`` between neighbours), then
     forced-relinearisation updates in which every custom term beyond the thresholds is
     rebuilt, until nothing is (at most
-    ``cfg.final_rounds``). Returns per round [terms rebuilt, variables iSAM2 relinearised]."""
+    ``cfg.final_rounds``); ``pyf``: the extensions' ``py_factors.PyFactorBook``, whose due
+    factors are rebuilt in the same rounds. Returns per round [terms rebuilt, variables
+    iSAM2 relinearised]."""
     cfg = P.cfg
     n_seg = int(seg[-1]) + 1
     nf = gtsam.NonlinearFactorGraph()
@@ -348,26 +351,46 @@ def settle(isam: Any, book: TermBook, P: Any, seg: Any, rw_idx: list[int],
                                                  noise([TIE_SD[0]] * 3)))
         removed = sorted(set(removed) | set(rw_idx))
     out: list[list[int]] = []
+    py_at = _py_rebuild(pyf, nf, arrays, removed)
     for r in range(cfg.final_rounds):
         # an empty constraint map: plain COLAMD for the re-elimination (iSAM2's default
         # puts every key of the new factors, nearly all here, last: one huge root clique)
         ures = isam.update(nf, gtsam.Values(), removed, gtsam.KeyGroupMap(), None, None, True)
         book.record(tags, ures.getNewFactorsIndices())
+        if pyf is not None:
+            pyf.record(py_at[0], ures.getNewFactorsIndices(), py_at[1])
         n_relin = int(ures.getVariablesRelinearized())
         est = isam.calculateBestEstimate()
         read_states(est, everything, arrays, P)
+        if pyf is not None:
+            pyf.read_ext(est)
+            pyf.pending = pyf.due(arrays)
         if has_baro:
             for j in range(j0, n_seg):
                 cal[j] = est.atVector(K(j))
         book.pending = book.due(everything, nk - 1, rot, pos, cal if has_baro else None,
                                 all_segments=True)
-        out.append([len(tags), n_relin])
-        if (not book.pending.size and n_relin == 0) or r == cfg.final_rounds - 1:
+        out.append([len(tags) + len(py_at[0]), n_relin])
+        py_due = pyf is not None and pyf.pending.size
+        if (not book.pending.size and not py_due and n_relin == 0) \
+                or r == cfg.final_rounds - 1:
             break
         nf = gtsam.NonlinearFactorGraph()
         tags, removed = book.rebuild(nf, nk - 2, rot, pos, vel, bias, cb, gg,
                                      cal if has_baro else None, bt, bz, P.pri, dg)
+        py_at = _py_rebuild(pyf, nf, arrays, removed)
     return out
+
+
+def _py_rebuild(pyf: Any, nf: Any, arrays: tuple[Any, ...], removed: list[int]
+                ) -> tuple[list[int], list[int]]:
+    """The extension book's due factors rebuilt at the end of ``nf`` (the factors they
+    replace added to ``removed``, in place); their slots and positions in ``nf``."""
+    if pyf is None or not pyf.pending.size:
+        return [], []
+    slots, at, more = pyf.rebuild(nf, arrays)
+    removed[:] = sorted(set(removed) | set(more))
+    return slots, at
 
 
 def post_solve_gate(book: TermBook, P: Any, states: Any) -> list[int]:

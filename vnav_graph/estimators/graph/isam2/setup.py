@@ -15,6 +15,7 @@ from ..batch.smoother import solver_warnings, value_of
 from ..model.cpp_factors import keyframe_fixes, prior_factors
 from ..model.extend import Collected, key_name
 from ..settings import GraphConfig
+from .py_factors import LINEAR_ONLY
 
 
 def update_error(P: Any, k: int, exc: BaseException | None, gap: bool) -> RuntimeError:
@@ -68,9 +69,26 @@ def segment_span(P: Any, seg: np.ndarray, j: int) -> float:
     return max(float(P.cfg.segment_s), t1 - t0)
 
 
-def threshold_map(cfg: GraphConfig, ext: Collected | None = None) -> Any:
+def newest_last(P: Any, seg: np.ndarray, k: int, b_last: int) -> Any:
+    """iSAM2's constraint map putting keyframe k's variables (X, V, its B — B(b_last) while
+    B(k) has not entered —, C, G) and its segment's K, A last in a re-elimination's
+    ordering."""
+    last = gtsam.KeyGroupMap()
+    j = int(seg[k])
+    keys = [X(k), V(k), B(min(k, b_last))]
+    keys += [C(k), K(j)] if P.drive.baro is not None else []
+    keys += [G(k)] if P.gm is not None else []
+    keys += [A(j)] if P.ka is not None else []
+    for key in keys:
+        last.insert2(key, 1)
+    return last
+
+
+def threshold_map(cfg: GraphConfig, ext: Collected | None = None,
+                  linear: set[str] | None = None) -> Any:
     """Per-variable-type relinearisation thresholds (tangent-space components); the letters
-    of the extensions' variables get theirs (``Variable.relinearize_threshold``)."""
+    of the extensions' variables get theirs (``Variable.relinearize_threshold``), those in
+    ``linear`` none (only linear factors touch them: ``py_factors.LINEAR_ONLY``)."""
     if cfg.relinearize_typed is None:
         return cfg.relinearize_threshold
     rot, trans, vel, ba, bg = cfg.relinearize_typed
@@ -85,7 +103,7 @@ def threshold_map(cfg: GraphConfig, ext: Collected | None = None) -> Any:
     m.insert(("a", np.full(3, 1e9)))  # the accelerometer scale factors: linear factors only
     if ext is not None:
         for ch, thr in ext.threshold_entries(cfg.relinearize_threshold).items():
-            m.insert((ch, thr))
+            m.insert((ch, np.full(thr.size, LINEAR_ONLY) if ch in (linear or ()) else thr))
     return m
 
 
@@ -159,11 +177,13 @@ def first_keyframe(P: Any, r0: Any, p0: Any, v0: Any, k0: Any, yaw_sd: float
     return graph0, vals0, fix_at
 
 
-def isam2_params(cfg: GraphConfig, robust: bool, ext: Collected | None = None) -> Any:
-    """ISAM2Params of one pass: typed relinearisation thresholds, Gauss-Newton (or, for the
-    robust retry, dogleg) with the configured wildfire threshold, QR factorisation."""
+def isam2_params(cfg: GraphConfig, robust: bool, ext: Collected | None = None,
+                 linear: set[str] | None = None) -> Any:
+    """ISAM2Params of one pass: typed relinearisation thresholds (``threshold_map``),
+    Gauss-Newton (or, for the robust retry, dogleg) with the configured wildfire threshold,
+    QR factorisation."""
     params = gtsam.ISAM2Params()
-    params.setRelinearizeThreshold(threshold_map(cfg, ext))
+    params.setRelinearizeThreshold(threshold_map(cfg, ext, linear))
     params.relinearizeSkip = cfg.relinearize_skip
     params.enableRelinearization = cfg.relinearize_threshold > 0
     params.enablePartialRelinearizationCheck = cfg.partial_relinearization_check

@@ -27,7 +27,10 @@ filtering optimum inside a 60 s GNSS outage; with these it stays within ~1 m
 deltas of *old* variables are left stale by it (the newest keyframes sit in the root clique
 and are always exact). Measurements in ``docs/graph.md``.
 
-User extensions (``extend``): each factor enters the update that creates the last keyframe it
+User extensions (``extend``, the compass of ``magnetometer`` among them): a ``CustomFactor``
+enters as a ``LinearContainerFactor`` linearised in Python and is relinearised by
+``py_factors.PyFactorBook`` (iSAM2's C++ would hand each callback a copy of its whole
+``Values``); each factor enters the update that creates the last keyframe it
 touches, each new variable (with its prior) the first update that uses it; the final pass has
 them all. ``info["extra_variables_online"]``: iSAM2's estimate and marginal σ of the new
 variables after the last update; ``info["extra_variables"]``: the final pass's.
