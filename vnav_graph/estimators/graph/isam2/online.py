@@ -16,17 +16,14 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
 from typing import Any
 
 import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import A, B, C, G, K, V, X
 
-from ....geo.frames import mat_to_quat
 from ....sensors.noise import gm_transition
 from ....types import Drive
-from ..batch.linalg import trim_heap
 from ..model import interval_factors as gf
 from ..model.cpp_factors import (
     PRIOR_ATT_SD,
@@ -47,9 +44,9 @@ from ..settings import GraphConfig
 from . import linear_factors as terms
 from . import relin
 from .answers import Answers
+from .final_rounds import OnlineResult, finish
 from .py_factors import PyFactorBook
 from .setup import (
-    extra_online_of,
     first_keyframe,
     isam2_params,
     newest_last,
@@ -64,34 +61,6 @@ DIVERGED_SPEED = 1e4  # m/s: an online velocity above this means the solution di
 # relinearise-and-solve rounds in that update (``OnlinePass._iterate``)
 RETURN_GAP_S = 10.0
 RETURN_ROUNDS = 5
-
-
-@dataclass
-class OnlineResult:
-    """What the online pass hands to the final batch check (``GraphISAM2._finish``).
-
-    est: iSAM2's estimate after the final rounds (gtsam.Values, with the keyframes that left
-    its window); extra_online: the user variables after the last keyframe; t_online: when the
-    last update ended (perf_counter); online: (n_kf, 10) p, v (t frame) and quaternion known at
-    each keyframe; init: the initial states; pims: the IMU preintegrations of the intervals;
-    seg: segment of each keyframe; upd_ms / brk: per-update timings and counts;
-    relin_counts: the info entries of the relinearisation; gate0: ``P.g_use`` and
-    ``P.g_rej_post`` before iSAM2's own post-solve gate."""
-
-    P: Any
-    est: Any
-    extra_online: Any
-    t_online: float
-    online: np.ndarray
-    ext: Collected | None
-    init: tuple[Any, Any, Any]
-    pims: list[Any]
-    seg: np.ndarray
-    upd_ms: np.ndarray
-    brk: np.ndarray
-    relin_counts: dict[str, Any]
-    gate0: tuple[Any, int]
-    answers: Answers
 
 
 class OnlinePass:
@@ -207,10 +176,11 @@ class OnlinePass:
     def _a_keys(self, m: int) -> tuple[int, int]:
         return A(int(self.seg[m])), A(int(self.seg[m + 1]))
 
-    def _cal(self) -> dict[int, np.ndarray] | None:
+    def calibration(self) -> dict[int, np.ndarray] | None:
+        """The segments' (s, τd) when the drive has a barometer, else None."""
         return self.cal if self.has_baro else None
 
-    def _new_bias(self, nv: Any, nf: Any, k: int) -> None:
+    def new_bias(self, nv: Any, nf: Any, k: int) -> None:
         """B(k) and its link from B(k−1) (``bias_link``: with the scale factors it needs ā_k,
         known once interval k is preintegrated), predicted from B(k−1)."""
         P, bias = self.P, self.bias
@@ -229,7 +199,7 @@ class OnlinePass:
         dg = gravity_delta(P, pos[k:k + 1])[0]
         self.dg_kf[k] = dg
         if self.b_last < k:
-            self._new_bias(nv, nf, k)
+            self.new_bias(nv, nf, k)
             self.b_last = k
         b_k = gtsam.imuBias.ConstantBias(bias[k, 0:3], bias[k, 3:6])
         pim = preintegrate(P, k, rot[k], dg, b_k)
@@ -312,7 +282,7 @@ class OnlinePass:
         # the interval terms go first in the update (their factor indices come first): the
         # ones due for relinearisation, rebuilt at the current estimate ...
         nf_t = gtsam.NonlinearFactorGraph()
-        tags, removed = book.rebuild(nf_t, k, *arr, self._cal(), self.bt, self.bz, P.pri,
+        tags, removed = book.rebuild(nf_t, k, *arr, self.calibration(), self.bt, self.bz, P.pri,
                                      self.dg_kf)
         n_swap = len(tags)
         # ... then the new ones, at this linearisation: the GNSS fixes inside interval k
@@ -324,7 +294,7 @@ class OnlinePass:
         self._new_states(k, nf, nv)
         new_baro, self.baro_next = terms.baro_factors(P, k, st, self.bias, self.cal, self.seg,
                                                       self.bt, self.bz, self.baro_next, P.pri)
-        tags += book.new_terms(k, gcf, new_baro, st, self._cal(), nf_t)
+        tags += book.new_terms(k, gcf, new_baro, st, self.calibration(), nf_t)
         # the extensions' due CustomFactors, rebuilt after everything else
         nf_p = gtsam.NonlinearFactorGraph()
         ext_removed = self.pyf.rebuild_into(nf_p, nf.size(), arr)
@@ -376,7 +346,7 @@ class OnlinePass:
             self.pyf.freeze(gone)
             gone_set = set(gone)
             self.rw_idx = [i for i in self.rw_idx if i not in gone_set]
-        book.pending = book.due(marked, k + 1, self.rot, self.pos, self._cal())
+        book.pending = book.due(marked, k + 1, self.rot, self.pos, self.calibration())
         self.pyf.check(self.isam, k + 1, arr)
         self.online[k + 1, 0:6] = np.r_[self.pos[k + 1], self.vel[k + 1]]
         self.online_rot[k + 1] = self.rot[k + 1]
@@ -407,10 +377,10 @@ class OnlinePass:
         Returns the keyframes marked by all rounds."""
         P, book = self.P, self.book
         for _ in range(RETURN_ROUNDS):
-            book.pending = book.due(marked, k + 1, self.rot, self.pos, self._cal())
+            book.pending = book.due(marked, k + 1, self.rot, self.pos, self.calibration())
             nf = gtsam.NonlinearFactorGraph()
             self.pyf.check(self.isam, k + 1, self.arrays)
-            tags, removed = book.rebuild(nf, k, *self.arrays, self._cal(), self.bt, self.bz,
+            tags, removed = book.rebuild(nf, k, *self.arrays, self.calibration(), self.bt, self.bz,
                                          P.pri, self.dg_kf)
             ext_removed = self.pyf.rebuild_into(nf, 0, self.arrays)
             n_ext = len(ext_removed)
@@ -448,76 +418,7 @@ class OnlinePass:
         if self.P.ka is not None:
             self.ka = self.isam.calculateEstimateVector(A(int(self.seg[k + 1])))
 
-    # -- after the last keyframe ---------------------------------------------------------
-
-    def _close(self) -> None:
-        """The baro samples stamped after the last keyframe whose delayed time is inside the
-        span, and the last keyframe's B (a continuation of the last interval's: no IMU
-        factor)."""
-        P, nk = self.P, self.P.n_kf
-        if nk < 2:
-            return
-        st = terms.keyframe_states(P, nk - 2, *self.arrays, self.dg_kf)
-        new_baro, self.baro_next = terms.baro_factors(P, nk - 2, st, self.bias, self.cal,
-                                                      self.seg, self.bt, self.bz,
-                                                      self.baro_next, P.pri, last=True)
-        nf = gtsam.NonlinearFactorGraph()
-        nv = gtsam.Values()
-        tags = self.book.new_terms(nk - 2, None, new_baro, st, self._cal(), nf)
-        if self.b_last < nk - 1:
-            self._new_bias(nv, nf, nk - 1)
-            self.b_last = nk - 1
-        if nf.size():
-            self.book.record(tags, self.isam.update(nf, nv).getNewFactorsIndices())
-
     def finish(self) -> OnlineResult:
-        """The last baro samples, the final rounds and iSAM2's own post-solve GNSS gate; the
-        iSAM2 instance is released afterwards."""
-        P, cfg, book = self.P, self.cfg, self.book
-        self._close()
-        self.online[:, 6:10] = mat_to_quat(self.online_rot)  # one call (0.4 ms per keyframe)
-        t_online = time.perf_counter()
-        extra_online = extra_online_of(self.isam, self.isam.calculateEstimate(), self.ext)
-        args = (P, self.seg, self.rw_idx, self.arrays, self.cal, self.bt, self.bz, self.dg_kf)
-        self.pyf.skip = 1  # the final rounds check at every round, as iSAM2's forced ones
-        rounds = (relin.settle(self.isam, book, *args, pyf=self.pyf)
-                  if cfg.final_rounds > 0 else [])
-        gate0 = (P.g_use.copy(), P.g_rej_post)
-        if cfg.final_rounds > 0:
-            # the batch's post-solve GNSS gate at iSAM2's estimate, then final rounds without
-            # the rejected fixes: its own estimate keeps the fixes the batch keeps (a 15 s IMU
-            # gap on hill-drive: 7 fixes the batch gated, a cost gap of 26 against the batch
-            # pass with them in iSAM2)
-            for _ in range(cfg.gate_rounds):
-                k_cal = self.cal[int(self.seg[-1])] if self.has_baro else None
-                kf_rm = relin.post_solve_gate(book, P,
-                                              relin.estimate_states(P, self.arrays, k_cal))
-                if not book.pending.size and not kf_rm:
-                    break
-                rounds += relin.settle(self.isam, book, *args, tie=False, removed=kf_rm,
-                                       pyf=self.pyf)
-        est = self.isam.calculateBestEstimate()  # full back-substitution (no wildfire)
-        if self.win is not None:  # and of the keyframes that left iSAM2
-            est = self.win.complete(est)
-            self.win_info = self.win.info()
-            self.win = None  # its conditionals (~20 MB on a 1-hour drive) are not needed now
-        # the Bayes tree is not needed by the final pass: released before it (≈ 210 MB of
-        # C++ memory on a 1-hour drive, otherwise alive under the final pass's peak)
-        self.isam = None
-        trim_heap()  # its freed nodes are scattered over the heap: hand them back
-        counts = {"isam2_relinearized": book.relinearized,
-                  "isam2_relinearized_factors": book.swapped_factors,
-                  "isam2_calibration_steps_halved": book.damped,
-                  "isam2_baro_samples_left_window": book.dropped_at_floor,
-                  "isam2_gnss_return_rounds": self.return_rounds,
-                  # the extensions' CustomFactors linearised again (``py_factors``)
-                  "isam2_relinearized_custom": self.pyf.rebuilt,
-                  "baro_scale_max_abs": self.s_max if self.has_baro else None,
-                  "isam2_final_rounds": rounds,
-                  "isam2_gnss_rejected_postsolve": P.g_rej_post - gate0[1],
-                  **self.win_info,
-                  "final_rounds_s": time.perf_counter() - t_online}
-        return OnlineResult(P, est, extra_online, t_online, self.online, self.ext, self.init,
-                            self.pims, self.seg, self.upd_ms, self.brk, counts, gate0,
-                            self.answers)
-
+        """The last baro samples, the final rounds and iSAM2's own post-solve GNSS gate
+        (``final_rounds.finish``); the iSAM2 instance is released afterwards."""
+        return finish(self)

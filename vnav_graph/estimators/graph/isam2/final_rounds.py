@@ -1,0 +1,121 @@
+"""The end of ``graph-isam2``'s online pass: the baro samples after the last keyframe, the
+final rounds that make iSAM2's own estimate the smoothed optimum of the batch's model
+(``relin.settle``), iSAM2's post-solve GNSS gate, and what the pass hands to the final batch
+check (``OnlineResult``)."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import gtsam
+import numpy as np
+
+from ....geo.frames import mat_to_quat
+from ..batch.linalg import trim_heap
+from ..model.extend import Collected
+from . import linear_factors as terms
+from . import relin
+from .answers import Answers
+from .setup import extra_online_of
+
+
+@dataclass
+class OnlineResult:
+    """What the online pass hands to the final batch check (``GraphISAM2._finish``).
+
+    est: iSAM2's estimate after the final rounds (gtsam.Values, with the keyframes that left
+    its window); extra_online: the user variables after the last keyframe; t_online: when the
+    last update ended (perf_counter); online: (n_kf, 10) p, v (t frame) and quaternion known at
+    each keyframe; init: the initial states; pims: the IMU preintegrations of the intervals;
+    seg: segment of each keyframe; upd_ms / brk: per-update timings and counts;
+    relin_counts: the info entries of the relinearisation; gate0: ``P.g_use`` and
+    ``P.g_rej_post`` before iSAM2's own post-solve gate."""
+
+    P: Any
+    est: Any
+    extra_online: Any
+    t_online: float
+    online: np.ndarray
+    ext: Collected | None
+    init: tuple[Any, Any, Any]
+    pims: list[Any]
+    seg: np.ndarray
+    upd_ms: np.ndarray
+    brk: np.ndarray
+    relin_counts: dict[str, Any]
+    gate0: tuple[Any, int]
+    answers: Answers
+
+
+
+def close_last(op: Any) -> None:
+    """The baro samples stamped after the last keyframe whose delayed time is inside the
+    span, and the last keyframe's B (a continuation of the last interval's: no IMU
+    factor)."""
+    P, nk = op.P, op.P.n_kf
+    if nk < 2:
+        return
+    st = terms.keyframe_states(P, nk - 2, *op.arrays, op.dg_kf)
+    new_baro, op.baro_next = terms.baro_factors(P, nk - 2, st, op.bias, op.cal, op.seg, op.bt,
+                                                op.bz, op.baro_next, P.pri, last=True)
+    nf = gtsam.NonlinearFactorGraph()
+    nv = gtsam.Values()
+    tags = op.book.new_terms(nk - 2, None, new_baro, st, op.calibration(), nf)
+    if op.b_last < nk - 1:
+        op.new_bias(nv, nf, nk - 1)
+        op.b_last = nk - 1
+    if nf.size():
+        op.book.record(tags, op.isam.update(nf, nv).getNewFactorsIndices())
+
+
+def finish(op: Any) -> OnlineResult:
+    """The last baro samples, the final rounds and iSAM2's own post-solve GNSS gate of the
+    online pass ``op`` (``online.OnlinePass``); its iSAM2 instance is released afterwards."""
+    P, cfg, book = op.P, op.cfg, op.book
+    close_last(op)
+    op.online[:, 6:10] = mat_to_quat(op.online_rot)  # one call (0.4 ms per keyframe)
+    t_online = time.perf_counter()
+    extra_online = extra_online_of(op.isam, op.isam.calculateEstimate(), op.ext)
+    args = (P, op.seg, op.rw_idx, op.arrays, op.cal, op.bt, op.bz, op.dg_kf)
+    op.pyf.skip = 1  # the final rounds check at every round, as iSAM2's forced ones
+    rounds = (relin.settle(op.isam, book, *args, pyf=op.pyf)
+              if cfg.final_rounds > 0 else [])
+    gate0 = (P.g_use.copy(), P.g_rej_post)
+    if cfg.final_rounds > 0:
+        # the batch's post-solve GNSS gate at iSAM2's estimate, then final rounds without
+        # the rejected fixes: its own estimate keeps the fixes the batch keeps (a 15 s IMU
+        # gap on hill-drive: 7 fixes the batch gated, a cost gap of 26 against the batch
+        # pass with them in iSAM2)
+        for _ in range(cfg.gate_rounds):
+            k_cal = op.cal[int(op.seg[-1])] if op.has_baro else None
+            kf_rm = relin.post_solve_gate(book, P,
+                                          relin.estimate_states(P, op.arrays, k_cal))
+            if not book.pending.size and not kf_rm:
+                break
+            rounds += relin.settle(op.isam, book, *args, tie=False, removed=kf_rm,
+                                   pyf=op.pyf)
+    est = op.isam.calculateBestEstimate()  # full back-substitution (no wildfire)
+    if op.win is not None:  # and of the keyframes that left iSAM2
+        est = op.win.complete(est)
+        op.win_info = op.win.info()
+        op.win = None  # its conditionals (~20 MB on a 1-hour drive) are not needed now
+    # the Bayes tree is not needed by the final pass: released before it (≈ 210 MB of
+    # C++ memory on a 1-hour drive, otherwise alive under the final pass's peak)
+    op.isam = None
+    trim_heap()  # its freed nodes are scattered over the heap: hand them back
+    counts = {"isam2_relinearized": book.relinearized,
+              "isam2_relinearized_factors": book.swapped_factors,
+              "isam2_calibration_steps_halved": book.damped,
+              "isam2_baro_samples_left_window": book.dropped_at_floor,
+              "isam2_gnss_return_rounds": op.return_rounds,
+              # the extensions' CustomFactors linearised again (``py_factors``)
+              "isam2_relinearized_custom": op.pyf.rebuilt,
+              "baro_scale_max_abs": op.s_max if op.has_baro else None,
+              "isam2_final_rounds": rounds,
+              "isam2_gnss_rejected_postsolve": P.g_rej_post - gate0[1],
+              **op.win_info,
+              "final_rounds_s": time.perf_counter() - t_online}
+    return OnlineResult(P, est, extra_online, t_online, op.online, op.ext, op.init, op.pims,
+                        op.seg, op.upd_ms, op.brk, counts, gate0, op.answers)
