@@ -345,7 +345,7 @@ class EKFRTS(EKF):
         if redo is None:
             return run, est
         run2, est2 = self._pass(drive, redo[0], t0)
-        info = {**run2.info, **redo[1]}
+        info = {**est2.info, **redo[1]}
         # the causal (online) estimate stays the first pass's: the re-run knows the future
         return replace(run2, info=info), est2.replace(info=info, config=cfg, online=est.online)
 
@@ -364,8 +364,15 @@ class EKFRTS(EKF):
         online = _trajectory(run, run.lla, run.vel, run.q, run.par)
         traj = _trajectory(run, lla, vel, q, par)
         cov = km.unpack_cov(cov_s, run.has_baro)
-        return run, _estimate(self.name, run, traj, par, cov, t0, online, cfg,
-                              float(np.sqrt(max(var_b, 0.0))))
+        est = _estimate(self.name, run, traj, par, cov, t0, online, cfg,
+                        float(np.sqrt(max(var_b, 0.0))))
+        if cfg.gnss_gm is not None and drive.gnss is not None:
+            # the smoothed GNSS error state at every fix (the post-smoothing gate's residual)
+            tg = drive.gnss.t - run.g_latency
+            ge = np.column_stack([np.interp(tg, run.t_out, par[:, km.PGE + a])
+                                  for a in range(3)])
+            est = est.replace(info={**est.info, "gnss_gm_at_fixes": ge})
+        return run, est
 
 
 def max_rejects(cfg: EkfConfig, drive: Drive) -> int:
