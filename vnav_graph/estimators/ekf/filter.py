@@ -77,6 +77,7 @@ from ...types import (
     ParamEstimate,
     Trajectory,
 )
+from ..gnss_auto import with_gm_auto
 from . import backward, carry, inputs, kernel, regate, rts
 from . import model as km
 from .alignment import Alignment, initial_state
@@ -282,6 +283,9 @@ class EKF:
         self.config = config or EkfConfig()
 
     def run(self, drive: Drive) -> Estimate:
+        if self.config.gnss_gm_auto:  # without, then perhaps with the GNSS error state
+            return with_gm_auto(drive, self.config, self.name,
+                                lambda cfg: type(self)(cfg).run(drive))
         with small_pages():  # large numpy arrays without huge-page faults (numpy_pages)
             est = without_contradicting_mag(self._run(drive), self.config,
                                             lambda cfg: type(self)(cfg)._run(drive))
