@@ -16,7 +16,7 @@ from vnav_graph.estimators import gnss_auto
 from vnav_graph.estimators.ekf.filter import EKF, EKFRTS, EkfConfig
 from vnav_graph.estimators.graph import GraphBatch, GraphConfig
 from vnav_graph.evaluation.metrics import evaluate
-from vnav_graph.sensors.gnss_model import GM_AUTO_THRESHOLD
+from vnav_graph.sensors.gnss_model import GM_AUTO_SIGMAS, GM_AUTO_THRESHOLD
 from vnav_graph.simulation.scenario import simulate
 
 GM = {"gnss_gm_sd_h": 2.5, "gnss_gm_sd_v": 4.0, "gnss_gm_tau_s": 30.0}
@@ -29,17 +29,21 @@ def test_auto_needs_the_state_sigma():
         GraphConfig(gnss_gm_auto=True)
 
 
-@pytest.mark.parametrize(("ac", "on"), [
-    ({"horiz": 0.10, "vert": GM_AUTO_THRESHOLD + 0.01}, True),  # either axis
-    ({"horiz": GM_AUTO_THRESHOLD + 0.01, "vert": None}, True),
-    ({"horiz": GM_AUTO_THRESHOLD, "vert": -0.5}, False),  # strictly above
-    ({"horiz": None, "vert": None}, False),
-    (None, False),  # no GNSS
+@pytest.mark.parametrize(("ac", "on", "thr"), [
+    ({"horiz": 0.10, "vert": 0.16, "pairs": 2500}, True, 0.15),  # either axis
+    ({"horiz": 0.16, "vert": None, "pairs": 2500}, True, 0.15),
+    ({"horiz": 0.15, "vert": -0.5, "pairs": 2500}, False, 0.15),  # strictly above
+    # few pairs: 4σ of a white series' ρ̂ (σ = 1/√pairs) is the larger threshold
+    ({"horiz": 0.20, "vert": 0.19, "pairs": 400}, False, 0.2),
+    ({"horiz": 0.21, "vert": 0.0, "pairs": 400}, True, 0.2),
+    ({"horiz": None, "vert": None, "pairs": 0}, False, np.inf),
+    (None, False, np.inf),  # no GNSS
 ])
-def test_decision_rule(monkeypatch, ac, on):
+def test_decision_rule(monkeypatch, ac, on, thr):
+    assert GM_AUTO_THRESHOLD == 0.15 and GM_AUTO_SIGMAS == 4.0
     monkeypatch.setattr(gnss_auto, "gnss_residual_autocorr", lambda est, drive: ac)
     dec = gnss_auto.gm_decision(None, None)
-    assert dec["on"] is on and dec["threshold"] == GM_AUTO_THRESHOLD
+    assert dec["on"] is on and dec["threshold"] == pytest.approx(thr)
 
 
 def test_white_errors_keep_the_first_pass():

@@ -5,15 +5,17 @@ The receiver's σ says how large its errors are, not how they are correlated. A 
 runs without the state; the autocorrelation at 5 s of the fixes' residuals against that
 pass (``sensors.gnss_residuals``) is near 0 when the errors are white (the smoothed
 trajectory does not follow white noise) and large when they are correlated over tens of
-seconds. Above ``GM_AUTO_THRESHOLD`` on either axis the pass is run again with the state
+seconds. Above ``GM_AUTO_THRESHOLD`` on either axis, and above ``GM_AUTO_SIGMAS`` times the
+σ 1/√M of a white series' autocorrelation over the M fix pairs at that lag (a short or 1 Hz
+drive: 6 min at 1 Hz gives 0.21), the pass is run again with the state
 (its σ and τ from the configuration: the same causes, atmosphere, orbit and multipath,
 correlate every axis, and a smoother that follows a fast correlated error hides it in one
 axis's residuals: urban-dense's horizontal 0.00 … 0.14 under ekf-rts against 0.41 … 0.47
 vertical). Carrying the state on a white-error drive costs accuracy (the fixes are
 down-weighted for an error that is not there), hence the test.
 
-``info["gnss_gm_auto"]``: {"autocorr_h", "autocorr_v", "lag_s", "threshold", "on"}; a warning
-when the state was turned on; ``runtime_s`` covers both passes.
+``info["gnss_gm_auto"]``: {"autocorr_h", "autocorr_v", "lag_s", "pairs", "threshold", "on"}; a
+warning when the state was turned on; ``runtime_s`` covers both passes.
 """
 
 from __future__ import annotations
@@ -23,7 +25,9 @@ from collections.abc import Callable
 from dataclasses import replace
 from typing import Any
 
-from ..sensors.gnss_model import GM_AUTO_THRESHOLD
+import numpy as np
+
+from ..sensors.gnss_model import GM_AUTO_SIGMAS, GM_AUTO_THRESHOLD
 from ..sensors.gnss_residuals import RESIDUAL_LAG_S, gnss_residual_autocorr
 from ..types import Drive, Estimate
 
@@ -31,10 +35,11 @@ from ..types import Drive, Estimate
 def gm_decision(est: Estimate, drive: Drive) -> dict[str, Any]:
     """The autocorrelations of ``est``'s GNSS residuals and whether they call for the state."""
     ac = gnss_residual_autocorr(est, drive) or {}
-    h, v = ac.get("horiz"), ac.get("vert")
-    on = any(x is not None and x > GM_AUTO_THRESHOLD for x in (h, v))
-    return {"autocorr_h": h, "autocorr_v": v, "lag_s": RESIDUAL_LAG_S,
-            "threshold": GM_AUTO_THRESHOLD, "on": bool(on)}
+    h, v, pairs = ac.get("horiz"), ac.get("vert"), int(ac.get("pairs") or 0)
+    thr = max(GM_AUTO_THRESHOLD, GM_AUTO_SIGMAS / np.sqrt(pairs)) if pairs else np.inf
+    on = any(x is not None and x > thr for x in (h, v))
+    return {"autocorr_h": h, "autocorr_v": v, "lag_s": RESIDUAL_LAG_S, "pairs": pairs,
+            "threshold": float(thr), "on": bool(on)}
 
 
 def with_gm_auto(drive: Drive, cfg: Any, name: str,
@@ -52,7 +57,7 @@ def with_gm_auto(drive: Drive, cfg: Any, name: str,
         warnings.append(
             f"{name}: the GNSS residuals are correlated in time (autocorrelation at "
             f"{RESIDUAL_LAG_S:g} s: horizontal {_f(dec['autocorr_h'])}, vertical "
-            f"{_f(dec['autocorr_v'])}, above {GM_AUTO_THRESHOLD:g}); solved again with the "
+            f"{_f(dec['autocorr_v'])}, above {dec['threshold']:.3g}); solved again with the "
             f"Gauss-Markov GNSS error state (σ {gm.sd_h:g} m horizontal, {gm.sd_v:g} m "
             f"vertical, τ {gm.tau_s:g} s)")
     info = {**est.info, "gnss_gm_auto": dec, "warnings": warnings}

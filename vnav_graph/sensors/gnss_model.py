@@ -47,8 +47,10 @@ GM_WHITE_MIN_FRACTION = 0.1
 # the per-fix σ floor of every estimator [m, m/s] (``sensors.model``)
 GNSS_SD_FLOOR = 0.01
 # ``gnss_gm_auto``: the residual autocorrelation at 5 s above which the state is carried
-# (white-error drives −0.12 … 0.09, correlated ones 0.24 … 0.67: ``docs/design.md``)
+# (white-error drives −0.12 … 0.13, correlated ones 0.24 … 0.72: ``docs/design.md``), and at
+# least this many σ of a white series' autocorrelation (1/√pairs: 0.21 for 6 min at 1 Hz)
 GM_AUTO_THRESHOLD = 0.15
+GM_AUTO_SIGMAS = 4.0
 # the NED axes of the error state by its dimension: height only, horizontal only, all three
 GM_AXES = {1: (2,), 2: (0, 1), 3: (0, 1, 2)}
 

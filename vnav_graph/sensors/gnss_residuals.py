@@ -38,28 +38,37 @@ def gnss_residuals(est: Any, drive: Any) -> tuple[FloatArray, FloatArray]:
     return t, lla_to_ned(g.lla[m], drive.origin_lla) - ant
 
 
+def lag_pairs(t: FloatArray, lag_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """(i, j): the fix pairs whose second fix lies within half a fix interval of t_i + lag."""
+    dt = float(np.median(np.diff(t)))
+    j = np.clip(np.searchsorted(t, t + lag_s), 0, t.size - 1)
+    ok = np.abs(t[j] - (t + lag_s)) <= 0.5 * dt
+    return np.flatnonzero(ok), j[ok]
+
+
 def autocorr_at(t: FloatArray, x: FloatArray, lag_s: float) -> float | None:
     """Autocorrelation of the demeaned series x (M,) at lag ``lag_s``: Σ x_i x_j / Σ x_i²
     over the pairs whose second fix lies within half a fix interval of t_i + lag."""
     if t.size < MIN_PAIRS + 1:
         return None
     x = x - np.mean(x)
-    dt = float(np.median(np.diff(t)))
-    j = np.clip(np.searchsorted(t, t + lag_s), 0, t.size - 1)
-    ok = np.abs(t[j] - (t + lag_s)) <= 0.5 * dt
-    if np.count_nonzero(ok) < MIN_PAIRS:
+    i, j = lag_pairs(t, lag_s)
+    if i.size < MIN_PAIRS:
         return None
-    den = float(np.sum(x[ok] ** 2))
-    return float(np.sum(x[ok] * x[j[ok]]) / den) if den > 0 else None
+    den = float(np.sum(x[i] ** 2))
+    return float(np.sum(x[i] * x[j]) / den) if den > 0 else None
 
 
 def gnss_residual_autocorr(est: Any, drive: Any, lag_s: float = RESIDUAL_LAG_S
                            ) -> dict[str, float | None] | None:
     """{"horiz": mean of the north and east residual autocorrelations, "vert": the down
-    one, "lag_s"} at ``lag_s``; None without GNSS."""
+    one, "lag_s", "pairs": the number of fix pairs at that lag (a white series gives ρ̂ of
+    σ 1/√pairs)} at ``lag_s``; None without GNSS."""
     if drive.gnss is None or len(drive.gnss) == 0:
         return None
     t, r = gnss_residuals(est, drive)
     ac = [autocorr_at(t, r[:, a], lag_s) for a in range(3)]
     h = [a for a in ac[:2] if a is not None]
-    return {"horiz": float(np.mean(h)) if h else None, "vert": ac[2], "lag_s": float(lag_s)}
+    pairs = int(lag_pairs(t, lag_s)[0].size) if t.size > 1 else 0
+    return {"horiz": float(np.mean(h)) if h else None, "vert": ac[2], "lag_s": float(lag_s),
+            "pairs": pairs}
