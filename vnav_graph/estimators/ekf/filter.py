@@ -219,6 +219,9 @@ def _report(drive: Drive, res: tuple[Any, ...], gr: inputs.Grids, gaps: NDArrayI
     info = {
         "gnss_rejected": int(rej_pos.sum()),
         "gnss_rejected_t": (gnss.t[rej_pos] if gnss is not None else np.zeros(0)),
+        # fixes of which nothing was used (position refused, and velocity refused or absent)
+        "gnss_unused_t": (gnss.t[rej_pos & (rej_vel | (not has_vel))] if gnss is not None
+                          else np.zeros(0)),
         "gnss_alt_rejected": int(rej_v.sum()),
         "gnss_vel_rejected": int(rej_vel.sum()),
         "imu_gaps": [[float(t[i]), float(t[i + 1] - t[i])] for i in gaps],

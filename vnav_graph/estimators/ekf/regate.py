@@ -1,9 +1,11 @@
 """Post-smoothing GNSS gate of ``ekf-rts`` (``EkfConfig.post_gate``): the counterpart of the
 graph's post-solve gate (``graph.model.problem.post_solve_rejections``).
 
-After the forward pass and the RTS smoother, every fix the filter used is compared with the
-smoothed trajectory: its whitened residual χ² — position (antenna = IMU position + C l) and,
-when the receiver gives velocity, velocity, each row divided by the fix's σ of the shared
+After the forward pass and the RTS smoother, every fix the filter used any part of (its
+position, or its velocity alone: a fix whose position was refused as a multipath fault still
+gave its velocity) is compared with the smoothed trajectory: its whitened residual χ² —
+position (antenna = IMU position + C l) and, when the receiver gives velocity, velocity, each
+row divided by the fix's σ of the shared
 sensor model (``sensors.model``) — is tested against the χ² quantile of 1 − (1 − p)² with
 p = ``EkfConfig.gate_prob`` and 3 (6 with velocity) degrees of freedom: the graph's rule
 (the squared tail probability: a false rejection costs a whole re-run, a glitch has χ² in
@@ -100,7 +102,9 @@ def regated(drive: Drive, est: Estimate, model: SensorModel, g_latency: float, c
     for _ in range(cfg.post_gate_rounds):
         sub = drive if keep.all() else drive.replace(gnss=drive.gnss.select(keep))
         assert sub.gnss is not None
-        used = ~np.isin(sub.gnss.t, est.info["gnss_rejected_t"])
+        # a fix whose position the filter refused may still have given it its velocity: it is
+        # tested too (the joint χ² has its position residual), as the graph tests every fix
+        used = ~np.isin(sub.gnss.t, est.info["gnss_unused_t"])
         bad = misfits(sub, est, model, g_latency, used, cfg.gate_prob)
         if not bad.any():
             break
