@@ -109,3 +109,25 @@ def test_ekf_rts_reports_the_smoothed_error_state_at_the_fixes(smoothed):
     assert np.all(ge[:, :2] == 0.0)  # height-only state: north and east not carried
     assert np.all(np.isfinite(ge[:, 2])) and np.any(ge[:, 2] != 0.0)
     assert "gnss_gm_at_fixes" not in EKFRTS(CFG).run(d).info
+
+
+@pytest.mark.parametrize("velocity_used", [True, False])
+def test_a_fix_that_gave_only_its_velocity_is_tested(smoothed, velocity_used):
+    """A fix whose position the filter refused but whose velocity it used is tested (and
+    removed when it misfits); one of which nothing was used is not."""
+    d, est = smoothed
+    offset = np.zeros(d.gnss.t.size)
+    offset[150] = 30.0
+    d2 = _fixes_on(d, est, offset)
+    t150 = d2.gnss.t[[150]]
+    info = {**est.info, "gnss_rejected_t": t150,
+            "gnss_unused_t": np.zeros(0) if velocity_used else t150}
+    out = regate.regated(d2, est.replace(info=info), sensor_model(d2), 0.0, CFG, "ekf-rts",
+                         lambda sub: (sensor_model(sub), est.replace(info=info)), 0.0)
+    assert out.info["gnss_rejected_postsmooth"] == (1 if velocity_used else 0)
+
+
+def test_unused_fixes_are_the_refused_positions_without_a_used_velocity(smoothed):
+    _, est = smoothed
+    unused = set(est.info["gnss_unused_t"])
+    assert unused <= set(est.info["gnss_rejected_t"])
