@@ -60,7 +60,7 @@ def parse_model(text: str) -> tuple[float, float, float] | None:
 
 def configs(model: tuple[float, float, float] | None, ekf_max_rejects: int | None = None,
             ekf_max_rejected_s: float | None = None) -> dict[str, Any]:
-    """Both estimators' configs: hard_scenarios.toml's, plus the GNSS error model
+    """Both estimators' configs: hard_scenarios.toml's with the GNSS error model
     (``ekf_max_rejects``: the EKF's ``max_consecutive_rejects``, ``ekf_max_rejected_s`` its
     ``max_rejected_s``; None: its own)."""
     from vnav_graph.estimators.configfile import load_configs
@@ -73,11 +73,15 @@ def configs(model: tuple[float, float, float] | None, ekf_max_rejects: int | Non
         else:
             from vnav_graph.estimators.base import create
             cfg = create(name).config
+        # the model as given, on every drive (hard_scenarios.toml's gnss_gm_auto decides
+        # per drive; this study compares the state off and on)
         if model is not None:
             cfg = replace(cfg, gnss_gm_sd_h=model[0], gnss_gm_sd_v=model[1],
-                          gnss_gm_tau_s=model[2])
+                          gnss_gm_tau_s=model[2], gnss_gm_auto=False)
+        else:
+            cfg = replace(cfg, gnss_gm_sd_h=0.0, gnss_gm_sd_v=0.0, gnss_gm_auto=False)
         if ekf_max_rejects is not None and name.startswith("ekf"):
-            cfg = replace(cfg, max_consecutive_rejects=ekf_max_rejects)
+            cfg = replace(cfg, max_consecutive_rejects=ekf_max_rejects, max_rejected_s=None)
         if ekf_max_rejected_s is not None and name.startswith("ekf"):
             cfg = replace(cfg, max_rejected_s=ekf_max_rejected_s)
         out[name] = cfg

@@ -76,3 +76,58 @@ def test_regated_removes_counts_and_warns(smoothed):
     assert out.info["gnss_rejected"] == est.info["gnss_rejected"] + 2
     assert set(d2.gnss.t[[150, 450]]) <= set(out.info["gnss_rejected_t"])
     assert any("did not fit the smoothed trajectory" in w for w in out.info["warnings"])
+
+
+def test_fix_chi2_subtracts_the_gnss_error_state(smoothed):
+    """With the Gauss-Markov GNSS error state the residual is z − (r + C l + ê), whitened by
+    the white rest of the fix's σ (``GnssGM.split``): fixes placed on the antenna track plus
+    ê have χ² 0, and an offset on top of ê counts in white σ."""
+    d, est = smoothed
+    g = d.gnss.t.size
+    rng = np.random.default_rng(3)
+    ge = np.column_stack([rng.normal(0, 2.5, g), np.zeros(g), np.zeros(g)])  # north only
+    offset = ge[:, 0].copy()
+    offset[200] += 3.0
+    d2 = _fixes_on(d, est, offset)
+    cfg = EkfConfig(gnss_gm_sd_h=2.0, gnss_gm_sd_v=0.0, gnss_gm_tau_s=30.0)
+    model = sensor_model(d2, cfg.gnss_gm)
+    est_gm = est.replace(info={**est.info, "gnss_gm_at_fixes": ge})
+    c2, _ = regate.fix_chi2(d2, est_gm, model, 0.0)
+    expect = np.zeros(g)
+    expect[200] = (3.0 / model.gnss_pos_sd[200, 0]) ** 2
+    np.testing.assert_allclose(c2, expect, atol=1e-6)
+    # without ê the same fixes carry the whole error state, in units of the white σ
+    c2_no, _ = regate.fix_chi2(d2, est, model, 0.0)
+    np.testing.assert_allclose(c2_no, (offset / model.gnss_pos_sd[:, 0]) ** 2, atol=1e-6)
+
+
+def test_ekf_rts_reports_the_smoothed_error_state_at_the_fixes(smoothed):
+    d, _ = smoothed
+    est = EKFRTS(EkfConfig(fb_separation=False, gnss_gm_sd_v=2.0, gnss_gm_tau_s=60.0)).run(d)
+    ge = est.info["gnss_gm_at_fixes"]
+    assert ge.shape == (d.gnss.t.size, 3)
+    assert np.all(ge[:, :2] == 0.0)  # height-only state: north and east not carried
+    assert np.all(np.isfinite(ge[:, 2])) and np.any(ge[:, 2] != 0.0)
+    assert "gnss_gm_at_fixes" not in EKFRTS(CFG).run(d).info
+
+
+@pytest.mark.parametrize("velocity_used", [True, False])
+def test_a_fix_that_gave_only_its_velocity_is_tested(smoothed, velocity_used):
+    """A fix whose position the filter refused but whose velocity it used is tested (and
+    removed when it misfits); one of which nothing was used is not."""
+    d, est = smoothed
+    offset = np.zeros(d.gnss.t.size)
+    offset[150] = 30.0
+    d2 = _fixes_on(d, est, offset)
+    t150 = d2.gnss.t[[150]]
+    info = {**est.info, "gnss_rejected_t": t150,
+            "gnss_unused_t": np.zeros(0) if velocity_used else t150}
+    out = regate.regated(d2, est.replace(info=info), sensor_model(d2), 0.0, CFG, "ekf-rts",
+                         lambda sub: (sensor_model(sub), est.replace(info=info)), 0.0)
+    assert out.info["gnss_rejected_postsmooth"] == (1 if velocity_used else 0)
+
+
+def test_unused_fixes_are_the_refused_positions_without_a_used_velocity(smoothed):
+    _, est = smoothed
+    unused = set(est.info["gnss_unused_t"])
+    assert unused <= set(est.info["gnss_rejected_t"])

@@ -213,3 +213,28 @@ def test_three_axis_state_in_every_graph_path():
     ekf = EKFRTS(EkfConfig(gnss_gm_sd_h=2.5, gnss_gm_sd_v=4.0, gnss_gm_tau_s=30.0)).run(d)
     assert ekf.info["gnss_gm"] == want and ekf.info["gnss_height_gm"] == {"sd_m": 4.0,
                                                                           "tau_s": 30.0}
+
+
+@pytest.mark.parametrize("dt_over_tau", [0.01, 1.0, 5.0])
+def test_gm_rows_of_phi_are_exact_and_keep_the_steady_state(dt_over_tau):
+    """Φ's Gauss-Markov rows (GNSS error, baro bias, IMU biases) are e^{−Δt/τ} alone, so a
+    stationary σ² stays σ² over any interval, an IMU gap of several τ included."""
+    from vnav_graph.sensors.noise import gm_process_var
+
+    tau = 30.0
+    dt = dt_over_tau * tau
+    for gap in (0.0, 1.0):
+        ing = np.zeros(km.NING)
+        ing[0:9] = np.eye(3).ravel()
+        ing[21], ing[22] = dt, gap
+        phi = km.step_phi(ing, 2 * tau, 3 * tau, 4 * tau, tau)
+        for rows, t in ((range(km.IGE, km.IGE + 3), tau), ((km.IBB,), 4 * tau),
+                        (range(km.IBG, km.IBG + 3), 2 * tau), (range(km.IBA, km.IBA + 3), 3 * tau)):
+            for i in rows:
+                expect = np.zeros(km.NX)
+                expect[i] = np.exp(-dt / t)
+                np.testing.assert_allclose(phi[i], expect, rtol=1e-15, atol=0)
+        i = km.IGE
+        sd = 2.5
+        assert phi[i, i] ** 2 * sd**2 + gm_process_var(dt, tau, sd) == pytest.approx(sd**2,
+                                                                                     rel=1e-14)

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from vnav_graph.evaluation.gnss_residuals import MIN_PAIRS, autocorr_at
+from vnav_graph.sensors.gnss_residuals import lag_pairs
 from vnav_graph.sensors.noise import gauss_markov
 
 
@@ -28,3 +29,9 @@ def test_white_noise_is_uncorrelated_and_gaps_are_skipped():
     rho = autocorr_at(t, x, 5.0)
     assert abs(rho) < 4 / np.sqrt(t.size)  # ρ̂ of white noise: σ 1/√N
     assert autocorr_at(t[:MIN_PAIRS], x[:MIN_PAIRS], 5.0) is None
+
+
+def test_pair_count_of_the_diagnostic():
+    t = np.arange(0.0, 100.0, 1.0)
+    i, j = lag_pairs(t, 5.0)
+    assert i.size == 95 and np.all(t[j] - t[i] == 5.0)

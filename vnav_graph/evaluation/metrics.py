@@ -260,6 +260,9 @@ def evaluate(est: Estimate, drive: Drive,
         "lag": causal_block(est, drive, "lag"),
         # ekf-rts: forward/backward filter separation (null for the others)
         "fb_separation": fb_separation_block(est.info.get("fb_separation")),
+        # gnss_gm_auto: the residual autocorrelations and whether the Gauss-Markov GNSS
+        # error state was carried (``estimators.gnss_auto``; null without the option)
+        "gnss_gm_auto": est.info.get("gnss_gm_auto"),
     }
     if drive.truth is not None:
         err = errors_vs_truth(est, drive)

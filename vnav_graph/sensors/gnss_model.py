@@ -46,6 +46,11 @@ from ..types import FloatArray
 GM_WHITE_MIN_FRACTION = 0.1
 # the per-fix σ floor of every estimator [m, m/s] (``sensors.model``)
 GNSS_SD_FLOOR = 0.01
+# ``gnss_gm_auto``: the residual autocorrelation at 5 s above which the state is carried
+# (white-error drives −0.12 … 0.13, correlated ones 0.24 … 0.72: ``docs/design.md``), and at
+# least this many σ of a white series' autocorrelation (1/√pairs: 0.21 for 6 min at 1 Hz)
+GM_AUTO_THRESHOLD = 0.15
+GM_AUTO_SIGMAS = 4.0
 # the NED axes of the error state by its dimension: height only, horizontal only, all three
 GM_AXES = {1: (2,), 2: (0, 1), 3: (0, 1, 2)}
 
@@ -166,13 +171,22 @@ class GnssErrorSettings:
     gnss_gm_sd_h: σ of the Gauss-Markov GNSS error state, north and east [m] (0: not carried).
     gnss_gm_sd_v: σ of that state, down [m] (0: not carried).
     gnss_gm_tau_s: correlation time of that state [s].
+    gnss_gm_auto: carry that state only when the drive says its GNSS errors are correlated:
+        a first pass without it, then, when the autocorrelation of the fixes' residuals at
+        5 s exceeds ``GM_AUTO_THRESHOLD`` on either axis (``sensors.gnss_residuals``), the
+        pass again with it (``estimators.gnss_auto``; ``info["gnss_gm_auto"]``).
     """
 
     gnss_gm_sd_h: float = 0.0
     gnss_gm_sd_v: float = 0.0
     gnss_gm_tau_s: float = 300.0
+    gnss_gm_auto: bool = False
 
     @property
     def gnss_gm(self) -> GnssGM | None:
-        return gnss_gm(self.gnss_gm_sd_h, self.gnss_gm_sd_v, self.gnss_gm_tau_s,
-                       type(self).__name__)
+        gm = gnss_gm(self.gnss_gm_sd_h, self.gnss_gm_sd_v, self.gnss_gm_tau_s,
+                     type(self).__name__)
+        if self.gnss_gm_auto and gm is None:
+            raise ValueError(f"{type(self).__name__}.gnss_gm_auto needs the state's σ "
+                             "(gnss_gm_sd_h or gnss_gm_sd_v > 0)")
+        return gm

@@ -77,6 +77,7 @@ from ...types import (
     ParamEstimate,
     Trajectory,
 )
+from ..gnss_auto import with_gm_auto
 from . import backward, carry, inputs, kernel, regate, rts
 from . import model as km
 from .alignment import Alignment, initial_state
@@ -218,6 +219,9 @@ def _report(drive: Drive, res: tuple[Any, ...], gr: inputs.Grids, gaps: NDArrayI
     info = {
         "gnss_rejected": int(rej_pos.sum()),
         "gnss_rejected_t": (gnss.t[rej_pos] if gnss is not None else np.zeros(0)),
+        # fixes of which nothing was used (position refused, and velocity refused or absent)
+        "gnss_unused_t": (gnss.t[rej_pos & (rej_vel | (not has_vel))] if gnss is not None
+                          else np.zeros(0)),
         "gnss_alt_rejected": int(rej_v.sum()),
         "gnss_vel_rejected": int(rej_vel.sum()),
         "imu_gaps": [[float(t[i]), float(t[i + 1] - t[i])] for i in gaps],
@@ -282,6 +286,9 @@ class EKF:
         self.config = config or EkfConfig()
 
     def run(self, drive: Drive) -> Estimate:
+        if self.config.gnss_gm_auto:  # without, then perhaps with the GNSS error state
+            return with_gm_auto(drive, self.config, self.name,
+                                lambda cfg: type(self)(cfg).run(drive))
         with small_pages():  # large numpy arrays without huge-page faults (numpy_pages)
             est = without_contradicting_mag(self._run(drive), self.config,
                                             lambda cfg: type(self)(cfg)._run(drive))
@@ -345,7 +352,7 @@ class EKFRTS(EKF):
         if redo is None:
             return run, est
         run2, est2 = self._pass(drive, redo[0], t0)
-        info = {**run2.info, **redo[1]}
+        info = {**est2.info, **redo[1]}
         # the causal (online) estimate stays the first pass's: the re-run knows the future
         return replace(run2, info=info), est2.replace(info=info, config=cfg, online=est.online)
 
@@ -364,8 +371,15 @@ class EKFRTS(EKF):
         online = _trajectory(run, run.lla, run.vel, run.q, run.par)
         traj = _trajectory(run, lla, vel, q, par)
         cov = km.unpack_cov(cov_s, run.has_baro)
-        return run, _estimate(self.name, run, traj, par, cov, t0, online, cfg,
-                              float(np.sqrt(max(var_b, 0.0))))
+        est = _estimate(self.name, run, traj, par, cov, t0, online, cfg,
+                        float(np.sqrt(max(var_b, 0.0))))
+        if cfg.gnss_gm is not None and drive.gnss is not None:
+            # the smoothed GNSS error state at every fix (the post-smoothing gate's residual)
+            tg = drive.gnss.t - run.g_latency
+            ge = np.column_stack([np.interp(tg, run.t_out, par[:, km.PGE + a])
+                                  for a in range(3)])
+            est = est.replace(info={**est.info, "gnss_gm_at_fixes": ge})
+        return run, est
 
 
 def max_rejects(cfg: EkfConfig, drive: Drive) -> int:

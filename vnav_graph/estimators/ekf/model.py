@@ -262,8 +262,16 @@ def step_phi(ing, tau_g, tau_a, tau_b, tau_h):
     roll/pitch error rows are zero (the tilt is re-levelled after the gap, its new error is
     independent of the old one and enters through Q), and so is the yaw row when the heading
     is forgotten over the gap (ing[20] set: the yaw error restarts with the uniform variance
-    in Q)."""
-    phi = transition(build_f(ing, tau_g, tau_a, tau_b, tau_h), ing[21])
+    in Q). The rows of the first-order Gauss-Markov states (IMU biases, baro bias, GNSS
+    error) have F = −1/τ on the diagonal alone, so their row of e^{FΔt} is exactly e^{−Δt/τ}
+    there: set so, and Φ² σ² + Q_d = σ² over any interval (``sensors.noise.gm_process_var``),
+    an IMU gap of several τ included (the second-order series gives 1 − x + x²/2 ≥ 1/2)."""
+    dt = ing[21]
+    phi = transition(build_f(ing, tau_g, tau_a, tau_b, tau_h), dt)
+    for i0, n, tau in ((IBG, 3, tau_g), (IBA, 3, tau_a), (IBB, 1, tau_b), (IGE, 3, tau_h)):
+        if np.isfinite(tau):
+            for i in range(i0, i0 + n):
+                phi[i, i] = np.exp(-dt / tau)
     if ing[22] > 0.5:
         for j in range(NX):
             phi[IATT, j] = 0.0

@@ -54,6 +54,7 @@ from ....types import (
     ParamEstimate,
     Trajectory,
 )
+from ...gnss_auto import with_gm_auto
 from ..model import interval_factors as gf
 from ..model.cpp_factors import build_batch_graph, pims_for
 from ..model.extend import GraphExtension, check_extensions, collect, make_view
@@ -331,7 +332,10 @@ class GraphBatch:
     def run(self, drive: Drive) -> Estimate:
         """Solve; when the magnetometer was used and its hard iron fails the post-solve check
         (``sensors.magnetometer.hard_iron_note``), solve again without it and say why in
-        ``info["mag_note"]``."""
+        ``info["mag_note"]``. With ``gnss_gm_auto``: ``estimators.gnss_auto``."""
+        if self.config.gnss_gm_auto:
+            return with_gm_auto(drive, self.config, self.name,
+                                lambda cfg: GraphBatch(cfg, self.extensions).run(drive))
         with solver_context():
             est = self._run(drive)
         def rerun(cfg: GraphConfig) -> Estimate:

@@ -61,6 +61,7 @@ from ....geo.frames import mat_to_quat, ned_to_lla, quat_to_mat
 from ....sensors.baro import with_prior_conflict_notes, without_implausible_scale
 from ....sensors.magnetometer import without_contradicting_mag
 from ....types import Drive, Estimate, Trajectory
+from ...gnss_auto import with_gm_auto
 from ..batch.general import first_line
 from ..batch.linalg import solver_context
 from ..batch.smoother import fallback_notes, gnss_gm_info, outputs, provides
@@ -120,6 +121,9 @@ class GraphISAM2:
         returns after a long outage with a km-level innovation (phone IMU, 60 s holdout
         windows) or after a logging gap; the dogleg step is bounded by its trust region.
         ``Estimate.info["isam2_fallback"]`` holds the first error when the retry was used."""
+        if self.config.gnss_gm_auto:  # without, then perhaps with the GNSS error state
+            return with_gm_auto(drive, self.config, self.name,
+                                lambda cfg: GraphISAM2(cfg, self.extensions).run(drive))
         t_start = time.perf_counter()
         cfg0 = self.config
         dt_imu = np.diff(drive.imu.t)
