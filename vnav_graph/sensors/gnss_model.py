@@ -171,15 +171,15 @@ class GnssErrorSettings:
     gnss_gm_sd_h: σ of the Gauss-Markov GNSS error state, north and east [m] (0: not carried).
     gnss_gm_sd_v: σ of that state, down [m] (0: not carried).
     gnss_gm_tau_s: correlation time of that state [s].
-    gnss_gm_auto: carry that state only when the drive says its GNSS errors are correlated:
-        a first pass without it, then, when the autocorrelation of the fixes' residuals at
-        5 s exceeds ``GM_AUTO_THRESHOLD`` on either axis (``sensors.gnss_residuals``), the
-        pass again with it (``estimators.gnss_auto``; ``info["gnss_gm_auto"]``).
+    gnss_gm_auto: carry that state only when a first pass's GNSS residuals are correlated.
     """
 
     gnss_gm_sd_h: float = 0.0
     gnss_gm_sd_v: float = 0.0
     gnss_gm_tau_s: float = 300.0
+    # a first pass without the state, then, when the autocorrelation of the fixes' residuals
+    # at 5 s exceeds ``GM_AUTO_THRESHOLD`` on either axis (``sensors.gnss_residuals``), the
+    # pass again with it (``estimators.gnss_auto``; ``info["gnss_gm_auto"]``)
     gnss_gm_auto: bool = False
 
     @property
