@@ -386,7 +386,11 @@ def render(results_dir: Path) -> str:
     rep = results_dir / "reproductions.json"
     out += ["## Seed-paper reproductions", ""]
     if rep.is_file():
-        out += reproductions_section(json.loads(rep.read_text())) + [""]
+        rep_doc = json.loads(rep.read_text())
+        if rep_doc.get("quick"):
+            out += ["`python benchmarks/reproduce_seeds.py --quick` (CI-sized: shortened runs).",
+                    ""]
+        out += reproductions_section(rep_doc) + [""]
     else:
         out += ["Not generated in this run (`benchmarks/reproduce_seeds.py` output "
                 "`reproductions.json` missing).", ""]
@@ -397,7 +401,12 @@ def render(results_dir: Path) -> str:
     perf = results_dir / "graph_perf.json"
     out += ["## Factor-graph performance", ""]
     if perf.is_file():
-        out += perf_section(json.loads(perf.read_text())) + [""]
+        perf_doc = json.loads(perf.read_text())
+        dur = perf_doc.get("drive_duration_s")
+        if dur is not None:
+            out += [f"`python benchmarks/bench_graph.py` on a {dur / 60:.0f}-minute hill-drive"
+                    f"{' (`--quick`: the CI-sized drive)' if dur < 3600 else ''}.", ""]
+        out += perf_section(perf_doc) + [""]
     else:
         out += ["Not generated in this run (`benchmarks/bench_graph.py` output "
                 "`graph_perf.json` missing).", ""]
