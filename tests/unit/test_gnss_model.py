@@ -19,7 +19,7 @@ from vnav_graph.estimators.ekf.rows import gnss_rows as ekf_gnss_rows
 from vnav_graph.estimators.graph.model import interval_factors as gf
 from vnav_graph.geo.earth import radii_scalar
 from vnav_graph.geo.frames import lla_to_ned, ned_to_lla
-from vnav_graph.nav.rotations import quat_to_dcm, rpy_quat
+from vnav_graph.nav.rotations import quat_to_dcm, rpy_quat, so3_exp
 from vnav_graph.sensors.gnss_model import (
     GM_AXES,
     antenna_position,
@@ -30,11 +30,6 @@ from vnav_graph.sensors.gnss_model import (
 
 LEVER = np.array([0.6, -0.25, -1.1])
 
-
-def _so3(phi):
-    a = np.linalg.norm(phi)
-    k = gf.skew(phi)
-    return np.eye(3) + np.sin(a) / a * k + (1 - np.cos(a)) / a**2 * k @ k
 
 
 def _attitude(rng):
@@ -54,7 +49,7 @@ def test_antenna_jacobians_match_finite_differences():
     for j in range(3):
         e = np.zeros(3)
         e[j] = eps
-        cp, cm = _so3(e) @ c, _so3(-e) @ c
+        cp, cm = so3_exp(e) @ c, so3_exp(-e) @ c
         fd_p = (antenna_position(cp, LEVER)[0] - antenna_position(cm, LEVER)[0]) / (2 * eps)
         fd_v = (antenna_velocity(cp, LEVER, w)[0] - antenna_velocity(cm, LEVER, w)[0]) / (2 * eps)
         # b_g enters as ω = ω̃ − b_g: ∂/∂δb_g (estimated minus true) is −∂/∂ω̃... of the true
@@ -91,7 +86,7 @@ def _graph_at(lla, c, ge, dim, rng):
     kf = gf.keyframe_indices(t, 1.0)
     dense = gf.dense_preintegration(t, gyro, accel, kf)
     nk = kf.size
-    rot = np.array([_so3(rng.normal(0.0, 0.3, 3)) for _ in range(nk)])
+    rot = np.array([so3_exp(rng.normal(0.0, 0.3, 3)) for _ in range(nk)])
     rot[1] = c
     pos = rng.normal(0.0, 5.0, (nk, 3))
     pos[1] = 0.0
@@ -176,7 +171,7 @@ def test_magnetometer_filter_row_and_graph_factor_agree():
         e[j] = eps
         vp, vm = gtsam.Values(), gtsam.Values()
         for v, s in ((vp, 1.0), (vm, -1.0)):
-            v.insert(X(3), gtsam.Pose3(gtsam.Rot3(c @ _so3(s * e)), np.zeros(3)))
+            v.insert(X(3), gtsam.Pose3(gtsam.Rot3(c @ so3_exp(s * e)), np.zeros(3)))
             v.insert(H(0), bias)
         fd = (f.unwhitenedError(vp)[0] - f.unwhitenedError(vm)[0]) / (2 * eps)
         # central difference, O(ε²) truncation, ~1e-10 round-off over 2ε

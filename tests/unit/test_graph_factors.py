@@ -8,16 +8,9 @@ import pytest
 from vnav_graph.estimators.graph.model import interval_factors as gf
 from vnav_graph.geo.earth import gravity
 from vnav_graph.geo.frames import lla_to_ned, ned_to_lla
+from vnav_graph.nav.rotations import so3_exp
 
 ORIGIN = np.array([np.radians(47.0), np.radians(11.0), 500.0])
-
-
-def _so3(phi):
-    a = np.linalg.norm(phi)
-    k = gf.skew(phi)
-    if a < 1e-12:
-        return np.eye(3) + k
-    return np.eye(3) + np.sin(a) / a * k + (1 - np.cos(a)) / a**2 * k @ k
 
 
 def _setup(seed=0):
@@ -29,7 +22,7 @@ def _setup(seed=0):
     kf = gf.keyframe_indices(t, 1.0)
     dense = gf.dense_preintegration(t, gyro, accel, kf)
     nk = kf.size
-    rot = np.array([_so3(rng.normal(size=3)) for _ in range(nk)])
+    rot = np.array([so3_exp(rng.normal(size=3)) for _ in range(nk)])
     pos = np.array([[100.0 * k, 50.0 * k, -20.0 * k] for k in range(nk)]) + rng.normal(
         size=(nk, 3))
     vel = rng.normal(size=(nk, 3))
@@ -52,7 +45,7 @@ def _perturb(st, col, eps, k):
         d = np.zeros(3)
         d[c % 3] = eps
         if c < 3:
-            rot[j] = rot[j] @ _so3(d)
+            rot[j] = rot[j] @ so3_exp(d)
         else:
             pos[j] = pos[j] + rot[j] @ d
     elif col == gf.COL_B0:
@@ -139,7 +132,7 @@ def test_interpolant_hits_keyframes_and_is_exact_for_constant_acceleration():
     f = np.array([0.3, -0.2, -9.7])
     dense = gf.dense_preintegration(t, np.zeros((t.size, 3)), np.tile(f, (t.size, 1)),
                                     gf.keyframe_indices(t, 1.0))
-    rot = np.array([_so3(np.array([0.1, -0.2, 0.3]))] * 3)
+    rot = np.array([so3_exp(np.array([0.1, -0.2, 0.3]))] * 3)
     a = np.array([0.0, 0.0, 9.81])
     acc = a + rot[0] @ f
     v0 = np.array([10.0, -3.0, 1.0])
