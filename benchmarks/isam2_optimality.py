@@ -24,7 +24,8 @@ and the distance of graph-isam2 from its optimum (``online_gap``, ``lag_gap``). 
 cuts and seeds. ``lag`` ≈ ``lag_optimum`` with both far above ``smoother`` means the gap of
 the lag goal is information the lag has not seen (a GNSS outage longer than L), not the
 incremental solver; a large ``lag_gap`` would be the solver's. Every estimator runs with
-``benchmarks/hard_scenarios.toml``. Cut drives end with every stream and the truth at t_c.
+``benchmarks/hard_scenarios.toml``. Cut drives end with every stream and the truth at t_c
+(``Drive.until``).
 """
 
 from __future__ import annotations
@@ -45,17 +46,6 @@ CONFIG = REPO / "benchmarks" / "hard_scenarios.toml"
 FIRST_CUT_S = 60.0
 KEYS = ("online", "filter_optimum", "ekf", "lag", "lag_optimum", "smoother",
         "online_gap", "lag_gap")
-
-
-def cut(drive: Any, t1: float) -> Any:
-    """The drive with every stream and the truth ending at absolute time ``t1``."""
-    t0 = float(drive.imu.t[0])
-    kw: dict[str, Any] = {"imu": drive.imu.slice(t0, t1), "truth": drive.truth.slice(t0, t1)}
-    for name in ("gnss", "baro", "mag"):
-        s = getattr(drive, name, None)
-        if s is not None:
-            kw[name] = s.select(s.t <= t1)
-    return drive.replace(**kw)
 
 
 def ned_at(traj: Any, t: float, origin: Any) -> np.ndarray | None:
@@ -88,7 +78,7 @@ def run_one(job: tuple[str, int, float, float]) -> dict[str, Any]:
     g, ekf, gb = (full[n].estimate for n in ("graph-isam2", "ekf", "graph-batch"))
     lag_s = float(g.info["lag_s"])
     for tc in np.arange(t0 + FIRST_CUT_S, float(drive.imu.t[-1]) - 1.0, every):
-        r = run_estimator("graph-batch", cut(drive, float(tc)), configs.get("graph-batch"),
+        r = run_estimator("graph-batch", drive.until(float(tc)), configs.get("graph-batch"),
                           interrupts=False)
         if r.estimate is None:
             out["cuts"].append({"t_s": float(tc - t0), "error": r.error})

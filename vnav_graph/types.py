@@ -273,6 +273,19 @@ class Drive:
 
         return replace(self, **changes)
 
+    def until(self, t1: float) -> Drive:
+        """The drive with every stream and the truth ending at ``t1`` (the drive's clock [s]):
+        what a causal estimator has seen at ``t1``."""
+        t0 = float(self.imu.t[0])
+        kw: dict[str, Any] = {"imu": self.imu.slice(t0, t1)}
+        if self.truth is not None:
+            kw["truth"] = self.truth.slice(t0, t1)
+        for name in ("gnss", "baro", "mag"):
+            s = getattr(self, name)
+            if s is not None:
+                kw[name] = s.select(s.t <= t1)
+        return self.replace(**kw)
+
 
 @dataclass(frozen=True)
 class ParamEstimate:

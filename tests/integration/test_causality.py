@@ -34,13 +34,7 @@ ATOL_DEG = 1e-6  # heading
 
 def cut(drive: Drive, t1: float) -> Drive:
     """The drive with every stream and the truth ending at ``t0 + t1``."""
-    t0 = float(drive.imu.t[0])
-    kw: dict = {"imu": drive.imu.slice(t0, t0 + t1), "truth": drive.truth.slice(t0, t0 + t1)}
-    for name in ("gnss", "baro", "mag"):
-        s = getattr(drive, name, None)
-        if s is not None:
-            kw[name] = s.select(s.t <= t0 + t1)
-    return drive.replace(**kw)
+    return drive.until(float(drive.imu.t[0]) + t1)
 
 
 @pytest.fixture(scope="module")

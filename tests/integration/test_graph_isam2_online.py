@@ -24,11 +24,6 @@ from vnav_graph.geo.frames import lla_to_ned
 from vnav_graph.simulation.scenario import load_scenario, simulate
 
 
-def _cut(d, t1):
-    return d.replace(imu=d.imu.slice(d.imu.t[0], t1), gnss=d.gnss.select(d.gnss.t <= t1),
-                     baro=d.baro.select(d.baro.t <= t1))
-
-
 @pytest.mark.slow
 def test_online_estimate_is_the_filtering_optimum_in_an_outage():
     drive = simulate(load_scenario("hill-drive", duration_s=600.0), seed=4)
@@ -36,7 +31,7 @@ def test_online_estimate_is_the_filtering_optimum_in_an_outage():
     est = create("graph-isam2").run(drive)
     assert est.info["isam2_relinearized"] > 0
     for t_cut, tol in ((345.0, 1.5), (359.0, 2.0)):  # 45 s and 59 s into the outage
-        opt = create("graph-batch").run(_cut(drive, t_cut)).trajectory
+        opt = create("graph-batch").run(drive.until(t_cut)).trajectory
         tq = np.array([opt.t[-1]])
         p_opt = lla_to_ned(opt.at(tq).lla, o)[0]
         p_on = lla_to_ned(est.online.at(tq).lla, o)[0]
@@ -160,7 +155,7 @@ def test_online_estimate_does_not_change_when_the_drive_is_cut_later(short, long
     started from the initial guess's keyframe 0 (the heading carried back from later), the
     online heading moves by up to 158° between these cuts."""
     drive = simulate(load_scenario("hill-drive", duration_s=long + 5.0), seed=0)
-    ests = [create("graph-isam2").run(_cut(drive, drive.imu.t[0] + t)) for t in (short, long)]
+    ests = [create("graph-isam2").run(drive.until(drive.imu.t[0] + t)) for t in (short, long)]
     a, b = ests[0].online, ests[1].online
     n = a.t.size - 1
     assert n >= short - 1
@@ -184,7 +179,7 @@ def test_lag_and_online_covariances_are_the_cut_drives_batch_answers():
     est = create("graph-isam2").run(drive)
     assert est.info["lag_s"] == 10.0 and est.lag is not None
     t_cut = drive.imu.t[0] + 80.0
-    cut = GraphBatch(GraphConfig(cov_epochs=1000)).run(_cut(drive, t_cut))
+    cut = GraphBatch(GraphConfig(cov_epochs=1000)).run(drive.until(t_cut))
     o = drive.origin_lla
     j = int(np.argmin(np.abs(est.lag.t - (t_cut - 10.0))))
     assert abs(est.lag.t[j] - (t_cut - 10.0)) < 1e-6

@@ -1,4 +1,5 @@
-"""The bookkeeping of benchmarks/isam2_optimality.py: the cut drive and the RMS summary."""
+"""The bookkeeping of benchmarks/isam2_optimality.py: the cut drive (``Drive.until``) and the
+RMS summary."""
 
 from __future__ import annotations
 
@@ -16,10 +17,10 @@ opt = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(opt)
 
 
-def test_cut_ends_every_stream_and_the_truth_at_the_cut():
+def test_until_ends_every_stream_and_the_truth_at_the_cut():
     d = simulate("hill-drive", 0, duration_s=40.0)
     t1 = float(d.imu.t[0]) + 25.0
-    c = opt.cut(d, t1)
+    c = d.until(t1)
     for s in (c.imu, c.gnss, c.baro, c.truth):
         assert s.t[-1] <= t1 + 1e-9 and s.t[-1] > t1 - 1.0
     np.testing.assert_array_equal(c.gnss.t, d.gnss.t[d.gnss.t <= t1])
