@@ -32,10 +32,9 @@ import numpy as np
 
 from ..model.extend import Collected, read_value
 from ..settings import GraphConfig
+from .relin import split_keys
 
 LINEAR_ONLY = 1e9  # iSAM2 threshold of a variable whose factors are all linear here
-_KEY_BITS = 56
-_IDX_MASK = (1 << _KEY_BITS) - 1
 _POSE, _VEC = 0, 1  # kinds of a (factor, key) pair's value
 
 
@@ -57,8 +56,7 @@ class PyFactorBook:
         self.pair_start = np.r_[0, np.cumsum(sizes)]  # pairs of factor i: start[i]:start[i+1]
         pk = np.concatenate(keys) if keys else np.zeros(0, dtype=np.uint64)
         self.pair_f, self.pair_key = pf, pk
-        self.pair_ch = (pk >> np.uint64(_KEY_BITS)).astype(int)
-        self.pair_k = (pk & np.uint64(_IDX_MASK)).astype(np.int64)
+        self.pair_ch, self.pair_k = split_keys(pk)
         self.ext_vars = {key: var for key, (var, _) in ext.variables.items()}
         self.now: dict[int, Any] = {key: value for key, (_, value) in ext.variables.items()}
         dims = [6] + [np.asarray(v).size for v in self.now.values()

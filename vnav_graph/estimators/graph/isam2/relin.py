@@ -49,13 +49,18 @@ _IDX_MASK = (1 << _KEY_BITS) - 1
 _X, _B = ord("x"), ord("b")
 
 
+def split_keys(arr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The character (as its code) and index of each GTSAM symbol key of ``arr`` (uint64)."""
+    return ((arr >> np.uint64(_KEY_BITS)).astype(int),
+            (arr & np.uint64(_IDX_MASK)).astype(np.int64))
+
+
 def marked_keyframes(keys: Any) -> np.ndarray:
     """Keyframe indices of the X/B keys among an ``ISAM2Result``'s marked keys."""
     arr = np.fromiter(keys, dtype=np.uint64)
     if arr.size == 0:
         return np.zeros(0, dtype=int)
-    ch = (arr >> np.uint64(_KEY_BITS)).astype(int)
-    idx = (arr & np.uint64(_IDX_MASK)).astype(int)
+    ch, idx = split_keys(arr)
     return np.unique(idx[(ch == _X) | (ch == _B)])
 
 
