@@ -41,6 +41,9 @@ general_over_floor`` and (additive) ``peak_rss_mb_by_stage``, ``isam2_relineariz
   stage's peak includes what earlier stages left alive (the drive, the interpreter and the
   loaded numba kernels: ≈ 260 MB before the drive); each stage's estimate is released once
   its numbers are read (graph-batch's and the general path's hold ≈ 12 MB each).
+- ``isam2_stage_growth_mb``: the graph-isam2 stage's peak minus the resident memory at its
+  start, i.e. what graph-isam2 itself adds (the drive and the interpreter excluded); the
+  number to compare between drive lengths when asking whether its memory is flat.
 """
 
 from __future__ import annotations
@@ -67,17 +70,23 @@ class StagePeaks:
 
     def __init__(self) -> None:
         self.peaks: dict[str, float] = {}
+        self.growth: dict[str, float] = {}  # stage peak − resident memory at the stage's start
+        self._base = 0.0
         self._reset = Path("/proc/self/clear_refs")
 
     @staticmethod
-    def _hwm_mb() -> float | None:
+    def _status_mb(field: str) -> float | None:
         try:
             for line in Path("/proc/self/status").read_text().splitlines():
-                if line.startswith("VmHWM:"):
+                if line.startswith(field):
                     return float(line.split()[1]) / 1024.0
         except OSError:
             pass
         return None
+
+    @classmethod
+    def _hwm_mb(cls) -> float | None:
+        return cls._status_mb("VmHWM:")
 
     def start(self) -> None:
         from vnav_graph.estimators.graph.batch.linalg import trim_heap
@@ -88,11 +97,13 @@ class StagePeaks:
             self._reset.write_text("5")
         except OSError:
             pass
+        self._base = self._status_mb("VmRSS:") or 0.0
 
     def end(self, stage: str) -> None:
         hwm = self._hwm_mb()
         self.peaks[stage] = (hwm if hwm is not None else
                              resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0)
+        self.growth[stage] = self.peaks[stage] - self._base
 
 
 def builtin_floor(drive: Any) -> float:
@@ -264,6 +275,9 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     # additive: the lag L of Estimate.lag, the graph-isam2 stage's own peak, the online
     # pass, the part of it spent on the online/lag marginal covariances, whose answer
     out.update(isam2_extra, isam2_peak_rss_mb=stages.peaks["graph-isam2"])
+    # additive: what the graph-isam2 stage added to the process (the drive, interpreter and
+    # GTSAM excluded): its online pass's own memory, which the window keeps flat in drive length
+    out["isam2_stage_growth_mb"] = stages.growth["graph-isam2"]
     a.out.mkdir(parents=True, exist_ok=True)
     (a.out / "graph_perf.json").write_text(json.dumps(out, indent=2) + "\n")
     print(json.dumps(out, indent=2))

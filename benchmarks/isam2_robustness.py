@@ -17,7 +17,8 @@ Writes ``DIR/isam2_robustness.json``::
                    "first_fix_ratio_over_3"}}}}
 
 Cases: ``two-outage``, a 20-minute hill drive with the industrial IMU, 1 Hz GNSS and two
-240 s outages (seeds 0-5 by default); ``long-outage``, the shipped scenario (consumer IMU,
+240 s outages (seeds 0-5 by default); ``two-outage-50hz``, the same with a 50 Hz IMU;
+``long-outage``, the shipped scenario (consumer IMU,
 three 180 s outages, 20 seeds by default). "online_warnings" are the fallbacks of the online
 pass (the dogleg retry after a failed or diverged update, ``info["isam2_fallback"]``).
 The error when GNSS returns is the online estimate's (graph-isam2) and the forward ekf's
@@ -45,18 +46,21 @@ from vnav_graph.simulation.scenario import load_scenario, simulate
 
 CASES = {
     "two-outage": "20-min hill drive, industrial IMU, 1 Hz GNSS, two 240 s outages",
+    "two-outage-50hz": "two-outage with the IMU sampled at 50 Hz",
     "long-outage": "the long-outage scenario (consumer IMU, three 180 s outages)",
 }
-DEFAULT_SEEDS = {"two-outage": 6, "long-outage": 20}
+DEFAULT_SEEDS = {"two-outage": 6, "two-outage-50hz": 6, "long-outage": 20}
 
 
 def scenario(case: str, quick: bool) -> Any:
     sc = load_scenario("long-outage")
-    if case == "two-outage":
+    if case.startswith("two-outage"):
         gnss = dataclasses.replace(sc.gnss, rate_hz=1.0,
                                    outages=((300.0, 540.0), (780.0, 1020.0)))
         sc = dataclasses.replace(sc, name="two-outage", imu=IMU_PRESETS["industrial"],
                                  gnss=gnss)
+    if case == "two-outage-50hz":
+        sc = dataclasses.replace(sc, name=case, imu_rate_hz=50.0)
     if quick:  # the first outage only
         sc = dataclasses.replace(sc, duration_s=sc.gnss.outages[0][1] + 60.0)
     return sc
