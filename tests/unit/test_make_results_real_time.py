@@ -61,3 +61,17 @@ def test_real_time_pair_scored_over_the_common_span_with_the_heading_known_rule(
     g = [r for r in rt if r["estimator"] == "graph-isam2"]
     assert all(r["online"]["from_s"] == 20.0 for r in g)
     assert [r["heading_known_rmse_deg"] for r in g] == [0.9, 1.1, 0.9, 1.1]
+
+
+def test_rows_without_online_common_are_said_to_be_scored_over_their_own_epochs(tmp_path):
+    mr = make_results()
+    runs = []
+    for i in range(3):
+        for est, start in (("ekf", 20.0), ("graph-isam2", 0.0)):
+            r = row(est, i, online(start, 2.0 + i, 1.0))
+            del r["online_common"]  # rows without the key
+            runs.append(r)
+    text = mr.real_time_span(runs, "s", "ekf", "graph-isam2")
+    assert text.startswith("each over its own epochs (mean first epoch: ekf from 20.0 s, "
+                           "graph-isam2 from 0.0 s; these bench rows have no `online_common`)")
+    assert "both scored from" not in text
