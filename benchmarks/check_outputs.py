@@ -23,8 +23,8 @@ METRIC_KEYS = {"status", "error", "alt_rmse_m", "alt_max_abs_m", "vel_down_rmse_
                "nees_mean", "runtime_s", "realtime_factor", "baro", "online", "lag"}
 # the online block of every estimator with a causal estimate (null for the pure smoothers),
 # and graph-isam2's fixed-lag block (the same keys and lag_s)
-ONLINE_KEYS = {"alt_rmse_m", "horiz_rmse_m", "heading_rmse_deg", "vel_down_rmse_mps",
-               "nees_mean", "nees_dof"}
+ONLINE_KEYS = {"alt_rmse_m", "horiz_rmse_m", "heading_rmse_deg", "heading_known_rmse_deg",
+               "heading_known_after_s", "vel_down_rmse_mps", "nees_mean", "nees_dof"}
 CAUSAL = {"observer1d", "loop2", "loop3", "loop3-adaptive", "vkf4", "vekf7", "ekf",
           "graph-isam2"}
 PURE_SMOOTHERS = {"ekf-rts", "graph-batch"}

@@ -62,8 +62,12 @@ ONLINE_METRICS = (
     ("alt_rmse_m", "altitude RMSE", "m", 1.0, ".3f"),
     ("horiz_rmse_m", "horizontal RMSE", "m", 1.0, ".3f"),
     ("heading_rmse_deg", "heading RMSE", "deg", 1.0, ".2f"),
+    ("heading_known_rmse_deg", "heading RMSE where its own σ_yaw ≤ 5°", "deg", 1.0, ".2f"),
     ("vel_down_rmse_mps", "vertical-velocity RMSE", "m/s", 1.0, ".4f"),
 )
+# the keys a real-time row takes from its online (common-span) block
+REAL_TIME_KEYS = ("alt_rmse_m", "horiz_rmse_m", "heading_rmse_deg", "heading_known_rmse_deg",
+                  "heading_known_after_s", "vel_down_rmse_mps", "nees_mean", "nees_dof")
 # metric key in bench rows, label, unit, display scale, format
 METRICS = (
     ("alt_rmse_m", "altitude RMSE", "m", 1.0, ".3f"),
@@ -114,13 +118,52 @@ def hard_module() -> Any:
     return mod
 
 
-def online_rows(runs: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """The bench rows with their ``online`` block's metrics in place of the trajectory's
-    (rows without one are left out): the real-time estimates, scored alike."""
-    keys = ("alt_rmse_m", "horiz_rmse_m", "heading_rmse_deg", "vel_down_rmse_mps",
-            "nees_mean", "nees_dof")
-    return [{**r, **{k: r["online"].get(k) for k in keys}, "heading_known_rmse_deg": None}
-            for r in runs if r.get("online")]
+def real_time_rows(runs: list[dict[str, Any]], a: str, b: str) -> list[dict[str, Any]]:
+    """The rows of ``a`` and ``b`` with their real-time metrics in place of the trajectory's,
+    both over their common span, from the later of their two first epochs: a row whose
+    causal estimate starts earlier takes ``online_common[<other>]`` (the bench scores it from
+    the other's first epoch, ``montecarlo.common_start_blocks``), the other its ``online``
+    block. Rows without an online block are left out."""
+    out = []
+    for r in runs:
+        if r["estimator"] not in (a, b) or not r.get("online"):
+            continue
+        other = b if r["estimator"] == a else a
+        blk = (r.get("online_common") or {}).get(other) or r["online"]
+        out.append({**r, **{k: blk.get(k) for k in REAL_TIME_KEYS}, "online": blk})
+    return out
+
+
+def real_time_span(runs: list[dict[str, Any]], scenario: str, a: str, b: str) -> str:
+    """The sentence on the span of a real-time pair: each one's first epoch, the common start
+    (or that the rows have no ``online_common`` and each is scored over its own epochs), and
+    the time from which each one's online σ_yaw stays ≤ 5°; means over the seeds."""
+    def rows(name: str, which: list[dict[str, Any]]) -> list[dict[str, Any]]:
+        return [r["online"] for r in which if r["scenario"] == scenario and
+                r["estimator"] == name and r.get("status") == "ok" and r.get("online")]
+
+    def mean(name: str, key: str, which: list[dict[str, Any]]) -> float | None:
+        v = [o[key] for o in rows(name, which) if o.get(key) is not None]
+        return sum(v) / len(v) if v else None
+
+    own = {n: mean(n, "from_s", runs) for n in (a, b)}
+    starts = {n: mean(n, "from_s", real_time_rows(runs, a, b)) for n in (a, b)}
+    text = "mean first epoch: " + ", ".join(f"{n} from {v:.1f} s" for n, v in own.items()
+                                             if v is not None)
+    if None not in starts.values() and abs(starts[a] - starts[b]) < 0.05:
+        text = (f"both over their common span, from the later of their two first epochs "
+                f"({text}; both scored from {starts[a]:.1f} s)")
+    else:
+        text = f"each over its own epochs ({text}; these bench rows have no `online_common`)"
+
+    def known(n: str) -> str:
+        if not any("heading_known_after_s" in o for o in rows(n, runs)):
+            return f"{n} not recorded"
+        v = mean(n, "heading_known_after_s", runs)
+        return f"{n} {'never' if v is None else format(v, '.1f') + ' s'}"
+
+    return (f"{text}. Heading known (its own σ_yaw ≤ 5° from then on, mean s after the "
+            f"drive's start, over its own epochs): {known(a)}, {known(b)}.")
 
 
 def paired(runs: list[dict[str, Any]], scenario: str, a: str, b: str, key: str
@@ -170,7 +213,7 @@ def comparison_section(doc: dict[str, Any], scenario: str, pairs: Any = PAIRS,
                        runs: list[dict[str, Any]] | None = None,
                        metrics: Any = None) -> list[str]:
     """Per pair, the paired difference of every metric with its verdict (win rule applied);
-    ``runs``: the rows to compare (default the bench rows; ``online_rows`` for real time)."""
+    ``runs``: the rows to compare (default the bench rows; ``real_time_rows`` for real time)."""
     runs = doc["runs"] if runs is None else runs
     have = {r["estimator"] for r in runs if r["scenario"] == scenario}
     lines = []
@@ -191,24 +234,18 @@ def comparison_section(doc: dict[str, Any], scenario: str, pairs: Any = PAIRS,
 
 def like_for_like(doc: dict[str, Any], scenario: str) -> list[str]:
     """The two like-for-like sections of a scenario: real time (forward ekf against online
-    graph-isam2, from the ``online`` blocks) and offline (ekf-rts, graph-batch, final
-    graph-isam2)."""
-    on = online_rows(doc["runs"])
-    starts = {}
-    for name in ("ekf", "graph-isam2"):
-        v = [r["online"].get("from_s") for r in doc["runs"] if r["scenario"] == scenario
-             and r["estimator"] == name and r.get("online")
-             and r["online"].get("from_s") is not None]
-        if v:
-            starts[name] = sum(v) / len(v)
+    graph-isam2, from the ``online`` blocks over their common span: ``real_time_rows``) and
+    offline (ekf-rts, graph-batch, final graph-isam2)."""
     out = []
-    rt = comparison_section(doc, scenario, REAL_TIME_PAIRS, on, ONLINE_METRICS)
-    if rt:
-        span = ", ".join(f"{n} from {t:.1f} s" for n, t in starts.items())
-        out += ["### Real time: forward ekf vs online graph-isam2", "",
-                "Each scored by its `online` block: the causal estimate, every epoch from "
-                f"data up to it, over its own epochs (mean first epoch: {span}; the ekf is "
-                "online once its alignment has read its data).", ""] + rt
+    for a, b, effect in REAL_TIME_PAIRS:
+        rt = comparison_section(doc, scenario, ((a, b, effect),),
+                                real_time_rows(doc["runs"], a, b), ONLINE_METRICS)
+        if not rt:
+            continue
+        out += [f"### Real time: {effect}", "",
+                "Each scored by its `online` block (the causal estimate, every epoch from "
+                "data up to it; the ekf is online once its alignment has read its data), "
+                + real_time_span(doc["runs"], scenario, a, b), ""] + rt
     off = comparison_section(doc, scenario, OFFLINE_PAIRS, None, (*METRICS[:3], *[
         m for m in ONLINE_METRICS if m[0] in ("horiz_rmse_m", "heading_rmse_deg")]))
     if off:

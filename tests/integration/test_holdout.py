@@ -116,6 +116,8 @@ def test_holdout_scores_the_online_and_lag_estimates(registry) -> None:
     for b in (p["online"], p["lag"]):
         assert b["horiz_rmse_m"] == pytest.approx(1.0, abs=1e-3)
         assert b["heading_rmse_deg"] is None and b["nees_mean"] is None
+        assert b["heading_known_rmse_deg"] is None  # no heading reference either
+        assert "heading_known_after_s" in b
 
 
 def test_holdout_scores_planted_errors_exactly(monkeypatch: pytest.MonkeyPatch, registry) -> None:

@@ -184,3 +184,21 @@ def test_rankings_real_time_from_online_blocks_offline_from_trajectories():
                      "0.25 < ekf 0.30",
                      "OFFLINE (smoothers and final trajectories) Altitude RMSE [m]: ekf-rts "
                      "0.10 < graph-batch 0.11 < graph-isam2 (final) 0.12 < ekf 0.30"]
+
+
+def test_rankings_have_heading_where_each_reports_sigma_yaw_within_5_deg():
+    """The heading ranking over the whole span puts the ekf first (graph-isam2's online
+    estimate is charged for the standstill where it says it does not know); the one over the
+    epochs where each reports σ_yaw ≤ 5° orders them by that metric."""
+    from vnav_graph.evaluation.compare import rankings
+
+    def blk(heading, known, from_s):
+        on = {"heading_rmse_deg": heading, "heading_known_rmse_deg": known, "from_s": from_s}
+        return {"status": "ok", "heading_rmse_deg": heading, "heading_known_rmse_deg": known,
+                "online": on}
+
+    rk = rankings({"ekf": blk(7.2, 0.9, 20.0), "graph-isam2": blk(21.0, 0.6, 0.0)})
+    rt = rk["real_time"]
+    assert [r["name"] for r in rt["heading_rmse_deg"]] == ["ekf", "graph-isam2 (online)"]
+    assert [(r["name"], r["value"]) for r in rt["heading_known_rmse_deg"]] == [
+        ("graph-isam2 (online)", 0.6), ("ekf", 0.9)]

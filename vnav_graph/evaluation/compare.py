@@ -343,7 +343,8 @@ def against_baseline(summary: Mapping[str, Any], baseline: str) -> dict[str, Any
 
 # (block key, label, unit) of the two rankings
 RANKING_METRICS = (("alt_rmse_m", "Altitude RMSE", "m"), ("horiz_rmse_m", "Horizontal RMSE", "m"),
-                   ("heading_rmse_deg", "Heading RMSE", "deg"))
+                   ("heading_rmse_deg", "Heading RMSE", "deg"),
+                   ("heading_known_rmse_deg", "Heading RMSE where its own σ_yaw ≤ 5°", "deg"))
 
 
 def rankings(estimators: Mapping[str, Mapping[str, Any]]) -> dict[str, Any]:

@@ -188,10 +188,12 @@ def causal_score(est: Estimate, drive: Drive, withheld: np.ndarray, which: str,
                  given: np.ndarray | None = None) -> dict[str, Any] | None:
     """The ``online`` / ``lag`` block of the holdout: the causal (or fixed-lag) estimate scored
     like the trajectory (``score``: its own datum offset, the same withheld fixes).
-    ``heading_rmse_deg`` and ``nees_*`` are null (GNSS gives neither a heading nor the full
-    state); the lag block has ``lag_s``. None when the estimate has none (``causal_view``);
-    null metrics when it covers no withheld fix."""
-    from .metrics import ONLINE_KEYS, causal_view
+    ``heading_rmse_deg``, ``heading_known_rmse_deg`` and ``nees_*`` are null (GNSS gives
+    neither a heading nor the full state); ``heading_known_after_s`` is the time [s after the
+    drive's start] from which the estimate's own σ_yaw stays ≤ 5° (``metrics.known_after``,
+    the summary's definition; it needs no reference); the lag block has ``lag_s``. None when
+    the estimate has none (``causal_view``); null metrics when it covers no withheld fix."""
+    from .metrics import ONLINE_KEYS, causal_view, known_after
 
     view = causal_view(est, which)
     if view is None:
@@ -204,6 +206,11 @@ def causal_score(est: Estimate, drive: Drive, withheld: np.ndarray, which: str,
         b = {}
     for k in ("alt_rmse_m", "horiz_rmse_m", "vel_down_rmse_mps"):
         out[k] = b.get(k)
+    if "att" in view.provides:
+        t = view.trajectory.t
+        sd = view.sigma_at(t, ERROR_STATE["att_n"].start + 2)  # rotation error about down
+        out["heading_known_after_s"] = known_after(
+            t, None if sd is None else np.degrees(sd), t_ref=float(drive.imu.t[0]))
     if which == "lag":
         lag = est.info.get("lag_s")
         out["lag_s"] = None if lag is None else float(lag)

@@ -62,21 +62,31 @@ HEADING_KNOWN_SD_DEG = 5.0
 
 
 def heading_known(t: FloatArray, heading: FloatArray | None, sd: FloatArray | None,
-                  limit_deg: float = HEADING_KNOWN_SD_DEG) -> tuple[float | None, float | None]:
+                  limit_deg: float = HEADING_KNOWN_SD_DEG,
+                  t_ref: float | None = None) -> tuple[float | None, float | None]:
     """(RMS heading error over the epochs with σ_yaw ≤ ``limit_deg`` [deg], the time [s after
-    the first epoch] from which σ_yaw stays ≤ ``limit_deg``); None where it never is, or
-    without a heading error or its σ."""
+    ``t_ref``, default the first epoch] from which σ_yaw stays ≤ ``limit_deg``:
+    ``known_after``); None where it never is, or without a heading error or its σ."""
     if heading is None or sd is None:
         return None, None
     known = np.isfinite(sd) & (sd <= limit_deg) & np.isfinite(heading)
     if not known.any():
         return None, None
     rms = float(np.sqrt(np.mean(heading[known] ** 2)))
+    return rms, known_after(t, sd, limit_deg, t_ref)
+
+
+def known_after(t: FloatArray, sd: FloatArray | None, limit_deg: float = HEADING_KNOWN_SD_DEG,
+                t_ref: float | None = None) -> float | None:
+    """The time [s after ``t_ref``, default ``t[0]``] from which ``sd`` [deg] stays ≤
+    ``limit_deg`` to the last epoch; None without ``sd``, or when it is above it at the end."""
+    if sd is None or t.size == 0:
+        return None
     bad = np.flatnonzero(~(np.isfinite(sd) & (sd <= limit_deg)))
     if bad.size and bad[-1] == t.size - 1:
-        return rms, None  # not known at the end
+        return None  # not known at the end
     start = 0 if bad.size == 0 else int(bad[-1]) + 1
-    return rms, float(t[start] - t[0])
+    return float(t[start] - (t[0] if t_ref is None else t_ref))
 
 
 def outage_max(t: FloatArray, err: FloatArray | None,
@@ -159,8 +169,8 @@ METRIC_KEYS = ("alt_rmse_m", "alt_max_abs_m", "horiz_rmse_m", "heading_rmse_deg"
 
 # The keys of the ``online`` block (and, with ``lag_s``, the ``lag`` block) of every
 # summary.json / holdout.json / bench.json estimator block
-ONLINE_KEYS = ("alt_rmse_m", "horiz_rmse_m", "heading_rmse_deg", "vel_down_rmse_mps",
-               "nees_mean", "nees_dof")
+ONLINE_KEYS = ("alt_rmse_m", "horiz_rmse_m", "heading_rmse_deg", "heading_known_rmse_deg",
+               "heading_known_after_s", "vel_down_rmse_mps", "nees_mean", "nees_dof")
 
 
 def causal_view(est: Estimate, which: str) -> Estimate | None:
@@ -178,27 +188,82 @@ def causal_view(est: Estimate, which: str) -> Estimate | None:
                     t_cov=None if cov is None else tr.t, info=est.info)
 
 
-def causal_block(est: Estimate, drive: Drive, which: str) -> dict[str, Any] | None:
-    """The ``online`` / ``lag`` block: ``ONLINE_KEYS`` of the causal or fixed-lag estimate
-    against truth over its own epochs (null without truth or where the estimate lacks the
-    quantity), ``from_s`` (its first epoch, s after the drive's start), ``lag_s``
-    (``info["lag_s"]``) in the lag block; None when the estimate has none (``causal_view``)."""
+@dataclass(frozen=True)
+class CausalErrors:
+    """The errors of a causal (or fixed-lag) estimate against truth, epoch by epoch: what its
+    ``online`` / ``lag`` block summarises (``causal_metrics``), kept so that two estimates
+    can be scored over a common span (``causal_metrics(..., t_from)``)."""
+
+    from_s: float  # its first epoch [s after the drive's start]
+    t_ref: float  # the drive's start [s]
+    err: Errors | None  # None without truth
+    t_nees: FloatArray | None  # the covariance epochs of ``nees``
+    nees: FloatArray | None  # NEES of position and velocity there
+    nees_dof: int | None
+
+
+def causal_errors(est: Estimate, drive: Drive, which: str) -> CausalErrors | None:
+    """``CausalErrors`` of ``est``'s causal / fixed-lag estimate (``causal_view``), None when
+    it has none."""
     view = causal_view(est, which)
     if view is None:
         return None
-    out: dict[str, Any] = dict.fromkeys(ONLINE_KEYS)
+    t_ref = float(drive.imu.t[0])
     # its first epoch [s after the drive's start]: the ekf's starts when it is aligned
-    out["from_s"] = float(view.trajectory.t[0] - drive.imu.t[0])
-    if drive.truth is not None:
-        err = errors_vs_truth(view, drive)
-        if err.t.size:
-            out["alt_rmse_m"] = _rms(err.alt)
-            out["horiz_rmse_m"] = _rms(err.horiz)
-            out["heading_rmse_deg"] = _rms(err.heading)
-            out["vel_down_rmse_mps"] = _rms(err.vel_down)
-        ne = nees(view, drive)
-        if ne is not None and ne[0].size:
-            out["nees_mean"], out["nees_dof"] = float(np.mean(ne[0])), ne[1]
+    from_s = float(view.trajectory.t[0] - t_ref)
+    if drive.truth is None:
+        return CausalErrors(from_s, t_ref, None, None, None, None)
+    err = errors_vs_truth(view, drive)
+    ne = nees(view, drive)
+    t_ne = None
+    if ne is not None and view.t_cov is not None:
+        m = (view.t_cov >= drive.truth.t[0]) & (view.t_cov <= drive.truth.t[-1])
+        t_ne = view.t_cov[m]
+    return CausalErrors(from_s, t_ref, err, t_ne, None if ne is None else ne[0],
+                        None if ne is None else ne[1])
+
+
+def causal_metrics(ce: CausalErrors, t_from_s: float | None = None) -> dict[str, Any]:
+    """``ONLINE_KEYS`` over the epochs from ``t_from_s`` [s after the drive's start; default
+    every epoch]: the RMS errors, ``heading_known`` (its own σ_yaw, the top-level block's
+    metric; ``heading_known_after_s`` in s after the drive's start) and the mean NEES; null
+    without truth or where the estimate lacks the quantity."""
+    out: dict[str, Any] = dict.fromkeys(ONLINE_KEYS)
+    err = ce.err
+    if err is None:
+        return out
+    t0 = ce.t_ref + (-np.inf if t_from_s is None else t_from_s)
+    m = err.t >= t0
+    if m.any():
+        def cut(x: FloatArray | None) -> FloatArray | None:
+            return None if x is None else x[m]
+
+        out["alt_rmse_m"] = _rms(err.alt[m])
+        out["horiz_rmse_m"] = _rms(cut(err.horiz))
+        out["heading_rmse_deg"] = _rms(cut(err.heading))
+        out["vel_down_rmse_mps"] = _rms(cut(err.vel_down))
+        out["heading_known_rmse_deg"], out["heading_known_after_s"] = heading_known(
+            err.t[m], cut(err.heading), cut(err.heading_sd), t_ref=ce.t_ref)
+    if ce.nees is not None and ce.t_nees is not None:
+        k = ce.t_nees >= t0
+        if k.any():
+            out["nees_mean"], out["nees_dof"] = float(np.mean(ce.nees[k])), ce.nees_dof
+    return out
+
+
+def causal_block(est: Estimate, drive: Drive, which: str) -> dict[str, Any] | None:
+    """The ``online`` / ``lag`` block: ``ONLINE_KEYS`` of the causal or fixed-lag estimate
+    against truth over its own epochs (``causal_metrics``: null without truth or where the
+    estimate lacks the quantity), ``from_s`` (its first epoch, s after the drive's start),
+    ``lag_s`` (``info["lag_s"]``) in the lag block; None when the estimate has none
+    (``causal_view``)."""
+    ce = causal_errors(est, drive, which)
+    return None if ce is None else causal_block_of(ce, est, which)
+
+
+def causal_block_of(ce: CausalErrors, est: Estimate, which: str) -> dict[str, Any]:
+    """``causal_block`` from the errors ``ce`` already computed."""
+    out: dict[str, Any] = {**causal_metrics(ce), "from_s": ce.from_s}
     if which == "lag":
         lag = est.info.get("lag_s")
         out["lag_s"] = None if lag is None else float(lag)
@@ -225,7 +290,8 @@ def evaluate(est: Estimate, drive: Drive,
     error, estimates providing ``pos_h``), ``heading_rmse_deg`` (RMS of the yaw error wrapped
     to ±180°, estimates providing ``att``), ``heading_known_rmse_deg`` and
     ``heading_known_after_s`` (the same over the epochs where the estimate's own σ_yaw ≤
-    ``HEADING_KNOWN_SD_DEG``, and the time from which it stays there: ``heading_known``),
+    ``HEADING_KNOWN_SD_DEG``, and the time [s after the drive's start] from which it stays
+    there: ``heading_known``),
     ``outage_alt_max_m`` / ``outage_horiz_max_m``
     (max |error| inside the drive's GNSS outages, ``meta["gnss_outages"]``; null without
     outages), ``warnings`` and ``extra_variables`` (the
@@ -275,7 +341,7 @@ def evaluate(est: Estimate, drive: Drive,
         if err.heading is not None:
             out["heading_rmse_deg"] = float(np.sqrt(np.mean(err.heading**2)))
         out["heading_known_rmse_deg"], out["heading_known_after_s"] = heading_known(
-            err.t, err.heading, err.heading_sd)
+            err.t, err.heading, err.heading_sd, t_ref=float(drive.imu.t[0]))
         outages = drive.meta.get("gnss_outages") or []
         out["outage_alt_max_m"] = outage_max(err.t, err.alt, outages)
         out["outage_horiz_max_m"] = outage_max(err.t, err.horiz, outages)
