@@ -396,7 +396,9 @@ def render(results_dir: Path) -> str:
         f"{cfg.get('vnav_graph_version', '?')}: scenarios {', '.join(cfg['scenarios'])}, "
         f"seeds {cfg['seeds']}, drive length {dur}, {len(doc['runs'])} runs "
         f"({n_fail} failed), executor {cfg.get('executor')}, wall time "
-        f"{cfg.get('wall_s', float('nan')):.0f} s.", "",
+        f"{cfg.get('wall_s', float('nan')):.0f} s. Runtimes are wall times of runs that "
+        "shared the machine with each other (and with whatever else ran on it): compare them "
+        "within this page only.", "",
         "Cells are mean [95 % CI over seeds, Student t]; errors are against the simulator's "
         "truth; NEES/dof = 1 means the covariance is consistent; baro errors are "
         "|estimate − truth| (bias: time mean of b(t)). Pairwise statements use paired "
