@@ -73,6 +73,7 @@ def container(keys: list[int], lam: Any, eta: Any, blocks: tuple[tuple[int, int]
     return gtsam.LinearContainerFactor(
         gtsam.JacobianFactor(gtsam.GaussianConditional(terms, len(keys), d, None)), lin)
 
+
 def keyframe_states(P: Any, k: int | list[int], rot: Any, pos: Any, vel: Any, bias: Any,
                     cb: Any, gg: Any, dg: Any = None) -> gf.KeyframeStates:
     """Keyframe states of the running arrays (views, not copies) for the rows of interval k
