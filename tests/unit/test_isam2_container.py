@@ -14,6 +14,7 @@ from vnav_graph.estimators.graph.batch.general import information_factor
 from vnav_graph.estimators.graph.isam2.linear_factors import (
     BARO_BLOCKS,
     container,
+    containers,
     gnss_gm_blocks,
 )
 
@@ -77,3 +78,49 @@ def test_indefinite_block_takes_the_pieces_path() -> None:
     lin = _lin(keys, rng)
     a_old = _jacobian(information_factor(keys, lam, eta, blocks, lin), lin)
     assert np.array_equal(_jacobian(container(keys, lam, eta, blocks, lin), lin), a_old)
+
+
+def _baro_stack(rng: np.random.Generator, g: int) -> tuple[list[list[int]], np.ndarray,
+                                                            np.ndarray]:
+    n = sum(w for _, w in BARO_BLOCKS)
+    keys_of = [[X(m), X(m + 1), C(m), C(m + 1), K(m // 3), B(m)] for m in range(4, 4 + g)]
+    lam, eta = np.zeros((g, n, n)), rng.normal(size=(g, n)) * 100
+    for i in range(g):
+        jac = rng.normal(size=(3 * n, n)) * 10.0 ** rng.uniform(-2, 4, size=n)
+        jac[:, 19:22] = 0.0
+        lam[i] = jac.T @ jac
+    return keys_of, lam, eta
+
+
+def _stack_lin(keys_of: list[list[int]], rng: np.random.Generator) -> gtsam.Values:
+    lin = gtsam.Values()
+    for key in sorted({key for kk in keys_of for key in kk}):
+        lin.insert(_lin([key], rng))
+    return lin
+
+
+def test_batched_equals_one_by_one() -> None:
+    """``containers`` (one batched Cholesky) gives each block's ``information_factor``."""
+    rng = np.random.default_rng(11)
+    keys_of, lam, eta = _baro_stack(rng, 6)
+    lin = _stack_lin(keys_of, rng)
+    got = containers(keys_of, lam, eta, BARO_BLOCKS, lin)
+    assert len(got) == 6
+    for i, kk in enumerate(keys_of):
+        a_old = _jacobian(information_factor(kk, lam[i], eta[i], BARO_BLOCKS, lin), lin)
+        assert list(got[i].keys()) == sorted(kk)
+        assert np.max(np.abs(_jacobian(got[i], lin) - a_old)) <= 1e-12 * np.max(np.abs(a_old))
+
+
+def test_batched_with_an_indefinite_block() -> None:
+    """One indefinite block in the stack: every block as ``container`` builds it alone."""
+    rng = np.random.default_rng(12)
+    keys_of, lam, eta = _baro_stack(rng, 4)
+    w, v = np.linalg.eigh(lam[2])
+    w[0] = -0.05
+    lam[2] = (v * w) @ v.T
+    lin = _stack_lin(keys_of, rng)
+    got = containers(keys_of, lam, eta, BARO_BLOCKS, lin)
+    for i, kk in enumerate(keys_of):
+        assert np.array_equal(_jacobian(got[i], lin),
+                              _jacobian(container(kk, lam[i], eta[i], BARO_BLOCKS, lin), lin))

@@ -69,6 +69,41 @@ def container(keys: list[int], lam: Any, eta: Any, blocks: tuple[tuple[int, int]
     if info != 0 or not r.diagonal().min() > SMALL_PIVOT:
         return information_factor(keys, lam, eta, blocks, lin)
     d = lapack.dtrtrs(r, eta.take(cols), lower=0, trans=1)[0]
+    return _jacobian_container(keys, order, at, r, d, lin)
+
+
+def containers(keys_of: list[list[int]], lam: Any, eta: Any,
+               blocks: tuple[tuple[int, int], ...], lin: Any) -> list[Any]:
+    """``container`` of a stack of blocks (Λ (G, n, n), η (G, n); ``keys_of[i]``: block i's
+    keys, all in the same relative order) with one batched Cholesky. When the batch is
+    refused (a block not positive definite), each block goes through ``container``."""
+    order = tuple(sorted(range(len(keys_of[0])), key=keys_of[0].__getitem__))
+    if any(tuple(sorted(range(len(kk)), key=kk.__getitem__)) != order for kk in keys_of):
+        return [container(kk, lam[i], eta[i], blocks, lin) for i, kk in enumerate(keys_of)]
+    cols, flat, at = _sorted_columns(blocks, order)
+    g, n = lam.shape[0], cols.size
+    a = lam.reshape(g, -1)[:, flat].reshape(g, n, n)
+    a[:, np.arange(n), np.arange(n)] += 1e-9  # as information_factor
+    try:
+        r = np.swapaxes(np.linalg.cholesky(a), 1, 2)  # upper: Λ + 1e-9·I = RᵀR
+    except np.linalg.LinAlgError:
+        return [container(kk, lam[i], eta[i], blocks, lin) for i, kk in enumerate(keys_of)]
+    ok = np.diagonal(r, axis1=1, axis2=2).min(axis=1) > SMALL_PIVOT
+    e = eta[:, cols]
+    out = []
+    for i, kk in enumerate(keys_of):
+        if not ok[i]:
+            out.append(information_factor(kk, lam[i], eta[i], blocks, lin))
+            continue
+        d = lapack.dtrtrs(r[i], e[i], lower=0, trans=1)[0]
+        out.append(_jacobian_container(kk, order, at, r[i], d, lin))
+    return out
+
+
+def _jacobian_container(keys: list[int], order: tuple[int, ...],
+                        at: tuple[tuple[int, int], ...], r: Any, d: Any, lin: Any) -> Any:
+    """The LinearContainerFactor of the JacobianFactor [R | d] over ``keys`` (columns in the
+    key order ``order``, key p's at ``at[p]``), linearised at ``lin``."""
     terms = [(keys[i], r[:, c:c + w]) for i, (c, w) in zip(order, at, strict=True)]
     return gtsam.LinearContainerFactor(
         gtsam.JacobianFactor(gtsam.GaussianConditional(terms, len(keys), d, None)), lin)
@@ -253,8 +288,14 @@ def baro_terms(P: Any, k: int, st: gf.KeyframeStates, bias: Any, cal: dict[int, 
     groups, lam, eta, _ = gf.group_information(gf.IntervalRows(m_all, rw, jw), 1)
     ms = [int(m) for m in groups]
     lin = _baro_lin(ms, st, bias, cal, seg)
-    return [(m, sel[m_of == m], _baro_lcf(m, lam[i], eta[i], lin, seg))
-            for i, m in enumerate(ms)]
+    # each interval's samples, in their order in ``sel``
+    by_m = np.argsort(m_of, kind="stable")
+    cuts = np.searchsorted(m_of[by_m], np.r_[groups, groups + 1])
+    cols = np.arange(gf.N_COLS)
+    lam_p, eta_p = pad_information(lam, eta, cols, cols, gf.N_COLS + 3)
+    keys_of = [[X(m), X(m + 1), C(m), C(m + 1), K(int(seg[m])), B(m)] for m in ms]
+    facs = containers(keys_of, lam_p, eta_p, BARO_BLOCKS, lin)
+    return [(m, sel[by_m[cuts[i]:cuts[i + len(ms)]]], facs[i]) for i, m in enumerate(ms)]
 
 
 def _baro_lin(ms: list[int], st: gf.KeyframeStates, bias: Any, cal: dict[int, Any],
@@ -271,13 +312,3 @@ def _baro_lin(ms: list[int], st: gf.KeyframeStates, bias: Any, cal: dict[int, An
     for j in sorted({int(seg[m]) for m in ms}):
         lin.insert(K(j), np.asarray(cal[j], float))
     return lin
-
-
-def _baro_lcf(m: int, lam: Any, eta: Any, lin: Any, seg: Any) -> Any:
-    """Interval m's baro information (Λ, η over the ``factors`` columns) as its
-    LinearContainerFactor, linearised at ``lin`` (``_baro_lin``)."""
-    j = int(seg[m])
-    cols = np.arange(gf.N_COLS)
-    lam_p, eta_p = pad_information(lam, eta, cols, cols, gf.N_COLS + 3)
-    return container([X(m), X(m + 1), C(m), C(m + 1), K(j), B(m)], lam_p, eta_p,
-                     BARO_BLOCKS, lin)
