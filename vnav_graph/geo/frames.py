@@ -1,10 +1,14 @@
-"""Frames and rotations: lla <-> tangent-plane NED (via pymap3d), quaternions, Euler angles.
+"""Frames and rotations: lla <-> tangent-plane NED (pymap3d's WGS-84 formulas), quaternions,
+Euler angles.
 
 Quaternions are scalar-first ``(w, x, y, z)``, Hamilton; ``q_ab`` maps b-coordinates into a.
 Euler angles are roll, pitch, yaw (z-y-x, aerospace): ``mat_nb = Rz(yaw) Ry(pitch) Rx(roll)``.
 """
 
 from __future__ import annotations
+
+from functools import cache
+from math import pi
 
 import numpy as np
 import pymap3d
@@ -23,11 +27,74 @@ def lla_to_ned(lla: ArrayLike, origin_lla: ArrayLike) -> FloatArray:
 
 
 def ned_to_lla(pos_n: ArrayLike, origin_lla: ArrayLike) -> FloatArray:
-    """Tangent-plane NED at ``origin_lla`` [m] to geodetic (rad, rad, m), shape (N, 3)."""
+    """Tangent-plane NED at ``origin_lla`` [m] to geodetic (rad, rad, m), shape (N, 3).
+
+    pymap3d's ``ned2geodetic`` (WGS-84; You 2000, no iteration), the same operations in the
+    same order, so bitwise equal to it (tests/unit/test_frames_fast.py), without its
+    per-call overhead (0.3 ms, most of the cost for the few points a graph-isam2 update
+    converts); the origin's terms are computed once. Points at the Earth's centre or on its
+    axis go through pymap3d itself."""
     p = np.atleast_2d(np.asarray(pos_n, dtype=float))
     o = np.asarray(origin_lla, dtype=float)
-    lat, lon, h = pymap3d.ned2geodetic(p[:, 0], p[:, 1], p[:, 2], o[0], o[1], o[2], deg=False)
-    return np.column_stack([lat, lon, h])
+    x0, y0, z0, clat, slat, clon, slon = _origin_terms(float(o[0]), float(o[1]), float(o[2]))
+    north, east, up = p[:, 0], p[:, 1], -p[:, 2]
+    # pymap3d.enu2uvw, then enu2ecef
+    t = clat * up - slat * north
+    w = slat * up + clat * north
+    x = x0 + (clon * t - slon * east)
+    y = y0 + (slon * t + clon * east)
+    z = z0 + w
+    out = _ecef_to_lla(x, y, z)
+    if out is None:
+        lat, lon, h = pymap3d.ned2geodetic(p[:, 0], p[:, 1], p[:, 2], o[0], o[1], o[2],
+                                           deg=False)
+        return np.column_stack([lat, lon, h])
+    return np.column_stack(out)
+
+
+_WGS84_A, _WGS84_B = 6378137.0, 6356752.31424518  # pymap3d's Ellipsoid "wgs84"
+
+
+@cache
+def _origin_terms(lat0: float, lon0: float, h0: float) -> tuple[np.float64, ...]:
+    """pymap3d.geodetic2ecef of the origin and the sines and cosines of its lat, lon."""
+    lat, lon, alt = np.float64(lat0), np.float64(lon0), np.float64(h0)
+    a, b = _WGS84_A, _WGS84_B
+    n = a**2 / np.hypot(a * np.cos(lat), b * np.sin(lat))
+    x0 = (n + alt) * np.cos(lat) * np.cos(lon)
+    y0 = (n + alt) * np.cos(lat) * np.sin(lon)
+    z0 = (n * (b / a) ** 2 + alt) * np.sin(lat)
+    return x0, y0, z0, np.cos(lat), np.sin(lat), np.cos(lon), np.sin(lon)
+
+
+def _ecef_to_lla(x: FloatArray, y: FloatArray, z: FloatArray
+                 ) -> tuple[FloatArray, FloatArray, FloatArray] | None:
+    """pymap3d.ecef2geodetic (WGS-84, radians) for arrays; None where it would take its
+    special branch (a point at the centre or on the polar axis)."""
+    a, b = _WGS84_A, _WGS84_B
+    r = np.sqrt(x**2 + y**2 + z**2)
+    e = np.sqrt(a**2 - b**2)
+    u = np.sqrt(0.5 * (r**2 - e**2) + 0.5 * np.hypot(r**2 - e**2, 2 * e * z))
+    hxy = np.hypot(x, y)
+    hue = np.hypot(u, e)
+    if np.any((np.abs(u) <= 1e-8) | (np.abs(hxy) <= 1e-8)):  # np.isclose(·, 0)
+        return None
+    beta = np.arctan(hue / u * z / hxy)
+    beta += ((b * u - a * hue + e**2) * np.sin(beta)) / (
+        a * hue * 1 / np.cos(beta) - e**2 * np.cos(beta))
+    lat = np.arctan(a / b * np.tan(beta))
+    lim_pi2 = pi / 2 - np.finfo(beta.dtype).eps
+    lat = np.where(beta >= lim_pi2, pi / 2, lat)
+    lat = np.where(beta <= -lim_pi2, -pi / 2, lat)
+    lon = np.arctan2(y, x)
+    cos_beta = np.cos(beta)
+    cos_beta = np.where(beta >= lim_pi2, 0, cos_beta)
+    cos_beta = np.where(beta <= -lim_pi2, 0, cos_beta)
+    alt = np.hypot(z - b * np.sin(beta), hxy - a * cos_beta)
+    inside = x**2 / a**2 + y**2 / a**2 + z**2 / b**2 < 1
+    if inside.any():
+        alt[inside] = -alt[inside]
+    return lat, lon, alt
 
 
 def skew(v: ArrayLike) -> FloatArray:

@@ -94,14 +94,11 @@ def rot_n_e(lat: FloatArray, lon: FloatArray) -> FloatArray:
     """C_ne (..., 3, 3): ECEF → local NED at (lat, lon) [rad] (Groves eq. 2.150)."""
     sl, cl = np.sin(lat), np.cos(lat)
     so, co = np.sin(lon), np.cos(lon)
-    return np.stack(
-        [
-            np.stack([-sl * co, -sl * so, cl], -1),
-            np.stack([-so, co, np.zeros_like(lat)], -1),
-            np.stack([-cl * co, -cl * so, -sl], -1),
-        ],
-        -2,
-    )
+    out = np.empty(np.shape(lat) + (3, 3))
+    out[..., 0, 0], out[..., 0, 1], out[..., 0, 2] = -sl * co, -sl * so, cl
+    out[..., 1, 0], out[..., 1, 1], out[..., 1, 2] = -so, co, 0.0
+    out[..., 2, 0], out[..., 2, 1], out[..., 2, 2] = -cl * co, -cl * so, -sl
+    return out
 
 
 def rot_t_n(lla: FloatArray, origin_lla: FloatArray) -> FloatArray:

@@ -62,22 +62,26 @@ def heading_factor(k: int, z_b: FloatArray, d_ref: float, sd: float, loss_sd: fl
     noise = gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Huber.Create(loss_sd),
                                            base)
 
+    key_x = X(k)
+
     def error(this: Any, values: Any, jac: Any) -> FloatArray:
-        r_k = values.atPose3(this.keys()[0]).rotation().matrix()
+        r_k = values.atPose3(key_x).rotation().matrix()
         # ``sensors.magnetometer.mag_heading_row`` (the EKF's row) in numpy: the same model,
         # tested equal to 1e-12 (tests/unit/test_gnss_model.py); calling the compiled row
         # here rounds differently and moves the graph's results by ~1e-12 relative
-        d = z_b - values.atVector(this.keys()[1])
+        d = z_b - values.atVector(KEY)
         m = r_k @ d
         h2 = m[0] * m[0] + m[1] * m[1]
         e = wrap_pi(np.arctan2(m[1], m[0]) - d_ref)
         if jac is not None:
             g = np.array([-m[1], m[0], 0.0]) / h2
-            jac[0] = np.hstack([g @ (-r_k @ skew3(d)), np.zeros(3)])[None, :]
+            row = np.zeros((1, 6))
+            row[0, 0:3] = g @ (-r_k @ skew3(d))
+            jac[0] = row
             jac[1] = (-g @ r_k)[None, :]
         return np.array([e])
 
-    return gtsam.CustomFactor(noise, [X(k), KEY], error)
+    return gtsam.CustomFactor(noise, [key_x, KEY], error)
 
 
 class MagnetometerExtension:
