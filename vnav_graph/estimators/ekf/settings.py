@@ -61,8 +61,7 @@ class EkfConfig(GnssErrorSettings):
     loss_threshold_sd: Huber thresholds k (GNSS position, GNSS velocity, baro) [σ].
     post_gate: ``ekf-rts``: drop fixes that misfit the smoothed trajectory, rerun (``ekf.regate``).
     post_gate_rounds: at most this many post-smoothing gate rounds.
-    post_huber_rounds: ``ekf-rts`` with ``post_gate`` and a GNSS Huber loss: passes with the
-        fixes' Huber weights from their smoothed residuals (``ekf.regate.huber_rounds``).
+    post_huber_rounds: ``ekf-rts``: passes with the Huber weights of smoothed residuals.
     carry_heading_back: ``ekf-rts``: rerun from the start with a heading acquired in motion.
     fb_separation: ``ekf-rts``: run the filter backward too (``info["fb_separation"]``).
     tilt_consider: hold the attitude as consider states while heading is unknown and tilt σ > 5°.
