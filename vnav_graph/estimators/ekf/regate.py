@@ -121,10 +121,12 @@ def reweighted(drive: Drive, est: Estimate, model: SensorModel, g_latency: float
     assert gnss is not None
     c2p, c2v = fix_chi2_parts(drive, est, model, g_latency)
     kp, kv, _ = cfg.huber_k()
-    wp = huber_weights(c2p, kp)
+    # a part the forward gate refused keeps its σ: its weight would widen that gate for it
+    wp = np.where(np.isin(gnss.t, est.info["gnss_rejected_t"]), 1.0, huber_weights(c2p, kp))
     vel_sd = gnss.vel_sd
     if c2v is not None and vel_sd is not None:
-        vel_sd = np.asarray(vel_sd, dtype=float) / np.sqrt(huber_weights(c2v, kv))[:, None]
+        wv = np.where(np.isin(gnss.t, est.info["gnss_unused_t"]), 1.0, huber_weights(c2v, kv))
+        vel_sd = np.asarray(vel_sd, dtype=float) / np.sqrt(wv)[:, None]
     g = replace(gnss, pos_sd=huber_sd(gnss.pos_sd, wp, cfg.gnss_gm), vel_sd=vel_sd)
     return drive.replace(gnss=g), wp
 
