@@ -28,7 +28,9 @@ off over 15 s with a velocity 5 σ off), while the graph, whose residual is take
 whole drive, down-weights them. After the gate rounds each used fix gets the graph's weights,
 w_p = min(1, k_p/e_p) of its whitened position residual norm e_p (3 rows, white σ, ê
 included) and w_v of its velocity residual, its σ is divided by √w (``huber_sd``: the white
-part only, the Gauss-Markov part stays, so ``GnssGM.split`` returns white/√w), and the
+part only, the Gauss-Markov part stays, so ``GnssGM.split`` returns white/√w; a part the
+forward χ² gate refused keeps its σ, which would otherwise widen that gate for exactly the
+outliers it refused: on a 2 Hz urban variant a burst then pulled the track 23 m), and the
 forward and RTS passes run again with the forward Huber loss off for the fixes (one weight
 per fix, as in the graph; the χ² gates stay). The filter's covariance is then computed with
 the down-weighted R, as the graph's is from its re-weighted information.
