@@ -184,3 +184,24 @@ def test_huber_rounds_weigh_each_fix_by_its_smoothed_residual(smoothed):
     np.testing.assert_allclose(seen[-1].gnss_vel_sd, model.gnss_vel_sd)
     assert out.info["post_huber"] == {"rounds": 2, "downweighted": 2,
                                       "weight_min": pytest.approx(0.25, rel=1e-6)}
+
+
+def test_huber_rounds_keep_the_sigma_of_a_refused_position(smoothed):
+    """A fix whose position the forward gate refused keeps its σ whatever its residual (a
+    weight would widen that gate for it)."""
+    d, est = smoothed
+    cfg = EkfConfig(fb_separation=False, carry_heading_back=False, post_gate=True,
+                    loss_gnss_pos="huber", post_huber_rounds=1)
+    sd_n = sensor_model(d).gnss_pos_sd[:, 0]
+    offset = np.zeros(d.gnss.t.size)
+    offset[[120, 400]] = 8.0 * sd_n[[120, 400]]
+    d2 = _fixes_on(d, est, offset)
+    model = sensor_model(d2)
+    refused = est.replace(info={**est.info, "gnss_rejected_t": d2.gnss.t[[400]]})
+    seen = []
+    regate.huber_rounds(d2, refused, model, 0.0, cfg,
+                        lambda sub: seen.append(sensor_model(sub)) or est)
+    w = np.ones(d2.gnss.t.size)
+    w[120] = 2.0 / 8.0
+    np.testing.assert_allclose(seen[0].gnss_pos_sd, model.gnss_pos_sd / np.sqrt(w)[:, None],
+                               rtol=1e-6)
