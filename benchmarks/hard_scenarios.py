@@ -20,12 +20,14 @@ What it measures
   receiver σ), ``long-outage`` (MEMS IMU, three 180 s outages) and ``hot-baro`` (0.3 s
   latency, ISA + 15 K, a fast 10 m Gauss-Markov bias); their TOML files give the rationale.
 - Both approaches at their best, with one configuration over every scenario
-  (``benchmarks/hard_scenarios.toml``): both families with a Huber loss on the GNSS fixes
-  and a gate that removes the fixes the smoothed answer does not fit (the graphs' post-solve
-  gate, ekf-rts's post-smoothing gate); ekf-rts carries an acquired heading back to the
-  start; both carry the Gauss-Markov GNSS error state where the drive's GNSS residuals are
-  correlated (``gnss_gm_auto``: on urban, off on the white-error scenarios), and the EKF
-  forces a fix in only after 30 s of refusals (``max_rejected_s``).
+  (``benchmarks/hard_scenarios.toml``): both families with a Huber loss on the GNSS fixes,
+  weighted by their residuals against the smoothed answer (the graphs' IRLS, ekf-rts's
+  ``post_huber_rounds``), and a gate that removes the fixes the smoothed answer does not fit
+  (the graphs' post-solve gate, ekf-rts's post-smoothing gate); ekf-rts carries an
+  acquired heading back to the start; both carry the Gauss-Markov GNSS error state where
+  the drive's GNSS residuals are correlated (``gnss_gm_auto``: on urban, off on the
+  white-error scenarios), and the EKF forces a fix in only after 30 s of refusals
+  (``max_rejected_s``).
 - Per scenario, its primary metrics (``PRIMARY``); per pair of estimators the paired 95 %
   Student-t interval over seeds of the difference and of the ratio b/a; the goal of the
   study (graph-batch ≥ 20 % better than ekf-rts with the paired CI excluding zero) is checked

@@ -131,3 +131,77 @@ def test_unused_fixes_are_the_refused_positions_without_a_used_velocity(smoothed
     _, est = smoothed
     unused = set(est.info["gnss_unused_t"])
     assert unused <= set(est.info["gnss_rejected_t"])
+
+
+def test_huber_weights_are_the_graphs():
+    """One threshold rule in both families: min(1, k/e) of the Mahalanobis norm e = √χ²,
+    the graph's IRLS weight (``graph.model.robust.weight_and_loss``)."""
+    from vnav_graph.estimators.graph.model.robust import weight_and_loss
+
+    e = np.array([0.0, 0.5, 1.99, 2.0, 2.01, 7.0, 1e4])
+    np.testing.assert_allclose(regate.huber_weights(e**2, 2.0),
+                               weight_and_loss(e, "huber", 2.0)[0], rtol=1e-15)
+    np.testing.assert_array_equal(regate.huber_weights(e**2, 0.0), np.ones(e.size))
+
+
+def test_huber_sd_divides_the_white_part_only():
+    """σ' of a fix of weight w keeps the Gauss-Markov part: split(σ') = split(σ)/√w, also
+    where the white rest is at its 10 % floor (σ below σ_gm)."""
+    from vnav_graph.sensors.gnss_model import GnssGM
+
+    gm = GnssGM(2.5, 4.0, 30.0)
+    sd = np.array([[2.55, 2.55, 4.12], [3.54, 3.54, 5.10], [1.0, 1.0, 2.0]])
+    w = np.array([1.0, 0.25, 0.04])
+    np.testing.assert_allclose(gm.split(regate.huber_sd(sd, w, gm)),
+                               gm.split(sd) / np.sqrt(w)[:, None], rtol=1e-12)
+    np.testing.assert_allclose(regate.huber_sd(sd, w, None), sd / np.sqrt(w)[:, None])
+
+
+def test_huber_rounds_weigh_each_fix_by_its_smoothed_residual(smoothed):
+    """Fixes k_p·σ·(1.5, 4) north of the smoothed track get position weights 1/1.5 and 1/4
+    (the others, on it, 1); the pass runs on σ/√w (velocity on the track: σ kept) and
+    ``info["post_huber"]`` counts the two."""
+    d, est = smoothed
+    cfg = EkfConfig(fb_separation=False, carry_heading_back=False, post_gate=True,
+                    loss_gnss_pos="huber", loss_gnss_vel="huber", post_huber_rounds=2)
+    sd_n = sensor_model(d).gnss_pos_sd[:, 0]
+    offset = np.zeros(d.gnss.t.size)
+    offset[[120, 400]] = 2.0 * np.array([1.5, 4.0]) * sd_n[[120, 400]]
+    d2 = _fixes_on(d, est, offset)
+    model = sensor_model(d2)
+    seen = []
+
+    def weighted(sub):
+        seen.append(sensor_model(sub))
+        return est  # the same trajectory: the weights do not change between rounds
+
+    out = regate.huber_rounds(d2, est, model, 0.0, cfg, weighted)
+    assert len(seen) == 2
+    w = np.ones(d2.gnss.t.size)
+    w[[120, 400]] = [1 / 1.5, 1 / 4.0]
+    np.testing.assert_allclose(seen[-1].gnss_pos_sd, model.gnss_pos_sd / np.sqrt(w)[:, None],
+                               rtol=1e-6)
+    np.testing.assert_allclose(seen[-1].gnss_vel_sd, model.gnss_vel_sd)
+    assert out.info["post_huber"] == {"rounds": 2, "downweighted": 2,
+                                      "weight_min": pytest.approx(0.25, rel=1e-6)}
+
+
+def test_huber_rounds_keep_the_sigma_of_a_refused_position(smoothed):
+    """A fix whose position the forward gate refused keeps its σ whatever its residual (a
+    weight would widen that gate for it)."""
+    d, est = smoothed
+    cfg = EkfConfig(fb_separation=False, carry_heading_back=False, post_gate=True,
+                    loss_gnss_pos="huber", post_huber_rounds=1)
+    sd_n = sensor_model(d).gnss_pos_sd[:, 0]
+    offset = np.zeros(d.gnss.t.size)
+    offset[[120, 400]] = 8.0 * sd_n[[120, 400]]
+    d2 = _fixes_on(d, est, offset)
+    model = sensor_model(d2)
+    refused = est.replace(info={**est.info, "gnss_rejected_t": d2.gnss.t[[400]]})
+    seen = []
+    regate.huber_rounds(d2, refused, model, 0.0, cfg,
+                        lambda sub: seen.append(sensor_model(sub)) or est)
+    w = np.ones(d2.gnss.t.size)
+    w[120] = 2.0 / 8.0
+    np.testing.assert_allclose(seen[0].gnss_pos_sd, model.gnss_pos_sd / np.sqrt(w)[:, None],
+                               rtol=1e-6)

@@ -48,6 +48,7 @@ seed 001 (baro error model); Rauch, Tung & Striebel, AIAA J. 3(8), 1965.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -336,7 +337,20 @@ class EKFRTS(EKF):
             return r.model, e
 
         return regate.regated(drive, est, run.model, run.g_latency, self.config, self.name,
-                              again, t0)
+                              again, t0, self._weighted(t0))
+
+    def _weighted(self, t0: float) -> Callable[[Drive], Estimate] | None:
+        """The passes of ``ekf.regate.huber_rounds``: forward (its GNSS Huber loss off: the
+        weights are in the fixes' σ) and RTS, None when no round applies."""
+        cfg = self.config
+        if cfg.post_huber_rounds <= 0 or not any(cfg.huber_k()[:2]):
+            return None
+        off = replace(cfg, loss_gnss_pos="none", loss_gnss_vel="none")
+
+        def weighted(d: Drive) -> Estimate:
+            return type(self)(off)._smooth(d, t0)[1].replace(config=cfg)
+
+        return weighted
 
     def _smooth(self, drive: Drive, t0: float) -> tuple[_Run, Estimate]:
         """The forward pass and the RTS smoother over it (``t0``: start of the run's clock);

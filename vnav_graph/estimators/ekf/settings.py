@@ -61,6 +61,7 @@ class EkfConfig(GnssErrorSettings):
     loss_threshold_sd: Huber thresholds k (GNSS position, GNSS velocity, baro) [σ].
     post_gate: ``ekf-rts``: drop fixes that misfit the smoothed trajectory, rerun (``ekf.regate``).
     post_gate_rounds: at most this many post-smoothing gate rounds.
+    post_huber_rounds: ``ekf-rts``: passes with the Huber weights of smoothed residuals.
     carry_heading_back: ``ekf-rts``: rerun from the start with a heading acquired in motion.
     fb_separation: ``ekf-rts``: run the filter backward too (``info["fb_separation"]``).
     tilt_consider: hold the attitude as consider states while heading is unknown and tilt σ > 5°.
@@ -111,6 +112,9 @@ class EkfConfig(GnssErrorSettings):
     # trajectory and run the forward and RTS passes again
     post_gate: bool = False
     post_gate_rounds: int = 3
+    # the graph's IRLS for ekf-rts: each fix's Huber weight from its residual against the
+    # smoothed trajectory instead of its forward innovation, passes run again with it
+    post_huber_rounds: int = 3
     # a heading acquired in motion is carried back to the drive's start and the forward and RTS
     # passes run again from there with it (ekf.carry)
     carry_heading_back: bool = True
@@ -138,5 +142,7 @@ class EkfConfig(GnssErrorSettings):
         if len(self.loss_threshold_sd) != 3 or not all(
                 np.isfinite(k) and k > 0 for k in self.loss_threshold_sd):
             raise ValueError("EkfConfig.loss_threshold_sd: three thresholds > 0 [σ]")
+        if self.post_huber_rounds < 0:
+            raise ValueError("EkfConfig.post_huber_rounds: must be ≥ 0")
         if not 0.5 < self.gate_prob < 1.0:
             raise ValueError("EkfConfig.gate_prob: must be in (0.5, 1)")
