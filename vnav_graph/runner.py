@@ -306,6 +306,8 @@ def run_holdout(drive: Drive, estimators: Sequence[str] | None = None, outage_s:
             info = r.estimate.info or {}
             s.block["warnings"] = [str(x) for x in info.get("warnings") or []]
             s.block["fallbacks"] = [str(x) for x in info.get("fallbacks") or []]
+            # graph-isam2: whose answer the trajectory is, "isam2" or "batch" (null elsewhere)
+            s.block["isam2_final"] = info.get("isam2_final")
             # of those, the baro calibration's prior conflicts (sensors.baro): data, not solver
             s.block["baro_prior_conflict"] = [str(x) for x in
                                               info.get("baro_prior_conflict") or []]

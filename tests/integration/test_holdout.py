@@ -98,7 +98,7 @@ class _PlantedOnline(_Planted):
             lla[:, 2] += (dh - 2.0) * inside
             return Trajectory(tr.t, lla, tr.vel_n)
 
-        info = {**e.info, "lag_s": 10.0}
+        info = {**e.info, "lag_s": 10.0, "isam2_final": "batch"}
         return e.replace(online=high(4.0), lag=high(1.0), info=info)
 
 
@@ -113,6 +113,7 @@ def test_holdout_scores_the_online_and_lag_estimates(registry) -> None:
     assert p["online"]["alt_rmse_m"] == pytest.approx(4.0, abs=1e-9)
     assert p["lag"]["alt_rmse_m"] == pytest.approx(1.0, abs=1e-9)
     assert p["lag"]["lag_s"] == 10.0
+    assert p["isam2_final"] == "batch"  # whose answer the trajectory is, as in summary.json
     for b in (p["online"], p["lag"]):
         assert b["horiz_rmse_m"] == pytest.approx(1.0, abs=1e-3)
         assert b["heading_rmse_deg"] is None and b["nees_mean"] is None
@@ -141,6 +142,7 @@ def test_holdout_scores_planted_errors_exactly(monkeypatch: pytest.MonkeyPatch, 
     # the estimator's warnings, and which of them are baro prior conflicts (data, not solver)
     assert p["warnings"] == ["solver note", CONFLICT]
     assert p["baro_prior_conflict"] == [CONFLICT]
+    assert p["isam2_final"] is None  # not graph-isam2
     # per window: the same 2 m and 1 m in each, 60 fixes each; no v_D (not provided)
     assert [(w["n"], w["alt_rmse_m"]) for w in p["per_window"]] == [(60, pytest.approx(2.0))] * 4
     assert all(w["horiz_rmse_m"] == pytest.approx(1.0, abs=1e-3) for w in p["per_window"])
