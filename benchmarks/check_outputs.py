@@ -16,7 +16,8 @@ GRAPH_PERF_KEYS = {"drive_duration_s", "keyframes", "batch_s", "builtin_floor_s"
                    "isam2_update_p99_ms", "ekf_s", "ekf_realtime_factor", "peak_rss_mb",
                    "general_over_floor", "isam2_lag_s", "isam2_peak_rss_mb", "isam2_final",
                    "isam2_online_s", "isam2_marginals_s"}
-GRAPH_PERF_ADDITIVE = {"peak_rss_mb_by_stage", "isam2_relinearized"}  # newer bench_graph.py
+# newer bench_graph.py
+GRAPH_PERF_ADDITIVE = {"peak_rss_mb_by_stage", "isam2_relinearized", "isam2_stage_growth_mb"}
 REPRO_KEYS = {"seed003_steady_sd_m", "seed003_gps_only_sd_m", "seed003_settling_s",
               "seed001_rmse_m", "seed001_calibration", "seed004_outage_alt_rmse_m"}
 METRIC_KEYS = {"status", "error", "alt_rmse_m", "alt_max_abs_m", "vel_down_rmse_mps",
