@@ -18,6 +18,7 @@ import argparse
 import json
 import os
 import sys
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 LOGS = ("erle_pxf_218/218.BIN", "erle_pxf_loiter_rtl/Loiter_RTL.bin",
@@ -33,6 +34,20 @@ def data_root(arg: str | None) -> Path:
     return Path(env) if env else Path(__file__).resolve().parents[1].parent / "shared" / "data"
 
 
+def present_logs(root: Path, missing: list[str] | None = None,
+                 logs: Sequence[str] = LOGS) -> Iterator[tuple[str, Path]]:
+    """(relative name, path) of each of ``logs`` present under ``root``. An absent one is
+    appended to ``missing`` when given, else reported on stderr as ``missing: <name>``."""
+    for rel in logs:
+        p = root / rel
+        if p.exists():
+            yield rel, p
+        elif missing is not None:
+            missing.append(rel)
+        else:
+            print(f"missing: {rel}", file=sys.stderr)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", required=True)
@@ -45,11 +60,7 @@ def main(argv: list[str] | None = None) -> int:
     names = [n for n in a.estimators.split(",") if n]
     root = data_root(a.data)
     doc: dict = {"estimators": names, "logs": {}, "missing": []}
-    for rel in LOGS:
-        p = root / rel
-        if not p.exists():
-            doc["missing"].append(rel)
-            continue
+    for rel, p in present_logs(root, doc["missing"]):
         drive = load_drive(p)
         if not doc["logs"]:
             run_holdout(drive, names)  # untimed, first log only: kernels compiled / loaded

@@ -153,7 +153,7 @@ DIAG_SCENARIOS = ("default", "hill-drive", "urban", "urban-dense")
 
 def diagnostic(seeds: int, out: Path) -> int:
     """The residual autocorrelation of ekf-rts (model off) on simulated and real drives."""
-    from bench_real_logs import LOGS, data_root
+    from bench_real_logs import data_root, present_logs
 
     from vnav_graph.evaluation.gnss_residuals import gnss_residual_autocorr
     from vnav_graph.io import load_drive
@@ -171,10 +171,7 @@ def diagnostic(seeds: int, out: Path) -> int:
         doc["simulated"][sc] = vals
         print(sc, vals, file=sys.stderr, flush=True)
     root = data_root(None)
-    for rel in LOGS:
-        p = root / rel
-        if not p.exists():
-            continue
+    for rel, p in present_logs(root, missing=[]):  # absent logs are simply left out
         d = load_drive(p)
         res = run_one("ekf-rts", d, interrupts=False)
         doc["logs"][rel.split("/")[0]] = (None if res.estimate is None

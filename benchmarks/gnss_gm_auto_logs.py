@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_real_logs import LOGS, data_root  # noqa: E402
+from bench_real_logs import data_root, present_logs  # noqa: E402
 from real_logs_table import NAMES  # noqa: E402
 
 ESTIMATORS = ("ekf-rts", "graph-batch")
@@ -66,11 +66,7 @@ def main(argv: list[str] | None = None) -> int:
 
     root = data_root(args.data)
     doc: dict[str, Any] = {"config": GM, "logs": {}}
-    for rel in LOGS:
-        p = root / rel
-        if not p.exists():
-            print(f"missing: {rel}", file=sys.stderr)
-            continue
+    for rel, p in present_logs(root):
         drive = load_drive(p)
         doc["logs"][rel.split("/")[0]] = {
             "off": scores(run_holdout(drive, ESTIMATORS)),

@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_real_logs import LOGS, data_root  # noqa: E402
+from bench_real_logs import data_root, present_logs  # noqa: E402
 
 ESTIMATORS = ("ekf-rts", "graph-batch")
 
@@ -53,11 +53,7 @@ def main(argv: list[str] | None = None) -> int:
     variants = [("off", None)] + [(f"σ {args.sd:g} m τ {t:g} s", (args.sd, t))
                                   for t in args.tau]
     doc: dict[str, Any] = {"sd_m": args.sd, "tau_s": args.tau, "logs": {}}
-    for rel in LOGS:
-        p = root / rel
-        if not p.exists():
-            print(f"missing: {rel}", file=sys.stderr)
-            continue
+    for rel, p in present_logs(root):
         drive = load_drive(p)
         row: dict[str, Any] = {}
         for name, v in variants:

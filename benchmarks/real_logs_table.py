@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_real_logs import LOGS, data_root  # noqa: E402
+from bench_real_logs import data_root, present_logs  # noqa: E402
 
 NAMES = {"erle_pxf_218": "218", "erle_pxf_loiter_rtl": "loiter_rtl",
          "erle_pxf_181_gps_glitch": "181 glitch¹", "ski_iphone_100hz": "ski",
@@ -94,11 +94,7 @@ def main(argv: list[str] | None = None) -> int:
 
     root = data_root(args.data)
     docs: dict[str, dict[str, Any]] = {}
-    for rel in LOGS:
-        p = root / rel
-        if not p.exists():
-            print(f"missing: {rel}", file=sys.stderr)
-            continue
+    for rel, p in present_logs(root):
         t0 = time.perf_counter()
         docs[NAMES[rel.split("/")[0]]] = run_holdout(load_drive(p), None, progress=True).doc
         print(f"{rel}: {time.perf_counter() - t0:.0f} s", file=sys.stderr)

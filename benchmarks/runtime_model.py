@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_real_logs import data_root  # noqa: E402
+from bench_real_logs import data_root, present_logs  # noqa: E402
 
 SIMULATED = [("default", None), ("cold-start-phone", None), ("sortie", None),
              ("hill-drive", 120.0), ("hill-drive", 480.0), ("hill-drive-mag", 120.0),
@@ -43,9 +43,8 @@ def drives(quick: bool, root: Path):
             lambda sc=sc, dur=dur: simulate(sc, 0, **({} if dur is None else
                                                        {"duration_s": dur})))
     if not quick:
-        for rel in LOGS:
-            if (root / rel).exists():
-                yield Path(rel).name, lambda rel=rel: load_drive(root / rel)
+        for rel, p in present_logs(root, missing=[], logs=LOGS):
+            yield Path(rel).name, lambda p=p: load_drive(p)
 
 
 def fit(runs: list[dict], names: list[str]) -> dict[str, list[float]]:
