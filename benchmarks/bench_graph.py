@@ -75,7 +75,7 @@ class StagePeaks:
         self._reset = Path("/proc/self/clear_refs")
 
     @staticmethod
-    def _status_mb(field: str) -> float | None:
+    def status_mb(field: str) -> float | None:
         try:
             for line in Path("/proc/self/status").read_text().splitlines():
                 if line.startswith(field):
@@ -86,7 +86,7 @@ class StagePeaks:
 
     @classmethod
     def _hwm_mb(cls) -> float | None:
-        return cls._status_mb("VmHWM:")
+        return cls.status_mb("VmHWM:")
 
     def start(self) -> None:
         from vnav_graph.estimators.graph.batch.linalg import trim_heap
@@ -97,7 +97,7 @@ class StagePeaks:
             self._reset.write_text("5")
         except OSError:
             pass
-        self._base = self._status_mb("VmRSS:") or 0.0
+        self._base = self.status_mb("VmRSS:") or 0.0
 
     def end(self, stage: str) -> None:
         hwm = self._hwm_mb()

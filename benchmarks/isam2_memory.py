@@ -31,7 +31,6 @@ memory is known against the keyframe reached, not against wall time. Writes
 from __future__ import annotations
 
 import argparse
-import gc
 import json
 import subprocess
 import sys
@@ -41,21 +40,14 @@ from typing import Any
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_graph import StagePeaks  # noqa: E402
+
 SAMPLE_EVERY = 100
 
 
-def rss_mb(field: str = "VmRSS:") -> float:
-    for line in Path("/proc/self/status").read_text().splitlines():
-        if line.startswith(field):
-            return float(line.split()[1]) / 1024.0
-    return float("nan")
-
-
-def _reset_peak() -> None:
-    try:
-        Path("/proc/self/clear_refs").write_text("5")
-    except OSError:
-        pass
+def rss_mb() -> float:
+    return StagePeaks.status_mb("VmRSS:") or float("nan")
 
 
 def records_mb(est: Any, window: Any) -> float:
@@ -73,7 +65,6 @@ def records_mb(est: Any, window: Any) -> float:
 
 def run_one(hours: float, seed: int) -> dict[str, Any]:
     from vnav_graph.estimators.graph import GraphISAM2
-    from vnav_graph.estimators.graph.batch.linalg import trim_heap
     from vnav_graph.estimators.graph.isam2.online import OnlinePass
     from vnav_graph.simulation.scenario import simulate
 
@@ -91,10 +82,9 @@ def run_one(hours: float, seed: int) -> dict[str, Any]:
             if not windows or windows[-1] is not self.win:
                 windows.append(self.win)
 
-    gc.collect()
-    trim_heap()
+    stages = StagePeaks()
+    stages.start()  # collect, trim the C heap, reset the high-water mark
     before = rss_mb()
-    _reset_peak()
     OnlinePass.update = sampled
     try:
         t0 = time.perf_counter()
@@ -102,7 +92,7 @@ def run_one(hours: float, seed: int) -> dict[str, Any]:
         wall = time.perf_counter() - t0
     finally:
         OnlinePass.update = original
-    peak = rss_mb("VmHWM:")
+    stages.end("graph-isam2")
     kf = np.array([k for k, _ in samples], float)
     mb = np.array([m for _, m in samples])
     n_kf = int(est.info["keyframes"])
@@ -112,7 +102,7 @@ def run_one(hours: float, seed: int) -> dict[str, Any]:
     window = windows[-1] if windows else None
     return {"hours": hours, "keyframes": n_kf, "rss_before_mb": before,
             "online_peak_growth_mb": float(mb.max() - before),
-            "run_peak_growth_mb": peak - before,
+            "run_peak_growth_mb": stages.growth["graph-isam2"],
             "slope_mb_per_h": None if per_kf is None else per_kf * kf_per_h * 3600.0,
             "records_mb_per_h": records_mb(est, window) / hours,
             "online_s": float(est.info["online_s"]), "run_s": wall,
