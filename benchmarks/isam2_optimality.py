@@ -3,7 +3,7 @@
 Usage::
 
     python benchmarks/isam2_optimality.py [--seeds 5] [--duration 300] [--every 20]
-        [--scenarios hill-drive,sortie] --out DIR
+        [--scenarios hill-drive,sortie] [--config FILE] --out DIR
 
 Writes ``DIR/isam2_optimality.json`` (schema ``vnav_graph.isam2_optimality/1``) and prints
 one line per scenario.
@@ -24,8 +24,8 @@ and the distance of graph-isam2 from its optimum (``online_gap``, ``lag_gap``). 
 cuts and seeds. ``lag`` ≈ ``lag_optimum`` with both far above ``smoother`` means the gap of
 the lag goal is information the lag has not seen (a GNSS outage longer than L), not the
 incremental solver; a large ``lag_gap`` would be the solver's. Every estimator runs with
-``benchmarks/hard_scenarios.toml``. Cut drives end with every stream and the truth at t_c
-(``Drive.until``).
+``benchmarks/hard_scenarios.toml`` (``--config``: another file of the same form). Cut
+drives end with every stream and the truth at t_c (``Drive.until``).
 """
 
 from __future__ import annotations
@@ -57,7 +57,7 @@ def ned_at(traj: Any, t: float, origin: Any) -> np.ndarray | None:
     return lla_to_ned(traj.at(np.array([t])).lla, origin)[0]
 
 
-def run_one(job: tuple[str, int, float, float]) -> dict[str, Any]:
+def run_one(job: tuple[str, int, float, float, str]) -> dict[str, Any]:
     """One (scenario, seed): the errors of every estimate at every cut (module docstring)."""
     from vnav_graph.estimators.configfile import load_configs
     from vnav_graph.evaluation.montecarlo import shorten_scenario
@@ -65,8 +65,8 @@ def run_one(job: tuple[str, int, float, float]) -> dict[str, Any]:
     from vnav_graph.runner import run_one as run_estimator
     from vnav_graph.simulation import simulate
 
-    scenario, seed, duration, every = job
-    configs = load_configs(CONFIG)
+    scenario, seed, duration, every, config = job
+    configs = load_configs(Path(config))
     drive = simulate(shorten_scenario(scenario, duration), seed)
     o, t0 = drive.origin_lla, float(drive.imu.t[0])
     full = {n: run_estimator(n, drive, configs.get(n), interrupts=False)
@@ -140,13 +140,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--every", type=float, default=20.0, help="spacing of the cuts [s]")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--scenarios", default="hill-drive,sortie")
+    ap.add_argument("--config", type=Path, default=CONFIG,
+                    help="estimator configurations (default benchmarks/hard_scenarios.toml)")
     ap.add_argument("--out", type=Path, required=True)
     a = ap.parse_args(argv)
     if a.seeds < 1 or a.workers < 1 or a.every <= 0 or a.duration <= FIRST_CUT_S:
         print("isam2_optimality: --seeds, --workers, --every must be positive and --duration "
               f"> {FIRST_CUT_S:.0f} s", file=sys.stderr)
         return 2
-    jobs = [(s, k, a.duration, a.every) for s in a.scenarios.split(",") if s
+    jobs = [(s, k, a.duration, a.every, str(a.config)) for s in a.scenarios.split(",") if s
             for k in range(a.seeds)]
     t0 = time.perf_counter()
     runs = []
@@ -159,7 +161,9 @@ def main(argv: list[str] | None = None) -> int:
     summary = summarise(runs)
     doc = {"schema": SCHEMA, "config": {**{k: getattr(a, k) for k in
                                            ("seeds", "duration", "every", "scenarios")},
-                                        "configuration": "benchmarks/hard_scenarios.toml",
+                                        "configuration": (
+                                            "benchmarks/hard_scenarios.toml"
+                                            if a.config == CONFIG else a.config.name),
                                         "wall_s": time.perf_counter() - t0},
            "summary": summary, "runs": runs}
     a.out.mkdir(parents=True, exist_ok=True)

@@ -37,6 +37,7 @@ class GraphConfig(GnssErrorSettings):
     final_batch: also run the batch solver from iSAM2's estimate, as its check.
     isam2_batch_fallback: return the check's solution when it ends significantly lower.
     isam2_lag_s: lag L of graph-isam2's fixed-lag estimate ``Estimate.lag`` [s].
+    isam2_gate_s: span of graph-isam2's post-solve GNSS gate after each update [s] (None: off).
     final_rounds: at most this many forced-relinearisation updates after the last keyframe.
     isam2_window_s: seconds of keyframes kept in iSAM2 (None: all; at least two segments).
     observable_ratio: posterior/prior σ below which a baro parameter counts as observed.
@@ -82,6 +83,7 @@ class GraphConfig(GnssErrorSettings):
     # otherwise a check that ends lower is a warning and iSAM2's own estimate is returned
     isam2_batch_fallback: bool = False
     isam2_lag_s: float = 10.0
+    isam2_gate_s: float | None = 20.0
     final_rounds: int = 8
     isam2_window_s: float | None = 600.0
     observable_ratio: float = 0.8
@@ -117,6 +119,10 @@ class GraphConfig(GnssErrorSettings):
         if not (np.isfinite(self.isam2_lag_s) and self.isam2_lag_s >= 0):
             raise ValueError("GraphConfig.isam2_lag_s must be a finite lag ≥ 0 [s], not "
                              f"{self.isam2_lag_s!r}")
+        if self.isam2_gate_s is not None and not (np.isfinite(self.isam2_gate_s)
+                                                  and self.isam2_gate_s >= 0):
+            raise ValueError("GraphConfig.isam2_gate_s must be None or a finite span ≥ 0 [s], "
+                             f"not {self.isam2_gate_s!r}")
         if self.isam2_window_s is not None and self.isam2_lag_s >= self.isam2_window_s:
             raise ValueError(f"GraphConfig.isam2_lag_s ({self.isam2_lag_s:g} s) must be shorter "
                              f"than isam2_window_s ({self.isam2_window_s:g} s)")

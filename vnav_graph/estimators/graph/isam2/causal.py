@@ -38,6 +38,9 @@ def causal_pass(drive: Drive, cfg: GraphConfig, robust: bool,
     if st0.anchor is None:
         return OnlinePass(drive, cfg, robust, extensions, P, init, causal=True).run(), info
     m = st0.anchor
+    # the first pass's online gate (``online_gate``) judged fixes from its own start: the
+    # second pass, graph-batch's problem, starts from the same fixes as a pass of its own
+    g_use0, rej0 = P.g_use.copy(), P.g_rej_post
     first = OnlinePass(drive, cfg, robust, extensions, P, init, causal=True)
     first.run_to(m)
     # (m is the last keyframe when the heading never becomes known: the first pass is then
@@ -46,6 +49,7 @@ def causal_pass(drive: Drive, cfg: GraphConfig, robust: bool,
     kept, kept_rot = first.online[:n_kept].copy(), first.online_rot[:n_kept].copy()
     answers = first.answers
     del first  # its iSAM2 is not alive under the second pass
+    P.g_use[:], P.g_rej_post = g_use0, rej0
     again = OnlinePass(drive, cfg, robust, extensions, P, init)
     again.run_to(P.n_kf - 1)
     again.online[:n_kept], again.online_rot[:n_kept] = kept, kept_rot

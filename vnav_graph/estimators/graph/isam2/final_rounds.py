@@ -115,6 +115,9 @@ def finish(op: Any) -> OnlineResult:
               "baro_scale_max_abs": op.s_max if op.has_baro else None,
               "isam2_final_rounds": rounds,
               "isam2_gnss_rejected_postsolve": P.g_rej_post - gate0[1],
+              # refused by the online pass's gate after its updates (``online_gate``)
+              "isam2_gnss_rejected_online": op.gate.refused,
+              "isam2_gate_rounds": op.gate.rounds,
               **op.win_info,
               "final_rounds_s": time.perf_counter() - t_online}
     return OnlineResult(P, est, extra_online, t_online, op.online, op.ext, op.init, op.pims,

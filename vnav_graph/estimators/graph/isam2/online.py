@@ -45,6 +45,7 @@ from . import linear_factors as terms
 from . import relin
 from .answers import Answers
 from .final_rounds import OnlineResult, finish
+from .online_gate import OnlineGate
 from .py_factors import PyFactorBook
 from .setup import (
     first_keyframe,
@@ -135,6 +136,7 @@ class OnlinePass:
         self.answers = Answers(P, seg, cfg.isam2_lag_s)
         self.last_fix_t = float(P.t_kf[0])  # the latest fix in an update so far
         self.return_rounds = 0  # extra rounds when GNSS returned (``_iterate``)
+        self.gate = OnlineGate(P, cfg.isam2_gate_s)  # the post-solve gate after each update
         self.answers.online_cov[0] = self.answers.cov(self.isam, vals0, 0, 0)
         self.baro_next = 0
         self.calib_rw = np.asarray(cfg.calib_rw, float)
@@ -335,7 +337,14 @@ class OnlinePass:
                 and np.linalg.norm(self.vel[k + 1]) < DIVERGED_SPEED):
             raise update_error(P, k, None, bool(P.gap[k]))
         if self._gnss_returns(k, fix_at):
-            marked = self._iterate(k, marked)
+            marked = self._iterate(k, marked, RETURN_ROUNDS)
+        if self.gate.judge(book, k, arr, self.dg_kf).size:  # (``online_gate``)
+            # converged first, as the batch's gate judges; then without what still fails
+            marked = self._iterate(k, marked, RETURN_ROUNDS, count=False)
+            bad = self.gate.judge(book, k, arr, self.dg_kf)
+            if bad.size:
+                gated, kf_rm = self.gate.refuse(book, bad)
+                marked = self._iterate(k, marked, 1, gated, kf_rm, count=False)
         self._read_calibration(k)
         self.answers.after_update(self.isam, k, gtsam.Pose3(gtsam.Rot3(self.rot[k + 1]),
                                                             self.pos[k + 1]))
@@ -367,24 +376,33 @@ class OnlinePass:
         self.last_fix_t = max(self.last_fix_t, float(t.max()))
         return back
 
-    def _iterate(self, k: int, marked: np.ndarray) -> np.ndarray:
-        """Up to ``RETURN_ROUNDS`` more relinearise-and-solve rounds in update k, when GNSS
-        returns: the fix pulls the dead-reckoned states metres to tens of metres, and one
+    def _iterate(self, k: int, marked: np.ndarray, rounds: int,
+                 gated: np.ndarray | None = None, kf_rm: list[int] | None = None,
+                 count: bool = True) -> np.ndarray:
+        """Up to ``rounds`` more relinearise-and-solve rounds in update k: ``RETURN_ROUNDS``
+        when GNSS returns, one after the online gate refused fixes (``gated``: the intervals
+        whose GNSS term loses them, ``kf_rm``: the refused keyframe fixes' factors; ``count``:
+        counted in ``return_rounds``). When GNSS
+        returns the fix pulls the dead-reckoned states metres to tens of metres, and one
         Gauss-Newton step from there leaves the online estimate short of the filtering
         optimum (long-outage seed 0: 11.4 m horizontal error at the first fix after the
         180 s outage, the forward ekf 0.7 m). Each round rebuilds the interval terms due and
         lets iSAM2 relinearise its own factors; it stops when nothing was relinearised.
         Returns the keyframes marked by all rounds."""
         P, book = self.P, self.book
-        for _ in range(RETURN_ROUNDS):
+        gate_round = gated is not None
+        for i in range(rounds):
             book.pending = book.due(marked, k + 1, self.rot, self.pos, self.calibration())
+            if gate_round and i == 0:
+                book.pending = np.union1d(book.pending, gated).astype(int)
             nf = gtsam.NonlinearFactorGraph()
             self.pyf.check(self.isam, k + 1, self.arrays)
             tags, removed = book.rebuild(nf, k, *self.arrays, self.calibration(), self.bt, self.bz,
                                          P.pri, self.dg_kf)
             ext_removed = self.pyf.rebuild_into(nf, 0, self.arrays)
             n_ext = len(ext_removed)
-            removed = sorted(set(removed) | set(ext_removed))
+            removed = sorted(set(removed) | set(ext_removed)
+                             | set(kf_rm if gate_round and i == 0 else []))
             try:
                 # the newest keyframe last in the re-elimination, not every key of the rebuilt
                 # terms (iSAM2's default: after a return nearly all of them, one dense root
@@ -402,7 +420,10 @@ class OnlinePass:
                     self.b_last)
             except RuntimeError as exc:
                 raise update_error(P, k, exc, bool(P.gap[k])) from exc
-            self.return_rounds += 1
+            if count:
+                self.return_rounds += 1
+            else:
+                self.gate.rounds += 1
             marked = np.union1d(marked, m2).astype(int)
             if not tags and not n_ext and ures.getVariablesRelinearized() == 0:
                 break

@@ -1,0 +1,107 @@
+"""graph-isam2's post-solve GNSS gate inside the online pass (``GraphConfig.isam2_gate_s``).
+
+The batch's post-solve gate (``problem.post_solve_rejections``) refuses the fixes whose
+whitened residual χ² *at the solution* exceeds the ``1 − (1 − p)²`` quantile, then solves
+again. graph-batch on a drive cut at t (the filtering optimum of the online estimate) does
+that over every fix up to t; without it the online pass weighs a multipath fix only by its
+Huber weight at the prediction, and keeps it.
+
+After each update the gate here takes the used fixes of the last ``isam2_gate_s`` seconds
+still in iSAM2 and evaluates their χ² at iSAM2's current estimate with the batch's rule and
+threshold. When some fail, the update first runs the relinearise-and-solve rounds of a GNSS
+return (``OnlinePass._iterate``): the batch judges at a converged solution, and one
+Gauss-Newton step is not one (after a 150 s IMU logging gap, judging after the single step
+refused 503 of the next 520 fixes: the Huber-weighted fixes pulled too little, the refused
+ones not at all, a lock-out). The fixes that still fail are refused (``P.g_use``) and the
+update runs one more round without them. Causal: a fix is judged only with the
+data up to the update. Like the batch's gate and the ekf's, a refusal is final: the final
+rounds' gate adds to it and does not re-admit. As in the batch, nothing is refused when
+every candidate fails (a solution that fits none of them is not one to judge them by).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from ..model import interval_factors as gf
+from . import linear_factors as terms
+from .relin import TermBook
+
+
+class OnlineGate:
+    """The gate of one online pass: its χ² thresholds and what it refused."""
+
+    def __init__(self, P: Any, span_s: float | None) -> None:
+        from scipy.stats import chi2
+
+        self.P = P
+        prob = P.cfg.gnss_gate_prob
+        self.on = span_s is not None and span_s > 0 and prob > 0
+        self.span_s = float(span_s or 0.0)
+        q = 1.0 - (1.0 - prob) ** 2 if prob > 0 else 0.0
+        self.thr = {3: float(chi2.ppf(q, 3)), 6: float(chi2.ppf(q, 6))} if self.on else {}
+        self.refused = 0  # fixes refused by the online gate
+        self.updates = 0  # updates in which it refused any
+        self.rounds = 0  # solve rounds it ran (``OnlinePass._iterate``)
+
+    def candidates(self, book: TermBook, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """The used fixes iSAM2 holds after the update that created keyframe k + 1, from
+        ``span_s`` before it; and the interval each one's rows are written on (≤ k)."""
+        P = self.P
+        t_hi = float(P.t_kf[k + 1])
+        t_lo = max(t_hi - self.span_s, float(P.t_kf[book.floor]))
+        a, b = np.searchsorted(P.g_t, [t_lo, t_hi], side="left"), \
+            np.searchsorted(P.g_t, t_hi, side="right")
+        idx = np.arange(a[0], b)
+        idx = idx[P.g_use[idx] & (P.g_kf[idx] >= -1)]
+        m = np.minimum(gf.interval_of(P.t_kf, P.g_t[idx]), k)
+        keep = m >= book.floor
+        return idx[keep], m[keep]
+
+    def judge(self, book: TermBook, k: int, arrays: tuple[Any, ...],
+              dg_kf: Any) -> np.ndarray:
+        """The candidate fixes (``candidates``) that fail the gate at the running estimate
+        ``arrays`` after the update that created keyframe k + 1; empty when none or every
+        one fails, or when the gate is off."""
+        none = np.zeros(0, dtype=int)
+        if not self.on:
+            return none
+        P = self.P
+        idx, m = self.candidates(book, k)
+        if idx.size < 2:
+            return none
+        st = terms.keyframe_states(P, np.unique(m).tolist(), *arrays, dg_kf)
+        rows = gf.gnss_rows(
+            P.dense, st, P.g_t[idx], P.g_pos[idx], P.g_pos_sd[idx],
+            None if P.g_vel is None else P.g_vel[idx],
+            None if P.g_vel_sd is None else P.g_vel_sd[idx], P.lever, k=m,
+            omega_b=None if P.g_omega is None else P.g_omega[idx])
+        r = rows.r.reshape(-1, idx.size, 3)  # (1 or 2, n, 3): position rows, then velocity
+        bad = np.sum(r**2, axis=(0, 2)) > self.thr[3 * r.shape[0]]
+        if not bad.any() or bad.all():
+            return none
+        return idx[bad]
+
+    def refuse(self, book: TermBook, rej: np.ndarray) -> tuple[np.ndarray, list[int]]:
+        """Refuse the fixes ``rej`` (``P.g_use``, ``P.g_rej_post``, ``refused``) and take
+        them out of their intervals' terms (``book.fixes_of``); returns the intervals whose
+        GNSS term must be rebuilt and the iSAM2 indices of the refused keyframe fixes'
+        factors, to remove."""
+        P = self.P
+        P.g_use[rej] = False
+        P.g_rej_post += int(rej.size)
+        self.refused += int(rej.size)
+        self.updates += 1
+        m = gf.interval_of(P.t_kf, P.g_t[rej])
+        pend = []
+        for mm in set(m.tolist()) | {int(x) - 1 for x in P.g_kf[rej] if x >= 1}:
+            if 0 <= mm < len(book.fixes_of):
+                f = book.fixes_of[mm]
+                drop = np.isin(f, rej)
+                if drop.any():
+                    book.fixes_of[mm] = f[~drop]
+                    pend.append(mm)
+        kf_rm = [j for i in rej[P.g_kf[rej] >= 0] for j in book.kf_fix_idx.pop(int(i), [])]
+        return np.unique(np.asarray(pend, dtype=int)), kf_rm
