@@ -133,14 +133,16 @@ def test_unused_fixes_are_the_refused_positions_without_a_used_velocity(smoothed
     assert unused <= set(est.info["gnss_rejected_t"])
 
 
-def test_huber_weights_are_the_graphs():
-    """One threshold rule in both families: min(1, k/e) of the Mahalanobis norm e = √χ²,
-    the graph's IRLS weight (``graph.model.robust.weight_and_loss``)."""
-    from vnav_graph.estimators.graph.model.robust import weight_and_loss
+def test_huber_weights_are_the_forward_filters():
+    """One threshold rule for the forward filter and the smoothed-residual weights: min(1, k/e)
+    of the Mahalanobis norm e = √χ², the vectorised shared loss (``sensors.robust``, the
+    graphs' IRLS weight) against the forward filter's scalar kernel (``ekf.model``)."""
+    from vnav_graph.estimators.ekf.model import huber_weight
 
     e = np.array([0.0, 0.5, 1.99, 2.0, 2.01, 7.0, 1e4])
-    np.testing.assert_allclose(regate.huber_weights(e**2, 2.0),
-                               weight_and_loss(e, "huber", 2.0)[0], rtol=1e-15)
+    for k in (2.0, 0.0):
+        np.testing.assert_allclose(regate.huber_weights(e**2, k),
+                                   [huber_weight(x, k) for x in e], rtol=1e-15)
     np.testing.assert_array_equal(regate.huber_weights(e**2, 0.0), np.ones(e.size))
 
 

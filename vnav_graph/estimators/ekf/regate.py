@@ -49,6 +49,7 @@ from ...geo.earth import radii
 from ...geo.frames import quat_to_mat
 from ...sensors.gnss_model import GnssGM
 from ...sensors.model import SensorModel
+from ...sensors.robust import weight_and_loss
 from ...types import Drive, Estimate, FloatArray
 from .settings import EkfConfig
 
@@ -94,12 +95,13 @@ def fix_chi2_parts(drive: Drive, est: Estimate, model: SensorModel, g_latency: f
 
 
 def huber_weights(c2: FloatArray, k: float) -> FloatArray:
-    """Huber's IRLS weight min(1, k/e) of each Mahalanobis norm e = √χ² (``huber_weight``,
-    ``graph.model.robust``); all 1 for k ≤ 0 (no loss)."""
+    """Huber's IRLS weight min(1, k/e) of each Mahalanobis norm e = √χ² (``sensors.robust``,
+    the graphs' loss; ``ekf.model.huber_weight`` is the forward filter's scalar kernel of it);
+    all 1 for k ≤ 0 (no loss)."""
     e = np.sqrt(np.maximum(np.asarray(c2, dtype=float), 0.0))
     if k <= 0:
         return np.ones(e.size)
-    return np.minimum(1.0, k / np.maximum(e, 1e-300))
+    return weight_and_loss(e, "huber", k)[0]
 
 
 def huber_sd(pos_sd: FloatArray, w: FloatArray, gm: GnssGM | None) -> FloatArray:
