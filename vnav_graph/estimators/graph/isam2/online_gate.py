@@ -13,8 +13,8 @@ return (``OnlinePass._iterate``): the batch judges at a converged solution, and 
 Gauss-Newton step is not one (after a 150 s IMU logging gap, judging after the single step
 refused 503 of the next 520 fixes: the Huber-weighted fixes pulled too little, the refused
 ones not at all, a lock-out). The fixes that still fail are refused (``P.g_use``) and the
-update runs one more round without them. Causal: a fix is judged only with the
-data up to the update. Like the batch's gate and the ekf's, a refusal is final: the final
+update runs one more round without them. Causal: a fix is judged only with the data up to
+the update. Like the batch's gate and the ekf's, a refusal is final: the final
 rounds' gate adds to it and does not re-admit. As in the batch, nothing is refused when
 every candidate fails (a solution that fits none of them is not one to judge them by).
 """
@@ -43,7 +43,6 @@ class OnlineGate:
         q = 1.0 - (1.0 - prob) ** 2 if prob > 0 else 0.0
         self.thr = {3: float(chi2.ppf(q, 3)), 6: float(chi2.ppf(q, 6))} if self.on else {}
         self.refused = 0  # fixes refused by the online gate
-        self.updates = 0  # updates in which it refused any
         self.rounds = 0  # solve rounds it ran (``OnlinePass._iterate``)
 
     def candidates(self, book: TermBook, k: int) -> tuple[np.ndarray, np.ndarray]:
@@ -52,9 +51,8 @@ class OnlineGate:
         P = self.P
         t_hi = float(P.t_kf[k + 1])
         t_lo = max(t_hi - self.span_s, float(P.t_kf[book.floor]))
-        a, b = np.searchsorted(P.g_t, [t_lo, t_hi], side="left"), \
-            np.searchsorted(P.g_t, t_hi, side="right")
-        idx = np.arange(a[0], b)
+        idx = np.arange(np.searchsorted(P.g_t, t_lo, side="left"),
+                        np.searchsorted(P.g_t, t_hi, side="right"))
         idx = idx[P.g_use[idx] & (P.g_kf[idx] >= -1)]
         m = np.minimum(gf.interval_of(P.t_kf, P.g_t[idx]), k)
         keep = m >= book.floor
@@ -93,7 +91,6 @@ class OnlineGate:
         P.g_use[rej] = False
         P.g_rej_post += int(rej.size)
         self.refused += int(rej.size)
-        self.updates += 1
         m = gf.interval_of(P.t_kf, P.g_t[rej])
         pend = []
         for mm in set(m.tolist()) | {int(x) - 1 for x in P.g_kf[rej] if x >= 1}:
