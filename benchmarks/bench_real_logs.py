@@ -20,6 +20,7 @@ import os
 import sys
 from collections.abc import Iterator, Sequence
 from pathlib import Path
+from typing import Any
 
 LOGS = ("erle_pxf_218/218.BIN", "erle_pxf_loiter_rtl/Loiter_RTL.bin",
         "erle_pxf_181_gps_glitch/181.BIN", "ski_iphone_100hz",
@@ -46,6 +47,18 @@ def present_logs(root: Path, missing: list[str] | None = None,
             missing.append(rel)
         else:
             print(f"missing: {rel}", file=sys.stderr)
+
+
+def write_logs_json(doc: Any, has_logs: bool, out: str | Path, name: str) -> bool:
+    """Write ``doc`` as ``out/name`` (indented JSON) when a shared log was present
+    (``has_logs``); else say so on stderr, write nothing and return False."""
+    if not has_logs:
+        print("no shared logs found", file=sys.stderr)
+        return False
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / name).write_text(json.dumps(doc, indent=1, default=str) + "\n")
+    return True
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -20,7 +20,6 @@ not proof of harm.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 from typing import Any
@@ -28,7 +27,7 @@ from typing import Any
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_real_logs import data_root, present_logs  # noqa: E402
+from bench_real_logs import data_root, present_logs, write_logs_json  # noqa: E402
 from real_logs_table import NAMES  # noqa: E402
 
 ESTIMATORS = ("ekf-rts", "graph-batch")
@@ -72,12 +71,8 @@ def main(argv: list[str] | None = None) -> int:
             "off": scores(run_holdout(drive, ESTIMATORS)),
             "auto": scores(run_holdout(drive, ESTIMATORS, configs=configs()))}
         print(f"{rel}: done", file=sys.stderr, flush=True)
-    if not doc["logs"]:
-        print("no shared logs found", file=sys.stderr)
+    if not write_logs_json(doc, bool(doc["logs"]), args.out, "gnss_gm_auto_logs.json"):
         return 2
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "gnss_gm_auto_logs.json").write_text(json.dumps(doc, indent=1, default=str) + "\n")
     print(render(doc))
     return 0
 

@@ -19,14 +19,13 @@ the state on it is a real win, a small loss is not proof of harm.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_real_logs import data_root, present_logs  # noqa: E402
+from bench_real_logs import data_root, present_logs, write_logs_json  # noqa: E402
 
 ESTIMATORS = ("ekf-rts", "graph-batch")
 
@@ -68,12 +67,8 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{rel} {name}: {time.perf_counter() - t0:.0f} s", file=sys.stderr,
                   flush=True)
         doc["logs"][rel.split("/")[0]] = row
-    if not doc["logs"]:
-        print("no shared logs found", file=sys.stderr)
+    if not write_logs_json(doc, bool(doc["logs"]), args.out, "gnss_gm_study.json"):
         return 2
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "gnss_gm_study.json").write_text(json.dumps(doc, indent=1, default=str) + "\n")
     print(render(doc, [n for n, _ in variants]))
     return 0
 

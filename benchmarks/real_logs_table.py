@@ -13,14 +13,13 @@ solver warnings, baro-scale agreement) and the screening counts.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_real_logs import data_root, present_logs  # noqa: E402
+from bench_real_logs import data_root, present_logs, write_logs_json  # noqa: E402
 
 NAMES = {"erle_pxf_218": "218", "erle_pxf_loiter_rtl": "loiter_rtl",
          "erle_pxf_181_gps_glitch": "181 glitch¹", "ski_iphone_100hz": "ski",
@@ -98,12 +97,8 @@ def main(argv: list[str] | None = None) -> int:
         t0 = time.perf_counter()
         docs[NAMES[rel.split("/")[0]]] = run_holdout(load_drive(p), None, progress=True).doc
         print(f"{rel}: {time.perf_counter() - t0:.0f} s", file=sys.stderr)
-    if not docs:
-        print("no shared logs found", file=sys.stderr)
+    if not write_logs_json(docs, bool(docs), args.out, "real_logs_table.json"):
         return 2
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "real_logs_table.json").write_text(json.dumps(docs, indent=1, default=str))
     table = render(docs)
     print(table)
     if not args.no_write:

@@ -12,9 +12,14 @@ and Mahalanobis norm e = ‖r‖ costs ρ(e) instead of e²/2, with the threshol
 (Huber 1964; Zhang, "Parameter estimation techniques", 1997, Table 1). The weight w = ρ'(e)/e
 is the iteratively-reweighted-least-squares weight: rows scaled by √w at each linearisation
 (GTSAM's ``noiseModel.Robust`` on the graphs' C++ factors, tested equal), or a variance R/w.
+
+A fix that fits the solution worse than any loss should weigh is refused after solving by
+both families' post-solve gates at one threshold (``post_gate_threshold``).
 """
 
 from __future__ import annotations
+
+from functools import cache
 
 import numpy as np
 
@@ -36,3 +41,13 @@ def weight_and_loss(e: FloatArray, loss: str, k: float) -> tuple[FloatArray, Flo
         q = (e / k) ** 2
         return 1.0 / (1.0 + q), 0.5 * k * k * np.log1p(q)
     raise ValueError(f"unknown robust loss {loss!r}")
+
+
+@cache
+def post_gate_threshold(gate_prob: float, dof: int) -> float:
+    """χ² threshold of the post-solve GNSS gates (the graphs', ekf-rts's post-smoothing one):
+    the 1 − (1 − p)² quantile, ``dof`` degrees of freedom (a false rejection costs a whole
+    re-solve, a glitch has χ² in the thousands either way)."""
+    from scipy.stats import chi2
+
+    return float(chi2.ppf(1.0 - (1.0 - gate_prob) ** 2, dof))

@@ -43,20 +43,14 @@ from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
-from scipy.stats import chi2
 
 from ...geo.earth import radii
 from ...geo.frames import quat_to_mat
 from ...sensors.gnss_model import GnssGM
 from ...sensors.model import SensorModel
-from ...sensors.robust import weight_and_loss
+from ...sensors.robust import post_gate_threshold, weight_and_loss
 from ...types import Drive, Estimate, FloatArray
 from .settings import EkfConfig
-
-
-def post_gate_threshold(gate_prob: float, dof: int) -> float:
-    """χ² threshold of the post-smoothing gate: the 1 − (1 − p)² quantile (the graph's)."""
-    return float(chi2.ppf(1.0 - (1.0 - gate_prob) ** 2, dof))
 
 
 def fix_chi2(drive: Drive, est: Estimate, model: SensorModel,

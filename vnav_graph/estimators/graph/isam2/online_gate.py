@@ -26,22 +26,18 @@ from typing import Any
 import numpy as np
 
 from ..model import interval_factors as gf
+from ..model.problem import gate_failures
 from . import linear_factors as terms
 from .relin import TermBook
 
 
 class OnlineGate:
-    """The gate of one online pass: its χ² thresholds and what it refused."""
+    """The gate of one online pass and what it refused."""
 
     def __init__(self, P: Any, span_s: float | None) -> None:
-        from scipy.stats import chi2
-
         self.P = P
-        prob = P.cfg.gnss_gate_prob
-        self.on = span_s is not None and span_s > 0 and prob > 0
+        self.on = span_s is not None and span_s > 0 and P.cfg.gnss_gate_prob > 0
         self.span_s = float(span_s or 0.0)
-        q = 1.0 - (1.0 - prob) ** 2 if prob > 0 else 0.0
-        self.thr = {3: float(chi2.ppf(q, 3)), 6: float(chi2.ppf(q, 6))} if self.on else {}
         self.refused = 0  # fixes refused by the online gate
         self.rounds = 0  # solve rounds it ran (``OnlinePass._iterate``)
 
@@ -60,45 +56,29 @@ class OnlineGate:
 
     def judge(self, book: TermBook, k: int, arrays: tuple[Any, ...],
               dg_kf: Any) -> np.ndarray:
-        """The candidate fixes (``candidates``) that fail the gate at the running estimate
-        ``arrays`` after the update that created keyframe k + 1; empty when none or every
-        one fails, or when the gate is off."""
-        none = np.zeros(0, dtype=int)
+        """The candidate fixes (``candidates``) that fail the batch's gate
+        (``problem.gate_failures``) at the running estimate ``arrays`` after the update that
+        created keyframe k + 1; empty when none or every one fails, or when the gate is
+        off."""
         if not self.on:
-            return none
-        P = self.P
+            return np.zeros(0, dtype=int)
         idx, m = self.candidates(book, k)
         if idx.size < 2:
-            return none
-        st = terms.keyframe_states(P, np.unique(m).tolist(), *arrays, dg_kf)
-        rows = gf.gnss_rows(
-            P.dense, st, P.g_t[idx], P.g_pos[idx], P.g_pos_sd[idx],
-            None if P.g_vel is None else P.g_vel[idx],
-            None if P.g_vel_sd is None else P.g_vel_sd[idx], P.lever, k=m,
-            omega_b=None if P.g_omega is None else P.g_omega[idx])
-        r = rows.r.reshape(-1, idx.size, 3)  # (1 or 2, n, 3): position rows, then velocity
-        bad = np.sum(r**2, axis=(0, 2)) > self.thr[3 * r.shape[0]]
-        if not bad.any() or bad.all():
-            return none
-        return idx[bad]
+            return idx[:0]
+        st = terms.keyframe_states(self.P, np.unique(m).tolist(), *arrays, dg_kf)
+        return gate_failures(self.P, st, idx, m)
 
     def refuse(self, book: TermBook, rej: np.ndarray) -> tuple[np.ndarray, list[int]]:
         """Refuse the fixes ``rej`` (``P.g_use``, ``P.g_rej_post``, ``refused``) and take
-        them out of their intervals' terms (``book.fixes_of``); returns the intervals whose
-        GNSS term must be rebuilt and the iSAM2 indices of the refused keyframe fixes'
+        them out of their intervals' terms (``TermBook.drop_fixes``); returns the intervals
+        whose GNSS term must be rebuilt and the iSAM2 indices of the refused keyframe fixes'
         factors, to remove."""
         P = self.P
         P.g_use[rej] = False
         P.g_rej_post += int(rej.size)
         self.refused += int(rej.size)
-        m = gf.interval_of(P.t_kf, P.g_t[rej])
-        pend = []
-        for mm in set(m.tolist()) | {int(x) - 1 for x in P.g_kf[rej] if x >= 1}:
-            if 0 <= mm < len(book.fixes_of):
-                f = book.fixes_of[mm]
-                drop = np.isin(f, rej)
-                if drop.any():
-                    book.fixes_of[mm] = f[~drop]
-                    pend.append(mm)
-        kf_rm = [j for i in rej[P.g_kf[rej] >= 0] for j in book.kf_fix_idx.pop(int(i), [])]
-        return np.unique(np.asarray(pend, dtype=int)), kf_rm
+        # a fix's interval, and with the GNSS error state a keyframe fix's (the one ending
+        # at it)
+        ms = set(gf.interval_of(P.t_kf, P.g_t[rej]).tolist()) \
+            | {int(j) - 1 for j in P.g_kf[rej] if j >= 1}
+        return book.drop_fixes(rej, sorted(m for m in ms if m < len(book.fixes_of)))

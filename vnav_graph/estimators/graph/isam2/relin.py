@@ -158,6 +158,21 @@ class TermBook:
             self._note(m, st, cal)
         return tags
 
+    def drop_fixes(self, rej: np.ndarray, ms: Any = None) -> tuple[np.ndarray, list[int]]:
+        """Take the refused fixes ``rej`` out of their intervals' terms (``fixes_of``; ``ms``:
+        the intervals that may hold them, default every one); returns the intervals whose
+        GNSS term must be rebuilt and the iSAM2 indices of the refused keyframe fixes'
+        factors, to remove."""
+        pend = []
+        for m in range(len(self.fixes_of)) if ms is None else ms:
+            f = self.fixes_of[m]
+            if f.size and (drop := np.isin(f, rej)).any():
+                self.fixes_of[m] = f[~drop]
+                pend.append(m)
+        P = self.P
+        kf_rm = [j for i in rej[P.g_kf[rej] >= 0] for j in self.kf_fix_idx.pop(int(i), [])]
+        return np.asarray(pend, dtype=int), kf_rm
+
     # -- policy ----------------------------------------------------------------------------
 
     def due(self, marked: np.ndarray, k_new: int, rot: Any, pos: Any,
@@ -294,10 +309,10 @@ def read_states(est: Any, keys_k: Any, arrays: tuple[Any, ...], P: Any,
     """The states of keyframes ``keys_k`` in ``est`` (X, V, B, and C / G when the problem has
     them) into the running arrays (rot, pos, vel, bias, cb, gg). ``b_last``: the last B(k)
     iSAM2 holds (B(k) enters with interval k); a later keyframe's bias is B(b_last)'s."""
-    rot, pos, vel, bias, cb, gg = arrays
-    has_baro, has_gm = P.drive.baro is not None, P.gm is not None
     if _read_bulk(est, keys_k, arrays, P, b_last):
         return
+    rot, pos, vel, bias, cb, gg = arrays
+    has_baro, has_gm = P.drive.baro is not None, P.gm is not None
     for k in keys_k:
         pose = est.atPose3(X(k))
         rot[k] = pose.rotation().matrix()
@@ -447,13 +462,9 @@ def post_solve_gate(book: TermBook, P: Any, states: Any) -> list[int]:
         rej = rej[~frozen]
     if not rej.size:
         return []
-    pend = []
-    for m, f in enumerate(book.fixes_of):
-        if f.size and np.isin(f, rej).any():
-            book.fixes_of[m] = f[~np.isin(f, rej)]
-            pend.append(m)
+    pend, kf_rm = book.drop_fixes(rej)
     book.pending = np.unique(np.r_[book.pending, pend]).astype(int)
-    return [j for i in rej[P.g_kf[rej] >= 0] for j in book.kf_fix_idx.pop(int(i), [])]
+    return kf_rm
 
 
 def estimate_states(P: Any, arrays: tuple[Any, ...], k_cal: Any) -> gf.KeyframeStates:

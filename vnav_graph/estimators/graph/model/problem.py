@@ -27,6 +27,7 @@ from ....sensors.model import (
     baro_prior,
     sensor_model,
 )
+from ....sensors.robust import post_gate_threshold
 from ....types import (
     Drive,
     FloatArray,
@@ -359,22 +360,27 @@ CHI2_BLOCK = 2048  # fixes per block of ``gnss_chi2``
 
 
 def post_solve_rejections(P: Problem, st: gf.KeyframeStates) -> np.ndarray:
-    """The post-solve GNSS gate at the states ``st``: the used fixes whose whitened residual
-    χ² exceeds the squared tail probability of ``gnss_gate_prob`` (a false rejection costs a
-    whole re-solve, a glitch has χ² in the thousands either way). They are marked unused
-    (``P.g_use``) and counted (``P.g_rej_post``); returns them, empty when none or every one
-    fails (or gating is off)."""
-    from scipy.stats import chi2
+    """The post-solve GNSS gate at the states ``st`` over every used fix (``gate_failures``).
+    The failing fixes are marked unused (``P.g_use``) and counted (``P.g_rej_post``); returns
+    them, empty when none or every one fails (or gating is off)."""
+    idx = gate_failures(P, st, gnss_batch_idx(P))
+    P.g_use[idx] = False
+    P.g_rej_post += int(idx.size)
+    return idx
 
-    idx = gnss_batch_idx(P)
+
+def gate_failures(P: Problem, st: gf.KeyframeStates, idx: np.ndarray,
+                  k: np.ndarray | None = None) -> np.ndarray:
+    """The fixes among ``idx`` whose whitened residual χ² at the states ``st`` exceeds the
+    post-solve threshold of ``gnss_gate_prob`` (``sensors.robust.post_gate_threshold``);
+    empty when none or every one fails (a solution that fits none of them is not one to judge
+    them by), or when gating is off. ``k``: each fix's interval (``gnss_chi2``)."""
     if idx.size == 0 or P.cfg.gnss_gate_prob <= 0:
         return idx[:0]
-    c2, dof = gnss_chi2(P, st, idx)
-    bad = c2 > chi2.ppf(1.0 - (1.0 - P.cfg.gnss_gate_prob) ** 2, dof)
+    c2, dof = gnss_chi2(P, st, idx, k)
+    bad = c2 > post_gate_threshold(float(P.cfg.gnss_gate_prob), dof)
     if not np.any(bad) or np.all(bad):
         return idx[:0]
-    P.g_use[idx[bad]] = False
-    P.g_rej_post += int(bad.sum())
     return idx[bad]
 
 
@@ -395,13 +401,14 @@ def gnss_rows_of(P: Problem, st: gf.KeyframeStates, idx: np.ndarray,
 
 
 def _gnss_rows(P: Problem, st: gf.KeyframeStates, idx: np.ndarray, incr: Any,
-               out: FloatArray | None = None) -> gf.IntervalRows:
+               out: FloatArray | None = None, k: np.ndarray | None = None
+               ) -> gf.IntervalRows:
     """``gf.gnss_rows`` of fixes ``idx`` with the IMU increments ``incr`` at them (None:
-    computed for these fixes)."""
+    computed for these fixes); ``k``: each fix's interval (default: the one holding it)."""
     return gf.gnss_rows(
         P.dense, st, P.g_t[idx], P.g_pos[idx], P.g_pos_sd[idx],
         None if P.g_vel is None else P.g_vel[idx],
-        None if P.g_vel_sd is None else P.g_vel_sd[idx], P.lever, incr=incr, out=out,
+        None if P.g_vel_sd is None else P.g_vel_sd[idx], P.lever, incr=incr, out=out, k=k,
         omega_b=None if P.g_omega is None else P.g_omega[idx])
 
 
@@ -465,11 +472,13 @@ def interval_rows(P: Problem, st: gf.KeyframeStates, pri: dict[str, float],
     return gf.IntervalRows(np.concatenate(ks), np.concatenate(rs), jac, loss, weights)
 
 
-def gnss_chi2(P: Problem, st: gf.KeyframeStates, idx: np.ndarray) -> tuple[FloatArray, int]:
+def gnss_chi2(P: Problem, st: gf.KeyframeStates, idx: np.ndarray,
+              k: np.ndarray | None = None) -> tuple[FloatArray, int]:
     """χ² of each fix's whitened residual at the solution (position, + velocity when the log
-    has it) and its degrees of freedom."""
+    has it) and its degrees of freedom. ``k``: each fix's interval (default: the one holding
+    it; a fix on keyframe k+1 can be given interval k, ``gf.gnss_rows``)."""
     m = idx.size
-    cached = P.g_incr is not None and np.array_equal(P.g_incr[0], idx)
+    cached = k is None and P.g_incr is not None and np.array_equal(P.g_incr[0], idx)
     c2 = np.empty(m)
     n_kind = 1
     # in blocks of fixes: only the residuals are needed, and the Jacobian of every fix at
@@ -478,7 +487,8 @@ def gnss_chi2(P: Problem, st: gf.KeyframeStates, idx: np.ndarray) -> tuple[Float
     for a in range(0, m, CHI2_BLOCK):
         sl = slice(a, a + CHI2_BLOCK)
         ii = idx[sl]
-        rows = _gnss_rows(P, st, ii, tuple(x[sl] for x in P.g_incr[1]) if cached else None)
+        rows = _gnss_rows(P, st, ii, tuple(x[sl] for x in P.g_incr[1]) if cached else None,
+                          k=None if k is None else k[sl])
         r = rows.r.reshape(-1, ii.size, 3)  # (1 or 2, n, 3): position rows, then velocity
         c2[sl] = np.sum(r**2, axis=(0, 2))
         n_kind = r.shape[0]
