@@ -11,9 +11,9 @@ from vnav_graph.io import load_drive
 from vnav_graph.io.sanity import check_drive
 from vnav_graph.types import BaroStream, GnssStream, ImuStream
 
-from .corpus import (
+from .mutations import SEMANTIC
+from .writers import (
     G0,
-    SEMANTIC,
     npz_arrays,
     sim_raw,
     write_dataflash,
@@ -276,7 +276,7 @@ def test_nan_truth_is_dropped_with_a_warning():
 def test_gnss_held_10_km_jump_is_dropped_as_one_glitch(tmp_path):
     """A phone folder whose GNSS sits 10 km north for 5 s: the 50 fixes are dropped and named
     (a rule that takes one fix at a time sees only "2 position steps faster than 150 m/s")."""
-    from .corpus import write_sl_folder
+    from .writers import write_sl_folder
 
     d = load_drive(write_sl_folder(_mut("gnss-jump-10km-5s"), tmp_path / "jump"))
     c = load_drive(write_sl_folder(RAW, tmp_path / "clean"))
