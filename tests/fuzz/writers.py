@@ -358,3 +358,31 @@ def write_ulog(raw: Raw, path: Path, omit: tuple[str, ...] = ()) -> Path:
         out += msg(b"D", struct.pack("<H", i) + payload)
     path.write_bytes(out)
     return path
+
+
+def ulog_bytes(topics: dict[str, tuple[str, list[tuple]]]) -> bytes:
+    """A minimal ULog v1 byte by byte (docs.px4.io "ULog File Format"): header, flag bits,
+    formats, subscriptions, data (little endian). ``topics``: name → (format, rows)."""
+    codes = {"uint64_t": "Q", "float": "f", "double": "d", "int32_t": "i", "uint8_t": "B",
+             "int64_t": "q", "uint32_t": "I"}
+
+    def msg(kind: bytes, payload: bytes) -> bytes:
+        return struct.pack("<HB", len(payload), kind[0]) + payload
+
+    out = b"ULog\x01\x12\x35\x01" + struct.pack("<Q", 0)
+    out += msg(b"B", bytes(16) + struct.pack("<3Q", 0, 0, 0))
+    for name, (fmt, _) in topics.items():
+        out += msg(b"F", f"{name}:{fmt}".encode())
+    for i, name in enumerate(topics):
+        out += msg(b"A", struct.pack("<BH", 0, i) + name.encode())
+    rows = []
+    for i, (_, (fmt, data)) in enumerate(topics.items()):
+        pack = "<"
+        for member in fmt.strip(";").split(";"):
+            typ = member.split(" ")[0]
+            base, _, n = typ.partition("[")
+            pack += (n.rstrip("]") if n else "") + codes[base]
+        rows += [(r[0], i, struct.pack(pack, *r)) for r in data]
+    for _, i, payload in sorted(rows, key=lambda x: x[0]):
+        out += msg(b"D", struct.pack("<H", i) + payload)
+    return out
