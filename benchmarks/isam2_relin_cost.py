@@ -10,7 +10,7 @@ variants alternated so that the machine's load falls on all of them alike:
 
 - ``default``: ``GraphConfig``'s thresholds;
 - ``coarse``: the rotation threshold ten times larger (``relinearize_typed[0]``), for iSAM2's
-  own factors and for the interval terms;
+  own factors, the interval terms and the extensions' factors (the compass's);
 - ``off``: ``relinearize_threshold = 0``: nothing is relinearised, neither by iSAM2 nor by the
   term books, and the final rounds cannot make iSAM2's estimate the optimum.
 
