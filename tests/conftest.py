@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -46,6 +47,18 @@ def data_dir() -> Path:
     if d is None:
         pytest.skip("real logs not found: set VNAV_DATA or place them in ../shared/data")
     return d
+
+
+@pytest.fixture
+def shared_log(data_dir: Path) -> Callable[[str], Path]:
+    """The path of one shared log, by its path under the data folder; the test is skipped
+    when that log is absent."""
+    def path(rel: str) -> Path:
+        p = data_dir / rel
+        if not p.exists():
+            pytest.skip(f"shared log {rel} not present")
+        return p
+    return path
 
 
 @pytest.fixture

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from .writers import G0, Raw
+from .writers import G0, Raw, dataflash_records
 
 
 # --------------------------------------------------------------- semantic / hostile
@@ -373,27 +373,11 @@ def df_patch_fmt_names(b: bytes, a: str, c: str) -> bytes:
 
 
 def df_patch_field(b: bytes, msg: str, col: str, value: float) -> bytes:
-    """Set one float field of every ``msg`` record (walks the records by their FMT lengths)."""
-    fmts: dict[int, tuple[str, str, list[str], int]] = {}
+    """Set one float field of every ``msg`` record (records walked by
+    ``writers.dataflash_records``)."""
     out = bytearray(b)
-    i = 0
     n = len(out)
-    while i + 3 <= n:
-        if out[i] != 0xA3 or out[i + 1] != 0x95:
-            i += 1
-            continue
-        tid = out[i + 2]
-        if tid == 0x80 and i + 89 <= n:
-            t, ln, name, fmt, cols = struct.unpack("<BB4s16s64s", bytes(out[i + 3:i + 89]))
-            fmts[t] = (name.rstrip(b"\0").decode("ascii", "replace"),
-                       fmt.rstrip(b"\0").decode("ascii", "replace"),
-                       cols.rstrip(b"\0").decode("ascii", "replace").split(","), ln)
-            i += 89
-            continue
-        if tid not in fmts:
-            i += 1
-            continue
-        name, fmt, cols, ln = fmts[tid]
+    for i, name, fmt, cols, ln in dataflash_records(out):
         if name == msg and col in cols and i + ln <= n:
             off = i + 3
             for c, ch in zip(cols, fmt, strict=False):
@@ -404,7 +388,6 @@ def df_patch_field(b: bytes, msg: str, col: str, value: float) -> bytes:
                     scale = {"e": 100.0, "i": 1.0, "L": 1e7}[ch]
                     out[off:off + 4] = struct.pack("<i", int(value * scale))
                 off += size
-        i += ln
     return bytes(out)
 
 

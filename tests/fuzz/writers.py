@@ -8,6 +8,7 @@ from __future__ import annotations
 import io
 import json
 import struct
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -267,31 +268,44 @@ _DF_SCALED = {"e": ("i", 100), "E": ("I", 100), "c": ("h", 100), "C": ("H", 100)
               "L": ("i", 10**7), "M": ("B", 1)}
 
 
-def dataflash_scale_field(data: bytes, msg: str, field_name: str, factor: float) -> bytes:
-    """A DataFlash log with one numeric field of every ``msg`` record multiplied by
-    ``factor`` (e.g. GPS ``Alt`` in feet; scaled integer fields are rounded), records walked
-    in order by the lengths their FMT records give; bytes that start no known record are
-    copied as they are."""
-    import numpy as np
+def dataflash_records(out: bytes | bytearray
+                      ) -> Iterator[tuple[int, str, str, list[str], int]]:
+    """The records of a DataFlash log other than FMT definitions, walked in order by the
+    lengths their FMT records give (bytes that start no known record are skipped): (offset of
+    the record's header, message name, format, column names, record length). ``out`` may be
+    changed in place between records, as long as its length and FMT records stay."""
+    fmts: dict[int, tuple[str, str, list[str], int]] = {}
 
-    out = bytearray(data)
-    fmts: dict[int, tuple[str, int, str, list[str]]] = {}
-    i = 0
-    while i + 3 <= len(out):
+    def text(b: bytes) -> str:
+        return b.rstrip(b"\0").decode("ascii", "replace")
+
+    i, n = 0, len(out)
+    while i + 3 <= n:
         if out[i] != 0xA3 or out[i + 1] != 0x95:
             i += 1
             continue
         tid = out[i + 2]
-        if tid == 128 and i + 89 <= len(out):
-            t, length, name, fmt, cols = struct.unpack("<BB4s16s64s", out[i + 3:i + 89])
-            fmts[t] = (name.rstrip(b"\0").decode(), length, fmt.rstrip(b"\0").decode(),
-                       cols.rstrip(b"\0").decode().split(","))
+        if tid == 0x80 and i + 89 <= n:
+            t, length, name, fmt, cols = struct.unpack("<BB4s16s64s", bytes(out[i + 3:i + 89]))
+            fmts[t] = (text(name), text(fmt), text(cols).split(","), length)
             i += 89
             continue
         if tid not in fmts:
             i += 1
             continue
-        name, length, fmt, cols = fmts[tid]
+        name, fmt, cols, length = fmts[tid]
+        yield i, name, fmt, cols, length
+        i += length
+
+
+def dataflash_scale_field(data: bytes, msg: str, field_name: str, factor: float) -> bytes:
+    """A DataFlash log with one numeric field of every ``msg`` record multiplied by
+    ``factor`` (e.g. GPS ``Alt`` in feet; scaled integer fields are rounded), records walked
+    by ``dataflash_records``; bytes that start no known record are copied as they are."""
+    import numpy as np
+
+    out = bytearray(data)
+    for i, name, fmt, cols, _ in dataflash_records(out):
         if name == msg and field_name in cols:
             k = cols.index(field_name)
             off = i + 3 + struct.calcsize("<" + "".join(_DF_SCALED.get(c, ("", 1))[0]
@@ -300,7 +314,6 @@ def dataflash_scale_field(data: bytes, msg: str, field_name: str, factor: float)
             (v,) = struct.unpack_from("<" + code, out, off)
             new = float(np.float32(v * factor)) if code in "fd" else int(round(v * factor))
             struct.pack_into("<" + code, out, off, new)
-        i += length
     return bytes(out)
 
 
@@ -309,11 +322,8 @@ def _i32(x: float) -> int:
 
 
 def write_ulog(raw: Raw, path: Path, omit: tuple[str, ...] = ()) -> Path:
-    """Minimal ULog v1 (header, flags, formats, subscriptions, data) in the layout PX4 uses."""
-    codes = {"uint64_t": "Q", "float": "f", "int32_t": "i", "uint8_t": "B"}
-
-    def msg(kind: bytes, payload: bytes) -> bytes:
-        return struct.pack("<HB", len(payload), kind[0]) + payload
+    """Minimal ULog v1 (header, flags, formats, subscriptions, data) in the layout PX4 uses
+    (``ulog_bytes``); records in time order unless ``raw.extra["shuffle_records"]``."""
 
     def us(t: float) -> int:
         return int(round(t * 1e6)) if np.isfinite(t) and t >= 0 else 0
@@ -338,31 +348,15 @@ def write_ulog(raw: Raw, path: Path, omit: tuple[str, ...] = ()) -> Path:
             "uint64_t timestamp;float[3] magnetometer_ga;",
             [(us(t_mag[k]), *(np.asarray(b_ut[k]) / 100.0)) for k in range(len(t_mag))])
     topics = {k: v for k, v in topics.items() if k not in omit}
-    out = b"ULog\x01\x12\x35\x01" + struct.pack("<Q", 0)
-    out += msg(b"B", bytes(16) + struct.pack("<3Q", 0, 0, 0))
-    for name, (fmt, _) in topics.items():
-        out += msg(b"F", f"{name}:{fmt}".encode())
-    for i, name in enumerate(topics):
-        out += msg(b"A", struct.pack("<BH", 0, i) + name.encode())
-    rows = []
-    for i, (_, (fmt, data)) in enumerate(topics.items()):
-        pk = "<"
-        for fld in fmt.strip(";").split(";"):
-            typ = fld.split(" ")[0]
-            base, _, n = typ.partition("[")
-            pk += (n.rstrip("]") if n else "") + codes[base]
-        rows += [(r[0], i, struct.pack(pk, *r)) for r in data]
-    if not raw.extra.get("shuffle_records"):
-        rows = sorted(rows, key=lambda x: x[0])
-    for _, i, payload in rows:
-        out += msg(b"D", struct.pack("<H", i) + payload)
-    path.write_bytes(out)
+    path.write_bytes(ulog_bytes(topics, in_time_order=not raw.extra.get("shuffle_records")))
     return path
 
 
-def ulog_bytes(topics: dict[str, tuple[str, list[tuple]]]) -> bytes:
+def ulog_bytes(topics: dict[str, tuple[str, list[tuple]]], in_time_order: bool = True) -> bytes:
     """A minimal ULog v1 byte by byte (docs.px4.io "ULog File Format"): header, flag bits,
-    formats, subscriptions, data (little endian). ``topics``: name → (format, rows)."""
+    formats, subscriptions, data (little endian). ``topics``: name → (format, rows), each
+    row's first value its timestamp; the data records sorted by it (``in_time_order``) or
+    topic by topic."""
     codes = {"uint64_t": "Q", "float": "f", "double": "d", "int32_t": "i", "uint8_t": "B",
              "int64_t": "q", "uint32_t": "I"}
 
@@ -383,6 +377,8 @@ def ulog_bytes(topics: dict[str, tuple[str, list[tuple]]]) -> bytes:
             base, _, n = typ.partition("[")
             pack += (n.rstrip("]") if n else "") + codes[base]
         rows += [(r[0], i, struct.pack(pack, *r)) for r in data]
-    for _, i, payload in sorted(rows, key=lambda x: x[0]):
+    if in_time_order:
+        rows = sorted(rows, key=lambda x: x[0])
+    for _, i, payload in rows:
         out += msg(b"D", struct.pack("<H", i) + payload)
     return out

@@ -4,6 +4,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -12,13 +13,6 @@ import pytest
 from vnav_graph.io.readers import read_log
 from vnav_graph.io.readers._common import fit_clock, local_to_gps_seconds
 from vnav_graph.io.readers.ardupilot import read_dataflash
-
-
-def _log(data_dir: Path, rel: str) -> Path:
-    p = data_dir / rel
-    if not p.exists():
-        pytest.skip(f"shared log {rel} not present")
-    return p
 
 
 # ------------------------------------------------------------------------- closed forms
@@ -60,8 +54,8 @@ def test_local_to_gps_seconds_closed_form() -> None:
 
 
 # ---------------------------------------------------------------------------- real logs
-def test_erle_218_boot_clock_ratio_and_gps_time(data_dir: Path) -> None:
-    path = _log(data_dir, "erle_pxf_218/218.BIN")
+def test_erle_218_boot_clock_ratio_and_gps_time(shared_log: Callable[[str], Path]) -> None:
+    path = shared_log("erle_pxf_218/218.BIN")
     d = read_log(path)
     c = d.meta["clock"]
     # GPS time spans 363.0 s while boot time spans 335.0 s: 0.9229; the fit over all fixes

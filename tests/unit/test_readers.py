@@ -8,6 +8,7 @@ A PX4 ULog is synthesised byte by byte (ULog spec: docs.px4.io "ULog File Format
 from __future__ import annotations
 
 import shutil
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -23,12 +24,6 @@ CAR_CUT = DATA / "sensorlogger_car_1hz_cut.csv"
 G0 = 9.80665
 DEG = np.pi / 180
 
-
-def _log(data_dir: Path, rel: str) -> Path:
-    p = data_dir / rel
-    if not p.exists():
-        pytest.skip(f"shared log {rel} not present")
-    return p
 
 
 # ------------------------------------------------------------------- detection by content
@@ -193,13 +188,13 @@ def test_px4_ulog_synthetic(tmp_path: Path) -> None:
 
 
 # --------------------------------------------------------------------- shared real logs
-def test_ardupilot_218(data_dir: Path) -> None:
+def test_ardupilot_218(shared_log: Callable[[str], Path]) -> None:
     import gc
     import warnings
 
     with warnings.catch_warnings(record=True) as rec:
         warnings.simplefilter("always")
-        d = read_log(_log(data_dir, "erle_pxf_218/218.BIN"))
+        d = read_log(shared_log("erle_pxf_218/218.BIN"))
         gc.collect()  # an unclosed log file warns when collected (it landed in a report)
     assert not [w for w in rec if issubclass(w.category, ResourceWarning)]
     m = d.meta
@@ -245,8 +240,8 @@ def test_px4_vehicle_type_from_mav_type() -> None:
     assert vehicle_of_mav_type(None) == "unknown" and vehicle_of_mav_type(99) == "unknown"
 
 
-def test_ardupilot_loiter_rtl_repairs(data_dir: Path) -> None:
-    d = read_log(_log(data_dir, "erle_pxf_loiter_rtl/Loiter_RTL.bin"))
+def test_ardupilot_loiter_rtl_repairs(shared_log: Callable[[str], Path]) -> None:
+    d = read_log(shared_log("erle_pxf_loiter_rtl/Loiter_RTL.bin"))
     drop = d.meta["dropped"]["gnss"]
     assert drop["no 3-D fix (Status < 3)"] == 2  # README: first two without a 3-D fix
     assert drop["duplicated time stamp"] == 111  # same GPS time logged twice
@@ -260,8 +255,9 @@ def test_ardupilot_loiter_rtl_repairs(data_dir: Path) -> None:
     assert any("drive has no magnetometer" in n for n in d.meta["notes"])
 
 
-def test_ardupilot_glitch_log_keeps_gnss_for_the_estimators(data_dir: Path) -> None:
-    d = read_log(_log(data_dir, "erle_pxf_181_gps_glitch/181.BIN"))
+def test_ardupilot_glitch_log_keeps_gnss_for_the_estimators(
+        shared_log: Callable[[str], Path]) -> None:
+    d = read_log(shared_log("erle_pxf_181_gps_glitch/181.BIN"))
     h = d.gnss.lla[:, 2]
     # the reader does not gate: the bad heights (README 317.9 … 826.5 m) reach the estimators
     assert h.min() == pytest.approx(317.93, abs=0.01) and h.max() == pytest.approx(826.49,
@@ -276,8 +272,8 @@ def test_ardupilot_glitch_log_keeps_gnss_for_the_estimators(data_dir: Path) -> N
     assert np.ptp(d.baro.alt) == pytest.approx(47.9, abs=0.1)
 
 
-def test_truncated_dataflash(data_dir: Path, tmp_path: Path) -> None:
-    src = _log(data_dir, "erle_pxf_218/218.BIN").read_bytes()
+def test_truncated_dataflash(shared_log: Callable[[str], Path], tmp_path: Path) -> None:
+    src = shared_log("erle_pxf_218/218.BIN").read_bytes()
     tiny = tmp_path / "cut.bin"
     tiny.write_bytes(src[:3000])  # format records only
     with pytest.raises(ValueError, match="no IMU data"):
@@ -293,12 +289,12 @@ def test_truncated_dataflash(data_dir: Path, tmp_path: Path) -> None:
     assert not (tmp_path / "o" / "holdout.json").exists()
 
 
-def test_ski_full_and_car_full(data_dir: Path) -> None:
-    ski = read_log(_log(data_dir, "ski_iphone_100hz"))
+def test_ski_full_and_car_full(shared_log: Callable[[str], Path]) -> None:
+    ski = read_log(shared_log("ski_iphone_100hz"))
     assert ski.mag is None  # the ski export has no Magnetometer.csv
     assert len(ski.gnss) == 362 and ski.imu.rate_hz == pytest.approx(100.5, abs=0.5)
     assert ski.gnss.lla[:, 2].max() - ski.gnss.lla[:, 2].min() > 390  # 412 m descent
-    car = read_log(_log(data_dir, "car_phone_1hz_2025-07-18/2025-07-18_23-13-43.csv"))
+    car = read_log(shared_log("car_phone_1hz_2025-07-18/2025-07-18_23-13-43.csv"))
     assert car.meta["dropped"]["gnss"]["missing position"] == 37  # README: 37 rows
     assert len(car.imu) == 5563 and car.meta["averaged_1s"] is True
     # mag_x/y/z on the same 1 s rows; a phone in a car: |B| 88 µT (hard iron of the car and

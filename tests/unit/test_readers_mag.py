@@ -8,6 +8,7 @@ full shared logs skip when the logs are absent.
 from __future__ import annotations
 
 import shutil
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -22,12 +23,6 @@ CAR_CUT = DATA / "sensorlogger_car_1hz_cut.csv"
 G0 = 9.80665
 DEG = np.pi / 180
 
-
-def _log(data_dir: Path, rel: str) -> Path:
-    p = data_dir / rel
-    if not p.exists():
-        pytest.skip(f"shared log {rel} not present")
-    return p
 
 
 # ------------------------------------------------------------------------ magnetometer
@@ -69,8 +64,8 @@ def _mag_vs_att(d, att: np.ndarray) -> np.ndarray:
     return _wrap_deg(_heading_deg(d.mag.field_b, roll, pitch) - yaw)
 
 
-def test_ardupilot_218_mag_heading_matches_att_yaw(data_dir: Path) -> None:
-    p = _log(data_dir, "erle_pxf_218/218.BIN")
+def test_ardupilot_218_mag_heading_matches_att_yaw(shared_log: Callable[[str], Path]) -> None:
+    p = shared_log("erle_pxf_218/218.BIN")
     d = read_log(p)
     m = d.mag
     assert len(m) == 3350 and m.sd_ut == 5.0 and "mag" not in d.meta["dropped"]
@@ -89,8 +84,8 @@ def test_ardupilot_218_mag_heading_matches_att_yaw(data_dir: Path) -> None:
     assert abs(np.median(dh)) < 1.0 and np.std(dh) < 7.0
 
 
-def test_ardupilot_181_mag_is_noisier(data_dir: Path) -> None:
-    p = _log(data_dir, "erle_pxf_181_gps_glitch/181.BIN")
+def test_ardupilot_181_mag_is_noisier(shared_log: Callable[[str], Path]) -> None:
+    p = shared_log("erle_pxf_181_gps_glitch/181.BIN")
     d = read_log(p)
     assert len(d.mag) == 1245
     b = np.linalg.norm(d.mag.field_b, axis=1)
@@ -100,10 +95,10 @@ def test_ardupilot_181_mag_is_noisier(data_dir: Path) -> None:
     assert abs(np.median(dh)) < 5.0 and 10.0 < np.std(dh) < 30.0
 
 
-def test_px4_real_mag_heading_matches_attitude(data_dir: Path) -> None:
+def test_px4_real_mag_heading_matches_attitude(shared_log: Callable[[str], Path]) -> None:
     from pyulog import ULog
 
-    p = _log(data_dir, "px4_ulog_samples/sample_px4_events.ulg")
+    p = shared_log("px4_ulog_samples/sample_px4_events.ulg")
     d = read_log(p)
     assert len(d.mag) == 459 and d.mag.sd_ut == 5.0  # vehicle_magnetometer, not sensor_mag
     # Gauss → µT: Zurich's field is 48 µT
@@ -282,9 +277,9 @@ def test_merged_csv_mag_mapped_like_the_accelerometer(tmp_path: Path) -> None:
     ("car_phone_1hz_2025-07-18/2025-07-18_23-13-43.csv", 2025.545),  # ISO time, 18 July
     ("ski_iphone_100hz", 2025.916),  # Location.csv Unix ns, 1 December
 ])
-def test_logs_carry_their_date(data_dir: Path, rel: str, year: float) -> None:
+def test_logs_carry_their_date(shared_log: Callable[[str], Path], rel: str, year: float) -> None:
     """The date of the Earth's field (World Magnetic Model epoch) comes from the log."""
-    d = read_log(_log(data_dir, rel))
+    d = read_log(shared_log(rel))
     assert d.meta["decimal_year"] == pytest.approx(year, abs=0.005)
 
 
