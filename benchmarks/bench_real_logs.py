@@ -35,6 +35,13 @@ def data_root(arg: str | None) -> Path:
     return Path(env) if env else Path(__file__).resolve().parents[1].parent / "shared" / "data"
 
 
+def select_logs(names: str | None, logs: Sequence[str] = LOGS) -> list[str]:
+    """The logs of ``logs`` whose names contain one of the comma-separated parts ``names``
+    (all of them when ``names`` is empty or None)."""
+    wanted = [w for w in (names or "").split(",") if w]
+    return [rel for rel in logs if not wanted or any(w in rel for w in wanted)]
+
+
 def present_logs(root: Path, missing: list[str] | None = None,
                  logs: Sequence[str] = LOGS) -> Iterator[tuple[str, Path]]:
     """(relative name, path) of each of ``logs`` present under ``root``. An absent one is

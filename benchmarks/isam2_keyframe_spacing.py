@@ -41,7 +41,7 @@ import numpy as np
 
 FIRST_S = 60.0  # scores from here on (the online estimates' opening)
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_real_logs import LOGS, data_root, present_logs  # noqa: E402
+from bench_real_logs import data_root, present_logs, select_logs  # noqa: E402
 
 
 def rmse(p: np.ndarray, truth: np.ndarray) -> tuple[float, float]:
@@ -57,8 +57,7 @@ def real_logs(which: str, data: str | None, spacings: list[float]) -> dict[str, 
     from vnav_graph.io import load_drive
     from vnav_graph.runner import run_holdout
 
-    wanted = [w for w in which.split(",") if w]
-    logs = [rel for rel in LOGS if any(w in rel for w in wanted)]
+    logs = select_logs(which)
     out: dict[str, Any] = {}
     for rel, path in present_logs(data_root(data), None, logs):
         drive = load_drive(path)

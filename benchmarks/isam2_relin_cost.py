@@ -40,10 +40,11 @@ from typing import Any
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_real_logs import data_root, present_logs, write_logs_json  # noqa: E402
+from bench_real_logs import LOGS as ALL_LOGS  # noqa: E402
+from bench_real_logs import data_root, present_logs, select_logs, write_logs_json  # noqa: E402
 
-LOGS = ("erle_pxf_218/218.BIN", "erle_pxf_loiter_rtl/Loiter_RTL.bin",
-        "erle_pxf_181_gps_glitch/181.BIN", "ski_iphone_100hz")
+# the full-rate logs: the averaged 1 Hz car logs run with their own low-rate settings
+LOGS = tuple(rel for rel in ALL_LOGS if not rel.startswith("car_phone_1hz"))
 VARIANTS = ("default", "coarse", "off")
 COARSE = 10.0  # the rotation threshold's factor in the "coarse" variant
 
@@ -114,8 +115,7 @@ def main(argv: list[str] | None = None) -> int:
         ap.exit(2, "isam2_relin_cost: --repeat must be at least 1\n")
     from vnav_graph.io import load_drive
 
-    wanted = [s for s in (a.logs or "").split(",") if s]
-    logs = [rel for rel in LOGS if not wanted or any(w in rel for w in wanted)]
+    logs = select_logs(a.logs, LOGS)
     doc: dict[str, Any] = {"schema": "vnav_graph.isam2_relin_cost/1", "repeat": a.repeat,
                            "coarse_factor": COARSE, "logs": {}, "missing": []}
     warmed = False
