@@ -265,7 +265,7 @@ def failed_block(error: str, runtime_s: float, status: str = "failed",
         "realtime_factor": None, "gnss_rejected": None, "warnings": [], "fallbacks": [],
         "solver": None, "isam2_final": None, "extensions": None, "self_check": None,
         "online": None, "lag": None,
-        "fb_separation": None, "gnss_gm_auto": None,
+        "fb_separation": None, "gnss_gm_auto": None, "real_time_pass": None,
         "baro": {"scale": dict(null_param), "latency_s": dict(null_param),
                  "bias_m": dict(null_param)},
         **extra,
@@ -318,6 +318,7 @@ def run_holdout(drive: Drive, estimators: Sequence[str] | None = None, outage_s:
             s.block["fb_separation"] = fb_separation_block(info.get("fb_separation"))
             # gnss_gm_auto: the residual autocorrelations and the decision (null without it)
             s.block["gnss_gm_auto"] = info.get("gnss_gm_auto")
+            s.block["real_time_pass"] = info.get("real_time_pass")
             results[r.name], series[r.name] = s.block, s
         except Exception as exc:  # one estimator's failure is data, not a crash
             if os.environ.get("VNAV_DEBUG"):

@@ -481,3 +481,21 @@ class Estimate:
         from dataclasses import replace
 
         return replace(self, **changes)
+
+    def with_real_time_of(self, first: Estimate, why: str) -> Estimate:
+        """This estimate (a pass run again because of what a whole-drive check found in
+        ``first``) with ``first``'s real-time answers: ``online`` and ``lag`` with their
+        covariances and ``info["online_from_s"]``. A decision taken at the end of the drive
+        may change the final answer, not what was answered in real time before it.
+        ``info["real_time_pass"]`` says so: {"pass": "first", "why": why, "decided_at_s":
+        the end of the drive, from its start}."""
+        info = dict(self.info)
+        if "online_from_s" in first.info:
+            info["online_from_s"] = first.info["online_from_s"]
+        if first.online is None:
+            return self
+        t = self.trajectory.t
+        info["real_time_pass"] = {"pass": "first", "why": why,
+                                  "decided_at_s": float(t[-1] - t[0]) if t.size else 0.0}
+        return self.replace(online=first.online, online_cov=first.online_cov, lag=first.lag,
+                            lag_cov=first.lag_cov, info=info)

@@ -329,6 +329,9 @@ def evaluate(est: Estimate, drive: Drive,
         # gnss_gm_auto: the residual autocorrelations and whether the Gauss-Markov GNSS
         # error state was carried (``estimators.gnss_auto``; null without the option)
         "gnss_gm_auto": est.info.get("gnss_gm_auto"),
+        # the pass whose real-time answers these are, when a whole-drive check ran the
+        # estimator again ({"pass", "why", "decided_at_s"}; null when there was one pass)
+        "real_time_pass": est.info.get("real_time_pass"),
     }
     if drive.truth is not None:
         err = errors_vs_truth(est, drive)

@@ -72,3 +72,45 @@ def glitch_mask(t: NDArray[np.float64], pos: NDArray[np.float64],
         bad[idx[i + 1:end + 1]] = True
         k = int(np.searchsorted(out, end, side="right"))
     return bad
+
+
+def causal_glitch_mask(t: NDArray[np.float64], pos: NDArray[np.float64],
+                       max_speed: float = MAX_SPEED,
+                       max_s: float = MAX_GLITCH_S) -> NDArray[np.bool_]:
+    """``glitch_mask``'s rule decided fix by fix from the fixes up to each one (a real-time
+    answer's pre-gate: it may not wait for a glitch's return).
+
+    A step faster than ``max_speed`` from the last kept fix ``i`` opens a glitch: that fix and
+    the following ones are refused until a fast step lands back within reach of fix ``i``
+    (``|p[j] − p[i]| ≤ max_speed · (t[j] − t[i])``), which is kept and closes it. A glitch
+    still open ``max_s`` after fix ``i`` is taken as a lasting shift: from the first fix past
+    ``max_s`` on, fixes are kept again (the refused ones stay refused: they were decided when
+    they arrived). On an out-and-back glitch shorter than ``max_s`` the refused fixes are
+    ``glitch_mask``'s; on a lasting shift ``glitch_mask`` refuses none and this rule the fixes
+    of its first ``max_s`` seconds.
+    """
+    n = int(t.size)
+    bad = np.zeros(n, dtype=bool)
+    ok = np.all(np.isfinite(pos), axis=1) & np.isfinite(t)
+    idx = np.flatnonzero(ok)
+    if idx.size < 2:
+        return bad
+    tt, pp_arr = t[idx].tolist(), pos[idx]
+    anchor = -1  # the last kept fix before an open glitch (−1: none open)
+    prev = 0  # the previous finite fix
+    for j in range(1, idx.size):
+        dt = max(tt[j] - tt[prev], 0.0)
+        fast = float(np.linalg.norm(pp_arr[j] - pp_arr[prev])) > max_speed * dt
+        if anchor < 0:
+            if fast:
+                anchor = prev
+                bad[idx[j]] = True
+        elif tt[j] - tt[anchor] > max_s:
+            anchor = -1  # a lasting shift: kept from here on
+        elif fast and (float(np.linalg.norm(pp_arr[j] - pp_arr[anchor]))
+                       <= max_speed * (tt[j] - tt[anchor])):
+            anchor = -1  # back within reach of the last kept fix: the glitch closes
+        else:
+            bad[idx[j]] = True
+        prev = j
+    return bad

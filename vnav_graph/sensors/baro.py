@@ -159,10 +159,12 @@ def without_implausible_scale(result: Any, config: Any, rerun: Callable[[Any], A
     graph-batch, graph-isam2): ``result`` when its scale is physical
     (:func:`implausible_scale_note`), else ``rerun(config with baro_scale_sd =
     STIFF_SCALE_SD)`` (the scale held at its prior mean) with the reason as a warning and in
-    ``info["baro_scale_note"]``. A config that already sets ``baro_scale_sd`` is the
-    user's (or this check's) own choice and is not second-guessed, and a result that
-    carries ``baro_scale_note`` already is that re-solve, reached through another check's
-    rerun (the magnetometer's runs the whole estimator again, checks included)."""
+    ``info["baro_scale_note"]``; the real-time answers stay ``result``'s (the check needs
+    the whole drive: ``Estimate.with_real_time_of``). A config that already sets
+    ``baro_scale_sd`` is the user's (or this check's) own choice and is not second-guessed,
+    and a result that carries ``baro_scale_note`` already is that re-solve, reached through
+    another check's rerun (the magnetometer's runs the whole estimator again, checks
+    included)."""
     if getattr(config, "baro_scale_sd", None) is not None or "baro_scale_note" in result.info:
         return result  # the user's prior, or already this check's re-solve (a nested rerun)
     why = implausible_scale_note(result)
@@ -170,7 +172,8 @@ def without_implausible_scale(result: Any, config: Any, rerun: Callable[[Any], A
         return result
     from dataclasses import replace
 
-    again = rerun(replace(config, baro_scale_sd=STIFF_SCALE_SD))
+    again = rerun(replace(config, baro_scale_sd=STIFF_SCALE_SD)).with_real_time_of(
+        result, "the baro scale was held at 0 after the whole drive's scale check")
     note = f"{why}; solved again with the scale held at 0 (prior σ {STIFF_SCALE_SD:.1%})"
     info = {**again.info, "baro_scale_note": note,
             "warnings": [*(again.info.get("warnings") or []), note]}

@@ -78,6 +78,7 @@ from ...types import (
     ParamEstimate,
     Trajectory,
 )
+from ..base import with_online
 from ..gnss_auto import with_gm_auto
 from . import backward, carry, inputs, kernel, regate, rts
 from . import model as km
@@ -301,7 +302,10 @@ class EKF:
         run = run_forward(drive, self.config, store_rts=False)
         traj = _trajectory(run, run.lla, run.vel, run.q, run.par)
         cov = km.unpack_cov(run.cov_packed, run.has_baro)
-        return _estimate(self.name, run, traj, run.par, cov, t0, None, self.config)
+        # the forward filter's real-time answer, set here so that a pass run again after a
+        # whole-drive check keeps this one's (``Estimate.with_real_time_of``)
+        return with_online(self.name, _estimate(self.name, run, traj, run.par, cov, t0, None,
+                                                self.config))
 
 
 class EKFRTS(EKF):

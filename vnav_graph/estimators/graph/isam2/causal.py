@@ -30,7 +30,7 @@ def causal_pass(drive: Drive, cfg: GraphConfig, robust: bool,
     (when the heading is never known, m is the last keyframe and the first pass is the whole
     online estimate).
     Returns the result and ``info["isam2_causal_start"]``."""
-    P = setup(drive, cfg)
+    P = setup(drive, cfg, causal=True)
     init = initial_states(P)
     st0 = P.start0
     info: dict[str, Any] = {"anchor_keyframe": None, "anchor_t_s": None,

@@ -14,6 +14,7 @@ import numpy as np
 
 from ....geo.frames import mat_to_quat
 from ..batch.linalg import trim_heap
+from ..model.cpp_factors import gap_factors
 from ..model.extend import Collected
 from . import linear_factors as terms
 from . import relin
@@ -80,7 +81,14 @@ def finish(op: Any) -> OnlineResult:
     extra_online = extra_online_of(op.isam, op.isam.calculateEstimate(), op.ext)
     args = (P, op.seg, op.rw_idx, op.arrays, op.cal, op.bt, op.bz, op.dg_kf)
     op.pyf.skip = 1  # the final rounds check at every round, as iSAM2's forced ones
-    rounds = (relin.settle(op.isam, book, *args, pyf=op.pyf)
+    # the online gap priors (from the online state) give way to graph-batch's (from the
+    # initial states); those that left the window stay (counted)
+    swap = ([], [])
+    if cfg.final_rounds > 0 and op.gap_prior_idx:
+        swap = (list(op.gap_prior_idx.values()),
+                [gap_factors(P, k, *op.gap_states, op.a_keys(k))[2][0]
+                 for k in op.gap_prior_idx])
+    rounds = (relin.settle(op.isam, book, *args, pyf=op.pyf, swap=swap)
               if cfg.final_rounds > 0 else [])
     gate0 = (P.g_use.copy(), P.g_rej_post)
     if cfg.final_rounds > 0:
@@ -118,6 +126,9 @@ def finish(op: Any) -> OnlineResult:
               # refused by the online pass's gate after its updates (``online_gate``)
               "isam2_gnss_rejected_online": op.gate.refused,
               "isam2_gate_rounds": op.gate.rounds,
+              # IMU-gap re-alignment priors of the final answer that stayed the online
+              # pass's (their keyframes left the window before the final rounds)
+              "isam2_gap_priors_online": int(np.sum(P.gap)) - len(swap[0]),
               **op.win_info,
               "final_rounds_s": time.perf_counter() - t_online}
     return OnlineResult(P, est, extra_online, t_online, op.online, op.ext, op.init, op.pims,

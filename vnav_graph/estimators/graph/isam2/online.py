@@ -123,6 +123,10 @@ class OnlinePass:
         self.book.record_fixes(fix_at0, new0, 0)
         self.rw_idx: list[int] = []  # iSAM2 indices of the K / A segment random walks
         self.rw_at: list[int] = []
+        # the online gap priors: (interval, index in the update's new factors) until the
+        # update, then interval → iSAM2 factor index (swapped by the final rounds)
+        self.gap_prior_at: list[tuple[int, int]] = []
+        self.gap_prior_idx: dict[int, int] = {}
         self.dg_kf = np.zeros((nk, 3))  # gravity anomaly at each keyframe, once (terms)
         self.pims: list[Any] = []
         self.upd_ms = np.zeros(nk - 1)
@@ -175,7 +179,7 @@ class OnlinePass:
 
     # -- one keyframe --------------------------------------------------------------------
 
-    def _a_keys(self, m: int) -> tuple[int, int]:
+    def a_keys(self, m: int) -> tuple[int, int]:
         return A(int(self.seg[m])), A(int(self.seg[m + 1]))
 
     def calibration(self) -> dict[int, np.ndarray] | None:
@@ -192,7 +196,7 @@ class OnlinePass:
         if P.ka is not None:
             bias[k, 0:3] += (P.ka.f_mean[k] - phi[0:3] * P.ka.f_mean[k - 1]) * self.ka
         nv.insert(B(k), gtsam.imuBias.ConstantBias(bias[k, 0:3], bias[k, 3:6]))
-        nf.add(bias_link(P, k - 1, dt_b, self._a_keys(k - 1)))
+        nf.add(bias_link(P, k - 1, dt_b, self.a_keys(k - 1)))
 
     def _predict(self, k: int, nf: Any, nv: Any) -> Any:
         """Interval k's IMU factor (or, across a logging gap, the gap's factors) and keyframe
@@ -207,15 +211,15 @@ class OnlinePass:
         pim = preintegrate(P, k, rot[k], dg, b_k)
         self.pims.append(pim)
         if P.gap[k]:  # its factors link B(k) to B(k+1): B(k+1) enters now
-            # the new keyframe starts at the gap prior's centre from iSAM2's estimate; the
-            # prior itself is graph-batch's (from the initial states), so that both smoothers
-            # solve one problem
-            x1, v1, _ = gap_factors(P, k, rot, pos, vel, self._a_keys(k))
-            gap_f = gap_factors(P, k, *self.gap_states, self._a_keys(k))[2]
+            # the new keyframe and its re-alignment prior from iSAM2's estimate (the data up
+            # to now); the final rounds swap the prior for graph-batch's, built from the
+            # initial states, so that both smoothers' final answers solve one problem
+            x1, v1, gap_f = gap_factors(P, k, rot, pos, vel, self.a_keys(k))
             nv.insert(X(k + 1), x1)
             nv.insert(V(k + 1), v1)
             nv.insert(B(k + 1), b_k)
             self.b_last = k + 1
+            self.gap_prior_at.append((k, nf.size()))  # gap_f[0], the prior
             for f in gap_f:
                 nf.add(f)
         else:
@@ -324,6 +328,9 @@ class OnlinePass:
             book.record(tags, new_idx)
             self.rw_idx += [int(new_idx[len(tags) + i]) for i in self.rw_at]
             self.rw_at = []
+            self.gap_prior_idx.update((kk, int(new_idx[len(tags) + i]))
+                                      for kk, i in self.gap_prior_at)
+            self.gap_prior_at = []
             book.record_fixes(fix_at, new_idx, len(tags))
             self.pyf.record_new(new_idx, len(tags))
             marked = relin.marked_keyframes(ures.getMarkedKeys())
@@ -355,6 +362,8 @@ class OnlinePass:
             self.pyf.freeze(gone)
             gone_set = set(gone)
             self.rw_idx = [i for i in self.rw_idx if i not in gone_set]
+            self.gap_prior_idx = {kk: i for kk, i in self.gap_prior_idx.items()
+                                  if i not in gone_set}
         book.pending = book.due(marked, k + 1, self.rot, self.pos, self.calibration())
         self.pyf.check(self.isam, k + 1, arr)
         self.online[k + 1, 0:6] = np.r_[self.pos[k + 1], self.vel[k + 1]]

@@ -369,15 +369,16 @@ def state_keys(keys_k: Any, P: Any, b_last: int | None = None) -> Any:
 def settle(isam: Any, book: TermBook, P: Any, seg: Any, rw_idx: list[int],
             arrays: tuple[Any, ...], cal: dict[int, Any], bt: Any, bz: Any,
             dg: Any, tie: bool = True, removed: list[int] | None = None,
-            pyf: Any = None) -> list[list[int]]:
+            pyf: Any = None, swap: tuple[list[int], list[Any]] = ([], [])) -> list[list[int]]:
     """Final rounds after the last keyframe, so that iSAM2's own estimate is the smoothed
     optimum of the batch's model: the segments' (s, τd) and accelerometer scale factors are
     tied into one (their random walks removed, ``TIE_SD`` between neighbours), then
     forced-relinearisation updates in which every custom term beyond the thresholds is
     rebuilt, until nothing is (at most
     ``cfg.final_rounds``); ``pyf``: the extensions' ``py_factors.PyFactorBook``, whose due
-    factors are rebuilt in the same rounds. Returns per round [terms rebuilt, variables
-    iSAM2 relinearised]."""
+    factors are rebuilt in the same rounds; ``swap``: factor indices removed and factors
+    added in the first round (the online gap priors and graph-batch's). Returns per round
+    [terms rebuilt, variables iSAM2 relinearised]."""
     cfg = P.cfg
     n_seg = int(seg[-1]) + 1
     nf = gtsam.NonlinearFactorGraph()
@@ -401,6 +402,9 @@ def settle(isam: Any, book: TermBook, P: Any, seg: Any, rw_idx: list[int],
                 nf.add(gtsam.BetweenFactorVector(A(j - 1), A(j), np.zeros(3),
                                                  noise([TIE_SD[0]] * 3)))
         removed = sorted(set(removed) | set(rw_idx))
+    for f in swap[1]:
+        nf.add(f)
+    removed = sorted(set(removed) | set(swap[0]))
     out: list[list[int]] = []
     py_at = _py_rebuild(pyf, nf, arrays, removed)
     for r in range(cfg.final_rounds):

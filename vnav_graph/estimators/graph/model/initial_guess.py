@@ -102,7 +102,12 @@ def initial_states(P: Problem) -> tuple[FloatArray, FloatArray, FloatArray]:
         anchor = int(np.searchsorted(P.t_kf, P.t_kf[k0] + look - 1e-9)) if k0 > 0 else 0
     if compass_heading(P, rot):
         P.init_attitude = "compass"
-        r_c, anchor = _with_yaw_of(r_c, rot[0]), 0  # the compass's heading at keyframe 0
+        # the compass's heading at keyframe 0 from keyframe 0's own levelled tilt and the
+        # compass sample nearest it (not ``rot[0]``: its tilt is carried back from the first
+        # TRIAD keyframe and its correction is a median over ±COMPASS_WINDOW_S)
+        r_k0 = compass_turned(P, r_c[None], P.t_kf[:1])
+        if r_k0 is not None:
+            r_c, anchor = r_k0[0], 0
     elif filter_attitude(P, rot):
         P.init_attitude = "ekf"  # the ekf is causal: its heading from the keyframe it is good
         anchor = P.ekf_heading_kf
@@ -302,21 +307,14 @@ def compass_heading(P: Problem, rot: FloatArray) -> bool:
     crept along the weakly held heading for hundreds of iterations. The ekf aligns its
     heading on the compass too (``ekf.magnetometer.initial_heading``). Returns whether the
     attitudes were turned."""
-    from ....sensors.magnetometer import MIN_HORIZONTAL_UT, drive_field, usable, wrap_pi
+    from ....sensors.magnetometer import usable
 
-    drive = P.drive
-    mag = drive.mag
-    if not P.cfg.use_mag or not usable(mag)[0]:  # usable: a stream of ≥ 2 samples
+    if not P.cfg.use_mag or not usable(P.drive.mag)[0]:  # usable: a stream of ≥ 2 samples
         return False
-    ref = drive_field(drive)[0].ned_ut
-    j = nearest_index(mag.t, P.t_kf)
-    spacing = float(np.median(np.diff(mag.t)))
-    m_t = np.einsum("nij,nj->ni", rot, mag.field_b[j])
-    ok = (np.abs(mag.t[j] - P.t_kf) <= 0.5 * spacing) & (np.hypot(m_t[:, 0], m_t[:, 1])
-                                                         >= MIN_HORIZONTAL_UT)
-    if not ok.any():
+    corr = _compass_corrections(P, rot, P.t_kf)
+    if corr is None:
         return False
-    d_ok = wrap_pi(np.arctan2(ref[1], ref[0]) - np.arctan2(m_t[ok, 1], m_t[ok, 0]))
+    ok, d_ok = corr
     t_ok = P.t_kf[ok]
     lo = np.searchsorted(t_ok, t_ok - COMPASS_WINDOW_S)
     hi = np.searchsorted(t_ok, t_ok + COMPASS_WINDOW_S, side="right")
@@ -327,6 +325,38 @@ def compass_heading(P: Problem, rot: FloatArray) -> bool:
     rz[:, 0, 0], rz[:, 0, 1], rz[:, 1, 0], rz[:, 1, 1], rz[:, 2, 2] = c, -s, s, c, 1.0
     rot[:] = rz @ rot
     return True
+
+
+def _compass_corrections(P: Problem, rot: FloatArray, t_q: FloatArray
+                         ) -> tuple[np.ndarray, FloatArray] | None:
+    """Where the attitudes ``rot`` at times ``t_q`` have a compass sample within half a
+    sample spacing and a horizontal field of at least ``MIN_HORIZONTAL_UT``: the mask and the
+    yaw corrections [rad] that turn them onto the compass's heading (the azimuth of R·z, z the
+    measured field with zero hard iron, equals the field reference's). None without any."""
+    from ....sensors.magnetometer import MIN_HORIZONTAL_UT, drive_field, wrap_pi
+
+    mag = P.drive.mag
+    ref = drive_field(P.drive)[0].ned_ut
+    j = nearest_index(mag.t, t_q)
+    spacing = float(np.median(np.diff(mag.t)))
+    m_t = np.einsum("nij,nj->ni", rot, mag.field_b[j])
+    ok = (np.abs(mag.t[j] - t_q) <= 0.5 * spacing) & (np.hypot(m_t[:, 0], m_t[:, 1])
+                                                      >= MIN_HORIZONTAL_UT)
+    if not ok.any():
+        return None
+    return ok, wrap_pi(np.arctan2(ref[1], ref[0]) - np.arctan2(m_t[ok, 1], m_t[ok, 0]))
+
+
+def compass_turned(P: Problem, rot: FloatArray, t_q: FloatArray) -> FloatArray | None:
+    """``rot`` (n, 3, 3) at ``t_q`` turned about the down axis onto the compass's heading
+    sample by sample (``_compass_corrections``), or None where any lacks a sample."""
+    corr = _compass_corrections(P, rot, t_q)
+    if corr is None or not corr[0].all():
+        return None
+    c, s = np.cos(corr[1]), np.sin(corr[1])
+    rz = np.zeros((c.size, 3, 3))
+    rz[:, 0, 0], rz[:, 0, 1], rz[:, 1, 0], rz[:, 1, 1], rz[:, 2, 2] = c, -s, s, c, 1.0
+    return rz @ rot
 
 
 # half-width of the window over which the compass corrections of the initial heading are

@@ -96,6 +96,7 @@ class MagnetometerExtension:
         cfg, mag = self.config, view.drive.mag
         assert mag is not None
         fm = drive_field(view.drive)[0]  # the origin is view.origin_lla
+        cos_incl = float(np.hypot(fm.ned_ut[0], fm.ned_ut[1]) / np.linalg.norm(fm.ned_ut))
         # field reference in the tangent frame at each keyframe (initial position)
         i = nearest_index(mag.t, view.t_kf)
         spacing = float(np.median(np.diff(mag.t))) if mag.t.size > 1 else np.inf
@@ -107,8 +108,10 @@ class MagnetometerExtension:
             if slot[k] == last:
                 continue
             z = np.asarray(mag.field_b[i[k]], float)
-            m_t = view.rotation(k) @ z  # only for the strength of the horizontal field
-            hor = float(np.hypot(m_t[0], m_t[1]))
+            # the sample's horizontal strength: its magnitude at the reference field's
+            # inclination (attitude-free, so that a keyframe's σ does not depend on an
+            # initial attitude drawn from later data: graph-isam2's online answer is causal)
+            hor = float(np.linalg.norm(z)) * cos_incl
             if hor < MIN_HORIZONTAL_UT:
                 continue
             last = slot[k]

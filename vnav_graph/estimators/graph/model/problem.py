@@ -18,7 +18,7 @@ from ....config import REAL_LOG_BARO, BaroSpec, ImuSpec
 from ....geo.earth import gravity
 from ....nav.arrays import nearest_index
 from ....nav.gaps import imu_gaps as nav_imu_gaps
-from ....nav.gnss_glitch import glitch_mask
+from ....nav.gnss_glitch import causal_glitch_mask, glitch_mask
 from ....nav.velocity_screen import velocity_screen
 from ....sensors.gnss_model import GnssGM
 from ....sensors.model import (
@@ -114,7 +114,12 @@ class Problem:
         return int(self.t_kf.size)
 
 
-def setup(drive: Drive, cfg: GraphConfig) -> Problem:
+def setup(drive: Drive, cfg: GraphConfig, causal: bool = False) -> Problem:
+    """The problem of ``drive`` under ``cfg``. ``causal``: the GNSS pre-gates decide each fix
+    from the data up to the keyframe at which it enters (graph-isam2, whose online answer
+    is real time): ``_pregate_gnss``'s causal seed, climb rate and baro epoch, and
+    ``nav.gnss_glitch.causal_glitch_mask``; without it (graph-batch) they may use the whole
+    drive."""
     imu = drive.imu
     origin = np.asarray(drive.origin_lla, float)
     h0 = float(origin[2])
@@ -157,16 +162,20 @@ def setup(drive: Drive, cfg: GraphConfig) -> Problem:
     pri = _baro_priors(bspec)
     if cfg.baro_scale_sd is not None:  # the post-solve scale check's (sensors.baro)
         pri["s_sd"] = float(cfg.baro_scale_sd)
+    # the keyframe at which each fix enters graph-isam2's online pass (its data up to then)
+    t_enter = t_kf[np.minimum(np.searchsorted(t_kf, t_g - 1e-6), t_kf.size - 1)]
     use = _pregate_gnss(drive, t_g, gn.lla[:, 2], model.gnss_pos_sd[:, 2], pri,
                         cfg.gnss_gate_prob,
                         None if gn.vel_n is None else gn.vel_n[:, 2],
-                        None if gn.vel_sd is None else gn.vel_sd[:, 2])
+                        None if gn.vel_sd is None else gn.vel_sd[:, 2],
+                        t_enter if causal else None)
     if cfg.gnss_gate_prob > 0:
         # fixes that jump away faster than any vehicle and come back (nav.gnss_glitch): the
         # post-solve gate cannot take them, the initial guess already follows them (a 10 km
         # jump held for 5 s left both smoothers 700 m off and graph-isam2's information
         # blocks indefinite)
-        use &= ~glitch_mask(t_g, pos[:, :2])  # heights: the baro gate above
+        # heights: the baro gate above
+        use &= ~(causal_glitch_mask if causal else glitch_mask)(t_g, pos[:, :2])
     n_vel = 0
     if cfg.velocity_screen and gn.vel_n is not None and cfg.gnss_gate_prob > 0:
         # GNSS velocity against the IMU's specific-force integral (attitude-free)
@@ -202,7 +211,8 @@ def setup(drive: Drive, cfg: GraphConfig) -> Problem:
 
 def _pregate_gnss(drive: Drive, t: FloatArray, h: FloatArray, sd_h: FloatArray,
                   pri: dict[str, float], prob: float, vel_d: FloatArray | None = None,
-                  vel_d_sd: FloatArray | None = None) -> np.ndarray:
+                  vel_d_sd: FloatArray | None = None,
+                  t_avail: FloatArray | None = None) -> np.ndarray:
     """Causal χ² gate of GNSS heights against the barometer; returns the mask of kept fixes.
 
     By the shared baro model, d = h_gnss(t) − h_baro(t + τ0) = −s·(h − h0) − b + noise: a
@@ -214,6 +224,13 @@ def _pregate_gnss(drive: Drive, t: FloatArray, h: FloatArray, sd_h: FloatArray,
     When the log has GNSS velocity, a fix is also refused when −v_down disagrees with the
     baro climb rate (central difference over ±1 s): variance σ_vd² + (σ_baro/√2 /1 s)²
     + (σ_s·v)² + (0.5 m/s)² (vertical acceleration over the ±1 s difference window).
+
+    ``t_avail`` (per fix, the time up to which data may be read for it) makes the gate causal:
+    the baro at t + τ0 is read at most at ``t_avail`` and carried on by the climb rate, the
+    climb rate is the backward difference over the 2 s before that epoch (its lag, ½·a·2 s,
+    is inside the 0.5 m/s term for a vertical acceleration up to 0.5 m/s²), and each of the
+    first ``n0`` fixes is judged against the median and MAD of the fixes up to it (the seed
+    of the filter, otherwise the median of the first ``n0``).
     """
     use = np.isfinite(h) & np.isfinite(sd_h)
     baro = drive.baro
@@ -228,8 +245,13 @@ def _pregate_gnss(drive: Drive, t: FloatArray, h: FloatArray, sd_h: FloatArray,
     if idx.size == 0:
         return use
     tt = t[idx] + pri["tau0"]
-    hb = np.interp(tt, bt, bz)
-    v_up = (np.interp(tt + 1.0, bt, bz) - np.interp(tt - 1.0, bt, bz)) / 2.0
+    if t_avail is None:
+        hb = np.interp(tt, bt, bz)
+        v_up = (np.interp(tt + 1.0, bt, bz) - np.interp(tt - 1.0, bt, bz)) / 2.0
+    else:
+        te = np.minimum(tt, t_avail[idx])
+        v_up = (np.interp(te, bt, bz) - np.interp(te - 2.0, bt, bz)) / 2.0
+        hb = np.interp(te, bt, bz) + v_up * (tt - te)
     d = h[idx] - hb
     r = sd_h[idx] ** 2 + pri["noise"] ** 2 + (v_up * pri["tau_sd"]) ** 2
     hrel = hb - drive.origin_lla[2]
@@ -238,6 +260,14 @@ def _pregate_gnss(drive: Drive, t: FloatArray, h: FloatArray, sd_h: FloatArray,
     c0 = float(np.median(d[:n0]))
     mad = float(np.median(np.abs(d[:n0] - c0))) * 1.4826
     keep = np.ones(idx.size, bool)
+    start = 0  # the first fix the filter below judges
+    if t_avail is not None:
+        # the first n0 fixes: each against the median and MAD of those up to it
+        for i in range(n0):
+            med = float(np.median(d[:i + 1]))
+            sc = float(np.median(np.abs(d[:i + 1] - med))) * 1.4826
+            keep[i] = (d[i] - med) ** 2 <= thr * (sc**2 + r[i])
+        start = n0
     if vel_d is not None and vel_d_sd is not None:
         var_v = (vel_d_sd[idx] ** 2 + 0.5 * pri["noise"] ** 2 + (pri["s_sd"] * v_up) ** 2
                  + 0.5**2)
@@ -251,7 +281,7 @@ def _pregate_gnss(drive: Drive, t: FloatArray, h: FloatArray, sd_h: FloatArray,
     kept = keep.tolist()
     for i, (di, hh, ri) in enumerate(zip(d.tolist(), hrel.tolist(), r.tolist(), strict=True)):
         p00 += q_dt[i]
-        if not kept[i]:
+        if not kept[i] or i < start:
             continue
         nu = di - (c + hh * s)
         ph0, ph1 = p00 + p01 * hh, p01 + p11 * hh
