@@ -83,17 +83,29 @@ def configure_opt() -> str | None:
     return NUMBA_OPT_LEVEL
 
 
+# a source version's directory used (written) this recently is never pruned [s]: two
+# installed versions running at the same time (two virtual environments, a checkout and its
+# CI) would otherwise delete each other's kernels while the other compiles into them
+PRUNE_IDLE_S = 86_400.0
+
+
 def prune_old(base: Path, current: Path) -> None:
-    """Remove all but the ``KEEP_CACHES`` most recently used source-version directories."""
+    """Remove the source-version directories beyond the ``KEEP_CACHES`` most recently used
+    that have not been written for ``PRUNE_IDLE_S``."""
+    import time
+
     try:
         dirs = [d for d in base.iterdir() if d.is_dir() and d != current]
+        mtimes = {d: d.stat().st_mtime for d in dirs}
     except OSError:
         return
     import shutil
 
-    dirs.sort(key=lambda d: d.stat().st_mtime, reverse=True)
+    dirs.sort(key=lambda d: mtimes[d], reverse=True)
+    now = time.time()
     for d in dirs[KEEP_CACHES - 1:]:
-        shutil.rmtree(d, ignore_errors=True)
+        if now - mtimes[d] > PRUNE_IDLE_S:
+            shutil.rmtree(d, ignore_errors=True)
 
 
 class CompileTimer:

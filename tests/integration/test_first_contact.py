@@ -194,6 +194,24 @@ def test_old_source_versions_are_pruned(tmp_path: Path) -> None:
     assert kept == ["current", "v3", "v4"] and jit.KEEP_CACHES == 3
 
 
+def test_a_version_in_use_is_not_pruned(tmp_path: Path) -> None:
+    """Directories written within PRUNE_IDLE_S stay, however many: another installed version
+    running now compiles into one of them."""
+    import time
+
+    base = tmp_path / "numba"
+    now = time.time()
+    for k in range(5):
+        d = base / f"v{k}"
+        d.mkdir(parents=True)
+        age = jit.PRUNE_IDLE_S * (2.0 if k == 0 else 0.5)  # v0 idle, the others in use
+        os.utime(d, (now - age - k, now - age - k))
+    cur = base / "current"
+    cur.mkdir()
+    jit.prune_old(base, cur)
+    assert sorted(p.name for p in base.iterdir()) == ["current", "v1", "v2", "v3", "v4"]
+
+
 def test_package_tree_holds_no_numba_cache() -> None:
     """The numba cache must never be written beside the sources (it breaks reinstalls)."""
     root = Path(jit.__file__).parent
