@@ -483,12 +483,11 @@ class Estimate:
         return replace(self, **changes)
 
     def with_real_time_of(self, first: Estimate, why: str) -> Estimate:
-        """This estimate (a pass run again because of what a whole-drive check found in
-        ``first``) with ``first``'s real-time answers: ``online`` and ``lag`` with their
-        covariances and ``info["online_from_s"]``. A decision taken at the end of the drive
-        may change the final answer, not what was answered in real time before it.
-        ``info["real_time_pass"]`` says so: {"pass": "first", "why": why, "decided_at_s":
-        the end of the drive, from its start}."""
+        """This estimate (a pass run again after a whole-drive check of ``first``) with
+        ``first``'s real-time answers (``online``, ``lag``, their covariances and
+        ``info["online_from_s"]``): a decision taken at the end of the drive may change the
+        final answer only. ``info["real_time_pass"]``: {"pass": "first", "why",
+        "decided_at_s": the end of the drive, from its start}."""
         info = dict(self.info)
         if "online_from_s" in first.info:
             info["online_from_s"] = first.info["online_from_s"]

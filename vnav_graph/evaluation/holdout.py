@@ -8,7 +8,9 @@ Navigation*, 2nd ed., §14.4 on outage bridging; seed 004 reports outage altitud
 
 Scoring (stated in ``holdout.json["scoring"]``)
 ----------------------------------------------
-For each estimator, with ĥ(t) its height interpolated to the GNSS fix times:
+For each estimator, with ĥ(t) its height at the GNSS fix times (the final trajectory
+interpolated; a real-time answer, ``online`` or ``lag``, read from its latest epoch at or
+before the fix and carried on at that epoch's velocity, ``held_forward``):
 
 - datum offset ``c = median(h_gnss − ĥ)`` over the fixes the estimator *was given* (outside
   the windows). GNSS height and barometric height have different datums (MSL vs ellipsoid,
@@ -44,7 +46,7 @@ from typing import Any
 
 import numpy as np
 
-from ..types import ERROR_STATE, Drive, Estimate, FloatArray
+from ..types import ERROR_STATE, Drive, Estimate, FloatArray, Trajectory
 
 HOLDOUT_SCHEMA = "vnav_graph.holdout/1"
 TAIL_S = 5.0
@@ -118,20 +120,46 @@ def _rms(x: FloatArray) -> float | None:
     return float(np.sqrt(np.mean(x**2))) if x.size else None
 
 
+def held_forward(tr: Trajectory, t_q: FloatArray, origin_lla: FloatArray) -> Trajectory:
+    """``tr`` at times ``t_q`` (each at or after its first epoch) from its latest epoch at or
+    before each, carried on at that epoch's velocity: a real-time answer read at an epoch
+    between its own outputs, with nothing from the next one (linear interpolation would
+    read up to one output interval ahead). Attitude and biases are held."""
+    from ..geo.frames import lla_to_ned, ned_to_lla
+
+    j = np.clip(np.searchsorted(tr.t, t_q, side="right") - 1, 0, tr.t.size - 1)
+    tau = (t_q - tr.t[j])[:, None]
+    if np.all(np.isfinite(tr.lla[:, :2])) and np.all(np.isfinite(tr.vel_n)):
+        lla = ned_to_lla(lla_to_ned(tr.lla[j], origin_lla) + tr.vel_n[j] * tau, origin_lla)
+    else:  # a vertical-only estimate: its height alone moves
+        lla = tr.lla[j].copy()
+        lla[:, 2] = tr.lla[j, 2] - np.nan_to_num(tr.vel_n[j, 2]) * tau[:, 0]
+
+    def held(a: FloatArray | None) -> FloatArray | None:
+        return None if a is None else a[j]
+
+    return Trajectory(t_q, lla, tr.vel_n[j], held(tr.q_nb), held(tr.bias_gyro),
+                      held(tr.bias_accel), held(tr.bias_baro))
+
+
 def score(est: Estimate, drive: Drive, withheld: np.ndarray,
           windows: Sequence[tuple[float, float]] = (),
-          given: np.ndarray | None = None) -> Scored:
+          given: np.ndarray | None = None, real_time: bool = False) -> Scored:
     """Score an estimate against the GNSS fixes flagged ``withheld`` (module docstring).
 
     ``windows`` (optional) adds ``per_window`` scores to the block. ``given``: the fixes the
     estimator was given (the datum offset is taken over them; default ``~withheld``) — a
-    withheld fix excluded by the reference screen is in neither set.
+    withheld fix excluded by the reference screen is in neither set. ``real_time``: read the
+    estimate at each fix from its latest epoch at or before it (``held_forward``; its σ the
+    same way) instead of interpolating between its epochs.
     """
     g = drive.gnss
     assert g is not None
     tr = est.trajectory
     inside = (g.t >= tr.t[0]) & (g.t <= tr.t[-1])
     t = g.t[inside]
+    if real_time and t.size:
+        tr = held_forward(tr, t, drive.origin_lla)
     h_g = g.lla[inside, 2]
     h_e = np.interp(t, tr.t, tr.alt)
     w = withheld[inside]
@@ -159,8 +187,10 @@ def score(est: Estimate, drive: Drive, withheld: np.ndarray,
         var = est.cov[:, _DOWN, _DOWN]
         ok = np.isfinite(var)
         if ok.any():
-            sd = np.sqrt(np.clip(np.interp(t, est.t_cov[ok], var[ok]), 0.0, None)
-                         + g.pos_sd[inside, 2] ** 2)
+            tc, vc = est.t_cov[ok], var[ok]
+            v_t = (vc[np.clip(np.searchsorted(tc, t, side="right") - 1, 0, tc.size - 1)]
+                   if real_time else np.interp(t, tc, vc))
+            sd = np.sqrt(np.clip(v_t, 0.0, None) + g.pos_sd[inside, 2] ** 2)
     rej = est.info.get("gnss_rejected") if est.info is not None else None
     block = {
         "status": "ok", "error": None,
@@ -201,7 +231,7 @@ def causal_score(est: Estimate, drive: Drive, withheld: np.ndarray, which: str,
     out: dict[str, Any] = dict.fromkeys(ONLINE_KEYS)
     out["from_s"] = float(view.trajectory.t[0] - drive.imu.t[0])
     try:
-        b = score(view, drive, withheld, given=given).block
+        b = score(view, drive, withheld, given=given, real_time=True).block
     except ValueError:  # covers no withheld fix
         b = {}
     for k in ("alt_rmse_m", "horiz_rmse_m", "vel_down_rmse_mps"):
@@ -273,7 +303,10 @@ def holdout_doc(drive: Drive, windows: Sequence[tuple[float, float]], withheld: 
                     "that passes the reference screen (reference_screening), "
                     "c = median(GNSS height - estimate) over the fixes given to the estimator "
                     "(datum offset, reported as alt_offset_m); horiz error = NE distance to the "
-                    "withheld fix, no offset removed"),
+                    "withheld fix, no offset removed; the final trajectory is interpolated "
+                    "to the fix times, the online and lag answers are read from their "
+                    "latest epoch at or before each fix, carried on at its velocity (nothing "
+                    "from a later epoch)"),
         "estimators": results,
         "onboard": _onboard_score(drive, reference, ~withheld),
     }

@@ -90,3 +90,52 @@ class Answers:
         for name in ("lag_kf", "lag_t", "lag_state", "lag_rot", "lag_cov"):
             setattr(self, name, getattr(other, name)[:a] + getattr(self, name)[b:])
 
+
+
+def real_time(P: Any, online: FloatArray, rot: FloatArray, bias: FloatArray,
+              online_cov: FloatArray, t_out: FloatArray
+              ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """graph-isam2's real-time output at the output epochs ``t_out``: at a keyframe its
+    online state, between keyframes k and k + 1 the online state of k propagated with the IMU
+    samples since (the data up to that epoch: the state of k + 1 comes with the next update),
+
+        p(τ) = p_k + v_k τ + ½ a τ² + R_k (Δp(τ) − ½ b_a τ²),
+        v(τ) = v_k + a τ + R_k (Δv(τ) − b_a τ),   R(τ) = R_k ΔR(τ) Exp(−b_g τ),
+
+    with a = g_t(p_k) − 2 Ω×v_k, ΔR, Δv, Δp the keyframe interval's dense increments
+    (``DenseIncrements.at``, trapezoidal from keyframe k) and b_a, b_g the biases known at
+    k's update (first order in the bias over one interval). Inside an interval that holds an
+    IMU logging gap nothing is propagated: only its keyframe epochs are output.
+
+    ``online`` (n_kf, 10) p, v (t frame), quaternion; ``rot`` (n_kf, 3, 3) its attitude;
+    ``bias`` (n_kf, 6) accel, gyro; ``online_cov`` (n_kf, 18, 18). Returns the epochs, the
+    (M, 10) states in ``online``'s layout, the (M, 3, 3) attitudes and the covariances (the
+    keyframes', NaN between them: the propagation's own covariance is not computed)."""
+    from ....nav.rotations import so3_exp
+    from ..model import interval_factors as gf
+
+    t_kf = P.t_kf
+    t_q = np.unique(np.r_[t_out[(t_out >= t_kf[0]) & (t_out <= t_kf[-1])], t_kf])
+    k = np.clip(np.searchsorted(t_kf, t_q, side="right") - 1, 0, t_kf.size - 1)
+    on_kf = np.abs(t_q - t_kf[k]) < 1e-9
+    gap = P.gap if P.gap.size else np.zeros(max(t_kf.size - 1, 0), dtype=bool)
+    keep = on_kf | ~gap[np.minimum(k, gap.size - 1)] if gap.size else on_kf | True
+    t_q, k, on_kf = t_q[keep], k[keep], on_kf[keep]
+    out = online[k].copy()
+    r_out = rot[k].copy()
+    cov = np.full((t_q.size, ERROR_STATE_DIM, ERROR_STATE_DIM), np.nan)
+    cov[on_kf] = online_cov[k[on_kf]]
+    mid = np.flatnonzero(~on_kf)
+    if mid.size:
+        km = k[mid]
+        tau = (t_q[mid] - t_kf[km])[:, None]
+        dr, dv, dp = P.dense.at(t_q[mid], km)
+        p_k, v_k, r_k = online[km, 0:3], online[km, 3:6], rot[km]
+        b_a, b_g = bias[km, 0:3], bias[km, 3:6]
+        a = gf.gravity_t(p_k, P.origin) - 2.0 * np.cross(P.omega_t, v_k)
+        out[mid, 0:3] = (p_k + v_k * tau + 0.5 * a * tau**2
+                         + np.einsum("nij,nj->ni", r_k, dp - 0.5 * b_a * tau**2))
+        out[mid, 3:6] = v_k + a * tau + np.einsum("nij,nj->ni", r_k, dv - b_a * tau)
+        corr = np.array([so3_exp(-bg * tt) for bg, tt in zip(b_g, tau[:, 0], strict=True)])
+        r_out[mid] = r_k @ dr @ corr
+    return t_q, out, r_out, cov

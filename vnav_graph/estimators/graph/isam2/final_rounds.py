@@ -32,7 +32,8 @@ class OnlineResult:
     each keyframe; init: the initial states; pims: the IMU preintegrations of the intervals;
     seg: segment of each keyframe; upd_ms / brk: per-update timings and counts;
     relin_counts: the info entries of the relinearisation; gate0: ``P.g_use`` and
-    ``P.g_rej_post`` before iSAM2's own post-solve gate."""
+    ``P.g_rej_post`` before iSAM2's own post-solve gate; online_bias: the biases known at each
+    keyframe's update."""
 
     P: Any
     est: Any
@@ -48,6 +49,7 @@ class OnlineResult:
     relin_counts: dict[str, Any]
     gate0: tuple[Any, int]
     answers: Answers
+    online_bias: np.ndarray  # (n_kf, 6) accel, gyro bias known at each keyframe's update
 
 
 
@@ -132,4 +134,4 @@ def finish(op: Any) -> OnlineResult:
               **op.win_info,
               "final_rounds_s": time.perf_counter() - t_online}
     return OnlineResult(P, est, extra_online, t_online, op.online, op.ext, op.init, op.pims,
-                        op.seg, op.upd_ms, op.brk, counts, gate0, op.answers)
+                        op.seg, op.upd_ms, op.brk, counts, gate0, op.answers, op.online_bias)

@@ -135,6 +135,9 @@ class OnlinePass:
         self.brk = np.zeros((nk - 1, 7))
         self.online = np.zeros((nk, 10))  # p(3), v(3), quat(4) in t frame
         self.online_rot = np.zeros((nk, 3, 3))  # its attitude, as quaternions after the pass
+        # the biases (accel, gyro) known at each keyframe's update: the real-time output
+        # between keyframes propagates the IMU with them (``answers.real_time``)
+        self.online_bias = np.zeros((nk, 6))
         self.online[0, 0:6] = np.r_[self.pos[0], self.vel[0]]
         self.online_rot[0] = self.rot[0]
         self.answers = Answers(P, seg, cfg.isam2_lag_s)
@@ -368,6 +371,7 @@ class OnlinePass:
         self.pyf.check(self.isam, k + 1, arr)
         self.online[k + 1, 0:6] = np.r_[self.pos[k + 1], self.vel[k + 1]]
         self.online_rot[k + 1] = self.rot[k + 1]
+        self.online_bias[k + 1] = self.bias[k + 1]
         t_end = time.perf_counter()
         self.upd_ms[k] = 1e3 * (t_end - tu)
         self.brk[k] = (1e3 * (t_pre - tu), 1e3 * (t_lcf - t_pre), 1e3 * (t_upd - t_lcf),

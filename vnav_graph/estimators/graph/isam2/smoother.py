@@ -64,7 +64,7 @@ from ....types import Drive, Estimate, Trajectory
 from ...gnss_auto import with_gm_auto
 from ..batch.general import first_line
 from ..batch.linalg import solver_context
-from ..batch.smoother import fallback_notes, gnss_gm_info, outputs, provides
+from ..batch.smoother import fallback_notes, gnss_gm_info, output_times, outputs, provides
 from ..batch.solve import evaluate_at, gauss_newton
 from ..model import interval_factors as gf
 from ..model.cpp_factors import build_batch_graph, pims_for
@@ -72,6 +72,7 @@ from ..model.extend import GraphExtension, check_extensions
 from ..model.magnetometer import builtin_extensions, mag_info
 from ..model.problem import states_from_values
 from ..settings import LOW_RATE_DT, LOW_RATE_KEYFRAME_DT, GraphConfig
+from .answers import real_time
 from .causal import causal_pass
 from .online import OnlineResult
 from .setup import estimate_info
@@ -183,7 +184,13 @@ class GraphISAM2:
         pri = P.pri
         has_baro = drive.baro is not None
         calib0 = np.zeros(P.n_kf, dtype=int)
-        online_traj = self._online_trajectory(P, on.online)
+        # the real-time output: each keyframe's online state and, between keyframes, its
+        # IMU propagation (``answers.real_time``), at the output epochs
+        t_rt, rt, rt_rot, rt_cov = real_time(P, on.online, quat_to_mat(on.online[:, 6:10]),
+                                             on.online_bias, on.answers.online_cov,
+                                             output_times(P))
+        rt[:, 6:10] = mat_to_quat(rt_rot)
+        online_traj = self._online_trajectory(P, rt, t_rt)
         # iSAM2's own estimate as a point of the batch problem (one global (s, τd): the
         # segments are tied by the final rounds)
         own_vals, own_graph = self._batch_from(P, est, pims, pri, seg, init)
@@ -238,7 +245,7 @@ class GraphISAM2:
         info.update(lag_info)
         return Estimate(self.name, out["trajectory"], provides(drive), out["cov"],
                         out["t_cov"], out["baro"], time.perf_counter() - t_start,
-                        online=online_traj, online_cov=on.answers.online_cov, lag=lag,
+                        online=online_traj, online_cov=rt_cov, lag=lag,
                         lag_cov=lag_cov, info=info, config=self.config)
 
     @classmethod
