@@ -16,7 +16,8 @@ holds: the CSV's side file, the KML and GPX descriptions and the TUM ``#`` lines
 Rows: the epochs on the 20 Hz grid of the drive clock (``tables.EXPORT_RATE_HZ``, the graph
 smoothers' output rate: t a multiple of 0.05 s), taken, never interpolated, so every track
 pairs row by row with the truth by time stamp (the 50 Hz ekf keeps every 0.1 s; a track off
-the grid, on a log's own clock, the first epoch of each 0.05 s: ``tables.at_rate``).
+the grid, on a log's own clock, is thinned to rows at least 0.0475 s apart:
+``tables.at_rate``).
 ``full_rate=True`` (``--full-rate``) writes every epoch (the truth and the vertical filters
 are at the IMU rate).
 

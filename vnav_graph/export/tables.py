@@ -4,10 +4,13 @@
   the drive clock, taken, never interpolated. A track keeps its epochs that lie on the grid
   (t a multiple of 0.05 s at 20 Hz), so every exported track pairs row by row, by time stamp,
   with the truth and with the others: the 200 Hz truth and the 20 Hz graph smoothers keep
-  every 0.05 s, the 50 Hz ekf every 0.1 s (the ekf has no epoch at 0.05 s). A track whose
-  epochs seldom lie on the grid (in under a quarter of its intervals: a log's own clock)
-  keeps the first epoch of each interval instead. Pairing rows 0.01 s apart would add
-  0.2 m of apparent error at 20 m/s, so the grid is not filled with near epochs.
+  every 0.05 s, the 50 Hz ekf every 0.1 s (the ekf has no epoch at 0.05 s). Pairing rows
+  0.01 s apart would add 0.2 m of apparent error at 20 m/s, so the grid is not filled with
+  near epochs. A track whose epochs seldom lie on the grid (in under a quarter of its
+  intervals: a log's own clock) is thinned instead: from its first epoch on, each next row is
+  its first epoch at least 0.95 / ``rate_hz`` after the last row (0.0475 s at 20 Hz), so an
+  output at 20 Hz on the log's clock (the graph smoothers' 0.0498 s on a phone log) keeps
+  every epoch and a 100 Hz filter keeps every fifth.
 - ``csv_table(table)``: the Parquet table (SI, radians) with every angle in degrees: the
   columns ``*_rad`` become ``*_deg`` and ``*_radps`` become ``*_degps``; all others unchanged.
 - ``csv_metadata(...)``: the CSV's side file ``<file>.csv-metadata.json`` in the W3C "CSV on
@@ -30,6 +33,8 @@ EXPORT_RATE_HZ = 20.0
 _GRID_TOL = 1e-6
 # a track keeps its on-grid epochs when they fill at least this share of its intervals
 _ON_GRID_SHARE = 0.25
+# off the grid: the least spacing of the rows, in grid intervals
+_MIN_SPACING = 0.95
 
 # what each kind of answer is (``Track.answer``), said in every exported file
 ANSWERS = {
@@ -44,16 +49,22 @@ ANSWERS = {
 def at_rate(table: pd.DataFrame, rate_hz: float | None) -> pd.DataFrame:
     """The rows of ``table`` (column ``t_s`` [s], increasing) on the grid t = k / ``rate_hz``
     of the drive clock (module docstring): its epochs on the grid, or, when those fill under
-    a quarter of the intervals [k / rate_hz, (k + 1) / rate_hz) it spans, the first epoch of
-    each interval. ``rate_hz=None`` returns ``table`` unchanged (every epoch)."""
+    a quarter of the intervals [k / rate_hz, (k + 1) / rate_hz) it spans, its epochs thinned
+    to at least 0.95 / ``rate_hz`` apart. ``rate_hz=None`` returns ``table`` unchanged."""
     if rate_hz is None or len(table) < 2:
         return table
-    x = table["t_s"].to_numpy() * float(rate_hz)  # time in grid intervals
+    t = table["t_s"].to_numpy()
+    x = t * float(rate_hz)  # time in grid intervals
     k = np.floor(x + _GRID_TOL)
     first = np.r_[True, k[1:] != k[:-1]]  # the first epoch of each interval
     on_grid = first & (np.abs(x - k) <= _GRID_TOL)
-    use_grid = np.count_nonzero(on_grid) >= _ON_GRID_SHARE * np.count_nonzero(first)
-    return table[on_grid if use_grid else first].reset_index(drop=True)
+    if np.count_nonzero(on_grid) >= _ON_GRID_SHARE * np.count_nonzero(first):
+        return table[on_grid].reset_index(drop=True)
+    keep, i, step = [], 0, _MIN_SPACING / float(rate_hz)
+    while i < t.size:  # one pass per kept row
+        keep.append(i)
+        i = int(np.searchsorted(t, t[i] + step, side="left"))
+    return table.iloc[keep].reset_index(drop=True)
 
 
 def rate_note(rate_hz: float | None) -> str:
@@ -61,9 +72,9 @@ def rate_note(rate_hz: float | None) -> str:
     if rate_hz is None:
         return "rows: every epoch of the estimate"
     return (f"rows: the epochs on the {rate_hz:g} Hz grid of the drive clock (t a multiple of "
-            f"{1.0 / rate_hz:g} s; a track without epochs on the grid: the first of each "
-            f"{1.0 / rate_hz:g} s), at most {rate_hz:g} Hz ('vnav-graph export --full-rate': "
-            "every epoch)")
+            f"{1.0 / rate_hz:g} s; a track without epochs on the grid: its epochs at least "
+            f"{_MIN_SPACING / rate_hz:g} s apart) ('vnav-graph export --full-rate': every "
+            "epoch)")
 
 
 def csv_name(column: str) -> str:
