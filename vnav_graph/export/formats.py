@@ -156,9 +156,10 @@ def export_run(run_dir: str | Path, formats: str | Sequence[str],
     where there is one); an unknown name is a one-line ValueError. ``online``: export the
     online answers (``estimates/<name>.online.parquet``) as ``<name>.online.<ext>`` instead of
     the final ones (the truth, where there is one, as ``truth.<ext>``); a name without an
-    online answer is a one-line ValueError. Rows at most ``tables.EXPORT_RATE_HZ`` apart
-    (``tables.at_rate``), every epoch with ``full_rate``. Files are written through
-    ``outputs.publish`` (complete files only, never a half-written one under a final name).
+    online answer is a one-line ValueError. Rows: the epochs on the ``tables.EXPORT_RATE_HZ``
+    grid of the drive clock (``tables.at_rate``), every epoch with ``full_rate``. Files are
+    written through ``outputs.publish`` (complete files only, never a half-written one under a
+    final name).
     """
     from ..outputs import publish
 
