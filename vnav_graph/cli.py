@@ -104,7 +104,8 @@ def _names_epilog() -> str:
     lines = _name_lines("estimators (--estimators a,b; default: all):",
                         "scenarios (--scenario NAME; default: default):", between=("",))
     lines += ["", "outputs in --out: summary.json, summary.txt, report.html, plots/*.png, "
-              "estimates/<name>.parquet,", "  drive.json, truth.parquet (simulated), export/ "
+              "estimates/<name>.parquet,", "  estimates/<name>.online.parquet (causal "
+              "estimators), drive.json, truth.parquet (simulated),", "  export/ "
               "(with --export)", "", EXIT_CODES]
     return "\n".join(lines)
 
@@ -158,19 +159,30 @@ def build_parser() -> argparse.ArgumentParser:
 
     x = sub.add_parser(
         "export", help="export a finished run's trajectories as CSV, KML, GPX or TUM",
-        description="Write OUT_DIR/export/<estimator>.<format> (and truth.<format> where the "
-                    "drive has a truth, and all.kml with every track) from the folder a "
-                    "'vnav-graph run --out OUT_DIR' wrote. csv: the Parquet's columns and "
-                    "units with a commented header; kml: tracks (absolute altitude) and the "
-                    "GNSS windows; gpx: track with elevation, UTC time where the drive has "
-                    "one; tum: 'timestamp x y z qx qy qz qw' in local NED (evo). "
-                    "Vertical-only estimators export as CSV only.")
+        description="Write OUT_DIR/export/<estimator>.<format> (each estimator's final "
+                    "answer; truth.<format> where the drive has a truth, and all.kml with "
+                    "every track) from the folder a 'vnav-graph run --out OUT_DIR' wrote; "
+                    "with --online the causal estimators' online answers as "
+                    "<estimator>.online.<format>. csv: one header row, units in the column "
+                    "names, angles in degrees, the rest in <file>.csv-metadata.json; kml: "
+                    "tracks (absolute altitude) and the GNSS windows; gpx: track with "
+                    "elevation, UTC time where the drive has one; tum: 'timestamp x y z qx "
+                    "qy qz qw' in local NED (evo). Rows: the epochs on the 20 Hz grid of "
+                    "the drive clock (--full-rate: every epoch). Vertical-only estimators "
+                    "export as CSV only.")
     x.add_argument("run_dir", metavar="OUT_DIR", help="output folder of 'vnav-graph run'")
-    x.add_argument("--format", dest="formats", type=_export_formats, required=True,
-                   metavar="FORMATS", help="comma-separated: csv,kml,gpx,tum")
+    x.add_argument("--format", dest="formats", type=_export_formats, default=None,
+                   metavar="FORMATS", help="comma-separated: csv,kml,gpx,tum (default: all)")
     x.add_argument("--estimators", type=_csv_list, default=None,
                    help="comma-separated names (default: every estimate in OUT_DIR, and "
                         "truth)")
+    x.add_argument("--online", action="store_true",
+                   help="export the online (real-time) answers of the causal estimators "
+                        "(estimates/<name>.online.parquet) as <name>.online.<format>")
+    x.add_argument("--full-rate", action="store_true",
+                   help="every epoch of each trajectory (default: the epochs at multiples "
+                        "of 0.05 s, 20 Hz, the graph smoothers' output rate; the truth and "
+                        "the vertical filters are at the IMU rate)")
 
     b = sub.add_parser("bench", help="Monte Carlo over scenarios x seeds x estimators")
     b.add_argument("--quick", action="store_true")
@@ -406,21 +418,24 @@ def cmd_calibrate_baro(args: argparse.Namespace) -> int:
     return 0
 
 
-def _export(out: Path, formats: list[str], estimators: list[str] | None) -> Any:
-    from .export import export_run
+def _export(out: Path, formats: list[str] | None, estimators: list[str] | None,
+            online: bool = False, full_rate: bool = False) -> Any:
+    from .export import FORMATS, export_run
 
-    return export_run(out, formats, estimators)
+    return export_run(out, formats or FORMATS, estimators, online, full_rate)
 
 
 def _print_export(res: Any) -> None:
-    for why in res.skipped:
-        print(f"export: skipped {why}")
+    skipped = res.skipped_line()
+    if skipped:
+        print(f"export: skipped {skipped}")
     folders = sorted({str(p.parent) for p in res.written})
     print(f"export: wrote {len(res.written)} file(s) to {', '.join(folders) or '(nothing)'}")
 
 
 def cmd_export(args: argparse.Namespace) -> int:
-    _print_export(_export(Path(args.run_dir), args.formats, args.estimators))
+    _print_export(_export(Path(args.run_dir), args.formats, args.estimators, args.online,
+                          args.full_rate))
     return 0
 
 

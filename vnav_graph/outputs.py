@@ -22,6 +22,8 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 TMP_PREFIX = ".vnav-tmp-"
+# ``estimates/<name>.online.parquet``: a causal estimator's online answer beside its final one
+ONLINE_SUFFIX = ".online"
 
 
 def check_out_dir(path: str | Path) -> Path:

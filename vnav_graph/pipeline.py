@@ -13,9 +13,10 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from .evaluation.metrics import evaluate
+from .evaluation.metrics import causal_view, evaluate
 from .failures import failure_message
 from .io.jsonout import dumps_strict
+from .outputs import ONLINE_SUFFIX
 from .progress import Mode
 from .runner import (
     RunResult,
@@ -29,10 +30,11 @@ from .runner import (
 )
 from .types import Drive, Estimate
 
-__all__ = ["EXIT_ALL_FAILED", "EXIT_SOME_FAILED", "SUMMARY_SCHEMA", "RunResult",
-           "apply_holdout", "estimate_table", "failed_block", "format_table", "interrupt_flag",
-           "reader_repairs", "resolve_estimators", "run_captured", "run_estimators",
-           "run_one", "run_status", "score_holdout", "summarize", "write_outputs"]
+__all__ = ["EXIT_ALL_FAILED", "EXIT_SOME_FAILED", "ONLINE_SUFFIX", "SUMMARY_SCHEMA",
+           "RunResult", "apply_holdout", "estimate_table", "failed_block", "format_table",
+           "interrupt_flag", "online_table", "reader_repairs", "resolve_estimators",
+           "run_captured", "run_estimators", "run_one", "run_status", "score_holdout",
+           "summarize", "write_outputs"]
 
 SUMMARY_SCHEMA = "vnav_graph.summary/1"
 
@@ -329,6 +331,19 @@ def estimate_table(est: Estimate, origin_lla: Any = None) -> Any:
     return est.to_dataframe(origin_lla)
 
 
+def online_table(est: Estimate, origin_lla: Any = None) -> Any:
+    """The table of ``est``'s online answer (``estimates/<name>.online.parquet``), or None
+    when it has none to score (``metrics.causal_view``: the pure smoothers' forward pass is
+    another estimator's row).
+
+    The layout of ``estimate_table``, one row per online epoch (``est.online.t``), the sigmas
+    from ``est.online_cov`` (absent without it). The baro scale and latency columns are left
+    out: ``Estimate.baro`` is calibrated over the whole drive, not known at an online epoch.
+    """
+    online = causal_view(est, "online")
+    return None if online is None else online.to_dataframe(origin_lla)
+
+
 # files a run owns in its output directory (removed when a later run does not write them again)
 RUN_OUTPUTS = ("summary.json", "summary.txt", "report.html", "estimates/*.parquet",
                "plots/*.png", "drive.json", "truth.parquet", "export/*")
@@ -338,7 +353,9 @@ def write_outputs(
     out_dir: Path, summary: dict[str, Any], results: Sequence[RunResult], drive: Drive,
     extra_writers: Sequence[Any] = (),
 ) -> list[Path]:
-    """Write summary.json, the table and per-estimator Parquet files into ``out_dir``.
+    """Write summary.json, the table and per-estimator Parquet files into ``out_dir``:
+    ``estimates/<name>.parquet`` (``estimate_table``, the final answer) and, for an estimator
+    with a causal estimate, ``estimates/<name>.online.parquet`` (``online_table``).
 
     Written through ``vnav_graph.outputs.publish``: an interrupted run leaves no half-written
     file under a final name, and results of an earlier run in the same directory that this run
@@ -355,6 +372,10 @@ def write_outputs(
             if r.estimate is not None:
                 estimate_table(r.estimate, drive.origin_lla).to_parquet(
                     tmp / "estimates" / f"{r.name}.parquet", index=False)
+                online = online_table(r.estimate, drive.origin_lla)
+                if online is not None:
+                    online.to_parquet(tmp / "estimates" / f"{r.name}{ONLINE_SUFFIX}.parquet",
+                                      index=False)
         for w in extra_writers:
             w(tmp, summary, results, drive)
 

@@ -12,18 +12,17 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from ..outputs import ONLINE_SUFFIX
 from ..suggest import did_you_mean
 from .run_info import DRIVE_INFO, TRUTH_TABLE
+from .tables import ANSWERS, EXPORT_RATE_HZ, at_rate, csv_metadata, csv_table, rate_note
 
 FORMATS = ("csv", "kml", "gpx", "tum")
 EXPORT_DIR = "export"
 SUMMARY_SCHEMA = "vnav_graph.summary/1"
 GPX_NS = "https://github.com/vnav-graph/vnav_graph/gpx/1"
-CSV_FLOAT = "%.12g"  # 12 significant digits: 1e-12 rad of latitude is 6 µm
-
-# unit of a table column, by its name's suffix (Estimate.to_dataframe's naming)
-_UNITS = (("_mps2", "m/s^2"), ("_radps", "rad/s"), ("_mps", "m/s"), ("_rad", "rad"),
-          ("_m", "m"), ("_s", "s"))
+CSV_FLOAT = "%.12g"  # 12 significant digits: 5e-10 deg of longitude past 100 deg is 0.06 mm
+CSV_META_SUFFIX = "-metadata.json"  # <file>.csv-metadata.json: CSV on the Web's side file
 
 
 def parse_formats(spec: str | Iterable[str]) -> list[str]:
@@ -39,20 +38,29 @@ def parse_formats(spec: str | Iterable[str]) -> list[str]:
     return list(dict.fromkeys(items))
 
 
-def column_unit(name: str) -> str:
-    """The unit of an estimate-table column ("1" for the dimensionless baro scale)."""
-    for suffix, unit in _UNITS:
-        if name.endswith(suffix):
-            return unit
-    return "1"
-
-
 @dataclass
 class Track:
-    """One trajectory of a run folder: an estimator's or the truth."""
+    """One trajectory of a run folder: an estimator's final or online answer, or the truth.
+
+    ``table``: the Parquet's layout (SI, radians) at the export's rate; ``answer``: a key of
+    ``tables.ANSWERS``; ``rows``: ``tables.rate_note`` of the rate.
+    """
 
     name: str
     table: pd.DataFrame
+    answer: str = "final"
+    rows: str = ""
+
+    @property
+    def stem(self) -> str:
+        """The exported files' name without the format: ``<name>`` for a final answer and
+        the truth, ``<name>.online`` for an online one."""
+        return self.name + (ONLINE_SUFFIX if self.answer == "online" else "")
+
+    @property
+    def label(self) -> str:
+        """The track's name in a viewer: ``ekf (online)``, ``ekf (final)``, ``truth``."""
+        return self.name if self.answer == "truth" else f"{self.name} ({self.answer})"
 
     @property
     def horizontal(self) -> bool:
@@ -71,7 +79,8 @@ class RunFolder:
     path: Path
     summary: dict[str, Any]
     info: dict[str, Any]
-    tables: dict[str, Path]  # estimator (and "truth") -> Parquet
+    tables: dict[str, Path]  # estimator (and "truth") -> Parquet of its final answer
+    online: dict[str, Path] = field(default_factory=dict)  # estimator -> its online Parquet
 
     @property
     def windows(self) -> list[tuple[str, float, float]]:
@@ -106,38 +115,68 @@ def open_run(path: str | Path) -> RunFolder:
         raise ValueError(f"{p}: no {DRIVE_INFO} (written by 'vnav-graph run' since export "
                          "exists): run the drive again to export it")
     info = json.loads(ip.read_text())
-    tables = {f.stem: f for f in sorted((p / "estimates").glob("*.parquet"))}
+    tables, online = {}, {}
+    for f in sorted((p / "estimates").glob("*.parquet")):
+        if f.stem.endswith(ONLINE_SUFFIX):
+            online[f.stem[: -len(ONLINE_SUFFIX)]] = f
+        else:
+            tables[f.stem] = f
     if (p / TRUTH_TABLE).is_file():
         tables["truth"] = p / TRUTH_TABLE
     if not tables:
         raise ValueError(f"{p}: the run folder holds no estimates (estimates/*.parquet)")
-    return RunFolder(p, summary, info, tables)
+    return RunFolder(p, summary, info, tables, online)
 
 
 @dataclass
 class ExportResult:
     written: list[Path] = field(default_factory=list)
-    skipped: list[str] = field(default_factory=list)  # "<name>.<fmt>: why"
+    skipped: list[tuple[str, str, str]] = field(default_factory=list)  # (track, format, why)
+
+    def skipped_line(self) -> str | None:
+        """Every skipped file in one line, grouped by reason, e.g. ``kml, gpx of loop2,
+        loop3: vertical-only estimate (no horizontal track): CSV only``; None when none."""
+        if not self.skipped:
+            return None
+        groups: dict[str, tuple[dict[str, None], dict[str, None]]] = {}
+        for name, fmt, why in self.skipped:
+            fmts, names = groups.setdefault(why, ({}, {}))
+            fmts[fmt] = None
+            names[name] = None
+        return "; ".join(f"{', '.join(f)} of {', '.join(sorted(n))}: {why}"
+                         for why, (f, n) in groups.items())
 
 
 def export_run(run_dir: str | Path, formats: str | Sequence[str],
-               estimators: Sequence[str] | None = None) -> ExportResult:
+               estimators: Sequence[str] | None = None, online: bool = False,
+               full_rate: bool = False) -> ExportResult:
     """Write ``run_dir/export/<name>.<ext>`` for each estimator (and the truth) and format.
 
     ``estimators``: the names to export (default: every estimate in the folder, and the truth
-    where there is one); an unknown name is a one-line ValueError. Files are written through
-    ``outputs.publish`` (complete files only, never a half-written one under a final name).
+    where there is one); an unknown name is a one-line ValueError. ``online``: export the
+    online answers (``estimates/<name>.online.parquet``) as ``<name>.online.<ext>`` instead of
+    the final ones (the truth, where there is one, as ``truth.<ext>``); a name without an
+    online answer is a one-line ValueError. Rows: the epochs on the ``tables.EXPORT_RATE_HZ``
+    grid of the drive clock (``tables.at_rate``), every epoch with ``full_rate``. Files are
+    written through ``outputs.publish`` (complete files only, never a half-written one under a
+    final name).
     """
     from ..outputs import publish
 
     run = open_run(run_dir)
     fmts = parse_formats(formats)
-    names = list(run.tables) if estimators is None else list(dict.fromkeys(estimators))
+    if online and not run.online:
+        raise ValueError(f"{run.path}: no online estimates (estimates/*{ONLINE_SUFFIX}.parquet: "
+                         "'vnav-graph run' writes one per causal estimator, e.g. ekf, "
+                         "graph-isam2)")
+    have = _sources(run, online)
+    names = list(have) if estimators is None else list(dict.fromkeys(estimators))
     for n in names:
-        if n not in run.tables:
-            raise ValueError(f"no estimate '{n}' in {run.path}{did_you_mean(n, run.tables)} "
-                             f"(it has {', '.join(run.tables)})")
-    tracks = [Track(n, pd.read_parquet(run.tables[n])) for n in names]
+        if n not in have:
+            raise ValueError(_missing(run, n, online, have))
+    rate = None if full_rate else EXPORT_RATE_HZ
+    tracks = [Track(n, at_rate(pd.read_parquet(path), rate), answer, rate_note(rate))
+              for n, (path, answer) in ((n, have[n]) for n in names)]
     res = ExportResult()
 
     def fill(tmp: Path) -> None:
@@ -146,15 +185,35 @@ def export_run(run_dir: str | Path, formats: str | Sequence[str],
             for tr in tracks:
                 why = _unsupported(tr, fmt)
                 if why:
-                    res.skipped.append(f"{tr.name}.{fmt}: {why}")
+                    res.skipped.append((tr.stem, fmt, why))
                     continue
-                _WRITERS[fmt](tmp / f"{tr.name}.{fmt}", tr, run)
+                _WRITERS[fmt](tmp / f"{tr.stem}.{fmt}", tr, run)
                 writable.append(tr)
             if fmt == "kml" and len(writable) > 1:
-                write_kml(tmp / "all.kml", writable, run)
+                write_kml(tmp / ("all.online.kml" if online else "all.kml"), writable, run)
 
     res.written = publish(run.path / EXPORT_DIR, fill)
     return res
+
+
+def _sources(run: RunFolder, online: bool) -> dict[str, tuple[Path, str]]:
+    """The tracks ``export_run`` can write: name -> (Parquet, answer)."""
+    truth = {"truth": (run.tables["truth"], "truth")} if "truth" in run.tables else {}
+    if not online:
+        return {n: (p, "final") for n, p in run.tables.items() if n != "truth"} | truth
+    return {n: (p, "online") for n, p in run.online.items()} | truth
+
+
+def _missing(run: RunFolder, name: str, online: bool,
+             have: dict[str, tuple[Path, str]]) -> str:
+    """The one-line error for a name ``export_run`` cannot export."""
+    if online and name in run.tables:
+        causal = [n for n in have if n != "truth"]
+        return (f"'{name}' has no online estimate in {run.path} (no estimates/"
+                f"{name}{ONLINE_SUFFIX}.parquet: a pure smoother has none); online estimates: "
+                f"{', '.join(causal) or 'none'}")
+    return (f"no estimate '{name}' in {run.path}{did_you_mean(name, have)} "
+            f"(it has {', '.join(have)})")
 
 
 def _unsupported(tr: Track, fmt: str) -> str | None:
@@ -183,31 +242,40 @@ def _origin_text(info: dict[str, Any]) -> str:
             f"height {o['height_m']:.3f} m")
 
 
-def write_csv(path: Path, tr: Track, run: RunFolder) -> None:
-    """The track's table as CSV with ``#`` header lines (units, frames, datum, provenance)."""
+def _notes(tr: Track, run: RunFolder) -> list[str]:
+    """The lines every export of ``tr`` states: the drive, the answer, time, heights,
+    origin and rows."""
     info = run.info
-    head = [
-        f"vnav_graph {run.summary.get('version')} trajectory export: "
-        f"{'truth' if tr.name == 'truth' else 'estimator ' + tr.name}",
+    answer = ANSWERS[tr.answer]
+    frm = ((run.summary.get("estimators") or {}).get(tr.name) or {}).get("online") or {}
+    if tr.answer == "online" and frm.get("from_s"):
+        answer += f"; from t = {frm['from_s']:g} s (before it the estimator is not aligned)"
+    return [
         _drive_line(run),
+        f"{tr.label}: {answer}",
         f"time: {info['time_reference']}"
         + (f" (t0_unix_s = {info['t0_unix_s']:.3f})" if info.get("t0_unix_s") else ""),
-        f"lat_rad, lon_rad: WGS-84 geodetic latitude and longitude [rad]; alt_m: "
-        f"{info['height_datum']} [m], +up",
-        f"pos_n_m, pos_e_m, pos_d_m: local tangent-plane NED position [m] from the origin "
-        f"{_origin_text(info)}",
-        "vel_*_mps: NED velocity [m/s]; roll_rad, pitch_rad, yaw_rad: z-y-x Euler angles of "
-        "the body-to-NED rotation [rad]; bias_*: IMU biases in body axes",
-        "baro_bias_m: baro Gauss-Markov bias [m]; baro_scale: scale-factor error [-]; "
-        "baro_latency_s: latency [s]",
-        "*_sd_*: one-sigma of the column of that name, same unit (att_*_sd_rad: tilt-error "
-        "sigmas about the N, E, D axes; horiz_sd_m: sqrt(pos_n_sd^2 + pos_e_sd^2)); NaN where "
-        "not estimated",
-        "units: " + ", ".join(f"{c} [{column_unit(c)}]" for c in tr.table.columns),
+        f"heights: {info['height_datum']}, +up",
+        f"local tangent-plane NED origin: {_origin_text(info)}",
+        tr.rows,
     ]
+
+
+def write_csv(path: Path, tr: Track, run: RunFolder) -> None:
+    """The track's table as CSV with one header row (the column names carry the units; angles
+    in degrees: ``tables.csv_table``) and its side file ``<file>-metadata.json``
+    (``tables.csv_metadata``: the answer, drive, datum, time, origin and each column)."""
+    table = csv_table(tr.table)
     with open(path, "w", newline="") as f:
-        f.write("".join(f"# {h}\n" for h in head))
-        tr.table.to_csv(f, index=False, float_format=CSV_FLOAT, lineterminator="\n")
+        table.to_csv(f, index=False, float_format=CSV_FLOAT, lineterminator="\n")
+    notes = _notes(tr, run)
+    notes.append("angles in degrees, every other quantity in SI units (the unit ends each "
+                 "column name); *_sd_*: one-sigma of the column of that name; empty where not "
+                 "estimated")
+    meta = csv_metadata(path.name, list(table.columns), f"{tr.label}: {path.name}",
+                        tr.answer, notes, f"vnav_graph {run.summary.get('version')}",
+                        run.info["height_datum"])
+    path.with_name(path.name + CSV_META_SUFFIX).write_text(json.dumps(meta, indent=1) + "\n")
 
 
 # -- KML ----------------------------------------------------------------------------------------
@@ -232,19 +300,21 @@ def write_kml(path: Path, tracks: Sequence[Track], run: RunFolder) -> None:
     kml = simplekml.Kml(name=f"vnav_graph: {run.info.get('name')}")
     kml.document.description = (
         f"{_drive_line(run)}. Altitudes: {run.info['height_datum']} (KML viewers read "
-        "absolute altitudes as above mean sea level). " + run.info["time_reference"])
+        "absolute altitudes as above mean sea level). " + run.info["time_reference"] + ". "
+        + "; ".join(dict.fromkeys(f"{tr.label}: {ANSWERS[tr.answer]}" for tr in tracks)))
     for tr in tracks:
         color = _kml_color(estimator_color(tr.name))
-        line = kml.newlinestring(name=tr.name, coords=[tuple(c) for c in _lon_lat_alt(tr.table)])
+        line = kml.newlinestring(name=tr.label,
+                                 coords=[tuple(c) for c in _lon_lat_alt(tr.table)])
         line.altitudemode = simplekml.AltitudeMode.absolute
         line.style.linestyle.color = color
         line.style.linestyle.width = 2
-        line.description = f"{tr.name}: {len(tr.table)} epochs, t = {tr.table['t_s'].iloc[0]:.2f}" \
-                           f" .. {tr.table['t_s'].iloc[-1]:.2f} s"
+        t = tr.table["t_s"].to_numpy()
+        line.description = (f"{tr.label}: {ANSWERS[tr.answer]}. {len(t)} epochs, t = "
+                            f"{t[0]:.2f} .. {t[-1]:.2f} s; {tr.rows}")
         if not run.windows:
             continue
-        folder = kml.newfolder(name=f"{tr.name}: GNSS windows")
-        t = tr.table["t_s"].to_numpy()
+        folder = kml.newfolder(name=f"{tr.label}: GNSS windows")
         for label, a, b in run.windows:
             inside = tr.table[(t >= a) & (t <= b)]
             coords = _lon_lat_alt(inside)
@@ -275,12 +345,13 @@ def write_gpx(path: Path, tr: Track, run: RunFolder) -> None:
     gpx = gpxpy.gpx.GPX()
     gpx.creator = f"vnav_graph {run.summary.get('version')}"
     gpx.nsmap["vnav"] = GPX_NS
-    trk = gpxpy.gpx.GPXTrack(name=tr.name)
+    trk = gpxpy.gpx.GPXTrack(name=tr.label)
     trk.description = (
-        f"{_drive_line(run)}. Elevation: {run.info['height_datum']}. "
+        f"{tr.label}: {ANSWERS[tr.answer]}. {_drive_line(run)}. Elevation: "
+        f"{run.info['height_datum']}. "
         + ("Time: UTC." if t0 is not None else
            "Time is relative: the drive has no absolute time, so the points have no <time>; "
-           "vnav:t_s gives seconds on the drive's clock."))
+           "vnav:t_s gives seconds on the drive's clock.") + f" {tr.rows}.")
     seg = gpxpy.gpx.GPXTrackSegment()
     df = tr.table
     ok = np.isfinite(df["lat_rad"]) & np.isfinite(df["lon_rad"]) & np.isfinite(df["alt_m"])
@@ -315,13 +386,15 @@ def tum_rows(df: pd.DataFrame) -> np.ndarray:
 
 
 def write_tum(path: Path, tr: Track, run: RunFolder) -> None:
-    """TUM trajectory: drive-clock time, NED position and body-to-NED quaternion."""
+    """TUM trajectory: drive-clock time, NED position and body-to-NED quaternion, after ``#``
+    lines (evo's reader skips them) that say which answer it is, the drive and the rows."""
     rows = tum_rows(tr.table)
-    head = (f"# vnav_graph {run.summary.get('version')}: {tr.name}; {_drive_line(run)}\n"
-            "# timestamp [s, drive clock] x y z [m, local NED: north east down from "
-            f"{_origin_text(run.info)}] qx qy qz qw [body to NED]\n")
+    head = [f"vnav_graph {run.summary.get('version')}: {tr.label}",
+            *(n for n in _notes(tr, run) if not n.startswith(("heights", "local"))),
+            "timestamp [s, drive clock] x y z [m, local NED: north east down from "
+            f"{_origin_text(run.info)}] qx qy qz qw [body to NED]"]
     with open(path, "w") as f:
-        f.write(head)
+        f.write("".join(f"# {h}\n" for h in head))
         np.savetxt(f, rows, fmt=["%.6f"] + ["%.6f"] * 3 + ["%.9f"] * 4, delimiter=" ")
 
 
