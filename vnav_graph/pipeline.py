@@ -78,7 +78,13 @@ def summarize(drive: Drive, results: Sequence[RunResult]) -> dict[str, Any]:
     until ``apply_holdout`` scores a real log).
     """
     from . import __version__
-    from .evaluation.compare import comparison, rankings, time_blocks
+    from .evaluation.compare import (
+        BLOCK_MIN_S,
+        MIN_BLOCKS_TO_RANK,
+        comparison,
+        rankings,
+        time_blocks,
+    )
 
     blocks = None
     if drive.truth is not None:
@@ -98,11 +104,17 @@ def summarize(drive: Drive, results: Sequence[RunResult]) -> dict[str, Any]:
         ests[r.name]["jit_s"] = round(r.jit_s, 3)
     comp = None
     if blocks is not None:
+        need_s = MIN_BLOCKS_TO_RANK * BLOCK_MIN_S
         comp = comparison(
             ests, per_block, "truth", blocks, "time block",
             f"One simulated run: the CI is over {len(blocks)} consecutive time blocks of this "
             "run (batch means; blocks are not independent runs). For an interval over runs "
-            "use `vnav-graph bench` with several seeds.")
+            "use `vnav-graph bench` with several seeds." if len(blocks) >= MIN_BLOCKS_TO_RANK
+            else f"One simulated run, split into {len(blocks)} time blocks of about "
+            f"{BLOCK_MIN_S:g} s. For an interval over runs use `vnav-graph bench` with "
+            "several seeds.",
+            remedy=f"a drive of at least {need_s:g} s (--duration {need_s:g}) gives "
+                   f"{MIN_BLOCKS_TO_RANK} time blocks")
     meta = drive.meta
     head: dict[str, Any] = {"name": drive.name, "source": drive.source,
                             "duration_s": drive.duration_s}
@@ -132,7 +144,7 @@ def apply_holdout(summary: dict[str, Any], holdout_doc: dict[str, Any]) -> dict[
     ``evaluation``; ``comparison`` is recomputed over the windows (its ``per_block`` = the
     holdout ``per_window``). NEES stays null (no reference for the full state).
     """
-    from .evaluation.compare import comparison, rankings
+    from .evaluation.compare import MIN_BLOCKS_TO_RANK, comparison, rankings
 
     out = json.loads(json.dumps(summary))
     per_block: dict[str, list[dict[str, Any]]] = {}
@@ -164,8 +176,10 @@ def apply_holdout(summary: dict[str, Any], holdout_doc: dict[str, Any]) -> dict[
         out["estimators"], per_block, "withheld GNSS (holdout)",
         [(w["t0"], w["t1"]) for w in windows], "holdout window",
         f"Scored against GNSS withheld in {len(windows)} windows of "
-        f"{holdout_doc['outage_s']:g} s (a second run of each estimator without those fixes); "
-        "the CI treats the windows as independent (each is preceded by GNSS).")
+        f"{holdout_doc['outage_s']:g} s (a second run of each estimator without those fixes)"
+        + ("; the CI treats the windows as independent (each is preceded by GNSS)."
+           if len(windows) >= MIN_BLOCKS_TO_RANK else "."),
+        remedy=holdout_doc.get("remedy"))
     out["rankings"] = rankings(out["estimators"])
     return out
 

@@ -99,6 +99,31 @@ def choose_windows(t_gnss: FloatArray, outage_s: float = 60.0,
     return wins
 
 
+# --outage lengths [s] ``windows_remedy`` tries, longest first
+REMEDY_OUTAGES_S = (45.0, 30.0, 20.0, 15.0, 10.0)
+
+
+def windows_remedy(t_gnss: FloatArray, outage_s: float, n_windows: int,
+                   need: int = 4) -> str | None:
+    """What would give ``need`` windows on this GNSS span: the longest ``--outage`` of
+    ``REMEDY_OUTAGES_S`` (default spacing) that gives that many, or that none does; None when
+    ``n_windows`` already reaches it."""
+    if n_windows >= need:
+        return None
+    for o in REMEDY_OUTAGES_S:
+        if o >= outage_s:
+            continue
+        try:
+            n = len(choose_windows(t_gnss, o))
+        except ValueError:
+            continue
+        if n >= need:
+            return f"--outage {o:g} gives {n} windows on this log"
+    span = float(t_gnss[-1] - t_gnss[0])
+    return (f"this log's {span:.0f} s of GNSS holds fewer than {need} windows even of "
+            f"{REMEDY_OUTAGES_S[-1]:g} s: a longer log would")
+
+
 def in_windows(t: FloatArray, windows: Sequence[tuple[float, float]]) -> np.ndarray:
     m = np.zeros(np.shape(t), dtype=bool)
     for a, b in windows:
@@ -276,6 +301,8 @@ def holdout_doc(drive: Drive, windows: Sequence[tuple[float, float]], withheld: 
                     "withheld fix, no offset removed"),
         "estimators": results,
         "onboard": _onboard_score(drive, reference, ~withheld),
+        # what would give enough windows to rank (``windows_remedy``), null when there are
+        "remedy": windows_remedy(drive.gnss.t, outage_s, len(windows)),
     }
 
 
