@@ -22,3 +22,13 @@ def test_a_log_too_short_for_four_windows_says_so():
     assert len(choose_windows(t, 10.0)) == 2
     assert windows_remedy(t, 60.0, 0) == ("this log's 60 s of GNSS holds fewer than 4 windows "
                                           "even of 10 s: a longer log would")
+
+
+def test_run_picks_a_shorter_outage_only_where_60_s_gives_fewer_than_four():
+    from vnav_graph.evaluation.holdout import auto_outage
+
+    assert auto_outage(np.arange(0.0, 1200.0)) == (60.0, None)  # 60 s gives 5 windows
+    t = np.arange(0.0, 400.0)  # 60 s gives 3 (above), 45 s gives 4
+    assert auto_outage(t) == (45.0, "outage 45 s chosen: it gives 4 windows on this log "
+                                    "where 60 s gives 3 (set --outage to choose)")
+    assert auto_outage(np.arange(0.0, 61.0)) == (60.0, None)  # none gives 4: the default

@@ -124,6 +124,31 @@ def windows_remedy(t_gnss: FloatArray, outage_s: float, n_windows: int,
             f"{REMEDY_OUTAGES_S[-1]:g} s: a longer log would")
 
 
+DEFAULT_OUTAGE_S = 60.0
+
+
+def auto_outage(t_gnss: FloatArray, spacing_s: float | None = None,
+                need: int = 4) -> tuple[float, str | None]:
+    """The outage length ``run`` uses when none is given: ``DEFAULT_OUTAGE_S`` when it gives
+    ``need`` windows (or more), else the longest of ``REMEDY_OUTAGES_S`` that does (the
+    sentence that says so as second value); ``DEFAULT_OUTAGE_S`` and None when none does."""
+    def count(o: float) -> int:
+        try:
+            return len(choose_windows(t_gnss, o, spacing_s))
+        except ValueError:
+            return 0
+
+    n0 = count(DEFAULT_OUTAGE_S)
+    if n0 >= need:
+        return DEFAULT_OUTAGE_S, None
+    for o in REMEDY_OUTAGES_S:
+        n = count(o)
+        if n >= need:
+            return o, (f"outage {o:g} s chosen: it gives {n} windows on this log where "
+                       f"{DEFAULT_OUTAGE_S:g} s gives {n0} (set --outage to choose)")
+    return DEFAULT_OUTAGE_S, None
+
+
 def in_windows(t: FloatArray, windows: Sequence[tuple[float, float]]) -> np.ndarray:
     m = np.zeros(np.shape(t), dtype=bool)
     for a, b in windows:
