@@ -281,7 +281,7 @@ def _num(x: float | None, scale: float, spec: str) -> str:
 
 
 def _iv(iv: list[float] | None, scale: float, spec: str) -> str:
-    return "" if iv is None else f" [{format(iv[0] * scale, spec)}, {format(iv[1] * scale, spec)}]"
+    return "" if iv is None else f" [{_num(iv[0], scale, spec)}, {_num(iv[1], scale, spec)}]"
 
 
 def describe(w: dict[str, Any], a: str, b: str, unit: str, scale: float = 1.0,
@@ -330,7 +330,8 @@ def describe(w: dict[str, Any], a: str, b: str, unit: str, scale: float = 1.0,
             f"{e} {_num(t['worst'], scale, spec)}{u} (seed {t['worst_seed']})"
             for e, t in tails.items() if t["worst"] is not None)
         if any(t["p95_mean"] is not None for t in tails.values()):
-            tail += "; 95th percentile of |error| (mean / largest over seeds): " + ", ".join(
+            tail += ("; 95th percentile of |error| over the drive (mean / largest over "
+                     "seeds): ") + ", ".join(
                 f"{e} {_num(t['p95_mean'], scale, spec)} / {_num(t['p95_max'], scale, spec)}{u}"
                 for e, t in tails.items() if t["p95_mean"] is not None)
         elif any(t["p95_key"] for t in tails.values()):
