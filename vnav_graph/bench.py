@@ -25,7 +25,9 @@ from .evaluation.montecarlo import (
     BENCH_SCHEMA,
     CAUSAL_ERRORS_KEY,
     DEFAULT_WORKERS,
+    HEADING_ERRORS_KEY,
     aggregate,
+    common_heading_blocks,
     common_start_blocks,
     finite,
     shorten_scenario,
@@ -95,7 +97,7 @@ def run_task(task: BenchTask) -> dict[str, Any]:
     one-time warm-up of the estimator in this process (``warm_up``).
     """
     from .estimators.base import register
-    from .evaluation.metrics import causal_errors, evaluate
+    from .evaluation.metrics import causal_errors, evaluate, heading_errors
     from .simulation import simulate
 
     row: dict[str, Any] = {"scenario": task.scenario, "seed": int(task.seed),
@@ -120,6 +122,9 @@ def run_task(task: BenchTask) -> dict[str, Any]:
         # the causal estimate's errors epoch by epoch, for the real-time pairs scored over
         # their common span (montecarlo.common_start_blocks; removed before the row is kept)
         row[CAUSAL_ERRORS_KEY] = causal_errors(res.estimate, drive, "online")
+        # its heading error and σ_yaw, for heading scored where both of a pair know it
+        # (montecarlo.common_heading_blocks; removed before the row is kept)
+        row[HEADING_ERRORS_KEY] = heading_errors(res.estimate, drive)
         if row["status"] == "ok" and row["alt_rmse_m"] is None and drive.truth is not None:
             row["status"] = "failed"
             row["error"] = "evaluate: non-finite altitude error (estimator diverged)"
@@ -214,9 +219,11 @@ def run_tasks(
     finally:
         bar.close()
     if interrupted:
-        raise BenchInterrupted(common_start_blocks([r for r in rows if r is not None]))
-    return common_start_blocks([r if r is not None else _failed_row(t, "worker: no result")
-                                for r, t in zip(rows, tasks, strict=True)])
+        raise BenchInterrupted(common_heading_blocks(common_start_blocks(
+            [r for r in rows if r is not None])))
+    return common_heading_blocks(common_start_blocks(
+        [r if r is not None else _failed_row(t, "worker: no result")
+         for r, t in zip(rows, tasks, strict=True)]))
 
 
 class BenchInterrupted(KeyboardInterrupt):

@@ -80,7 +80,13 @@ def summarize(drive: Drive, results: Sequence[RunResult]) -> dict[str, Any]:
     until ``apply_holdout`` scores a real log).
     """
     from . import __version__
-    from .evaluation.compare import comparison, rankings, time_blocks
+    from .evaluation.compare import (
+        BLOCK_MIN_S,
+        MIN_BLOCKS_TO_RANK,
+        comparison,
+        rankings,
+        time_blocks,
+    )
 
     blocks = None
     if drive.truth is not None:
@@ -100,11 +106,17 @@ def summarize(drive: Drive, results: Sequence[RunResult]) -> dict[str, Any]:
         ests[r.name]["jit_s"] = round(r.jit_s, 3)
     comp = None
     if blocks is not None:
+        need_s = MIN_BLOCKS_TO_RANK * BLOCK_MIN_S
         comp = comparison(
             ests, per_block, "truth", blocks, "time block",
             f"One simulated run: the CI is over {len(blocks)} consecutive time blocks of this "
             "run (batch means; blocks are not independent runs). For an interval over runs "
-            "use `vnav-graph bench` with several seeds.")
+            "use `vnav-graph bench` with several seeds." if len(blocks) >= MIN_BLOCKS_TO_RANK
+            else f"One simulated run, split into {len(blocks)} time blocks of about "
+            f"{BLOCK_MIN_S:g} s. For an interval over runs use `vnav-graph bench` with "
+            "several seeds.",
+            remedy=f"a drive of at least {need_s:g} s (--duration {need_s:g}) gives "
+                   f"{MIN_BLOCKS_TO_RANK} time blocks")
     meta = drive.meta
     head: dict[str, Any] = {"name": drive.name, "source": drive.source,
                             "duration_s": drive.duration_s}
@@ -134,7 +146,7 @@ def apply_holdout(summary: dict[str, Any], holdout_doc: dict[str, Any]) -> dict[
     ``evaluation``; ``comparison`` is recomputed over the windows (its ``per_block`` = the
     holdout ``per_window``). NEES stays null (no reference for the full state).
     """
-    from .evaluation.compare import comparison, rankings
+    from .evaluation.compare import MIN_BLOCKS_TO_RANK, comparison, rankings
 
     out = json.loads(json.dumps(summary))
     per_block: dict[str, list[dict[str, Any]]] = {}
@@ -161,35 +173,50 @@ def apply_holdout(summary: dict[str, Any], holdout_doc: dict[str, Any]) -> dict[
         "scoring": holdout_doc["scoring"],
         "gnss_sd_v_median_m": holdout_doc.get("gnss_sd_v_median_m"),
         "onboard": holdout_doc.get("onboard"),
+        # additive: the sentence saying a shorter outage was chosen (``auto_outage``)
+        "outage_chosen": holdout_doc.get("outage_chosen"),
     }
     out["comparison"] = comparison(
         out["estimators"], per_block, "withheld GNSS (holdout)",
         [(w["t0"], w["t1"]) for w in windows], "holdout window",
         f"Scored against GNSS withheld in {len(windows)} windows of "
-        f"{holdout_doc['outage_s']:g} s (a second run of each estimator without those fixes); "
-        "the CI treats the windows as independent (each is preceded by GNSS).")
+        f"{holdout_doc['outage_s']:g} s (a second run of each estimator without those fixes"
+        + (f"; {holdout_doc['outage_chosen']}" if holdout_doc.get("outage_chosen") else "")
+        + ")" + ("; the CI treats the windows as independent (each is preceded by GNSS)."
+                 if len(windows) >= MIN_BLOCKS_TO_RANK else "."),
+        remedy=holdout_doc.get("remedy"))
     out["rankings"] = rankings(out["estimators"])
     return out
 
 
 def score_holdout(summary: dict[str, Any], drive: Drive, names: Sequence[str],
                   progress: bool | Mode = False, configs: Mapping[str, Any] | None = None,
-                  outage_s: float = 60.0, spacing_s: float | None = None
+                  outage_s: float | None = None, spacing_s: float | None = None
                   ) -> tuple[dict[str, Any], Any]:
     """The optional holdout scoring of ``run`` (:func:`apply_holdout`), which never sinks the
     run: when the log cannot be scored (GNSS span too short for one outage window, too few
     fixes) the summary keeps its results and says why in ``evaluation.skipped``. ``outage_s``
-    and ``spacing_s``: the windows (``run --outage / --spacing``, as ``holdout``'s).
+    and ``spacing_s``: the windows (``run --outage / --spacing``, as ``holdout``'s); without
+    ``outage_s``, 60 s, or a shorter outage where 60 s gives fewer than 4 windows and a
+    shorter one gives 4 (``holdout.auto_outage``, said in ``evaluation.outage_chosen`` and
+    the headline's note).
 
     Returns the summary and the ``HoldoutResult`` (None when skipped), whose error series the
     report draws."""
+    from .evaluation.holdout import auto_outage
+
+    chosen = None
+    if outage_s is None and drive.gnss is not None and len(drive.gnss) >= 2:
+        outage_s, chosen = auto_outage(drive.gnss.t, spacing_s)
     try:
-        res = run_holdout(drive, list(names), outage_s, spacing_s, progress=progress,
-                          configs=configs)
+        res = run_holdout(drive, list(names), outage_s or 60.0, spacing_s,
+                          progress=progress, configs=configs)
     except ValueError as exc:
         out = dict(summary)
         out["evaluation"] = {"basis": None, "skipped": failure_message(exc)}
         return out, None
+    if chosen:
+        res.doc["outage_chosen"] = chosen
     return apply_holdout(summary, res.doc), res
 
 

@@ -126,8 +126,8 @@ def test_bench_row_equals_run_summary():
 
 
 def test_make_results_page_from_numbers(tmp_path):
-    """The results page states a win exactly when the paired CI excludes zero and the win rule
-    counts it (a loser without σ: counted; a loser whose σ covers its error: not)."""
+    """The results page states a win exactly when the paired CI excludes zero (the accuracy
+    win rule), with the loser's calibration beside it, and "not resolved" otherwise."""
     import importlib.util
     from pathlib import Path
 
@@ -154,20 +154,25 @@ def test_make_results_page_from_numbers(tmp_path):
                       "executor": "local", "wall_s": 1.0}}
     (tmp_path / "bench.json").write_text(json.dumps(doc))
     page = mr.render(tmp_path)
-    assert ("altitude RMSE: **ekf-rts** lower by 0.500 m (a − b 95 % CI [0.500, 0.500] m, "
-            "n = 4)") in page
+    # gain 0.5/3 = 17 %, its delta-method CI from the spread of the ekf's values
+    assert ("altitude RMSE: d = 0.500 [0.500, 0.500] m, gain 17 [5, 28] %, n = 4: "
+            "**ekf-rts wins**") in page
     assert "Why" not in page  # no mechanism the run did not measure
     assert "**ekf-rts → graph-batch (ekf-rts vs graph-batch).**" in page  # offline, like for like
     # ±0.1 m alternating over 4 seeds: mean 0, s = 0.11547, t_{0.975,3} = 3.182 → |d| ≤ 0.184
-    assert "altitude RMSE: no significant difference (a − b 95 % CI [-0.184, 0.184] m" in page
-    # the same 0.5 m against an ekf whose σ covers its error (NEES/dof 1): not counted
+    assert ("altitude RMSE: d = 0.000 [-0.184, 0.184] m, gain 0 [-7, 7] %, n = 4: not "
+            "resolved (the 95 % CI of the difference contains 0)") in page
+    assert "**Win rule:** a paired difference over seeds" in page
+    # the same 0.5 m against an ekf whose σ covers its error (NEES/dof 1): still a win, its
+    # calibration beside it (these rows carry only the 6-dof NEES: said so)
     for r in runs:
         if r["estimator"] == "ekf":
             r["nees_mean"], r["nees_dof"] = 6.0, 6
     (tmp_path / "bench.json").write_text(json.dumps({**doc, "aggregate": aggregate(runs)}))
     page = mr.render(tmp_path)
-    assert ("altitude RMSE: ekf-rts lower by 0.500 m (a − b 95 % CI [0.500, 0.500] m, n = 4); "
-            "not counted as a win: the loser's σ covers its error") in page
+    assert ("altitude RMSE: d = 0.500 [0.500, 0.500] m, gain 17 [5, 28] %, n = 4: "
+            "**ekf-rts wins**; NEES/dof (position+velocity, 6 dof: the runs carry no per-axis "
+            "NEES): ekf 1.00, ekf-rts —") in page
     assert "reproductions.json` missing" in page
     (tmp_path / "reproductions.json").write_text(json.dumps(
         {"seed003_steady_sd_m": 1.1, "seed001_rmse_m": {"vekf7": 4.0}}))

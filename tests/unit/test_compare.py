@@ -63,9 +63,9 @@ def test_headline_picks_best_and_states_the_margin() -> None:
     half = T975[3] * np.sqrt(0.02 / 3) / 2.0
     assert h["ci95"] == pytest.approx([0.5 - half, 0.5 + half], abs=1e-3)
     assert h["verdict"] == "better" and h["n_blocks"] == 4
-    assert h["text"].startswith("Altitude RMSE: graph-batch best, 1.00 m vs ekf 1.50 m "
-                                "(0.50 m, 33 % lower)")
-    assert "95 % CI [+0.37, +0.63] m (graph-batch lower in 4 of 4 holdout windows)" in h["text"]
+    assert h["text"] == ("Altitude RMSE, paired difference from graph-batch (1.00 m) over 4 "
+                         "holdout windows, 95 % CI: ekf +0.50 m [+0.37, +0.63] (graph-batch "
+                         "lower than ekf in 4 of 4).")
     # one estimator has a horizontal RMSE: nothing to rank
     assert comp["metrics"]["horiz_rmse_m"] is None
     assert h["summary_text"] == (
@@ -75,15 +75,41 @@ def test_headline_picks_best_and_states_the_margin() -> None:
     assert headline_lines({"comparison": comp}) == [h["summary_text"], h["text"], "note"]
 
 
-def test_headline_tied_when_ci_includes_zero() -> None:
+def test_not_resolved_when_ci_includes_zero() -> None:
     # overall ekf-rts is lower, but per window the sign flips: d = +1, −1, +1, −0.6
     vals = {"ekf-rts": 2.0, "graph-isam2": 2.1}
     blocks = {"ekf-rts": [1.0, 3.0, 1.0, 2.6], "graph-isam2": [2.0, 2.0, 2.0, 2.0]}
     h = rank_metric(vals, blocks, "alt_rmse_m", "Altitude RMSE", "holdout window")
-    assert h["best"] == "ekf-rts" and h["verdict"] == "tied"
+    assert h["best"] == "ekf-rts" and h["verdict"] == "tied"  # the JSON value, unchanged
     assert h["ci95"][0] < 0 < h["ci95"][1]
-    assert "ekf-rts and graph-isam2 tied" in h["text"] and "includes 0" in h["text"]
     assert h["n_blocks_best_lower"] == 2
+    # |d| = 1, 1, 1, 0.6: 90 % of Σ|d| needs all four windows, so the reason is the CI
+    assert h["tied"][0]["sits_in"] == 4
+    assert h["summary_text"] == (
+        "Altitude RMSE: the smoothers (ekf-rts, graph-isam2) at 2.00–2.10 m, not resolved "
+        "from one another.")
+    for word in ("tie", "separated"):
+        assert word not in h["summary_text"] and word not in h["text"]
+
+
+def test_the_reason_names_the_blocks_an_excess_sits_in() -> None:
+    """The default drive's case: ekf 22.9 m against smoothers at 0.62 m, its excess in 2 of 8
+    blocks (CI containing 0): not resolved, with that reason, not "tied"."""
+    ekf = [0.18, 0.21, 0.16, 0.13, 11.63, 63.8, 0.31, 0.13]
+    best = [0.05, 0.1, 0.12, 0.08, 1.22, 1.21, 0.18, 0.09]
+    h = rank_metric({"graph-isam2": 0.62, "ekf": 22.9}, {"graph-isam2": best, "ekf": ekf},
+                    "horiz_rmse_m", "Horizontal RMSE", "time block")
+    assert h["ci95"][0] < 0 < h["ci95"][1]
+    assert h["summary_text"] == ("Horizontal RMSE: graph-isam2 lowest at 0.62 m; ekf (22.9 m) "
+                                 "not resolved from it: its excess over graph-isam2 sits in "
+                                 "2 of 8 time blocks.")
+    # closed form of concentration: |d| sorted 62.59, 10.41, ...; 90 % of the sum needs two
+    from vnav_graph.evaluation.compare import concentration
+
+    assert concentration([1.0, 1.0, 1.0, 1.0]) == 4  # 90 % of 4 needs all four
+    assert concentration([10.0, -0.5, 0.5]) == 1  # 10 ≥ 0.9 · 11
+    assert concentration([8.0, -2.0, 1.0]) == 2  # 8 < 9.9 ≤ 8 + 2
+    assert concentration([]) == 0
 
 
 def test_headline_mixed_and_no_ci() -> None:
@@ -95,7 +121,8 @@ def test_headline_mixed_and_no_ci() -> None:
     h = rank_metric({"a": 1.0, "b": 1.1}, {"a": [1.0, None], "b": [1.2, 1.3]},
                     "alt_rmse_m", "Altitude RMSE", "holdout window")
     assert h["verdict"] == "no CI" and h["ci95"] is None and h["n_blocks"] == 1
-    assert "no confidence interval" in h["text"]
+    assert h["text"] == ("Altitude RMSE: 1 paired holdout window(s): no confidence interval "
+                         "(at least 4 are needed).")
     assert rank_metric({"a": 1.0, "b": None}, {}, "alt_rmse_m", "x", "y") is None
 
 
@@ -118,22 +145,41 @@ def test_headline_names_the_family_that_ties_and_its_margin() -> None:
         h["best"]}
     assert h["resolved"]
     assert h["summary_text"].startswith(
-        "Altitude RMSE: the smoothers (ekf-rts, graph-batch, graph-isam2) tie at 0.1")
+        "Altitude RMSE: the smoothers (ekf-rts, graph-batch, graph-isam2) at 0.1")
+    assert "not resolved from one another" in h["summary_text"]
     r_filter = 0.34 / h["best_value"]
     assert f"{r_filter:.1f}× better than the best filter (ekf 0.34 m)" in h["summary_text"]
     assert "better than the best loop or observer (loop3 3.60 m)" in h["summary_text"]
     third = ({"ekf-rts", "graph-batch", "graph-isam2"} - {h["best"], h["runner_up"]}).pop()
-    assert f"Also not separated from {h['best']}: {third}" in h["text"]
+    assert f"; {third} +" in h["text"]  # every unresolved one with its paired CI
+    assert comp["headline"] == [h["summary_text"], h["text"]]  # one line each, no repeat
 
 
 def test_two_windows_cannot_rank() -> None:
-    h = rank_metric({"ekf-rts": 0.67, "graph-batch": 0.672, "vekf7": 1.73},
-                    {"ekf-rts": [0.6, 0.74], "graph-batch": [0.62, 0.72],
-                     "vekf7": [1.5, 1.9]}, "alt_rmse_m", "Altitude RMSE", "holdout window")
-    assert not h["resolved"]
-    assert h["summary_text"].startswith(
-        "Altitude RMSE: 2 paired holdout window(s) cannot rank the estimators (at least 4 are "
-        "needed); lowest ekf-rts 0.67 m")
+    """Fewer than four windows: no CI, no ranking, one line saying so and what would resolve
+    it; the rankings are not printed."""
+    from vnav_graph.evaluation.compare import can_rank, ranking_lines, rankings
+
+    ests = {"ekf-rts": _est(0.67), "graph-batch": _est(0.672), "vekf7": _est(1.73)}
+    pb = {"ekf-rts": _blocks([0.6, 0.74]), "graph-batch": _blocks([0.62, 0.72]),
+          "vekf7": _blocks([1.5, 1.9])}
+    comp = comparison(ests, pb, "withheld GNSS (holdout)", [(0, 1)] * 2, "holdout window",
+                      "note", remedy="--outage 30 gives 5 windows on this log")
+    h = comp["metrics"]["alt_rmse_m"]
+    assert not h["resolved"] and h["ci95"] is not None  # computed, kept in the JSON
+    assert comp["headline"] == [
+        "Not resolved: 2 paired holdout window(s) cannot rank the estimators (at least 4 are "
+        "needed), so no confidence interval and no ranking is given; --outage 30 gives 5 "
+        "windows on this log."]
+    summary = {"comparison": comp, "rankings": rankings(ests)}
+    assert not can_rank(summary) and ranking_lines(summary) == []
+    lines = headline_lines(summary)
+    assert not any("CI [" in x or "<" in x for x in lines)
+    # four windows: ranked
+    pb4 = {n: _blocks([b["alt_rmse_m"] for b in v] * 2) for n, v in pb.items()}
+    comp4 = comparison(ests, pb4, "x", [(0, 1)] * 4, "holdout window", "note")
+    assert comp4["resolved"] and comp4["remedy"] is None
+    assert ranking_lines({"comparison": comp4, "rankings": rankings(ests)})
 
 
 def test_against_baseline_puts_everyone_against_one() -> None:
@@ -153,6 +199,7 @@ def test_against_baseline_puts_everyone_against_one() -> None:
     first = s["comparison"]["headline"][0]
     assert first.startswith("Altitude RMSE against base (1.00 m), paired 95 % CI over the "
                             "time blocks: variant -0.100 m")
+    assert "tied" not in first
     missing = against_baseline({"estimators": ests, "comparison": comp}, "broken")
     assert missing["comparison"]["headline"][0] == ("Altitude RMSE: the baseline broken has "
                                                     "no result (failed).")

@@ -206,8 +206,9 @@ def test_write_report_files_and_html(drive, tmp_path):
 
 
 def test_table_and_headline_agree_with_summary(drive, tmp_path):
-    """Three stand-ins 0.5 / 1.5 / 2.5 m off truth: the table shows the summary's numbers
-    and the headline names the 0.5 m one, in the HTML and in the terminal table alike."""
+    """Three stand-ins 0.5 / 1.5 / 2.5 m off truth: the table shows the summary's numbers,
+    and the headline, in the HTML and in the terminal table alike, says that 2 time blocks
+    cannot rank them and what would."""
     results = [RunResult(n, shifted_truth(drive, n, off), None, 0.5)
                for n, off in (("ekf", 1.5), ("graph-batch", 0.5), ("loop3", 2.5))]
     summary = summarize(drive, results)
@@ -219,9 +220,16 @@ def test_table_and_headline_agree_with_summary(drive, tmp_path):
     write_report(tmp_path, summary, results, drive)
     page = (tmp_path / "report.html").read_text(encoding="utf-8")
     assert assert_table_matches_summary(page, summary) == 3 * 6
-    assert f'<p class="headline">{h["text"]}</p>' in page
+    # a drive of 2 time blocks cannot rank: one line says so and what would, in both places
+    assert h["n_blocks"] == 2
+    (line,) = summary["comparison"]["headline"]
+    assert line.startswith("Not resolved: 2 paired time block(s) cannot rank the estimators")
+    assert line.endswith("; a drive of at least 120 s (--duration 120) gives 4 time blocks.")
+    assert f'<p class="headline">{line}</p>' in page
     text = format_table(summary)
-    assert f"HEADLINE {h['text']}" in text
+    assert f"HEADLINE {line}" in text
+    assert "OFFLINE" not in text and "CI [" not in text  # no ranking, no CI
+    assert "No ranking: too few paired blocks or windows" in page
     head = next(x for x in text.splitlines() if x.startswith("estimator"))
     for unit in ("alt RMSE m", "horiz RMSE m", "vD RMSE m/s", "scale %", "latency ms",
                  "bias m", "run s"):
@@ -319,11 +327,15 @@ def test_log_run_is_scored_and_drawn_against_withheld_gnss(tmp_path, monkeypatch
     page = (out / "report.html").read_text(encoding="utf-8")
     assert assert_table_matches_summary(page, summary) == 2 * 6
     assert "CLOCK REPAIRED: planted note" in page
-    assert "ekf-rts and graph-batch tied" in page
+    # d = +1, −1, +1, −1 over 4 windows: not resolved, said with its measured reason
+    assert ("Altitude RMSE: ekf-rts lowest at 2.00 m; graph-batch (2.24 m) not resolved from "
+            "it: the paired 95 % CI [-1.84, +1.84] m contains 0.") in page
+    assert "tied" not in page and "not separated" not in page
     assert "withheld from it, at those fixes only" in page and "shaded: the withheld" in page
     assert "simulation truth" not in page
     text = (out / "summary.txt").read_text()
-    assert "HEADLINE Altitude RMSE: ekf-rts and graph-batch tied" in text
+    assert "HEADLINE Altitude RMSE: ekf-rts lowest at 2.00 m; graph-batch (2.24 m) not " in text
+    assert "tied" not in text
     # the onboard estimate: no offset on the given fixes, +0.7 m at every withheld one
     ob = summary["evaluation"]["onboard"]
     assert ob["alt_rmse_m"] == pytest.approx(0.7, abs=1e-9)

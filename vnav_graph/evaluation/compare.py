@@ -14,9 +14,15 @@ Per metric (altitude RMSE, horizontal RMSE where at least two estimators provide
   Student-t interval ``mean(d) ± t_{0.975, n−1} · sd(d)/√n``. The t-interval is used rather
   than a bootstrap because ``n`` is small (2 to 10): a bootstrap of 2 numbers returns their
   range, which is not a 95 % interval.
-- **verdict**: ``"better"`` when the CI lies above zero, ``"tied"`` when it contains zero,
-  ``"mixed"`` when it lies below zero (per-block differences favour the runner-up although
-  its overall RMSE is higher), ``"no CI"`` with fewer than two paired blocks.
+- **verdict** (the JSON value): ``"better"`` when the CI lies above zero, ``"tied"`` when it
+  contains zero, ``"mixed"`` when it lies below zero (per-block differences favour the
+  runner-up although its overall RMSE is higher), ``"no CI"`` with fewer than two paired
+  blocks. The words printed say "not resolved", with the measured reason (``reason``): the
+  excess sits in k of n blocks (``concentration``), or the CI contains 0, or the blocks favour
+  the other one.
+- Fewer than ``MIN_BLOCKS_TO_RANK`` paired blocks give no CI and no ranking in the printed
+  words; one line says so and what would resolve it (the caller's ``remedy``: a longer drive,
+  a shorter ``--outage``).
 
 Honesty about the blocks: holdout windows are separated by at least one outage length of
 GNSS, which re-anchors every estimator, so they are close to independent. Time blocks of one
@@ -43,9 +49,11 @@ HEADLINE_METRICS = (("alt_rmse_m", "Altitude RMSE"), ("horiz_rmse_m", "Horizonta
 # Fewer paired blocks than this cannot rank estimators: the t quantile with 2 degrees of
 # freedom is 4.3 (3.2 with 3), so only a difference several times its scatter is resolved.
 MIN_BLOCKS_TO_RANK = 4
-# The finding sentence says "tie" for estimators the blocks do not separate from the best and
-# whose value is within this fraction of it; the others are named as not separated.
+# The finding sentence groups with the best the estimators the blocks do not resolve from it
+# and whose value is within this fraction of it; the others are named with the reason.
 TIE_REL = 0.10
+# ``concentration``: the share of the summed |paired difference| the fewest blocks must hold
+CONCENTRATION = 0.9
 
 
 def time_blocks(t0: float, t1: float) -> list[tuple[float, float]]:
@@ -126,6 +134,33 @@ def _dm(x: float) -> str:
     return ("+" if x >= 0 else "-") + _m(abs(x))
 
 
+def concentration(d: Sequence[float], share: float = CONCENTRATION) -> int:
+    """The fewest paired differences ``d`` whose |d| hold ``share`` of Σ|d| (the blocks an
+    excess sits in); 0 for an empty or all-zero ``d``."""
+    a = np.sort(np.abs(np.asarray(d, dtype=float)))[::-1]
+    total = float(a.sum())
+    if total <= 0:
+        return 0
+    return int(np.searchsorted(np.cumsum(a), share * total - 1e-12 * total) + 1)
+
+
+def reason(t: Mapping[str, Any], best: str, block_kind: str) -> str:
+    """Why an estimator is not resolved from ``best`` (an entry of ``rank_metric``'s
+    ``tied``), measured: too few paired blocks, blocks that favour it, an excess that sits in
+    a few blocks, or a CI that contains 0."""
+    n = t["n_blocks"]
+    if t["ci95"] is None or n < MIN_BLOCKS_TO_RANK:
+        return f"{n} paired {block_kind}(s), at least {MIN_BLOCKS_TO_RANK} needed"
+    lo, hi = t["ci95"]
+    if hi < 0:
+        return (f"the {block_kind}s favour it (paired 95 % CI [{_dm(lo)}, {_dm(hi)}] m) though "
+                f"its RMSE over the run is higher")
+    k = t.get("sits_in") or n
+    if k <= n // 2:
+        return f"its excess over {best} sits in {k} of {n} {block_kind}s"
+    return f"the paired 95 % CI [{_dm(lo)}, {_dm(hi)}] m contains 0"
+
+
 def rank_metric(values: Mapping[str, float | None],
                 per_block: Mapping[str, Sequence[float | None]], key: str, label: str,
                 block_kind: str) -> dict[str, Any] | None:
@@ -160,7 +195,8 @@ def rank_metric(values: Mapping[str, float | None],
         if cin is None or cin[1] <= 0:
             tied.append({"name": n, "value": v, "n_blocks": len(dn),
                          "paired_mean": None if cin is None else cin[0],
-                         "ci95": None if cin is None else [cin[1], cin[2]]})
+                         "ci95": None if cin is None else [cin[1], cin[2]],
+                         "sits_in": concentration(dn)})
     out = {"metric": key, "best": best, "best_value": best_v, "runner_up": runner,
            "runner_up_value": run_v, "diff": diff, "rel_pct": rel, "n_blocks": len(d),
            "n_blocks_best_lower": int(sum(x > 0 for x in d)),
@@ -168,39 +204,30 @@ def rank_metric(values: Mapping[str, float | None],
            "ci95": None if ci is None else [ci[1], ci[2]], "verdict": verdict,
            "tied": tied, "resolved": len(d) >= MIN_BLOCKS_TO_RANK,
            "values": {n: v for v, n in have}}
+    for t in tied:
+        t["reason"] = reason(t, best, block_kind)
     out["text"] = headline_text(out, label, block_kind)
     out["summary_text"] = people_text(out, label, block_kind)
     return out
 
 
 def headline_text(h: Mapping[str, Any], label: str, block_kind: str) -> str:
-    """The statistical sentence of ``rank_metric``: best, runner-up, the paired interval, and
-    every estimator the blocks do not separate from the best."""
-    rel = "" if h["rel_pct"] is None else f", {h['rel_pct']:.0f} %"
-    vs = (f"{_m(h['best_value'])} m vs {h['runner_up']} {_m(h['runner_up_value'])} m "
-          f"({_m(h['diff'])} m{rel} lower)")
-    if h["verdict"] == "no CI":
-        return (f"{label}: {h['best']} lowest, {vs}; {h['n_blocks']} paired {block_kind}(s): "
-                "no confidence interval (needs two or more).")
-    lo, hi = h["ci95"]
-    ci = (f"paired difference over {h['n_blocks']} {block_kind}s {_dm(h['paired_mean'])} m, "
-          f"95 % CI [{_dm(lo)}, {_dm(hi)}] m")
-    wins = (f" ({h['best']} lower in {h['n_blocks_best_lower']} of {h['n_blocks']} "
-            f"{block_kind}s)")
-    others = [t for t in h.get("tied", []) if t["name"] != h["runner_up"]]
-    also = ""
-    if others:
-        also = (" Also not separated from " + h["best"] + ": " + ", ".join(
-            f"{t['name']} {_m(t['value'])} m" + (
-                "" if t["ci95"] is None else
-                f" (CI [{_dm(t['ci95'][0])}, {_dm(t['ci95'][1])}] m)") for t in others) + ".")
-    if h["verdict"] == "better":
-        return f"{label}: {h['best']} best, {vs}; {ci}{wins}.{also}"
-    if h["verdict"] == "tied":
-        return (f"{label}: {h['best']} and {h['runner_up']} tied: {h['best']} {vs}, but the "
-                f"{ci} includes 0{wins}.{also}")
-    return (f"{label}: {h['best']} lowest overall but the {block_kind}s favour "
-            f"{h['runner_up']} (mixed): {vs}; {ci}{wins}.{also}")
+    """The statistical line of ``rank_metric``: each estimator's paired difference from the
+    best over the blocks with its 95 % CI (numbers only: ``people_text`` says what they
+    resolve); without a CI under ``MIN_BLOCKS_TO_RANK`` blocks."""
+    n = h["n_blocks"]
+    if not h["resolved"]:
+        return (f"{label}: {n} paired {block_kind}(s): no confidence interval (at least "
+                f"{MIN_BLOCKS_TO_RANK} are needed).")
+    rows = [{"name": h["runner_up"], "value": h["runner_up_value"], "ci95": h["ci95"],
+             "paired_mean": h["paired_mean"], "n_blocks": n}]
+    rows += [t for t in h.get("tied", []) if t["name"] != h["runner_up"]]
+    parts = [f"{t['name']} {_dm(t['paired_mean'])} m [{_dm(t['ci95'][0])}, "
+             f"{_dm(t['ci95'][1])}]" for t in rows if t["ci95"] is not None]
+    return (f"{label}, paired difference from {h['best']} ({_m(h['best_value'])} m) over {n} "
+            f"{block_kind}s, 95 % CI: " + "; ".join(parts)
+            + f" ({h['best']} lower than {h['runner_up']} in {h['n_blocks_best_lower']} of "
+            f"{n}).")
 
 
 def _names(names: Sequence[str]) -> str:
@@ -213,72 +240,91 @@ def _times(r: float) -> str:
 
 def people_text(h: Mapping[str, Any], label: str, block_kind: str) -> str:
     """The finding of ``rank_metric`` in one sentence for a person: who is best (or which
-    estimators the blocks cannot separate), and by how much the best of every other family
-    trails, e.g. "Altitude RMSE: the smoothers (ekf-rts, graph-batch, graph-isam2) tie at
-    0.18 m, 1.9× better than the best filter (ekf 0.34 m) and 12× better than the best loop
-    or observer (observer1d 2.08 m)."."""
+    estimators the blocks do not resolve from it, and why), and by how much the best of every
+    other family trails, e.g. "Altitude RMSE: the smoothers (ekf-rts, graph-batch,
+    graph-isam2) at 0.18 m, not resolved from one another, 1.9× better than the best filter
+    (ekf 0.34 m) and 12× better than the best loop or observer (observer1d 2.08 m)."."""
     from ..estimators.base import FAMILIES, family_of
 
     values: dict[str, float] = h["values"]
     best = h["best"]
     if not h["resolved"]:
-        top = [best, *[t["name"] for t in h["tied"]]][:3]
-        return (f"{label}: {h['n_blocks']} paired {block_kind}(s) cannot rank the "
-                f"estimators (at least {MIN_BLOCKS_TO_RANK} are needed); lowest "
-                + ", ".join(f"{n} {_m(values[n])} m" for n in top) + ".")
+        return (f"{label}: not resolved: {h['n_blocks']} paired {block_kind}(s) cannot rank "
+                f"the estimators (at least {MIN_BLOCKS_TO_RANK} are needed).")
     close = [t["name"] for t in h["tied"] if t["value"] <= (1 + TIE_REL) * h["best_value"]]
-    loose = [t["name"] for t in h["tied"] if t["name"] not in close]
+    loose = [t for t in h["tied"] if t["name"] not in close]
     top = [best, *close]
     top_v = [values[n] for n in top]
     fams = {family_of(n)[0] for n in top}
     at = (f"{_m(min(top_v))} m" if _m(min(top_v)) == _m(max(top_v))
           else f"{_m(min(top_v))}–{_m(max(top_v))} m")
-    if len(top) == 1:
-        who = f"{best} is best at {at}"
+    if len(top) == 1:  # "best" only when every other one is resolved from it
+        who = f"{best} {'lowest' if loose else 'is best'} at {at}"
     else:
         members = next((m for f, _, m in FAMILIES if f in fams), ())
         present = [n for n in members if n in values]
         if len(fams) == 1 and sorted(present) == sorted(top):
-            who = f"the {family_of(best)[0]} ({', '.join(present)}) tie at {at}"
+            who = f"the {family_of(best)[0]} ({', '.join(present)}) at {at}"
         else:
-            who = f"{_names(top)} tie at {at}"
+            who = f"{_names(top)} at {at}"
+        who += ", not resolved from one another"
     trail: dict[str, tuple[str, float, str]] = {}
+    loose_names = {t["name"] for t in loose}
     for n, v in values.items():
         f, one = family_of(n)
         if f not in fams and (f not in trail or v < trail[f][1]):
             trail[f] = (n, v, one)
     parts = [f"{_times(v / h['best_value'])} better than the best {one} ({n} {_m(v)} m)"
              for n, v, one in sorted(trail.values(), key=lambda x: x[1])
-             if h["best_value"] > 0 and n not in loose]
-    if loose:
-        who += ("; the " + block_kind + "s do not separate " + _names(
-            [f"{n} ({_m(values[n])} m)" for n in loose]) + " from " + (
-                "it" if len(top) == 1 else "them") + ", though")
-    return f"{label}: {who}" + (", " + " and ".join(parts) if parts else "") + "."
+             if h["best_value"] > 0 and n not in loose_names]
+    text = f"{label}: {who}" + (", " + " and ".join(parts) if parts else "")
+    for t in loose:
+        text += (f"; {t['name']} ({_m(t['value'])} m) not resolved from "
+                 f"{'it' if len(top) == 1 else 'them'}: {t['reason']}")
+    return text + "."
 
 
 def comparison(estimators: Mapping[str, Mapping[str, Any]],
                per_block: Mapping[str, Sequence[Mapping[str, Any]]], basis: str,
                blocks: Sequence[tuple[float, float]], block_kind: str,
-               note: str) -> dict[str, Any]:
+               note: str, remedy: str | None = None) -> dict[str, Any]:
     """``summary["comparison"]``: the headline of each metric and the per-block values it
     used (``per_block``: name → list aligned with ``blocks`` of dicts with the metric keys).
 
     ``estimators`` are the summary's estimator blocks; failed estimators and missing values
-    are left out of the ranking.
+    are left out of the ranking. The headline has one line per message: per metric the
+    finding (``summary_text``) and, where the blocks can rank, its numbers (``text``); when no
+    metric has ``MIN_BLOCKS_TO_RANK`` paired blocks, one line instead saying so and what would
+    resolve it (``remedy``; also in ``comparison["remedy"]``).
     """
     metrics: dict[str, Any] = {}
     for key, label in HEADLINE_METRICS:
         vals = {n: m.get(key) for n, m in estimators.items() if m.get("status") == "ok"}
         pb = {n: [b.get(key) for b in rows] for n, rows in per_block.items()}
         metrics[key] = rank_metric(vals, pb, key, label, block_kind)
-    headline = [m["summary_text"] for m in metrics.values() if m]
-    headline += [m["text"] for m in metrics.values() if m]
+    have = [m for m in metrics.values() if m]
+    resolved = any(m["resolved"] for m in have)
+    if have and not resolved:
+        n = max(m["n_blocks"] for m in have)
+        headline = [f"Not resolved: {n} paired {block_kind}(s) cannot rank the estimators "
+                    f"(at least {MIN_BLOCKS_TO_RANK} are needed), so no confidence interval "
+                    "and no ranking is given" + (f"; {remedy}" if remedy else "") + "."]
+    else:
+        headline = [m["summary_text"] for m in have]
+        headline += [m["text"] for m in have if m["resolved"]]
     return {"basis": basis, "block_kind": block_kind, "headline": headline,
             "blocks": [[float(a), float(b)] for a, b in blocks], "note": note,
             "method": "95 % Student-t interval of the paired per-block RMSE difference "
-                      "(runner-up − best); tied when it includes 0",
+                      "(runner-up − best); not resolved when it includes 0",
+            "resolved": resolved, "remedy": None if resolved else remedy,
             "metrics": metrics, "per_block": {n: list(r) for n, r in per_block.items()}}
+
+
+def can_rank(summary: Mapping[str, Any]) -> bool:
+    """Whether a summary's comparison has a metric with enough paired blocks to rank (True
+    without a comparison: nothing says otherwise)."""
+    comp = summary.get("comparison")
+    return not comp or bool(comp.get("resolved", True))
 
 
 def headline_lines(summary: Mapping[str, Any]) -> list[str]:
@@ -330,8 +376,14 @@ def against_baseline(summary: Mapping[str, Any], baseline: str) -> dict[str, Any
                        "worse" if ci[1] > 0 else "tied")
             rows[n] = {"value": v, "diff": v - base_v, "n_blocks": len(d),
                        "ci95": None if ci is None else [ci[1], ci[2]], "verdict": verdict}
-            ci_txt = "" if ci is None else f" [{_dm(ci[1])}, {_dm(ci[2])}]"
-            parts.append(f"{n} {_dm(v - base_v)} m{ci_txt} ({verdict})")
+            if ci is None or len(d) < MIN_BLOCKS_TO_RANK:
+                parts.append(f"{n} {_dm(v - base_v)} m (not resolved: {len(d)} paired "
+                             f"{kind}(s), at least {MIN_BLOCKS_TO_RANK} needed)")
+                continue
+            why = verdict if verdict != "tied" else (
+                "not resolved: " + reason({"n_blocks": len(d), "ci95": [ci[1], ci[2]],
+                                           "sits_in": concentration(d)}, baseline, kind))
+            parts.append(f"{n} {_dm(v - base_v)} m [{_dm(ci[1])}, {_dm(ci[2])}] ({why})")
         res[key] = rows
         if parts:
             lines.append(f"{label} against {baseline} ({_m(base_v)} m), paired 95 % CI over "
@@ -392,7 +444,7 @@ def ranked_name(entry: Mapping[str, Any]) -> str:
 def ranking_lines(summary: Mapping[str, Any]) -> list[str]:
     """The two rankings of a summary as text lines, one per ranking and metric."""
     rk = summary.get("rankings")
-    if not rk:
+    if not rk or not can_rank(summary):  # the headline says it cannot, and what would
         return []
     lines = []
     for kind, title in (("real_time", "REAL TIME (causal estimates)"),

@@ -101,6 +101,56 @@ def choose_windows(t_gnss: FloatArray, outage_s: float = 60.0,
     return wins
 
 
+# --outage lengths [s] ``windows_remedy`` tries, longest first
+REMEDY_OUTAGES_S = (45.0, 30.0, 20.0, 15.0, 10.0)
+
+
+def windows_remedy(t_gnss: FloatArray, outage_s: float, n_windows: int,
+                   need: int = 4) -> str | None:
+    """What would give ``need`` windows on this GNSS span: the longest ``--outage`` of
+    ``REMEDY_OUTAGES_S`` (default spacing) that gives that many, or that none does; None when
+    ``n_windows`` already reaches it."""
+    if n_windows >= need:
+        return None
+    for o in REMEDY_OUTAGES_S:
+        if o >= outage_s:
+            continue
+        try:
+            n = len(choose_windows(t_gnss, o))
+        except ValueError:
+            continue
+        if n >= need:
+            return f"--outage {o:g} gives {n} windows on this log"
+    span = float(t_gnss[-1] - t_gnss[0])
+    return (f"this log's {span:.0f} s of GNSS holds fewer than {need} windows even of "
+            f"{REMEDY_OUTAGES_S[-1]:g} s: a longer log would")
+
+
+DEFAULT_OUTAGE_S = 60.0
+
+
+def auto_outage(t_gnss: FloatArray, spacing_s: float | None = None,
+                need: int = 4) -> tuple[float, str | None]:
+    """The outage length ``run`` uses when none is given: ``DEFAULT_OUTAGE_S`` when it gives
+    ``need`` windows (or more), else the longest of ``REMEDY_OUTAGES_S`` that does (the
+    sentence that says so as second value); ``DEFAULT_OUTAGE_S`` and None when none does."""
+    def count(o: float) -> int:
+        try:
+            return len(choose_windows(t_gnss, o, spacing_s))
+        except ValueError:
+            return 0
+
+    n0 = count(DEFAULT_OUTAGE_S)
+    if n0 >= need:
+        return DEFAULT_OUTAGE_S, None
+    for o in REMEDY_OUTAGES_S:
+        n = count(o)
+        if n >= need:
+            return o, (f"outage {o:g} s chosen: it gives {n} windows on this log where "
+                       f"{DEFAULT_OUTAGE_S:g} s gives {n0} (set --outage to choose)")
+    return DEFAULT_OUTAGE_S, None
+
+
 def in_windows(t: FloatArray, windows: Sequence[tuple[float, float]]) -> np.ndarray:
     m = np.zeros(np.shape(t), dtype=bool)
     for a, b in windows:
@@ -309,6 +359,8 @@ def holdout_doc(drive: Drive, windows: Sequence[tuple[float, float]], withheld: 
                     "from a later epoch)"),
         "estimators": results,
         "onboard": _onboard_score(drive, reference, ~withheld),
+        # what would give enough windows to rank (``windows_remedy``), null when there are
+        "remedy": windows_remedy(drive.gnss.t, outage_s, len(windows)),
     }
 
 

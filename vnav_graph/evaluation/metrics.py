@@ -89,6 +89,40 @@ def known_after(t: FloatArray, sd: FloatArray | None, limit_deg: float = HEADING
     return float(t[start] - (t[0] if t_ref is None else t_ref))
 
 
+def heading_errors(est: Estimate, drive: Drive
+                   ) -> tuple[FloatArray, FloatArray, FloatArray] | None:
+    """``(t, heading error, σ_yaw)`` [s, deg, deg] of ``est`` against truth
+    (``errors_vs_truth``), None without truth, a heading or its σ."""
+    if drive.truth is None:
+        return None
+    err = errors_vs_truth(est, drive)
+    if err.heading is None or err.heading_sd is None:
+        return None
+    return err.t, err.heading, err.heading_sd
+
+
+def heading_common(t: FloatArray, heading: FloatArray, sd: FloatArray, t_other: FloatArray,
+                   sd_other: FloatArray, limit_deg: float = HEADING_KNOWN_SD_DEG
+                   ) -> dict[str, Any]:
+    """RMS heading error [deg] of one estimate at the epochs where it and another both report
+    σ_yaw ≤ ``limit_deg``: its own epochs ``t`` [s] with its ``sd`` ≤ the limit and the other's
+    ``sd_other`` (at ``t_other``, interpolated to ``t``; outside the other's span: not known)
+    ≤ the limit. Returns ``{"rmse_deg", "n_epochs", "known_s"}`` (``known_s``: the seconds
+    those epochs span, their count times the median step); ``rmse_deg`` None where there are
+    none."""
+    other = np.full(t.size, np.nan)
+    ok = np.isfinite(sd_other)
+    if ok.any():
+        inside = (t >= t_other[ok][0]) & (t <= t_other[ok][-1])
+        other[inside] = np.interp(t[inside], t_other[ok], sd_other[ok])
+    both = (np.isfinite(heading) & np.isfinite(sd) & (sd <= limit_deg)
+            & np.isfinite(other) & (other <= limit_deg))
+    n = int(both.sum())
+    step = float(np.median(np.diff(t))) if t.size > 1 else 0.0
+    return {"rmse_deg": float(np.sqrt(np.mean(heading[both] ** 2))) if n else None,
+            "n_epochs": n, "known_s": n * step}
+
+
 def outage_max(t: FloatArray, err: FloatArray | None,
                windows: Sequence[Sequence[float]]) -> float | None:
     """max |err| over the samples inside the GNSS outage ``windows`` [(t0, t1), ...] [s];
@@ -126,6 +160,69 @@ def nees(est: Estimate, drive: Drive) -> tuple[FloatArray, int] | None:
     p = est.cov[m][:, idx[:, None], idx[None, :]]
     val = np.einsum("ni,ni->n", e, np.linalg.solve(p, e[..., None])[..., 0])
     return val, int(idx.size)
+
+
+# The per-axis NEES of ``nees_axes``: (key, ERROR_STATE components, dof) of each metric's own
+# axes (down position = altitude, north/east position = horizontal)
+NEES_AXES = (("alt", (2,), 1), ("horiz", (0, 1), 2), ("vel", (3, 4, 5), 3),
+             ("vel_down", (5,), 1))
+
+
+def nees_axes(est: Estimate, drive: Drive, err: Errors | None = None) -> dict[str, Any] | None:
+    """Mean NEES per dof on each metric's own axes: ``alt`` (down position, 1 dof), ``horiz``
+    (north/east position, 2), ``vel`` (north/east/down velocity, 3), ``vel_down`` (1) at
+    the covariance epochs, and ``heading``, the mean of (yaw error / σ_yaw)² at the
+    trajectory epochs where σ_yaw is finite. A value is None where the estimate lacks the
+    quantity or its variance; the whole block is None without truth or covariance.
+    1 = the reported σ matches the error; above 2 the σ does not cover it."""
+    if est.cov is None or est.t_cov is None or drive.truth is None:
+        return None
+    m = (est.t_cov >= drive.truth.t[0]) & (est.t_cov <= drive.truth.t[-1])
+    t = est.t_cov[m]
+    if t.size == 0:
+        return None
+    traj = est.trajectory.at(t)
+    truth = drive.truth.at(t)
+    e = np.full((t.size, 6), np.nan)
+    if "pos_h" in est.provides:
+        e[:, 0:3] = traj.pos_n(drive.origin_lla) - truth.pos_n(drive.origin_lla)
+    e[:, 2] = -(traj.alt - truth.alt)  # down error from heights (as ``nees``)
+    if "vel_h" in est.provides:
+        e[:, 3:5] = (traj.vel_n - truth.vel_n)[:, :2]
+    if "vel_d" in est.provides:
+        e[:, 5] = traj.vel_down - truth.vel_down
+    cov = est.cov[m][:, :6, :6]
+    out: dict[str, Any] = {}
+    for key, comps, dof in NEES_AXES:
+        idx = np.array(comps)
+        ee = e[:, idx]
+        p = cov[:, idx[:, None], idx[None, :]]
+        ok = np.all(np.isfinite(ee), axis=1) & np.all(np.isfinite(p), axis=(1, 2))
+        if not ok.any():
+            out[key] = None
+            continue
+        val = np.einsum("ni,ni->n", ee[ok], np.linalg.solve(p[ok], ee[ok][..., None])[..., 0])
+        out[key] = float(np.mean(val)) / dof
+    err = err if err is not None else errors_vs_truth(est, drive)
+    out["heading"] = None
+    if err.heading is not None and err.heading_sd is not None:
+        k = np.isfinite(err.heading) & np.isfinite(err.heading_sd) & (err.heading_sd > 0)
+        if k.any():
+            out["heading"] = float(np.mean((err.heading[k] / err.heading_sd[k]) ** 2))
+    return out
+
+
+def error_p95(err: Errors) -> dict[str, float | None]:
+    """The 95th percentile of |error| over the drive: ``alt_p95_m``, ``horiz_p95_m``,
+    ``heading_p95_deg``, ``vel_down_p95_mps`` (None where the estimate lacks the quantity)."""
+    def p95(x: FloatArray | None) -> float | None:
+        if x is None:
+            return None
+        x = x[np.isfinite(x)]
+        return float(np.percentile(np.abs(x), 95)) if x.size else None
+
+    return {"alt_p95_m": p95(err.alt), "horiz_p95_m": p95(err.horiz),
+            "heading_p95_deg": p95(err.heading), "vel_down_p95_mps": p95(err.vel_down)}
 
 
 def _param(block: Any, truth: float | None) -> dict[str, Any]:
@@ -302,7 +399,11 @@ def evaluate(est: Estimate, drive: Drive,
     ``blocks`` (time blocks ``[(t0, t1), ...]`` [s]) the block also has ``per_block``, the
     RMS values per block, which ``pipeline.summarize`` moves to ``summary["comparison"]``
     (the paired comparison of ``vnav_graph.evaluation.compare``), so the estimator block
-    stays the bench row.
+    stays the bench row. ``nees_axes`` (``nees_axes``: mean NEES/dof on the altitude,
+    horizontal, velocity, vertical-velocity and heading axes; null without truth or
+    covariance) and ``alt_p95_m`` / ``horiz_p95_m`` / ``heading_p95_deg`` /
+    ``vel_down_p95_mps`` (``error_p95``) are read by the win rule
+    (``vnav_graph.evaluation.winrule``).
     """
     out: dict[str, Any] = {
         "status": "ok", "error": None, **dict.fromkeys(METRIC_KEYS),
@@ -332,6 +433,9 @@ def evaluate(est: Estimate, drive: Drive,
         # the pass whose real-time answers these are, when a whole-drive check ran the
         # estimator again ({"pass", "why", "decided_at_s"}; null when there was one pass)
         "real_time_pass": est.info.get("real_time_pass"),
+        # the win rule's calibration and tails (nees_axes, error_p95; null without truth)
+        "nees_axes": None, "alt_p95_m": None, "horiz_p95_m": None, "heading_p95_deg": None,
+        "vel_down_p95_mps": None,
     }
     if drive.truth is not None:
         err = errors_vs_truth(est, drive)
@@ -360,6 +464,9 @@ def evaluate(est: Estimate, drive: Drive,
         if ne is not None:
             out["nees_mean"] = float(np.mean(ne[0]))
             out["nees_dof"] = ne[1]
+        # additions: calibration on each metric's own axes, and the error's tail
+        out["nees_axes"] = nees_axes(est, drive, err)
+        out.update(error_p95(err))
     out["baro"] = baro_block(est.baro, drive)
     from .selfcheck import DIVERGED, self_check
 

@@ -180,6 +180,37 @@ def common_start_blocks(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     return rows
 
 
+# A run row's private field (never written): its heading error and σ_yaw epoch by epoch,
+# ``(t, heading_deg, heading_sd_deg)``, read by ``common_heading_blocks``
+HEADING_ERRORS_KEY = "_heading_errors"
+
+
+def common_heading_blocks(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The rows with ``heading_common`` added and ``HEADING_ERRORS_KEY`` removed.
+
+    Heading is compared where both estimators know it: per (scenario, seed), a row with a
+    heading error and σ_yaw gets ``heading_common[<other>]`` for every other such row, its
+    RMS heading error at the epochs where both report σ_yaw ≤ 5° (``metrics.heading_common``:
+    ``{"rmse_deg", "n_epochs", "known_s"}``). Rows without them get ``heading_common: null``."""
+    from .metrics import heading_common
+
+    groups: dict[tuple[Any, Any], list[dict[str, Any]]] = {}
+    for r in rows:
+        groups.setdefault((r.get("scenario"), r.get("seed")), []).append(r)
+    for group in groups.values():
+        have = [(r, r.get(HEADING_ERRORS_KEY)) for r in group]
+        have = [(r, h) for r, h in have if h is not None and r.get("status") == "ok"]
+        for r in group:
+            h = r.pop(HEADING_ERRORS_KEY, None)
+            if h is None or r.get("status") != "ok":
+                r["heading_common"] = None
+                continue
+            r["heading_common"] = {
+                str(o["estimator"]): finite(heading_common(h[0], h[1], h[2], oh[0], oh[2]))
+                for o, oh in have if o is not r}
+    return rows
+
+
 def aggregate(runs: Sequence[dict[str, Any]]) -> dict[str, dict[str, dict[str, Any]]]:
     """Per scenario × estimator: run counts and ``mean_ci95`` of each metric in
     ``AGG_METRICS`` over the successful runs (failed runs are counted, not averaged)."""
@@ -298,5 +329,6 @@ def failure_summary(doc: dict[str, Any]) -> str | None:
             f"{first['estimator']} on {first['scenario']} seed {first['seed']}: {first['error']}")
 
 
-__all__ = ["AGG_METRICS", "BENCH_SCHEMA", "aggregate", "derived_metrics", "failure_summary",
+__all__ = ["AGG_METRICS", "BENCH_SCHEMA", "aggregate", "common_heading_blocks",
+           "derived_metrics", "failure_summary",
            "finite", "format_bench_md", "mean_ci95", "shorten_scenario", "write_bench"]

@@ -128,11 +128,14 @@ def comparison_table(summary: dict[str, Any]) -> str:
 def rankings_html(summary: dict[str, Any]) -> str:
     """The real-time and offline rankings (``summary["rankings"]``) side by side, a table per
     metric (``id="rankings"``)."""
-    from ..evaluation.compare import RANKING_METRICS, ranked_name
+    from ..evaluation.compare import RANKING_METRICS, can_rank, ranked_name
 
     rk = summary.get("rankings")
     if not rk:
         return '<p class="note" id="rankings">No ranking: no estimator has a score.</p>'
+    if not can_rank(summary):  # the headline says why, and what would resolve it
+        return ('<p class="note" id="rankings">No ranking: too few paired blocks or windows '
+                "to rank (see the headline).</p>")
     parts = []
     for key, label, unit in RANKING_METRICS:
         rt, off = rk["real_time"].get(key) or [], rk["offline"].get(key) or []
