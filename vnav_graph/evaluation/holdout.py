@@ -249,6 +249,8 @@ def score(est: Estimate, drive: Drive, withheld: np.ndarray,
         "horiz_rmse_m": horiz,
         "vel_down_rmse_mps": None if vd_err is None else _rms(vd_err[w]),
         "gnss_rejected": None if rej is None else int(rej),
+        "gnss_forced": (None if est.info is None or est.info.get("gnss_forced") is None
+                        else int(est.info["gnss_forced"])),
         "alt_offset_m": c,
         "n_scored": int(w.sum()),
         "runtime_s": float(est.runtime_s),

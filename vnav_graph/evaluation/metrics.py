@@ -410,6 +410,8 @@ def evaluate(est: Estimate, drive: Drive,
         "runtime_s": float(est.runtime_s),
         "realtime_factor": (drive.duration_s / est.runtime_s) if est.runtime_s > 0 else None,
         "gnss_rejected": est.info.get("gnss_rejected"),
+        # fixes the ekf forced in after its refusal limit (null for estimators that force none)
+        "gnss_forced": est.info.get("gnss_forced"),
         # things the user should know about this result (e.g. a solver that stopped at its
         # iteration cap); an addition to the docs/design.md block, always a list
         "warnings": [str(w) for w in est.info.get("warnings", [])],

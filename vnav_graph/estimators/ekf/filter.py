@@ -241,6 +241,15 @@ def _report(drive: Drive, res: tuple[Any, ...], gr: inputs.Grids, gaps: NDArrayI
                            "given" if ini.heading_known else
                            "accel-matching" if heading_accel else "gnss-track"),
     }
+    # horizontal pairs forced in after max_rejects refusals in a row: each inflated P by its
+    # own innovation, so the filter then follows the fixes whatever they are
+    forced = res[20]
+    info["gnss_forced"] = int(forced.sum())
+    if forced.any() and gnss is not None:
+        info["warnings"] = [
+            f"ekf: {int(forced.sum())} GNSS fix(es) forced in after "
+            f"{max_rejects(cfg, drive)} refusals in a row (the covariance inflated by each "
+            f"one's innovation; first at {float(gnss.t[forced][0] - t[0]):.1f} s)"]
     return innov, info
 
 

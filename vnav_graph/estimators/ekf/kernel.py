@@ -194,6 +194,7 @@ def run_filter(grids, init, noise, events, gnss, baro, mag, settings):
     inn_baro = np.full(nb, np.nan)
     inn_mag = np.full(nm, np.nan)
     rej_pos = np.zeros(ng, dtype=np.bool_)
+    forced_pos = np.zeros(ng, dtype=np.bool_)  # horizontal pairs forced in after refusals
     rej_vel = np.zeros(ng, dtype=np.bool_)
     rej_v = np.zeros(ng, dtype=np.bool_)
     rej_baro = np.zeros(nb, dtype=np.bool_)
@@ -331,7 +332,7 @@ def run_filter(grids, init, noise, events, gnss, baro, mag, settings):
                     update_gnss(p, dx, heff, pend_y[e], pend_r[e], mm, idx, pend_t[e], k,
                                 settings, gnss.pos_sd[idx, 2], baro.has_baro,
                                 noise.b_prior_var, v_gate, counts, rts_q, inn_pos, inn_vel,
-                                rej_pos, rej_vel, rej_v, pend_ok[e])
+                                rej_pos, rej_vel, rej_v, pend_ok[e], forced_pos)
                 elif pend_type[e] == BARO:
                     update_gated(p, dx, heff, pend_y[e], pend_r[e], settings.gate_baro,
                                  settings.max_consec_baro, counts, C_BARO, inn_baro, rej_baro,
@@ -357,4 +358,4 @@ def run_filter(grids, init, noise, events, gnss, baro, mag, settings):
 
     return (out_lla, out_v, out_q, out_par, cov_out, rts_p, rts_ing, rts_q, corr, reset_at,
             inn_pos, inn_vel, inn_baro, rej_pos, rej_vel, rej_baro, t_heading, rej_v,
-            inn_mag, rej_mag)
+            inn_mag, rej_mag, forced_pos)

@@ -140,9 +140,11 @@ def delayed_rows(h, r, mm, fmat, qd, lag, dtg):
 
 @njit(cache=True)
 def update_gnss(p, dx, heff, y, r, mm, idx, te, k, settings, sd_v, has_baro, b_prior_var,
-                v_gate, counts, rts_q, inn_pos, inn_vel, rej_pos, rej_vel, rej_v, heading_ok):
+                v_gate, counts, rts_q, inn_pos, inn_vel, rej_pos, rej_vel, rej_v, heading_ok,
+                forced_pos):
     """A GNSS fix: the horizontal position pair (χ²₂ gate; after ``max_consec`` refusals a
-    jump of the observed size is added to P and forced in), the height through the fault
+    jump of the observed size is added to P and forced in, flagged in ``forced_pos``), the
+    height through the fault
     detection of ``nav.gnss_gate.height_gate``, then the velocity (pair, then down, which
     follows the height's verdict). Huber re-weighting per ``settings.huber_*`` (pair, height
     and vertical velocity each on its own NIS). While the heading is unknown the horizontal
@@ -151,6 +153,7 @@ def update_gnss(p, dx, heff, y, r, mm, idx, te, k, settings, sd_v, has_baro, b_p
     c0 = IATT if tilt_held(p, settings, heading_ok) else 0
     c1 = IATT + 3 if c0 > 0 else 0
     force_h = counts[C_POS] >= settings.max_consec
+    forced_pos[idx] = force_h
     if force_h:
         for a in range(2):
             nu_a = y[a] - heff[a] @ dx
