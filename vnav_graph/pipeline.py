@@ -98,17 +98,25 @@ def summarize(drive: Drive, results: Sequence[RunResult]) -> dict[str, Any]:
         ests[r.name]["jit_s"] = round(r.jit_s, 3)
     comp = None
     if blocks is not None:
-        comp = comparison(
-            ests, per_block, "truth", blocks, "time block",
-            f"One simulated run: the CI is over {len(blocks)} consecutive time blocks of this "
-            "run (batch means; blocks are not independent runs). For an interval over runs "
-            "use `vnav-graph bench` with several seeds.")
+        ref = drive.meta.get("reference")
+        if ref:  # a log scored against a reference file (``run --truth``)
+            comp = comparison(
+                ests, per_block, f"the reference {ref['file']}", blocks, "time block",
+                f"Against the reference {ref['file']}: the CI is over {len(blocks)} "
+                "consecutive time blocks of this drive (batch means; blocks are not "
+                "independent drives).")
+        else:
+            comp = comparison(
+                ests, per_block, "truth", blocks, "time block",
+                f"One simulated run: the CI is over {len(blocks)} consecutive time blocks of "
+                "this run (batch means; blocks are not independent runs). For an interval "
+                "over runs use `vnav-graph bench` with several seeds.")
     meta = drive.meta
     head: dict[str, Any] = {"name": drive.name, "source": drive.source,
                             "duration_s": drive.duration_s}
     if meta.get("warnings"):  # additive: what the input checks found (io.sanity)
         head["warnings"] = [str(w) for w in meta["warnings"]]
-    return {
+    out = {
         "schema": SUMMARY_SCHEMA,
         "version": __version__,
         "drive": head,
@@ -120,6 +128,10 @@ def summarize(drive: Drive, results: Sequence[RunResult]) -> dict[str, Any]:
         # the real-time and offline rankings (vnav_graph.evaluation.compare.rankings)
         "rankings": rankings(ests),
     }
+    if meta.get("reference"):  # additive: errors against a reference file (run --truth)
+        out["reference"] = {**meta["reference"],
+                            "basis": f"against the reference {meta['reference']['file']}"}
+    return out
 
 
 def apply_holdout(summary: dict[str, Any], holdout_doc: dict[str, Any]) -> dict[str, Any]:
@@ -293,7 +305,12 @@ def format_table(summary: dict[str, Any]) -> str:
             f"mean bias {truth['bias_m']['truth']:.2f} m"
         )
     ev = summary.get("evaluation")
-    if ev and ev.get("skipped"):
+    if summary.get("reference"):
+        ref = summary["reference"]
+        lines.append(f"errors against the reference {ref['file']} ({ref['epochs']} epochs; "
+                     f"{ref['time']}; heights {ref['height']}; lever arm: {ref['lever_arm']});"
+                     " NEES/dof: mean NEES per degree of freedom (1.0 = consistent)")
+    elif ev and ev.get("skipped"):
         lines.append(f"holdout scoring skipped: {ev['skipped']} (errors are null)")
     elif ev:
         lines.append(f"errors against {ev['basis']}: {len(ev['windows'])} windows of "
