@@ -85,3 +85,14 @@ def test_reference_outside_the_drive_or_without_time(tmp_path: Path) -> None:
     (tmp_path / "x.txt").write_text("a,b,c\n1,2,3\n")
     with pytest.raises(ValueError, match="not a reference trajectory"):
         load_reference(tmp_path / "x.txt", drive)
+
+
+def test_reference_that_is_the_gnss_input_is_flagged() -> None:
+    drive = read_mapped(CUT, WALK_MAP)
+    own = attach_reference(drive, CUT / "gnss_1730_spp.pos", CUT, WALK_MAP)
+    assert own.meta["reference"]["is_gnss_input"] is True
+    assert any("is the drive's GNSS input" in w for w in own.meta["warnings"])
+    assert "both above ellipsoid" in own.meta["reference"]["height"]
+    other = attach_reference(drive, CUT / "gnss_1730_sf.pos", CUT, WALK_MAP)
+    assert other.meta["reference"]["is_gnss_input"] is False
+    assert not other.meta.get("warnings")

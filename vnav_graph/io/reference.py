@@ -177,10 +177,19 @@ def load_reference(path: str | Path, drive: Drive, height_datum: str | None = No
     return traj, info
 
 
-def with_reference(drive: Drive, traj: Trajectory, info: dict[str, Any]) -> Drive:
-    """``drive`` with ``traj`` as its truth and ``meta["reference"] = info``."""
+def with_reference(drive: Drive, traj: Trajectory, info: dict[str, Any],
+                   is_input: bool = False) -> Drive:
+    """``drive`` with ``traj`` as its truth and ``meta["reference"] = info``; ``is_input``:
+    the reference is the drive's own GNSS input (a warning says what the scores then mean,
+    and ``info["is_gnss_input"]``)."""
     meta = dict(drive.meta)
-    meta["reference"] = info
+    meta["reference"] = {**info, "is_gnss_input": bool(is_input)}
+    if is_input:
+        meta["warnings"] = [*list(meta.get("warnings") or []),
+                            f"the reference {info['file']} is the drive's GNSS input: the "
+                            "errors measure how closely the estimates follow it, not their "
+                            "accuracy without it (vnav-graph holdout --truth scores withheld "
+                            "windows against it)"]
     return drive.replace(truth=traj, meta=meta)
 
 
@@ -189,8 +198,9 @@ def attach_reference(drive: Drive, truth: str | Path, drive_path: str | Path | N
                      fix_only: bool = False) -> Drive:
     """``run/holdout --truth``: the drive with the reference in ``truth`` as its truth. The
     column map (``column_map``, or the one inside the drive's folder) gives the reference's
-    ``[truth]`` height datum and ``fix_only``, the lever arm ``lever_arms.truth`` and the
-    geoid separation; ``height_datum`` (``--height-datum``) wins over the map's."""
+    ``[truth]`` height datum and ``fix_only`` (when ``[truth] file`` is this file or not
+    given), the lever arm ``lever_arms.truth`` and the geoid separation; ``height_datum``
+    (``--height-datum``) wins over the map's."""
     from .readers.column_map import find_map, lever, load_map
 
     doc: dict[str, Any] = {}
@@ -199,10 +209,15 @@ def attach_reference(drive: Drive, truth: str | Path, drive_path: str | Path | N
     if column_map is not None:
         doc = load_map(column_map)
     tr = doc.get("truth") or {}
+    if tr.get("file") and Path(tr["file"]).name != Path(truth).name:
+        tr = {}  # the map's [truth] describes another file
     traj, info = load_reference(
         truth, drive, height_datum or tr.get("height_datum"), lever(doc, "truth"),
         doc.get("geoid_separation_m"), fix_only or bool(tr.get("fix_only", False)))
-    return with_reference(drive, traj, info)
+    gfile = drive.meta.get("gnss_file")
+    same = (gfile is not None and drive_path is not None and Path(drive_path).is_dir()
+            and (Path(drive_path) / str(gfile)).resolve() == Path(truth).resolve())
+    return with_reference(drive, traj, info, same)
 
 
 def load_scored(path: str | Path, column_map: str | Path | None = None,

@@ -291,7 +291,8 @@ def read_mapped(folder: str | Path, map_path: str | Path | None = None,
     origin = gnss.lla[0] if gnss is not None else np.zeros(3)
     meta.update(report.as_meta())
     meta.update(source="log", name=str(doc.get("name") or folder.name), format=FORMAT,
-                height_reference=datum, column_map=str(Path(map_path).name))
+                height_reference=datum, column_map=str(Path(map_path).name),
+                gnss_file=None if gn is None else str(gn["file"]))
     return Drive(imu, gnss, None, origin, meta=meta)
 
 
