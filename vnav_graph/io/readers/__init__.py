@@ -63,7 +63,8 @@ def detect_format(path: str | Path) -> str:
         raise ValueError(f"{p.name}: an RTKLIB solution holds GNSS only: run the folder with "
                          "its IMU file and a column map (--map MAP.toml, docs/column_maps.md)")
     raise ValueError(f"{p.name}: unknown log format (not ArduPilot DataFlash, PX4 ULog or a "
-                     "Sensor Logger CSV export)")
+                     "Sensor Logger CSV export; for plain IMU/GNSS files run their folder "
+                     "with a column map, --map MAP.toml)")
 
 
 def read_log(path: str | Path, column_map: str | Path | None = None,
