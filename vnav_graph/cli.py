@@ -51,6 +51,17 @@ def _extension_args(p: argparse.ArgumentParser, config: bool = True) -> None:
                             "(e.g. [graph-batch] max_iterations = 300)")
 
 
+def _truth_args(p: argparse.ArgumentParser) -> None:
+    """``run``/``holdout``: plain files by a column map, scored against a reference."""
+    p.add_argument("--map", default=None, metavar="MAP.toml",
+                   help="column map of a folder of plain files (found inside it without)")
+    p.add_argument("--height-datum", choices=("msl", "ellipsoid"), default=None,
+                   help="height datum of a GNSS or reference file whose header is silent")
+    p.add_argument("--truth", default=None, metavar="FILE",
+                   help="score against this reference trajectory (RTKLIB .pos or NMEA)")
+    p.add_argument("--truth-fix-only", action="store_true", help="score at Q = 1 epochs only")
+
+
 def _load_extensions(args: argparse.Namespace) -> None:
     """Register ``--plugin`` estimators, then read ``--config`` into ``args.configs``."""
     if getattr(args, "plugin", None):
@@ -157,6 +168,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--export", type=_export_formats, default=None, metavar="FORMATS",
                    help="also export the trajectories at the end: comma-separated "
                         "csv,kml,gpx,tum (into OUT/export/; see 'vnav-graph export')")
+    _truth_args(r)
     _extension_args(r)
 
     x = sub.add_parser(
@@ -204,6 +216,7 @@ def build_parser() -> argparse.ArgumentParser:
     h.add_argument("--estimators", type=_csv_list, default=None)
     h.add_argument("--out", required=True)
     h.add_argument("--no-progress", action="store_true")
+    _truth_args(h)
     _extension_args(h)
 
     c = sub.add_parser("calibrate-baro", help="least-squares baro scale/latency/bias vs GNSS")
@@ -231,7 +244,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from .io import load_drive
+    from .io.reference import load_scored
     from .jit import Prewarm
     from .outputs import check_out_dir
     from .pipeline import format_table, summarize
@@ -250,12 +263,15 @@ def cmd_run(args: argparse.Namespace) -> int:
     mode = mode_for(not args.no_progress)
     if args.drive is not None and args.scenario is not None:
         raise ValueError("give either a DRIVE or --scenario, not both")
+    if args.drive is None and (args.truth or args.map):
+        raise ValueError("--truth and --map need a DRIVE (a log or a folder)")
     # first run on a machine: a second process starts compiling kernels while the drive loads
     pre = Prewarm.start(names)
     try:
         if args.drive is not None:
             with stage(f"reading {Path(args.drive).name}", mode):
-                drive = load_drive(args.drive)
+                drive = load_scored(args.drive, args.map, args.height_datum, args.truth,
+                                    args.truth_fix_only)
         else:
             over = {} if args.duration is None else {"duration_s": args.duration}
             scenario = args.scenario or "default"
@@ -383,8 +399,8 @@ def cmd_holdout(args: argparse.Namespace) -> int:
     """``vnav-graph holdout LOG``: writes ``holdout.json``, ``holdout.md`` (also printed) and
     ``holdout.png`` (``vnav_graph.report.error_plots``, grouped like the run report)."""
     from .evaluation.holdout import format_markdown
-    from .io import load_drive
     from .io.jsonout import dumps_strict
+    from .io.reference import load_scored
     from .outputs import check_out_dir, publish
     from .progress import mode_for, stage
     from .report.error_plots import plot_holdout_errors
@@ -393,7 +409,8 @@ def cmd_holdout(args: argparse.Namespace) -> int:
     out = check_out_dir(args.out)
     mode = mode_for(not args.no_progress)
     with stage(f"reading {Path(args.log).name}", mode):
-        drive = load_drive(args.log)
+        drive = load_scored(args.log, args.map, args.height_datum, args.truth,
+                            args.truth_fix_only)
     _say_hint(drive, resolve_estimators(args.estimators), False, mode)
     res = run_holdout(drive, args.estimators, args.outage, args.spacing, progress=mode,
                       configs=getattr(args, "configs", None))

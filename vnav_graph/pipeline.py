@@ -107,22 +107,35 @@ def summarize(drive: Drive, results: Sequence[RunResult]) -> dict[str, Any]:
     comp = None
     if blocks is not None:
         need_s = MIN_BLOCKS_TO_RANK * BLOCK_MIN_S
-        comp = comparison(
-            ests, per_block, "truth", blocks, "time block",
-            f"One simulated run: the CI is over {len(blocks)} consecutive time blocks of this "
-            "run (batch means; blocks are not independent runs). For an interval over runs "
-            "use `vnav-graph bench` with several seeds." if len(blocks) >= MIN_BLOCKS_TO_RANK
-            else f"One simulated run, split into {len(blocks)} time blocks of about "
-            f"{BLOCK_MIN_S:g} s. For an interval over runs use `vnav-graph bench` with "
-            "several seeds.",
-            remedy=f"a drive of at least {need_s:g} s (--duration {need_s:g}) gives "
-                   f"{MIN_BLOCKS_TO_RANK} time blocks")
+        ref = drive.meta.get("reference")
+        enough = len(blocks) >= MIN_BLOCKS_TO_RANK
+        if ref:  # a log scored against a reference file (``run --truth``)
+            comp = comparison(
+                ests, per_block, f"the reference {ref['file']}", blocks, "time block",
+                f"Against the reference {ref['file']}: the CI is over {len(blocks)} "
+                "consecutive time blocks of this drive (batch means; blocks are not "
+                "independent drives)." if enough
+                else f"Against the reference {ref['file']}, split into {len(blocks)} time "
+                f"blocks of about {BLOCK_MIN_S:g} s.",
+                remedy=f"a drive of at least {need_s:g} s gives {MIN_BLOCKS_TO_RANK} time "
+                       "blocks")
+        else:
+            comp = comparison(
+                ests, per_block, "truth", blocks, "time block",
+                f"One simulated run: the CI is over {len(blocks)} consecutive time blocks of "
+                "this run (batch means; blocks are not independent runs). For an interval "
+                "over runs use `vnav-graph bench` with several seeds." if enough
+                else f"One simulated run, split into {len(blocks)} time blocks of about "
+                f"{BLOCK_MIN_S:g} s. For an interval over runs use `vnav-graph bench` with "
+                "several seeds.",
+                remedy=f"a drive of at least {need_s:g} s (--duration {need_s:g}) gives "
+                       f"{MIN_BLOCKS_TO_RANK} time blocks")
     meta = drive.meta
     head: dict[str, Any] = {"name": drive.name, "source": drive.source,
                             "duration_s": drive.duration_s}
     if meta.get("warnings"):  # additive: what the input checks found (io.sanity)
         head["warnings"] = [str(w) for w in meta["warnings"]]
-    return {
+    out = {
         "schema": SUMMARY_SCHEMA,
         "version": __version__,
         "drive": head,
@@ -134,6 +147,10 @@ def summarize(drive: Drive, results: Sequence[RunResult]) -> dict[str, Any]:
         # the real-time and offline rankings (vnav_graph.evaluation.compare.rankings)
         "rankings": rankings(ests),
     }
+    if meta.get("reference"):  # additive: errors against a reference file (run --truth)
+        out["reference"] = {**meta["reference"],
+                            "basis": f"against the reference {meta['reference']['file']}"}
+    return out
 
 
 def apply_holdout(summary: dict[str, Any], holdout_doc: dict[str, Any]) -> dict[str, Any]:
@@ -322,7 +339,12 @@ def format_table(summary: dict[str, Any]) -> str:
             f"mean bias {truth['bias_m']['truth']:.2f} m"
         )
     ev = summary.get("evaluation")
-    if ev and ev.get("skipped"):
+    if summary.get("reference"):
+        ref = summary["reference"]
+        lines.append(f"errors against the reference {ref['file']} ({ref['epochs']} epochs; "
+                     f"{ref['time']}; heights {ref['height']}; lever arm: {ref['lever_arm']});"
+                     " NEES/dof: mean NEES per degree of freedom (1.0 = consistent)")
+    elif ev and ev.get("skipped"):
         lines.append(f"holdout scoring skipped: {ev['skipped']} (errors are null)")
     elif ev:
         lines.append(f"errors against {ev['basis']}: {len(ev['windows'])} windows of "

@@ -320,10 +320,17 @@ def run_holdout(drive: Drive, estimators: Sequence[str] | None = None, outage_s:
             # gnss_gm_auto: the residual autocorrelations and the decision (null without it)
             s.block["gnss_gm_auto"] = info.get("gnss_gm_auto")
             s.block["real_time_pass"] = info.get("real_time_pass")
+            if drive.truth is not None:  # holdout --truth: the windows against the reference
+                from .evaluation.reference_score import reference_block
+
+                s.block["reference"] = reference_block(r.estimate, drive, windows)
             results[r.name], series[r.name] = s.block, s
         except Exception as exc:  # one estimator's failure is data, not a crash
             if os.environ.get("VNAV_DEBUG"):
                 traceback.print_exc()
             results[r.name] = holdout_failed(failure_message(exc, typed=True), r.runtime_s)
     doc = holdout_doc(drive, windows, withheld, reference, screen, outage_s, results)
+    if drive.meta.get("reference"):  # additive: what the ``reference`` blocks are against
+        ref = drive.meta["reference"]
+        doc["reference"] = {**ref, "basis": f"against the reference {ref['file']}"}
     return HoldoutResult(doc, windows, series)

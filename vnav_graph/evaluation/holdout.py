@@ -400,4 +400,25 @@ def format_markdown(doc: dict[str, Any]) -> str:
     if ob:
         lines.append(f"| onboard: {ob['name']} (had GNSS) | ok | {f(ob['alt_rmse_m'])} | "
                      f"{f(ob['alt_max_abs_m'])} | — | — | — | — | — | — |")
+    if doc.get("reference"):
+        lines += _reference_lines(doc, f)
     return "\n".join(lines) + "\n"
+
+
+def _reference_lines(doc: dict[str, Any], f: Any) -> list[str]:
+    """The windows scored against the reference (``evaluation.reference_score``)."""
+    ref = doc["reference"]
+    lines = ["", f"## Inside the windows, {ref['basis']} ({ref['format']}; {ref['time']}; "
+             f"heights {ref['height']}; lever arm: {ref['lever_arm']})", "",
+             "| estimator | n | alt RMSE m | alt max m | horiz RMSE m | horiz max m "
+             "| vD RMSE m/s | NEES/dof |", "|---|---|---|---|---|---|---|---|"]
+    for name, b in doc["estimators"].items():
+        r = b.get("reference")
+        if not r:
+            continue
+        nd = r["nees_mean"] / r["nees_dof"] if r.get("nees_dof") else None
+        lines.append(f"| {name} | {r['n_scored']} | {f(r['alt_rmse_m'])} | "
+                     f"{f(r['alt_max_abs_m'])} | {f(r['horiz_rmse_m'])} | "
+                     f"{f(r['horiz_max_m'])} | {f(r['vel_down_rmse_mps'], '.3f')} | "
+                     f"{f(nd)} |")
+    return lines

@@ -8,7 +8,8 @@ from ..types import Drive
 from .drive_io import load_npz, save_npz
 
 
-def load_drive(path: str | Path, check: bool = True) -> Drive:
+def load_drive(path: str | Path, check: bool = True, column_map: str | Path | None = None,
+               height_datum: str | None = None) -> Drive:
     """Load a Drive from a ``.npz`` written by ``save_npz`` or from a real log (auto-detected
     by content through ``vnav_graph.io.readers``). Raises ValueError with a one-line reason.
 
@@ -20,7 +21,7 @@ def load_drive(path: str | Path, check: bool = True) -> Drive:
     """
     from .quiet import quietly
 
-    drive, noise = quietly(_load_unchecked, path)
+    drive, noise = quietly(_load_unchecked, path, column_map, height_datum)
     if noise.count:
         meta = dict(drive.meta)
         meta["warnings"] = [*list(meta.get("warnings") or []), noise.summary()]
@@ -58,7 +59,8 @@ def _with_garbage_stretches(drive: Drive, path: Path) -> Drive:
     return drive.replace(meta=meta)
 
 
-def _load_unchecked(path: str | Path) -> Drive:
+def _load_unchecked(path: str | Path, column_map: str | Path | None = None,
+                    height_datum: str | None = None) -> Drive:
     p = Path(path)
     if not p.exists():
         raise ValueError(f"no such file or directory: {p}")
@@ -74,7 +76,7 @@ def _load_unchecked(path: str | Path) -> Drive:
             raise ValueError(f"{p.name}: not a vnav_graph drive (.npz) and no log readers in "
                              "this build") from None
         raise
-    return read_log(p)
+    return read_log(p, column_map, height_datum)
 
 
 __all__ = ["load_drive", "load_npz", "save_npz"]

@@ -188,6 +188,12 @@ def baro_table(summary: dict[str, Any]) -> str:
 def basis_text(summary: dict[str, Any]) -> str:
     """One sentence: what the errors in the table are measured against."""
     ev = summary.get("evaluation")
+    ref = summary.get("reference")
+    if ref:
+        return (f"Errors are {ref['basis']} ({ref['format']}, {ref['epochs']} epochs) over the "
+                f"whole drive: {ref['time']}; heights {ref['height']}; lever arm: "
+                f"{ref['lever_arm']}. NEES/dof: mean normalised estimation error squared per "
+                "degree of freedom over position/velocity (1 = consistent covariance).")
     if ev and ev.get("skipped"):
         return (f"No truth, and the withheld-GNSS scoring was skipped ({ev['skipped']}): the "
                 "table has no error numbers, and the plots show fit residuals against the "
@@ -216,7 +222,7 @@ def headline_html(summary: dict[str, Any]) -> str:
     lines = headline_lines(summary)
     if not lines:
         why = ("fewer than two estimators have a score" if summary.get("comparison")
-               or summary["drive"]["source"] == "simulated"
+               or summary["drive"]["source"] == "simulated" or summary.get("reference")
                else "a log without truth is scored only by the holdout run (skipped here)")
         return f'<div id="headline"><p class="headline">No headline: {why}.</p></div>'
 

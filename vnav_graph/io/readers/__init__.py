@@ -8,7 +8,10 @@
 - a folder of CSVs whose header starts ``time,seconds_elapsed`` →
   :func:`.sensorlogger.read_sensorlogger_folder`, ``"sensorlogger-folder"``;
 - a CSV whose header has ``time``, ``latitude``, ``longitude`` and ``acc_*`` or ``pressure``
-  columns → :func:`.sensorlogger.read_merged_csv`, ``"sensorlogger-merged-1hz"``.
+  columns → :func:`.sensorlogger.read_merged_csv`, ``"sensorlogger-merged-1hz"``;
+- a folder with a column map (a ``*.toml`` with an ``[imu]`` table), or any folder with
+  ``column_map=`` given → :func:`.column_map.read_mapped`, ``"column-map"`` (plain IMU text,
+  RTKLIB ``.pos`` or NMEA GNSS).
 
 Every reader cleans and reports: ``Drive.meta`` has ``source="log"``, ``name``, ``format``,
 ``dropped`` / ``repaired`` (per stream: reason → count), ``gaps`` (logging gaps as
@@ -35,10 +38,15 @@ def detect_format(path: str | Path) -> str:
     if not p.exists():
         raise ValueError(f"no such file or directory: {p}")
     if p.is_dir():
+        from .column_map import find_map
+
+        if find_map(p) is not None:
+            return "column-map"
         if is_sensorlogger_folder(p):
             return "sensorlogger-folder"
         raise ValueError(f"{p.name}: folder is not a Sensor Logger export "
-                         "(no CSV with time,seconds_elapsed columns)")
+                         "(no CSV with time,seconds_elapsed columns) and has no column map "
+                         "(a *.toml with an [imu] table, or --map MAP.toml)")
     with open(p, "rb") as fh:
         head = fh.read(4096)
     if not head:
@@ -49,13 +57,32 @@ def detect_format(path: str | Path) -> str:
         return "px4-ulog"
     if is_merged_csv(head):
         return "sensorlogger-merged-1hz"
+    from .rtklib_pos import is_pos
+
+    if is_pos(head):
+        raise ValueError(f"{p.name}: an RTKLIB solution holds GNSS only: run the folder with "
+                         "its IMU file and a column map (--map MAP.toml, docs/column_maps.md)")
     raise ValueError(f"{p.name}: unknown log format (not ArduPilot DataFlash, PX4 ULog or a "
-                     "Sensor Logger CSV export)")
+                     "Sensor Logger CSV export; for plain IMU/GNSS files run their folder "
+                     "with a column map, --map MAP.toml)")
 
 
-def read_log(path: str | Path) -> Drive:
-    """Read a real log (format detected from content) into a Drive; ValueError if unreadable."""
+def read_log(path: str | Path, column_map: str | Path | None = None,
+             height_datum: str | None = None) -> Drive:
+    """Read a real log (format detected from content) into a Drive; ValueError if unreadable.
+    ``column_map``: a TOML column map for a folder of plain files (``height_datum``: the GNSS
+    file's datum where its header and the map are silent)."""
+    if column_map is not None:
+        from .column_map import read_mapped
+
+        if not Path(path).is_dir():
+            raise ValueError(f"--map needs a folder, not the file {Path(path).name}")
+        return read_mapped(path, column_map, height_datum)
     fmt = detect_format(path)
+    if fmt == "column-map":
+        from .column_map import read_mapped
+
+        return read_mapped(path, None, height_datum)
     if fmt == "ardupilot-dataflash":
         from .ardupilot import read_dataflash
 

@@ -1,0 +1,25 @@
+"""benchmarks/truth_logs.py: the source repository's simulated outages (15 s windows every
+45 s, from 40 s / 25 s after the first reference epoch to 30 s / 45 s before the last) are
+11 windows on the car drive and 2 on the walk."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import pytest
+
+_P = Path(__file__).resolve().parents[2] / "benchmarks" / "truth_logs.py"
+_spec = importlib.util.spec_from_file_location("truth_logs", _P)
+tl = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(tl)
+
+
+def test_source_outage_windows() -> None:
+    # car: .pos epochs 19:34:18.499 .. 19:43:27.499 (549 s); walk: 17:30:39.749 .. 17:32:53.5
+    car = tl.source_windows(0.0, 549.0, *tl.DRIVES["car_drive_0708"]["source_outages"])
+    walk = tl.source_windows(0.0, 133.75, *tl.DRIVES["walk_0827"]["source_outages"])
+    assert len(car) == 11 and len(walk) == 2
+    assert car[0] == (40.0, 55.0) and car[1][0] == pytest.approx(85.0)
+    assert car[-1][1] <= 549.0 - 30.0
+    assert walk == [(25.0, 40.0), (70.0, 85.0)]
