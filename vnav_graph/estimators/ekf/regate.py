@@ -7,7 +7,8 @@ gave its velocity) is compared with the smoothed trajectory: its whitened residu
 position (antenna = IMU position + C l) and, when the receiver gives velocity, velocity, each
 row divided by the fix's σ of the shared
 sensor model (``sensors.model``) — is tested against the χ² quantile of 1 − (1 − p)² with
-p = ``EkfConfig.gate_prob`` and 3 (6 with velocity) degrees of freedom: the graph's rule
+p = ``EkfConfig.post_gate_prob`` (the graph's ``gnss_gate_prob``, 0.9999) and 3 (6 with
+velocity) degrees of freedom: the graph's rule
 (the squared tail probability: a false rejection costs a whole re-run, a glitch has χ² in
 the thousands either way). Fixes above it are removed from the drive and the forward and RTS
 passes are run again, at most ``post_gate_rounds`` times; nothing is removed when none or
@@ -168,7 +169,7 @@ def regated(drive: Drive, est: Estimate, model: SensorModel, g_latency: float, c
         # a fix whose position the filter refused may still have given it its velocity: it is
         # tested too (the joint χ² has its position residual), as the graph tests every fix
         used = ~np.isin(sub.gnss.t, est.info["gnss_unused_t"])
-        bad = misfits(sub, est, model, g_latency, used, cfg.gate_prob)
+        bad = misfits(sub, est, model, g_latency, used, cfg.post_gate_prob)
         if not bad.any():
             break
         keep[np.flatnonzero(keep)[bad]] = False
@@ -184,7 +185,7 @@ def regated(drive: Drive, est: Estimate, model: SensorModel, g_latency: float, c
                 gnss_rejected_t=np.sort(np.r_[info["gnss_rejected_t"], drive.gnss.t[~keep]]))
     if removed:
         info["warnings"] = [*(info.get("warnings") or []),
-                            warning(name, removed, rounds, cfg.gate_prob)]
+                            warning(name, removed, rounds, cfg.post_gate_prob)]
     return est.replace(info=info, runtime_s=time.perf_counter() - t0)
 
 

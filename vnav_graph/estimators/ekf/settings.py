@@ -61,6 +61,7 @@ class EkfConfig(GnssErrorSettings):
     loss_threshold_sd: Huber thresholds k (GNSS position, GNSS velocity, baro) [σ].
     post_gate: ``ekf-rts``: drop fixes that misfit the smoothed trajectory, rerun (``ekf.regate``).
     post_gate_rounds: at most this many post-smoothing gate rounds.
+    post_gate_prob: p of the post-smoothing gate's 1 − (1 − p)² χ² quantile (= graph's).
     post_huber_rounds: ``ekf-rts``: passes with the Huber weights of smoothed residuals.
     carry_heading_back: ``ekf-rts``: rerun from the start with a heading acquired in motion.
     fb_separation: ``ekf-rts``: run the filter backward too (``info["fb_separation"]``).
@@ -112,6 +113,7 @@ class EkfConfig(GnssErrorSettings):
     # trajectory and run the forward and RTS passes again
     post_gate: bool = False
     post_gate_rounds: int = 3
+    post_gate_prob: float = 0.9999
     # the graph's IRLS for ekf-rts: each fix's Huber weight from its residual against the
     # smoothed trajectory instead of its forward innovation, passes run again with it
     post_huber_rounds: int = 3
@@ -146,3 +148,5 @@ class EkfConfig(GnssErrorSettings):
             raise ValueError("EkfConfig.post_huber_rounds: must be ≥ 0")
         if not 0.5 < self.gate_prob < 1.0:
             raise ValueError("EkfConfig.gate_prob: must be in (0.5, 1)")
+        if not 0.5 < self.post_gate_prob < 1.0:
+            raise ValueError("EkfConfig.post_gate_prob: must be in (0.5, 1)")

@@ -1,0 +1,34 @@
+"""One configuration per comparison: every option the filter family (``EkfConfig``) and the
+graph family (``GraphConfig``) share has one default, listed here with the pairs that go by
+two names; everything else is family-specific and named in docs/design.md ("Options of one
+family only")."""
+
+from __future__ import annotations
+
+import dataclasses
+
+from vnav_graph.estimators.ekf.settings import EkfConfig
+from vnav_graph.estimators.graph.settings import GraphConfig
+
+# the same quantity under one name in both
+SHARED = ("accel_scale", "baro_scale_sd", "gnss_gm_auto", "gnss_gm_sd_h", "gnss_gm_sd_v",
+          "gnss_gm_tau_s", "loss_baro", "loss_gnss_pos", "loss_gnss_vel", "loss_threshold_sd",
+          "mag_bias_sd", "mag_heading_floor", "mag_interval_s", "use_mag")
+# (EkfConfig name, GraphConfig name): the same quantity under two names
+PAIRS = (("post_gate_prob", "gnss_gate_prob"),)
+
+
+def _defaults(cls: type) -> dict[str, object]:
+    return {f.name: f.default for f in dataclasses.fields(cls)}
+
+
+def test_the_shared_options_are_the_fields_both_have() -> None:
+    e, g = _defaults(EkfConfig), _defaults(GraphConfig)
+    assert set(SHARED) == set(e) & set(g)
+
+
+def test_shared_options_have_equal_defaults() -> None:
+    e, g = _defaults(EkfConfig), _defaults(GraphConfig)
+    differ = {k: (e[k], g[k]) for k in SHARED if e[k] != g[k]}
+    differ |= {f"{a}/{b}": (e[a], g[b]) for a, b in PAIRS if e[a] != g[b]}
+    assert not differ, differ
