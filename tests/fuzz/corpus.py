@@ -46,6 +46,7 @@ from .mutations import (
     csv_text_mutations,
     df_patch_field,
     df_patch_fmt_names,
+    df_scale_fields,
     imu_gap,
     npz_structure,
 )
@@ -162,7 +163,7 @@ def build_cases(include_shared: bool = True) -> list[Case]:
     for fmt in ("dataflash", "ulog"):
         ctrl = f"{fmt}/sortie/control/none"
         cases.append(Case(ctrl, fmt, "control", False, sim_writer(fmt, air), ctrl))
-        for name in ("swap-gyro-xz", "gyro-z-inverted"):
+        for name in ("swap-gyro-xz", "gyro-z-inverted", "gyro-deg-s"):
             mut, fam, _ = SEMANTIC[name]
             cases.append(Case(f"{fmt}/sortie/{fam}/{name}", fmt, fam, True,
                               sim_writer(fmt, mut(air, np.random.default_rng(0))), ctrl))
@@ -286,6 +287,8 @@ def build_cases(include_shared: bool = True) -> list[Case]:
                 "accz-all-nan": lambda b: df_patch_field(b, "IMU", "AccZ", float("nan")),
                 "press-all-zero": lambda b: df_patch_field(b, "BARO", "Press", 0.0),
                 "gps-alt-zero": lambda b: df_patch_field(b, "GPS", "Alt", 0.0),
+                "gyro-deg-s": lambda b: df_scale_fields(b, "IMU", ("GyrX", "GyrY", "GyrZ"),
+                                                        180.0 / np.pi),
             }
             for name, fn in patches.items():
                 cases.append(_bytes_case(f"{fmt}/{base}/structure/{name}", fmt, _copy_src(src),

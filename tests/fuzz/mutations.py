@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from .writers import G0, Raw, dataflash_records
+from .writers import G0, Raw, dataflash_records, dataflash_scale_field
 
 
 # --------------------------------------------------------------- semantic / hostile
@@ -394,3 +394,11 @@ def df_patch_field(b: bytes, msg: str, col: str, value: float) -> bytes:
 _PYMAV = {"a": "64s", "b": "b", "B": "B", "g": "e", "h": "h", "H": "H", "i": "i", "I": "I",
           "f": "f", "n": "4s", "N": "16s", "Z": "64s", "c": "h", "C": "H", "e": "i", "E": "I",
           "L": "i", "d": "d", "M": "b", "q": "q", "Q": "Q"}
+
+
+def df_scale_fields(b: bytes, msg: str, cols: tuple[str, ...], factor: float) -> bytes:
+    """Every ``msg`` record's fields ``cols`` multiplied by ``factor`` (e.g. a gyro logged in
+    deg/s: ``IMU`` ``GyrX/Y/Z`` × 180/π)."""
+    for c in cols:
+        b = dataflash_scale_field(b, msg, c, factor)
+    return b
