@@ -44,6 +44,7 @@ from .evaluation.holdout import (
     Scored,
     baro_block,
     causal_score,
+    check_run,
     choose_windows,
     holdout_doc,
     in_windows,
@@ -318,6 +319,7 @@ def run_holdout(drive: Drive, estimators: Sequence[str] | None = None, outage_s:
             s.block["fb_separation"] = fb_separation_block(info.get("fb_separation"))
             # gnss_gm_auto: the residual autocorrelations and the decision (null without it)
             s.block["gnss_gm_auto"] = info.get("gnss_gm_auto")
+            check_run(s, r.estimate, held, drive, reference, ~withheld)
             results[r.name], series[r.name] = s.block, s
         except Exception as exc:  # one estimator's failure is data, not a crash
             if os.environ.get("VNAV_DEBUG"):

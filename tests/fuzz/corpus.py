@@ -16,7 +16,8 @@ Case families
 - ``bytes``: truncations, byte flips, swapped / duplicated / zeroed blocks, header damage,
   applied to the file bytes (for a folder: to one of its CSVs).
 - ``semantic``: the streams are changed before writing: units (g, deg/s, feet, ms, hPa), axis
-  swaps, NaN / inf, constant or zero streams, shuffled stamps, a long IMU gap.
+  swaps, NaN / inf, constant or zero streams, every value of the second half zeroed, shuffled
+  stamps, a long IMU gap.
 - ``hostile``: well-formed but physically hostile streams: accelerometer or gyro clipping,
   baro steps and spikes, GNSS jumps.
 - ``structure``: format-specific damage: ``.npz`` keys, dtypes and JSON header; CSV columns,
@@ -229,6 +230,7 @@ def build_cases(include_shared: bool = True) -> list[Case]:
     long_raw, long_sim = sim_raw(duration_s=720.0)
     gap = long_raw.copy()
     imu_gap(gap, 60.0, 660.0)
+    alt_jump = SEMANTIC["gnss-alt-jump-1km-5s"][0](long_raw, np.random.default_rng(0))
     for fmt in ("npz", "sl-folder"):
         def build_l(d: Path, fmt: str = fmt, r: Raw = long_raw) -> Path:
             d.mkdir(parents=True, exist_ok=True)
@@ -238,6 +240,8 @@ def build_cases(include_shared: bool = True) -> list[Case]:
         cases.append(Case(ctrl, fmt, "control", False, build_l, ctrl))
         cases.append(Case(f"{fmt}/sim-long/semantic/imu-gap-10min", fmt, "semantic", True,
                           lambda d, fmt=fmt, b=build_l: b(d, fmt, gap), ctrl))
+        cases.append(Case(f"{fmt}/sim-long/hostile/gnss-alt-jump-1km-5s", fmt, "hostile", True,
+                          lambda d, fmt=fmt, b=build_l: b(d, fmt, alt_jump), ctrl))
 
     # ---- the small real cuts in tests/data (always present)
     real: list[tuple[str, str, Path]] = [

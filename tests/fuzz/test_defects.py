@@ -72,6 +72,7 @@ def test_npz_byte_damage_inside_a_member_is_a_value_error(tmp_path):
 
 @pytest.mark.parametrize(("change", "match"), [
     ({"meta": [1, 2]}, "'meta' is a list"),
+    ({"meta": None}, "'meta' is null"),
     ({"imu_spec": [1, 2]}, "not a sensor spec"),
     ({"baro_spec": "BaroSpec"}, "not a sensor spec"),
     ({"baro_truth": {"scale": 0.01}}, "baro_truth"),

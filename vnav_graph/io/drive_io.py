@@ -206,7 +206,8 @@ def load_npz(path: str | Path) -> Drive:
     """Read a Drive written by ``save_npz``. ValueError on a corrupt or foreign file.
 
     Checks, in order: the zip directory (sizes, before decompressing), each member's
-    decompression and CRC, the JSON header's structure and types, every array's dtype
+    decompression and CRC, the JSON header's structure and types (``meta`` must be an object:
+    null or missing is refused, as ``save_npz`` never writes either), every array's dtype
     (numeric; float seconds for time stamps), then the stream types' own validation. A file
     whose truth arrays are all absent reads as a real drive (``baro_truth`` dropped too;
     ``meta["notes"]`` says so).
@@ -230,6 +231,10 @@ def load_npz(path: str | Path) -> Drive:
     if header.get("format") != FORMAT:
         raise ValueError(f"{p.name}: unsupported format {header.get('format')!r}")
     a = {k: _numeric(k, v, p.name) for k, v in raw.items() if k in _ARRAY_KEYS_FLOAT}
+    if header.get("meta") is None:  # save_npz always writes an object (possibly empty)
+        raise ValueError(f"{p.name}: header field 'meta' is "
+                         f"{'null' if 'meta' in header else 'missing'}, expected an object "
+                         "(corrupt or hand-edited drive; an empty drive writes {})")
     meta = dict(_header_dict(header, "meta", p.name) or {})
     _imu_units_first(a, meta)
     try:
