@@ -131,9 +131,10 @@ def apply_holdout(summary: dict[str, Any], holdout_doc: dict[str, Any]) -> dict[
     withheld in windows (``vnav_graph.evaluation.holdout``), and the summary says so in
     ``evaluation``; a holdout run that fails its self-check (``holdout.check_run``: an
     answer more than 1 km from the withheld fixes, or diverged from the given ones) marks the
-    estimator ``"diverged"`` (``holdout_error``; ``holdout_self_check`` is its check and its
-    flags join ``warnings``); ``comparison`` is recomputed over the windows (its ``per_block`` = the
-    holdout ``per_window``). NEES stays null (no reference for the full state).
+    estimator ``"diverged"``, its errors kept, not ranked (``holdout_error``;
+    ``holdout_self_check`` is its check and its flags join ``warnings``); ``comparison`` is
+    recomputed over the windows (its ``per_block`` = the holdout ``per_window``). NEES stays
+    null (no reference for the full state).
     """
     from .evaluation.compare import comparison, rankings
     from .evaluation.selfcheck import DIVERGED
@@ -153,13 +154,16 @@ def apply_holdout(summary: dict[str, Any], holdout_doc: dict[str, Any]) -> dict[
         block["warnings"] = [*block.get("warnings", []),
                              *(f"holdout run: {w}" for w in (h.get("self_check") or {}).get(
                                  "flags", []))]
+        scored = ("alt_rmse_m", "alt_max_abs_m", "horiz_rmse_m", "vel_down_rmse_mps")
         if h["status"] != "ok":
             block["holdout_error"] = h.get("error")
-            if h["status"] == DIVERGED and block["status"] == "ok":
-                # its errors against the withheld fixes are the summary's: not an answer
-                block["status"], block["error"] = DIVERGED, f"holdout run: {h.get('error')}"
+            if h["status"] == DIVERGED:  # its errors stay in the row, never ranked
+                for k in scored:
+                    block[k] = h.get(k)
+                if block["status"] == "ok":
+                    block["status"], block["error"] = DIVERGED, f"holdout run: {h.get('error')}"
             continue
-        for k in ("alt_rmse_m", "alt_max_abs_m", "horiz_rmse_m", "vel_down_rmse_mps"):
+        for k in scored:
             block[k] = h.get(k)
         per_block[name] = h.get("per_window") or []
     windows = holdout_doc["windows"]
