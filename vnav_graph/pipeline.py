@@ -160,10 +160,15 @@ def apply_holdout(summary: dict[str, Any], holdout_doc: dict[str, Any]) -> dict[
     trajectories written by ``run`` use all GNSS; ``alt_rmse_m``/``alt_max_abs_m``/
     ``horiz_rmse_m``/``vel_down_rmse_mps`` come from a second run of each estimator with GNSS
     withheld in windows (``vnav_graph.evaluation.holdout``), and the summary says so in
-    ``evaluation``; ``comparison`` is recomputed over the windows (its ``per_block`` = the
-    holdout ``per_window``). NEES stays null (no reference for the full state).
+    ``evaluation``; a holdout run that fails its self-check (``holdout.check_run``: an
+    answer more than 1 km from the withheld fixes, or diverged from the given ones) marks the
+    estimator ``"diverged"``, its errors kept, not ranked (``holdout_error``;
+    ``holdout_self_check`` is its check and its flags join ``warnings``); ``comparison`` is
+    recomputed over the windows (its ``per_block`` = the holdout ``per_window``). NEES stays
+    null (no reference for the full state).
     """
     from .evaluation.compare import MIN_BLOCKS_TO_RANK, comparison, rankings
+    from .evaluation.selfcheck import DIVERGED
 
     out = json.loads(json.dumps(summary))
     per_block: dict[str, list[dict[str, Any]]] = {}
@@ -176,10 +181,20 @@ def apply_holdout(summary: dict[str, Any], holdout_doc: dict[str, Any]) -> dict[
             block[k] = None
         # the causal and fixed-lag estimates, scored on the same withheld fixes
         block["online"], block["lag"] = h.get("online"), h.get("lag")
+        block["holdout_self_check"] = h.get("self_check")
+        block["warnings"] = [*block.get("warnings", []),
+                             *(f"holdout run: {w}" for w in (h.get("self_check") or {}).get(
+                                 "flags", []))]
+        scored = ("alt_rmse_m", "alt_max_abs_m", "horiz_rmse_m", "vel_down_rmse_mps")
         if h["status"] != "ok":
             block["holdout_error"] = h.get("error")
+            if h["status"] == DIVERGED:  # its errors stay in the row, never ranked
+                for k in scored:
+                    block[k] = h.get(k)
+                if block["status"] == "ok":
+                    block["status"], block["error"] = DIVERGED, f"holdout run: {h.get('error')}"
             continue
-        for k in ("alt_rmse_m", "alt_max_abs_m", "horiz_rmse_m", "vel_down_rmse_mps"):
+        for k in scored:
             block[k] = h.get(k)
         per_block[name] = h.get("per_window") or []
     windows = holdout_doc["windows"]

@@ -44,6 +44,7 @@ from .evaluation.holdout import (
     Scored,
     baro_block,
     causal_score,
+    check_run,
     choose_windows,
     holdout_doc,
     in_windows,
@@ -324,6 +325,7 @@ def run_holdout(drive: Drive, estimators: Sequence[str] | None = None, outage_s:
                 from .evaluation.reference_score import reference_block
 
                 s.block["reference"] = reference_block(r.estimate, drive, windows)
+            check_run(s, r.estimate, held, drive, reference, ~withheld)
             results[r.name], series[r.name] = s.block, s
         except Exception as exc:  # one estimator's failure is data, not a crash
             if os.environ.get("VNAV_DEBUG"):

@@ -16,7 +16,8 @@ Case families
 - ``bytes``: truncations, byte flips, swapped / duplicated / zeroed blocks, header damage,
   applied to the file bytes (for a folder: to one of its CSVs).
 - ``semantic``: the streams are changed before writing: units (g, deg/s, feet, ms, hPa), axis
-  swaps, NaN / inf, constant or zero streams, shuffled stamps, a long IMU gap.
+  swaps, NaN / inf, constant or zero streams, every value of the second half zeroed, shuffled
+  stamps, a long IMU gap.
 - ``hostile``: well-formed but physically hostile streams: accelerometer or gyro clipping,
   baro steps and spikes, GNSS jumps.
 - ``structure``: format-specific damage: ``.npz`` keys, dtypes and JSON header; CSV columns,
@@ -46,6 +47,7 @@ from .mutations import (
     csv_text_mutations,
     df_patch_field,
     df_patch_fmt_names,
+    df_scale_fields,
     imu_gap,
     npz_structure,
 )
@@ -126,6 +128,14 @@ def _copy_src(src: Path) -> Callable[[Path], Path]:
     return build
 
 
+def _swap_csv_columns(text: str, a: str, b: str) -> str:
+    """A CSV's header with columns ``a`` and ``b`` renamed into each other (their values
+    swap places)."""
+    head, _, body = text.partition("\n")
+    cols = [{a: b, b: a}.get(c.strip(), c) for c in head.split(",")]
+    return ",".join(cols) + "\n" + body
+
+
 def build_cases(include_shared: bool = True) -> list[Case]:
     """Every case of the corpus (deterministic order and content)."""
     raw, sim = sim_raw()
@@ -162,7 +172,7 @@ def build_cases(include_shared: bool = True) -> list[Case]:
     for fmt in ("dataflash", "ulog"):
         ctrl = f"{fmt}/sortie/control/none"
         cases.append(Case(ctrl, fmt, "control", False, sim_writer(fmt, air), ctrl))
-        for name in ("swap-gyro-xz", "gyro-z-inverted"):
+        for name in ("swap-gyro-xz", "gyro-z-inverted", "gyro-deg-s"):
             mut, fam, _ = SEMANTIC[name]
             cases.append(Case(f"{fmt}/sortie/{fam}/{name}", fmt, fam, True,
                               sim_writer(fmt, mut(air, np.random.default_rng(0))), ctrl))
@@ -228,6 +238,7 @@ def build_cases(include_shared: bool = True) -> list[Case]:
     long_raw, long_sim = sim_raw(duration_s=720.0)
     gap = long_raw.copy()
     imu_gap(gap, 60.0, 660.0)
+    alt_jump = SEMANTIC["gnss-alt-jump-1km-5s"][0](long_raw, np.random.default_rng(0))
     for fmt in ("npz", "sl-folder"):
         def build_l(d: Path, fmt: str = fmt, r: Raw = long_raw) -> Path:
             d.mkdir(parents=True, exist_ok=True)
@@ -237,6 +248,8 @@ def build_cases(include_shared: bool = True) -> list[Case]:
         cases.append(Case(ctrl, fmt, "control", False, build_l, ctrl))
         cases.append(Case(f"{fmt}/sim-long/semantic/imu-gap-10min", fmt, "semantic", True,
                           lambda d, fmt=fmt, b=build_l: b(d, fmt, gap), ctrl))
+        cases.append(Case(f"{fmt}/sim-long/hostile/gnss-alt-jump-1km-5s", fmt, "hostile", True,
+                          lambda d, fmt=fmt, b=build_l: b(d, fmt, alt_jump), ctrl))
 
     # ---- the small real cuts in tests/data (always present)
     real: list[tuple[str, str, Path]] = [
@@ -280,12 +293,24 @@ def build_cases(include_shared: bool = True) -> list[Case]:
                 benign = name in ("crlf-line-ends", "bom")
                 cases.append(Case(f"{fmt}/{base}/structure/{name}", fmt, "structure",
                                   not benign, build_c, ctrl))
+        if fmt == "sl-folder" and base == "ski":
+            # gyro x and z swapped in the phone's CSVs: the course-rate check refuses it (the
+            # 12 s ski-cut has 14 fixes, too few for that check, and is not detected)
+            def build_sw(d: Path, src: Path = src) -> Path:
+                p = _copy_src(src)(d)
+                for f in p.glob("Gyroscope*.csv"):
+                    f.write_text(_swap_csv_columns(f.read_text(), "x", "z"))
+                return p
+            cases.append(Case(f"{fmt}/{base}/semantic/swap-gyro-xz", fmt, "semantic", True,
+                              build_sw, ctrl))
         if fmt == "dataflash":
             patches = {
                 "fmt-swap-IMU-BARO": lambda b: df_patch_fmt_names(b, "IMU", "BARO"),
                 "accz-all-nan": lambda b: df_patch_field(b, "IMU", "AccZ", float("nan")),
                 "press-all-zero": lambda b: df_patch_field(b, "BARO", "Press", 0.0),
                 "gps-alt-zero": lambda b: df_patch_field(b, "GPS", "Alt", 0.0),
+                "gyro-deg-s": lambda b: df_scale_fields(b, "IMU", ("GyrX", "GyrY", "GyrZ"),
+                                                        180.0 / np.pi),
             }
             for name, fn in patches.items():
                 cases.append(_bytes_case(f"{fmt}/{base}/structure/{name}", fmt, _copy_src(src),

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from .writers import G0, Raw, dataflash_records
+from .writers import G0, Raw, dataflash_records, dataflash_scale_field
 
 
 # --------------------------------------------------------------- semantic / hostile
@@ -67,6 +67,18 @@ def imu_gap(r: Raw, t0: float, t1: float) -> None:
     r.t_imu, r.gyro, r.acc = r.t_imu[keep], r.gyro[keep], r.acc[keep]
 
 
+def _zero_second_half(r: Raw) -> None:
+    """Every value of every record in the second half of the drive zeroed, stamps kept (a
+    logger that went on writing records of zeros)."""
+    mid = 0.5 * (r.t_imu[0] + r.t_imu[-1])
+    m = r.t_imu > mid
+    r.gyro[m], r.acc[m] = 0.0, 0.0
+    m = r.t_gnss > mid
+    r.lat_deg[m], r.lon_deg[m], r.h[m], r.vel_n[m] = 0.0, 0.0, 0.0, 0.0
+    m = r.t_baro > mid
+    r.press[m], r.baro_alt[m] = 0.0, 0.0
+
+
 def _shuffle_imu_t(r: Raw, rng: np.random.Generator) -> None:
     r.t_imu = rng.permutation(r.t_imu)
     r.extra["shuffle_records"] = True  # written in this order, not sorted by stamp
@@ -108,6 +120,7 @@ SEMANTIC: dict[str, tuple[Callable[[Raw, np.random.Generator], Raw], str, tuple[
     "imu-time-us-as-s": (_m(lambda r, g: setattr(r, "t_imu", r.t_imu * 1e-3)), "semantic",
                          ("npz", "dataflash", "ulog", "sl-folder")),
     "imu-time-shuffled": (_m(_shuffle_imu_t), "semantic", ("npz", "ulog", "sl-folder")),
+    "values-zeroed-second-half": (_m(lambda r, g: _zero_second_half(r)), "semantic", None),
     "imu-gap-70s": (_m(lambda r, g: imu_gap(r, 20.0, 90.0)), "semantic", None),
     "baro-alt-feet": (_m(lambda r, g: setattr(r, "baro_alt", r.baro_alt / 0.3048)),
                       "semantic", ("npz",)),
@@ -394,3 +407,11 @@ def df_patch_field(b: bytes, msg: str, col: str, value: float) -> bytes:
 _PYMAV = {"a": "64s", "b": "b", "B": "B", "g": "e", "h": "h", "H": "H", "i": "i", "I": "I",
           "f": "f", "n": "4s", "N": "16s", "Z": "64s", "c": "h", "C": "H", "e": "i", "E": "I",
           "L": "i", "d": "d", "M": "b", "q": "q", "Q": "Q"}
+
+
+def df_scale_fields(b: bytes, msg: str, cols: tuple[str, ...], factor: float) -> bytes:
+    """Every ``msg`` record's fields ``cols`` multiplied by ``factor`` (e.g. a gyro logged in
+    deg/s: ``IMU`` ``GyrX/Y/Z`` × 180/π)."""
+    for c in cols:
+        b = dataflash_scale_field(b, msg, c, factor)
+    return b

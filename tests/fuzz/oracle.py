@@ -161,3 +161,43 @@ def classify(case: Any, path: Path, control: Any, seconds: float, drive: Any = N
     o.difference = material_difference(drive, control)
     o.outcome = "silent" if o.difference else "clean"
     return o
+
+
+# ------------------------------------------------------------ run answers (summary.json)
+WRONG_M = 1000.0  # an answer this far off is not one (evaluation.selfcheck.LOST_M)
+
+
+def wrong_but_ok(summary: dict[str, Any]) -> list[str]:
+    """Every estimator reported "ok" in a ``summary.json`` while one of its answers, the final
+    trajectory or the causal ``online`` one, is more than ``WRONG_M`` off in height or
+    horizontally: against truth (a simulated drive) or the withheld fixes (a log's holdout
+    run). Read from ``alt_max_abs_m``, the self-checks' ``error_max_m`` (both answers, both
+    axes; the holdout run's in ``holdout_self_check``) and the RMS errors of the ``online``
+    block. One line per violation; [] when none."""
+    bad = []
+    for name, m in summary["estimators"].items():
+        if m["status"] != "ok":
+            continue
+        seen: dict[str, Any] = {"alt_max_abs_m": m.get("alt_max_abs_m"),
+                                "horiz_rmse_m": m.get("horiz_rmse_m")}
+        for key in ("self_check", "holdout_self_check"):
+            em = (m.get(key) or {}).get("error_max_m") or {}
+            seen.update({f"{key}.{k}": v for k, v in em.items() if k != "basis"})
+        on = m.get("online") or {}
+        seen.update({f"online.{k}": on.get(k) for k in ("alt_rmse_m", "horiz_rmse_m")})
+        bad += [f"{name}: {k} = {v:.0f} m, status ok" for k, v in seen.items()
+                if isinstance(v, (int, float)) and v > WRONG_M]
+    return bad
+
+
+def answers_checked(summary: dict[str, Any]) -> list[str]:
+    """The estimators of a summary whose self-check did not look at both answers: an "ok"
+    estimator with a causal answer (an ``online`` block) must have the online self-check."""
+    out = []
+    for name, m in summary["estimators"].items():
+        sc = m.get("self_check")
+        if m["status"] not in ("ok", "diverged") or sc is None:
+            continue
+        if m.get("online") is not None and sc.get("online") is None:
+            out.append(f"{name}: online answer not self-checked")
+    return out

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -71,6 +72,7 @@ def test_npz_byte_damage_inside_a_member_is_a_value_error(tmp_path):
 
 @pytest.mark.parametrize(("change", "match"), [
     ({"meta": [1, 2]}, "'meta' is a list"),
+    ({"meta": None}, "'meta' is null"),
     ({"imu_spec": [1, 2]}, "not a sensor spec"),
     ({"baro_spec": "BaroSpec"}, "not a sensor spec"),
     ({"baro_truth": {"scale": 0.01}}, "baro_truth"),
@@ -196,6 +198,50 @@ def test_gyro_in_degrees_per_second_is_converted():
     d = check_drive(_drive(gyro=np.degrees(SIM.imu.gyro_b)))
     np.testing.assert_allclose(d.imu.gyro_b, SIM.imu.gyro_b, rtol=1e-12)
     assert "deg/s" in d.meta["warnings"][0]
+
+
+AIR, _ = sim_raw("sortie", 400.0)
+
+
+def _units_first(case: Path, ctrl: Path) -> None:
+    """``case`` (gyro in deg/s) reads in full, converted, with one warning saying so."""
+    d, c = load_drive(case), load_drive(ctrl)
+    assert len(d.imu) == len(c.imu)  # no sample screened as "outside physical range"
+    assert "imu" not in (d.meta.get("dropped") or {}) or not sum(
+        d.meta["dropped"]["imu"].values())
+    np.testing.assert_allclose(d.imu.gyro_b, c.imu.gyro_b, rtol=1e-5, atol=1e-5)
+    assert sum("deg/s" in w for w in d.meta["warnings"]) == 1
+    assert "gyro in deg/s: multiplied by pi/180" in d.meta["repaired"]["imu"]
+
+
+@pytest.mark.parametrize("fmt", ["dataflash", "ulog", "npz", "sl-folder"])
+def test_slow_turning_gyro_in_degrees_is_converted(fmt, tmp_path):
+    """The sortie aircraft never turns faster than 8 deg/s for a second, so its deg/s gyro
+    passes the block-rate test; the GNSS course (57 times less turn than the gyro's) decides."""
+    from .corpus import WRITERS
+
+    deg = SEMANTIC["gyro-deg-s"][0](AIR, np.random.default_rng(0))
+    suffix = {"dataflash": ".bin", "ulog": ".ulg", "npz": ".npz", "sl-folder": ""}[fmt]
+    if fmt == "npz":
+        case, ctrl = write_npz(deg, tmp_path / "deg.npz"), write_npz(AIR, tmp_path / "c.npz")
+    else:
+        case = WRITERS[fmt](deg, tmp_path / f"deg{suffix}")
+        ctrl = WRITERS[fmt](AIR, tmp_path / f"c{suffix}")
+    _units_first(case, ctrl)
+
+
+@pytest.mark.parametrize("log", ["erle_pxf_181_gps_glitch/181.BIN", "erle_pxf_218/218.BIN"])
+def test_shared_dataflash_gyro_in_degrees_reads_in_full(log, shared_log, tmp_path):
+    """Multirotor logs with the gyro rewritten in deg/s: 31 % of 181.BIN's samples and 4.5 %
+    of 218.BIN's turn faster than 50 deg/s; the reader's range screen (|gyro| <= 50) must see
+    them in rad/s, after the unit is decided on the raw samples."""
+    from .mutations import df_scale_fields
+
+    src = shared_log(log)
+    p = tmp_path / "deg.bin"
+    p.write_bytes(df_scale_fields(src.read_bytes(), "IMU", ("GyrX", "GyrY", "GyrZ"),
+                                  180.0 / np.pi))
+    _units_first(p, src)
 
 
 def test_swapped_accelerometer_axes_are_refused():

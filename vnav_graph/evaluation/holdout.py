@@ -266,6 +266,44 @@ def score(est: Estimate, drive: Drive, withheld: np.ndarray,
     return Scored(block, t, err, w, sd, horiz_err, vd_err)
 
 
+def check_run(scored: Scored, est: Estimate, held: Drive, drive: Drive, reference: np.ndarray,
+              given: np.ndarray) -> None:
+    """The self-check of one holdout run, into ``scored.block``: ``self_check`` (both answers
+    against the fixes the run was given, ``selfcheck.check_answers`` on ``held``, whose
+    withheld windows are outages; with ``error_max_m``, the largest errors of both answers
+    in both axes against the withheld fixes), its flags added to ``warnings``, and
+    ``status`` ``"diverged"`` with its ``error`` when the check fails or an answer is more
+    than ``selfcheck.LOST_M`` from the withheld fixes (``selfcheck.far_off``)."""
+    from .metrics import causal_view
+    from .selfcheck import DIVERGED, check_answers, far_off
+
+    b = scored.block
+    view = causal_view(est, "online")
+    check = check_answers(est, view, held)
+    on_h = on_v = None
+    if view is not None:
+        try:
+            o = score(view, drive, reference, given=given)
+            on_v = o.block["alt_max_abs_m"]
+            on_h = _max_finite(o.horiz_err)
+        except ValueError:  # covers no withheld fix
+            pass
+    maxima = {"height": b["alt_max_abs_m"], "horizontal": _max_finite(scored.horiz_err),
+              "online_height": on_v, "online_horizontal": on_h}
+    b["self_check"] = {**check.as_dict(), "error_max_m": {**maxima, "basis": "withheld GNSS"}}
+    b["warnings"] = [*b.get("warnings", []), *check.flags]
+    far = far_off(maxima, "the withheld GNSS fixes")
+    if check.diverged or far:
+        b["status"], b["error"] = DIVERGED, check.reason or far
+
+
+def _max_finite(x: FloatArray | None) -> float | None:
+    if x is None:
+        return None
+    x = x[np.isfinite(x)]
+    return float(np.max(np.abs(x))) if x.size else None
+
+
 def causal_score(est: Estimate, drive: Drive, withheld: np.ndarray, which: str,
                  given: np.ndarray | None = None) -> dict[str, Any] | None:
     """The ``online`` / ``lag`` block of the holdout: the causal (or fixed-lag) estimate scored

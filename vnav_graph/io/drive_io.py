@@ -181,11 +181,33 @@ def _mag_checked(a: dict[str, np.ndarray], header: dict[str, Any],
     return MagStream(a["mag_t"], a["mag_field_b"], float(sd))
 
 
+def _imu_units_first(a: dict[str, np.ndarray], meta: dict[str, Any]) -> None:
+    """Convert ``imu_gyro_b`` / ``imu_accel_b`` in place where ``io.imu_checks.unit_fixes``
+    finds deg/s or g units, before ``ImuStream``'s range check sees them (counted in
+    ``meta["repaired"]["imu"]``, warned in ``meta["warnings"]``). Arrays of the wrong shape
+    are left for ``ImuStream`` to refuse."""
+    from .imu_checks import unit_fixes
+
+    t, w, f = a.get("imu_t"), a.get("imu_gyro_b"), a.get("imu_accel_b")
+    if t is None or w is None or f is None or t.ndim != 1 or w.shape != (t.size, 3) \
+            or f.shape != (t.size, 3):
+        return
+    for fix in unit_fixes(t, w, f):
+        key = "imu_gyro_b" if fix.field == "gyro" else "imu_accel_b"
+        a[key] = a[key] * fix.factor
+        rep = meta.get("repaired") if isinstance(meta.get("repaired"), dict) else {}
+        imu = dict(rep.get("imu") or {}) if isinstance(rep.get("imu"), dict) else {}
+        imu[fix.reason] = imu.get(fix.reason, 0) + int(t.size)
+        meta["repaired"] = {**rep, "imu": imu}
+        meta["warnings"] = [*list(meta.get("warnings") or []), fix.warning]
+
+
 def load_npz(path: str | Path) -> Drive:
     """Read a Drive written by ``save_npz``. ValueError on a corrupt or foreign file.
 
     Checks, in order: the zip directory (sizes, before decompressing), each member's
-    decompression and CRC, the JSON header's structure and types, every array's dtype
+    decompression and CRC, the JSON header's structure and types (``meta`` must be an object:
+    null or missing is refused, as ``save_npz`` never writes either), every array's dtype
     (numeric; float seconds for time stamps), then the stream types' own validation. A file
     whose truth arrays are all absent reads as a real drive (``baro_truth`` dropped too;
     ``meta["notes"]`` says so).
@@ -209,7 +231,12 @@ def load_npz(path: str | Path) -> Drive:
     if header.get("format") != FORMAT:
         raise ValueError(f"{p.name}: unsupported format {header.get('format')!r}")
     a = {k: _numeric(k, v, p.name) for k, v in raw.items() if k in _ARRAY_KEYS_FLOAT}
+    if header.get("meta") is None:  # save_npz always writes an object (possibly empty)
+        raise ValueError(f"{p.name}: header field 'meta' is "
+                         f"{'null' if 'meta' in header else 'missing'}, expected an object "
+                         "(corrupt or hand-edited drive; an empty drive writes {})")
     meta = dict(_header_dict(header, "meta", p.name) or {})
+    _imu_units_first(a, meta)
     try:
         imu = ImuStream(a["imu_t"], a["imu_gyro_b"], a["imu_accel_b"],
                         _spec_checked(header.get("imu_spec"), "imu_spec", p.name))

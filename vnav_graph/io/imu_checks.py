@@ -4,6 +4,13 @@ Each check takes the Drive and the :class:`~vnav_graph.io.findings.Findings` of 
 returns a repaired Drive (or None when nothing changes), or raises ``ValueError``;
 :data:`IMU_CHECKS` lists them in the order ``check_drive`` runs them.
 
+Units come first: every reader (DataFlash, ULog, Sensor Logger, ``.npz``) calls
+:func:`unit_fixes` on the raw, finite samples *before* any range screen of its own, so a gyro
+in deg/s is converted instead of screened as "outside physical range" (a DataFlash range of
+50 'rad/s' once dropped every sample above 50 deg/s: 31 % of a deg/s log). The checks below
+then find rad/s and m/s² and change nothing; they still decide for a drive that reaches
+``check_drive`` some other way.
+
 Checks, with the evidence each uses
 -----------------------------------
 - specific-force magnitude: the median |f| over the drive is g for any vehicle that does not
@@ -29,6 +36,9 @@ Checks, with the evidence each uses
   pass; the shared car logs 0.001, the ski phone 0.004 (r2 0.55, k 0.51). Gyro x/z swapped:
   29 of 30 simulated drives refused, the ski phone 0.55 against 0.39 (refused); z inverted:
   28 of 30 refused (k −0.45 to −1.22). The multirotor logs move too little to decide.
+  A gyro in deg/s turns 57.3 times too far: k = π/180 × the clean k (0.45-1.3 → 0.008-0.023),
+  so k in ``DEG_K_BAND`` (0.005-0.05) with ``r2_down`` ≥ 0.5 converts it (the sortie aircraft
+  in deg/s: its busiest second is 6 'rad/s', under ``DEG_BUSY``).
 - gravity axis: the mean specific force should point along −z_b (FRD, level mounting); more
   than ``MAX_TILT_DEG`` away is refused (swapped axes, or an IMU mounted on its side).
 - held samples: runs of bit-identical IMU samples for ``HELD_MIN_S`` are removed (a stuck
@@ -46,6 +56,7 @@ Checks, with the evidence each uses
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -82,6 +93,7 @@ COURSE_R2_EXPLAINED = 0.5  # the gyro explains at least half the course-rate var
 COURSE_R2_NONE = 0.2  # ... but about the down axis less than a fifth of it
 COURSE_R2_GAP = 0.1  # ... or 10 points less than about its best axis (clean: <= 0.06)
 COURSE_P = 1e-3  # ... and that difference significant (F test, independent windows)
+DEG_K_BAND = (0.005, 0.05)  # course change per gyro turn of a deg/s gyro (clean k: 0.45-1.3)
 
 
 def _block_means(t: FloatArray, x: FloatArray, block_s: float) -> tuple[FloatArray, FloatArray]:
@@ -92,6 +104,69 @@ def _block_means(t: FloatArray, x: FloatArray, block_s: float) -> tuple[FloatArr
     tm = np.bincount(k, weights=t) / n
     xm = np.column_stack([np.bincount(k, weights=x[:, j]) / n for j in range(x.shape[1])])
     return tm, xm
+
+
+def gyro_in_degrees(st: dict[str, float]) -> bool:
+    """Do the 1 s block statistics of :func:`rotation_stats` (``busy``, ``quiet``,
+    ``blocks``) say the gyro is in deg/s? (``DEG_BUSY``, ``DEG_QUIET``; at least 5 blocks)"""
+    return st["blocks"] >= 5 and (st["busy"] > DEG_BUSY or st["quiet"] > DEG_QUIET)
+
+
+@dataclass(frozen=True)
+class UnitFix:
+    """One unit conversion decided on raw samples: multiply ``field`` (``"gyro"`` or
+    ``"accel"``) by ``factor``; ``reason`` is the ``meta["repaired"]`` key, ``warning`` the
+    ``meta["warnings"]`` line."""
+
+    field: str
+    factor: float
+    reason: str
+    warning: str
+
+
+GYRO_DEG_REASON = "gyro in deg/s: multiplied by pi/180"
+ACCEL_G_REASON = "specific force in g: multiplied by 9.80665"
+ACCEL_G2_REASON = "specific force multiplied by g twice: divided by 9.80665"
+
+
+def unit_fixes(t: FloatArray, gyro: FloatArray, accel: FloatArray) -> list[UnitFix]:
+    """The unit conversions the raw IMU samples need (module docstring), decided before any
+    range screen: specific force in g (× g0) or in g·g0 (÷ g0) from its median magnitude,
+    gyro in deg/s (× π/180) from its 1 s block means. Rows with a non-finite value or stamp
+    are ignored; the stamps may be unsorted. The gyro is left undecided (no fix) when the
+    median sample interval is outside [5e-5, 2] s: stamps in the wrong unit, which
+    ``sanity`` refuses. A magnitude that is neither g units nor m/s² gives no fix here
+    (``check_drive`` refuses it)."""
+    t = np.asarray(t, dtype=float)
+    gyro = np.asarray(gyro, dtype=float)
+    accel = np.asarray(accel, dtype=float)
+    ok = np.isfinite(t) & np.all(np.isfinite(gyro), axis=1) & np.all(np.isfinite(accel), axis=1)
+    if ok.sum() < 10:
+        return []
+    t, gyro, accel = t[ok], gyro[ok], accel[ok]
+    fixes: list[UnitFix] = []
+    mag = float(np.median(np.linalg.norm(accel, axis=1)))
+    if ACCEL_IN_G[0] <= mag <= ACCEL_IN_G[1]:
+        fixes.append(UnitFix("accel", G0, ACCEL_G_REASON,
+                             f"imu: median |specific force| {mag:.3g} is g units, not m/s^2: "
+                             "converted (x 9.80665)"))
+    elif ACCEL_TWICE[0] <= mag <= ACCEL_TWICE[1]:
+        fixes.append(UnitFix("accel", 1.0 / G0, ACCEL_G2_REASON,
+                             f"imu: median |specific force| {mag:.4g} m/s^2 is about g^2: "
+                             "converted twice to m/s^2; divided by 9.80665"))
+    ts = np.sort(t)
+    dt = float(np.median(np.diff(ts))) if ts.size > 1 else 0.0
+    if 5e-5 <= dt <= 2.0:
+        _, wm = _block_means(t - ts[0], gyro, 1.0)
+        n = np.linalg.norm(wm, axis=1)
+        st = {"quiet": float(np.percentile(n, 2)), "busy": float(np.percentile(n, 99.9)),
+              "blocks": float(n.size)}
+        if gyro_in_degrees(st):
+            fixes.append(UnitFix("gyro", np.pi / 180.0, GYRO_DEG_REASON,
+                                 f"imu: gyro rates look like deg/s (quietest second "
+                                 f"{st['quiet']:.2g}, busiest {st['busy']:.3g} 'rad/s'): "
+                                 "converted (x pi/180) before any range check"))
+    return fixes
 
 
 def rotation_stats(t: FloatArray, gyro: FloatArray, accel: FloatArray) -> dict[str, float]:
@@ -127,14 +202,14 @@ def _check_accel_magnitude(drive: Drive, f: Findings) -> Drive:
     if ACCEL_OK[0] <= mag <= ACCEL_OK[1]:
         return drive
     if ACCEL_IN_G[0] <= mag <= ACCEL_IN_G[1]:
-        f.repair("imu", "specific force in g: multiplied by 9.80665", len(drive.imu),
+        f.repair("imu", ACCEL_G_REASON, len(drive.imu),
                  f"imu: median |specific force| {mag:.3g} is g units, not m/s^2: converted "
                  "(x 9.80665)")
         return drive.replace(imu=_imu(drive, drive.imu.gyro_b, drive.imu.accel_b * G0))
     if ACCEL_TWICE[0] <= mag <= ACCEL_TWICE[1]:
-        f.repair("imu", "specific force multiplied by g twice: divided by 9.80665",
-                 len(drive.imu), f"imu: median |specific force| {mag:.4g} m/s^2 is about g^2: "
-                 "converted twice to m/s^2; divided by 9.80665")
+        f.repair("imu", ACCEL_G2_REASON, len(drive.imu),
+                 f"imu: median |specific force| {mag:.4g} m/s^2 is about g^2: converted "
+                 "twice to m/s^2; divided by 9.80665")
         return drive.replace(imu=_imu(drive, drive.imu.gyro_b, drive.imu.accel_b / G0))
     raise reject("imu", f"median |specific force| {mag:.3g} m/s^2 is not about g "
                  "(9.8): wrong unit, gravity removed, or not an accelerometer")
@@ -146,8 +221,8 @@ def _check_rotation(drive: Drive, f: Findings) -> Drive:
     f.diag["imu_rotation_stats"] = st
     if st["blocks"] < 5:
         return drive
-    if st["busy"] > DEG_BUSY or st["quiet"] > DEG_QUIET:
-        f.repair("imu", "gyro in deg/s: multiplied by pi/180", len(i),
+    if gyro_in_degrees(st):
+        f.repair("imu", GYRO_DEG_REASON, len(i),
                  f"imu: gyro rates look like deg/s (quietest second {st['quiet']:.2g}, "
                  f"busiest {st['busy']:.3g} 'rad/s'): converted (x pi/180)")
         return drive.replace(imu=_imu(drive, i.gyro_b * (np.pi / 180.0), i.accel_b))
@@ -304,15 +379,24 @@ def course_rate_fit(drive: Drive) -> dict[str, float] | None:
                 float(np.linalg.norm(u)), 1e-12)))))}
 
 
-def _check_course_rate(drive: Drive, f: Findings) -> None:
-    """The gyro against the GNSS course (:func:`course_rate_fit`), any vehicle: refused when
-    the gyro explains the turns (``COURSE_R2_EXPLAINED``) but not about the gravity axis
+def _check_course_rate(drive: Drive, f: Findings) -> Drive | None:
+    """The gyro against the GNSS course (:func:`course_rate_fit`), any vehicle: a gyro that
+    explains the turns about the down axis (``COURSE_R2_EXPLAINED``) with a gain
+    k in ``DEG_K_BAND`` turns 57 times too fast: deg/s, converted (a vehicle that never
+    turns faster than 8 deg/s for a second escapes the rate test of :func:`unit_fixes`).
+    Refused when the gyro explains the turns but not about the gravity axis
     (``COURSE_R2_NONE``, or ``COURSE_R2_GAP`` less than about its best axis, significant at
     ``COURSE_P``), or turns the wrong way about it."""
     fit = course_rate_fit(drive)
     f.diag["imu_course_rate_fit"] = fit
     if fit is None or fit["course_rate_rms"] < COURSE_MIN_RATE:
-        return
+        return None
+    if fit["r2_down"] >= COURSE_R2_EXPLAINED and DEG_K_BAND[0] <= fit["k_down"] <= DEG_K_BAND[1]:
+        i = drive.imu
+        f.repair("imu", GYRO_DEG_REASON, len(i),
+                 f"imu: the gyro turns {1 / fit['k_down']:.0f} times as far as the GNSS course "
+                 f"in turns (r2 {fit['r2_down']:.2f}; 57.3 is deg/s): converted (x pi/180)")
+        return drive.replace(imu=_imu(drive, i.gyro_b * (np.pi / 180.0), i.accel_b))
     off_axis = fit["r2_down"] < COURSE_R2_NONE or (
         fit["r2_any"] - fit["r2_down"] >= COURSE_R2_GAP and fit["p_down"] < COURSE_P)
     if fit["r2_any"] >= COURSE_R2_EXPLAINED and off_axis:
@@ -324,6 +408,7 @@ def _check_course_rate(drive: Drive, f: Findings) -> None:
         raise reject("imu", f"the gyro turns the wrong way about the down axis ("
                      f"{fit['k_down']:.2f} x the GNSS course change in turns): a gyro axis "
                      "inverted (mirrored against the accelerometer)?")
+    return None
 
 
 def _check_held_samples(drive: Drive, f: Findings) -> Drive:

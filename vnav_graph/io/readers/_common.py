@@ -32,6 +32,7 @@ class Report:
     repaired: dict[str, dict[str, int]] = field(default_factory=dict)
     gaps: dict[str, list[list[float]]] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)  # → meta["warnings"] (repairs to know)
     clock_rate: float | None = None  # receiver-vs-logger clock ratio where measured
 
     def drop(self, stream: str, reason: str, count: int) -> None:
@@ -45,8 +46,31 @@ class Report:
             d[reason] = d.get(reason, 0) + int(count)
 
     def as_meta(self) -> dict[str, Any]:
-        return {"dropped": self.dropped, "repaired": self.repaired, "gaps": self.gaps,
-                "notes": list(self.notes)}
+        out: dict[str, Any] = {"dropped": self.dropped, "repaired": self.repaired,
+                               "gaps": self.gaps, "notes": list(self.notes)}
+        if self.warnings:
+            out["warnings"] = list(self.warnings)
+        return out
+
+
+def imu_in_si(t: FloatArray, gyro: FloatArray, accel: FloatArray,
+              report: Report) -> tuple[FloatArray, FloatArray]:
+    """Gyro [rad/s] and specific force [m/s²] of raw IMU samples whose units
+    ``io.imu_checks.unit_fixes`` decided on the raw values (deg/s, g, g·g0): converted,
+    counted under ``meta["repaired"]["imu"]`` and warned. Every reader calls it before any
+    range screen of its own, so a sample in the wrong unit is converted, not dropped."""
+    from ..imu_checks import unit_fixes
+
+    gyro = np.asarray(gyro, dtype=float)
+    accel = np.asarray(accel, dtype=float)
+    for fix in unit_fixes(t, gyro, accel):
+        if fix.field == "gyro":
+            gyro = gyro * fix.factor
+        else:
+            accel = accel * fix.factor
+        report.repair("imu", fix.reason, int(np.asarray(t).size))
+        report.warnings.append(fix.warning)
+    return gyro, accel
 
 
 def monotonic_mask(t: FloatArray, stream: str, report: Report) -> NDArray[np.bool_]:

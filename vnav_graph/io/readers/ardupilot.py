@@ -76,6 +76,7 @@ from ._common import (
     find_gaps,
     finite_rows,
     gps_to_unix,
+    imu_in_si,
     local_to_gps_seconds,
     mag_stream,
     monotonic_mask,
@@ -304,6 +305,7 @@ def _read_imu(rows: list[dict[str, Any]], name: str,
     acc = np.column_stack([col(imu_rows, f"Acc{a}") for a in "XYZ"])
     ok = finite_rows(gyro, acc)
     report.drop("imu", "non-finite sample", int((~ok).sum()))
+    gyro, acc = imu_in_si(t_imu, gyro, acc, report)  # units first, then the range screen
     phys = (np.max(np.abs(gyro), axis=1) <= 50.0) & (np.max(np.abs(acc), axis=1) <= 2000.0)
     report.drop("imu", "outside physical range", int((ok & ~phys).sum()))
     ok &= phys

@@ -22,6 +22,7 @@ from ._common import (
     decimal_year_unix,
     find_gaps,
     finite_rows,
+    imu_in_si,
     mag_stream,
     monotonic_mask,
     pressure_altitude,
@@ -61,6 +62,7 @@ def aligned_imu(t: np.ndarray, f_d: np.ndarray, w_d: np.ndarray,
     ok = finite_rows(f_d, w_d)
     report.drop("imu", "non-finite sample", int((~ok).sum()))
     t, f_d, w_d = t[ok], f_d[ok], w_d[ok]
+    w_d, f_d = imu_in_si(t, w_d, f_d, report)  # units before the mounting's 1 g test
     keep = monotonic_mask(t, "imu", report)
     t, f_d, w_d = t[keep], f_d[keep], w_d[keep]
     if t.size < 10:

@@ -40,6 +40,7 @@ from ._common import (
     decimal_year_unix,
     find_gaps,
     finite_rows,
+    imu_in_si,
     mag_stream,
     monotonic_mask,
     onboard_block,
@@ -126,6 +127,7 @@ def read_ulog(path: str | Path) -> Drive:
     ok = finite_rows(gyro, acc)
     report.drop("imu", "non-finite sample", int((~ok).sum()))
     t_imu, gyro, acc = t_imu[ok], gyro[ok], acc[ok]
+    gyro, acc = imu_in_si(t_imu, gyro, acc, report)
     keep = monotonic_mask(t_imu, "imu", report)
     t_imu, gyro, acc = t_imu[keep], gyro[keep], acc[keep]
     if t_imu.size < 10:
