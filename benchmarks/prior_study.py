@@ -6,7 +6,7 @@ readers give), so the estimators infer the IMU model from the data and take the 
 from ``REAL_LOG_BARO``, exactly as on a shared log — and the estimated baro scale, latency and
 mean bias are compared with the simulation's truth: z = (estimate − truth) / σ, with the
 estimate, σ and truth taken from the ``baro`` block of summary.json
-(``vnav_graph.evaluation.metrics.baro_block``; bias truth = time average of b(t)). An honest σ
+(``vnav_graph.evaluation.blocks.baro_block``; bias truth = time average of b(t)). An honest σ
 gives rms z ≈ 1 over the seeds; the goal is 0.8 ≤ rms z ≤ 1.25 for every
 scenario × estimator × parameter. With n seeds the rms z of an exactly calibrated σ scatters:
 ``rms_z_ci95`` is its χ²(n) 95 % interval (assumes zero-mean Gaussian z; n = 20 gives
@@ -126,7 +126,7 @@ def run_one(scenario: str, seed: int, estimators: Iterable[str],
     """Simulate ``scenario``/``seed``, run each estimator on it as a real log; one record per
     estimator: the ``baro`` block (est, sd, truth) and its z per parameter."""
     from vnav_graph.estimators.base import create
-    from vnav_graph.evaluation.metrics import baro_block
+    from vnav_graph.evaluation.blocks import baro_block
     from vnav_graph.simulation import simulate
 
     truth_drive = simulate(scenario, seed, **dict(overrides or {}))

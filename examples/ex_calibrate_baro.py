@@ -15,7 +15,7 @@ from typing import Any
 
 from vnav_graph.calibration import calibrate_baro, format_calibration
 from vnav_graph.estimators.base import available, create
-from vnav_graph.evaluation.metrics import baro_block
+from vnav_graph.evaluation.blocks import baro_block
 from vnav_graph.evaluation.montecarlo import shorten_scenario
 from vnav_graph.simulation import simulate
 

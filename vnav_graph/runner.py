@@ -39,6 +39,7 @@ from typing import Any
 
 from .ahrs_cache import Shared, sharing
 from .estimators.base import available, create, with_online
+from .evaluation.blocks import fb_separation_block
 from .evaluation.holdout import (
     HoldoutResult,
     Scored,
@@ -51,7 +52,7 @@ from .evaluation.holdout import (
     score,
     withhold,
 )
-from .evaluation.metrics import METRIC_KEYS, fb_separation_block
+from .evaluation.metrics import METRIC_KEYS
 from .evaluation.screening import screen_reference
 from .failures import ExtensionError, MissingStream, failure_message
 from .jit import CompileTimer, Prewarm, family_of, mark_warm

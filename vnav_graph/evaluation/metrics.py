@@ -13,7 +13,8 @@ from typing import Any
 
 import numpy as np
 
-from ..types import ERROR_STATE, BaroEstimate, Drive, Estimate, FloatArray
+from ..types import ERROR_STATE, Drive, Estimate, FloatArray
+from .blocks import baro_block, extra_variables_block, fb_separation_block
 
 
 @dataclass(frozen=True)
@@ -136,17 +137,35 @@ def outage_max(t: FloatArray, err: FloatArray | None,
     return float(np.max(np.abs(err[m]))) if m.any() else None
 
 
-def nees(est: Estimate, drive: Drive) -> tuple[FloatArray, int] | None:
-    """NEES over the position/velocity error components the estimate covers (finite rows of
-    ``pos_n``/``vel_n`` in its covariance). Returns (nees per covariance epoch, dof)."""
+def nees_rows(est: Estimate, drive: Drive) -> tuple[np.ndarray, np.ndarray] | None:
+    """The covariance epochs ``nees`` scores (inside the truth's span, with finite variances)
+    and the position/velocity components it covers; None where it scores nothing."""
     if est.cov is None or est.t_cov is None or drive.truth is None:
         return None
     idx = np.r_[np.arange(18)[ERROR_STATE["pos_n"]], np.arange(18)[ERROR_STATE["vel_n"]]]
-    diag = np.diagonal(est.cov[0])[idx]
-    idx = idx[np.isfinite(diag)]
+    diag = np.diagonal(est.cov, axis1=1, axis2=2)[:, idx]
+    rows = np.any(np.isfinite(diag), axis=1)
+    if not rows.any():
+        return None
+    keep = np.isfinite(diag[int(np.argmax(rows))])
+    idx, diag = idx[keep], diag[:, keep]
     if idx.size == 0:
         return None
-    m = (est.t_cov >= drive.truth.t[0]) & (est.t_cov <= drive.truth.t[-1])
+    m = ((est.t_cov >= drive.truth.t[0]) & (est.t_cov <= drive.truth.t[-1])
+         & np.all(np.isfinite(diag), axis=1))
+    return m, idx
+
+
+def nees(est: Estimate, drive: Drive) -> tuple[FloatArray, int] | None:
+    """NEES over the position/velocity error components the estimate covers (finite rows of
+    ``pos_n``/``vel_n`` in its covariance), at the covariance epochs where those are finite
+    (``nees_rows``; graph-isam2's real-time output has none between keyframes). Returns
+    (nees per such epoch, dof)."""
+    rows = nees_rows(est, drive)
+    if rows is None:
+        return None
+    m, idx = rows
+    assert est.t_cov is not None and est.cov is not None and drive.truth is not None
     t = est.t_cov[m]
     traj = est.trajectory.at(t)
     truth = drive.truth.at(t)
@@ -225,40 +244,6 @@ def error_p95(err: Errors) -> dict[str, float | None]:
             "heading_p95_deg": p95(err.heading), "vel_down_p95_mps": p95(err.vel_down)}
 
 
-def _param(block: Any, truth: float | None) -> dict[str, Any]:
-    if block is None:
-        return {"est": None, "sd": None, "truth": truth}
-    return {"est": float(block.est), "sd": None if block.sd is None else float(block.sd),
-            "truth": truth}
-
-
-def baro_block(baro: BaroEstimate | None, drive: Drive) -> dict[str, Any]:
-    """The ``baro`` block of summary.json. Bias truth is the time average of b(t)."""
-    bt = drive.baro_truth
-    bias_truth = None
-    if drive.truth is not None and drive.truth.bias_baro is not None:
-        bias_truth = float(np.mean(drive.truth.bias_baro))
-    b = baro or BaroEstimate()
-    return {
-        "scale": _param(b.scale, None if bt is None else float(bt.scale)),
-        "latency_s": _param(b.latency_s, None if bt is None else float(bt.latency_s)),
-        "bias_m": _param(b.bias_m, bias_truth),
-    }
-
-
-def extra_variables_block(extra: Any) -> dict[str, Any] | None:
-    """Value and σ of every added variable (``Estimate.info["extra_variables"]``; the
-    covariance matrices stay in the estimate), None when there are none."""
-    if not extra:
-        return None
-    return {str(k): {"est": [float(x) for x in v["est"]] if v.get("est") is not None else None,
-                     "sd": [float(x) for x in v["sd"]]}
-            for k, v in extra.items()}
-
-
-# The error metrics of a summary.json / bench.json block, in their order: null until scored
-# (``evaluate``), and null in the block of an estimator without a result
-# (``runner.failed_block``)
 METRIC_KEYS = ("alt_rmse_m", "alt_max_abs_m", "horiz_rmse_m", "heading_rmse_deg",
                "heading_known_rmse_deg", "heading_known_after_s", "outage_alt_max_m",
                "outage_horiz_max_m", "vel_down_rmse_mps", "nees_mean", "nees_dof")
@@ -313,9 +298,9 @@ def causal_errors(est: Estimate, drive: Drive, which: str) -> CausalErrors | Non
     err = errors_vs_truth(view, drive)
     ne = nees(view, drive)
     t_ne = None
-    if ne is not None and view.t_cov is not None:
-        m = (view.t_cov >= drive.truth.t[0]) & (view.t_cov <= drive.truth.t[-1])
-        t_ne = view.t_cov[m]
+    rows = nees_rows(view, drive)
+    if ne is not None and view.t_cov is not None and rows is not None:
+        t_ne = view.t_cov[rows[0]]
     return CausalErrors(from_s, t_ref, err, t_ne, None if ne is None else ne[0],
                         None if ne is None else ne[1])
 
@@ -369,14 +354,6 @@ def causal_block_of(ce: CausalErrors, est: Estimate, which: str) -> dict[str, An
 
 def _rms(x: FloatArray | None) -> float | None:
     return None if x is None or x.size == 0 else float(np.sqrt(np.mean(x**2)))
-
-
-def fb_separation_block(sep: Any) -> dict[str, float] | None:
-    """``{"alt_p95_m", "horiz_p95_m"}``: the 95th percentiles of the distance between the
-    forward filter and the filter run backward (``ekf.backward``); None when not computed."""
-    if not sep:
-        return None
-    return {"alt_p95_m": float(sep["alt_p95_m"]), "horiz_p95_m": float(sep["horiz_p95_m"])}
 
 
 def evaluate(est: Estimate, drive: Drive,
@@ -439,36 +416,10 @@ def evaluate(est: Estimate, drive: Drive,
         "nees_axes": None, "alt_p95_m": None, "horiz_p95_m": None, "heading_p95_deg": None,
         "vel_down_p95_mps": None,
     }
+    err = None
     if drive.truth is not None:
         err = errors_vs_truth(est, drive)
-        out["alt_rmse_m"] = float(np.sqrt(np.mean(err.alt**2)))
-        out["alt_max_abs_m"] = float(np.max(np.abs(err.alt)))
-        if err.vel_down is not None:
-            out["vel_down_rmse_mps"] = float(np.sqrt(np.mean(err.vel_down**2)))
-        if err.horiz is not None:
-            out["horiz_rmse_m"] = float(np.sqrt(np.mean(err.horiz**2)))
-        if err.heading is not None:
-            out["heading_rmse_deg"] = float(np.sqrt(np.mean(err.heading**2)))
-        out["heading_known_rmse_deg"], out["heading_known_after_s"] = heading_known(
-            err.t, err.heading, err.heading_sd, t_ref=float(drive.imu.t[0]))
-        outages = drive.meta.get("gnss_outages") or []
-        out["outage_alt_max_m"] = outage_max(err.t, err.alt, outages)
-        out["outage_horiz_max_m"] = outage_max(err.t, err.horiz, outages)
-        if blocks is not None:
-            from .compare import block_rmse
-
-            cols = {"alt_rmse_m": block_rmse(err.t, err.alt, blocks),
-                    "horiz_rmse_m": block_rmse(err.t, err.horiz, blocks),
-                    "vel_down_rmse_mps": block_rmse(err.t, err.vel_down, blocks)}
-            out["per_block"] = [{"t0": a, "t1": b, **{k: v[i] for k, v in cols.items()}}
-                                for i, (a, b) in enumerate(blocks)]
-        ne = nees(est, drive)
-        if ne is not None:
-            out["nees_mean"] = float(np.mean(ne[0]))
-            out["nees_dof"] = ne[1]
-        # additions: calibration on each metric's own axes, and the error's tail
-        out["nees_axes"] = nees_axes(est, drive, err)
-        out.update(error_p95(err))
+        out.update(_truth_metrics(est, drive, err, blocks))
     out["baro"] = baro_block(est.baro, drive)
     from .selfcheck import DIVERGED, check_answers, far_off
 
@@ -484,6 +435,41 @@ def evaluate(est: Estimate, drive: Drive,
         out["status"], out["error"] = DIVERGED, check.reason
     elif far:
         out["status"], out["error"] = DIVERGED, far
+    return out
+
+
+def _truth_metrics(est: Estimate, drive: Drive, err: Errors,
+                   blocks: Sequence[tuple[float, float]] | None) -> dict[str, Any]:
+    """``evaluate``'s error metrics against the drive's truth (``err``: ``errors_vs_truth``)."""
+    out: dict[str, Any] = {}
+    out["alt_rmse_m"] = float(np.sqrt(np.mean(err.alt**2)))
+    out["alt_max_abs_m"] = float(np.max(np.abs(err.alt)))
+    if err.vel_down is not None:
+        out["vel_down_rmse_mps"] = float(np.sqrt(np.mean(err.vel_down**2)))
+    if err.horiz is not None:
+        out["horiz_rmse_m"] = float(np.sqrt(np.mean(err.horiz**2)))
+    if err.heading is not None:
+        out["heading_rmse_deg"] = float(np.sqrt(np.mean(err.heading**2)))
+    out["heading_known_rmse_deg"], out["heading_known_after_s"] = heading_known(
+        err.t, err.heading, err.heading_sd, t_ref=float(drive.imu.t[0]))
+    outages = drive.meta.get("gnss_outages") or []
+    out["outage_alt_max_m"] = outage_max(err.t, err.alt, outages)
+    out["outage_horiz_max_m"] = outage_max(err.t, err.horiz, outages)
+    if blocks is not None:
+        from .compare import block_rmse
+
+        cols = {"alt_rmse_m": block_rmse(err.t, err.alt, blocks),
+                "horiz_rmse_m": block_rmse(err.t, err.horiz, blocks),
+                "vel_down_rmse_mps": block_rmse(err.t, err.vel_down, blocks)}
+        out["per_block"] = [{"t0": a, "t1": b, **{k: v[i] for k, v in cols.items()}}
+                            for i, (a, b) in enumerate(blocks)]
+    ne = nees(est, drive)
+    if ne is not None:
+        out["nees_mean"] = float(np.mean(ne[0]))
+        out["nees_dof"] = ne[1]
+    # additions: calibration on each metric's own axes, and the error's tail
+    out["nees_axes"] = nees_axes(est, drive, err)
+    out.update(error_p95(err))
     return out
 
 

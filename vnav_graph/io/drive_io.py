@@ -182,11 +182,11 @@ def _mag_checked(a: dict[str, np.ndarray], header: dict[str, Any],
 
 
 def _imu_units_first(a: dict[str, np.ndarray], meta: dict[str, Any]) -> None:
-    """Convert ``imu_gyro_b`` / ``imu_accel_b`` in place where ``io.imu_checks.unit_fixes``
+    """Convert ``imu_gyro_b`` / ``imu_accel_b`` in place where ``io.imu_units.unit_fixes``
     finds deg/s or g units, before ``ImuStream``'s range check sees them (counted in
     ``meta["repaired"]["imu"]``, warned in ``meta["warnings"]``). Arrays of the wrong shape
     are left for ``ImuStream`` to refuse."""
-    from .imu_checks import unit_fixes
+    from .imu_units import unit_fixes
 
     t, w, f = a.get("imu_t"), a.get("imu_gyro_b"), a.get("imu_accel_b")
     if t is None or w is None or f is None or t.ndim != 1 or w.shape != (t.size, 3) \

@@ -5,7 +5,7 @@ returns a repaired Drive (or None when nothing changes), or raises ``ValueError`
 :data:`IMU_CHECKS` lists them in the order ``check_drive`` runs them.
 
 Units come first: every reader (DataFlash, ULog, Sensor Logger, ``.npz``) calls
-:func:`unit_fixes` on the raw, finite samples *before* any range screen of its own, so a gyro
+``imu_units.unit_fixes`` on the raw, finite samples *before* any range screen of its own, so a gyro
 in deg/s is converted instead of screened as "outside physical range" (a DataFlash range of
 50 'rad/s' once dropped every sample above 50 deg/s: 31 % of a deg/s log). The checks below
 then find rad/s and m/s² and change nothing; they still decide for a drive that reaches
@@ -56,7 +56,6 @@ Checks, with the evidence each uses
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -64,14 +63,19 @@ from numpy.typing import NDArray
 from ..geo.earth import G0
 from ..types import Drive, ImuStream
 from .findings import Findings, reject
+from .imu_units import (
+    ACCEL_G2_REASON,
+    ACCEL_G_REASON,
+    ACCEL_IN_G,
+    ACCEL_TWICE,
+    GYRO_DEG_REASON,
+    block_means,
+    gyro_in_degrees,
+)
 
 FloatArray = NDArray[np.float64]
 
 ACCEL_OK = (6.0, 14.0)  # median |f| [m/s²] accepted as "g in m/s²"
-ACCEL_IN_G = (0.6, 1.4)
-ACCEL_TWICE = (60.0, 140.0)
-DEG_BUSY = 8.0  # rad/s: 99.9th pct of 1 s mean |ω| above this (458 deg/s held 1 s) → deg/s
-DEG_QUIET = 0.5  # rad/s: even the quietest seconds turn at 29 deg/s → deg/s
 GROUND_AXIS_RATIO = 10.0  # rotation mostly about one axis (cars: 20-120; drones: < 5; skier: 5-15)
 GROUND_BUSY = 1.5  # rad/s: a ground vehicle's 1 s mean rates stay below this
 GROUND_AXIS_RMS = 0.02  # rad/s: enough turning to judge the axis
@@ -96,79 +100,6 @@ COURSE_P = 1e-3  # ... and that difference significant (F test, independent wind
 DEG_K_BAND = (0.005, 0.05)  # course change per gyro turn of a deg/s gyro (clean k: 0.45-1.3)
 
 
-def _block_means(t: FloatArray, x: FloatArray, block_s: float) -> tuple[FloatArray, FloatArray]:
-    # np.unique, not bincount over the raw index: one stamp far in the future (a flipped
-    # bit) must not allocate an array as long as the time it spans
-    _, k = np.unique(np.floor((t - t[0]) / block_s), return_inverse=True)
-    n = np.bincount(k)
-    tm = np.bincount(k, weights=t) / n
-    xm = np.column_stack([np.bincount(k, weights=x[:, j]) / n for j in range(x.shape[1])])
-    return tm, xm
-
-
-def gyro_in_degrees(st: dict[str, float]) -> bool:
-    """Do the 1 s block statistics of :func:`rotation_stats` (``busy``, ``quiet``,
-    ``blocks``) say the gyro is in deg/s? (``DEG_BUSY``, ``DEG_QUIET``; at least 5 blocks)"""
-    return st["blocks"] >= 5 and (st["busy"] > DEG_BUSY or st["quiet"] > DEG_QUIET)
-
-
-@dataclass(frozen=True)
-class UnitFix:
-    """One unit conversion decided on raw samples: multiply ``field`` (``"gyro"`` or
-    ``"accel"``) by ``factor``; ``reason`` is the ``meta["repaired"]`` key, ``warning`` the
-    ``meta["warnings"]`` line."""
-
-    field: str
-    factor: float
-    reason: str
-    warning: str
-
-
-GYRO_DEG_REASON = "gyro in deg/s: multiplied by pi/180"
-ACCEL_G_REASON = "specific force in g: multiplied by 9.80665"
-ACCEL_G2_REASON = "specific force multiplied by g twice: divided by 9.80665"
-
-
-def unit_fixes(t: FloatArray, gyro: FloatArray, accel: FloatArray) -> list[UnitFix]:
-    """The unit conversions the raw IMU samples need (module docstring), decided before any
-    range screen: specific force in g (× g0) or in g·g0 (÷ g0) from its median magnitude,
-    gyro in deg/s (× π/180) from its 1 s block means. Rows with a non-finite value or stamp
-    are ignored; the stamps may be unsorted. The gyro is left undecided (no fix) when the
-    median sample interval is outside [5e-5, 2] s: stamps in the wrong unit, which
-    ``sanity`` refuses. A magnitude that is neither g units nor m/s² gives no fix here
-    (``check_drive`` refuses it)."""
-    t = np.asarray(t, dtype=float)
-    gyro = np.asarray(gyro, dtype=float)
-    accel = np.asarray(accel, dtype=float)
-    ok = np.isfinite(t) & np.all(np.isfinite(gyro), axis=1) & np.all(np.isfinite(accel), axis=1)
-    if ok.sum() < 10:
-        return []
-    t, gyro, accel = t[ok], gyro[ok], accel[ok]
-    fixes: list[UnitFix] = []
-    mag = float(np.median(np.linalg.norm(accel, axis=1)))
-    if ACCEL_IN_G[0] <= mag <= ACCEL_IN_G[1]:
-        fixes.append(UnitFix("accel", G0, ACCEL_G_REASON,
-                             f"imu: median |specific force| {mag:.3g} is g units, not m/s^2: "
-                             "converted (x 9.80665)"))
-    elif ACCEL_TWICE[0] <= mag <= ACCEL_TWICE[1]:
-        fixes.append(UnitFix("accel", 1.0 / G0, ACCEL_G2_REASON,
-                             f"imu: median |specific force| {mag:.4g} m/s^2 is about g^2: "
-                             "converted twice to m/s^2; divided by 9.80665"))
-    ts = np.sort(t)
-    dt = float(np.median(np.diff(ts))) if ts.size > 1 else 0.0
-    if 5e-5 <= dt <= 2.0:
-        _, wm = _block_means(t - ts[0], gyro, 1.0)
-        n = np.linalg.norm(wm, axis=1)
-        st = {"quiet": float(np.percentile(n, 2)), "busy": float(np.percentile(n, 99.9)),
-              "blocks": float(n.size)}
-        if gyro_in_degrees(st):
-            fixes.append(UnitFix("gyro", np.pi / 180.0, GYRO_DEG_REASON,
-                                 f"imu: gyro rates look like deg/s (quietest second "
-                                 f"{st['quiet']:.2g}, busiest {st['busy']:.3g} 'rad/s'): "
-                                 "converted (x pi/180) before any range check"))
-    return fixes
-
-
 def rotation_stats(t: FloatArray, gyro: FloatArray, accel: FloatArray) -> dict[str, float]:
     """Statistics of 1 s block means of the gyro used by the unit and axis checks.
 
@@ -177,7 +108,7 @@ def rotation_stats(t: FloatArray, gyro: FloatArray, accel: FloatArray) -> dict[s
     sqrt of the first [rad/s]; ``axis_angle_deg``: angle between that principal rotation axis
     and the mean specific force.
     """
-    _, wm = _block_means(t, gyro, 1.0)
+    _, wm = block_means(t, gyro, 1.0)
     n = np.linalg.norm(wm, axis=1)
     lam, vec = np.linalg.eigh(wm.T @ wm / max(len(wm), 1))
     m = accel.mean(axis=0)
@@ -249,8 +180,8 @@ def handedness(drive: Drive) -> dict[str, float] | None:
     if g is None or len(g) < 30:
         return None
     i = drive.imu
-    tb, am = _block_means(i.t, i.accel_b, 1.0)
-    _, wm = _block_means(i.t, i.gyro_b, 1.0)
+    tb, am = block_means(i.t, i.accel_b, 1.0)
+    _, wm = block_means(i.t, i.gyro_b, 1.0)
     d = -i.accel_b.mean(axis=0)
     d = d / max(float(np.linalg.norm(d)), 1e-12)
     from ..geo.frames import lla_to_ned
@@ -322,7 +253,7 @@ def course_rate_fit(drive: Drive) -> dict[str, float] | None:
     i = drive.imu
     if g is None or len(g) < 10:
         return None
-    tb, wm = _block_means(i.t, i.gyro_b, 1.0)
+    tb, wm = block_means(i.t, i.gyro_b, 1.0)
     inside = (tb > g.t[0]) & (tb < g.t[-1])
     tb, wm = tb[inside], wm[inside]
     if tb.size < COURSE_MIN_BLOCKS:
@@ -333,7 +264,7 @@ def course_rate_fit(drive: Drive) -> dict[str, float] | None:
         from ..geo.frames import lla_to_ned
 
         ned = lla_to_ned(g.lla, g.lla[0])
-        tg, pm = _block_means(g.t, ned[:, :2], 1.0)
+        tg, pm = block_means(g.t, ned[:, :2], 1.0)
         if tg.size < 3:
             return None
         vg = np.gradient(pm, tg, axis=0)

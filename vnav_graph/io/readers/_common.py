@@ -56,10 +56,10 @@ class Report:
 def imu_in_si(t: FloatArray, gyro: FloatArray, accel: FloatArray,
               report: Report) -> tuple[FloatArray, FloatArray]:
     """Gyro [rad/s] and specific force [m/s²] of raw IMU samples whose units
-    ``io.imu_checks.unit_fixes`` decided on the raw values (deg/s, g, g·g0): converted,
+    ``io.imu_units.unit_fixes`` decided on the raw values (deg/s, g, g·g0): converted,
     counted under ``meta["repaired"]["imu"]`` and warned. Every reader calls it before any
     range screen of its own, so a sample in the wrong unit is converted, not dropped."""
-    from ..imu_checks import unit_fixes
+    from ..imu_units import unit_fixes
 
     gyro = np.asarray(gyro, dtype=float)
     accel = np.asarray(accel, dtype=float)
