@@ -21,6 +21,7 @@ from ...geo.earth import radii
 from ...sensors.model import SensorModel
 from ...sensors.noise import gm_process_var, gm_transition
 from ...types import Drive, FloatArray
+from .gnss_reference import nominal_interval
 from .inputs import VerticalInputs
 
 IntArray = NDArray[np.int64]
@@ -54,7 +55,7 @@ def input_error_psd(
         t_gap = t - t[0]
         v_h = np.zeros(t.size)
     else:
-        nominal = float(np.median(np.diff(gn.t)))
+        nominal = nominal_interval(gn.t)
         i = np.searchsorted(gn.t, t, side="right") - 1
         t_last = np.where(i >= 0, gn.t[np.maximum(i, 0)], t[0])
         t_gap = np.maximum(t - t_last - nominal, 0.0)
@@ -123,14 +124,16 @@ def noise_densities(drive: Drive, vi: VerticalInputs, model: SensorModel, cfg: A
 
 
 def transport_rate2(drive: Drive, vi: VerticalInputs) -> FloatArray:
-    """ρ_E² + ρ_N² at the IMU epochs from the GNSS horizontal velocity (0 without it)."""
+    """ρ_E² + ρ_N² at the IMU epochs from the GNSS horizontal velocity of the last fix at or
+    before each epoch, held (0 before the first fix and without receiver velocity)."""
     t = drive.imu.t
     h0 = float(drive.origin_lla[2])
     gn = drive.gnss
     rho2 = np.zeros(t.size)
-    if gn is not None and gn.vel_n is not None:
-        vn = np.interp(t, gn.t, gn.vel_n[:, 0])
-        ve = np.interp(t, gn.t, gn.vel_n[:, 1])
+    if gn is not None and gn.vel_n is not None and gn.t.size:
+        i = np.searchsorted(gn.t, t, side="right") - 1
+        v = np.where((i >= 0)[:, None], gn.vel_n[np.maximum(i, 0), :2], 0.0)
+        vn, ve = v[:, 0], v[:, 1]
         rn, re = radii(vi.lat)
         rho2 = (ve / (re + h0)) ** 2 + (vn / (rn + h0)) ** 2
     return rho2
