@@ -46,8 +46,8 @@ baro-inertial loop (``ekf_control=False``): see docs/adaptive_loop.md for the nu
 
 Causality: as ``loops`` (held baro, causal attitude reference; the EKF variant's baro
 interval from the first baro samples). Altitude RMSE, hill-drive seeds 0/1/2
-2.52/4.84/1.54 m (2.53/4.84/1.54 with baro and fixes interpolated to the epoch, reading
-the next sample), sortie seeds 0/1/2 2.75/8.90/5.59 m (2.67/8.85/5.55).
+2.52/4.84/1.54 m, sortie seeds 0/1/2 2.71/8.86/5.57 m (2.53/4.84/1.54 and 2.67/8.85/5.55 m
+with baro and fixes interpolated to the epoch, reading the next sample).
 """
 
 from __future__ import annotations

@@ -73,8 +73,10 @@ def ahrs_kernel(t, gyro, accel, q0, lla_i, vel_i, sdv_i, t_g, t_av, v_g, g_g, co
           st_acc, g_nom, imu_gap, relevel):
     """Numba kernel (module docstring steps 2-8).
 
-    lla_i, vel_i (N, 3): GNSS position/velocity interpolated to the IMU epochs (latitude,
-    height, course); sdv_i (N,) horizontal velocity σ there (inf in outages); t_g (M,),
+    lla_i, vel_i (N, 3): the last GNSS position / known velocity at or before each IMU epoch
+    (latitude, height; vertical velocity); sdv_i (N,) horizontal velocity σ there (inf in
+    outages: no course); the course is that of the propagated velocity after the yaw reset
+    while fixes renew it, else vel_i's; t_g (M,),
     v_g (M, 3) reference velocities at the (thinned) fixes, t_av (M,) ≥ t_g the time each
     velocity is known (t_g for a receiver's, later for a fit over later fixes: the interval
     ending at fix j is matched at the first IMU epoch at or after t_av[j]), g_g (M,)
@@ -105,6 +107,7 @@ def ahrs_kernel(t, gyro, accel, q0, lla_i, vel_i, sdv_i, t_g, t_av, v_g, g_g, co
     # horizontal velocity propagated from the last usable GNSS velocity (Coriolis, ω_en)
     vp = np.zeros(2)
     vp_valid = False
+    vp_fresh = False  # the last fix processed renewed vp
     j = 0
     while j < m and t_g[j] <= t[0]:
         if use_g[j]:
@@ -167,12 +170,22 @@ def ahrs_kernel(t, gyro, accel, q0, lla_i, vel_i, sdv_i, t_g, t_av, v_g, g_g, co
             vp[1] += 0.5 * (f_n[k, 1] + f_n[k + 1, 1]) * dt
         # heading: one-time reset to the GNSS course, then proportional correction; only from
         # a velocity that is usable (σ) and recently consistent with the IMU (gate)
-        vh = np.sqrt(vel_i[k + 1, 0] ** 2 + vel_i[k + 1, 1] ** 2)
+        # the course: that of the propagated velocity (the last usable fix's, carried to
+        # t[k+1] with the resolved specific force: a held fix would lag in turns) when the
+        # yaw is reset and the last fix renewed it; else that of the last fix's velocity (the
+        # resolved specific force is in a frame of unknown yaw before the reset)
+        if yaw_done and vp_fresh:
+            vc0 = vp[0]
+            vc1 = vp[1]
+        else:
+            vc0 = vel_i[k + 1, 0]
+            vc1 = vel_i[k + 1, 1]
+        vh = np.sqrt(vc0 ** 2 + vc1 ** 2)
         yaw = np.arctan2(c1[1, 0], c1[0, 0])
         v_thr = max(v_min, 5.0 * sdv_i[k + 1])
         vel_trusted = t[k + 1] - t_vel_ok <= fb_after
         if vh > v_thr and vel_trusted:
-            course = np.arctan2(vel_i[k + 1, 1], vel_i[k + 1, 0])
+            course = np.arctan2(vc1, vc0)
             if not yaw_done:
                 dq = quat_exp(np.array([0.0, 0.0, _wrap_nb(course - yaw)]))
                 put(q[k + 1], quat_mul(dq, qn))
@@ -247,6 +260,11 @@ def ahrs_kernel(t, gyro, accel, q0, lla_i, vel_i, sdv_i, t_g, t_av, v_g, g_g, co
                 vp[0] = v_g[j, 0] + cum[0] - f_here[0]
                 vp[1] = v_g[j, 1] + cum[1] - f_here[1]
                 vp_valid = True
+                vp_fresh = True
+            else:
+                # a fix came but did not renew the propagated velocity (unusable, or inside
+                # a run of gate rejections): the course is that fix's until one does
+                vp_fresh = False
             f_at_last = f_here
             have_last = True
             j += 1

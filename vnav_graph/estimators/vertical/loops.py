@@ -48,12 +48,11 @@ with zero vertical acceleration and the baro interpolated across the gap (``brid
 
 Causality: the loops' answer is their online answer; at each IMU epoch it uses the baro
 samples and the attitude reference (``vertical.inputs``, item 9) up to that epoch. Altitude
-RMSE against truth, hill-drive seeds 0/1/2 and sortie seeds 0/1/2, with the held baro and the
-causal attitude reference, against baro and fixes linearly interpolated to the epoch
-(reading the next sample): loop2 23.44/52.31/31.60 m (23.51/52.36/31.57) and
-4.98/3.05/3.65 m (5.26/3.23/3.47); loop3 3.66/7.58/3.16 m (3.67/7.58/3.16) and
-2.71/8.82/5.67 m (2.47/8.79/5.60), the sortie's fast climbs paying for the baro's
-half-sample delay.
+RMSE against truth, hill-drive seeds 0/1/2 and sortie seeds 0/1/2: loop2 23.52/52.35/31.58
+and 5.27/3.23/3.51 m; loop3 3.67/7.58/3.16 and 2.52/8.79/5.62 m. With the baro and the fixes
+interpolated to the epoch (reading the next sample): loop2 23.51/52.36/31.57 and
+5.26/3.23/3.47 m; loop3 3.67/7.58/3.16 and 2.47/8.79/5.60 m (the sortie's fast climbs pay
+for the baro's half-sample delay).
 """
 
 from __future__ import annotations

@@ -75,9 +75,11 @@ bad GNSS (gate and rejection count work; the altitude is not usable there).
 
 Causality: the answer is the online answer; the gate's period and σ_gps come from fixes seen
 before the gate opens (above) and the vertical acceleration from the causal attitude
-reference (``vertical.inputs``, item 9). Altitude RMSE against truth, hill-drive seeds 0/1/2:
-2.11/16.72/5.79 m (2.11/16.78/5.96 with whole-drive medians and fixes interpolated to the
-epoch, reading the next fix); sortie seeds 0/1/2: 5.93/4.51/4.04 m (6.20/5.35/4.58).
+reference (``vertical.inputs``, item 9). Altitude RMSE against truth, hill-drive seeds
+0/1/2: 2.11/16.80/5.94 m; sortie seeds 0/1/2: 6.20/5.31/4.58 m (2.11/16.78/5.96 and
+6.20/5.35/4.58 m with whole-drive medians and fixes interpolated toward the next one). Not
+causal: the state starts at the first fix at or after the first IMU epoch (the observer has
+no other altitude), 0.1-1 s ahead on the simulated drives.
 
 References: seed 003 (1-DOF INS + GPS altitude observer); Franklin, Powell, Workman,
 *Digital Control of Dynamic Systems*, 3rd ed., §6.3 (ZOH/bilinear equivalents).

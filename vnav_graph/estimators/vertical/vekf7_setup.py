@@ -139,24 +139,36 @@ def transport_rate2(drive: Drive, vi: VerticalInputs) -> FloatArray:
     return rho2
 
 
+def initial_fix(gn: Any, t0: float) -> int | None:
+    """Index of the last GNSS fix at or before ``t0`` and at most 5 s old (None: no such
+    fix): the filters start from data they have at their first epoch, never a later fix."""
+    if gn is None or gn.t.size == 0:
+        return None
+    i = int(np.searchsorted(gn.t, t0, side="right")) - 1
+    return i if i >= 0 and t0 - gn.t[i] <= 5.0 else None
+
+
 def initial_state(drive: Drive, g_psd: FloatArray | None,
                    nz: Noise) -> tuple[FloatArray, FloatArray]:
     """Nominal state and covariance at the first IMU epoch: GNSS height and vertical velocity
-    when a fix comes within 5 s, else the baro altitude with the bias prior."""
+    of the last fix at or before it (``initial_fix``), else the last baro altitude at or
+    before it (the first one when none) with the bias prior."""
     assert drive.baro is not None
     t0 = drive.imu.t[0]
     gn = drive.gnss
     nom = np.zeros(NX)
     p = np.zeros((NX, NX))
-    if gn is not None and gn.t[0] <= t0 + 5.0:
+    i0 = initial_fix(gn, t0)
+    if i0 is not None:
         assert g_psd is not None
-        nom[IH] = float(gn.lla[0, 2])
-        p[IH, IH] = float(g_psd[0, 2]) ** 2
+        nom[IH] = float(gn.lla[i0, 2])
+        p[IH, IH] = float(g_psd[i0, 2]) ** 2
     else:
-        nom[IH] = float(np.interp(t0, drive.baro.t, drive.baro.altitude))
+        kb = max(int(np.searchsorted(drive.baro.t, t0, side="right")) - 1, 0)
+        nom[IH] = float(drive.baro.altitude[kb])
         p[IH, IH] = nz.b_sd**2 + 1.0
-    if gn is not None and gn.vel_n is not None and gn.t[0] <= t0 + 5.0:
-        nom[IV] = -float(gn.vel_n[0, 2])
+    if i0 is not None and gn.vel_n is not None:
+        nom[IV] = -float(gn.vel_n[i0, 2])
     p[IV, IV] = 0.5**2
     nom[ITD] = nz.td0
     np.fill_diagonal(p, np.diag(p) + np.array(
