@@ -68,13 +68,6 @@ CASES = {
     "hard": (lambda: _scenario("urban", 2, 150.0), (70.0, 110.0), "hard"),
 }
 NAMES = [*sorted(CAUSAL), "graph-isam2"]
-# the vertical estimators' shared inputs (``estimators.vertical.inputs``) read GNSS ahead of
-# the epoch: measured on these cases up to 32 m (observer1d) and 17 m (loop2) in altitude
-# on long-outage, 0.3 m (vekf7); strict, so the marks go when the inputs are causal
-VERTICAL_AHEAD = {(n, c) for n in ("loop2", "loop3", "loop3-adaptive", "observer1d")
-                  for c in ("urban", "long-outage", "1hz", "hard")} | {
-    (n, c) for n in ("vekf7", "vkf4") for c in ("urban", "long-outage", "hard")}
-
 _DRIVES: dict[str, Drive] = {}
 _RUNS: dict[tuple[str, str, float | None], Estimate] = {}
 
@@ -115,10 +108,7 @@ def differences(a, b, t1: float, origin) -> dict[str, float]:
     return out
 
 
-@pytest.mark.parametrize("name, case", [
-    pytest.param(n, c, marks=pytest.mark.xfail(
-        strict=True, reason="vertical inputs read GNSS ahead")) if (n, c) in VERTICAL_AHEAD
-    else (n, c) for n in NAMES for c in CASES])
+@pytest.mark.parametrize("name, case", [(n, c) for n in NAMES for c in CASES])
 def test_online_answer_does_not_change_when_the_drive_goes_on(case, name):
     d = drive_of(case)
     full = run(case, name, None)

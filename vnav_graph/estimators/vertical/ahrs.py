@@ -66,15 +66,21 @@ def _accel_level(psi, fm, g_nom, alpha, max_corr, max_fb):
 
 
 @njit(cache=True)
-def ahrs_kernel(t, gyro, accel, q0, lla_i, vel_i, sdv_i, t_g, v_g, g_g, cor_g, ok_g, r_g, vert_g,
+def ahrs_kernel(t, gyro, accel, q0, lla_i, vel_i, sdv_i, t_g, t_av, v_g, g_g, cor_g, ok_g, r_g,
+          vert_g,
           use_g, kp, ki, k_yaw, ki_yaw, v_min, max_corr, max_fb, a_static, t_filt, gap,
           gate2, sd0, sd_bg, sd_yaw, r_nom, reinit_s, fb_after, lvl_win, lvl_tau, st_rate,
           st_acc, g_nom, imu_gap, relevel):
     """Numba kernel (module docstring steps 2-8).
 
-    lla_i, vel_i (N, 3): GNSS position/velocity interpolated to the IMU epochs (latitude,
-    height, course); sdv_i (N,) horizontal velocity σ there (inf in outages); t_g (M,),
-    v_g (M, 3) reference velocities at the (thinned) fixes, g_g (M,) gravity, cor_g (M, 3)
+    lla_i, vel_i (N, 3): the last GNSS position / known velocity at or before each IMU epoch
+    (latitude, height; vertical velocity); sdv_i (N,) horizontal velocity σ there (inf in
+    outages: no course); the course is that of the propagated velocity after the yaw reset
+    while fixes renew it, else vel_i's; t_g (M,),
+    v_g (M, 3) reference velocities at the (thinned) fixes, t_av (M,) ≥ t_g the time each
+    velocity is known (t_g for a receiver's, later for a fit over later fixes: the interval
+    ending at fix j is matched at the first IMU epoch at or after t_av[j]), g_g (M,)
+    gravity, cor_g (M, 3)
     (2ω_ie+ω_en)×v, ok_g (M,) interval [j−1, j] not across an outage, r_g (M,) horizontal
     residual variance per axis of that interval [(m/s²)²], vert_g (M,) its vertical component
     is trusted, use_g (M,) the fix's velocity is usable (σ ≤ sd_v_max); relevel (N, 2)
@@ -95,13 +101,13 @@ def ahrs_kernel(t, gyro, accel, q0, lla_i, vel_i, sdv_i, t_g, v_g, g_g, cor_g, o
     c = quat_to_dcm(q0)
     put(f_n[0], c @ accel[0])
     cum = np.zeros(3)  # ∫ f_n dt from t[0]
-    cum_prev = np.zeros(3)
     cum_arr = np.zeros((n, 3))  # prefix integral of f_n (for the accelerometer fallback)
     gyr_arr = np.zeros((n, 3))  # prefix integral of the raw gyro
     acc_arr = np.zeros((n, 3))  # prefix integral of the raw specific force
     # horizontal velocity propagated from the last usable GNSS velocity (Coriolis, ω_en)
     vp = np.zeros(2)
     vp_valid = False
+    vp_fresh = False  # the last fix processed renewed vp
     j = 0
     while j < m and t_g[j] <= t[0]:
         if use_g[j]:
@@ -113,7 +119,7 @@ def ahrs_kernel(t, gyro, accel, q0, lla_i, vel_i, sdv_i, t_g, v_g, g_g, cor_g, o
     f_at_last = np.zeros(3)  # ∫ f_n up to the previous fix time
     have_last = j > 0  # a fix at or before t[0]: integral there is 0
     yaw_done = False
-    skip = False
+    t_yaw = np.inf  # IMU epoch before the one-time yaw reset (inf: not yet)
     psi_until = -np.inf
     t_acc = t[0]  # last accepted levelling update (GNSS or fallback)
     t_gnss_acc = -np.inf  # last accepted GNSS levelling update
@@ -155,7 +161,6 @@ def ahrs_kernel(t, gyro, accel, q0, lla_i, vel_i, sdv_i, t_g, v_g, g_g, cor_g, o
         qn = q[k + 1]
         c1 = quat_to_dcm(qn)
         put(f_n[k + 1], c1 @ accel[k + 1])
-        cum_prev = cum.copy()
         cum = cum + 0.5 * (f_n[k] + f_n[k + 1]) * dt
         put(cum_arr[k + 1], cum)
         put(gyr_arr[k + 1], gyr_arr[k] + 0.5 * (gyro[k] + gyro[k + 1]) * dt)
@@ -165,26 +170,42 @@ def ahrs_kernel(t, gyro, accel, q0, lla_i, vel_i, sdv_i, t_g, v_g, g_g, cor_g, o
             vp[1] += 0.5 * (f_n[k, 1] + f_n[k + 1, 1]) * dt
         # heading: one-time reset to the GNSS course, then proportional correction; only from
         # a velocity that is usable (σ) and recently consistent with the IMU (gate)
-        vh = np.sqrt(vel_i[k + 1, 0] ** 2 + vel_i[k + 1, 1] ** 2)
+        # the course: that of the propagated velocity (the last usable fix's, carried to
+        # t[k+1] with the resolved specific force: a held fix would lag in turns) when the
+        # yaw is reset and the last fix renewed it; else that of the last fix's velocity (the
+        # resolved specific force is in a frame of unknown yaw before the reset)
+        if yaw_done and vp_fresh:
+            vc0 = vp[0]
+            vc1 = vp[1]
+        else:
+            vc0 = vel_i[k + 1, 0]
+            vc1 = vel_i[k + 1, 1]
+        vh = np.sqrt(vc0 ** 2 + vc1 ** 2)
         yaw = np.arctan2(c1[1, 0], c1[0, 0])
         v_thr = max(v_min, 5.0 * sdv_i[k + 1])
         vel_trusted = t[k + 1] - t_vel_ok <= fb_after
         if vh > v_thr and vel_trusted:
-            course = np.arctan2(vel_i[k + 1, 1], vel_i[k + 1, 0])
+            course = np.arctan2(vc1, vc0)
             if not yaw_done:
                 dq = quat_exp(np.array([0.0, 0.0, _wrap_nb(course - yaw)]))
                 put(q[k + 1], quat_mul(dq, qn))
                 yaw_done = True
                 psi[2] = 0.0
-                skip = True  # the current fix interval mixes two headings
+                t_yaw = t[k]  # the fix interval across t[k] mixes two headings
             else:
                 psi[2] = _clamp(_wrap_nb(yaw - course), max_corr)
         else:
             psi[2] = 0.0
         # tilt: velocity matching at each GNSS fix passed in (t[k], t[k+1]]
-        while j < m and t_g[j] <= t[k + 1]:
-            a = (t_g[j] - t[k]) / dt
-            f_here = cum_prev + a * (cum - cum_prev)
+        while j < m and t_av[j] <= t[k + 1]:
+            # ∫ f_n dt up to the fix time, from the stored prefix integral
+            ia = np.searchsorted(t, t_g[j], side="right") - 1
+            if ia >= k + 1:
+                f_here = cum.copy()
+            else:
+                a = (t_g[j] - t[ia]) / (t[ia + 1] - t[ia])
+                f_here = cum_arr[ia] + a * (cum_arr[ia + 1] - cum_arr[ia])
+            skip = j > 0 and t_g[j - 1] <= t_yaw < t_g[j]
             usable = use_g[j] and use_g[j - 1] if j > 0 else False
             if not usable:
                 cnt[3] += 1
@@ -204,7 +225,7 @@ def ahrs_kernel(t, gyro, accel, q0, lla_i, vel_i, sdv_i, t_g, v_g, g_g, cor_g, o
                 ah2 = f_ref[0] ** 2 + f_ref[1] ** 2
                 # before the heading is known a horizontal acceleration would be read as tilt
                 # (δf = ψ_z × a_h); then only quasi-static intervals level the platform
-                if not yaw_done and ah2 > a_static**2:
+                if t_g[j] <= t_yaw and ah2 > a_static**2:
                     psi[0] = 0.0
                     psi[1] = 0.0
                 else:
@@ -227,7 +248,7 @@ def ahrs_kernel(t, gyro, accel, q0, lla_i, vel_i, sdv_i, t_g, v_g, g_g, cor_g, o
                         cnt[0] += 1
                         _tilt_update(psi, f_ref, d, r_g[j], r_nom, dtg, t_filt, max_corr,
                                      max_fb)
-                        psi_until = t_g[j] + gap * dtg
+                        psi_until = t_av[j] + gap * dtg
                         t_acc = t_g[j]
                         t_gnss_acc = t_g[j]
                         t_vel_ok = t_g[j]
@@ -235,12 +256,17 @@ def ahrs_kernel(t, gyro, accel, q0, lla_i, vel_i, sdv_i, t_g, v_g, g_g, cor_g, o
                 # a usable velocity, not inside a run of gate rejections: trusted for the
                 # course and as the start of the propagated velocity (Coriolis, ω_en)
                 t_vel_ok = t_g[j]
-                vp[0] = v_g[j, 0]
-                vp[1] = v_g[j, 1]
+                # propagated from the fix time to this epoch
+                vp[0] = v_g[j, 0] + cum[0] - f_here[0]
+                vp[1] = v_g[j, 1] + cum[1] - f_here[1]
                 vp_valid = True
+                vp_fresh = True
+            else:
+                # a fix came but did not renew the propagated velocity (unusable, or inside
+                # a run of gate rejections): the course is that fix's until one does
+                vp_fresh = False
             f_at_last = f_here
             have_last = True
-            skip = False
             j += 1
         # fallback (step 6): slow accelerometer levelling when GNSS gave nothing usable
         tk = t[k + 1]
@@ -301,3 +327,46 @@ def poly_velocity(t, p, sd, half, seg):
             v[j, ax] = beta[1]
             sv[j, ax] = np.sqrt(cov[1, 1])
     return v, sv
+
+
+@njit(cache=True)
+def trailing_slope(t_q, t_s, z, window, sd_floor):
+    """Slope at each query time t_q of an unweighted quadratic fit of the samples (t_s, z)
+    with t_q − window ≤ t_s ≤ t_q (causal: no sample after t_q), its σ
+    σ̂·√[(XᵀX)⁻¹]₁₁ with σ̂ = max(√(RSS/(n − 3)), sd_floor) the fit's own residual σ. NaN /
+    inf where the window holds fewer than 5 samples or spans less than half its length."""
+    q = t_q.size
+    rate = np.full(q, np.nan)
+    unit_sd = np.full(q, np.inf)
+    a = 0
+    b = 0
+    for j in range(q):
+        while a < t_s.size and t_s[a] < t_q[j] - window:
+            a += 1
+        if b < a:
+            b = a
+        while b < t_s.size and t_s[b] <= t_q[j]:
+            b += 1
+        # samples a .. b-1
+        if b - a < 5 or t_s[b - 1] - t_s[a] < 0.5 * window:
+            continue
+        xtx = np.zeros((3, 3))
+        xty = np.zeros(3)
+        for i in range(a, b):
+            dtt = t_s[i] - t_q[j]
+            x = np.array([1.0, dtt, dtt * dtt])
+            xtx += outer(x, x)
+            xty += x * z[i]
+        if abs(np.linalg.det(xtx)) < 1e-300:
+            continue
+        cov = np.linalg.inv(xtx)
+        beta = cov @ xty
+        rss = 0.0
+        for i in range(a, b):
+            dtt = t_s[i] - t_q[j]
+            r = z[i] - beta[0] - beta[1] * dtt - beta[2] * dtt * dtt
+            rss += r * r
+        sig = np.sqrt(rss / (b - a - 3))
+        rate[j] = beta[1]
+        unit_sd[j] = max(sig, sd_floor) * np.sqrt(cov[1, 1])
+    return rate, unit_sd

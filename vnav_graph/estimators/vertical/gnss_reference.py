@@ -16,7 +16,18 @@ import numpy as np
 
 from ...geo.earth import OMEGA_IE, gravity, radii
 from ...types import Drive, FloatArray
-from .ahrs import poly_velocity
+from .ahrs import poly_velocity, trailing_slope
+
+# the receiver's nominal fix interval (and usual velocity σ) is taken from its first this
+# many fixes: a rate the system knows from the start, not a whole-drive statistic
+NOMINAL_FIXES = 20
+
+
+def nominal_interval(t: FloatArray) -> float:
+    """Nominal interval [s] of the increasing stamps ``t``: the median of the first
+    ``NOMINAL_FIXES`` intervals (1 s with fewer than two stamps)."""
+    d = np.diff(np.asarray(t, float)[:NOMINAL_FIXES + 1])
+    return float(np.median(d)) if d.size else 1.0
 
 
 def thin(t: FloatArray, min_dt: float) -> FloatArray:
@@ -46,7 +57,8 @@ def velocity_from_positions(t: FloatArray, lla: FloatArray, pos_sd: FloatArray,
     Parameters
     ----------
     t : (M,) fix times [s]; lla : (M, 3) (lat rad, lon rad, h m); pos_sd : (M, 3) NED σ [m]
-    window_s : fit window [s] (centred where the segment allows)
+    window_s : fit window [s] (centred where the segment allows: the velocity at t_j is
+        known at t_j + window_s/2, which is when the AHRS uses it)
     gap_s : a fix spacing above this starts a new segment (no fit across outages)
 
     Returns
@@ -65,35 +77,15 @@ def velocity_from_positions(t: FloatArray, lla: FloatArray, pos_sd: FloatArray,
 
 
 def baro_rate(t_q: FloatArray, t_b: FloatArray, alt_b: FloatArray,
-              half_s: float = 1.0) -> tuple[FloatArray, FloatArray]:
-    """Climb rate of the baro altitude at times ``t_q`` (slope of a straight line fitted over
-    ±half_s, at least 3 samples) and its σ from the baro noise estimated robustly as
-    1.4826·MAD(second differences)/√6. Returns (rate (Q,) [m/s, +up], σ (Q,)); NaN/inf where
-    the window holds fewer than 3 samples."""
-    t_b = np.asarray(t_b, float)
-    z = np.asarray(alt_b, float)
-    tc = t_b - t_b[0]
-    d2 = np.diff(z, 2)
-    sd_b = max(1.4826 * float(np.median(np.abs(d2 - np.median(d2)))) / np.sqrt(6.0), 0.02) \
-        if d2.size > 4 else 0.5
-    c1 = np.concatenate([[0.0], np.cumsum(np.ones_like(tc))])
-    ct = np.concatenate([[0.0], np.cumsum(tc)])
-    ct2 = np.concatenate([[0.0], np.cumsum(tc * tc)])
-    cz = np.concatenate([[0.0], np.cumsum(z)])
-    ctz = np.concatenate([[0.0], np.cumsum(tc * z)])
-    a = np.searchsorted(t_b, t_q - half_s, side="left")
-    b = np.searchsorted(t_b, t_q + half_s, side="right")
-    n = c1[b] - c1[a]
-    st, st2 = ct[b] - ct[a], ct2[b] - ct2[a]
-    sz, stz = cz[b] - cz[a], ctz[b] - ctz[a]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        sxx = st2 - st * st / n
-        rate = (stz - st * sz / n) / sxx
-        sd = sd_b / np.sqrt(sxx)
-    bad = (n < 3) | ~(sxx > 0)
-    rate[bad] = np.nan
-    sd[bad] = np.inf
-    return rate, sd
+              window_s: float = 2.0) -> tuple[FloatArray, FloatArray]:
+    """Climb rate of the baro altitude at times ``t_q`` from the samples up to each of them:
+    the slope at t_q of a quadratic fitted over the trailing [t_q − window_s, t_q] (at
+    least 5 samples spanning half the window; exact for a constant vertical acceleration,
+    no look-ahead), with its σ from that fit's own residual σ (floor 0.02 m). Returns
+    (rate (Q,) [m/s, +up], σ (Q,)); NaN/inf where the window is too thin."""
+    return trailing_slope(np.ascontiguousarray(t_q, dtype=float),
+                          np.ascontiguousarray(t_b, dtype=float),
+                          np.ascontiguousarray(alt_b, dtype=float), float(window_s), 0.02)
 
 
 def gnss_reference(drive: Drive, cfg: Any) -> tuple:
@@ -101,7 +93,7 @@ def gnss_reference(drive: Drive, cfg: Any) -> tuple:
     ``AhrsConfig``)."""
     gn = drive.gnss
     t_g, lla_g = gn.t, gn.lla
-    dt_nom = float(np.median(np.diff(t_g)))
+    dt_nom = nominal_interval(t_g)
     if gn.vel_n is not None:
         source = "receiver"
         v_g = np.asarray(gn.vel_n, float)
@@ -134,15 +126,19 @@ def gnss_reference(drive: Drive, cfg: Any) -> tuple:
 @dataclass(frozen=True)
 class Matching:
     """What the AHRS kernel needs from the GNSS (``vertical.inputs`` module docstring, steps
-    3-5): at the thinned fixes ``t_g`` the reference velocity ``v_g``, gravity ``g_g``, the
+    3-5): at the thinned fixes ``t_g`` the reference velocity ``v_g``, the time ``t_av`` it
+    is known (``t_g``, or half the fit window later for position-derived velocities), gravity
+    ``g_g``, the
     Coriolis and transport term ``cor_g``, the interval flags ``ok`` (not across an outage),
     ``vert_iv`` (vertical component trusted) and ``use`` (velocity usable), the residual
-    variance ``r_g``; at the IMU epochs the interpolated position ``lla_i``, velocity
-    ``vel_i`` and horizontal velocity σ ``sdv_i`` (inf in outages); the median usable σ
+    variance ``r_g``; at the IMU epochs the position ``lla_i``, velocity ``vel_i`` and
+    horizontal velocity σ ``sdv_i`` of the last fix at or before the epoch (no velocity and
+    σ = inf once ``gap_factor`` nominal intervals have passed without a fix); the usual σ
     ``sd_med``, the matching interval ``match`` [s] and the nominal residual variance
     ``r_nom``. Without GNSS the fix arrays are empty and the position is the origin."""
 
     t_g: FloatArray
+    t_av: FloatArray
     v_g: FloatArray
     g_g: FloatArray
     cor_g: FloatArray
@@ -170,13 +166,23 @@ def matching_inputs(drive: Drive, cfg: Any, t: FloatArray, info: dict) -> Matchi
             info["position_velocity_window_s"] = window
         t_g, lla_g = gn.t, gn.lla
         ok = np.concatenate([[False], np.diff(t_g) <= cfg.gap_factor * dt_nom])
-        lla_i = np.column_stack([np.interp(t, t_g, lla_g[:, i]) for i in range(3)])
-        vel_i = np.column_stack([np.interp(t, t_g, v_g[:, i]) for i in range(3)])
-        sdv_i = np.interp(t, t_g, np.where(use, sd_h, 1e9))
-        # inside outages the interpolated velocity is not a measurement: no course there
-        in_gap = np.zeros(n, dtype=bool)
-        for i in np.flatnonzero(~ok[1:]) + 1:
-            in_gap |= (t > t_g[i - 1]) & (t < t_g[i])
+        # when each fix's velocity is known: at the fix for a receiver's, half a window
+        # later for the centred position fit (step 3b)
+        t_av = t_g + 0.5 * window
+        # at each IMU epoch the last fix at or before it and the last velocity known by
+        # then, held (no interpolation toward the next fix); an outage is decided from the
+        # time elapsed since the last fix: more than gap_factor nominal intervals ago, no
+        # velocity (no course, no Coriolis from it)
+        last = np.searchsorted(t_g, t, side="right") - 1
+        have = last >= 0
+        li = np.maximum(last, 0)
+        lla_i = np.where(have[:, None], lla_g[li], np.asarray(drive.origin_lla, float)[None, :])
+        lastv = np.searchsorted(t_av, t, side="right") - 1
+        have_v = lastv >= 0
+        lv = np.maximum(lastv, 0)
+        vel_i = np.where(have_v[:, None], v_g[lv], 0.0)
+        sdv_i = np.where(have_v & use[lv], sd_h[lv], 1e9)
+        in_gap = ~have_v | (t - t_g[li] > cfg.gap_factor * dt_nom)
         vel_i[in_gap, :2] = 0.0
         sdv_i[in_gap] = np.inf
         # velocity matching over intervals of at least match_interval_s (fewer, longer Δv);
@@ -184,7 +190,7 @@ def matching_inputs(drive: Drive, cfg: Any, t: FloatArray, info: dict) -> Matchi
         match = cfg.match_interval_s if source == "receiver" else max(
             cfg.match_interval_s, 0.5 * window)
         keep = thin(t_g, match)
-        t_g, lla_g, v_g = t_g[keep], lla_g[keep], v_g[keep]
+        t_g, t_av, lla_g, v_g = t_g[keep], t_av[keep], lla_g[keep], v_g[keep]
         sd_h, use, vert = sd_h[keep], use[keep], vert[keep]
         ok = np.concatenate(
             [[False], np.diff(t_g) <= cfg.gap_factor * max(dt_nom, match)])
@@ -201,9 +207,12 @@ def matching_inputs(drive: Drive, cfg: Any, t: FloatArray, info: dict) -> Matchi
         w_en = np.column_stack([v_g[:, 1] / (re + lla_g[:, 2]), -v_g[:, 0] / (rn + lla_g[:, 2]),
                                 -v_g[:, 1] * np.tan(lla_g[:, 0]) / (re + lla_g[:, 2])])
         cor_g = np.cross(2 * w_ie + w_en, v_g)
-        sd_med = float(np.median(sd_h[use])) if np.any(use) else cfg.sd_v_default
+        # the receiver's usual velocity σ, from its first usable fixes (causal, like dt_nom)
+        sd_med = float(np.median(sd_h[use][:NOMINAL_FIXES])) if np.any(use) \
+            else cfg.sd_v_default
     else:
         t_g = np.empty(0)
+        t_av = np.empty(0)
         v_g = np.zeros((0, 3))
         g_g = np.empty(0)
         cor_g = np.zeros((0, 3))
@@ -217,5 +226,5 @@ def matching_inputs(drive: Drive, cfg: Any, t: FloatArray, info: dict) -> Matchi
         sd_med = 0.0
         match = cfg.match_interval_s
         r_nom = 1.0
-    return Matching(t_g, v_g, g_g, cor_g, ok, r_g, vert_iv, use, lla_i, vel_i, sdv_i,
+    return Matching(t_g, t_av, v_g, g_g, cor_g, ok, r_g, vert_iv, use, lla_i, vel_i, sdv_i,
                     sd_med, match, r_nom)

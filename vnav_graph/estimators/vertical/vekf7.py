@@ -55,6 +55,17 @@ attitude-reference f_D errors correlate with grade changes). Without GNSS veloci
 attitude reference's f_D is wrong by ≈ 1 m/s² on the hill-drive and this filter diverges
 (NEES in the hundreds): it needs a receiver that reports velocity.
 
+Causality: the answer is the online answer; measurements are processed at the first IMU
+epoch at or after their stamp, the inputs come from the causal attitude reference
+(``vertical.inputs``, item 9), the transport-rate term from the last fix's velocity, held
+(``vekf7_setup.transport_rate2``), and the filter starts from the last fix at or before its
+first epoch (``vekf7_setup.initial_fix``; else the baro there with the bias prior).
+Altitude RMSE, hill-drive seeds 0/1/2: 0.493/0.222/0.178 m; sortie seeds 0/1/2:
+0.384/0.455/0.438 m (0.492/0.217/0.190 and 0.367/0.461/0.423 m when the inputs are
+interpolated toward the next fix and the filter starts from the first fix, 0.1-0.5 s after
+the first epoch on these drives). ``benchmarks/reproduce_seeds.py --quick``: seed-001 RMSE
+0.457 m against 0.389 m that way.
+
 References: seed 001 §3.2 (eqs. 5-6); Groves 2nd ed. §14.2 (closed-loop error-state KF).
 """
 

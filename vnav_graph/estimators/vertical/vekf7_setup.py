@@ -21,6 +21,7 @@ from ...geo.earth import radii
 from ...sensors.model import SensorModel
 from ...sensors.noise import gm_process_var, gm_transition
 from ...types import Drive, FloatArray
+from .gnss_reference import nominal_interval
 from .inputs import VerticalInputs
 
 IntArray = NDArray[np.int64]
@@ -54,7 +55,7 @@ def input_error_psd(
         t_gap = t - t[0]
         v_h = np.zeros(t.size)
     else:
-        nominal = float(np.median(np.diff(gn.t)))
+        nominal = nominal_interval(gn.t)
         i = np.searchsorted(gn.t, t, side="right") - 1
         t_last = np.where(i >= 0, gn.t[np.maximum(i, 0)], t[0])
         t_gap = np.maximum(t - t_last - nominal, 0.0)
@@ -123,37 +124,51 @@ def noise_densities(drive: Drive, vi: VerticalInputs, model: SensorModel, cfg: A
 
 
 def transport_rate2(drive: Drive, vi: VerticalInputs) -> FloatArray:
-    """ρ_E² + ρ_N² at the IMU epochs from the GNSS horizontal velocity (0 without it)."""
+    """ρ_E² + ρ_N² at the IMU epochs from the GNSS horizontal velocity of the last fix at or
+    before each epoch, held (0 before the first fix and without receiver velocity)."""
     t = drive.imu.t
     h0 = float(drive.origin_lla[2])
     gn = drive.gnss
     rho2 = np.zeros(t.size)
-    if gn is not None and gn.vel_n is not None:
-        vn = np.interp(t, gn.t, gn.vel_n[:, 0])
-        ve = np.interp(t, gn.t, gn.vel_n[:, 1])
+    if gn is not None and gn.vel_n is not None and gn.t.size:
+        i = np.searchsorted(gn.t, t, side="right") - 1
+        v = np.where((i >= 0)[:, None], gn.vel_n[np.maximum(i, 0), :2], 0.0)
+        vn, ve = v[:, 0], v[:, 1]
         rn, re = radii(vi.lat)
         rho2 = (ve / (re + h0)) ** 2 + (vn / (rn + h0)) ** 2
     return rho2
 
 
+def initial_fix(gn: Any, t0: float) -> int | None:
+    """Index of the last GNSS fix at or before ``t0`` and at most 5 s old (None: no such
+    fix): the filters start from data they have at their first epoch, never a later fix."""
+    if gn is None or gn.t.size == 0:
+        return None
+    i = int(np.searchsorted(gn.t, t0, side="right")) - 1
+    return i if i >= 0 and t0 - gn.t[i] <= 5.0 else None
+
+
 def initial_state(drive: Drive, g_psd: FloatArray | None,
                    nz: Noise) -> tuple[FloatArray, FloatArray]:
     """Nominal state and covariance at the first IMU epoch: GNSS height and vertical velocity
-    when a fix comes within 5 s, else the baro altitude with the bias prior."""
+    of the last fix at or before it (``initial_fix``), else the last baro altitude at or
+    before it (the first one when none) with the bias prior."""
     assert drive.baro is not None
     t0 = drive.imu.t[0]
     gn = drive.gnss
     nom = np.zeros(NX)
     p = np.zeros((NX, NX))
-    if gn is not None and gn.t[0] <= t0 + 5.0:
+    i0 = initial_fix(gn, t0)
+    if i0 is not None:
         assert g_psd is not None
-        nom[IH] = float(gn.lla[0, 2])
-        p[IH, IH] = float(g_psd[0, 2]) ** 2
+        nom[IH] = float(gn.lla[i0, 2])
+        p[IH, IH] = float(g_psd[i0, 2]) ** 2
     else:
-        nom[IH] = float(np.interp(t0, drive.baro.t, drive.baro.altitude))
+        kb = max(int(np.searchsorted(drive.baro.t, t0, side="right")) - 1, 0)
+        nom[IH] = float(drive.baro.altitude[kb])
         p[IH, IH] = nz.b_sd**2 + 1.0
-    if gn is not None and gn.vel_n is not None and gn.t[0] <= t0 + 5.0:
-        nom[IV] = -float(gn.vel_n[0, 2])
+    if i0 is not None and gn.vel_n is not None:
+        nom[IV] = -float(gn.vel_n[i0, 2])
     p[IV, IV] = 0.5**2
     nom[ITD] = nz.td0
     np.fill_diagonal(p, np.diag(p) + np.array(
