@@ -84,8 +84,8 @@ def _graph_used(drive, name: str, monkeypatch: pytest.MonkeyPatch) -> dict:
     got: dict = {}
     orig = problem_mod.setup
 
-    def capture(d, cfg):
-        got["P"] = orig(d, cfg)
+    def capture(d, cfg, causal=False):
+        got["P"] = orig(d, cfg, causal)
         raise _Stop
 
     monkeypatch.setattr(batch_mod if name == "graph-batch" else isam2_mod, "setup", capture)
