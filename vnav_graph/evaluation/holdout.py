@@ -72,6 +72,9 @@ class HoldoutResult:
     doc: dict[str, Any]
     windows: list[tuple[float, float]]
     series: dict[str, Scored] = field(default_factory=dict)
+    # the holdout run's trajectories (GNSS withheld in ``windows``) of the estimators that
+    # provide a horizontal position, for the report's map
+    trajectories: dict[str, Trajectory] = field(default_factory=dict)
 
 
 def choose_windows(t_gnss: FloatArray, outage_s: float = 60.0,
