@@ -88,3 +88,19 @@ def test_no_horizontal_figure_without_pos_h_is_said(drive, tmp_path):
     page = (tmp_path / "report.html").read_text(encoding="utf-8")
     assert "No horizontal-error plot: no estimator provides a horizontal position." in page
     assert "No heading-error plot" in page
+
+
+def test_holdout_horizontal_sigma_closed_form(drive):
+    """The holdout scores carry σ_h = sqrt(P_NN + P_EE + σ_GNSS,N² + σ_GNSS,E²) at the fixes,
+    which the real-log horizontal figure draws (+3σ_h)."""
+    from vnav_graph.evaluation.holdout import in_windows, score
+
+    g = drive.gnss
+    withheld = in_windows(g.t, [(10.0, 20.0)])
+    s = score(moved_truth(drive, "ekf"), drive, withheld)
+    inside = (g.t >= drive.truth.t[0]) & (g.t <= drive.truth.t[-1])
+    want = np.sqrt(2 * SD_H**2 + g.pos_sd[inside, 0] ** 2 + g.pos_sd[inside, 1] ** 2)
+    np.testing.assert_allclose(s.horiz_sd, want, rtol=1e-12)
+    assert s.horiz_sd.shape == s.alt_err.shape
+    no_h = moved_truth(drive, "vkf4").replace(provides=frozenset({"alt", "vel_d", "cov"}))
+    assert score(no_h, drive, withheld).horiz_sd is None

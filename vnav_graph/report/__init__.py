@@ -68,12 +68,9 @@ def captions(es: Any, summary: dict[str, Any]) -> dict[str, str]:
         "horizontal_error.png": f"Horizontal position error (norm of the north/east "
                                 f"difference) {ref}, one panel per estimator that provides "
                                 f"it, {grp} per row; titles give the table's RMSE; "
-                                + ("dashed: +3σ_h, σ_h = sqrt(P_NN + P_EE"
-                                   + (")" if es.basis == TRUTH else " + σ_GNSS,N² + σ_GNSS,E²)")
-                                   + ", drawn where inside the axis"
-                                   if es.basis != WITHHELD else
-                                   "no σ (the holdout run keeps no horizontal covariance)")
-                                + f"; {shade}.",
+                                + "dashed: +3σ_h, σ_h = sqrt(P_NN + P_EE"
+                                + (")" if es.basis == TRUTH else " + σ_GNSS,N² + σ_GNSS,E²)")
+                                + f", drawn where inside the axis; {shade}.",
         "heading_error.png": f"Heading (yaw) error {ref}, one panel per estimator that "
                              f"provides the attitude, {grp} per row; titles give the table's "
                              "RMSE over the whole drive; dashed: ±3σ_yaw of the estimate, "
@@ -116,7 +113,7 @@ def map_figure(drive: Drive, results: Sequence[Any], es: Any, holdout: Any) -> A
                                    "GNSS fix withheld from the holdout run")
     tracks = {r.estimate.estimator: r.estimate.trajectory for r in results
               if r.estimate is not None and "pos_h" in r.estimate.provides}
-    label = ("GNSS fix inside a simulated outage" if drive.truth is not None
+    label = (None if drive.truth is not None
              else "GNSS fix inside a holdout window (given to this run)")
     return plot_trajectory_map(drive, tracks, es.windows, label)
 

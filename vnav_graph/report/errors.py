@@ -17,8 +17,7 @@ the holdout basis exactly the series whose RMS is ``horiz_rmse_m``. The heading 
 Conventions: altitude +up [m], vertical velocity +down [m/s]. The σ of the altitude against
 truth is sqrt(P_DD), against GNSS sqrt(P_DD + σ_GNSS,D²) (the fix is independent of the
 estimate); of the horizontal error σ_h = sqrt(P_NN + P_EE) (+ σ_GNSS,N² + σ_GNSS,E² against
-GNSS); the holdout run keeps no horizontal covariance, so its horizontal error has no σ.
-No matplotlib here.
+GNSS, the holdout run's own σ at the withheld fixes on that basis). No matplotlib here.
 """
 
 from __future__ import annotations
@@ -204,10 +203,13 @@ def from_holdout(holdout: Any) -> ErrorSet:
             continue
         w = s.withheld
         h = None if s.horiz_err is None else s.horiz_err[w]
+        has_h = h is not None and np.isfinite(h).any()
+        h_sd = s.horiz_sd
         series.append(ErrorSeries(name, s.t[w], s.alt_err[w],
                                   None if s.alt_sd is None else s.alt_sd[w],
                                   None if s.vd_err is None else s.vd_err[w],
-                                  h if h is not None and np.isfinite(h).any() else None))
+                                  h if has_h else None,
+                                  h_sd[w] if has_h and h_sd is not None else None))
     return ErrorSet(WITHHELD, series, [tuple(map(float, w)) for w in holdout.windows],
                     windows_only=True)
 

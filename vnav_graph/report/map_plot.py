@@ -1,8 +1,8 @@
 """The trajectory map of a run: north/east [m] from the drive's origin, seen from above.
 
 Drawn: the truth (black, thick) where there is one; the GNSS fixes (grey dots) and those inside
-the shaded windows (orange crosses: withheld by the holdout run, or none at all inside a
-simulated outage, where the truth is underlaid in yellow instead); every estimate that provides
+the windows (orange crosses: withheld by the holdout run; a simulated outage has no fixes,
+and the truth is underlaid in yellow there instead); every estimate that provides
 a horizontal position, in its palette colour and line style. On a real log scored by a holdout
 run the estimates are those of the holdout run, so the map shows where each went while GNSS
 was withheld.
@@ -108,12 +108,13 @@ def _broken(ne: FloatArray, mask: np.ndarray) -> FloatArray:
 
 
 def plot_trajectory_map(drive: Drive, tracks: Mapping[str, Trajectory],
-                        windows: Sequence[tuple[float, float]], withheld_label: str
+                        windows: Sequence[tuple[float, float]], withheld_label: str | None
                         ) -> Plot | None:
     """The map figure (module docstring), or None when no track and no
     reference exist. ``tracks``: name → trajectory of the estimators that provide a
     horizontal position; ``windows`` [s]: the outages (simulated) or withheld windows;
-    ``withheld_label``: the legend text of the fixes inside them."""
+    ``withheld_label``: the legend text of the fixes inside them, or None to draw them like
+    the others (a simulated drive: its fixes are the ones the estimators were given)."""
     origin = drive.origin_lla
     ne = {n: _ne(tr, origin) for n, tr in tracks.items()}
     ne = {n: v for n, v in ne.items() if np.isfinite(v).all(axis=1).any()}
@@ -137,7 +138,7 @@ def plot_trajectory_map(drive: Drive, tracks: Mapping[str, Trajectory],
                     solid_capstyle="butt", label="truth inside a GNSS outage", zorder=1)
         ax.plot(truth_ne[:, 1], truth_ne[:, 0], color="k", lw=2.2, label="truth", zorder=2)
     if g_ne is not None and g is not None:
-        w = in_any(g.t, windows)
+        w = in_any(g.t, windows) if withheld_label else np.zeros(len(g.t), bool)
         ax.plot(g_ne[~w, 1], g_ne[~w, 0], ".", color="0.55", ms=2.5, label="GNSS fix",
                 zorder=3)
         if w.any():

@@ -94,16 +94,18 @@ def _g(v: float) -> str:
     return f"{v:.3g}" if abs(v) < 100 else f"{v:.0f}"
 
 
-def _legend(fig: Any, es: ErrorSet, q: Quantity, height: float) -> None:
+def _legend(fig: Any, es: ErrorSet, q: Quantity, height: float, sigma: bool) -> None:
     """One legend for the figure, under its title: never over the data."""
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
 
     shade = canvas.SHADE_LIGHT if es.windows_only else canvas.SHADE
     handles = [Line2D([], [], color=ERROR_COLOR.get(es.basis, "tab:green"), lw=0.8,
-                      label="estimate − reference"),
-               Line2D([], [], color=SIGMA_COLOR, lw=0.7, ls=(0, (4, 2)),
-                      label=f"{q.sigma_label} of the estimate (drawn where inside the axis)")]
+                      label="estimate − reference")]
+    if sigma:
+        handles.append(Line2D([], [], color=SIGMA_COLOR, lw=0.7, ls=(0, (4, 2)),
+                              label=f"{q.sigma_label} of the estimate (drawn where inside "
+                                    "the axis)"))
     if es.windows:
         handles.append(Patch(color=shade, label=es.shaded))
     fig.legend(handles=handles, loc="upper center", ncol=3, fontsize=7.5, frameon=False,
@@ -173,7 +175,7 @@ def plot_family_panels(es: ErrorSet, q: Quantity, values: Mapping[str, float | N
             if row == nrow - 1 or col >= len(groups[row + 1][1]):
                 ax.set_xlabel(xaxis.xlabel(short=True), fontsize=7)
                 ax.xaxis.set_tick_params(labelbottom=True)
-    _legend(fig, es, q, height)
+    _legend(fig, es, q, height, any(v[2] is not None for v in picked.values()))
     fig.suptitle(f"{q.title} vs {reference_name(es)} — {title} (y-scale shared per row)",
                  fontsize=10)
     if xaxis.broken:
