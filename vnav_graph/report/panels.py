@@ -167,7 +167,7 @@ def plot_family_panels(es: ErrorSet, q: Quantity, values: Mapping[str, float | N
             ax.axhline(0.0, color="k", lw=0.5)
             ax.set_ylim(-lims.lim if q.signed else 0.0, lims.lim)
             head = f"{name}: RMSE {value_text(values, name, q.spec, q.unit)}"
-            ax.set_title(head + ("\n" + "; ".join(sub) if sub else ""), fontsize=8.5,
+            ax.set_title("\n".join([head, *sub]), fontsize=8.5,
                          color="black" if not sub else "#700000")
             ax.tick_params(labelsize=7)
             if col == 0:
