@@ -300,6 +300,7 @@ def run_holdout(drive: Drive, estimators: Sequence[str] | None = None, outage_s:
     held = withhold(drive, windows)
     results: dict[str, dict[str, Any]] = {}
     series: dict[str, Scored] = {}
+    tracks: dict[str, Any] = {}
     for r in run_estimators(held, names, progress, configs, desc="holdout run"):
         if r.estimate is None:
             results[r.name] = holdout_failed(r.error or "unknown error", r.runtime_s, r.status)
@@ -328,6 +329,8 @@ def run_holdout(drive: Drive, estimators: Sequence[str] | None = None, outage_s:
                 s.block["reference"] = reference_block(r.estimate, drive, windows)
             check_run(s, r.estimate, held, drive, reference, ~withheld)
             results[r.name], series[r.name] = s.block, s
+            if "pos_h" in r.estimate.provides:
+                tracks[r.name] = r.estimate.trajectory
         except Exception as exc:  # one estimator's failure is data, not a crash
             if os.environ.get("VNAV_DEBUG"):
                 traceback.print_exc()
@@ -336,4 +339,4 @@ def run_holdout(drive: Drive, estimators: Sequence[str] | None = None, outage_s:
     if drive.meta.get("reference"):  # additive: what the ``reference`` blocks are against
         ref = drive.meta["reference"]
         doc["reference"] = {**ref, "basis": f"against the reference {ref['file']}"}
-    return HoldoutResult(doc, windows, series)
+    return HoldoutResult(doc, windows, series, tracks)

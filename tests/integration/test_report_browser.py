@@ -165,6 +165,15 @@ def load_report(html: Path, shot: Path, tmp: Path) -> tuple[list[dict[str, Any]]
         b.close()
 
 
+def assert_new_figures(images: list[dict[str, Any]], prefixes: tuple[str, ...]) -> None:
+    """Each figure whose caption starts with one of ``prefixes`` is in the page, decoded, and
+    at least 1600 px wide."""
+    for prefix in prefixes:
+        found = [i for i in images if i["alt"].startswith(prefix)]
+        assert len(found) == 1, (prefix, [i["alt"] for i in images])
+        assert found[0]["w"] >= 1600, found[0]
+
+
 class _Shifted:
     """Truth + 1.5 m (a stand-in estimator, so the test needs no solver)."""
 
@@ -177,8 +186,8 @@ class _Shifted:
         tr = drive.truth
         lla = tr.lla[::10].copy()
         lla[:, 2] += self.offset
-        return Estimate(self.name, Trajectory(tr.t[::10], lla, tr.vel_n[::10]),
-                        frozenset({"alt", "vel_d", "pos_h"}), runtime_s=0.1)
+        return Estimate(self.name, Trajectory(tr.t[::10], lla, tr.vel_n[::10], tr.q_nb[::10]),
+                        frozenset({"alt", "vel_d", "pos_h", "att"}), runtime_s=0.1)
 
 
 needs_chromium = pytest.mark.skipif(
@@ -217,6 +226,8 @@ def test_report_in_headless_chromium(tmp_path: Path) -> None:
     assert len(images) == n_png >= 2
     bad = [i for i in images if i["w"] <= 0 or i["err"]]
     assert bad == [], bad
+    assert_new_figures(images, ("Horizontal position error", "Heading (yaw) error",
+                                "Trajectory map"))
     assert shot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and shot.stat().st_size > 20_000
 
 
@@ -243,4 +254,6 @@ def test_real_log_report_in_headless_chromium(tmp_path: Path, data_dir: Path) ->
     assert len(images) == n_png >= 2
     bad = [i for i in images if i["w"] <= 0 or i["err"]]
     assert bad == [], bad
+    # no truth: no heading figure (GNSS gives no heading); the holdout run's map and errors
+    assert_new_figures(images, ("Horizontal position error", "Trajectory map"))
     assert "withheld" in (out / "report.html").read_text().lower()

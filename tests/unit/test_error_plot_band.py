@@ -5,8 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from vnav_graph.report.error_plots import BAND_NOTE_ABOVE, band_overflow, plot_altitude_errors
+from vnav_graph.report.error_plots import plot_altitude_errors
 from vnav_graph.report.errors import TRUTH, ErrorSeries, ErrorSet
+from vnav_graph.report.panels import SIGMA_NOTE_ABOVE, band_overflow, sigma_inside
 
 
 def test_band_overflow_counts_samples_beyond_the_axis():
@@ -26,4 +27,13 @@ def test_a_band_wider_than_the_axis_is_noted():
     wide_notes = [n for n in plot.notes if n.startswith("ekf: ±3σ beyond the axis")]
     assert len(wide_notes) == 1 and "100 % of the time (median 3σ 60 m)" in wide_notes[0]
     assert not any(n.startswith("ekf-rts: ±3σ") for n in plot.notes)
-    assert BAND_NOTE_ABOVE < 1.0
+    assert SIGMA_NOTE_ABOVE < 1.0
+
+
+def test_sigma_line_stops_at_the_axis():
+    """3σ inside ±lim is drawn as is; beyond it (and where σ is unknown) it is not drawn,
+    so the line never runs along the panel's edge."""
+    line = sigma_inside(np.array([0.1, 0.5, 1.0, np.nan]), 2.0)
+    np.testing.assert_allclose(line[:2], [0.3, 1.5])
+    assert np.isnan(line[2:]).all()
+    np.testing.assert_array_equal(sigma_inside(np.array([1.0]), 2.0, k=1.0), [1.0])

@@ -180,7 +180,7 @@ def test_write_report_files_and_html(drive, tmp_path):
     written = write_report(tmp_path, summary, results, drive)
     pngs = sorted(p.name for p in (tmp_path / "plots").iterdir())
     assert pngs == ["altitude_error.png", "baro_convergence.png", "baro_parameters.png",
-                    "vertical_velocity_error.png"]
+                    "trajectory_map.png", "vertical_velocity_error.png"]
     assert {p.name for p in written} == set(pngs) | {"report.html"}
     for p in pngs:
         assert (tmp_path / "plots" / p).read_bytes()[:8] == PNG_MAGIC
@@ -380,6 +380,11 @@ def test_plotted_errors_are_the_scored_ones(tmp_path, monkeypatch, registry):
     assert np.sqrt(np.mean(s.vd**2)) == pytest.approx(
         summary["estimators"]["ekf-rts"]["vel_down_rmse_mps"], abs=1e-12)
     assert np.sqrt(np.mean(s.alt**2)) == pytest.approx(np.sqrt(10.0), abs=1e-9)
+    # the horizontal error drawn is the scored one (1 m north in every window)
+    assert np.sqrt(np.mean(s.horiz**2)) == pytest.approx(
+        summary["estimators"]["ekf-rts"]["horiz_rmse_m"], abs=1e-12)
+    assert s.horiz_sd is None and s.heading is None
+    assert set(hold.trajectories) == {"ekf-rts"}  # the map draws the holdout run's track
 
 
 def test_cli_run_writes_report(tmp_path, monkeypatch, registry):
@@ -388,7 +393,7 @@ def test_cli_run_writes_report(tmp_path, monkeypatch, registry):
     assert main(["run", "--scenario", "default", "--duration", "30", "--estimators", "shifted",
                  "--out", str(out), "--no-progress"]) == 0
     page = (out / "report.html").read_text(encoding="utf-8")
-    assert page.count("data:image/png;base64,") == len(list((out / "plots").glob("*.png"))) == 4
+    assert page.count("data:image/png;base64,") == len(list((out / "plots").glob("*.png"))) == 5
     assert not list(out.glob(".vnav-tmp-*"))  # the temporary directory is gone
 
 

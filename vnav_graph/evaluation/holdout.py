@@ -65,6 +65,8 @@ class Scored:
     alt_sd: FloatArray | None = None  # sqrt(P_DD + σ_GNSS,D²) at every fix [m], if cov
     horiz_err: FloatArray | None = None  # NE distance at withheld fixes, NaN elsewhere [m]
     vd_err: FloatArray | None = None  # v̂_D − v_D,GNSS at every fix [m/s]
+    # sqrt(P_NN + P_EE + σ_GNSS,N² + σ_GNSS,E²) at every fix [m], pos_h estimates with a cov
+    horiz_sd: FloatArray | None = None
 
 
 @dataclass(frozen=True)
@@ -72,6 +74,9 @@ class HoldoutResult:
     doc: dict[str, Any]
     windows: list[tuple[float, float]]
     series: dict[str, Scored] = field(default_factory=dict)
+    # the holdout run's trajectories (GNSS withheld in ``windows``) of the estimators that
+    # provide a horizontal position, for the report's map
+    trajectories: dict[str, Trajectory] = field(default_factory=dict)
 
 
 def choose_windows(t_gnss: FloatArray, outage_s: float = 60.0,
@@ -232,15 +237,27 @@ def score(est: Estimate, drive: Drive, withheld: np.ndarray,
     vd_err = None
     if "vel_d" in est.provides and g.vel_n is not None:
         vd_err = np.interp(t, tr.t, tr.vel_down) - g.vel_n[inside, 2]
-    sd = None
-    if est.cov is not None and est.t_cov is not None:
-        var = est.cov[:, _DOWN, _DOWN]
+    def var_at(rows: tuple[int, ...]) -> FloatArray | None:
+        """Sum of the covariance diagonal ``rows`` at the fixes (held forward in real time)."""
+        if est.cov is None or est.t_cov is None:
+            return None
+        var = sum(est.cov[:, r, r] for r in rows)
         ok = np.isfinite(var)
-        if ok.any():
-            tc, vc = est.t_cov[ok], var[ok]
-            v_t = (vc[np.clip(np.searchsorted(tc, t, side="right") - 1, 0, tc.size - 1)]
-                   if real_time else np.interp(t, tc, vc))
-            sd = np.sqrt(np.clip(v_t, 0.0, None) + g.pos_sd[inside, 2] ** 2)
+        if not ok.any():
+            return None
+        tc, vc = est.t_cov[ok], var[ok]
+        v_t = (vc[np.clip(np.searchsorted(tc, t, side="right") - 1, 0, tc.size - 1)]
+               if real_time else np.interp(t, tc, vc))
+        return np.clip(v_t, 0.0, None)
+
+    sd = None
+    v_d = var_at((_DOWN,))
+    if v_d is not None:
+        sd = np.sqrt(v_d + g.pos_sd[inside, 2] ** 2)
+    horiz_sd = None
+    v_h = var_at((_DOWN - 2, _DOWN - 1)) if horiz is not None else None
+    if v_h is not None:
+        horiz_sd = np.sqrt(v_h + g.pos_sd[inside, 0] ** 2 + g.pos_sd[inside, 1] ** 2)
     rej = est.info.get("gnss_rejected") if est.info is not None else None
     block = {
         "status": "ok", "error": None,
@@ -263,7 +280,7 @@ def score(est: Estimate, drive: Drive, withheld: np.ndarray,
                 "t0": float(a), "t1": float(b), "n": int(m.sum()),
                 "alt_rmse_m": _rms(err[m]), "horiz_rmse_m": _rms(horiz_err[m]),
                 "vel_down_rmse_mps": None if vd_err is None else _rms(vd_err[m])})
-    return Scored(block, t, err, w, sd, horiz_err, vd_err)
+    return Scored(block, t, err, w, sd, horiz_err, vd_err, horiz_sd)
 
 
 def check_run(scored: Scored, est: Estimate, held: Drive, drive: Drive, reference: np.ndarray,

@@ -15,7 +15,7 @@ import numpy as np
 
 from ..types import FloatArray
 
-DPI = 90
+DPI = 150  # 11 in wide figures: 1650 px
 MAX_POINTS = 1500
 SHADE = "0.86"
 SHADE_LIGHT = "0.93"  # the broken axis shows only windows: shading is everywhere, keep it pale

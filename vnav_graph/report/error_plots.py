@@ -1,7 +1,9 @@
 """Error plots, grouped by family with a shared, robust y-scale per family.
 
 - ``plot_altitude_errors``: one panel per estimator, a row per family (smoothers, filters,
-  loops/observers), ±3σ band where a covariance exists;
+  loops/observers), ±3σ lines where a covariance exists (:mod:`vnav_graph.report.panels`);
+- ``plot_horizontal_errors`` / ``plot_heading_errors``: the same layout for the horizontal
+  error's norm (+3σ_h line) and the heading error (±3σ_yaw);
 - ``plot_vertical_velocity_errors``: one panel per family, its members overlaid;
 - ``plot_holdout_errors``: ``holdout.png`` of ``vnav-graph holdout``, one panel per family.
 
@@ -14,128 +16,73 @@ note on the panel and in the returned ``Plot.notes`` (see :mod:`vnav_graph.repor
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from ..types import FloatArray
 from . import canvas
-from .errors import GIVEN, TRUTH, ErrorSeries, ErrorSet, from_holdout
+from .errors import ErrorSeries, ErrorSet, from_holdout
 from .groups import group_names, robust_limits
-from .palette import estimator_color
-
-_COLOR = {TRUTH: "tab:red", GIVEN: "tab:purple"}
-
-
-@dataclass(frozen=True)
-class Plot:
-    """PNG bytes of one figure and the notes its caption must carry (clipped series)."""
-
-    png: bytes
-    notes: tuple[str, ...] = ()
+from .palette import estimator_style
+from .panels import (
+    Plot,
+    Quantity,
+    plot_family_panels,
+    reference_name,
+    time_axis,
+    value_text,
+)
 
 
-def _axis(es: ErrorSet) -> canvas.TimeAxis | canvas.WindowAxis:
-    cls = canvas.WindowAxis if es.windows_only else canvas.TimeAxis
-    return cls(es.windows, es.shaded)
-
-
-def _value(values: Mapping[str, Any], name: str, spec: str, unit: str) -> str:
-    v = values.get(name)
-    return "not scored" if v is None else f"{format(v, spec)} {unit}"
-
-
-# the ±3σ band is drawn pale when it fills the panel more than this fraction of the time, and
-# noted (in the panel and under the figure) above BAND_NOTE_ABOVE
-BAND_PALE_ABOVE = 0.5
-BAND_NOTE_ABOVE = 0.05
-
-
-def band_overflow(sd: FloatArray, lim: float) -> float:
-    """Fraction of the finite samples whose ±3σ extends beyond ±``lim``."""
-    ok = np.isfinite(sd)
-    return float(np.mean(3.0 * sd[ok] > lim)) if ok.any() else 0.0
-
-
-def _clip_text(ax: Any, names_max: Mapping[str, float], unit: str, prefix: bool) -> None:
+def _clip_text(ax: Any, names_max: Mapping[str, float], unit: str) -> None:
     if names_max:
-        txt = "; ".join(f"{n + ' ' if prefix else ''}clipped: max |err| {v:.3g} {unit}"
-                        for n, v in names_max.items())
+        txt = "; ".join(f"{n} clipped: max |err| {v:.3g} {unit}" for n, v in names_max.items())
         ax.text(0.01, 0.97, txt, transform=ax.transAxes, fontsize=7, color="darkred",
                 va="top", ha="left", bbox={"fc": "white", "ec": "darkred", "lw": 0.5,
                                            "alpha": 0.85, "pad": 1.5})
 
 
-def _ref(es: ErrorSet) -> str:
-    return {TRUTH: "truth", GIVEN: "the GNSS the estimator was given"}.get(
-        es.basis, "withheld GNSS (holdout run)")
+def _alt_pick(s: ErrorSeries) -> tuple[FloatArray, FloatArray | None]:
+    return s.alt, s.alt_sd
+
+
+ALTITUDE = Quantity("Altitude error", "alt error [m]", "m", ".2f", True, _alt_pick)
+
+
+def _horiz_pick(s: ErrorSeries) -> tuple[FloatArray, FloatArray | None] | None:
+    return None if s.horiz is None else (s.horiz, s.horiz_sd)
+
+
+def _heading_pick(s: ErrorSeries) -> tuple[FloatArray, FloatArray | None] | None:
+    return None if s.heading is None else (s.heading, s.heading_sd)
+
+
+HORIZONTAL = Quantity("Horizontal position error |ΔNE|", "horiz error [m]", "m", ".2f", False,
+                      _horiz_pick, sigma_label="+3σ_h")
+HEADING = Quantity("Heading (yaw) error", "heading error [deg]", "deg", ".2f", True,
+                   _heading_pick, sigma_label="±3σ_yaw")
+
+
+def plot_horizontal_errors(es: ErrorSet, values: Mapping[str, float | None],
+                           title: str) -> Plot | None:
+    """Horizontal error panels by family (``pos_h`` estimators); ``values``: the table's
+    ``horiz_rmse_m``. None when no estimator provides a horizontal position."""
+    return plot_family_panels(es, HORIZONTAL, values, title)
+
+
+def plot_heading_errors(es: ErrorSet, values: Mapping[str, float | None],
+                        title: str) -> Plot | None:
+    """Heading error panels by family (``att`` estimators, against truth); ``values``: the
+    table's ``heading_rmse_deg``. None without a heading error (no truth, or no attitude)."""
+    return plot_family_panels(es, HEADING, values, title)
 
 
 def plot_altitude_errors(es: ErrorSet, values: Mapping[str, float | None],
                          title: str) -> Plot | None:
     """Altitude error panels by family. ``values``: the RMSE per estimator printed in each
     panel title (the table's ``alt_rmse_m``; None prints "not scored")."""
-    if not es.series:
-        return None
-    by_name = {s.name: s for s in es.series}
-    groups = group_names(by_name)
-    ncol = max(len(m) for _, m in groups)
-    nrow = len(groups)
-    xaxis = _axis(es)
-    height = 1.35 + 2.0 * nrow
-    fig = canvas.figure(11.0, height, left=0.09, wspace=0.18,
-                        bottom_in=0.75 if xaxis.broken else 0.55, top_in=1.0)
-    axes = fig.subplots(nrow, ncol, sharex=True, squeeze=False)
-    notes: list[str] = []
-    first = True
-    for row, (label, members) in enumerate(groups):
-        lims = robust_limits({n: by_name[n].alt for n in members})
-        notes += lims.notes("m")
-        for col in range(ncol):
-            ax = axes[row, col]
-            if col >= len(members):
-                ax.set_visible(False)
-                continue
-            s = by_name[members[col]]
-            x, e, sd = xaxis.map(s.t, s.alt, s.alt_sd)
-            xaxis.decorate(ax, legend=first)
-            if sd is not None:
-                over = band_overflow(sd, lims.lim)
-                # clipped to the axis, and pale where it fills the panel, so that it never
-                # hides the shaded windows or the error line
-                band = np.minimum(3.0 * sd, lims.lim)
-                ax.fill_between(x, -band, band, color="tab:blue", lw=0, label="±3σ",
-                                alpha=0.18 if over < BAND_PALE_ABOVE else 0.07, zorder=0.5)
-                if over > BAND_NOTE_ABOVE:
-                    note = (f"±3σ beyond the axis {100 * over:.0f} % of the time (median "
-                            f"3σ {np.nanmedian(3.0 * sd):.3g} m)")
-                    notes.append(f"{s.name}: {note}")
-                    ax.text(0.99, 0.03, note, transform=ax.transAxes, fontsize=6.5,
-                            color="tab:blue", va="bottom", ha="right",
-                            bbox={"fc": "white", "ec": "none", "alpha": 0.8, "pad": 1.0})
-            ax.plot(x, e, color=_COLOR.get(es.basis, "tab:green"), lw=0.8,
-                    label="estimate − reference")
-            ax.axhline(0.0, color="k", lw=0.5)
-            ax.set_ylim(-lims.lim, lims.lim)
-            ax.set_title(f"{s.name}: RMSE {_value(values, s.name, '.2f', 'm')}", fontsize=9)
-            _clip_text(ax, {s.name: lims.clipped[s.name]} if s.name in lims.clipped else {},
-                       "m", prefix=False)
-            ax.tick_params(labelsize=7)
-            if col == 0:
-                ax.set_ylabel(f"{label}\nalt error [m]", fontsize=8)
-            if first:  # one legend for the figure, under the title: never over the data
-                fig.legend(*ax.get_legend_handles_labels(), loc="upper center", ncol=4,
-                           fontsize=7.5, frameon=False, bbox_to_anchor=(0.5, 1 - 0.3 / height))
-                first = False
-            if row == nrow - 1 or col >= len(groups[row + 1][1]):
-                ax.set_xlabel(xaxis.xlabel(short=True), fontsize=7)
-                ax.xaxis.set_tick_params(labelbottom=True)
-    fig.suptitle(f"Altitude error vs {_ref(es)} — {title} (y-scale shared per row)",
-                 fontsize=10)
-    if xaxis.broken:
-        fig.text(0.5, 0.005, xaxis.xlabel(), ha="center", va="bottom", fontsize=7.5)
-    return Plot(canvas.png(fig), tuple(notes))
+    return plot_family_panels(es, ALTITUDE, values, title)
 
 
 def _overlay(es: ErrorSet, pick: Any, values: Mapping[str, float | None], spec: str,
@@ -148,7 +95,7 @@ def _overlay(es: ErrorSet, pick: Any, values: Mapping[str, float | None], spec: 
     groups = group_names(by_name)
     fig = canvas.figure(11.0, 0.95 + 2.1 * len(groups), left=0.08, right=0.79)
     axes = fig.subplots(len(groups), 1, sharex=True, squeeze=False).ravel()
-    xaxis = _axis(es)
+    xaxis = time_axis(es)
     notes: list[str] = []
     for k, (ax, (label, members)) in enumerate(zip(axes, groups, strict=True)):
         lims = robust_limits({n: pick(by_name[n]) for n in members})
@@ -160,11 +107,11 @@ def _overlay(es: ErrorSet, pick: Any, values: Mapping[str, float | None], spec: 
             x, e = xaxis.map(by_name[n].t, pick(by_name[n]))
             clip = n in lims.clipped
             (handles[i],) = ax.plot(x, e, lw=0.6 if clip else 0.85, alpha=0.5 if clip else 1.0,
-                                    color=estimator_color(n),
-                                    label=f"{n} ({_value(values, n, spec, unit)})")
+                                    **estimator_style(n),
+                                    label=f"{n} ({value_text(values, n, spec, unit)})")
         ax.axhline(0.0, color="k", lw=0.5)
         ax.set_ylim(-lims.lim, lims.lim)
-        _clip_text(ax, lims.clipped, unit, prefix=True)
+        _clip_text(ax, lims.clipped, unit)
         ax.set_ylabel(f"{label}\n{ylabel}", fontsize=8)
         ax.tick_params(labelsize=8)
         ax.legend(handles=[handles[i] for i in sorted(handles)], fontsize=7,
@@ -186,7 +133,7 @@ def plot_vertical_velocity_errors(es: ErrorSet, values: Mapping[str, float | Non
                                   title: str) -> Plot | None:
     """v_D error by family (overlaid); ``values``: the table's ``vel_down_rmse_mps``."""
     return _overlay(es, _vd, values, ".3f", "m/s", "v_D error [m/s]",
-                    f"Vertical velocity error vs {_ref(es)} — {title} (legend: RMSE)")
+                    f"Vertical velocity error vs {reference_name(es)} — {title} (legend: RMSE)")
 
 
 def plot_holdout_errors(holdout: Any) -> Plot | None:

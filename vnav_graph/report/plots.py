@@ -25,7 +25,7 @@ import numpy as np
 from ..types import ERROR_STATE, Drive, Estimate, FloatArray
 from . import canvas
 from .canvas import decimate
-from .palette import estimator_color
+from .palette import estimator_style
 
 
 def _plain_log_ticks(ax: Any) -> None:
@@ -156,7 +156,7 @@ def plot_baro_convergence(drive: Drive, results: Sequence[Any],
         return None
     panels = [("value", k) for k, _, _ in BARO_PARAMS if any(k in h for h in hists.values())]
     panels += [("sd", k) for k in ("scale", "latency_s") if any(k in h for h in sds.values())]
-    fig = canvas.figure(11.0, 0.6 + 2.1 * len(panels))
+    fig = canvas.figure(11.0, 0.6 + 2.1 * len(panels), right=0.84)
     axes = fig.subplots(len(panels), 1, sharex=True, squeeze=False).ravel()
     truth = baro_truth(drive)
     for ax, (kind, key) in zip(axes, panels, strict=True):
@@ -167,8 +167,7 @@ def plot_baro_convergence(drive: Drive, results: Sequence[Any],
                 if key in h:
                     t, sd = h[key]
                     s = decimate(t.size)
-                    ax.plot(t[s], sd[s] * sc, lw=0.9, label=name,
-                            color=estimator_color(name))
+                    ax.plot(t[s], sd[s] * sc, lw=0.9, label=name, **estimator_style(name))
             ax.set_yscale("log")
             _plain_log_ticks(ax)
             ax.set_ylabel("σ of " + label, fontsize=8)
@@ -179,7 +178,7 @@ def plot_baro_convergence(drive: Drive, results: Sequence[Any],
                 t, v, sd = h[key]
                 s = decimate(t.size)
                 (line,) = ax.plot(t[s], v[s] * sc, lw=0.9, label=name,
-                                  color=estimator_color(name))
+                                  **estimator_style(name))
                 if sd is not None:
                     ax.fill_between(t[s], (v[s] - sd[s]) * sc, (v[s] + sd[s]) * sc,
                                     color=line.get_color(), alpha=0.15, lw=0)
@@ -189,7 +188,7 @@ def plot_baro_convergence(drive: Drive, results: Sequence[Any],
             elif truth[key] is not None:
                 ax.axhline(truth[key] * sc, color="k", ls="--", lw=1, label="truth")
             ax.set_ylabel(label, fontsize=8)
-        ax.legend(fontsize=7, ncol=5, loc="upper right")
+        ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5))
         ax.tick_params(labelsize=8)
     axes[-1].set_xlabel("time [s]")
     fig.suptitle("Baro parameter convergence (band: ±1σ; σ panels from the covariance)",
@@ -204,7 +203,7 @@ def plot_fb_separation(results: Sequence[Any],
     ests = [e for e in _ok(results) if (e.info or {}).get("fb_separation")]
     if not ests:
         return None
-    fig = canvas.figure(11.0, 4.2, left=0.08)
+    fig = canvas.figure(11.0, 4.2, left=0.08, right=0.80)
     axes = fig.subplots(2, 1, sharex=True)
     for est in ests:
         sep = est.info["fb_separation"]
@@ -214,14 +213,14 @@ def plot_fb_separation(results: Sequence[Any],
                              (axes[1], "horiz_m", sep["horiz_p95_m"])):
             k = decimate(t.size)
             tt, y = t[k], np.asarray(ser[key], dtype=float)[k]
-            color = estimator_color(est.estimator)
-            ax.plot(tt, y, lw=0.8, color=color, label=f"{est.estimator} (p95 {p95:.2f} m)")
-            ax.axhline(p95, color=color, ls="--", lw=0.8)
+            style = estimator_style(est.estimator)
+            ax.plot(tt, y, lw=0.8, label=f"{est.estimator} (p95 {p95:.2f} m)", **style)
+            ax.axhline(p95, color=style["color"], ls="--", lw=0.8)
     for ax, label in zip(axes, ("altitude [m]", "horizontal [m]"), strict=True):
         _shade(ax, windows)
         ax.set_ylabel(label, fontsize=9)
         ax.tick_params(labelsize=8)
-        ax.legend(fontsize=7, loc="upper right")
+        ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5))
     axes[1].set_xlabel("time [s]", fontsize=9)
     fig.suptitle("Forward/backward filter separation", fontsize=10)
     return canvas.png(fig)
