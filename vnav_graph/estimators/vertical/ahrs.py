@@ -66,6 +66,44 @@ def _accel_level(psi, fm, g_nom, alpha, max_corr, max_fb):
 
 
 @njit(cache=True)
+def _heading_feedback(q_next, c1, psi, vc0, vc1, v_thr, trusted, yaw_done, max_corr):
+    """The heading step of ``ahrs_kernel``: with a course (velocity (vc0, vc1) above
+    ``v_thr`` and ``trusted``: usable and recently consistent with the IMU) the first time,
+    the yaw of ``q_next`` (attitude c1) is reset to it (in place); afterwards ψ_z is the
+    yaw minus the course (clamped); without a course ψ_z = 0. Returns (yaw done, reset now)."""
+    if np.sqrt(vc0 ** 2 + vc1 ** 2) > v_thr and trusted:
+        course = np.arctan2(vc1, vc0)
+        yaw = np.arctan2(c1[1, 0], c1[0, 0])
+        if not yaw_done:
+            dq = quat_exp(np.array([0.0, 0.0, _wrap_nb(course - yaw)]))
+            put(q_next, quat_mul(dq, q_next))
+            psi[2] = 0.0
+            return True, True
+        psi[2] = _clamp(_wrap_nb(yaw - course), max_corr)
+        return True, False
+    psi[2] = 0.0
+    return yaw_done, False
+
+
+@njit(cache=True)
+def _gate(nu2, gate2, n_rej, t_rej0, t_j, reinit_s, cnt):
+    """R2's χ²₂ gate on a levelling residual (``nu2``: its normalised square): accepted
+    below ``gate2``; refused otherwise, unless refusals have spanned ``reinit_s`` (then
+    accepted: a real drift cannot lock the GNSS out). Counts in ``cnt`` [1] refused, [2]
+    re-initialised. Returns (accept, refusals in a row, time of the first of them)."""
+    if nu2 <= gate2:
+        return True, n_rej, t_rej0
+    if n_rej == 0:
+        t_rej0 = t_j
+    n_rej += 1
+    if n_rej >= 2 and t_j - t_rej0 >= reinit_s:
+        cnt[2] += 1
+        return True, n_rej, t_rej0
+    cnt[1] += 1
+    return False, n_rej, t_rej0
+
+
+@njit(cache=True)
 def ahrs_kernel(t, gyro, accel, q0, lla_i, vel_i, sdv_i, t_g, t_av, v_g, g_g, cor_g, ok_g, r_g,
           vert_g,
           use_g, kp, ki, k_yaw, ki_yaw, v_min, max_corr, max_fb, a_static, t_filt, gap,
@@ -158,8 +196,7 @@ def ahrs_kernel(t, gyro, accel, q0, lla_i, vel_i, sdv_i, t_g, t_av, v_g, g_g, co
                                       dt)
             put(q[k + 1], qn)
         put(bg_out[k], bg)
-        qn = q[k + 1]
-        c1 = quat_to_dcm(qn)
+        c1 = quat_to_dcm(q[k + 1])
         put(f_n[k + 1], c1 @ accel[k + 1])
         cum = cum + 0.5 * (f_n[k] + f_n[k + 1]) * dt
         put(cum_arr[k + 1], cum)
@@ -168,34 +205,16 @@ def ahrs_kernel(t, gyro, accel, q0, lla_i, vel_i, sdv_i, t_g, t_av, v_g, g_g, co
         if dt <= imu_gap:
             vp[0] += 0.5 * (f_n[k, 0] + f_n[k + 1, 0]) * dt
             vp[1] += 0.5 * (f_n[k, 1] + f_n[k + 1, 1]) * dt
-        # heading: one-time reset to the GNSS course, then proportional correction; only from
-        # a velocity that is usable (σ) and recently consistent with the IMU (gate)
-        # the course: that of the propagated velocity (the last usable fix's, carried to
-        # t[k+1] with the resolved specific force: a held fix would lag in turns) when the
-        # yaw is reset and the last fix renewed it; else that of the last fix's velocity (the
-        # resolved specific force is in a frame of unknown yaw before the reset)
-        if yaw_done and vp_fresh:
-            vc0 = vp[0]
-            vc1 = vp[1]
-        else:
-            vc0 = vel_i[k + 1, 0]
-            vc1 = vel_i[k + 1, 1]
-        vh = np.sqrt(vc0 ** 2 + vc1 ** 2)
-        yaw = np.arctan2(c1[1, 0], c1[0, 0])
-        v_thr = max(v_min, 5.0 * sdv_i[k + 1])
-        vel_trusted = t[k + 1] - t_vel_ok <= fb_after
-        if vh > v_thr and vel_trusted:
-            course = np.arctan2(vc1, vc0)
-            if not yaw_done:
-                dq = quat_exp(np.array([0.0, 0.0, _wrap_nb(course - yaw)]))
-                put(q[k + 1], quat_mul(dq, qn))
-                yaw_done = True
-                psi[2] = 0.0
-                t_yaw = t[k]  # the fix interval across t[k] mixes two headings
-            else:
-                psi[2] = _clamp(_wrap_nb(yaw - course), max_corr)
-        else:
-            psi[2] = 0.0
+        # heading (``_heading_feedback``): the course of the propagated velocity (the last
+        # usable fix's carried to t[k+1]: a held fix lags in turns) once the yaw is reset and
+        # the last fix renewed it, else the last fix's (unknown yaw before the reset)
+        fresh = yaw_done and vp_fresh
+        yaw_done, reset = _heading_feedback(
+            q[k + 1], c1, psi, vp[0] if fresh else vel_i[k + 1, 0],
+            vp[1] if fresh else vel_i[k + 1, 1], max(v_min, 5.0 * sdv_i[k + 1]),
+            t[k + 1] - t_vel_ok <= fb_after, yaw_done, max_corr)
+        if reset:
+            t_yaw = t[k]  # the fix interval across t[k] mixes two headings
         # tilt: velocity matching at each GNSS fix passed in (t[k], t[k+1]]
         while j < m and t_av[j] <= t[k + 1]:
             # ∫ f_n dt up to the fix time, from the stored prefix integral
@@ -232,17 +251,9 @@ def ahrs_kernel(t, gyro, accel, q0, lla_i, vel_i, sdv_i, t_g, t_av, v_g, g_g, co
                     # R2: χ²₂ gate on the horizontal residual against its predicted spread
                     sd_t = sd0 + sd_bg * (t_g[j] - t_acc)
                     s_var = r_g[j] + (g_g[j] * sd_t) ** 2 + (sd_yaw**2) * ah2
-                    nu2 = (d[0] ** 2 + d[1] ** 2) / s_var
-                    accept = nu2 <= gate2
-                    if not accept:
-                        if n_rej == 0:
-                            t_rej0 = t_g[j]
-                        n_rej += 1
-                        if n_rej >= 2 and t_g[j] - t_rej0 >= reinit_s:
-                            accept = True
-                            cnt[2] += 1
-                        else:
-                            cnt[1] += 1
+                    accept, n_rej, t_rej0 = _gate(
+                        (d[0] ** 2 + d[1] ** 2) / s_var, gate2, n_rej, t_rej0, t_g[j],
+                        reinit_s, cnt)
                     if accept:
                         n_rej = 0
                         cnt[0] += 1
