@@ -52,16 +52,20 @@ def test_check_reruns_with_the_stiff_scale_once():
     class C:
         baro_scale_sd: float | None = None
 
-    calls = []
+    calls, kept = [], []
 
     def rerun(cfg):
         calls.append(cfg.baro_scale_sd)
         out = _est(0.01, {"warnings": ["earlier"]})
         out.replace = lambda **kw: SimpleNamespace(**{**vars(out), **kw})
+        # the re-solve keeps the first pass's real-time answers (Estimate.with_real_time_of)
+        out.with_real_time_of = lambda first, why: (kept.append((first, why)), out)[1]
         return out
 
-    res = without_implausible_scale(_est(-0.95), C(), rerun)
+    first = _est(-0.95)
+    res = without_implausible_scale(first, C(), rerun)
     assert calls == [STIFF_SCALE_SD]
+    assert len(kept) == 1 and kept[0][0] is first and "whole drive" in kept[0][1]
     assert res.info["warnings"][0] == "earlier" and "solved again" in res.info["warnings"][1]
     assert res.info["baro_scale_note"] == res.info["warnings"][1]
     assert res.runtime_s == 2.0 and res.config == C()

@@ -44,7 +44,9 @@ def test_online_parquet_holds_only_the_online_epochs(run):
         # a whole-drive calibration is not an online answer
         assert "baro_scale" not in back and "baro_latency_s" not in back
         final = pd.read_parquet(out / "estimates" / f"{name}.parquet")
-        assert len(back) < len(final)
+        # the ekf's online answer is at its covariance epochs, graph-isam2's real-time output
+        # at the output rate (its keyframes and the IMU propagation between them)
+        assert len(back) < len(final) if name == "ekf" else len(back) <= len(final)
         pd.testing.assert_frame_equal(back, online_table(e, e.origin_lla))
     # the ekf is online once aligned (summary's online from_s), at its covariance epochs
     ekf = pd.read_parquet(out / "estimates" / "ekf.online.parquet")["t_s"].to_numpy()

@@ -248,8 +248,13 @@ def outage_jumps(est: Estimate, drive: Drive) -> list[dict[str, Any]]:
         te = np.array([tr.t[j]])
 
         def var(comp: int, te: FloatArray = te) -> float:
-            sd = est.sigma_at(te, comp)
-            return 0.0 if sd is None or not np.isfinite(sd[0]) else float(sd[0]) ** 2
+            # the variance the answer reported at its latest covariance epoch at or before
+            # te (graph-isam2's real-time output has covariances at its keyframes only)
+            if est.cov is None or est.t_cov is None:
+                return 0.0
+            v = est.cov[:, comp, comp]
+            ok = np.flatnonzero(np.isfinite(v) & (est.t_cov <= te[0] + 1e-9))
+            return float(max(v[ok[-1]], 0.0)) if ok.size else 0.0
 
         pairs = [("height", abs(float(tr.lla[j, 2] - g.lla[i + 1, 2])),
                   float(g.pos_sd[i + 1, 2]) ** 2 + var(component("pos_n", 2)))]
