@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tests.integration.test_causality import differences
 from vnav_graph.estimators.base import CAUSAL
 from vnav_graph.estimators.configfile import load_configs
 from vnav_graph.geo.frames import lla_to_ned
@@ -90,22 +91,6 @@ def run(case: str, name: str, t1: float | None) -> Estimate:
             cfg = load_configs(HARD).get(name)
         _RUNS[key] = run_captured(name, d, cfg)
     return _RUNS[key]
-
-
-def differences(a, b, t1: float, origin) -> dict[str, float]:
-    """Max |a − b| of the online quantities over the epochs of ``a`` before ``t1``."""
-    n = min(int(np.searchsorted(a.t, a.t[0] + t1 - 1e-9)) - 1, a.t.size - 1)
-    assert n >= 5, "too few epochs to compare"
-    np.testing.assert_array_equal(a.t[:n], b.t[:n])
-    out = {"alt": float(np.max(np.abs(a.alt[:n] - b.alt[:n]))),
-           "vel_down": float(np.max(np.abs(a.vel_down[:n] - b.vel_down[:n])))}
-    if np.all(np.isfinite(a.lla[:n, :2])):
-        d = lla_to_ned(a.lla[:n], origin)[:, :2] - lla_to_ned(b.lla[:n], origin)[:, :2]
-        out["horiz"] = float(np.max(np.abs(d)))
-    if a.q_nb is not None:
-        dy = a.to_rph()[:n, 2] - b.to_rph()[:n, 2]
-        out["heading"] = float(np.max(np.abs(np.degrees((dy + np.pi) % (2 * np.pi) - np.pi))))
-    return out
 
 
 @pytest.mark.parametrize("name, case", [(n, c) for n in NAMES for c in CASES])
