@@ -27,6 +27,7 @@ it used instead (``calibration[...]["source"]``, ``heading_basis``) and the text
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -85,21 +86,29 @@ def _rows(runs: list[dict[str, Any]], scenario: str) -> dict[tuple[str, int], di
     return {(r["estimator"], int(r["seed"])): r for r in runs if r["scenario"] == scenario}
 
 
-def paired_values(runs: list[dict[str, Any]], scenario: str, a: str, b: str, key: str
-                  ) -> tuple[np.ndarray, np.ndarray, list[int]]:
-    """Values of ``key`` for a and b over the seeds where both ran and have it."""
+def _pairs(runs: list[dict[str, Any]], scenario: str, a: str, b: str,
+           get_a: Callable[[dict[str, Any]], float | None],
+           get_b: Callable[[dict[str, Any]], float | None]
+           ) -> tuple[np.ndarray, np.ndarray, list[int]]:
+    """``get_a`` of a's row and ``get_b`` of b's over the seeds where both ran and have it."""
     by = _rows(runs, scenario)
     xa, xb, seeds = [], [], []
     for seed in sorted({s for e, s in by if e in (a, b)}):
         ra, rb = by.get((a, seed)), by.get((b, seed))
         if ra is None or rb is None or ra["status"] != "ok" or rb["status"] != "ok":
             continue
-        va, vb = _value(ra, key), _value(rb, key)
+        va, vb = get_a(ra), get_b(rb)
         if va is not None and vb is not None:
             xa.append(va)
             xb.append(vb)
             seeds.append(int(seed))
     return np.array(xa), np.array(xb), seeds
+
+
+def paired_values(runs: list[dict[str, Any]], scenario: str, a: str, b: str, key: str
+                  ) -> tuple[np.ndarray, np.ndarray, list[int]]:
+    """Values of ``key`` for a and b over the seeds where both ran and have it."""
+    return _pairs(runs, scenario, a, b, lambda r: _value(r, key), lambda r: _value(r, key))
 
 
 def _common_heading(row: dict[str, Any], other: str) -> float | None:
@@ -111,18 +120,8 @@ def _common_heading(row: dict[str, Any], other: str) -> float | None:
 def _heading_pairs(runs: list[dict[str, Any]], scenario: str, a: str, b: str
                    ) -> tuple[np.ndarray, np.ndarray, list[int]]:
     """Heading RMSE of a and b at their common known epochs (``heading_common``), per seed."""
-    by = _rows(runs, scenario)
-    xa, xb, seeds = [], [], []
-    for seed in sorted({s for e, s in by if e in (a, b)}):
-        ra, rb = by.get((a, seed)), by.get((b, seed))
-        if ra is None or rb is None or ra["status"] != "ok" or rb["status"] != "ok":
-            continue
-        va, vb = _common_heading(ra, b), _common_heading(rb, a)
-        if va is not None and vb is not None:
-            xa.append(va)
-            xb.append(vb)
-            seeds.append(seed)
-    return np.array(xa), np.array(xb), seeds
+    return _pairs(runs, scenario, a, b, lambda r: _common_heading(r, b),
+                  lambda r: _common_heading(r, a))
 
 
 def _has_common_heading(runs: list[dict[str, Any]], scenario: str, a: str, b: str) -> bool:
