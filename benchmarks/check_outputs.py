@@ -77,6 +77,9 @@ def check(root: Path) -> list[str]:
                 problems.append(f"{where}/{r.get('estimator')} failed: {r.get('error')}")
             else:
                 problems += causal_problems(where, str(r.get("estimator")), r)
+        names = {r.get("estimator") for r in b.get("runs", [])}
+        if {"ekf-rts", "graph-batch"} <= names and not (root / "bench" / "forest.png").is_file():
+            problems.append("bench: forest.png (the paired gains of the graph) missing")
     r = load("reproductions.json")
     if r is not None and not REPRO_KEYS <= set(r):
         problems.append(f"reproductions.json lacks {sorted(REPRO_KEYS - set(r))}")

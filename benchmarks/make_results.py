@@ -1,34 +1,25 @@
 """Generate ``docs/results.md`` from benchmark output — never edit that page by hand.
 
-Usage
------
-Everything (bench, seed reproductions, graph performance, then the page)::
+Everything (bench, seed reproductions, graph performance, hard study, online accuracy; 20
+seeds unless ``--seeds`` asks for more), then the page::
 
     python benchmarks/make_results.py --run [--quick] [--seeds N] --out bench-results
 
-Only the page, from output that already exists in a directory::
-
-    python benchmarks/make_results.py bench-results [-o docs/results.md]
+Only the page, from output that already exists: ``make_results.py bench-results``.
 
 Inputs, from the results directory: ``bench.json`` (``vnav-graph bench``, required),
-``reproductions.json`` (``benchmarks/reproduce_seeds.py``), ``graph_perf.json``
-(``benchmarks/bench_graph.py``) and ``hard/`` (``benchmarks/hard_scenarios.py``: the
-EKF-vs-graph study on the hard scenarios; its plots are copied to ``docs/img/``), each
-optional.
+``reproductions.json``, ``graph_perf.json``, ``hard/`` (``hard_scenarios.py``; its plots go to
+``docs/img/``), ``online_accuracy.json`` and ``provenance.json`` (each step's command, commit
+and times: ``provenance.py``), each optional. Every section is stamped with its provenance
+and JSON (committed under ``docs/results_data/`` when small, else named by sha256).
 
 What the page says is computed, not written: for each pair of approaches that isolates one
-effect (e.g. ``ekf`` → ``ekf-rts``: smoothing; ``ekf-rts`` → ``graph-batch``: relinearisation
-and modelling), the per-seed **paired** differences d_i = x_a,i − x_b,i of each metric give
-mean(d) and its Student-t 95 % CI (same seeds, same drives: the paired interval removes the
-drive-to-drive spread). Each difference is judged by the accuracy win rule
-(``vnav_graph.evaluation.winrule.WIN_RULE``: a CI excluding 0 is a win, calibration on the
-metric's own axes beside it, the only veto a winner bought by overconfidence; heading where
-both know it; missing seeds named; tails beside the mean), stated on the page; the page names
-no mechanism it did not measure.
-Like for like: the forward ekf against graph-isam2's online estimate (the ``online`` blocks of
-the bench rows: real time), and ekf-rts against graph-batch and graph-isam2's final trajectory
-(offline); with ``online_accuracy.json`` in the results directory
-(``benchmarks/online_accuracy.py``) its goal table too.
+effect, the per-seed **paired** differences of each metric give mean(d) and its Student-t
+95 % CI, judged by the accuracy win rule (``vnav_graph.evaluation.winrule.WIN_RULE``), stated
+on the page. Like for like: the forward ekf against graph-isam2's online estimate (real
+time), ekf-rts against graph-batch and graph-isam2's final trajectory (offline), summed up
+in one forest plot (``vnav_graph.report.forest``). The page names no mechanism it did not
+measure.
 """
 
 from __future__ import annotations
@@ -42,6 +33,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from vnav_graph.evaluation.gains import real_time_rows
 from vnav_graph.evaluation.winrule import NEES_MAX, WIN_RULE, describe, win_rule
 
 REPO = Path(__file__).resolve().parent.parent
@@ -66,11 +58,6 @@ ONLINE_METRICS = (
     ("heading_rmse_deg", "heading RMSE", "deg", 1.0, ".2f"),
     ("vel_down_rmse_mps", "vertical-velocity RMSE", "m/s", 1.0, ".4f"),
 )
-# the keys a real-time row takes from its online (common-span) block
-REAL_TIME_KEYS = ("alt_rmse_m", "horiz_rmse_m", "heading_rmse_deg", "heading_known_rmse_deg",
-                  "heading_known_after_s", "vel_down_rmse_mps", "nees_mean", "nees_dof")
-# keys of a bench row that describe the final trajectory only (cleared in real-time rows)
-FINAL_ONLY = ("alt_p95_m", "horiz_p95_m", "heading_p95_deg", "vel_down_p95_mps")
 # metric key in bench rows, label, unit, display scale, format
 METRICS = (
     ("alt_rmse_m", "altitude RMSE", "m", 1.0, ".3f"),
@@ -105,36 +92,24 @@ def _fmt(m: dict[str, Any] | None, scale: float, spec: str) -> str:
     return s
 
 
-def hard_module() -> Any:
-    """``benchmarks/hard_scenarios.py`` as a module (its win rule and page section)."""
+def bench_module(name: str) -> Any:
+    """``benchmarks/<name>.py`` as a module (the scripts are not a package)."""
     import importlib.util
 
-    spec = importlib.util.spec_from_file_location(
-        "hard_scenarios", REPO / "benchmarks" / "hard_scenarios.py")
+    spec = importlib.util.spec_from_file_location(name, REPO / "benchmarks" / f"{name}.py")
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     return mod
 
 
-def real_time_rows(runs: list[dict[str, Any]], a: str, b: str) -> list[dict[str, Any]]:
-    """The rows of ``a`` and ``b`` with their real-time metrics in place of the trajectory's,
-    both over their common span, from the later of their two first epochs: a row whose
-    causal estimate starts earlier takes ``online_common[<other>]`` (the bench scores it from
-    the other's first epoch, ``montecarlo.common_start_blocks``), the other its ``online``
-    block. Rows without an online block are left out."""
-    out = []
-    for r in runs:
-        if r["estimator"] not in (a, b) or not r.get("online"):
-            continue
-        other = b if r["estimator"] == a else a
-        blk = (r.get("online_common") or {}).get(other) or r["online"]
-        rt = {**r, **{k: blk.get(k) for k in REAL_TIME_KEYS}, "online": blk,
-              # the final trajectory's: not the causal estimate's (the win rule then says
-              # what it used instead)
-              "heading_common": None, **dict.fromkeys(FINAL_ONLY)}
-        rt.pop("nees_axes", None)
-        out.append(rt)
-    return out
+def hard_module() -> Any:
+    """``benchmarks/hard_scenarios.py`` as a module (its win rule and page section)."""
+    return bench_module("hard_scenarios")
+
+
+def provenance_module() -> Any:
+    """``benchmarks/provenance.py``: the run records and section stamps."""
+    return bench_module("provenance")
 
 
 def real_time_span(runs: list[dict[str, Any]], scenario: str, a: str, b: str) -> str:
@@ -216,12 +191,7 @@ def online_goal_section(results_dir: Path) -> list[str]:
     p = results_dir / "online_accuracy.json"
     if not p.is_file():
         return []
-    import importlib.util
-
-    spec = importlib.util.spec_from_file_location(
-        "online_accuracy", REPO / "benchmarks" / "online_accuracy.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    mod = bench_module("online_accuracy")
     doc = json.loads(p.read_text())
     cfg = doc["config"]
     return ["## graph-isam2's accuracy goals: online and fixed lag", "",
@@ -319,8 +289,50 @@ def perf_section(perf: dict[str, Any]) -> list[str]:
     return lines
 
 
-def render(results_dir: Path) -> str:
-    """The whole results page from the files in ``results_dir``."""
+def _estimators(doc: dict[str, Any]) -> str:
+    return ", ".join(dict.fromkeys(r["estimator"] for r in doc.get("runs", [])))
+
+
+def forest_section(results_dir: Path, img_dir: Path | None) -> list[str]:
+    """The paired gains of the graph over the filter in every scenario of the bench and the
+    hard study (``evaluation.gains``), drawn as ``img/results-forest.png`` (``report.forest``)
+    when ``img_dir`` is given."""
+    from vnav_graph.evaluation.gains import gain_lines, gain_rows
+    from vnav_graph.report.forest import forest_png
+
+    rows = []
+    for name, path in (("bench", results_dir / "bench.json"),
+                       ("hard study", results_dir / "hard" / "bench.json")):
+        if path.is_file():
+            rows += gain_rows(json.loads(path.read_text())["runs"], name)
+    lines = gain_lines(rows)
+    if not lines:
+        return []
+    out = ["## Filter vs graph at a glance", "",
+           "Paired gains g = 1 − mean(graph)/mean(filter) over the seeds with their 95 % CI "
+           "(delta method), per scenario and metric: real time is the forward ekf against "
+           "graph-isam2's online estimate, offline is ekf-rts against graph-batch; filled: a "
+           "win the rule counts. The default scenarios come from the bench, the others from "
+           "the hard study (its configuration below).", ""]
+    png = forest_png(rows, "Filter vs graph: paired gains over seeds")
+    if png is not None and img_dir is not None:
+        img_dir.mkdir(parents=True, exist_ok=True)
+        (img_dir / "results-forest.png").write_bytes(png)
+        out += ["![paired gains of the graph over the filter](img/results-forest.png)", ""]
+    return out + ["<details><summary>the numbers</summary>", "", *lines, "", "</details>", ""]
+
+
+def render(results_dir: Path, docs_dir: Path | None = None) -> str:
+    """The whole results page from the files in ``results_dir``; with ``docs_dir`` the forest
+    figure goes to ``docs_dir/img`` and the small JSON files to ``docs_dir/results_data``."""
+    prov = provenance_module()
+    data = None if docs_dir is None else docs_dir / "results_data"
+
+    def stamp(step: str, path: Path, name: str, what: str) -> list[str]:
+        kept = (prov.keep(path, data, name) if data is not None
+                else f"JSON `{path.name}` sha256 `{prov.sha256(path)}`")
+        return [prov.stamp(results_dir, step, path, kept, what), ""]
+
     bench_path = results_dir / "bench.json"
     if not bench_path.is_file():
         raise ValueError(f"no bench.json in {results_dir} (run `vnav-graph bench --out "
@@ -335,11 +347,10 @@ def render(results_dir: Path) -> str:
         "# Results: EKF vs factor graph vs classical baro-inertial estimators", "",
         "<!-- GENERATED FILE: do not edit. Regenerate with one command: -->",
         "<!--   python benchmarks/make_results.py --run --out bench-results -->",
-        "Generated by `python benchmarks/make_results.py --run --out bench-results` "
-        "(runs `vnav-graph bench`, `benchmarks/reproduce_seeds.py` and "
-        "`benchmarks/bench_graph.py`, then writes this page; `--quick` for the CI-sized "
-        "version). From existing output: `python benchmarks/make_results.py bench-results`.",
-        "",
+        "Generated by `python benchmarks/make_results.py --run --out bench-results` (runs "
+        "the bench, the seed reproductions, the graph performance, the hard study and the "
+        "online accuracy study, then writes this page; `--quick` for the CI-sized version; "
+        "each section names its command, commit and JSON).", "",
         f"Generated {_dt.date.today().isoformat()} from vnav_graph "
         f"{cfg.get('vnav_graph_version', '?')}: scenarios {', '.join(cfg['scenarios'])}, "
         f"seeds {cfg['seeds']}, drive length {dur}, {len(doc['runs'])} runs "
@@ -353,6 +364,10 @@ def render(results_dir: Path) -> str:
         "differences d = a − b over the same seeds (d > 0: b lower). "
         f"**Win rule:** {WIN_RULE.format(n=NEES_MAX)}. The page names no "
         "mechanism it did not measure.", "",
+        *stamp("bench", bench_path, "bench.json",
+               f"estimators {_estimators(doc)}; scenarios {', '.join(cfg['scenarios'])}; "
+               f"seeds {len(cfg['seeds'])}; configuration: every estimator at its defaults"),
+        *forest_section(results_dir, None if docs_dir is None else docs_dir / "img"),
     ]
     for sc in doc["aggregate"]:
         out += [f"## Scenario `{sc}`", ""] + scenario_table(doc, sc) + [""]
@@ -376,18 +391,29 @@ def render(results_dir: Path) -> str:
         if rep_doc.get("quick"):
             out += ["`python benchmarks/reproduce_seeds.py --quick` (CI-sized: shortened runs).",
                     ""]
+        out += stamp("reproductions", rep, "reproductions.json", "the seed papers' cases")
         out += reproductions_section(rep_doc) + [""]
     else:
         out += ["Not generated in this run (`benchmarks/reproduce_seeds.py` output "
                 "`reproductions.json` missing).", ""]
     hard = results_dir / "hard"
     if (hard / "bench.json").is_file():
-        out += hard_module().render_section(hard)
-    out += online_goal_section(results_dir)
+        sec = hard_module().render_section(hard)
+        hdoc = json.loads((hard / "bench.json").read_text())
+        out += sec[:2] + stamp("hard", hard / "bench.json", "hard_bench.json",
+                               f"estimators {_estimators(hdoc)}; seeds "
+                               f"{len(hdoc['config']['seeds'])}; configuration "
+                               "`benchmarks/hard_scenarios.toml`") + sec[2:]
+    oa = online_goal_section(results_dir)
+    if oa:
+        p = results_dir / "online_accuracy.json"
+        out += oa[:2] + stamp("online_accuracy", p, "online_accuracy.json",
+                              "estimators ekf, graph-isam2 (online and lag), graph-batch") + oa[2:]
     perf = results_dir / "graph_perf.json"
     out += ["## Factor-graph performance", ""]
     if perf.is_file():
         perf_doc = json.loads(perf.read_text())
+        out += stamp("graph_perf", perf, "graph_perf.json", "graph-batch and graph-isam2")
         dur = perf_doc.get("drive_duration_s")
         if dur is not None:
             out += [f"`python benchmarks/bench_graph.py` on a {dur / 60:.0f}-minute hill-drive"
@@ -400,29 +426,33 @@ def render(results_dir: Path) -> str:
 
 
 def run_all(out: Path, quick: bool, seeds: int | None) -> None:
-    """Run the bench and, when present, the reproduction and graph-performance scripts."""
+    """Run the bench, the seed reproductions, the graph performance, the hard study and the
+    online accuracy study, each recorded in ``provenance.json`` (command, commit, times)."""
     out.mkdir(parents=True, exist_ok=True)
     py = sys.executable
+    prov = provenance_module()
+    n = str(max(seeds or 0, 20))
+
+    def step(name: str, cmd: list[str]) -> int:
+        return prov.record(out, name, cmd, lambda: subprocess.run(cmd).returncode)
+
     cmd = [py, "-m", "vnav_graph", "bench", "--out", str(out)]
-    cmd += ["--quick"] if quick else []
-    cmd += ["--seeds", str(seeds)] if seeds else []
-    rc = subprocess.run(cmd).returncode
+    cmd += ["--quick"] if quick else ["--seeds", n]
+    rc = step("bench", cmd)
     if rc not in (0, 1):  # 1 = some runs failed: still reported on the page
         raise SystemExit(f"make_results: bench failed with exit code {rc}")
-    for script in ("reproduce_seeds.py", "bench_graph.py"):
-        p = REPO / "benchmarks" / script
-        if p.is_file():
-            r = subprocess.run([py, str(p), *(["--quick"] if quick else []), "--out", str(out)])
-            if r.returncode != 0:
-                print(f"make_results: {script} exited {r.returncode}; its section is omitted",
-                      file=sys.stderr)
+    for name, script in (("reproductions", "reproduce_seeds.py"), ("graph_perf", "bench_graph.py")):
+        cmd = [py, str(REPO / "benchmarks" / script), *(["--quick"] if quick else []),
+               "--out", str(out)]
+        if step(name, cmd) != 0:
+            print(f"make_results: {script} failed; its section is omitted", file=sys.stderr)
     hard = [py, str(REPO / "benchmarks" / "hard_scenarios.py"), "--out", str(out / "hard")]
-    hard += ["--quick"] if quick else (["--seeds", str(max(seeds or 0, 20))])
-    if subprocess.run(hard).returncode != 0:
+    hard += ["--quick"] if quick else ["--seeds", n]
+    if step("hard", hard) != 0:
         print("make_results: hard_scenarios.py failed; its section is omitted", file=sys.stderr)
     oa = [py, str(REPO / "benchmarks" / "online_accuracy.py"), "--out", str(out)]
-    oa += ["--seeds", "2", "--duration", "240"] if quick else ["--seeds", str(max(seeds or 0, 20))]
-    if subprocess.run(oa).returncode != 0:
+    oa += ["--seeds", "2", "--duration", "240"] if quick else ["--seeds", n]
+    if step("online_accuracy", oa) != 0:
         print("make_results: online_accuracy.py failed; its section is omitted",
               file=sys.stderr)
 
@@ -446,7 +476,7 @@ def main(argv: list[str] | None = None) -> int:
     else:
         ap.error("give RESULTS_DIR or --run --out DIR")
     try:
-        page = render(results)
+        page = render(results, Path(a.output).parent)
     except ValueError as exc:
         print(f"make_results: error: {exc}", file=sys.stderr)
         return 2

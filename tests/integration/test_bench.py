@@ -73,6 +73,8 @@ def test_bench_cli_writes_schema(tmp_path, fake, capsys):
         assert set(cell) >= {"alt_rmse_m", "nees_mean", "runtime_s", "vel_down_rmse_mps"}
     md = (out / "bench.md").read_text()
     assert "## hill-drive" in md and "## sortie" in md and "| truth-plus-one | 2/2 |" in md
+    # no filter and graph pair among the estimators: no gains section, no figure
+    assert "paired gains" not in md and not (out / "forest.png").exists()
 
 
 def test_bench_failed_run_exit_1_after_writing(tmp_path, fake, capsys):
@@ -179,3 +181,12 @@ def test_make_results_page_from_numbers(tmp_path):
     page = mr.render(tmp_path)
     assert "| `seed003_steady_sd_m` | 1.1 | 1.2 |" in page
     assert "| `seed001_rmse_m.vekf7` | 4 | 5.7 |" in page
+    # every section names where it comes from: the forest of gains, the bench's JSON
+    docs = tmp_path / "docs"
+    page = mr.render(tmp_path, docs)
+    assert "## Filter vs graph at a glance" in page
+    assert (docs / "img" / "results-forest.png").is_file()
+    assert "offline (ekf-rts → graph-batch), altitude RMSE: gain" in page
+    assert page.count("*Provenance:*") == 2  # the bench and the reproductions
+    assert (docs / "results_data" / "bench.json").read_text() == \
+        (tmp_path / "bench.json").read_text()

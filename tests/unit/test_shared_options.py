@@ -15,7 +15,7 @@ SHARED = ("accel_scale", "baro_scale_sd", "gnss_gm_auto", "gnss_gm_sd_h", "gnss_
           "gnss_gm_tau_s", "loss_baro", "loss_gnss_pos", "loss_gnss_vel", "loss_threshold_sd",
           "mag_bias_sd", "mag_heading_floor", "mag_interval_s", "use_mag")
 # (EkfConfig name, GraphConfig name): the same quantity under two names
-PAIRS = (("post_gate_prob", "gnss_gate_prob"),)
+PAIRS = (("post_gate_prob", "gnss_gate_prob"), ("post_gate_rounds", "gate_rounds"))
 
 
 def _defaults(cls: type) -> dict[str, object]:
@@ -32,3 +32,10 @@ def test_shared_options_have_equal_defaults() -> None:
     differ = {k: (e[k], g[k]) for k in SHARED if e[k] != g[k]}
     differ |= {f"{a}/{b}": (e[a], g[b]) for a, b in PAIRS if e[a] != g[b]}
     assert not differ, differ
+
+
+def test_both_families_gate_fixes_after_the_solve_by_default() -> None:
+    """The graphs always run their post-solve gate (``gate_rounds``); ekf-rts's counterpart
+    (``post_gate``) is on by default too, so a default comparison is one configuration."""
+    assert EkfConfig().post_gate is True
+    assert GraphConfig().gate_rounds > 0 and GraphConfig().gnss_gate_prob > 0

@@ -150,6 +150,30 @@ def _say_hint(drive: Any, names: list[str], holdout: bool, mode: Any) -> None:
         say(f"hint: {hint}", mode)
 
 
+def _write_gains(doc: dict, out: Path) -> list[str]:
+    """The paired gains of the graph over the filter (``evaluation.gains``): appended to
+    ``bench.md`` as a section and drawn as ``forest.png`` (``report.forest``) beside
+    ``bench.json``, when the runs hold a filter and a graph to compare. Returns the section."""
+    from ..evaluation.gains import gain_lines, gain_rows
+    from ..report.forest import forest_png
+
+    rows = gain_rows(doc["runs"])
+    lines = gain_lines(rows)
+    if not lines:
+        return []
+    png = forest_png(rows, "Filter vs graph: paired gains over seeds")
+    section = ["## Filter vs graph: paired gains", "",
+               "Gain = 1 − mean(graph)/mean(filter) over the seeds, 95 % CI (delta method), "
+               "and the win rule's verdict; real time: ekf vs graph-isam2's online estimate, "
+               "offline: ekf-rts vs graph-batch.", "", *lines, ""]
+    if png is not None:
+        (out / "forest.png").write_bytes(png)
+        section += ["![paired gains of the graph over the filter](forest.png)", ""]
+    with open(out / "bench.md", "a", encoding="utf-8") as fh:
+        fh.write("\n" + "\n".join(section))
+    return section
+
+
 def cmd_bench(args: argparse.Namespace) -> int:
     """``vnav-graph bench``: validate arguments, run, write ``bench.json`` and ``bench.md``.
 
@@ -188,6 +212,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
                 workers=workers, dask=args.dask, progress=mode_for(not args.no_progress),
                 configs=getattr(args, "configs", None))
     mc.write_bench(doc, out)
+    gains = _write_gains(doc, out)
     n_ok = sum(r["status"] == "ok" for r in doc["runs"])
     if doc["config"]["interrupted"]:
         print(f"vnav-graph: interrupted: wrote the {len(doc['runs'])} of "
@@ -195,6 +220,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
               file=sys.stderr)
         return 130
     print(mc.format_bench_md(doc))
+    print("\n".join(gains))
     print(f"wrote {out / 'bench.json'} and {out / 'bench.md'}: {n_ok}/{len(doc['runs'])} runs "
           f"ok in {doc['config']['wall_s']:.1f} s")
     msg = mc.failure_summary(doc)

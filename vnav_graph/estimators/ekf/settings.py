@@ -111,7 +111,7 @@ class EkfConfig(GnssErrorSettings):
     loss_threshold_sd: tuple[float, float, float] = (2.0, 2.0, 2.0)
     # the graph's post-solve gate for ekf-rts: remove the fixes that do not fit the smoothed
     # trajectory and run the forward and RTS passes again
-    post_gate: bool = False
+    post_gate: bool = True
     post_gate_rounds: int = 3
     post_gate_prob: float = 0.9999
     # the graph's IRLS for ekf-rts: each fix's Huber weight from its residual against the
