@@ -29,10 +29,12 @@ import importlib as _importlib
 from typing import Any as _Any
 
 from .jit import configure_cache as _configure_cache  # noqa: E402
+from .jit import configure_locator as _configure_locator  # noqa: E402
 from .jit import configure_opt as _configure_opt  # noqa: E402
 from .version import __version__
 
 _configure_cache()  # numba's cache in the user cache dir, never inside the installed package
+_configure_locator()  # kernels cached by content and package path, not install path
 _configure_opt()  # LLVM level 2 unless NUMBA_OPT is set (jit.NUMBA_OPT_LEVEL: faster compile)
 
 # The public API, imported on first access (PEP 562) so that ``import vnav_graph`` (and with it

@@ -182,7 +182,10 @@ def family_of(name: str) -> str | None:
 
 
 def source_key() -> str:
-    """Changes whenever a kernel's source may have changed (numba then recompiles)."""
+    """Changes whenever a kernel's source may have changed (numba then recompiles): the hash
+    of every module's path inside the package and its *content*, so that the same sources
+    installed elsewhere or again (``pip install .``, then ``pip install -e .``) share one
+    cache directory."""
     import hashlib
 
     from .version import __version__
@@ -190,9 +193,78 @@ def source_key() -> str:
     h = hashlib.sha1(__version__.encode())
     root = Path(__file__).resolve().parent
     for p in sorted(root.rglob("*.py")):
-        st = p.stat()
-        h.update(f"{p.relative_to(root)}:{st.st_mtime_ns}:{st.st_size}".encode())
+        h.update(f"{p.relative_to(root).as_posix()}:".encode())
+        h.update(p.read_bytes())
     return h.hexdigest()[:16]
+
+
+# numba's own cache locators, tried after the package's (numba.core.caching._CacheImpl)
+NUMBA_LOCATORS = ("UserProvidedCacheLocator", "InTreeCacheLocator", "UserWideCacheLocator",
+                  "IPythonCacheLocator", "ZipCacheLocator")
+
+
+def configure_locator() -> bool:
+    """Put ``PackageCacheLocator`` first in numba's cache locators
+    (``NUMBA_CACHE_LOCATOR_CLASSES``, numba ≥ 0.62; older versions ignore it and cache by
+    install path) unless the user set that variable. Cheap: numba is not imported."""
+    if "NUMBA_CACHE_LOCATOR_CLASSES" in os.environ:
+        return False
+    value = ",".join((f"{__name__}.PackageCacheLocator", *NUMBA_LOCATORS))
+    os.environ["NUMBA_CACHE_LOCATOR_CLASSES"] = value
+    cfg = sys.modules.get("numba.core.config")
+    if cfg is not None and hasattr(cfg, "CACHE_LOCATOR_CLASSES"):
+        cfg.CACHE_LOCATOR_CLASSES = value
+    return True
+
+
+def __getattr__(name: str) -> Any:
+    """``PackageCacheLocator`` is built on first use (numba imports it by name when it caches
+    a kernel): defining it needs numba, which importing this module must not."""
+    if name == "PackageCacheLocator":
+        cls = package_locator()
+        globals()[name] = cls
+        return cls
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def package_locator() -> type:
+    """numba's cache locator for this package's kernels: the cache file sits under numba's
+    cache directory at the kernel module's path *inside* the package (numba's own locator
+    uses a hash of the absolute directory, so a reinstall at another path compiles again),
+    and its freshness stamp is the SHA-256 of the module's content (not its mtime, which a
+    reinstall changes). Modules outside the package get numba's locators."""
+    import functools
+    import hashlib
+
+    from numba.core import config
+    from numba.core.caching import UserProvidedCacheLocator
+
+    root = package_parent()
+    inside = os.path.join(root, "vnav_graph") + os.sep
+
+    @functools.lru_cache(maxsize=256)
+    def digest(path: str, mtime_ns: int, size: int) -> str:
+        with open(path, "rb") as fh:
+            return hashlib.sha256(fh.read()).hexdigest()
+
+    class PackageCacheLocator(UserProvidedCacheLocator):  # type: ignore[misc]
+        def __init__(self, py_func: Any, py_file: str) -> None:
+            super().__init__(py_func, py_file)
+            rel = os.path.relpath(os.path.dirname(os.path.abspath(py_file)), root)
+            self._cache_path = os.path.join(config.CACHE_DIR, rel)
+
+        def get_source_stamp(self) -> str:
+            st = os.stat(self._py_file)
+            return digest(self._py_file, st.st_mtime_ns, st.st_size)
+
+        @classmethod
+        def from_function(cls, py_func: Any, py_file: str) -> Any:
+            if not os.path.abspath(py_file).startswith(inside):
+                return None
+            return super().from_function(py_func, py_file)
+
+    PackageCacheLocator.__module__ = __name__
+    return PackageCacheLocator
 
 
 def stamp(family: str, key: str | None = None) -> Path:
