@@ -27,7 +27,7 @@ from vnav_graph.config import BaroSpec
 from vnav_graph.estimators.vertical.adaptive import AdaptiveConfig, run_adaptive
 from vnav_graph.estimators.vertical.loops import LoopInputs, gains3, loop_inputs, run_loop
 from vnav_graph.simulation import load_scenario, simulate
-from vnav_graph.types import BaroStream
+from vnav_graph.types.streams import BaroStream
 
 VARIANTS = {
     "loop3": None,

@@ -3,7 +3,7 @@
     python benchmarks/bench_real_logs.py --out DIR [--estimators a,b] [--data DIR]
 
 For every shared log present (``$VNAV_DATA`` or ``../shared/data``), runs
-``vnav_graph.runner.run_holdout`` with the given estimators (default
+``vnav_graph.run.runner.run_holdout`` with the given estimators (default
 ``ekf-rts,graph-isam2,graph-batch``) and writes ``DIR/real_log_perf.json``:
 ``{"logs": {LOG: {ESTIMATOR: {"status", "runtime_s", "alt_rmse_m"}}},
 "missing": [...]}``. Each estimator first runs once, untimed, on the first log, so numba's
@@ -75,7 +75,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--data", default=None)
     a = ap.parse_args(argv)
     from vnav_graph.io import load_drive
-    from vnav_graph.runner import run_holdout
+    from vnav_graph.run.runner import run_holdout
 
     names = [n for n in a.estimators.split(",") if n]
     root = data_root(a.data)

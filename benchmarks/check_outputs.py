@@ -69,7 +69,7 @@ def check(root: Path) -> list[str]:
             problems.append("summary.json: no estimator ran")
     b = load("bench/bench.json")
     if b is not None:
-        if b.get("schema") != "vnav_graph.bench/1" or not b.get("runs"):
+        if b.get("schema") != "vnav_graph.run.bench/1" or not b.get("runs"):
             problems.append("bench.json: wrong schema or no runs")
         for r in b.get("runs", []):
             where = f"bench.json: {r.get('scenario')}/{r.get('seed')}"

@@ -93,7 +93,7 @@ def run_seed(scenario: str, seed: int, models: list[str], duration: float | None
              ekf_max_rejected_s: float | None = None) -> dict[str, Any]:
     from vnav_graph.evaluation.gnss_residuals import gnss_residual_autocorr
     from vnav_graph.evaluation.metrics import evaluate
-    from vnav_graph.runner import run_one
+    from vnav_graph.run.runner import run_one
     from vnav_graph.simulation.scenario import simulate
 
     over = {} if duration is None else {"duration_s": duration}
@@ -157,7 +157,7 @@ def diagnostic(seeds: int, out: Path) -> int:
 
     from vnav_graph.evaluation.gnss_residuals import gnss_residual_autocorr
     from vnav_graph.io import load_drive
-    from vnav_graph.runner import run_one
+    from vnav_graph.run.runner import run_one
     from vnav_graph.simulation.scenario import simulate
 
     doc: dict[str, Any] = {"simulated": {}, "logs": {}}

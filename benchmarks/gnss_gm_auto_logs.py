@@ -61,7 +61,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", default="gnss-gm-auto-logs")
     args = ap.parse_args(argv)
     from vnav_graph.io import load_drive
-    from vnav_graph.runner import run_holdout
+    from vnav_graph.run.runner import run_holdout
 
     root = data_root(args.data)
     doc: dict[str, Any] = {"config": GM, "logs": {}}

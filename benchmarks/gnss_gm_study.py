@@ -46,7 +46,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--tau", type=float, nargs="+", default=[120.0, 600.0], help="GM τ [s]")
     args = ap.parse_args(argv)
     from vnav_graph.io import load_drive
-    from vnav_graph.runner import run_holdout
+    from vnav_graph.run.runner import run_holdout
 
     root = data_root(args.data)
     variants = [("off", None)] + [(f"σ {args.sd:g} m τ {t:g} s", (args.sd, t))

@@ -268,7 +268,7 @@ def ablation(drive: Any, configs: dict[str, Any]) -> dict[str, Any]:
     from vnav_graph.estimators.base import create
     from vnav_graph.evaluation.metrics import evaluate
     from vnav_graph.evaluation.montecarlo import derived_metrics
-    from vnav_graph.runner import run_one
+    from vnav_graph.run.runner import run_one
 
     out: dict[str, Any] = {}
     for label, name, change in ABLATION:
@@ -449,9 +449,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="plots, attribution and page section from an existing bench.json")
     ap.add_argument("--out", required=True)
     a = ap.parse_args(argv)
-    from vnav_graph.bench import bench
     from vnav_graph.estimators.configfile import load_configs
     from vnav_graph.evaluation.montecarlo import write_bench
+    from vnav_graph.run.bench import bench
 
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)

@@ -55,7 +55,7 @@ def real_logs(which: str, data: str | None, spacings: list[float]) -> dict[str, 
     """The holdout of each shared log named in ``which`` with both graphs at each spacing."""
     from vnav_graph.estimators.graph import GraphConfig
     from vnav_graph.io import load_drive
-    from vnav_graph.runner import run_holdout
+    from vnav_graph.run.runner import run_holdout
 
     logs = select_logs(which)
     out: dict[str, Any] = {}

@@ -65,7 +65,7 @@ def run_one(job: tuple[str, int, float, float, str]) -> dict[str, Any]:
     from vnav_graph.estimators.configfile import load_configs
     from vnav_graph.evaluation.montecarlo import shorten_scenario
     from vnav_graph.geo.frames import lla_to_ned
-    from vnav_graph.runner import run_one as run_estimator
+    from vnav_graph.run.runner import run_one as run_estimator
     from vnav_graph.simulation import simulate
 
     scenario, seed, duration, every, config = job

@@ -4,7 +4,7 @@
 
 For each shared log present (the full-rate ones: the averaged 1 Hz car logs run with their own
 low-rate settings, which any other setting turns off), the GNSS-outage holdout
-(``vnav_graph.runner.run_holdout``, as ``holdout`` runs it) is run ``--repeat`` times with
+(``vnav_graph.run.runner.run_holdout``, as ``holdout`` runs it) is run ``--repeat`` times with
 graph-batch and graph-isam2 under three relinearisation settings, in one process, the
 variants alternated so that the machine's load falls on all of them alike:
 
@@ -69,7 +69,7 @@ def _score(block: dict[str, Any], key: str) -> float | None:
 def run_variant(drive: Any, name: str) -> tuple[float, dict[str, Any]]:
     """One holdout run of graph-batch and graph-isam2 (``name``'s settings): graph-batch's
     runtime and graph-isam2's row."""
-    from vnav_graph import runner
+    from vnav_graph.run import runner
 
     kept: dict[str, Any] = {}
     plain = runner.run_estimators

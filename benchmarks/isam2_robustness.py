@@ -40,9 +40,9 @@ import numpy as np
 
 from vnav_graph.config import IMU_PRESETS
 from vnav_graph.estimators.base import create
-from vnav_graph.failures import failure_message
 from vnav_graph.geo.frames import lla_to_ned
 from vnav_graph.simulation.scenario import load_scenario, simulate
+from vnav_graph.util.failures import failure_message
 
 CASES = {
     "two-outage": "20-min hill drive, industrial IMU, 1 Hz GNSS, two 240 s outages",

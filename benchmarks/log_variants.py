@@ -56,7 +56,7 @@ def position_only(d: Any) -> Any:
 
 
 def imu_half_rate(d: Any) -> Any:
-    from vnav_graph.types import ImuStream
+    from vnav_graph.types.streams import ImuStream
 
     i = d.imu
     return d.replace(imu=ImuStream(i.t[::2], i.gyro_b[::2], i.accel_b[::2], i.spec))
@@ -123,7 +123,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--only", default=None, help="comma-separated variant numbers")
     a = ap.parse_args(argv)
     from vnav_graph.io.readers import read_log
-    from vnav_graph.runner import run_holdout
+    from vnav_graph.run.runner import run_holdout
 
     root = data_root(a.data)
     only = None if a.only is None else {int(x) for x in a.only.split(",")}

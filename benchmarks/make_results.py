@@ -338,8 +338,8 @@ def render(results_dir: Path, docs_dir: Path | None = None) -> str:
         raise ValueError(f"no bench.json in {results_dir} (run `vnav-graph bench --out "
                          f"{results_dir}` or use --run)")
     doc = json.loads(bench_path.read_text())
-    if doc.get("schema") != "vnav_graph.bench/1":
-        raise ValueError(f"{bench_path}: not a vnav_graph.bench/1 document")
+    if doc.get("schema") != "vnav_graph.run.bench/1":
+        raise ValueError(f"{bench_path}: not a vnav_graph.run.bench/1 document")
     cfg = doc["config"]
     dur = "scenario default" if cfg.get("duration_s") is None else f"{cfg['duration_s']:g} s"
     n_fail = sum(r["status"] != "ok" for r in doc["runs"])

@@ -10,7 +10,7 @@ Writes ``DIR/online_accuracy.json`` (schema ``vnav_graph.online_accuracy/3``) an
 goal table.
 
 Every estimator runs with the configuration of ``benchmarks/hard_scenarios.toml`` (each family
-at its best, the same file as the hard-scenario study), through ``vnav_graph.runner.run_one``
+at its best, the same file as the hard-scenario study), through ``vnav_graph.run.runner.run_one``
 (the path of ``run`` and ``bench``), on the same simulated drive per (scenario, seed).
 
 Scoring, per (scenario, seed), at **common epochs** only, so that one epoch weighs the same in
@@ -133,7 +133,7 @@ def run_one(job: tuple[str, int, float | None]) -> dict[str, Any]:
     scenarios) and score the online and fixed-lag pairs."""
     from vnav_graph.estimators.configfile import load_configs
     from vnav_graph.evaluation.montecarlo import shorten_scenario
-    from vnav_graph.runner import run_one as run_estimator
+    from vnav_graph.run.runner import run_one as run_estimator
     from vnav_graph.simulation import simulate
 
     scenario, seed, duration = job

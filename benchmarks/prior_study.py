@@ -191,7 +191,7 @@ def study(scenarios: Sequence[str], seeds: int, estimators: Sequence[str],
           overrides: Mapping[str, Any] | None = None, progress: str = "off",
           workers: int = 1, keep_imu_spec: bool = False) -> dict[str, Any]:
     """The whole study: every run's records, the summary and the prior used."""
-    from vnav_graph.progress import Counter, steps
+    from vnav_graph.run.progress import Counter, steps
 
     jobs = [(sc, s) for sc in scenarios for s in range(seeds)]
     rows: list[dict[str, Any]] = []
@@ -229,7 +229,7 @@ def _parse_prior(text: str) -> dict[str, float]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from vnav_graph.progress import mode_for
+    from vnav_graph.run.progress import mode_for
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=20)

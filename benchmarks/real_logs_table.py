@@ -2,7 +2,7 @@
 
     python benchmarks/real_logs_table.py [--data DIR] [--out DIR] [--no-write]
 
-Runs ``vnav_graph.runner.run_holdout`` (60 s windows, default spacing, every
+Runs ``vnav_graph.run.runner.run_holdout`` (60 s windows, default spacing, every
 estimator, screened withheld GNSS) on each shared log present, writes
 ``DIR/real_logs_table.json`` (the holdout documents) and replaces the text between the
 markers ``<!-- holdout-table:begin -->`` and ``<!-- holdout-table:end -->`` of
@@ -89,7 +89,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-write", action="store_true", help="do not edit docs/real_logs.md")
     args = ap.parse_args(argv)
     from vnav_graph.io import load_drive
-    from vnav_graph.runner import run_holdout
+    from vnav_graph.run.runner import run_holdout
 
     root = data_root(args.data)
     docs: dict[str, dict[str, Any]] = {}

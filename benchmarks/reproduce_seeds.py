@@ -25,7 +25,7 @@ What each number is
   and Gauss-Markov bias) *without* GNSS outages; altitude RMSE against truth over the whole
   drive, pooled over seeds (√ of the mean squared error over all epochs of all seeds).
 - seed 001 Table 1: each of the seven (dSF, Td, B) sets simulated on the ``sortie`` (scale and
-  latency fixed, B a constant bias) and recovered with ``vnav_graph.calibration`` (eq. 4);
+  latency fixed, B a constant bias) and recovered with ``estimators.vertical.calibration`` (eq. 4);
   ``[truth, estimate, standard error]`` in SI units (dSF as a fraction, Td in s, B in m).
 - seed 004 §6.2 (baro-inertial filter keeps the altitude within 50 ft without GNSS): the
   default ``sortie`` with its two 60 s GNSS outages; altitude RMSE over the outage epochs,
@@ -51,8 +51,8 @@ REPO = Path(__file__).resolve().parent.parent
 if str(REPO) not in sys.path:  # run from a checkout without installing
     sys.path.insert(0, str(REPO))
 
-from vnav_graph.calibration import SEED001_TABLE1, calibrate_baro  # noqa: E402
 from vnav_graph.estimators.base import available, create  # noqa: E402
+from vnav_graph.estimators.vertical.calibration import SEED001_TABLE1, calibrate_baro  # noqa: E402
 from vnav_graph.evaluation.metrics import errors_vs_truth  # noqa: E402
 from vnav_graph.simulation import load_scenario, simulate  # noqa: E402
 

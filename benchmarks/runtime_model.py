@@ -1,4 +1,4 @@
-"""Measure every estimator's runtime and fit the cost model of ``vnav_graph.runtime_estimate``.
+"""Measure every estimator's runtime and fit the cost model of ``vnav_graph.run.runtime_estimate``.
 
     python benchmarks/runtime_model.py --out DIR [--quick] [--data DIR]
 
@@ -69,8 +69,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--data", default=None)
     args = ap.parse_args(argv)
     from vnav_graph.estimators.base import available
-    from vnav_graph.runner import run_estimators
-    from vnav_graph.runtime_estimate import COST, features, predict
+    from vnav_graph.run.runner import run_estimators
+    from vnav_graph.run.runtime_estimate import COST, features, predict
 
     names = [n for n in available() if n in COST]
     runs = []

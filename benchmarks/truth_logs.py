@@ -80,7 +80,7 @@ def scored_case(drive: Any, windows: list[tuple[float, float]], names: list[str]
                 withhold_gnss: bool) -> dict[str, Any]:
     from vnav_graph.evaluation.holdout import withhold
     from vnav_graph.evaluation.reference_score import reference_block
-    from vnav_graph.runner import run_estimators
+    from vnav_graph.run.runner import run_estimators
 
     held = withhold(drive, windows) if withhold_gnss else drive
     out: dict[str, Any] = {"windows": [list(w) for w in windows], "estimators": {}}

@@ -1,7 +1,7 @@
 """Calibrate a barometer against GNSS: seed 001's least squares, and its 7-state filter.
 
 Seed 001 (eq. 4) regresses dH = H_B − H_G on [H_G, −V_G, 1] to get the scale error dSF, the
-latency Td and the bias B (``vnav_graph.calibration.calibrate_baro``). On a simulated sortie
+latency Td and the bias B (``calibrate_baro``). On a simulated sortie
 (climbs and descents give the regression its leverage) the estimates are compared with the
 simulator's truth; if the ``vekf7`` estimator is in this build, its online estimates of the
 same three parameters are shown beside them.
@@ -13,8 +13,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from vnav_graph.calibration import calibrate_baro, format_calibration
 from vnav_graph.estimators.base import available, create
+from vnav_graph.estimators.vertical.calibration import calibrate_baro, format_calibration
 from vnav_graph.evaluation.blocks import baro_block
 from vnav_graph.evaluation.montecarlo import shorten_scenario
 from vnav_graph.simulation import simulate

@@ -19,7 +19,7 @@ from typing import Any
 
 from vnav_graph.estimators.base import available
 from vnav_graph.evaluation.montecarlo import shorten_scenario
-from vnav_graph.pipeline import run_estimators, summarize
+from vnav_graph.run.pipeline import run_estimators, summarize
 from vnav_graph.simulation import simulate
 
 REQUIRES = ("ekf", "graph-batch")
@@ -47,8 +47,8 @@ def main(duration_s: float = 240.0, seed: int = 0, scenario: str = "hill-drive"
 if __name__ == "__main__":
     from pathlib import Path
 
-    from vnav_graph.pipeline import format_table, write_outputs
     from vnav_graph.report import write_report
+    from vnav_graph.run.pipeline import format_table, write_outputs
 
     res = main(duration_s=600.0)
     print(format_table(res["summary"]))

@@ -15,7 +15,7 @@ estimator (the 3rd-order loop with another time constant). Both are registered u
 names with
 ``vnav_graph.estimators.base.register`` and then benchmarked beside any built-in estimator
 that this build provides (``loop3``, ``ekf``, ``graph-batch`` …), with
-``vnav_graph.bench.bench`` — the function behind ``vnav-graph bench``.
+``vnav_graph.run.bench.bench`` — the function behind ``vnav-graph bench``.
 
 Run: ``python examples/ex_custom_estimator.py`` (prints the bench table).
 """
@@ -28,9 +28,9 @@ from typing import Any
 
 import numpy as np
 
-from vnav_graph.bench import bench
 from vnav_graph.estimators.base import available, register
 from vnav_graph.evaluation.montecarlo import format_bench_md
+from vnav_graph.run.bench import bench
 from vnav_graph.types import BaroEstimate, Drive, Estimate, ParamEstimate, Trajectory
 
 

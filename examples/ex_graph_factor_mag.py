@@ -60,7 +60,8 @@ from vnav_graph.estimators.graph.model.extend import GraphView, Terms, Variable,
 from vnav_graph.evaluation.montecarlo import shorten_scenario
 from vnav_graph.geo.frames import quat_to_mat
 from vnav_graph.simulation import simulate
-from vnav_graph.types import Drive, FloatArray
+from vnav_graph.types import Drive
+from vnav_graph.types.streams import FloatArray
 
 REQUIRES = ("graph-batch",)
 FIELD_T_UT = np.array([21.0, 1.5, 43.0])  # Earth field, NED [µT] (47° N: 48 µT, dip 64°)

@@ -50,7 +50,8 @@ from vnav_graph.evaluation.metrics import errors_vs_truth
 from vnav_graph.evaluation.montecarlo import shorten_scenario
 from vnav_graph.geo.frames import quat_to_mat
 from vnav_graph.simulation import simulate
-from vnav_graph.types import Drive, FloatArray
+from vnav_graph.types import Drive
+from vnav_graph.types.streams import FloatArray
 
 REQUIRES = ("graph-batch",)
 SPAN = 10  # keyframes between the two ends of one odometry factor

@@ -52,7 +52,8 @@ from vnav_graph.estimators.graph import GraphBatch, GraphConfig
 from vnav_graph.estimators.graph.model.extend import GraphView, Terms, V
 from vnav_graph.evaluation.montecarlo import shorten_scenario
 from vnav_graph.simulation import simulate
-from vnav_graph.types import Drive, FloatArray, ImuStream
+from vnav_graph.types import Drive
+from vnav_graph.types.streams import FloatArray, ImuStream
 
 REQUIRES = ("graph-batch",)
 WINDOW_S = 0.5  # detection window [s]

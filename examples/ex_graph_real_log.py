@@ -20,7 +20,7 @@ import numpy as np
 
 from vnav_graph.estimators.base import available
 from vnav_graph.io import load_drive
-from vnav_graph.pipeline import run_estimators, summarize
+from vnav_graph.run.pipeline import run_estimators, summarize
 from vnav_graph.types import Drive
 
 REQUIRES = ("graph-batch",)
@@ -76,7 +76,7 @@ def main(duration_s: float | None = 120.0, log: str | Path | None = None) -> dic
 if __name__ == "__main__":
     import sys
 
-    from vnav_graph.pipeline import format_table
+    from vnav_graph.run.pipeline import format_table
 
     res = main(duration_s=None, log=sys.argv[1] if len(sys.argv) > 1 else None)
     print(format_table(res["summary"]))

@@ -36,6 +36,24 @@ def pytest_configure(config: pytest.Config) -> None:
         threadpool_limits(limits=1, user_api="blas")
 
 
+QUICK_LIST = Path(__file__).resolve().parent / "quick.txt"
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """The quick tier (``-m quick``): the tests of the files listed in ``tests/quick.txt``
+    that are not marked slow, chosen from measured durations to run in about a minute on 2
+    cores (README, "Tests")."""
+    listed = {line.split("#")[0].strip() for line in QUICK_LIST.read_text().splitlines()}
+    listed.discard("")
+    missing = sorted(f for f in listed if not (REPO / f).is_file())
+    if missing:
+        raise pytest.UsageError(f"tests/quick.txt lists missing files: {', '.join(missing)}")
+    for item in items:
+        rel = Path(str(item.path)).resolve().relative_to(REPO).as_posix()
+        if rel in listed and item.get_closest_marker("slow") is None:
+            item.add_marker(pytest.mark.quick)
+
+
 @pytest.fixture
 def rng() -> np.random.Generator:
     return np.random.default_rng(12345)

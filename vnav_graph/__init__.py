@@ -28,9 +28,9 @@ are imported on first use, so ``import vnav_graph`` stays light (no scipy, numba
 import importlib as _importlib
 from typing import Any as _Any
 
-from .jit import configure_cache as _configure_cache  # noqa: E402
-from .jit import configure_locator as _configure_locator  # noqa: E402
-from .jit import configure_opt as _configure_opt  # noqa: E402
+from .util.jit import configure_cache as _configure_cache  # noqa: E402
+from .util.jit import configure_locator as _configure_locator  # noqa: E402
+from .util.jit import configure_opt as _configure_opt  # noqa: E402
 from .version import __version__
 
 _configure_cache()  # numba's cache in the user cache dir, never inside the installed package
@@ -52,11 +52,11 @@ _LAZY: dict[str, str] = {
     "evaluate": "vnav_graph.evaluation.metrics:evaluate",
     # core types
     "ERROR_STATE": "vnav_graph.types:ERROR_STATE",
-    "BaroStream": "vnav_graph.types:BaroStream",
+    "BaroStream": "vnav_graph.types.streams:BaroStream",
     "Drive": "vnav_graph.types:Drive",
     "Estimate": "vnav_graph.types:Estimate",
-    "GnssStream": "vnav_graph.types:GnssStream",
-    "ImuStream": "vnav_graph.types:ImuStream",
+    "GnssStream": "vnav_graph.types.streams:GnssStream",
+    "ImuStream": "vnav_graph.types.streams:ImuStream",
     "Trajectory": "vnav_graph.types:Trajectory",
 }
 

@@ -10,7 +10,7 @@ import pytest
 
 from vnav_graph.io import load_drive
 from vnav_graph.io.sanity import check_drive
-from vnav_graph.types import BaroStream, GnssStream, ImuStream
+from vnav_graph.types.streams import BaroStream, GnssStream, ImuStream
 
 from .mutations import SEMANTIC
 from .writers import (

@@ -13,7 +13,7 @@ from dataclasses import replace
 
 import pytest
 
-from vnav_graph.pipeline import run_estimators
+from vnav_graph.run.pipeline import run_estimators
 from vnav_graph.sensors.baro import PRIOR_CONFLICT_Z
 from vnav_graph.simulation.scenario import load_scenario, simulate
 

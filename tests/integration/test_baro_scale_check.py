@@ -27,7 +27,8 @@ from vnav_graph.sensors.baro import (
 )
 from vnav_graph.sensors.model import sensor_model
 from vnav_graph.simulation import simulate
-from vnav_graph.types import BaroEstimate, ImuStream, ParamEstimate
+from vnav_graph.types import BaroEstimate, ParamEstimate
+from vnav_graph.types.streams import ImuStream
 
 
 def _est(s: float, info: dict | None = None) -> SimpleNamespace:

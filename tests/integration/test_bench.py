@@ -13,11 +13,11 @@ import sys
 import numpy as np
 import pytest
 
-from vnav_graph.bench import BenchTask, run_task
 from vnav_graph.cli import main
 from vnav_graph.estimators import base
 from vnav_graph.evaluation.montecarlo import QUICK_DURATION_S, shorten_scenario
-from vnav_graph.pipeline import run_estimators, summarize
+from vnav_graph.run.bench import BenchTask, run_task
+from vnav_graph.run.pipeline import run_estimators, summarize
 from vnav_graph.simulation import simulate
 from vnav_graph.types import Estimate, Trajectory
 
@@ -56,7 +56,7 @@ def test_bench_cli_writes_schema(tmp_path, fake, capsys):
                "--estimators", "truth-plus-one", "--workers", "2", "--out", str(out)])
     assert rc == 0
     doc = json.loads((out / "bench.json").read_text())
-    assert doc["schema"] == "vnav_graph.bench/1" and set(doc) >= {"runs", "aggregate"}
+    assert doc["schema"] == "vnav_graph.run.bench/1" and set(doc) >= {"runs", "aggregate"}
     assert len(doc["runs"]) == 4
     for r in doc["runs"]:
         assert set(r) >= {"scenario", "seed", "estimator", "status", "error", "alt_rmse_m",
@@ -151,7 +151,7 @@ def test_make_results_page_from_numbers(tmp_path):
     runs = ([row("ekf", i, x + 0.5) for i, x in enumerate(base_)]
             + [row("ekf-rts", i, x) for i, x in enumerate(base_)]
             + [row("graph-batch", i, x + (0.1 if i % 2 else -0.1)) for i, x in enumerate(base_)])
-    doc = {"schema": "vnav_graph.bench/1", "runs": runs, "aggregate": aggregate(runs),
+    doc = {"schema": "vnav_graph.run.bench/1", "runs": runs, "aggregate": aggregate(runs),
            "config": {"scenarios": ["s"], "seeds": [0, 1, 2, 3], "duration_s": None,
                       "executor": "local", "wall_s": 1.0}}
     (tmp_path / "bench.json").write_text(json.dumps(doc))

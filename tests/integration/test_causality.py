@@ -19,7 +19,7 @@ import pytest
 
 from vnav_graph.estimators.base import CAUSAL
 from vnav_graph.geo.frames import lla_to_ned
-from vnav_graph.runner import run_captured
+from vnav_graph.run.runner import run_captured
 from vnav_graph.simulation.scenario import load_scenario, simulate
 from vnav_graph.types import Drive, Estimate
 

@@ -28,9 +28,10 @@ from tests.integration.test_causality import differences
 from vnav_graph.estimators.base import CAUSAL
 from vnav_graph.estimators.configfile import load_configs
 from vnav_graph.geo.frames import lla_to_ned
-from vnav_graph.runner import run_captured
+from vnav_graph.run.runner import run_captured
 from vnav_graph.simulation.scenario import load_scenario, simulate
-from vnav_graph.types import Drive, Estimate, GnssStream
+from vnav_graph.types import Drive, Estimate
+from vnav_graph.types.streams import GnssStream
 
 pytestmark = pytest.mark.slow
 

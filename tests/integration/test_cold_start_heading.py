@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import pytest
 
-from vnav_graph.pipeline import run_estimators, summarize
+from vnav_graph.run.pipeline import run_estimators, summarize
 from vnav_graph.simulation import simulate
 
 pytestmark = pytest.mark.slow

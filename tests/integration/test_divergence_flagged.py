@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from tests.fuzz.oracle import answers_checked, wrong_but_ok
-from vnav_graph.pipeline import run_estimators, run_status, summarize
+from vnav_graph.run.pipeline import run_estimators, run_status, summarize
 from vnav_graph.simulation import simulate
-from vnav_graph.types import ImuStream
+from vnav_graph.types.streams import ImuStream
 
 pytestmark = pytest.mark.slow
 

@@ -10,7 +10,7 @@ from vnav_graph.estimators.ekf.filter import EKF, max_rejects
 from vnav_graph.estimators.ekf.settings import EkfConfig
 from vnav_graph.evaluation.metrics import evaluate
 from vnav_graph.simulation import simulate
-from vnav_graph.types import GnssStream
+from vnav_graph.types.streams import GnssStream
 
 pytestmark = pytest.mark.slow
 

@@ -14,7 +14,7 @@ from vnav_graph.geo.earth import radii
 from vnav_graph.geo.frames import quat_to_mat
 from vnav_graph.sensors.model import sensor_model
 from vnav_graph.simulation.scenario import simulate
-from vnav_graph.types import GnssStream
+from vnav_graph.types.streams import GnssStream
 
 CFG = EkfConfig(fb_separation=False, carry_heading_back=False)
 

@@ -12,7 +12,7 @@ import pandas as pd
 import pytest
 
 from vnav_graph.export import export_run, write_run_info
-from vnav_graph.pipeline import online_table, run_estimators, summarize, write_outputs
+from vnav_graph.run.pipeline import online_table, run_estimators, summarize, write_outputs
 from vnav_graph.simulation import simulate
 
 pytestmark = pytest.mark.slow

@@ -17,8 +17,8 @@ from gtsam.symbol_shorthand import V
 
 from vnav_graph.estimators.graph import GraphBatch
 from vnav_graph.estimators.graph.model.extend import Terms
-from vnav_graph.failures import ExtensionError
 from vnav_graph.simulation import simulate
+from vnav_graph.util.failures import ExtensionError
 
 PLUGIN = textwrap.dedent('''
     import gtsam, numpy as np

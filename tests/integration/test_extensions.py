@@ -169,8 +169,8 @@ def test_plugin_runs_with_its_config(tmp_path):
 def test_config_reaches_holdout_and_bench(tmp_path, capsys):
     """The holdout and bench paths pass the config on too (bench: also echoed in bench.json
     and carried to the worker inside the task)."""
-    from vnav_graph.bench import bench
     from vnav_graph.io import save_npz
+    from vnav_graph.run.bench import bench
 
     log = tmp_path / "log.npz"  # a drive without truth, as a real log
     save_npz(simulate("hill-drive", 3, duration_s=300.0).replace(truth=None), log)

@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from vnav_graph import jit
-from vnav_graph.outputs import TMP_PREFIX, check_out_dir, publish
+from vnav_graph.run.outputs import TMP_PREFIX, check_out_dir, publish
+from vnav_graph.util import jit
 
 
 def _cli(*args: str, env: dict[str, str] | None = None, **kw) -> subprocess.CompletedProcess:
@@ -109,7 +109,7 @@ def test_progress_lines_without_a_terminal(tmp_path: Path) -> None:
 
 
 def test_stage_announces_only_slow_steps(capsys) -> None:
-    from vnav_graph.progress import stage
+    from vnav_graph.run.progress import stage
 
     with stage("quick step", "lines", announce_after_s=0.5):
         pass

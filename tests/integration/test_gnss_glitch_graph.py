@@ -9,7 +9,7 @@ import pytest
 from vnav_graph.estimators.base import create
 from vnav_graph.geo.frames import lla_to_ned
 from vnav_graph.simulation import simulate
-from vnav_graph.types import GnssStream
+from vnav_graph.types.streams import GnssStream
 
 
 @pytest.fixture(scope="module")

@@ -128,7 +128,7 @@ def test_isam2_final_equals_batch_and_online_is_causal():
 def test_iteration_cap_is_reported_as_a_warning():
     """A solve stopped by max_iterations says so: info['converged'] is False and a warning
     reaches the summary block and the printed table; a converged solve has none."""
-    from vnav_graph.pipeline import RunResult, format_table, summarize
+    from vnav_graph.run.pipeline import RunResult, format_table, summarize
 
     d = simulate("hill-drive", 1, duration_s=60.0)
     capped = GraphBatch(GraphConfig(max_iterations=1)).run(d)
@@ -149,7 +149,7 @@ def test_imu_logging_gap_is_bridged_not_preintegrated(monkeypatch):
     across the gap (the old batch behaviour, reproduced here by hiding the gap)."""
     from vnav_graph.estimators.graph.model import problem as gp
     from vnav_graph.evaluation.metrics import errors_vs_truth
-    from vnav_graph.types import ImuStream
+    from vnav_graph.types.streams import ImuStream
 
     d = simulate("hill-drive", 2, duration_s=180.0)
     keep = ~((d.imu.t > 80.0) & (d.imu.t < 95.0))

@@ -144,7 +144,7 @@ def test_bad_input_is_one_line_error(what, exts, match):
 def test_extra_variables_reach_summary_json(runs):
     import json
 
-    from vnav_graph.pipeline import RunResult, summarize
+    from vnav_graph.run.pipeline import RunResult, summarize
 
     d, eb, ei, e0 = runs
     s = json.loads(json.dumps(summarize(d, [RunResult(e.estimator + tag, e, None, e.runtime_s)

@@ -66,7 +66,7 @@ def test_an_unsteady_magnetometer_is_left_out_by_both_families() -> None:
     """A field whose strength swings (electrical interference of ±25 µT) is beyond the
     hard-iron model: ekf and graph-batch leave it out and say why."""
     from vnav_graph.estimators.ekf.filter import EKF
-    from vnav_graph.types import MagStream
+    from vnav_graph.types.streams import MagStream
 
     d = simulate(shorten_scenario("hill-drive-mag", 120.0), 1)
     m = d.mag
@@ -101,7 +101,7 @@ def test_a_compass_that_contradicts_the_heading_is_dropped_by_both_families(driv
     explains it while the car turns. With it the hard iron of both families comes out far
     outside its 3 µT prior (measured: graph-batch 13.5σ, ekf-rts 7.3σ); both drop it, say
     why, and return exactly their run without the magnetometer."""
-    from vnav_graph.types import MagStream
+    from vnav_graph.types.streams import MagStream
 
     a = np.radians(60.0)
     rot = np.array([[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]])
@@ -121,7 +121,7 @@ def test_a_compass_that_contradicts_the_heading_is_dropped_by_both_families(driv
 
 def test_graph_isam2_drops_a_contradicting_compass_too(drive) -> None:
     """graph-isam2 applies the same post-solve hard-iron check (``hard_iron_note``)."""
-    from vnav_graph.types import MagStream
+    from vnav_graph.types.streams import MagStream
 
     a = np.radians(60.0)
     rot = np.array([[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]])
@@ -136,8 +136,8 @@ def test_extension_counts_reach_the_summary():
     """What each extension added (here the smoothers' own magnetometer: one heading factor
     per magnetometer interval and the hard-iron variable H(0)) is in ``info["extensions"]``
     and the summary block; null for an estimator without extensions."""
-    from vnav_graph.pipeline import summarize
-    from vnav_graph.runner import run_estimators
+    from vnav_graph.run.pipeline import summarize
+    from vnav_graph.run.runner import run_estimators
     from vnav_graph.simulation import simulate
 
     d = simulate("hill-drive-mag", 0, duration_s=60.0)

@@ -11,7 +11,7 @@ import pytest
 
 from vnav_graph.estimators.graph.isam2 import setup as gi
 from vnav_graph.estimators.graph.model import problem as gp
-from vnav_graph.runner import run_holdout
+from vnav_graph.run.runner import run_holdout
 
 LOITER = "erle_pxf_loiter_rtl/Loiter_RTL.bin"
 

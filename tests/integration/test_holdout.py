@@ -12,8 +12,9 @@ import pytest
 from vnav_graph.estimators import base
 from vnav_graph.evaluation.holdout import choose_windows
 from vnav_graph.geo.earth import radii
-from vnav_graph.runner import run_holdout
-from vnav_graph.types import Drive, Estimate, GnssStream, ImuStream, Trajectory
+from vnav_graph.run.runner import run_holdout
+from vnav_graph.types import Drive, Estimate, Trajectory
+from vnav_graph.types.streams import GnssStream, ImuStream
 
 GLITCH = "erle_pxf_181_gps_glitch/181.BIN"
 # estimators that take GNSS (docs/design.md); the baro-inertial loops and vkf4 do not
@@ -229,7 +230,7 @@ def _flat_drive_with_baro(rng: np.random.Generator) -> Drive:
     lla = g.lla.copy()
     lla[:, 2] += 2.0 * rng.standard_normal(g.t.size)
     tb = np.arange(0.0, 600.0, 0.1)
-    from vnav_graph.types import BaroStream
+    from vnav_graph.types.streams import BaroStream
 
     baro = BaroStream(tb, alt=500.0 + 0.05 * tb + 12.0 + 0.3 * rng.standard_normal(tb.size))
     return d.replace(gnss=GnssStream(g.t, lla, g.pos_sd), baro=baro)

@@ -13,7 +13,7 @@ import pytest
 from vnav_graph.estimators.graph import GraphBatch, GraphISAM2
 from vnav_graph.evaluation.metrics import errors_vs_truth
 from vnav_graph.simulation import simulate
-from vnav_graph.types import ImuStream
+from vnav_graph.types.streams import ImuStream
 
 
 def _with_imu_gap(duration_s: float, t0: float, t1: float):
@@ -42,7 +42,7 @@ def test_isam2_survives_an_imu_gap_of_two_and_a_half_segments():
 def _all_stream_gap(seed: int, t0: float, gap: float, outage: float = 60.0):
     """hill-drive with GNSS out for ``outage`` s before t0 and every stream (IMU, baro, GNSS)
     missing for ``gap`` s from t0: a logger that stopped right after a GNSS outage."""
-    from vnav_graph.types import ImuStream as Imu
+    from vnav_graph.types.streams import ImuStream as Imu
 
     d0 = simulate("hill-drive", seed, duration_s=360.0)
     k = ~((d0.imu.t > t0) & (d0.imu.t < t0 + gap))

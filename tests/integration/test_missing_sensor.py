@@ -10,10 +10,10 @@ from pathlib import Path
 import pytest
 
 from vnav_graph.cli import main
-from vnav_graph.failures import MissingStream
 from vnav_graph.io import save_npz
-from vnav_graph.pipeline import run_status
+from vnav_graph.run.pipeline import run_status
 from vnav_graph.simulation import simulate
+from vnav_graph.util.failures import MissingStream
 
 NEED_BARO = ("loop2", "loop3", "loop3-adaptive", "vkf4", "vekf7")
 NO_BARO_OK = ("observer1d", "ekf")
@@ -104,9 +104,9 @@ class _NeedsBaro:
 
 
 def test_bench_rows_of_a_missing_stream_are_skipped_not_failed(monkeypatch) -> None:
-    from vnav_graph import runner
-    from vnav_graph.bench import BenchTask, run_tasks
     from vnav_graph.evaluation.montecarlo import aggregate, failure_summary, format_bench_md
+    from vnav_graph.run import runner
+    from vnav_graph.run.bench import BenchTask, run_tasks
 
     monkeypatch.setattr(runner, "create", lambda name, config=None: _NeedsBaro())
     rows = run_tasks([BenchTask("hill-drive", 0, "needs-baro", 30.0)], workers=1)

@@ -14,7 +14,7 @@ import pytest
 
 from vnav_graph.estimators import base
 from vnav_graph.estimators.ekf.filter import EKF, EKFRTS
-from vnav_graph.runner import run_holdout
+from vnav_graph.run.runner import run_holdout
 from vnav_graph.simulation import simulate
 
 FILTERS = ["ekf", "ekf-rts", "vekf7", "vkf4"]

@@ -21,8 +21,8 @@ from typing import Any
 import pytest
 
 from vnav_graph.evaluation.montecarlo import shorten_scenario
-from vnav_graph.pipeline import RunResult, summarize
 from vnav_graph.report import write_report
+from vnav_graph.run.pipeline import RunResult, summarize
 from vnav_graph.simulation import simulate
 
 CHROMIUM = Path("/usr/bin/chromium")

@@ -16,10 +16,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from vnav_graph import pipeline, runner
 from vnav_graph.cli import main
 from vnav_graph.io import save_npz
 from vnav_graph.io.jsonout import dumps_strict
+from vnav_graph.run import pipeline, runner
 from vnav_graph.simulation import simulate
 
 

@@ -15,9 +15,9 @@ import dataclasses
 
 import pytest
 
-from vnav_graph.bench import BenchTask, run_task
 from vnav_graph.evaluation.metrics import evaluate
-from vnav_graph.runner import run_one
+from vnav_graph.run.bench import BenchTask, run_task
+from vnav_graph.run.runner import run_one
 from vnav_graph.simulation import load_scenario, simulate
 
 HARD_IRON = (30.0, 0.0, 0.0)

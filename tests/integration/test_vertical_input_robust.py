@@ -16,7 +16,8 @@ from vnav_graph.estimators.vertical.loops import LoopInputs, gains3, run_loop, s
 from vnav_graph.geo.earth import OMEGA_IE, radii
 from vnav_graph.geo.frames import attitude_error_n, quat_to_mat
 from vnav_graph.simulation import load_scenario, simulate
-from vnav_graph.types import Drive, GnssStream
+from vnav_graph.types import Drive
+from vnav_graph.types.streams import GnssStream
 
 WS2 = schuler_vertical(np.radians(47.0), 500.0)
 

@@ -14,13 +14,13 @@ from pathlib import Path
 import pytest
 
 import vnav_graph
-from vnav_graph import jit
+from vnav_graph.util import jit
 
 PKG = Path(vnav_graph.__file__).resolve().parent
 
 PROBE = """
 import json, vnav_graph
-from vnav_graph.jit import CompileTimer
+from vnav_graph.util.jit import CompileTimer
 with CompileTimer() as ct:
     from vnav_graph.nav.gaps import cv_bridge_noise
     cv_bridge_noise(0.1, 1.0)

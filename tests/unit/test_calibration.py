@@ -1,4 +1,4 @@
-"""Seed-001 least-squares baro calibration (vnav_graph.calibration)."""
+"""Seed-001 least-squares baro calibration (vnav_graph.estimators.vertical.calibration)."""
 
 from __future__ import annotations
 
@@ -8,12 +8,12 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from vnav_graph.calibration import (
+from vnav_graph.cli import cmd_calibrate_baro
+from vnav_graph.estimators.vertical.calibration import (
     SEED001_TABLE1,
     calibrate_arrays,
     calibrate_baro,
 )
-from vnav_graph.cli import cmd_calibrate_baro
 from vnav_graph.sensors.baro import measure_baro
 from vnav_graph.simulation import load_scenario, simulate
 

@@ -96,7 +96,7 @@ def test_ekf_online_heading_known_equals_its_top_level_one(drive):
     """When the trajectory is the filter's own output at its covariance epochs, the online
     block and the summary block score the same states with the same σ: equal values."""
     from vnav_graph.estimators.base import with_online
-    from vnav_graph.runner import run_one
+    from vnav_graph.run.runner import run_one
 
     d = simulate(shorten_scenario("hill-drive", 90.0), 1)
     est = run_one("ekf", d, None, interrupts=False).estimate

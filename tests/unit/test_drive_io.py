@@ -7,7 +7,7 @@ import pytest
 
 from vnav_graph.io import load_drive, save_npz
 from vnav_graph.simulation import simulate
-from vnav_graph.types import MagStream
+from vnav_graph.types.streams import MagStream
 
 
 def test_npz_round_trip_is_lossless(tmp_path):

@@ -10,10 +10,10 @@ from vnav_graph.types import (
     BaroEstimate,
     Drive,
     Estimate,
-    ImuStream,
     ParamEstimate,
     Trajectory,
 )
+from vnav_graph.types.streams import ImuStream
 
 ORIGIN = np.array([np.radians(47.0), np.radians(11.0), 500.0])
 
@@ -96,7 +96,7 @@ def test_vertical_only_estimate_has_nan_horizontal_columns_and_no_optional_ones(
 
 def test_run_parquet_has_the_dataframe_columns(rng, tmp_path):
     """``write_outputs`` (``vnav-graph run``) writes exactly ``to_dataframe(origin)``."""
-    from vnav_graph.pipeline import RunResult, summarize, write_outputs
+    from vnav_graph.run.pipeline import RunResult, summarize, write_outputs
 
     est = _estimate(rng)
     t = np.arange(0.0, 10.0, 0.01)
@@ -117,7 +117,7 @@ def test_position_columns_need_an_origin_and_a_horizontal_estimate(rng):
 
 
 def test_to_dataframe_needs_no_origin_after_the_runner():
-    from vnav_graph.runner import run_estimators
+    from vnav_graph.run.runner import run_estimators
     from vnav_graph.simulation import simulate
 
     drive = simulate("default", 0, duration_s=30.0)

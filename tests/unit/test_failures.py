@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import pytest
 
-from vnav_graph import runner
-from vnav_graph.failures import failure_message
+from vnav_graph.run import runner
 from vnav_graph.simulation import simulate
+from vnav_graph.util.failures import failure_message
 
 
 def _raised(exc: BaseException) -> BaseException:

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from tests.fuzz.oracle import wrong_but_ok
 from vnav_graph.evaluation.metrics import METRIC_KEYS
-from vnav_graph.pipeline import apply_holdout
+from vnav_graph.run.pipeline import apply_holdout
 
 
 def _row(**kw):

@@ -95,7 +95,7 @@ def test_heading_sd_and_wrap() -> None:
 
 
 def test_magstream_validates() -> None:
-    from vnav_graph.types import MagStream
+    from vnav_graph.types.streams import MagStream
 
     m = MagStream(np.arange(3.0), np.ones((3, 3)) * 20.0, 0.5)
     assert len(m) == 3 and m.sd_ut == 0.5

@@ -43,7 +43,7 @@ def test_real_time_pair_scored_over_the_common_span_with_the_heading_known_rule(
         runs.append(row("ekf", i, online(20.0, 2.0 + 0.01 * i, 1.0), {}))
         common = online(20.0, 2.5 + 0.01 * i, 1.0 + (0.1 if i % 2 else -0.1))
         runs.append(row("graph-isam2", i, online(0.0, 16.0, 1.0), {"ekf": common}))
-    doc = {"schema": "vnav_graph.bench/1", "runs": runs, "aggregate": aggregate(runs),
+    doc = {"schema": "vnav_graph.run.bench/1", "runs": runs, "aggregate": aggregate(runs),
            "config": {"scenarios": ["s"], "seeds": [0, 1, 2, 3], "duration_s": None,
                       "executor": "local", "wall_s": 1.0}}
     (tmp_path / "bench.json").write_text(json.dumps(doc))

@@ -15,13 +15,13 @@ import math
 import numpy as np
 import pytest
 
-from vnav_graph.bench import BenchTask, bench, run_task, run_tasks
 from vnav_graph.evaluation.montecarlo import (
     aggregate,
     format_bench_md,
     mean_ci95,
     shorten_scenario,
 )
+from vnav_graph.run.bench import BenchTask, bench, run_task, run_tasks
 from vnav_graph.types import Estimate, Trajectory
 
 
@@ -104,7 +104,7 @@ def test_shorten_scenario_keeps_outages_inside():
 def test_gnss_fix_nees_and_failures_recorded(test_estimators):
     doc = bench(["hill-drive"], ["gnss-fix", "always-fails"], [0, 1], duration_s=60.0,
                 workers=2)
-    assert doc["schema"] == "vnav_graph.bench/1"
+    assert doc["schema"] == "vnav_graph.run.bench/1"
     assert [(r["seed"], r["estimator"]) for r in doc["runs"]] == [
         (0, "gnss-fix"), (0, "always-fails"), (1, "gnss-fix"), (1, "always-fails")]
     for r in doc["runs"]:

@@ -1,4 +1,4 @@
-"""``vnav_graph.numpy_pages.small_pages``: numpy's huge-page setting off inside, restored after."""
+"""``vnav_graph.util.pages.small_pages``: numpy's huge-page setting off inside, restored after."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import threading
 
 import pytest
 
-from vnav_graph import numpy_pages as pages
+from vnav_graph.util import pages as pages
 
 
 def _state() -> bool:

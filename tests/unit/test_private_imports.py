@@ -80,7 +80,7 @@ def test_the_finder_sees_a_private_attribute(tmp_path):
 
 
 def test_the_finder_sees_a_private_import(tmp_path):
-    (tmp_path / "t.py").write_text("from vnav_graph.jit import _prune, KEEP_CACHES\n"
+    (tmp_path / "t.py").write_text("from vnav_graph.util.jit import _prune, KEEP_CACHES\n"
                                    "import vnav_graph.io.readers._common as c\n"
                                    "from vnav_graph import __version__\n")
     assert private_imports(tmp_path) == ["t.py:1: _prune", "t.py:2: vnav_graph.io.readers._common"]

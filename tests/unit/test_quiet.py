@@ -42,7 +42,7 @@ def test_a_progress_announcement_during_a_quiet_read_reaches_the_terminal() -> N
 
     code = ("import time\n"
             "from vnav_graph.io.quiet import quietly\n"
-            "from vnav_graph.progress import stage\n"
+            "from vnav_graph.run.progress import stage\n"
             "with stage('reading x', 'lines', announce_after_s=0.05):\n"
             "    _, cap = quietly(time.sleep, 0.4)\n"
             "print(cap.count, cap.examples)\n")

@@ -12,7 +12,8 @@ from vnav_graph.geo.frames import lla_to_ned
 from vnav_graph.io.readers.column_map import read_mapped
 from vnav_graph.io.readers.rtklib_pos import read_pos
 from vnav_graph.io.reference import attach_reference, load_reference
-from vnav_graph.types import Drive, ImuStream
+from vnav_graph.types import Drive
+from vnav_graph.types.streams import ImuStream
 
 REPO = Path(__file__).resolve().parents[2]
 CUT = REPO / "tests" / "data" / "rtk_walk_cut"

@@ -8,7 +8,8 @@ import pytest
 
 from vnav_graph.evaluation.reference_score import reference_block
 from vnav_graph.geo.frames import lla_to_ned, ned_to_lla
-from vnav_graph.types import Drive, Estimate, ImuStream, Trajectory
+from vnav_graph.types import Drive, Estimate, Trajectory
+from vnav_graph.types.streams import ImuStream
 
 ORIGIN = np.array([np.radians(40.0967), np.radians(-105.1472), 1600.0])
 

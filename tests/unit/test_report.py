@@ -16,23 +16,16 @@ from vnav_graph.cli import main
 from vnav_graph.evaluation.montecarlo import shorten_scenario
 from vnav_graph.geo.earth import radii
 from vnav_graph.io import save_npz
-from vnav_graph.pipeline import RunResult, format_table, summarize
 from vnav_graph.report import write_report
 from vnav_graph.report.canvas import decimate
 from vnav_graph.report.errors import altitude_errors, outage_windows
 from vnav_graph.report.groups import group_names, robust_limits
 from vnav_graph.report.html import COLUMNS
 from vnav_graph.report.plots import baro_histories
+from vnav_graph.run.pipeline import RunResult, format_table, summarize
 from vnav_graph.simulation import simulate
-from vnav_graph.types import (
-    BaroEstimate,
-    Drive,
-    Estimate,
-    GnssStream,
-    ImuStream,
-    ParamEstimate,
-    Trajectory,
-)
+from vnav_graph.types import BaroEstimate, Drive, Estimate, ParamEstimate, Trajectory
+from vnav_graph.types.streams import GnssStream, ImuStream
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 OFFSET_M = 1.5
@@ -363,9 +356,9 @@ def test_plotted_errors_are_the_scored_ones(tmp_path, monkeypatch, registry):
     their RMS is the summary's number (the old report drew residuals against the GNSS the
     estimator had been given: 0.0 m here)."""
     from vnav_graph.io import load_drive
-    from vnav_graph.pipeline import apply_holdout, run_estimators
     from vnav_graph.report.errors import error_set
-    from vnav_graph.runner import run_holdout
+    from vnav_graph.run.pipeline import apply_holdout, run_estimators
+    from vnav_graph.run.runner import run_holdout
 
     registry("ekf-rts", lambda: _Planted("ekf-rts", [2.0, 4.0]))
     drive = load_drive(_flat_log(tmp_path))
@@ -405,7 +398,7 @@ class _Shifted:
 
 
 def test_reader_lines_say_each_fact_once():
-    from vnav_graph.pipeline import reader_repairs
+    from vnav_graph.run.pipeline import reader_repairs
 
     meta = {"notes": ["CLOCK REPAIRED: the boot clock advanced 0.92315 s per GPS second"],
             "repaired": {"clock": {"boot-clock stamps rescaled to GPS seconds": 1}},

@@ -13,9 +13,9 @@ import pytest
 from vnav_graph.evaluation.montecarlo import shorten_scenario
 from vnav_graph.geo.earth import radii
 from vnav_graph.geo.frames import quat_to_rph, rph_to_quat
-from vnav_graph.pipeline import RunResult, summarize
 from vnav_graph.report import write_report
 from vnav_graph.report.errors import error_set
+from vnav_graph.run.pipeline import RunResult, summarize
 from vnav_graph.simulation import simulate
 from vnav_graph.types import Estimate, Trajectory
 

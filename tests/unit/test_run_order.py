@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import pytest
 
-from vnav_graph import jit, runner
+from vnav_graph.run import runner
+from vnav_graph.util import jit
 
 
 @pytest.fixture
@@ -132,6 +133,6 @@ def test_child_imports_the_package_this_process_imported(monkeypatch, tmp_path) 
     monkeypatch.setattr(subprocess, "Popen", _Popen)
     monkeypatch.chdir(tmp_path)
     jit.Prewarm(["ekf"], "k")
-    assert seen["args"][1:4] == ["-m", "vnav_graph.jit", "k"]
+    assert seen["args"][1:4] == ["-m", "vnav_graph.util.jit", "k"]
     assert (Path(seen["cwd"]) / "vnav_graph" / "__init__.py").resolve() == \
         Path(vnav_graph.__file__).resolve()

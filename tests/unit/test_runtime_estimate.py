@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pytest
 
-from vnav_graph import runtime_estimate as rt
 from vnav_graph.cli import main
 from vnav_graph.estimators.base import available
+from vnav_graph.run import runtime_estimate as rt
 from vnav_graph.simulation import simulate
 
 DATA = Path(os.environ.get("VNAV_DATA", Path(__file__).resolve().parents[3] / "shared" / "data"))

@@ -9,9 +9,9 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from vnav_graph import ahrs_cache as sharing
-from vnav_graph import runner
+from vnav_graph.estimators.vertical import ahrs_cache as sharing
 from vnav_graph.estimators.vertical import inputs
+from vnav_graph.run import runner
 
 
 @dataclass

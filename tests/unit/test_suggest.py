@@ -6,7 +6,7 @@ import pytest
 
 from vnav_graph.estimators.base import create
 from vnav_graph.simulation import simulate
-from vnav_graph.suggest import did_you_mean
+from vnav_graph.util.suggest import did_you_mean
 
 
 def test_did_you_mean_closest_or_nothing():

@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from vnav_graph.types import BaroStream, Drive, GnssStream, ImuStream, Trajectory
+from vnav_graph.types import Drive, Trajectory
+from vnav_graph.types.streams import BaroStream, GnssStream, ImuStream
 
 
 def _imu(n=10):

@@ -54,17 +54,17 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
 def cmd_run(args: argparse.Namespace) -> int:
     from ..io.reference import load_scored
-    from ..jit import Prewarm
-    from ..outputs import check_out_dir
-    from ..pipeline import format_table, summarize
-    from ..progress import mode_for, stage
-    from ..runner import resolve_estimators, run_estimators
+    from ..run.outputs import check_out_dir
+    from ..run.pipeline import format_table, summarize
+    from ..run.progress import mode_for, stage
+    from ..run.runner import resolve_estimators, run_estimators
     from ..simulation import simulate
+    from ..util.jit import Prewarm
 
     t_start = time.perf_counter()
     names = resolve_estimators(args.estimators)  # validate before any work
     if args.baseline is not None and args.baseline not in names:
-        from ..suggest import did_you_mean
+        from ..util.suggest import did_you_mean
 
         raise ValueError(f"--baseline {args.baseline!r} is not among the estimators run"
                          f"{did_you_mean(args.baseline, names)} ({', '.join(names)})")
@@ -97,7 +97,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     summary = summarize(drive, results)
     holdout = None  # a real log's holdout run: its errors are what the report draws
     if drive.truth is None and drive.gnss is not None and not args.no_holdout:
-        from ..pipeline import score_holdout
+        from ..run.pipeline import score_holdout
 
         ok = [r.name for r in results if r.estimate is not None]
         if ok:
@@ -109,7 +109,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         from ..evaluation.compare import against_baseline
 
         summary = against_baseline(summary, args.baseline)
-    from ..pipeline import write_outputs
+    from ..run.pipeline import write_outputs
 
     writers = []
     try:
@@ -132,7 +132,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     if args.export:
         _print_export(exported)
     print(f"\nwrote {out / 'summary.json'} (run took {time.perf_counter() - t_start:.1f} s)")
-    from ..pipeline import run_status
+    from ..run.pipeline import run_status
 
     code, line = run_status(summary)
     if line:
@@ -142,8 +142,8 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 def _say_hint(drive: Any, names: list[str], holdout: bool, mode: Any) -> None:
     """The predicted runtime when the run will be long (``runtime_estimate.run_hint``)."""
-    from ..progress import say
-    from ..runtime_estimate import run_hint
+    from ..run.progress import say
+    from ..run.runtime_estimate import run_hint
 
     hint = run_hint(drive, names, holdout)
     if hint:
@@ -180,11 +180,11 @@ def cmd_bench(args: argparse.Namespace) -> int:
     Bad arguments raise ValueError (exit 2). Returns 1 when any run failed (after writing the
     files, with a one-line summary on stderr), 130 when interrupted, else 0.
     """
-    from ..bench import bench
     from ..evaluation import montecarlo as mc
-    from ..outputs import check_out_dir
-    from ..progress import mode_for
-    from ..runner import resolve_estimators
+    from ..run.bench import bench
+    from ..run.outputs import check_out_dir
+    from ..run.progress import mode_for
+    from ..run.runner import resolve_estimators
     from ..simulation import list_scenarios
 
     estimators = resolve_estimators(args.estimators)
@@ -193,7 +193,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
     known = list_scenarios()
     bad = [s for s in scenarios if s not in known and not s.endswith(".toml")]
     if bad:
-        from ..suggest import did_you_mean
+        from ..util.suggest import did_you_mean
 
         raise ValueError(f"unknown scenario(s) {', '.join(bad)}{did_you_mean(bad[0], known)} "
                          f"(known: {', '.join(known)})")
@@ -236,10 +236,10 @@ def cmd_holdout(args: argparse.Namespace) -> int:
     from ..evaluation.holdout import format_markdown
     from ..io.jsonout import dumps_strict
     from ..io.reference import load_scored
-    from ..outputs import check_out_dir, publish
-    from ..progress import mode_for, stage
     from ..report.error_plots import plot_holdout_errors
-    from ..runner import resolve_estimators, run_holdout
+    from ..run.outputs import check_out_dir, publish
+    from ..run.progress import mode_for, stage
+    from ..run.runner import resolve_estimators, run_holdout
 
     out = check_out_dir(args.out)
     mode = mode_for(not args.no_progress)
@@ -265,7 +265,7 @@ def cmd_holdout(args: argparse.Namespace) -> int:
 
 def cmd_calibrate_baro(args: argparse.Namespace) -> int:
     """``vnav-graph calibrate-baro DRIVE``: the least-squares baro calibration's table."""
-    from ..calibration import calibrate_baro, format_calibration
+    from ..estimators.vertical.calibration import calibrate_baro, format_calibration
     from ..io import load_drive
 
     print(format_calibration(calibrate_baro(load_drive(args.drive))))
@@ -318,7 +318,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (ValueError, FileNotFoundError, IsADirectoryError, PermissionError) as exc:
         if os.environ.get("VNAV_DEBUG"):
             traceback.print_exc()
-        from ..failures import failure_message
+        from ..util.failures import failure_message
 
         print(f"vnav-graph: error: {failure_message(exc)}", file=sys.stderr)
         return EXIT_BAD_INPUT

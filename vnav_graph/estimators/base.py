@@ -19,8 +19,8 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from ..failures import failure_message
 from ..types import Drive, Estimate, Trajectory
+from ..util.failures import failure_message
 
 
 class Estimator(Protocol):
@@ -159,7 +159,7 @@ def create(name: str, config: Any = None) -> Estimator:
     spec = _REGISTRY.get(name, _CORE.get(name))
     factory = None if spec is None else _resolve(spec)
     if factory is None:
-        from ..suggest import did_you_mean
+        from ..util.suggest import did_you_mean
 
         raise ValueError(f"unknown estimator {name!r}{did_you_mean(name, available())} "
                          f"(available: {', '.join(available())})")

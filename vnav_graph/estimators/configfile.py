@@ -36,8 +36,8 @@ import typing
 from pathlib import Path
 from typing import Any
 
-from ..failures import failure_message
-from ..suggest import did_you_mean
+from ..util.failures import failure_message
+from ..util.suggest import did_you_mean
 from .base import available, create
 
 

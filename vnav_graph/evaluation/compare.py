@@ -39,7 +39,7 @@ from typing import Any
 
 import numpy as np
 
-from ..types import FloatArray
+from ..types.streams import FloatArray
 
 # Time blocks of one simulated run: about 30 s each, at least 2 and at most 10.
 BLOCK_MIN_S = 30.0

@@ -33,7 +33,7 @@ at least 5 s before the last fix. Default spacing (start to start) is
 ``max(2·outage, (span − lead − outage − 5 s)/4)``: up to five windows with at least one
 outage length of GNSS between them.
 
-``vnav_graph.runner.run_holdout`` runs the estimators on the withheld drive and scores them
+``vnav_graph.run.runner.run_holdout`` runs the estimators on the withheld drive and scores them
 here; ``vnav-graph holdout`` writes its ``holdout.json`` (``holdout_doc``), ``holdout.md``
 (``format_markdown``, also printed) and ``holdout.png``.
 """
@@ -46,7 +46,8 @@ from typing import Any
 
 import numpy as np
 
-from ..types import ERROR_STATE, Drive, Estimate, FloatArray, Trajectory
+from ..types import ERROR_STATE, Drive, Estimate, Trajectory
+from ..types.streams import FloatArray
 
 HOLDOUT_SCHEMA = "vnav_graph.holdout/1"
 TAIL_S = 5.0

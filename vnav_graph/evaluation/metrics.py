@@ -13,7 +13,8 @@ from typing import Any
 
 import numpy as np
 
-from ..types import ERROR_STATE, Drive, Estimate, FloatArray
+from ..types import ERROR_STATE, Drive, Estimate
+from ..types.streams import FloatArray
 from .blocks import baro_block, extra_variables_block, fb_separation_block
 
 

@@ -1,6 +1,6 @@
 """Monte Carlo bench scoring: aggregation over seeds, the ``bench.json`` tables.
 
-The runs themselves are made by ``vnav_graph.bench`` (local process pool or Dask); each run
+The runs themselves are made by ``vnav_graph.run.bench`` (local process pool or Dask); each run
 row carries the metric block of ``summary.json`` (``vnav_graph.evaluation.metrics.evaluate``).
 
 Aggregation over seeds (per scenario × estimator), for each metric x with n ≥ 2 finite values:
@@ -18,7 +18,7 @@ drive), ``finite`` (NaN/inf to null), ``mean_ci95``, ``derived_metrics``, ``aggr
 
 The ``bench.json`` document (docs/design.md)::
 
-    {"schema": "vnav_graph.bench/1",
+    {"schema": "vnav_graph.run.bench/1",
      "config": {...},
      "runs": [{"scenario", "seed", "estimator", "duration_s", "status", "error",
                <metric fields of summary.json>}],
@@ -39,7 +39,7 @@ from typing import Any
 
 import numpy as np
 
-BENCH_SCHEMA = "vnav_graph.bench/1"
+BENCH_SCHEMA = "vnav_graph.run.bench/1"
 
 # Metrics aggregated over seeds (mean and 95 % CI). The first four are the docs/design.md ones;
 # the baro parameter errors |est − truth| show the modelling gain of the baro-aware estimators.

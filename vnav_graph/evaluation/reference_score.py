@@ -24,7 +24,8 @@ from typing import Any
 
 import numpy as np
 
-from ..types import Drive, Estimate, FloatArray
+from ..types import Drive, Estimate
+from ..types.streams import FloatArray
 
 __all__ = ["reference_block"]
 

@@ -12,8 +12,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from ..outputs import ONLINE_SUFFIX
-from ..suggest import did_you_mean
+from ..run.outputs import ONLINE_SUFFIX
+from ..util.suggest import did_you_mean
 from .run_info import DRIVE_INFO, TRUTH_TABLE
 from .tables import ANSWERS, EXPORT_RATE_HZ, at_rate, csv_metadata, csv_table, rate_note
 
@@ -161,7 +161,7 @@ def export_run(run_dir: str | Path, formats: str | Sequence[str],
     written through ``outputs.publish`` (complete files only, never a half-written one under a
     final name).
     """
-    from ..outputs import publish
+    from ..run.outputs import publish
 
     run = open_run(run_dir)
     fmts = parse_formats(formats)

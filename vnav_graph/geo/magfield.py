@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from ..types import FloatArray
+from ..types.streams import FloatArray
 
 # (first valid year, coefficient file in pygeomag/wmm/, model name) — newest last
 _WMM_EPOCHS: tuple[tuple[float, str, str], ...] = (

@@ -18,8 +18,9 @@ from typing import Any
 import numpy as np
 
 from ..config import BaroSpec, GnssSpec, ImuSpec
-from ..failures import failure_message
-from ..types import BaroStream, BaroTruth, Drive, GnssStream, ImuStream, MagStream, Trajectory
+from ..types import BaroTruth, Drive, Trajectory
+from ..types.streams import BaroStream, GnssStream, ImuStream, MagStream
+from ..util.failures import failure_message
 
 FORMAT = "vnav_graph.drive/1"
 _SPECS = {"ImuSpec": ImuSpec, "GnssSpec": GnssSpec, "BaroSpec": BaroSpec}

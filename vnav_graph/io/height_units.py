@@ -49,7 +49,8 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from ..types import BaroStream, Drive, GnssStream
+from ..types import Drive
+from ..types.streams import BaroStream, GnssStream
 from .findings import Findings, reject
 
 FloatArray = NDArray[np.float64]

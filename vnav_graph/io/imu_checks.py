@@ -61,7 +61,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..geo.earth import G0
-from ..types import Drive, ImuStream
+from ..types import Drive
+from ..types.streams import ImuStream
 from .findings import Findings, reject
 from .imu_units import (
     ACCEL_G2_REASON,

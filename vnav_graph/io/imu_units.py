@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..geo.earth import G0
-from ..types import FloatArray
+from ..types.streams import FloatArray
 
 ACCEL_IN_G = (0.6, 1.4)
 ACCEL_TWICE = (60.0, 140.0)

@@ -52,7 +52,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..nav.gnss_glitch import MAX_GLITCH_S, MAX_SPEED, glitch_mask
-from ..types import BaroStream, Drive, GnssStream
+from ..types import Drive
+from ..types.streams import BaroStream, GnssStream
 from .findings import Findings, reject
 from .height_units import check_gnss_height_units
 from .imu_checks import IMU_CHECKS

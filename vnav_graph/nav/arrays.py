@@ -6,7 +6,7 @@ together with a shape-mismatch error whose message formats both shapes (string j
 integer-to-string conversions). That formatting code is compiled once per process and per
 pair of dimensions, and linked into every kernel with such an assignment: measured on the
 default run with an empty numba cache, about a fifth of the whole compile time (numbers in
-``vnav_graph/jit.py``). :func:`put` makes the same copy element by element, with a constant
+``vnav_graph/util/jit.py``). :func:`put` makes the same copy element by element, with a constant
 message. The kernels use it for every array-valued slice assignment; filling with a scalar
 (``a[:] = 0.0``) has no shape check and stays as it is.
 

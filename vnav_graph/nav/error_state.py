@@ -16,7 +16,8 @@ from collections.abc import Iterable
 
 import numpy as np
 
-from ..types import ERROR_STATE, ERROR_STATE_DIM, FloatArray
+from ..types import ERROR_STATE, ERROR_STATE_DIM
+from ..types.streams import FloatArray
 
 
 def component(name: str, axis: int = 0) -> int:

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..types import FloatArray
+from ..types.streams import FloatArray
 
 
 def coarse_level(accel_mean_b: FloatArray) -> tuple[float, float]:

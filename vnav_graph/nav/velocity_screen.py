@@ -44,7 +44,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..types import FloatArray
+from ..types.streams import FloatArray
 
 HORIZON_S = 5.0  # s: longest span compared against one anchor fix
 FLOOR_MPS = 0.05  # m/s: velocity time-tag and interpolation error floor

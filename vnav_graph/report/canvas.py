@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from ..types import FloatArray
+from ..types.streams import FloatArray
 
 DPI = 150  # 11 in wide figures: 1650 px
 MAX_POINTS = 1500

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from ..types import FloatArray
+from ..types.streams import FloatArray
 from . import canvas
 from .errors import ErrorSeries, ErrorSet, from_holdout
 from .groups import group_names, robust_limits

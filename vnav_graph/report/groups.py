@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..estimators.base import FAMILIES, OTHER_FAMILY, family_order
-from ..types import FloatArray
+from ..types.streams import FloatArray
 
 GROUPS: tuple[tuple[str, tuple[str, ...]], ...] = tuple((f, m) for f, _, m in FAMILIES)
 OTHER = OTHER_FAMILY[0]

@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from ..types import FloatArray
+from ..types.streams import FloatArray
 from . import canvas
 from .errors import GIVEN, TRUTH, ErrorSeries, ErrorSet
 from .groups import group_names, robust_limits

@@ -22,7 +22,8 @@ from typing import Any
 
 import numpy as np
 
-from ..types import ERROR_STATE, Drive, Estimate, FloatArray
+from ..types import ERROR_STATE, Drive, Estimate
+from ..types.streams import FloatArray
 from . import canvas
 from .canvas import decimate
 from .palette import estimator_style

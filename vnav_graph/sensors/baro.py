@@ -21,7 +21,8 @@ from numpy.typing import ArrayLike
 
 from ..config import BaroSpec
 from ..geo.atmosphere import isa_pressure
-from ..types import BaroStream, BaroTruth, FloatArray
+from ..types import BaroTruth
+from ..types.streams import BaroStream, FloatArray
 from .noise import gauss_markov
 
 HPA_PER_M = 1.0 / 8.3  # near sea level, for converting a bias sigma to pressure

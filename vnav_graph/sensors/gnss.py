@@ -37,7 +37,8 @@ from numpy.typing import NDArray
 from ..config import GnssSpec
 from ..geo.earth import radii
 from ..geo.frames import quat_to_mat
-from ..types import FloatArray, GnssStream, Trajectory
+from ..types import Trajectory
+from ..types.streams import FloatArray, GnssStream
 from .noise import gauss_markov
 
 BoolArray = NDArray[np.bool_]

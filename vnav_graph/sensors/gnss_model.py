@@ -38,7 +38,7 @@ from numba import njit
 
 from ..geo.frames import skew
 from ..nav.rotations import cross3, skew3
-from ..types import FloatArray
+from ..types.streams import FloatArray
 
 # With a Gauss-Markov GNSS error state, the white part of a fix's σ keeps at least this
 # fraction of the receiver's σ (a σ_gm at or above the receiver's would otherwise leave white

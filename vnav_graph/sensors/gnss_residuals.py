@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from ..geo.frames import lla_to_ned, quat_to_mat
-from ..types import FloatArray
+from ..types.streams import FloatArray
 
 RESIDUAL_LAG_S = 5.0  # lag of the autocorrelation [s]
 MIN_PAIRS = 20  # fewer fix pairs at that lag: no value (None)

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..config import ImuSpec
-from ..types import FloatArray, ImuStream
+from ..types.streams import FloatArray, ImuStream
 from .noise import gauss_markov, random_walk, white_sd
 
 

@@ -45,7 +45,8 @@ from numba import njit
 if TYPE_CHECKING:
     from ..geo.magfield import FieldModel
 
-from ..types import Drive, Estimate, FloatArray, MagStream, Trajectory
+from ..types import Drive, Estimate, Trajectory
+from ..types.streams import FloatArray, MagStream
 
 MIN_HORIZONTAL_UT = 3.0  # weaker horizontal fields give no usable heading (near the poles) [µT]
 # Defaults shared by ekf/ekf-rts (EkfConfig) and both graphs (GraphConfig):

@@ -31,7 +31,7 @@ import numpy as np
 
 from ..config import DEG, IMU_PRESETS, REAL_LOG_BARO, BaroSpec, ImuSpec
 from ..nav.gaps import imu_gaps
-from ..types import FloatArray
+from ..types.streams import FloatArray
 from .gnss_model import GNSS_SD_FLOOR, GnssGM
 
 # Real-log IMU prior (a phone / autopilot MEMS IMU of unknown make): the consumer preset's

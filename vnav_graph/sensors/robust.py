@@ -23,7 +23,7 @@ from functools import cache
 
 import numpy as np
 
-from ..types import FloatArray
+from ..types.streams import FloatArray
 
 LOSSES = ("none", "huber", "cauchy")
 

@@ -84,7 +84,7 @@ def load_scenario(name_or_path: str | Path, **overrides: Any) -> ScenarioConfig:
     if p.suffix != ".toml":
         p = SCENARIO_DIR / f"{name_or_path}.toml"
         if not p.exists():
-            from ..suggest import did_you_mean
+            from ..util.suggest import did_you_mean
 
             known = list_scenarios()
             raise ValueError(f"unknown scenario {str(name_or_path)!r}"

@@ -22,7 +22,7 @@ from ..estimators.vertical.observer1d import (
     observer_kernel_gated,
     steady_state,
 )
-from ..types import FloatArray
+from ..types.streams import FloatArray
 
 
 @dataclass(frozen=True)

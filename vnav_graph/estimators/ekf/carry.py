@@ -23,7 +23,8 @@ from typing import Any
 
 import numpy as np
 
-from ...types import Estimate, FloatArray
+from ...types import Estimate
+from ...types.streams import FloatArray
 from .settings import EkfConfig
 
 # the largest σ of a heading carried back [rad]: 5°, the "heading known" bound of the

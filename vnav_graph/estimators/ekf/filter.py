@@ -57,7 +57,6 @@ from scipy.stats import chi2
 
 from ...config import REAL_LOG_BARO, ImuSpec
 from ...geo.earth import OMEGA_IE
-from ...numpy_pages import small_pages
 from ...sensors.baro import with_prior_conflict_notes, without_implausible_scale
 from ...sensors.magnetometer import (
     field_and_info,
@@ -70,14 +69,9 @@ from ...sensors.model import (
     sensor_model,
 )
 from ...sensors.noise import gm_mean_prior_sd
-from ...types import (
-    BaroEstimate,
-    Drive,
-    Estimate,
-    FloatArray,
-    ParamEstimate,
-    Trajectory,
-)
+from ...types import BaroEstimate, Drive, Estimate, ParamEstimate, Trajectory
+from ...types.streams import FloatArray
+from ...util.pages import small_pages
 from ..base import with_online
 from ..gnss_auto import with_gm_auto
 from . import backward, carry, inputs, kernel, regate, rts
@@ -300,7 +294,7 @@ class EKF:
         if self.config.gnss_gm_auto:  # without, then perhaps with the GNSS error state
             return with_gm_auto(drive, self.config, self.name,
                                 lambda cfg: type(self)(cfg).run(drive))
-        with small_pages():  # large numpy arrays without huge-page faults (numpy_pages)
+        with small_pages():  # large numpy arrays without huge-page faults (util.pages)
             est = without_contradicting_mag(self._run(drive), self.config,
                                             lambda cfg: type(self)(cfg)._run(drive))
             return with_prior_conflict_notes(without_implausible_scale(

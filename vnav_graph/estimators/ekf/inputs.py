@@ -17,7 +17,8 @@ from ...nav.gaps import GAP_ACCEL_SD
 from ...nav.levelling import coarse_level
 from ...sensors.model import BaroPrior, SensorModel
 from ...sensors.noise import gm_process_var, imu_bias_step, white_sd
-from ...types import Drive, FloatArray, ImuStream
+from ...types import Drive
+from ...types.streams import FloatArray, ImuStream
 from . import model as km
 from .alignment import track_heading
 from .magnetometer import one_per_interval

@@ -15,7 +15,8 @@ from scipy.stats import chi2
 
 from ...geo.frames import quat_to_mat, rph_to_quat
 from ...sensors.magnetometer import MIN_HORIZONTAL_UT, wrap_pi
-from ...types import Drive, FloatArray
+from ...types import Drive
+from ...types.streams import FloatArray
 from . import kernel
 
 

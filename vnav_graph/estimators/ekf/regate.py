@@ -50,7 +50,8 @@ from ...geo.frames import quat_to_mat
 from ...sensors.gnss_model import GnssGM
 from ...sensors.model import SensorModel
 from ...sensors.robust import post_gate_threshold, weight_and_loss
-from ...types import Drive, Estimate, FloatArray
+from ...types import Drive, Estimate
+from ...types.streams import FloatArray
 from .settings import EkfConfig
 
 

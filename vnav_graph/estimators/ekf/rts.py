@@ -25,7 +25,7 @@ from scipy.spatial.transform import Rotation
 
 from ...geo.earth import radii
 from ...nav.arrays import outer, put, solve
-from ...types import FloatArray
+from ...types.streams import FloatArray
 from .model import (
     IBA,
     IBB,
@@ -108,7 +108,7 @@ def rts_smooth(rts_p, rts_ing, rts_q, corr, reset_at, tau_g, tau_a, tau_b, tau_h
 def warm_up() -> None:
     """Compile ``rts_smooth`` for the argument types ``EKFRTS.run`` passes, on a two-epoch
     problem (identity covariances, no process noise, no reset). The first-run prewarm
-    (``vnav_graph.jit.WARMUPS``) calls it in whichever process is free first."""
+    (``vnav_graph.util.jit.WARMUPS``) calls it in whichever process is free first."""
     k = 2
     p = np.zeros((k, NPACK))
     for row in p:

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...types import FloatArray
+from ...types.streams import FloatArray
 
 
 def kalman(f: FloatArray, q: FloatArray, h: FloatArray, r: FloatArray, z: FloatArray,

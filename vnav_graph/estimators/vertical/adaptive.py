@@ -62,14 +62,8 @@ from ...config import REAL_LOG_BARO
 from ...nav.arrays import outer, put
 from ...nav.error_state import embed_error_state, selection
 from ...sensors.model import sensor_model
-from ...types import (
-    BaroEstimate,
-    Drive,
-    Estimate,
-    FloatArray,
-    ParamEstimate,
-    Trajectory,
-)
+from ...types import BaroEstimate, Drive, Estimate, ParamEstimate, Trajectory
+from ...types.streams import FloatArray
 from .gnss_reference import nominal_interval
 from .inputs import AhrsConfig
 from .loops import LoopInputs, bridge_gaps, loop_estimate, loop_inputs, zoh_nb

@@ -155,11 +155,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ...ahrs_cache import shared_call
 from ...geo.earth import OMEGA_IE, gravity, radii
 from ...nav.gaps import gap_threshold
-from ...types import Drive, FloatArray
+from ...types import Drive
+from ...types.streams import FloatArray
 from .ahrs import ahrs_kernel
+from .ahrs_cache import shared_call
 from .gnss_reference import baro_rate, matching_inputs, velocity_from_positions
 
 
@@ -341,7 +342,7 @@ def vertical_inputs(drive: Drive, config: AhrsConfig | None = None) -> VerticalI
     VerticalInputs
         arrays of shape (N,) (``q_nb`` (N, 4), ``bias_gyro`` (N, 3)) at ``drive.imu.t``.
         Inside ``runner.run_estimators`` it is computed once per drive and config and
-        shared, read-only, by the vertical estimators (``vnav_graph.ahrs_cache``).
+        shared, read-only, by the vertical estimators (``vertical.ahrs_cache``).
     """
     cfg = config or AhrsConfig()
     # computed once per run for all vertical estimators, time charged to each (sharing.py)

@@ -65,11 +65,12 @@ import numpy as np
 from numba import njit
 from scipy.linalg import expm, solve_discrete_are
 
-from ...failures import MissingStream
 from ...geo.earth import gravity, radii
 from ...nav.arrays import put
 from ...nav.gaps import imu_gaps
-from ...types import Drive, Estimate, FloatArray, Trajectory
+from ...types import Drive, Estimate, Trajectory
+from ...types.streams import FloatArray
+from ...util.failures import MissingStream
 from .inputs import AhrsConfig, vertical_inputs
 
 

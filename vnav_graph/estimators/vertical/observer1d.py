@@ -98,7 +98,8 @@ from ...config import G0
 from ...geo.earth import gravity, radii
 from ...nav.gaps import gap_threshold
 from ...sensors.model import sensor_model
-from ...types import Drive, Estimate, FloatArray, Trajectory
+from ...types import Drive, Estimate, Trajectory
+from ...types.streams import FloatArray
 from .inputs import AhrsConfig, vertical_inputs
 
 SEED003_GAIN = (0.4, 0.04, 0.002)

@@ -77,7 +77,6 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from ...failures import MissingStream
 from ...geo.earth import gravity_scalar, radii_scalar
 from ...nav.arrays import outer, put
 from ...nav.error_state import embed_error_state, selection
@@ -85,14 +84,9 @@ from ...nav.gaps import GAP_ACCEL_SD, cv_bridge_noise, gap_threshold
 from ...nav.gnss_gate import NO_LIMIT, REFUSE, height_gate, new_gate_state
 from ...sensors.baro import baro_jacobian, measure_baro, with_prior_conflict_notes
 from ...sensors.model import SensorModel, sensor_model
-from ...types import (
-    BaroEstimate,
-    Drive,
-    Estimate,
-    FloatArray,
-    ParamEstimate,
-    Trajectory,
-)
+from ...types import BaroEstimate, Drive, Estimate, ParamEstimate, Trajectory
+from ...types.streams import FloatArray
+from ...util.failures import MissingStream
 from .inputs import AhrsConfig, VerticalInputs, vertical_inputs
 from .vekf7_setup import (  # noqa: F401  (the state indices and input_error_psd: this module's API)
     IB,

@@ -20,7 +20,8 @@ from numpy.typing import NDArray
 from ...geo.earth import radii
 from ...sensors.model import SensorModel
 from ...sensors.noise import gm_process_var, gm_transition
-from ...types import Drive, FloatArray
+from ...types import Drive
+from ...types.streams import FloatArray
 from .gnss_reference import nominal_interval
 from .inputs import VerticalInputs
 

@@ -70,7 +70,6 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from ...failures import MissingStream
 from ...geo.earth import gravity_scalar
 from ...nav.arrays import outer, put
 from ...nav.error_state import embed_error_state, selection
@@ -78,14 +77,9 @@ from ...nav.gaps import GAP_ACCEL_SD, cv_bridge_noise, gap_threshold
 from ...nav.gnss_gate import NO_LIMIT, REFUSE, height_gate
 from ...sensors.model import sensor_model
 from ...sensors.noise import gm_process_var, gm_transition
-from ...types import (
-    BaroEstimate,
-    Drive,
-    Estimate,
-    FloatArray,
-    ParamEstimate,
-    Trajectory,
-)
+from ...types import BaroEstimate, Drive, Estimate, ParamEstimate, Trajectory
+from ...types.streams import FloatArray
+from ...util.failures import MissingStream
 from .inputs import AhrsConfig, vertical_inputs
 from .vekf7_setup import initial_fix, input_error_psd
 

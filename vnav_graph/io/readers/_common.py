@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ...geo.atmosphere import isa_altitude
-from ...types import MagStream
+from ...types.streams import MagStream
 
 FloatArray = NDArray[np.float64]
 

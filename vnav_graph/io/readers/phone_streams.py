@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from ...types import BaroStream, GnssStream, ImuStream, MagStream
+from ...types.streams import BaroStream, GnssStream, ImuStream, MagStream
 from ._common import (
     Report,
     baro_alt_aligned,

@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from ...types import GnssStream
+from ...types.streams import GnssStream
 from ._common import Report, monotonic_mask
 from .gpstime import GPS_EPOCH_UNIX_S, calendar_seconds, unix_to_gps, week_tow_to_gps
 

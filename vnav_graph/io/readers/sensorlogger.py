@@ -78,8 +78,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from ...failures import failure_message
 from ...types import Drive
+from ...util.failures import failure_message
 from ._common import (
     Report,
     finite_rows,

@@ -21,7 +21,7 @@ import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import B, C, G, K, X
 
-from ....types import FloatArray
+from ....types.streams import FloatArray
 from .layout import (
     IntervalInfo,
     Layout,

@@ -27,7 +27,7 @@ import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import A, B, C, G, K, V, X
 
-from ....types import FloatArray
+from ....types.streams import FloatArray
 from ..model import interval_factors as gf
 from . import linalg as gla
 

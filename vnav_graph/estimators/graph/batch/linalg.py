@@ -31,8 +31,8 @@ import numpy as np
 from numba import njit
 from scipy.linalg import LinAlgError, cho_solve_banded, cholesky_banded
 
-from ....numpy_pages import small_pages
-from ....types import FloatArray
+from ....types.streams import FloatArray
+from ....util.pages import small_pages
 
 
 @dataclass

@@ -50,10 +50,10 @@ from ....types import (
     BaroEstimate,
     Drive,
     Estimate,
-    FloatArray,
     ParamEstimate,
     Trajectory,
 )
+from ....types.streams import FloatArray
 from ...gnss_auto import with_gm_auto
 from ..model import interval_factors as gf
 from ..model.cpp_factors import build_batch_graph, pims_for

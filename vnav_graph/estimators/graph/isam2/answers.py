@@ -19,7 +19,8 @@ import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import B, C, V, X
 
-from ....types import ERROR_STATE_DIM, FloatArray
+from ....types import ERROR_STATE_DIM
+from ....types.streams import FloatArray
 from ..batch.smoother import cov_18
 
 

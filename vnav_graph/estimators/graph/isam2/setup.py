@@ -1,6 +1,6 @@
 """Set-up pieces of ``graph-isam2`` (``isam2``): its iSAM2 parameters and relinearisation
 thresholds, the baro-calibration segments, keyframe 0's factors, the error raised by a failed
-update and the ``Estimate.info`` it reports."""
+update (``UpdateFailed``) and the ``Estimate.info`` it reports."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import A, B, C, G, K, V, X
 
-from ....failures import failure_message
+from ....util.failures import failure_message
 from ..batch.smoother import solver_warnings, value_of
 from ..model.cpp_factors import keyframe_fixes, prior_factors
 from ..model.extend import Collected, key_name
@@ -18,8 +18,13 @@ from ..settings import GraphConfig
 from .py_factors import LINEAR_ONLY
 
 
-def update_error(P: Any, k: int, exc: BaseException | None, gap: bool) -> RuntimeError:
-    """A RuntimeError naming the keyframe, its time and the likely cause of a failed update.
+class UpdateFailed(RuntimeError):
+    """An iSAM2 update failed or diverged: ``GraphISAM2.run`` retries the pass once with its
+    robust settings on this type (and on no other error)."""
+
+
+def update_error(P: Any, k: int, exc: BaseException | None, gap: bool) -> UpdateFailed:
+    """An ``UpdateFailed`` naming the keyframe, its time and the likely cause.
 
     GTSAM's IndeterminantLinearSystemException reaches Python with an empty or generic
     message; this replaces it (and a diverged, non-finite estimate) with one that says where.
@@ -40,7 +45,7 @@ def update_error(P: Any, k: int, exc: BaseException | None, gap: bool) -> Runtim
         causes.append("a linearisation point far from the solution (diverged prediction)")
     what = ("iSAM2 update raised " + failure_message(exc, typed=True) if exc is not None
             else "the online estimate became non-finite or diverged")
-    return RuntimeError(
+    return UpdateFailed(
         f"graph-isam2: {what} at keyframe {k + 1} (t = {t1:.2f} s, interval "
         f"[{t0:.2f}, {t1:.2f}] s, largest IMU spacing {max_dt:.3g} s); likely cause: "
         + "; ".join(causes) + ". graph-batch (damped batch solver) may still work.")

@@ -75,7 +75,7 @@ from ..settings import LOW_RATE_DT, LOW_RATE_KEYFRAME_DT, GraphConfig
 from .answers import real_time
 from .causal import causal_pass
 from .online import OnlineResult
-from .setup import estimate_info
+from .setup import UpdateFailed, estimate_info
 
 # averaged low-rate IMU logs (median spacing ≥ LOW_RATE_DT, e.g. the 1 Hz phone logs): a
 # keyframe every sample made a 93-min log take 5563 updates (213 s online), and after its 37 s
@@ -141,17 +141,17 @@ class GraphISAM2:
             cfg0 = dataclasses.replace(self.config, **LOW_RATE_SETTINGS)
         try:
             est = self._run(drive, cfg0, False, t_start, None)
-        except RuntimeError as exc:
-            if "graph-isam2:" not in str(exc):  # not an update: no retry, but named
-                raise RuntimeError(f"graph-isam2: {first_line(exc)}") from exc
+        except UpdateFailed as exc:
             cfg = dataclasses.replace(cfg0, **ROBUST_SETTINGS)
             try:
                 est = self._run(drive, cfg, True, t_start, str(exc))
+            except UpdateFailed:
+                raise
             except RuntimeError as exc2:
-                if "graph-isam2:" in str(exc2):
-                    raise
                 raise RuntimeError(f"graph-isam2 (robust retry after: {first_line(exc)}): "
                                    f"{first_line(exc2)}") from exc2
+        except RuntimeError as exc:  # not an update: no retry, but named
+            raise RuntimeError(f"graph-isam2: {first_line(exc)}") from exc
         # the post-solve hard-iron and baro-scale checks of both families (graph-batch, ekf)
         def rerun(cfg: GraphConfig) -> Estimate:
             return GraphISAM2(cfg, self.extensions).run(drive)

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ....types import FloatArray
+from ....types.streams import FloatArray
 
 
 @dataclass(frozen=True)

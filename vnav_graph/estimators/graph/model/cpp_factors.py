@@ -16,7 +16,7 @@ from ....config import ImuSpec
 from ....nav.levelling import coarse_level
 from ....sensors.gnss_model import GnssGM
 from ....sensors.noise import gm_process_var, gm_transition, imu_bias_step
-from ....types import FloatArray
+from ....types.streams import FloatArray
 from ..batch.general import information_factor
 from . import interval_factors as gf
 from .problem import Problem, gravity_delta, noise, preintegrate

@@ -12,7 +12,7 @@ from numba import njit
 
 from ....nav.arrays import put
 from ....nav.rotations import dcm_to_quat_into, quat_to_dcm_into, so3_exp_into
-from ....types import FloatArray
+from ....types.streams import FloatArray
 from .interp import increments_at
 
 

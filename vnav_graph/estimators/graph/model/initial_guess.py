@@ -11,7 +11,8 @@ import numpy as np
 from ....geo.frames import ned_to_lla, quat_to_mat, skew
 from ....nav.arrays import nearest_index
 from ....nav.rotations import so3_exp
-from ....types import ERROR_STATE, FloatArray
+from ....types import ERROR_STATE
+from ....types.streams import FloatArray
 from . import interval_factors as gf
 from .cpp_factors import PRIOR_ATT_SD, level
 from .problem import Problem

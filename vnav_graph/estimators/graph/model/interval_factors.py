@@ -53,7 +53,7 @@ from ....sensors.gnss_model import (
     antenna_velocity_batch,
     body_tilt,
 )
-from ....types import FloatArray
+from ....types.streams import FloatArray
 from .dense_increments import DenseIncrements, dense_preintegration  # noqa: F401 (gf.*)
 from .interp import interpolant
 

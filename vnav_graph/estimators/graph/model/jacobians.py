@@ -23,7 +23,7 @@ from typing import Any
 import gtsam
 import numpy as np
 
-from ....types import FloatArray
+from ....types.streams import FloatArray
 
 
 @dataclass(frozen=True)

@@ -40,7 +40,7 @@ from ....sensors.magnetometer import (
     usable,
     wrap_pi,
 )
-from ....types import FloatArray
+from ....types.streams import FloatArray
 from .extend import GraphView, Terms, Variable, X
 
 KEY = H(0)

@@ -28,10 +28,8 @@ from ....sensors.model import (
     sensor_model,
 )
 from ....sensors.robust import post_gate_threshold
-from ....types import (
-    Drive,
-    FloatArray,
-)
+from ....types import Drive
+from ....types.streams import FloatArray
 from ..settings import GraphConfig
 from . import interval_factors as gf
 from .accel_scale import AccelScale, interval_mean_force

@@ -12,7 +12,7 @@ import gtsam
 import numpy as np
 
 from ....sensors.robust import LOSSES, weight_and_loss
-from ....types import FloatArray
+from ....types.streams import FloatArray
 
 __all__ = ["LOSSES", "check_loss", "reweight", "robust_noise", "weight_and_loss"]
 

@@ -35,7 +35,7 @@ class MissingStream(ValueError):
     """An estimator needs a stream the drive does not have (e.g. no barometer).
 
     Not a failure: a vehicle without a barometer is a valid input, the estimators that need
-    one cannot run on it. ``vnav_graph.runner`` reports them with ``status: "skipped"`` and
+    one cannot run on it. ``vnav_graph.run.runner`` reports them with ``status: "skipped"`` and
     ``reason`` (``"no barometer"``) instead of ``"failed"``. A ``ValueError``, so that a
     direct ``estimator.run(drive)`` caller sees the same exception type as before.
     """
@@ -54,7 +54,7 @@ class ExtensionError(ValueError):
     key, a reserved letter, a Jacobian of the wrong shape, ... The message names the
     extension.
 
-    Bad input, not an estimator failure: ``vnav_graph.runner`` lets it through, so ``run`` and
+    Bad input, not an estimator failure: ``vnav_graph.run.runner`` lets it through, so ``run`` and
     ``holdout`` stop with the one-line error and exit 2 instead of reporting the variant
     ``failed`` (or, for a wrong Jacobian shape, GTSAM crashing the process). A bench worker
     never raises: its row is ``failed`` with this error.

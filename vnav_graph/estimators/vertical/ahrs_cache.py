@@ -25,7 +25,7 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-from .jit import CompileTimer
+from ...util.jit import CompileTimer
 
 T = TypeVar("T")
 

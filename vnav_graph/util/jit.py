@@ -145,7 +145,7 @@ class CompileTimer:
 # vertical filters and their AHRS (was 44), ~41 s the EKF and its RTS (was 46), ~5 s the
 # graph. Compilation holds the GIL and numba's compiler lock, so threads do not help; a
 # second process does. ``Prewarm`` starts
-# ``python -m vnav_graph.jit KEY FAMILY ...``, which runs the family's estimators on a short
+# ``python -m vnav_graph.util.jit KEY FAMILY ...``, which runs the family's estimators on a short
 # simulated drive (compiling their kernels into the shared on-disk cache) and leaves a stamp
 # per family. ``runner.run_estimators`` runs the child's families last, so the main process
 # compiles and runs every other estimator meanwhile, then waits for the stamp (``wait``) and
@@ -172,9 +172,14 @@ FAMILIES = {  # estimators that share kernels: compiled together, by one process
 PREWARM_DRIVE = ("default", 0, 30.0)  # scenario, seed, duration [s] of the compile drive
 
 
+def package_root() -> Path:
+    """The ``vnav_graph`` package directory this process imported."""
+    return Path(__file__).resolve().parent.parent
+
+
 def package_parent() -> str:
     """The directory holding the ``vnav_graph`` package this process imported."""
-    return str(Path(__file__).resolve().parent.parent)
+    return str(package_root().parent)
 
 
 def family_of(name: str) -> str | None:
@@ -188,10 +193,10 @@ def source_key() -> str:
     cache directory."""
     import hashlib
 
-    from .version import __version__
+    from ..version import __version__
 
     h = hashlib.sha1(__version__.encode())
-    root = Path(__file__).resolve().parent
+    root = package_root()
     for p in sorted(root.rglob("*.py")):
         h.update(f"{p.relative_to(root).as_posix()}:".encode())
         h.update(p.read_bytes())
@@ -306,7 +311,7 @@ class Prewarm:
         # 89 s of compilation in a 104 s run). The child starts in the directory that holds
         # the package this process imported.
         self.proc = subprocess.Popen(
-            [sys.executable, "-m", "vnav_graph.jit", key, *families], cwd=package_parent(),
+            [sys.executable, "-m", "vnav_graph.util.jit", key, *families], cwd=package_parent(),
             stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
 
     @classmethod
@@ -385,8 +390,8 @@ def _compile_families(key: str, families: list[str]) -> None:
     their kernels into the cache), stamp the family, then compile its ``WARMUPS``."""
     import warnings
 
-    from .estimators.base import create
-    from .simulation import simulate
+    from ..estimators.base import create
+    from ..simulation import simulate
 
     scenario, seed, duration = PREWARM_DRIVE
     with warnings.catch_warnings():

@@ -3,7 +3,7 @@
 One **task** is ``(scenario, seed, estimator, duration override)``. The worker simulates the
 drive itself (a drive is never shipped between processes: a (scenario, seed) pair always gives
 the same drive, ``vnav_graph.simulation.simulate``), runs the estimator through
-``vnav_graph.runner.run_one`` and evaluates it with ``vnav_graph.evaluation.metrics.evaluate``
+``vnav_graph.run.runner.run_one`` and evaluates it with ``vnav_graph.evaluation.metrics.evaluate``
 — the same metric block as ``summary.json``. A task that raises is recorded with
 ``status: "failed"`` and its error (``runner.failed_block``); it is never dropped.
 
@@ -21,7 +21,7 @@ from concurrent.futures import CancelledError, ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass, is_dataclass
 from typing import Any
 
-from .evaluation.montecarlo import (
+from ..evaluation.montecarlo import (
     BENCH_SCHEMA,
     CAUSAL_ERRORS_KEY,
     DEFAULT_WORKERS,
@@ -32,7 +32,7 @@ from .evaluation.montecarlo import (
     finite,
     shorten_scenario,
 )
-from .failures import failure_message
+from ..util.failures import failure_message
 from .progress import Counter, Mode, mode_for
 from .runner import failed_block, interrupt_flag, run_one
 
@@ -80,7 +80,7 @@ def warm_up(task: BenchTask) -> None:
     if task.estimator in _WARMED:
         return
     _WARMED.add(task.estimator)
-    from .simulation import simulate
+    from ..simulation import simulate
 
     try:
         drive = simulate(shorten_scenario(task.scenario, WARMUP_DURATION_S), task.seed)
@@ -96,9 +96,9 @@ def run_task(task: BenchTask) -> dict[str, Any]:
     ``summary.json`` (``evaluate``), ``status`` and ``error``. ``runtime_s`` excludes the
     one-time warm-up of the estimator in this process (``warm_up``).
     """
-    from .estimators.base import register
-    from .evaluation.metrics import causal_errors, evaluate, heading_errors
-    from .simulation import simulate
+    from ..estimators.base import register
+    from ..evaluation.metrics import causal_errors, evaluate, heading_errors
+    from ..simulation import simulate
 
     row: dict[str, Any] = {"scenario": task.scenario, "seed": int(task.seed),
                            "estimator": task.estimator, "duration_s": task.duration_s}
@@ -148,7 +148,7 @@ def make_tasks(
     so that a worker process that did not inherit the registration can rebuild it; ``configs``
     maps an estimator name to its config object (default: the estimator's own).
     """
-    from .estimators.base import registered_factories
+    from ..estimators.base import registered_factories
 
     extra = registered_factories()
     cfg = dict(configs or {})
@@ -180,7 +180,7 @@ def run_tasks(
     dask : None for the local pool, else a ``dask.distributed.Client``, a scheduler
         address (``"tcp://host:8786"``) or ``"local[:N]"`` (a LocalCluster of N worker
         processes) — the same ``run_task`` is submitted to the cluster
-    progress : a ``vnav_graph.progress`` mode, or a bool (True: a bar on a terminal, a line
+    progress : a ``vnav_graph.run.progress`` mode, or a bool (True: a bar on a terminal, a line
         per finished run otherwise), on stderr
 
     A task whose worker dies (``BrokenProcessPool``, a lost Dask worker) is recorded as a
@@ -304,7 +304,7 @@ def bench(
     except BenchInterrupted as exc:  # Ctrl-C: the document of the runs that finished
         runs, interrupted = exc.rows, True
     wall = time.perf_counter() - t0
-    from . import __version__
+    from .. import __version__
 
     return {
         "schema": BENCH_SCHEMA,

@@ -1,5 +1,5 @@
 """Core data types: drives, trajectories and estimates on one clock, and the sensor streams
-(``vnav_graph.streams``, re-exported here).
+(``vnav_graph.types.streams``).
 
 Conventions (see also the package docstring)
 --------------------------------------------
@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from .streams import (  # noqa: F401  (re-exported: the streams are part of the core types)
+from .streams import (
     BaroStream,
     FloatArray,
     GnssStream,
@@ -130,7 +130,7 @@ class Trajectory:
 
     def pos_n(self, origin_lla: FloatArray) -> FloatArray:
         """Tangent-plane NED position relative to ``origin_lla`` [m], shape (N, 3)."""
-        from .geo.frames import lla_to_ned
+        from ..geo.frames import lla_to_ned
 
         return lla_to_ned(self.lla, origin_lla)
 
@@ -175,7 +175,7 @@ class Trajectory:
 
         q = None
         if self.q_nb is not None:
-            from .geo.frames import slerp_quat
+            from ..geo.frames import slerp_quat
 
             q = slerp_quat(self.t, self.q_nb, tq)
         return Trajectory(
@@ -203,7 +203,7 @@ class Trajectory:
         """Roll, pitch, yaw [rad], shape (N, 3) (requires ``q_nb``)."""
         if self.q_nb is None:
             raise ValueError("trajectory.q_nb: no attitude in this trajectory")
-        from .geo.frames import quat_to_rph
+        from ..geo.frames import quat_to_rph
 
         return quat_to_rph(self.q_nb)
 
@@ -337,7 +337,7 @@ class Estimate:
     innovations : normalised innovations per measurement type
     info : free-form diagnostics (rejected GNSS count ``gnss_rejected``, observability, ...)
     config : the estimator's settings
-    origin_lla : (3,) or None, the drive's tangent-plane origin (``vnav_graph.runner`` sets it;
+    origin_lla : (3,) or None, the drive's tangent-plane origin (``vnav_graph.run.runner`` sets it;
         ``to_dataframe()`` uses it)
     """
 
@@ -395,7 +395,7 @@ class Estimate:
         ----------
         origin_lla : (3,) or None, tangent-plane origin (lat [rad], lon [rad], height [m]) for
             the ``pos_*_m`` columns; None takes the estimate's own ``origin_lla`` (the drive's
-            origin, set when the estimator ran through ``vnav_graph.runner``, e.g.
+            origin, set when the estimator ran through ``vnav_graph.run.runner``, e.g.
             ``run_estimators``), and leaves the columns out when it has none.
 
         Returns

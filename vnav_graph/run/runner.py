@@ -1,7 +1,7 @@
 """The one place that creates, runs, times and catches estimators.
 
 ``run`` (``run_estimators``), the GNSS-outage holdout (``run_holdout``), the bench's workers,
-local or on Dask (``vnav_graph.bench.run_task``), all call :func:`run_one`:
+local or on Dask (``vnav_graph.run.bench.run_task``), all call :func:`run_one`:
 
 - the estimator name is checked against the registry once (:func:`resolve_estimators`);
 - ``create(name, config).run(drive)`` runs with Python warnings captured into the estimate's
@@ -37,10 +37,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from .ahrs_cache import Shared, sharing
-from .estimators.base import available, create, with_online
-from .evaluation.blocks import fb_separation_block
-from .evaluation.holdout import (
+from ..estimators.base import available, create, with_online
+from ..estimators.vertical.ahrs_cache import Shared, sharing
+from ..evaluation.blocks import fb_separation_block
+from ..evaluation.holdout import (
     HoldoutResult,
     Scored,
     baro_block,
@@ -52,12 +52,12 @@ from .evaluation.holdout import (
     score,
     withhold,
 )
-from .evaluation.metrics import METRIC_KEYS
-from .evaluation.screening import screen_reference
-from .failures import ExtensionError, MissingStream, failure_message
-from .jit import CompileTimer, Prewarm, family_of, mark_warm
+from ..evaluation.metrics import METRIC_KEYS
+from ..evaluation.screening import screen_reference
+from ..types import Drive, Estimate
+from ..util.failures import ExtensionError, MissingStream, failure_message
+from ..util.jit import CompileTimer, Prewarm, family_of, mark_warm
 from .progress import Mode, mode_for, say, steps
-from .types import Drive, Estimate
 
 
 @dataclass(frozen=True)
@@ -95,7 +95,7 @@ def resolve_estimators(names: Sequence[str] | None) -> list[str]:
         return avail
     unknown = [n for n in names if n not in avail]
     if unknown:
-        from .suggest import did_you_mean
+        from ..util.suggest import did_you_mean
 
         raise ValueError(f"unknown estimator(s) {', '.join(unknown)}"
                          f"{did_you_mean(unknown[0], avail)} (available: {', '.join(avail)})")
@@ -176,10 +176,10 @@ def run_estimators(drive: Drive, names: Sequence[str], progress: bool | Mode = T
                    desc: str = "estimators", prewarm: Any = "auto") -> list[RunResult]:
     """Run each named estimator on ``drive``; failures are captured, not raised.
 
-    ``progress``: a ``vnav_graph.progress`` mode, or a bool (True: bar on a terminal, a line
+    ``progress``: a ``vnav_graph.run.progress`` mode, or a bool (True: bar on a terminal, a line
     per estimator otherwise). ``configs`` maps estimator names to their config objects.
     On a machine where the kernels are not compiled yet, a second process compiles the later
-    estimator families meanwhile (``vnav_graph.jit.Prewarm``): ``prewarm="auto"`` starts one
+    estimator families meanwhile (``vnav_graph.util.jit.Prewarm``): ``prewarm="auto"`` starts one
     here, or pass one started earlier (``cli.cmd_run`` starts it before reading the drive) or
     None. It is closed here.
     """
@@ -198,7 +198,7 @@ def run_estimators(drive: Drive, names: Sequence[str], progress: bool | Mode = T
                  + [i for i, n in enumerate(names) if family_of(n) in pre.families])
     results: dict[int, RunResult] = {}
     try:
-        with sharing() as shared:  # the vertical filters' AHRS once (vnav_graph.ahrs_cache)
+        with sharing() as shared:  # the vertical filters' AHRS once (vertical.ahrs_cache)
             for i in steps(order, desc, mode, label=lambda i: names[i]):
                 name = names[i]
                 waited = pre.wait(name) if pre is not None else 0.0
@@ -288,7 +288,7 @@ def run_holdout(drive: Drive, estimators: Sequence[str] | None = None, outage_s:
     (``vnav_graph.evaluation.holdout``: windows, scoring, document).
 
     An estimator that raises is reported ``status: failed`` with its error; the others still
-    run. ``progress``: a ``vnav_graph.progress`` mode or a bool; ``configs``: estimator
+    run. ``progress``: a ``vnav_graph.run.progress`` mode or a bool; ``configs``: estimator
     configs by name.
     """
     if drive.gnss is None or len(drive.gnss) < 10:
@@ -324,7 +324,7 @@ def run_holdout(drive: Drive, estimators: Sequence[str] | None = None, outage_s:
             s.block["gnss_gm_auto"] = info.get("gnss_gm_auto")
             s.block["real_time_pass"] = info.get("real_time_pass")
             if drive.truth is not None:  # holdout --truth: the windows against the reference
-                from .evaluation.reference_score import reference_block
+                from ..evaluation.reference_score import reference_block
 
                 s.block["reference"] = reference_block(r.estimate, drive, windows)
             check_run(s, r.estimate, held, drive, reference, ~withheld)

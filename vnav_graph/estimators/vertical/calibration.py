@@ -52,7 +52,8 @@ from typing import Any
 
 import numpy as np
 
-from .types import Drive, FloatArray
+from ...types import Drive
+from ...types.streams import FloatArray
 
 # Seed 001 Table 1: (dSF [%], Td [s], B [ft]) estimated on the paper's seven flight test sets;
 # the reference values the calibration is reproduced against (tests, benchmarks/reproduce_seeds).
@@ -293,7 +294,7 @@ def calibrate_baro(drive: Drive) -> BaroCalibration:
             raise ValueError("calibrate-baro: too few GNSS fixes to differentiate heights")
         vg = np.gradient(g.lla[:, 2], tg)
         src = "differentiated_height"
-    from .sensors.model import sensor_model
+    from ...sensors.model import sensor_model
 
     model = sensor_model(drive)
     bp = model.baro

@@ -240,7 +240,7 @@ class BaroStream:
         """Barometric altitude [m, +up]: ``alt`` if given, else ISA altitude of ``pressure``."""
         if self.alt is not None:
             return self.alt
-        from .geo.atmosphere import isa_altitude
+        from ..geo.atmosphere import isa_altitude
 
         assert self.pressure is not None
         return isa_altitude(self.pressure)

@@ -27,7 +27,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from .types import Drive
+from ..types import Drive
 
 # seconds per (10⁴ IMU samples, 100 keyframes, 10⁵ keyframe × heading-factor pairs)
 COST: dict[str, tuple[float, float, float]] = {
@@ -48,7 +48,7 @@ LONG_RUN_S = 60.0  # a predicted run at least this long gets the hint
 
 def features(drive: Drive) -> tuple[float, float, float]:
     """(IMU samples / 10⁴, keyframes / 100, keyframes × heading factors / 10⁵) of ``drive``."""
-    from .sensors.magnetometer import MAG_INTERVAL_S, usable
+    from ..sensors.magnetometer import MAG_INTERVAL_S, usable
 
     n_imu = len(drive.imu)
     dt = np.diff(drive.imu.t)

@@ -1,4 +1,4 @@
-"""The main job: estimators run on one drive (``vnav_graph.runner``) are evaluated into
+"""The main job: estimators run on one drive (``vnav_graph.run.runner``) are evaluated into
 ``summary.json``, its table and the per-estimator Parquet files.
 
 A failed estimator is reported with ``status: failed`` and its error (docs/design.md,
@@ -13,9 +13,10 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from .evaluation.metrics import causal_view, evaluate
-from .failures import failure_message
-from .io.jsonout import dumps_strict
+from ..evaluation.metrics import causal_view, evaluate
+from ..io.jsonout import dumps_strict
+from ..types import Drive, Estimate
+from ..util.failures import failure_message
 from .outputs import ONLINE_SUFFIX
 from .progress import Mode
 from .runner import (
@@ -28,7 +29,6 @@ from .runner import (
     run_holdout,
     run_one,
 )
-from .types import Drive, Estimate
 
 __all__ = ["EXIT_ALL_FAILED", "EXIT_SOME_FAILED", "ONLINE_SUFFIX", "SUMMARY_SCHEMA",
            "RunResult", "apply_holdout", "estimate_table", "failed_block", "format_table",
@@ -79,8 +79,8 @@ def summarize(drive: Drive, results: Sequence[RunResult]) -> dict[str, Any]:
     ``vnav_graph.evaluation.compare``; against truth over time blocks of this run, or null
     until ``apply_holdout`` scores a real log).
     """
-    from . import __version__
-    from .evaluation.compare import (
+    from .. import __version__
+    from ..evaluation.compare import (
         BLOCK_MIN_S,
         MIN_BLOCKS_TO_RANK,
         comparison,
@@ -167,8 +167,8 @@ def apply_holdout(summary: dict[str, Any], holdout_doc: dict[str, Any]) -> dict[
     recomputed over the windows (its ``per_block`` = the holdout ``per_window``). NEES stays
     null (no reference for the full state).
     """
-    from .evaluation.compare import MIN_BLOCKS_TO_RANK, comparison, rankings
-    from .evaluation.selfcheck import DIVERGED
+    from ..evaluation.compare import MIN_BLOCKS_TO_RANK, comparison, rankings
+    from ..evaluation.selfcheck import DIVERGED
 
     out = json.loads(json.dumps(summary))
     per_block: dict[str, list[dict[str, Any]]] = {}
@@ -235,7 +235,7 @@ def score_holdout(summary: dict[str, Any], drive: Drive, names: Sequence[str],
 
     Returns the summary and the ``HoldoutResult`` (None when skipped), whose error series the
     report draws."""
-    from .evaluation.holdout import auto_outage
+    from ..evaluation.holdout import auto_outage
 
     chosen = None
     if outage_s is None and drive.gnss is not None and len(drive.gnss) >= 2:
@@ -303,7 +303,7 @@ TABLE_COLUMNS = (("estimator", 15), ("status", 7), ("alt RMSE m", 11), ("alt max
 
 def format_table(summary: dict[str, Any]) -> str:
     """Plain-text comparison table of a summary: headline, table with units, notes."""
-    from .evaluation.compare import headline_lines, ranking_lines
+    from ..evaluation.compare import headline_lines, ranking_lines
 
     def row(cells: Sequence[str]) -> str:
         return "".join(f"{c:<{w}}" if k == 0 else f"{c:>{w}}"
@@ -327,7 +327,7 @@ def format_table(summary: dict[str, Any]) -> str:
             s += "±" + format(p["sd"] * scale, spec)
         return s
 
-    from .estimators.base import family_order
+    from ..estimators.base import family_order
 
     for name in family_order(list(summary["estimators"])):  # the report's row order
         m = summary["estimators"][name]
@@ -421,7 +421,7 @@ def write_outputs(
     ``estimates/<name>.parquet`` (``estimate_table``, the final answer) and, for an estimator
     with a causal estimate, ``estimates/<name>.online.parquet`` (``online_table``).
 
-    Written through ``vnav_graph.outputs.publish``: an interrupted run leaves no half-written
+    Written through ``vnav_graph.run.outputs.publish``: an interrupted run leaves no half-written
     file under a final name, and results of an earlier run in the same directory that this run
     did not produce again (e.g. another estimator's Parquet) are removed.
     """
