@@ -64,7 +64,7 @@ def render(docs: dict[str, dict[str, Any]]) -> str:
         rh = (gb["horiz_rmse_m"] / er["horiz_rmse_m"]
               if gb.get("horiz_rmse_m") and er.get("horiz_rmse_m") else float("nan"))
         # solver warnings: the warnings that are not a baro prior conflict (a note on the
-        # data, ``sensors.baro.prior_conflict_notes``; counted apart)
+        # data, ``estimators.checks.prior_conflict_notes``; counted apart)
         notes = (gb.get("baro_prior_conflict") or []) + (gi.get("baro_prior_conflict") or [])
         warn = len([w for w in (gb.get("warnings") or []) + (gi.get("warnings") or [])
                     if w not in notes])

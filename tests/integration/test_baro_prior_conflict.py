@@ -1,5 +1,5 @@
 """A baro whose latency is far outside the estimators' prior is reported by every estimator
-with a baro calibration (``sensors.baro.prior_conflict_notes``), and a baro inside it is not.
+with a baro calibration (``estimators.checks.prior_conflict_notes``), and a baro inside it is not.
 
 A scenario that fixes the latency gives the estimators the documented default prior
 N(0.1 s, 0.1 s), never the truth (``sensors.model.baro_prior``). With a true latency of 1.0 s
@@ -13,8 +13,8 @@ from dataclasses import replace
 
 import pytest
 
+from vnav_graph.estimators.checks import PRIOR_CONFLICT_Z
 from vnav_graph.run.pipeline import run_estimators
-from vnav_graph.sensors.baro import PRIOR_CONFLICT_Z
 from vnav_graph.simulation.scenario import load_scenario, simulate
 
 ESTIMATORS = ["ekf-rts", "graph-batch", "vekf7"]

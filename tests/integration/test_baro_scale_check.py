@@ -1,4 +1,4 @@
-"""The post-solve baro-scale check (``sensors.baro.without_implausible_scale``) and the
+"""The post-solve baro-scale check (``estimators.checks.without_implausible_scale``) and the
 graph's vertical initialisation after the last GNSS fix (``graph.init``).
 
 An accelerometer bias step while GNSS is lost (vibration rectification: 181.BIN's |f| reads
@@ -16,15 +16,15 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from vnav_graph.estimators.ekf.filter import EKFRTS, EkfConfig
-from vnav_graph.estimators.graph import GraphBatch, GraphConfig
-from vnav_graph.evaluation.metrics import errors_vs_truth
-from vnav_graph.sensors.baro import (
+from vnav_graph.estimators.checks import (
     SCALE_LIMIT,
     STIFF_SCALE_SD,
     implausible_scale_note,
     without_implausible_scale,
 )
+from vnav_graph.estimators.ekf.filter import EKFRTS, EkfConfig
+from vnav_graph.estimators.graph import GraphBatch, GraphConfig
+from vnav_graph.evaluation.metrics import errors_vs_truth
 from vnav_graph.sensors.model import sensor_model
 from vnav_graph.simulation import simulate
 from vnav_graph.types import BaroEstimate, ParamEstimate

@@ -6,7 +6,7 @@ The drive: hill-drive-mag with a 30 µT hard iron along the body x axis (the pri
 (interquartile range over median) against the 10 % the hard-iron model allows, so every
 estimator that reads the magnetometer leaves it out (``sensors.magnetometer.usable``). Over
 the first 60 s the swing stays inside 10 %: the estimators use it, fit a hard iron 6-8σ from
-its prior, and solve again without it (``sensors.magnetometer.without_contradicting_mag``).
+its prior, and solve again without it (``estimators.checks.without_contradicting_mag``).
 """
 
 from __future__ import annotations

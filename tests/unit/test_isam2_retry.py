@@ -24,9 +24,7 @@ def _patched(monkeypatch, first: BaseException, calls: list):
         return "retried"
 
     monkeypatch.setattr(sm.GraphISAM2, "_run", fake_run)
-    monkeypatch.setattr(sm, "without_contradicting_mag", lambda est, *a: est)
-    monkeypatch.setattr(sm, "without_implausible_scale", lambda est, *a: est)
-    monkeypatch.setattr(sm, "with_prior_conflict_notes", lambda est: est)
+    monkeypatch.setattr(sm, "checked", lambda est, *a, **k: est)
 
 
 def test_a_failed_update_is_retried_with_the_robust_settings(monkeypatch, drive):

@@ -109,7 +109,7 @@ def test_magstream_validates() -> None:
 
 def test_hard_iron_note_is_the_chi2_3_gate() -> None:
     """Closed form: χ²₃ at 0.999 is 16.27, i.e. 4.03σ along one axis."""
-    from vnav_graph.sensors.magnetometer import hard_iron_note
+    from vnav_graph.estimators.checks import hard_iron_note
 
     def info(b):
         return {"extra_variables": {"h0": {"est": list(b), "sd": [1.0, 1.0, 1.0]}}}

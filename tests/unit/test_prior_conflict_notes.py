@@ -1,4 +1,4 @@
-"""The baro calibration's prior-conflict notes (``sensors.baro.prior_conflict_notes``): an
+"""The baro calibration's prior-conflict notes (``estimators.checks.prior_conflict_notes``): an
 estimate more than ``PRIOR_CONFLICT_Z`` prior σ from its prior mean is reported, with its
 numbers, in ``info["baro_prior_conflict"]`` and among the warnings."""
 
@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from vnav_graph.sensors.baro import (
+from vnav_graph.estimators.checks import (
     PRIOR_CONFLICT_Z,
     prior_conflict_notes,
     with_prior_conflict_notes,

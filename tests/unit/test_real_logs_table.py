@@ -1,5 +1,5 @@
 """benchmarks/real_logs_table.py's goals table counts solver warnings apart from the baro
-calibration's prior-conflict notes (``sensors.baro.prior_conflict_notes``)."""
+calibration's prior-conflict notes (``estimators.checks.prior_conflict_notes``)."""
 
 from __future__ import annotations
 

@@ -35,7 +35,6 @@ offset rotates with the vehicle in n, a heading error does not.
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -45,7 +44,7 @@ from numba import njit
 if TYPE_CHECKING:
     from ..geo.magfield import FieldModel
 
-from ..types import Drive, Estimate, Trajectory
+from ..types import Drive, Trajectory
 from ..types.streams import FloatArray, MagStream
 
 MIN_HORIZONTAL_UT = 3.0  # weaker horizontal fields give no usable heading (near the poles) [µT]
@@ -81,53 +80,6 @@ def usable(mag: MagStream | None) -> tuple[bool, str]:
                        f"(interquartile range over median; > {MAX_FIELD_SPREAD:.0%} means "
                        "vehicle interference beyond the hard-iron model)")
     return True, ""
-
-
-HARD_IRON_GATE_PROB = 0.999  # χ²₃ probability of the post-solve hard-iron check
-
-
-def hard_iron_note(info: dict[str, Any], prior_sd_ut: float) -> str:
-    """Post-solve check of an estimate that used the magnetometer: '' when its hard iron
-    (``info["extra_variables"]["h0"]["est"]``) is plausible under its prior N(0, σ² I)
-    (χ²₃ at ``HARD_IRON_GATE_PROB``: 4.0σ in 3 dof), else the note of an estimator that
-    drops the magnetometer and solves again. A hard iron far outside its prior means the
-    compass contradicts the heading of GNSS and IMU (interference beyond the model): on
-    181.BIN a batch smoother fitted (17, −18, 2) µT, which cancels most of the horizontal
-    field, so that any heading fits (the corrected horizontal field's median fell from 26 to
-    5 µT, its σ of the bias to 1e-5 µT). Same rule for both families."""
-    h = (info.get("extra_variables") or {}).get("h0")
-    if h is None:
-        return ""
-    from scipy.stats import chi2
-
-    b = np.asarray(h["est"], float)
-    d2 = float(np.sum((b / prior_sd_ut) ** 2))
-    lim = float(chi2.ppf(HARD_IRON_GATE_PROB, 3))
-    if not d2 > lim:
-        return ""
-    return (f"magnetometer not used: with it the hard iron came out at ({b[0]:.1f}, "
-            f"{b[1]:.1f}, {b[2]:.1f}) µT, {np.sqrt(d2):.1f}σ of its {prior_sd_ut:g} µT prior "
-            f"(χ²₃ {d2:.0f} > {lim:.1f}): the compass contradicts the heading of GNSS and "
-            "IMU (interference beyond the hard-iron model); solved again without it")
-
-
-def without_contradicting_mag(result: Estimate, config: Any,
-                              rerun: Callable[[Any], Estimate]) -> Estimate:
-    """The post-solve hard-iron check of every estimator that uses the magnetometer (ekf,
-    ekf-rts, graph-batch, graph-isam2): ``result`` when it passes (:func:`hard_iron_note`;
-    ``config`` has ``use_mag`` and ``mag_bias_sd``), else ``rerun(config without the
-    magnetometer)`` with the reason in ``info["mag_note"]``, the config asked for and the
-    time of both runs; the real-time answers stay ``result``'s (the check needs the whole
-    drive: ``Estimate.with_real_time_of``)."""
-    why = hard_iron_note(result.info, config.mag_bias_sd) if config.use_mag else ""
-    if not why:
-        return result
-    from dataclasses import replace
-
-    again = rerun(replace(config, use_mag=False)).with_real_time_of(
-        result, "the magnetometer was left out after the whole drive's hard-iron check")
-    return again.replace(info={**again.info, "mag_note": why}, config=config,
-                         runtime_s=result.runtime_s + again.runtime_s)
 
 
 DEFAULT_YEAR = 2025.0  # date of the field for a drive without one (noted in info)

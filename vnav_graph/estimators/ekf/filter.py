@@ -57,11 +57,7 @@ from scipy.stats import chi2
 
 from ...config import REAL_LOG_BARO, ImuSpec
 from ...geo.earth import OMEGA_IE
-from ...sensors.baro import with_prior_conflict_notes, without_implausible_scale
-from ...sensors.magnetometer import (
-    field_and_info,
-    without_contradicting_mag,
-)
+from ...sensors.magnetometer import field_and_info
 from ...sensors.model import (
     SensorModel,
     accel_scale_sd,
@@ -73,6 +69,7 @@ from ...types import BaroEstimate, Drive, Estimate, ParamEstimate, Trajectory
 from ...types.streams import FloatArray
 from ...util.pages import small_pages
 from ..base import with_online
+from ..checks import checked
 from ..gnss_auto import with_gm_auto
 from . import backward, carry, inputs, kernel, regate, rts
 from . import model as km
@@ -295,10 +292,9 @@ class EKF:
             return with_gm_auto(drive, self.config, self.name,
                                 lambda cfg: type(self)(cfg).run(drive))
         with small_pages():  # large numpy arrays without huge-page faults (util.pages)
-            est = without_contradicting_mag(self._run(drive), self.config,
-                                            lambda cfg: type(self)(cfg)._run(drive))
-            return with_prior_conflict_notes(without_implausible_scale(
-                est, self.config, lambda cfg: type(self)(cfg).run(drive)))
+            return checked(self._run(drive), self.config,
+                           lambda cfg: type(self)(cfg).run(drive),
+                           mag_rerun=lambda cfg: type(self)(cfg)._run(drive))
 
     def _run(self, drive: Drive) -> Estimate:
         t0 = time.perf_counter()

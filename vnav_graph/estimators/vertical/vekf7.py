@@ -82,11 +82,12 @@ from ...nav.arrays import outer, put
 from ...nav.error_state import embed_error_state, selection
 from ...nav.gaps import GAP_ACCEL_SD, cv_bridge_noise, gap_threshold
 from ...nav.gnss_gate import NO_LIMIT, REFUSE, height_gate, new_gate_state
-from ...sensors.baro import baro_jacobian, measure_baro, with_prior_conflict_notes
+from ...sensors.baro import baro_jacobian, measure_baro
 from ...sensors.model import SensorModel, sensor_model
 from ...types import BaroEstimate, Drive, Estimate, ParamEstimate, Trajectory
 from ...types.streams import FloatArray
 from ...util.failures import MissingStream
+from ..checks import with_prior_conflict_notes
 from .inputs import AhrsConfig, VerticalInputs, vertical_inputs
 from .vekf7_setup import (  # noqa: F401  (the state indices and input_error_psd: this module's API)
     IB,

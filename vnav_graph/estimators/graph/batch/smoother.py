@@ -41,8 +41,6 @@ from gtsam.symbol_shorthand import A, B, C, K, V, X
 
 from ....geo.frames import mat_to_quat, ned_to_lla
 from ....nav.error_state import component, embed_error_state
-from ....sensors.baro import with_prior_conflict_notes, without_implausible_scale
-from ....sensors.magnetometer import without_contradicting_mag
 from ....sensors.noise import gm_mean_prior_sd
 from ....types import (
     ERROR_STATE,
@@ -54,6 +52,7 @@ from ....types import (
     Trajectory,
 )
 from ....types.streams import FloatArray
+from ...checks import checked
 from ...gnss_auto import with_gm_auto
 from ..model import interval_factors as gf
 from ..model.cpp_factors import build_batch_graph, pims_for
@@ -331,7 +330,7 @@ class GraphBatch:
 
     def run(self, drive: Drive) -> Estimate:
         """Solve; when the magnetometer was used and its hard iron fails the post-solve check
-        (``sensors.magnetometer.hard_iron_note``), solve again without it and say why in
+        (``estimators.checks.hard_iron_note``), solve again without it and say why in
         ``info["mag_note"]``. With ``gnss_gm_auto``: ``estimators.gnss_auto``."""
         if self.config.gnss_gm_auto:
             return with_gm_auto(drive, self.config, self.name,
@@ -343,8 +342,7 @@ class GraphBatch:
 
         # the post-solve hard-iron and baro-scale checks of both families, then the
         # calibration's prior-conflict notes
-        return with_prior_conflict_notes(without_implausible_scale(
-            without_contradicting_mag(est, self.config, rerun), self.config, rerun))
+        return checked(est, self.config, rerun)
 
     def _run(self, drive: Drive) -> Estimate:
         t0 = time.perf_counter()

@@ -58,9 +58,8 @@ import numpy as np
 from gtsam.symbol_shorthand import A, B, C, G, K, V, X
 
 from ....geo.frames import mat_to_quat, ned_to_lla, quat_to_mat
-from ....sensors.baro import with_prior_conflict_notes, without_implausible_scale
-from ....sensors.magnetometer import without_contradicting_mag
 from ....types import Drive, Estimate, Trajectory
+from ...checks import checked
 from ...gnss_auto import with_gm_auto
 from ..batch.general import first_line
 from ..batch.linalg import solver_context
@@ -156,8 +155,7 @@ class GraphISAM2:
         def rerun(cfg: GraphConfig) -> Estimate:
             return GraphISAM2(cfg, self.extensions).run(drive)
 
-        return with_prior_conflict_notes(without_implausible_scale(
-            without_contradicting_mag(est, self.config, rerun), self.config, rerun))
+        return checked(est, self.config, rerun)
 
     def _run(self, drive: Drive, cfg: GraphConfig, robust: bool, t_start: float,
              fallback: str | None) -> Estimate:
