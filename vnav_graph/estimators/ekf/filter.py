@@ -375,7 +375,7 @@ class EKFRTS(EKF):
             return run, est
         assert run.rts is not None
         redo = carry.rerun_config(cfg, run.info, run.t_grid, run.rts[4], run.t_out, run.q,
-                                  est, run.model.imu.gyro_bias_sd)
+                                  run.par[:, km.PBG:km.PBG + 3], est)
         if redo is None:
             return run, est
         run2, est2 = self._pass(drive, redo[0], t0)
