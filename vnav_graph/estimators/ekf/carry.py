@@ -112,7 +112,7 @@ def rerun_config(cfg: EkfConfig, info: dict[str, Any], t_grid: FloatArray,
     ``gap_heading_forget_s`` lies before the acquisition (the vehicle may have turned in
     it). Shorter gaps before it add their heading random walk (``gap_yaw_rw``) to the σ.
     Nor when the carried σ exceeds ``CARRY_SD_MAX``."""
-    if info["heading_source"] not in ("accel-matching", "gnss-track"):
+    if info["heading_source"] not in ("accel-matching", "gnss-course", "gnss-track"):
         return None
     ch = carried_heading(t_grid, reset_at, t_out, q_fwd, bg_fwd, smoothed)
     if ch is None:
