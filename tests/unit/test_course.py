@@ -81,3 +81,11 @@ def test_gyro_yaw_integrates_the_z_rate() -> None:
     t = np.linspace(0.0, 10.0, 1001)
     assert gyro_yaw(t, np.full(t.size, 0.2), np.array([0.0, 5.0, 10.0])) == pytest.approx(
         [0.0, 1.0, 2.0])
+
+
+def test_a_one_hertz_receiver_gets_a_course_from_its_third_moving_fix() -> None:
+    t = np.arange(0.0, 10.0, 1.0) + 0.003 * np.sin(np.arange(10.0))  # 1 Hz with jitter
+    vel = np.tile([1.2, 0.0], (t.size, 1))
+    c = course_heading(t, vel, np.full(t.size, 0.05), np.radians(2.0), np.zeros(t.size))
+    assert np.all(c.yaw_sd[:2] == np.pi)
+    assert c.yaw_sd[2:] == pytest.approx(np.hypot(0.05 / 1.2, np.radians(2.0)))

@@ -97,8 +97,8 @@ def course_heading(t: FloatArray, vel_ne: FloatArray, vel_sd: FloatArray,
     ``t`` (N,) fix times [s]; ``vel_ne`` (N, 2) horizontal velocity [m/s]; ``vel_sd`` (N,)
     its noise per axis [m/s]; ``sideslip_sd`` the σ_β floor [rad]; ``yaw_gyro`` (N,) the
     gyro-carried heading at the fixes (``gyro_yaw``), with which σ_β grows to the sway's
-    scatter and a fix needs ``SWAY_MIN_FIXES`` usable courses in its window (None: the floor
-    alone)."""
+    scatter and a fix needs ``SWAY_MIN_FIXES`` usable courses in its window (``SWAY_WINDOW_S``,
+    or 2.5 fix intervals when longer; None: the floor alone)."""
     vel_ne = np.asarray(vel_ne, dtype=float)
     vel_sd = np.asarray(vel_sd, dtype=float)
     speed = np.hypot(vel_ne[:, 0], vel_ne[:, 1])
@@ -106,6 +106,10 @@ def course_heading(t: FloatArray, vel_ne: FloatArray, vel_sd: FloatArray,
     usable = speed > COURSE_SNR * vel_sd
     beta: FloatArray | float = sideslip_sd
     if yaw_gyro is not None:
-        sway = sway_sd(np.asarray(t, dtype=float), yaw, usable, yaw_gyro)
+        t = np.asarray(t, dtype=float)
+        # long enough for SWAY_MIN_FIXES fixes of a slow receiver (1 Hz: 2.5 s)
+        dt = float(np.median(np.diff(t))) if t.size > 1 else 0.0
+        window = max(SWAY_WINDOW_S, (SWAY_MIN_FIXES - 0.5) * dt)
+        sway = sway_sd(t, yaw, usable, yaw_gyro, window)
         beta = np.where(np.isnan(sway), np.inf, np.maximum(sway, sideslip_sd))
     return Course(yaw, speed, course_sd(speed, vel_sd, beta))
