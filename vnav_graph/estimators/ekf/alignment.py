@@ -32,6 +32,7 @@ import numpy as np
 from ...config import BaroSpec
 from ...geo.earth import gravity
 from ...geo.frames import lla_to_ned, quat_to_mat, rph_to_quat
+from ...nav.course import COURSE_SNR, course_heading, course_sd, gyro_yaw
 from ...nav.levelling import coarse_level
 from ...sensors.model import BaroPrior, SensorModel
 from ...types import Drive
@@ -86,7 +87,7 @@ def level_tilt_bias_jacobian(mat_nb: FloatArray, g: float) -> FloatArray:
 # half the baseline of a position-only course: the chord over 2 s [s]
 POS_ONLY_BASE_S = 1.0
 # a course counts only when the speed exceeds this many σ of its velocity noise
-TRACK_SNR = 5.0
+TRACK_SNR = COURSE_SNR
 # in-motion levelling (``moving_start``): window [s] and the floor of its acceleration σ
 MOVING_LEVEL_S = 1.0
 MOVING_ACCEL_SD_MIN = 0.2
@@ -107,51 +108,51 @@ class Track:
 
 def track_heading(gnss: GnssStream, sideslip_sd: float, imu: ImuStream | None = None,
                   base_s: float = POS_ONLY_BASE_S) -> Track:
-    """Course over ground of every fix, shape (N,), from data up to the fix (causal).
+    """Course over ground of every fix, shape (N,), from data up to the fix (causal), as a
+    heading with its σ by the rule of ``nav.course`` (σ_ψ² = σ_v²/|v_h|² + σ_β²; no course
+    below ``COURSE_SNR`` σ_v of speed).
 
-    With velocity: ψ = atan2(v_E, v_N), σ_ψ² = σ_v²/|v_h|² + σ_β² (σ_β = ``sideslip_sd``
-    allows for sideslip/crab). Without velocity: the chord from the position ``2·base_s``
-    earlier to the fix (interpolated between fixes) gives the course at ``t − base_s`` with a
-    cross-track velocity σ of σ_pos/(√2·base_s); the heading turned since then, integrated
-    from the gyro z axis (``imu``; level vehicle), brings it to the fix time. Neighbouring-fix
-    differences (0.1 s at 10 Hz, σ_v ≈ 7 m/s at 1 m noise) gave a course from noise at
-    standstill, which the EKF took as its heading (hill-drive without GNSS velocity: 1,400 to
-    2,700 of 5,400 fixes then rejected, 40–180 m horizontal RMSE). Fixes without 2·base_s of
-    history, or slower than ``TRACK_SNR`` σ of their velocity noise, get σ = π.
+    With velocity: ψ = atan2(v_E, v_N), σ_β the larger of ``sideslip_sd`` and the scatter of
+    course minus the gyro heading over the last ``SWAY_WINDOW_S`` (``nav.course.sway_sd``;
+    with ``imu``). Without velocity: the chord from the position ``2·base_s`` earlier to the
+    fix (interpolated between fixes) gives the course at ``t − base_s`` with a cross-track
+    velocity σ of σ_pos/(√2·base_s); the heading turned since then, integrated from the gyro
+    z axis (``imu``; level vehicle), brings it to the fix time. Neighbouring-fix differences
+    (0.1 s at 10 Hz, σ_v ≈ 7 m/s at 1 m noise) gave a course from noise at standstill, which
+    the EKF took as its heading (hill-drive without GNSS velocity: 1,400 to 2,700 of 5,400
+    fixes then rejected, 40–180 m horizontal RMSE). Fixes without 2·base_s of history get
+    σ = π.
     """
     if gnss.vel_n is not None and gnss.vel_sd is not None:
-        v = gnss.vel_n[:, :2]
         vsd = np.hypot(gnss.vel_sd[:, 0], gnss.vel_sd[:, 1]) / np.sqrt(2.0)
-        turn = np.zeros(gnss.t.size)
-        valid = np.ones(gnss.t.size, dtype=bool)
-    else:
-        # tangent plane at the first fix (lat·(R + h), used before, leaked the height noise,
-        # σ_v 2 m × 0.8 rad, into "north")
-        north, east = lla_to_ned(gnss.lla, gnss.lla[0])[:, :2].T
-        if gnss.t.size < 3:
-            z = np.zeros(gnss.t.size)
-            return Track(z, z, np.full(gnss.t.size, np.pi))
-        t0 = gnss.t - 2.0 * base_s
-        valid = t0 >= gnss.t[0]
-        v = np.column_stack([north - np.interp(t0, gnss.t, north),
-                             east - np.interp(t0, gnss.t, east)]) / (2.0 * base_s)
-        sd_p = np.hypot(gnss.pos_sd[:, 0], gnss.pos_sd[:, 1]) / np.sqrt(2.0)
-        vsd = sd_p / (np.sqrt(2.0) * base_s)
-        turn = np.zeros(gnss.t.size)
-        if imu is not None and imu.t.size > 1:
-            yaw_int = np.concatenate([[0.0], np.cumsum(
-                0.5 * (imu.gyro_b[1:, 2] + imu.gyro_b[:-1, 2]) * np.diff(imu.t))])
-            turn = np.interp(gnss.t, imu.t, yaw_int) - np.interp(gnss.t - base_s, imu.t,
-                                                                 yaw_int)
+        yaw_g = None
+        if imu is not None:
+            yaw_g = gyro_yaw(imu.t, imu.gyro_b[:, 2], gnss.t)
+        c = course_heading(gnss.t, gnss.vel_n[:, :2], vsd, sideslip_sd, yaw_g)
+        return Track(c.yaw, c.speed, c.yaw_sd)
+    # tangent plane at the first fix (lat·(R + h), used before, leaked the height noise,
+    # σ_v 2 m × 0.8 rad, into "north")
+    north, east = lla_to_ned(gnss.lla, gnss.lla[0])[:, :2].T
+    if gnss.t.size < 3:
+        z = np.zeros(gnss.t.size)
+        return Track(z, z, np.full(gnss.t.size, np.pi))
+    t0 = gnss.t - 2.0 * base_s
+    valid = t0 >= gnss.t[0]
+    v = np.column_stack([north - np.interp(t0, gnss.t, north),
+                         east - np.interp(t0, gnss.t, east)]) / (2.0 * base_s)
+    sd_p = np.hypot(gnss.pos_sd[:, 0], gnss.pos_sd[:, 1]) / np.sqrt(2.0)
+    vsd = sd_p / (np.sqrt(2.0) * base_s)
+    turn = np.zeros(gnss.t.size)
+    if imu is not None and imu.t.size > 1:
+        turn = gyro_yaw(imu.t, imu.gyro_b[:, 2], gnss.t) - gyro_yaw(
+            imu.t, imu.gyro_b[:, 2], gnss.t - base_s)
     speed = np.hypot(v[:, 0], v[:, 1])
     yaw = np.arctan2(v[:, 1], v[:, 0]) + turn
     yaw = np.arctan2(np.sin(yaw), np.cos(yaw))
-    with np.errstate(divide="ignore"):
-        sd = np.sqrt((vsd / np.maximum(speed, 1e-9)) ** 2 + sideslip_sd**2)
-    # a speed within TRACK_SNR σ of zero can be noise alone (P = exp(−k²/2) per fix: a
+    # a speed within COURSE_SNR σ of zero can be noise alone (P = exp(−k²/2) per fix: a
     # standstill read as a 3 m/s course, seen at 6.9 s of a 20 s standstill): no course
-    sd = np.where(valid & (speed > TRACK_SNR * vsd), sd, np.pi)
-    return Track(yaw, speed, np.minimum(sd, np.pi))
+    sd = np.where(valid, course_sd(speed, vsd, sideslip_sd), np.pi)
+    return Track(yaw, speed, sd)
 
 
 @dataclass(frozen=True)

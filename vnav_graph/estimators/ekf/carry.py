@@ -9,11 +9,22 @@ keeps the arbitrary start heading (cold-start seed 7: 97° off in the first 2 s)
 Before the acquisition the nominal yaw only integrates the gyros (its error state is
 decoupled), so the whole pre-acquisition attitude history is the true one rotated about the
 vertical by one angle, up to gyro drift. The reset at t_h rotates it by Δ (``reset_at``) and
-the smoother then corrects the post-reset yaw by δ_s = ψ_s(t_h) − ψ_f(t_h). The heading at
-t0 is therefore ψ_f(t0) + Δ + δ_s, with the variance of the smoothed yaw at t_h plus the gyro
-bias's drift over [t0, t_h], (σ_bg (t_h − t0))². The forward and RTS passes are then run
-again from t0 with that heading given (``EkfConfig.initial_heading``): one smoothing over the
-whole drive, with no reset in it.
+the smoother then corrects the post-reset yaw by δ_s = ψ_s(t_h) − ψ_f(t_h). The forward pass
+integrated the gyros with its own bias estimate b̂_f, which before the acquisition holds the
+prior mean on the down axis (nothing observes it while the yaw is decoupled); the smoother
+knows it from the motion after t_h (b̂_s, the bias is a Gauss-Markov state with τ of hours).
+The heading at t0 is therefore
+
+    ψ(t0) = ψ_f(t0) + Δ + δ_s + ∫_{t0}^{t_h} (C (b̂_s − b̂_f))_D dt,
+
+with the variance of the smoothed yaw at t_h plus the drift of the smoothed bias's error,
+(σ_bD (t_h − t0))², σ_bD² = c_Dᵀ P_bg c_D the largest over [t0, t_h] (c_D the down row of C,
+P_bg the smoothed gyro-bias covariance). The prior σ of the bias in its place (0.5 °/s for a
+real log of unknown make) gave 7.5° over the walk's 15 s standstill (``rtk/walk_0827``),
+above ``CARRY_SD_MAX``: nothing was carried back and ekf-rts started 155° from graph-batch;
+the smoothed bias's σ there is 0.022 °/s (0.3°), and the integral moves the start heading by
+2.7°. The forward and RTS passes are then run again from t0 with that heading given
+(``EkfConfig.initial_heading``): one smoothing over the whole drive, with no reset in it.
 """
 
 from __future__ import annotations
@@ -23,6 +34,7 @@ from typing import Any
 
 import numpy as np
 
+from ...geo.frames import quat_to_mat
 from ...types import Estimate
 from ...types.streams import FloatArray
 from .settings import EkfConfig
@@ -55,34 +67,45 @@ def _wrap(a: float) -> float:
 
 
 def carried_heading(t_grid: FloatArray, reset_at: FloatArray, t_out: FloatArray,
-                    q_fwd: FloatArray, smoothed: Estimate,
-                    gyro_bias_sd: float) -> CarriedHeading | None:
+                    q_fwd: FloatArray, bg_fwd: FloatArray, smoothed: Estimate
+                    ) -> CarriedHeading | None:
     """The heading at t0 from the first heading acquisition (module docstring), or None when
     the drive has none (heading given, from the compass, or never acquired).
 
     ``t_grid`` / ``reset_at``: the covariance grid and the yaw reset Δ at each of its epochs
-    (NaN: none); ``t_out`` / ``q_fwd``: the forward pass's output epochs and attitudes;
-    ``smoothed``: the RTS estimate of the same pass (trajectory on ``t_out``, ``cov``)."""
+    (NaN: none); ``t_out`` / ``q_fwd`` / ``bg_fwd``: the forward pass's output epochs,
+    attitudes and gyro biases [rad/s]; ``smoothed``: the RTS estimate of the same pass
+    (trajectory with its gyro biases on ``t_out``, ``cov``)."""
     k = np.flatnonzero(~np.isnan(reset_at))
-    if k.size == 0 or smoothed.cov is None or smoothed.t_cov is None:
+    tr = smoothed.trajectory
+    if (k.size == 0 or smoothed.cov is None or smoothed.t_cov is None or tr.q_nb is None
+            or tr.bias_gyro is None):
         return None
     t_h = float(t_grid[k[0]])
     j = int(np.searchsorted(t_out, t_h))
     if j >= t_out.size or not np.isclose(t_out[j], t_h, rtol=0.0, atol=1e-9):
         return None
-    delta_s = _wrap(float(_yaw(smoothed.trajectory.q_nb[j]) - _yaw(q_fwd[j])))
-    yaw0 = _wrap(float(_yaw(q_fwd[0])) + float(reset_at[k[0]]) + delta_s)
+    delta_s = _wrap(float(_yaw(tr.q_nb[j]) - _yaw(q_fwd[j])))
+    # the down component of the gyro-bias correction, integrated over [t0, t_h]
+    c_d = quat_to_mat(tr.q_nb[:j + 1])[:, 2, :]  # (n, 3): the down row of C_nb
+    rate = np.einsum("ni,ni->n", c_d, tr.bias_gyro[:j + 1] - bg_fwd[:j + 1])
+    drift = float(np.sum(0.5 * (rate[1:] + rate[:-1]) * np.diff(t_out[:j + 1])))
+    yaw0 = _wrap(float(_yaw(q_fwd[0])) + float(reset_at[k[0]]) + delta_s + drift)
     # the first covariance epoch at or after the acquisition (before it the yaw is unknown)
     jc = int(np.searchsorted(smoothed.t_cov, t_h - 1e-9))
     if jc >= smoothed.t_cov.size:
         return None
-    var = float(smoothed.cov[jc, 8, 8]) + (gyro_bias_sd * (t_h - float(t_out[0]))) ** 2
+    # σ of the smoothed bias on the down axis, the largest over [t0, t_h]
+    jq = np.clip(np.searchsorted(t_out, smoothed.t_cov[:jc + 1]), 0, j)
+    p_bg = smoothed.cov[:jc + 1, 9:12, 9:12]
+    var_bd = float(np.max(np.einsum("ni,nij,nj->n", c_d[jq], p_bg, c_d[jq])))
+    var = float(smoothed.cov[jc, 8, 8]) + var_bd * (t_h - float(t_out[0])) ** 2
     return CarriedHeading(yaw0, float(np.sqrt(max(var, 0.0))), t_h)
 
 
 def rerun_config(cfg: EkfConfig, info: dict[str, Any], t_grid: FloatArray,
                  reset_at: FloatArray, t_out: FloatArray, q_fwd: FloatArray,
-                 smoothed: Estimate, gyro_bias_sd: float
+                 bg_fwd: FloatArray, smoothed: Estimate
                  ) -> tuple[EkfConfig, dict[str, Any]] | None:
     """The settings of the re-run from t0 (the carried heading given) and the ``info``
     entries that report it, or None when there is nothing to carry back: the heading was
@@ -90,9 +113,9 @@ def rerun_config(cfg: EkfConfig, info: dict[str, Any], t_grid: FloatArray,
     ``gap_heading_forget_s`` lies before the acquisition (the vehicle may have turned in
     it). Shorter gaps before it add their heading random walk (``gap_yaw_rw``) to the σ.
     Nor when the carried σ exceeds ``CARRY_SD_MAX``."""
-    if info["heading_source"] not in ("accel-matching", "gnss-track"):
+    if info["heading_source"] not in ("accel-matching", "gnss-course", "gnss-track"):
         return None
-    ch = carried_heading(t_grid, reset_at, t_out, q_fwd, smoothed, gyro_bias_sd)
+    ch = carried_heading(t_grid, reset_at, t_out, q_fwd, bg_fwd, smoothed)
     if ch is None:
         return None
     gaps = [g for g in info["imu_gaps"] if g[0] < ch.t_acquired]

@@ -25,7 +25,8 @@ Outputs
   σ_v limit or probation, ``ekf.model`` docstring), ``gnss_alt_rejected`` (height refused),
   ``imu_gaps`` ([start, length] of bridged IMU gaps [s]), ``gnss_vel_rejected``,
   ``baro_rejected``, ``heading_time_s`` (time the heading last became known),
-  ``heading_source`` (given / accel-matching / gnss-track), rates used.
+  ``heading_source`` (given / magnetometer / accel-matching / gnss-course, the course
+  confirmed by the matching / gnss-track), rates used.
 
 Noise
 -----
@@ -162,6 +163,8 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
             max_consec=max_rejects(cfg, drive), max_consec_baro=int(max_consec_baro),
             max_sd_v=float(cfg.max_gnss_sd_v), probation_s=float(cfg.gnss_probation_s),
             heading_v_min=float(cfg.heading_speed_min), heading_accel=bool(heading_accel),
+            heading_course=bool(heading_accel and cfg.heading_source == "auto"),
+            course_confirm_sd=float(cfg.course_confirm_sd),
             align_chunk_s=float(cfg.align_chunk_s), align_forget_s=float(cfg.align_forget_s),
             align_sd_max=float(cfg.align_sd_max),
             align_acc_sd=float(np.sqrt(2.0) * ispec.accel_bias_sd),
@@ -230,6 +233,7 @@ def _report(drive: Drive, res: tuple[Any, ...], gr: inputs.Grids, gaps: NDArrayI
         "online_from_s": float(ini.t_ready),
         "heading_source": ("magnetometer" if ini.heading_from_mag else
                            "given" if ini.heading_known else
+                           "gnss-course" if res[21] else
                            "accel-matching" if heading_accel else "gnss-track"),
     }
     # horizontal pairs forced in after max_rejects refusals in a row: each inflated P by its
@@ -365,7 +369,7 @@ class EKFRTS(EKF):
             return run, est
         assert run.rts is not None
         redo = carry.rerun_config(cfg, run.info, run.t_grid, run.rts[4], run.t_out, run.q,
-                                  est, run.model.imu.gyro_bias_sd)
+                                  run.par[:, km.PBG:km.PBG + 3], est)
         if redo is None:
             return run, est
         run2, est2 = self._pass(drive, redo[0], t0)

@@ -18,8 +18,10 @@ from ...nav.arrays import put
 from ...nav.rotations import yaw_of
 
 # layout of the acquisition state
-CH_T, AL_DOT, AL_CROSS, AL_UU, AL_N, PREV_VFIX, PEND_TV, RESET_DELTA, RESET_SD = range(9)
-N_STATE = 9
+# (RESET_COURSE: 1 when the proposed reset is the GNSS course's)
+(CH_T, AL_DOT, AL_CROSS, AL_UU, AL_N, PREV_VFIX, PEND_TV, RESET_DELTA, RESET_SD,
+ RESET_COURSE) = range(10)
+N_STATE = 10
 
 
 @njit(cache=True)
@@ -94,3 +96,28 @@ def track_heading(acq, speed, course, course_sd, q, v_min, sd_max):
         dlt = course - yaw_of(q)
         acq[RESET_DELTA] = np.arctan2(np.sin(dlt), np.cos(dlt))
         acq[RESET_SD] = course_sd
+
+
+@njit(cache=True)
+def confirmed_course(acq, speed, course, course_sd, q, v_min, sd_max, confirm_sd):
+    """The GNSS course as the heading while acceleration matching runs (``heading_source``
+    "auto" with GNSS velocity): proposed when ``track_heading`` would take it and the
+    matching's running estimate δ̂ (at least one chunk, σ_δ ≤ ``confirm_sd``) agrees with it
+    within 3 σ of both, so that a body that does not move along its x axis (a sideways
+    mount, a multicopter, a hand-held device turned against its path) keeps the matching's
+    heading."""
+    if not (speed > v_min and course_sd <= sd_max and np.isnan(acq[RESET_DELTA])
+            and acq[AL_N] >= 1.0):
+        return
+    sd_al = 1.0 / np.sqrt(max(acq[AL_UU], 1e-12))
+    if sd_al > confirm_sd:
+        return
+    dlt = course - yaw_of(q)
+    dlt = np.arctan2(np.sin(dlt), np.cos(dlt))
+    d_al = np.arctan2(acq[AL_CROSS], acq[AL_DOT])
+    dd = dlt - d_al
+    dd = np.arctan2(np.sin(dd), np.cos(dd))
+    if abs(dd) <= 3.0 * np.sqrt(course_sd**2 + sd_al**2):
+        acq[RESET_DELTA] = dlt
+        acq[RESET_SD] = course_sd
+        acq[RESET_COURSE] = 1.0

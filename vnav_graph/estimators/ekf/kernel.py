@@ -26,8 +26,10 @@ from ...nav.arrays import put
 from ...nav.rotations import quat_to_dcm, rpy_quat, yaw_of
 from ...nav.strapdown import strapdown_step
 from .heading import (
+    RESET_COURSE,
     RESET_DELTA,
     RESET_SD,
+    confirmed_course,
     match_acceleration,
     new_state,
     restart_matching,
@@ -147,6 +149,8 @@ class Settings(NamedTuple):
     probation_s: float  # GNSS-height probation [s]
     heading_v_min: float  # speed above which the track gives the heading [m/s]
     heading_accel: bool  # acquire the heading by acceleration matching
+    heading_course: bool  # and by the GNSS course it confirms (heading.confirmed_course)
+    course_confirm_sd: float  # σ of the matching that can confirm a course [rad]
     align_chunk_s: float
     align_forget_s: float
     align_sd_max: float  # [rad]
@@ -204,6 +208,7 @@ def run_filter(grids, init, noise, events, gnss, baro, mag, settings):
     par, p = init.par0.copy(), init.p0.copy()
     heading_ok = init.heading_known
     t_heading = t[0] if heading_ok else np.nan
+    by_course = False  # the last heading acquisition was the GNSS course's
     counts = np.zeros(3, dtype=np.int64)  # the gates' refusal counters (steps.C_*)
     v_gate = np.array([0.0, 0.0, np.nan])  # nav.gnss_gate state
     acq = new_state()  # heading acquisition (ekf.heading)
@@ -286,6 +291,10 @@ def run_filter(grids, init, noise, events, gnss, baro, mag, settings):
                                        gnss.vel_sd, settings.align_chunk_s,
                                        settings.align_forget_s, settings.align_sd_max,
                                        settings.align_acc_sd)
+                    if settings.heading_course:
+                        confirmed_course(acq, gnss.track_speed[idx], gnss.track_yaw[idx],
+                                         gnss.track_sd[idx], qm, settings.heading_v_min,
+                                         settings.align_sd_max, settings.course_confirm_sd)
                 elif not heading_ok:
                     track_heading(acq, gnss.track_speed[idx], gnss.track_yaw[idx],
                                   gnss.track_sd[idx], qm, settings.heading_v_min,
@@ -319,6 +328,8 @@ def run_filter(grids, init, noise, events, gnss, baro, mag, settings):
                 reset_at[k] = acq[RESET_DELTA]
                 heading_ok = True
                 t_heading = t[i + 1]
+                by_course = acq[RESET_COURSE] > 0.5
+                acq[RESET_COURSE] = 0.0
                 acq[RESET_DELTA] = np.nan
             if store_rts:
                 put(rts_ing[k], ing)
@@ -358,4 +369,4 @@ def run_filter(grids, init, noise, events, gnss, baro, mag, settings):
 
     return (out_lla, out_v, out_q, out_par, cov_out, rts_p, rts_ing, rts_q, corr, reset_at,
             inn_pos, inn_vel, inn_baro, rej_pos, rej_vel, rej_baro, t_heading, rej_v,
-            inn_mag, rej_mag, forced_pos)
+            inn_mag, rej_mag, forced_pos, by_course)

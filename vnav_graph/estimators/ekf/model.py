@@ -71,8 +71,20 @@ are kept with forgetting exp(−T/``align_forget_s``) (the nominal yaw drifts wi
 z-gyro bias); δ̂ = atan2(S_c, S_d) is the maximum-likelihood rotation, its Fisher information
 is S_uu, σ_δ = 1/√S_uu. After ≥ 3 chunks and σ_δ ≤ ``align_sd_max`` the heading is reset by δ̂
 with σ 2σ_δ (factor 2: bias drift and tilt in U). A chunk whose |W| and |U| differ by > 4σ
-(rotation keeps the norm) is a GNSS velocity fault and is skipped. Without GNSS velocity the
-track heading (previous paragraph) is used. An IMU gap longer than ``gap_forget_s`` makes the
+(rotation keeps the norm) is a GNSS velocity fault and is skipped. With "auto" the GNSS course
+(σ by ``nav.course``) is taken before that once the matching's running estimate (≥ 1 chunk,
+σ_δ ≤ ``course_confirm_sd``) agrees with it within 3 σ of both, with the course's σ
+(``heading.confirmed_course``; the σ grown by their difference let the yaw wander 18° on
+the simulated walk of ``test_ekf_walking_start``, against 4.9°). A gentle start gives a
+course long before the matching's 15° (that walk at 0.1 m/s²: 5.9 s after moving instead of
+12 s; the car drive ``rtk/car_drive_0708``: 37.8 s instead of 103 s), and a body that does
+not move along its x axis keeps the matching's heading (the sideways IMU of
+``test_ekf_heading``). A hand-held device is the limit: on the walk ``rtk/walk_0827`` it
+points 86° off its path as it starts and 10–30° while walking; with RTK input the matching
+acquires first (16.0 s), with the single-point input the course is confirmed at 15.6 s and
+the yaw is 15° off until 22 s. Without GNSS velocity the track heading (previous paragraph)
+is used.
+An IMU gap longer than ``gap_forget_s`` makes the
 heading unknown again (the vehicle may have turned: Loiter_RTL's crash); the gap's Φ has a
 zero yaw row and Q gives the uniform variance, and the heading is re-acquired after it.
 

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...config import DEG
+from ...nav.course import SIDESLIP_SD
 from ...sensors.gnss_model import GnssErrorSettings
 from ...sensors.magnetometer import MAG_BIAS_SD_UT, MAG_HEADING_FLOOR, MAG_INTERVAL_S
 
@@ -42,7 +43,8 @@ class EkfConfig(GnssErrorSettings):
     gap_level_sd: σ of the roll/pitch re-levelled after an IMU logging gap [rad].
     gap_level_s: mean specific force over this long after a gap re-levels it [s].
     gap_yaw_rw: heading random walk added across an IMU logging gap [rad/√s].
-    heading_source: "auto" (acceleration matching with GNSS velocity, else track), "accel", "track".
+    heading_source: "auto" (matching and the course it confirms), "accel", "track".
+    course_confirm_sd: "auto": the matching's σ at or below which it can confirm a course [rad].
     align_chunk_s: acceleration-matching chunk length [s].
     align_forget_s: acceleration-matching forgetting time [s].
     align_sd_max: heading σ below which the matched heading is accepted [rad].
@@ -79,7 +81,7 @@ class EkfConfig(GnssErrorSettings):
     initial_heading: float | None = None
     initial_heading_sd: float = 2.0 * DEG
     heading_speed_min: float = 0.5
-    sideslip_sd: float = 2.0 * DEG
+    sideslip_sd: float = SIDESLIP_SD
     accel_scale: bool | None = None
     min_tilt_sd: float = 1e-4  # rad, levelling residual besides the accel-bias term
     max_gnss_sd_v: float = 15.0
@@ -89,6 +91,7 @@ class EkfConfig(GnssErrorSettings):
     gap_level_s: float = 1.0
     gap_yaw_rw: float = 0.05  # rad/√s
     heading_source: str = "auto"
+    course_confirm_sd: float = 30.0 * DEG
     align_chunk_s: float = 1.0
     align_forget_s: float = 30.0
     align_sd_max: float = 15.0 * DEG

@@ -10,6 +10,7 @@ import numpy as np
 
 from ....geo.frames import ned_to_lla, quat_to_mat, skew
 from ....nav.arrays import nearest_index
+from ....nav.course import SIDESLIP_SD, course_heading, gyro_yaw
 from ....nav.rotations import so3_exp
 from ....types import ERROR_STATE
 from ....types.streams import FloatArray
@@ -17,8 +18,9 @@ from . import interval_factors as gf
 from .cpp_factors import PRIOR_ATT_SD, level
 from .problem import Problem
 
-# TRIAD (specific force + course) needs a clear course: moving faster than this [m/s]
-TRIAD_SPEED = 3.0
+# TRIAD (specific force + course) needs a clear course: its σ as a heading by the rule of
+# ``nav.course`` (the ekf's) at most this [rad]
+TRIAD_SD_MAX = np.radians(10.0)
 # baseline half-width of the position differences of a position-only receiver [s]
 POS_ONLY_BASE_S = 1.0
 
@@ -29,7 +31,8 @@ def initial_states(P: Problem) -> tuple[FloatArray, FloatArray, FloatArray]:
     Position/velocity: GNSS at keyframes (lever arm removed), else propagated with the
     preintegrated increments. Attitude: TRIAD of (specific force, velocity direction) —
     f_t = a_t − g_t (a_t from differenced GNSS velocity) against the mean measured f_b, and the
-    body x axis along the GNSS velocity when moving faster than 3 m/s; otherwise propagated
+    body x axis along the GNSS velocity where the course is a heading to ``TRIAD_SD_MAX``
+    by the ekf's rule (``nav.course``; a walker at 1.2 m/s qualifies); otherwise propagated
     with the gyro increments (backwards before the first valid alignment). A position-only
     receiver gets its velocity and acceleration from central differences of the positions
     over ±1 s: without that TRIAD the heading started at 0 (yaw of the levelled first sample)
@@ -45,8 +48,7 @@ def initial_states(P: Problem) -> tuple[FloatArray, FloatArray, FloatArray]:
     g_kf = gf.gravity_t(pos_kf, P.origin)
     f_b = _mean_specific_force(imu.t, imu.accel_b, P.t_kf)
     f_t = acc_kf - g_kf + 2 * np.cross(P.omega_t, vel_kf)
-    speed = np.linalg.norm(vel_kf[:, :2], axis=1)
-    triad_ok = has & acc_ok & (speed > TRIAD_SPEED)
+    triad_ok = has & acc_ok & (_course_sd(P, gt, vel, vel_kf) <= TRIAD_SD_MAX)
     rot_triad = np.zeros((nk, 3, 3))
     ok = np.flatnonzero(triad_ok)
     rot_triad[ok] = _triad(f_b[ok], np.array([1.0, 0.0, 0.0]), f_t[ok], vel_kf[ok])
@@ -156,6 +158,28 @@ def _gnss_at_keyframes(P: Problem) -> tuple[FloatArray, FloatArray | None, Float
         acc_kf = (vp - vm) / (2 * w)
         acc_ok = has & (np.abs(P.t_kf + w - P.t_kf.clip(gt[0], gt[-1])) >= 0)
     return gt, vel, has, pos_kf, vel_kf, acc_kf, acc_ok
+
+
+def _course_sd(P: Problem, gt: FloatArray, vel: FloatArray | None, vel_kf: FloatArray
+               ) -> FloatArray:
+    """σ of the course at every keyframe as a heading [rad]: ``nav.course.course_heading``
+    over the kept fixes (the ekf's rule, with the sway against the gyro-carried heading),
+    read at the fix nearest each keyframe. A position-only receiver's velocity is the
+    keyframes' central differences, σ_p/(√2·base) of noise, and the sway is measured over
+    the keyframes."""
+    u = P.g_use
+    imu = P.drive.imu
+    if vel is not None and P.g_vel_sd is not None:
+        if gt.size == 0:
+            return np.full(P.n_kf, np.pi)
+        vsd = np.hypot(P.g_vel_sd[u, 0], P.g_vel_sd[u, 1]) / np.sqrt(2.0)
+        sd = course_heading(gt, vel[:, :2], vsd, SIDESLIP_SD,
+                            gyro_yaw(imu.t, imu.gyro_b[:, 2], gt)).yaw_sd
+        return sd[nearest_index(gt, P.t_kf)]
+    vsd_fix = np.hypot(P.g_pos_sd[u, 0], P.g_pos_sd[u, 1]) / (2.0 * POS_ONLY_BASE_S)
+    vsd = np.interp(P.t_kf, gt, vsd_fix) if gt.size else np.full(P.n_kf, np.inf)
+    return course_heading(P.t_kf, vel_kf[:, :2], vsd, SIDESLIP_SD,
+                          gyro_yaw(imu.t, imu.gyro_b[:, 2], P.t_kf)).yaw_sd
 
 
 def _baro_bridge(P: Problem, gt: FloatArray, has: FloatArray, pos_kf: FloatArray,
