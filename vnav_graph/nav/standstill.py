@@ -1,0 +1,256 @@
+"""Standstill detection for zero-velocity updates (ZUPT), shared by both estimator families.
+
+Test statistic: the SHOE / generalised likelihood-ratio detector of Skog et al.
+("Zero-velocity detection — an algorithm evaluation", IEEE T-BME 57(11), 2010), over the
+trailing window of the W IMU samples ending at sample k:
+
+    T_k = (1/W) Σ_{j=k−W+1..k} [ ||f_j − g·f̄/||f̄|| ||² / σ_a² + ||ω_j||² / σ_g² ],
+
+f the specific force in b [m/s²], ω the angular rate in b [rad/s], f̄ the window's mean
+specific force, g the normal gravity at the origin, σ_a and σ_g the per-sample noise σ. At
+rest with white noise of those σ, W·T_k is χ² with 6W − 2 degrees of freedom (two for the
+gravity direction taken from the window), and the IMU test is
+
+    T_k ≤ γ = χ²⁻¹_{6W−2}(p) / W,   p = ``PROB`` (0.999).
+
+Noise. σ_a, σ_g come from the shared sensor model (``estimators.zupt``: density·√rate, with
+the turn-on bias σ in quadrature: the detector knows no bias). A real log's inferred model
+holds the vibration in motion, so each is capped at ``QUIET_MARGIN`` times the per-axis rms
+of the drive's quietest ``QUIET_QUANTILE`` % windows (``quiet_sd``). On the RTK car drive the
+model's 0.66 m/s² and 0.10 rad/s become 0.32 m/s² and 0.026 rad/s: its stops show 0.10–0.12
+m/s² and 0.006–0.027 rad/s per axis (the idle at the start is the loudest), driving 0.5 m/s²
+and 0.06–0.09 rad/s (medians). White noise at the model's σ (a simulated drive) is not
+changed.
+
+GNSS agreement. An ideal IMU cannot tell a constant-velocity straight motion from rest, so
+where the drive has GNSS velocity a sample is still only if the fixes of the trailing
+``GNSS_WINDOW_S`` (at least 1.5 fix spacings) agree with zero: their inverse-variance mean
+per NED axis passes Σ_axes v̄_a²·Σ_i σ_{i,a}⁻² ≤ χ²⁻¹₃(p) (a 0.2 m/s creep over ten 10 Hz
+fixes of σ 0.1 m/s gives 40 against 16.3), and so does the latest fix alone. Without a fix
+in that window (an outage) no sample is still: the IMU alone would take a smooth cruise for a
+stop. A drive without GNSS velocity is decided by the IMU alone.
+
+Steady specific force. At rest f is constant. A run of still samples is cut where the
+window's mean specific force leaves the one at the run's start, ||f̄_k − f̄_start||² >
+2σ_a²/W · χ²⁻¹₃(1 − ``CUT_ALPHA``) (``steady_runs``). A gentle start tilts f by a/g, which
+T does not see (its gravity direction comes from the same window: it sees |f| − g ≈ a²/2g)
+but the mean does within a fraction of a second: on the RTK car drive the fastest reference
+speed at a ZUPT is 0.12 m/s with the cut, 0.54 m/s without. After the cut a constant
+acceleration is a steady f again (an IMU cannot tell it from a tilted rest): the GNSS speed
+then refuses it.
+
+Minimum duration. A sample gives a ZUPT only once its run has lasted ``MIN_DURATION_S``.
+
+Every test reads data up to t_k only: the decision at t_k is causal (the ekf's and
+graph-isam2's real-time answers stay causal). ``Standstill.intervals`` are the spans where
+ZUPTs apply, [t_start, t_end] in s on the drive clock.
+
+Measurement. Each ZUPT is the pseudo-measurement v_n = 0 (the IMU's velocity in n) with σ
+per axis ``Standstill.vel_sd``: the velocity that the detector's accelerometer noise leaves
+over its window, σ_a·Δt·√W, floored at ``ZUPT_SD_FLOOR``; the ekf applies one every
+1/``ZUPT_RATE_HZ`` s inside the intervals, the graph one velocity prior per keyframe inside.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.stats import chi2
+
+from ..types import FloatArray
+
+PROB = 0.999  # probability of the χ² tests (IMU window and GNSS agreement)
+WINDOW_S = 0.5  # SHOE window [s] (at least 2 samples)
+MIN_DURATION_S = 1.0  # a run of still samples gives ZUPTs after this long [s]
+GNSS_WINDOW_S = 1.0  # fixes of this trailing span must agree with zero [s] (≥ 1.5 fix spacings)
+ZUPT_RATE_HZ = 10.0  # ekf ZUPT rate inside an interval [Hz]
+ZUPT_SD_FLOOR = 0.01  # σ floor of the zero-velocity pseudo-measurement [m/s]
+# false-cut probability of the steady-force test per window pair: it is applied at every
+# sample of a run against one reference, so it must be rare (at 1e-3 the simulated hill-drive's
+# 14 s stop was cut in two by its accelerometer bias's Gauss-Markov drift)
+CUT_ALPHA = 1e-5
+QUIET_QUANTILE = 5.0  # % of the windows taken as rest when scaling the noise down
+QUIET_MARGIN = 3.0  # the noise at rest, at most this times that of the quietest windows
+
+
+@dataclass(frozen=True)
+class Standstill:
+    """The detector's answer on one drive (module docstring).
+
+    still: (N,) bool, a ZUPT applies at IMU sample k; statistic: (N,) T_k (NaN before the
+    first full window); threshold: γ; imu_still / gnss_ok: (N,) bool, each test alone;
+    intervals: (M, 2) [t_start, t_end] [s]; vel_sd: σ of the zero-velocity measurement per
+    axis [m/s]; sd_accel / sd_gyro: per-sample σ used [m/s², rad/s]; window: W [samples].
+    """
+
+    t: FloatArray
+    still: np.ndarray
+    statistic: FloatArray
+    threshold: float
+    imu_still: np.ndarray
+    gnss_ok: np.ndarray
+    intervals: FloatArray
+    vel_sd: float
+    sd_accel: float
+    sd_gyro: float
+    window: int
+
+    def interval_list(self) -> list[list[float]]:
+        """``intervals`` as a JSON-ready list of [t_start, t_end] [s]."""
+        return [[float(a), float(b)] for a, b in self.intervals]
+
+    def summary(self) -> dict[str, float]:
+        """JSON-ready detector settings: threshold γ, window [s], per-sample σ, and the
+        pseudo-measurement σ."""
+        rate = (self.t.size - 1) / float(self.t[-1] - self.t[0]) if self.t.size > 1 else 1.0
+        return {"threshold": self.threshold, "window_s": self.window / rate,
+                "sd_accel": self.sd_accel, "sd_gyro": self.sd_gyro, "vel_sd": self.vel_sd}
+
+    def update_times(self, rate_hz: float = ZUPT_RATE_HZ) -> FloatArray:
+        """IMU stamps of the ZUPT updates: the first still sample of each 1/``rate_hz`` slot
+        of the drive clock [s]."""
+        idx = np.flatnonzero(self.still)
+        if idx.size == 0:
+            return np.zeros(0)
+        slot = np.floor((self.t[idx] - self.t[0]) * rate_hz).astype(np.int64)
+        first = np.r_[True, slot[1:] != slot[:-1]]
+        return self.t[idx[first]]
+
+
+def shoe_terms(accel_b: FloatArray, gyro_b: FloatArray, g: float, window: int
+               ) -> tuple[FloatArray, FloatArray]:
+    """The two sums of T_k before weighting, each divided by W: (1/W)Σ||f − g f̄/||f̄|| ||²
+    [m²/s⁴] and (1/W)Σ||ω||² [rad²/s²] over the trailing ``window`` samples, each (N,), NaN
+    for the first window − 1 samples. accel_b (N, 3) [m/s²], gyro_b (N, 3) [rad/s].
+
+    With S = Σf, Q = Σ||f||² over the window, Σ||f − g S/||S|| ||² = Q − 2g||S|| + W g²."""
+    n = accel_b.shape[0]
+    out_a, out_g = np.full(n, np.nan), np.full(n, np.nan)
+    if n < window:
+        return out_a, out_g
+    cs = np.vstack([np.zeros((1, 3)), np.cumsum(accel_b, axis=0)])
+    cq = np.r_[0.0, np.cumsum(np.sum(accel_b**2, axis=1))]
+    cw = np.r_[0.0, np.cumsum(np.sum(gyro_b**2, axis=1))]
+    s = cs[window:] - cs[:-window]
+    q = cq[window:] - cq[:-window]
+    out_a[window - 1:] = np.maximum(q - 2.0 * g * np.linalg.norm(s, axis=1) + window * g * g,
+                                    0.0) / window
+    out_g[window - 1:] = (cw[window:] - cw[:-window]) / window
+    return out_a, out_g
+
+
+def shoe_statistic(accel_b: FloatArray, gyro_b: FloatArray, sd_accel: float, sd_gyro: float,
+                   g: float, window: int) -> FloatArray:
+    """T_k of the module docstring over the trailing ``window`` samples, (N,) (``shoe_terms``
+    weighted by the per-sample σ [m/s², rad/s])."""
+    a, w = shoe_terms(accel_b, gyro_b, g, window)
+    return a / sd_accel**2 + w / sd_gyro**2
+
+
+def quiet_sd(term: FloatArray) -> float:
+    """``QUIET_MARGIN`` times the per-axis rms of the ``QUIET_QUANTILE`` % quietest windows
+    of a ``shoe_terms`` sum (NaN when there is no full window)."""
+    ok = np.isfinite(term)
+    if not ok.any():
+        return float("nan")
+    return float(QUIET_MARGIN * np.sqrt(np.percentile(term[ok], QUIET_QUANTILE) / 3.0))
+
+
+def shoe_threshold(window: int, prob: float = PROB) -> float:
+    """γ = χ²⁻¹_{6W−2}(p) / W (module docstring)."""
+    return float(chi2.ppf(prob, 6 * window - 2) / window)
+
+
+def gnss_agrees(t: FloatArray, gnss_t: FloatArray, vel_n: FloatArray, vel_sd: FloatArray,
+                window_s: float, prob: float = PROB) -> np.ndarray:
+    """(N,) bool: the fixes stamped in (t_k − window_s, t_k] exist, their inverse-variance
+    mean velocity and the latest fix alone each pass the χ²₃ test of zero (module docstring).
+    vel_n, vel_sd (G, 3)."""
+    w = 1.0 / np.maximum(vel_sd, 1e-6) ** 2
+    cw = np.vstack([np.zeros((1, 3)), np.cumsum(w, axis=0)])
+    cv = np.vstack([np.zeros((1, 3)), np.cumsum(w * vel_n, axis=0)])
+    hi = np.searchsorted(gnss_t, t, side="right")
+    lo = np.searchsorted(gnss_t, t - window_s, side="right")
+    sw = cw[hi] - cw[lo]
+    sv = cv[hi] - cv[lo]
+    have = hi > lo
+    gate = chi2.ppf(prob, 3)
+    c2 = np.where(have[:, None], sv**2 / np.where(sw > 0, sw, 1.0), np.inf).sum(axis=1)
+    last = np.sum(vel_n**2 * w, axis=1)[np.maximum(hi - 1, 0)]
+    return have & (c2 <= gate) & (last <= gate)
+
+
+def window_mean(x: FloatArray, window: int) -> FloatArray:
+    """Mean of x (N, 3) over the trailing ``window`` samples, (N, 3) (NaN before the first
+    full window)."""
+    out = np.full(x.shape, np.nan)
+    if x.shape[0] >= window:
+        c = np.vstack([np.zeros((1, x.shape[1])), np.cumsum(x, axis=0)])
+        out[window - 1:] = (c[window:] - c[:-window]) / window
+    return out
+
+
+def steady_runs(cand: np.ndarray, f_mean: FloatArray, sd_diff: float, gate: float
+                ) -> np.ndarray:
+    """(N,) int: the first sample of the run each candidate sample belongs to (N elsewhere).
+    A run of candidates is cut where the window's mean specific force leaves the one at the
+    run's start: ||f̄_k − f̄_start||² / sd_diff² > ``gate`` (sd_diff = σ_a√(2/W), the σ of
+    the difference of two window means). At rest f is constant; a horizontal acceleration a
+    tilts it by a/g, which the window mean resolves long before the SHOE sum does (the
+    module docstring's gentle start). Causal: a cut at k depends on data up to t_k."""
+    n = cand.size
+    run_start = np.full(n, n, dtype=np.int64)
+    edges = np.diff(np.r_[0, cand.astype(np.int8), 0])
+    for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1), strict=True):
+        s = int(a)
+        while s < b:
+            d2 = np.sum((f_mean[s:b] - f_mean[s]) ** 2, axis=1) / sd_diff**2
+            bad = np.flatnonzero(d2 > gate)
+            e = s + int(bad[0]) if bad.size else int(b)
+            run_start[s:e] = s
+            s = e
+    return run_start
+
+
+def detect_standstill(t: FloatArray, accel_b: FloatArray, gyro_b: FloatArray, sd_accel: float,
+                      sd_gyro: float, g: float, gnss_t: FloatArray | None = None,
+                      gnss_vel: FloatArray | None = None, gnss_vel_sd: FloatArray | None = None,
+                      *, window_s: float = WINDOW_S, min_duration_s: float = MIN_DURATION_S,
+                      gnss_window_s: float = GNSS_WINDOW_S, prob: float = PROB) -> Standstill:
+    """Standstill of a drive (module docstring). t (N,) IMU stamps [s]; accel_b, gyro_b
+    (N, 3); sd_accel, sd_gyro: per-sample σ [m/s², rad/s] (turn-on bias included); g [m/s²];
+    gnss_t (G,), gnss_vel (G, 3) in n [m/s], gnss_vel_sd (G, 3) [m/s], all None without GNSS
+    velocity."""
+    if not (sd_accel > 0 and sd_gyro > 0 and g > 0):
+        raise ValueError("detect_standstill: sd_accel, sd_gyro and g must be > 0")
+    n = t.size
+    rate = (n - 1) / float(t[-1] - t[0]) if n > 1 else 1.0
+    window = max(2, int(round(window_s * rate)))
+    term_a, term_g = shoe_terms(accel_b, gyro_b, g, window)
+    # a real log's σ holds the vibration in motion: scaled down to its quiet windows
+    sd_accel = float(np.fmin(sd_accel, quiet_sd(term_a)))
+    sd_gyro = float(np.fmin(sd_gyro, quiet_sd(term_g)))
+    stat = term_a / sd_accel**2 + term_g / sd_gyro**2
+    gamma = shoe_threshold(window, prob)
+    imu_still = np.isfinite(stat) & (stat <= gamma)
+    if gnss_t is not None and gnss_vel is not None and gnss_vel_sd is not None \
+            and gnss_t.size:
+        spacing = float(np.median(np.diff(gnss_t))) if gnss_t.size > 1 else gnss_window_s
+        gok = gnss_agrees(t, gnss_t, gnss_vel, gnss_vel_sd,
+                          max(gnss_window_s, 1.5 * spacing), prob)
+    else:
+        gok = np.ones(n, dtype=bool)
+    cand = imu_still & gok
+    f_mean = window_mean(accel_b, window)
+    run_start = steady_runs(cand, f_mean, sd_accel * np.sqrt(2.0 / window),
+                            float(chi2.ppf(1.0 - CUT_ALPHA, 3)))
+    # causal minimum duration: the run ending at k started at least min_duration_s before t_k
+    still = cand & (t - t[np.minimum(run_start, n - 1)] >= min_duration_s)
+    edges = np.diff(np.r_[0, still.astype(np.int8), 0])
+    a, b = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1
+    intervals = np.column_stack([t[a], t[b]]) if a.size else np.zeros((0, 2))
+    dt = 1.0 / rate
+    vel_sd = max(sd_accel * dt * np.sqrt(window), ZUPT_SD_FLOOR)
+    return Standstill(t, still, stat, gamma, imu_still, gok, intervals, float(vel_sd),
+                      float(sd_accel), float(sd_gyro), window)
