@@ -25,7 +25,10 @@ Outputs
   σ_v limit or probation, ``ekf.model`` docstring), ``gnss_alt_rejected`` (height refused),
   ``imu_gaps`` ([start, length] of bridged IMU gaps [s]), ``gnss_vel_rejected``,
   ``baro_rejected``, ``heading_time_s`` (time the heading last became known),
-  ``heading_source`` (given / accel-matching / gnss-track), rates used.
+  ``heading_source`` (given / accel-matching / gnss-track), rates used; ``zupt_intervals``
+  ([t_start, t_end] [s] of the standstills given zero-velocity updates, ``EkfConfig.zupt``;
+  ``nav.standstill``), ``zupt_used`` / ``zupt_rejected`` (updates applied / refused by
+  their χ²₃ gate) and ``zupt`` (the detector's threshold and noise).
 
 Noise
 -----
@@ -57,6 +60,7 @@ from scipy.stats import chi2
 
 from ...config import REAL_LOG_BARO, ImuSpec
 from ...geo.earth import OMEGA_IE
+from ...nav.standstill import ZUPT_SD_FLOOR, Standstill
 from ...numpy_pages import small_pages
 from ...sensors.baro import with_prior_conflict_notes, without_implausible_scale
 from ...sensors.magnetometer import (
@@ -80,6 +84,7 @@ from ...types import (
 )
 from ..base import with_online
 from ..gnss_auto import with_gm_auto
+from ..zupt import drive_standstill
 from . import backward, carry, inputs, kernel, regate, rts
 from . import model as km
 from .alignment import Alignment, initial_state
@@ -136,7 +141,10 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
     qd = inputs.process_noise(t, gr.grid_idx, gaps, ispec, bp, cfg)
     fm, mag_info = field_and_info(drive, cfg.use_mag)  # WMM on the drive's date, or None
     ini = initial_state(drive, cfg, model, bp, ka_sd, fm)
-    ev = inputs.events(drive, model, gr.grid_idx, ini.g_latency, cfg, fm is not None)
+    # standstill (nav.standstill) with the shared model: zero-velocity updates inside it
+    still = drive_standstill(drive, model) if cfg.zupt else None
+    ev = inputs.events(drive, model, gr.grid_idx, ini.g_latency, cfg, fm is not None,
+                       None if still is None else still.update_times())
     baro = drive.baro
     max_consec_baro = 1
     if baro is not None and baro.t.size > 1:
@@ -176,10 +184,16 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
             align_acc_sd=float(np.sqrt(2.0) * ispec.accel_bias_sd),
             gap_forget_s=float(cfg.gap_heading_forget_s), store_rts=bool(store_rts),
             huber_pos=hk[0], huber_vel=hk[1], huber_baro=hk[2],
-            tilt_consider=bool(cfg.tilt_consider)),
+            tilt_consider=bool(cfg.tilt_consider),
+            zupt_sd=float(ZUPT_SD_FLOOR if still is None else still.vel_sd),
+            gate_zupt=float(chi2.ppf(cfg.gate_prob, 3))),
     )
     innov, info = _report(drive, res, gr, gaps, ini, cfg, heading_accel, est_scale, ev.has_vel)
     info.update(mag_info)
+    info.update(zupt_info(still, res[21], res[22]))
+    if "zupt" in info and info["zupt_used"]:
+        inn_z, rej_z = res[21], res[22]
+        innov["zupt"] = inn_z[np.isfinite(inn_z[:, 0]) & ~rej_z]
     if ev.m_field.shape[0]:
         inn_mag, rej_mag = res[18], res[19]
         innov["mag"] = inn_mag[np.isfinite(inn_mag) & ~rej_mag]
@@ -407,6 +421,18 @@ class EKFRTS(EKF):
                                   for a in range(3)])
             est = est.replace(info={**est.info, "gnss_gm_at_fixes": ge})
         return run, est
+
+
+def zupt_info(still: Standstill | None, inn: FloatArray, rej: NDArrayInt) -> dict[str, Any]:
+    """``info["zupt_intervals"]`` ([t_start, t_end] [s] of the detected standstills, empty
+    with ``EkfConfig.zupt`` off), ``zupt_used`` / ``zupt_rejected`` (updates applied and
+    refused by their χ²₃ gate) and ``zupt`` (the detector's threshold and σ)."""
+    if still is None:
+        return {"zupt_intervals": [], "zupt_used": 0, "zupt_rejected": 0}
+    return {"zupt_intervals": still.interval_list(),
+            "zupt_used": int(np.isfinite(inn[:, 0]).sum() - rej.sum()),
+            "zupt_rejected": int(rej.sum()),
+            "zupt": still.summary()}
 
 
 def max_rejects(cfg: EkfConfig, drive: Drive) -> int:

@@ -34,7 +34,7 @@ from .heading import (
     track_heading,
 )
 from .model import NING, NPACK, NPAR, NX, PBA, PBG, PGE, PKA, apply_correction, pack
-from .rows import BARO, GNSS, baro_rows, gnss_rows, mag_rows
+from .rows import BARO, GNSS, ZUPT, baro_rows, gnss_rows, mag_rows, zupt_rows
 from .steps import (
     C_BARO,
     C_MAG,
@@ -44,6 +44,7 @@ from .steps import (
     tilt_held,
     update_gated,
     update_gnss,
+    update_zupt,
 )
 
 FloatArray = NDArray[np.float64]
@@ -95,8 +96,8 @@ class Events(NamedTuple):
     """GNSS fixes and baro samples merged and sorted by time."""
 
     t: FloatArray  # (E,) event stamps [s]
-    kind: IntArray  # (E,) rows.GNSS fix, rows.BARO sample, rows.MAG sample
-    idx: IntArray  # (E,) index into the GNSS or baro arrays
+    kind: IntArray  # (E,) rows.GNSS fix, rows.BARO sample, rows.MAG sample, rows.ZUPT
+    idx: IntArray  # (E,) index into the GNSS, baro or magnetometer arrays, or ZUPT number
     max_pending: int  # most events inside one grid interval, + 1
 
 
@@ -157,6 +158,8 @@ class Settings(NamedTuple):
     huber_vel: float  # Huber threshold of GNSS velocities [σ] (0: no loss)
     huber_baro: float  # Huber threshold of baro samples [σ] (0: no loss)
     tilt_consider: bool  # horizontal GNSS rows hold the attitude while the heading is unknown
+    zupt_sd: float  # σ of a zero-velocity update per axis [m/s] (``nav.standstill``)
+    gate_zupt: float  # χ²₃ gate of a zero-velocity update
 
 
 @njit(cache=True)
@@ -199,6 +202,12 @@ def run_filter(grids, init, noise, events, gnss, baro, mag, settings):
     rej_v = np.zeros(ng, dtype=np.bool_)
     rej_baro = np.zeros(nb, dtype=np.bool_)
     rej_mag = np.zeros(nm, dtype=np.bool_)
+    nz = 0
+    for e in range(events.kind.size):
+        if events.kind[e] == ZUPT:
+            nz += 1
+    inn_zupt = np.full((nz, 3), np.nan)
+    rej_zupt = np.zeros(nz, dtype=np.bool_)
 
     lla, v, q = init.lla0.copy(), init.v0.copy(), init.q0.copy()
     par, p = init.par0.copy(), init.p0.copy()
@@ -292,6 +301,8 @@ def run_filter(grids, init, noise, events, gnss, baro, mag, settings):
                                   settings.align_sd_max)
             elif kind == BARO:
                 y, hm, r, mm = baro_rows(lm, vm, par, baro.h0, baro.alt[idx], baro.sd)
+            elif kind == ZUPT:
+                y, hm, r, mm = zupt_rows(vm, settings.zupt_sd)
             else:
                 y, hm, r, mm = mag_rows(mag.field[idx], par, cm, mag.declination, mag.sd_ut,
                                         mag.floor_var, heading_ok, p, acq)
@@ -338,6 +349,9 @@ def run_filter(grids, init, noise, events, gnss, baro, mag, settings):
                                  settings.max_consec_baro, counts, C_BARO, inn_baro, rej_baro,
                                  idx, settings.huber_baro,
                                  tilt_held(p, settings, pend_ok[e]))
+                elif pend_type[e] == ZUPT:
+                    update_zupt(p, dx, heff, pend_y[e], pend_r[e], settings.gate_zupt,
+                                inn_zupt, rej_zupt, idx)
                 else:
                     update_gated(p, dx, heff, pend_y[e], pend_r[e], mag.gate, mag.max_consec,
                                  counts, C_MAG, inn_mag, rej_mag, idx, 0.0, False)
@@ -358,4 +372,4 @@ def run_filter(grids, init, noise, events, gnss, baro, mag, settings):
 
     return (out_lla, out_v, out_q, out_par, cov_out, rts_p, rts_ing, rts_q, corr, reset_at,
             inn_pos, inn_vel, inn_baro, rej_pos, rej_vel, rej_baro, t_heading, rej_v,
-            inn_mag, rej_mag, forced_pos)
+            inn_mag, rej_mag, forced_pos, inn_zupt, rej_zupt)
