@@ -4,6 +4,8 @@ ZUPT while the car moves, and the velocity error during the stops drops in both 
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -75,3 +77,27 @@ def test_stop_velocity_error_drops(drive, family: str) -> None:
     e_on, e_off = _stop_vel_rms(on, drive, stops), _stop_vel_rms(off, drive, stops)
     # seed 0, 600 s: ekf 0.040 → 0.015 m/s, graph-batch 0.016 → 0.006 m/s
     assert e_on < 0.6 * e_off, (e_on, e_off)
+
+
+def test_position_only_drive(drive) -> None:
+    # without GNSS velocity the fixes' displacement over 2 s confirms the stops; a cruise
+    # is refused (IMU-only ZUPTs on this vibration-free IMU took every steady cruise for rest)
+    pos_only = drive.replace(gnss=dataclasses.replace(drive.gnss, vel_n=None, vel_sd=None))
+    got = EKF(EkfConfig()).run(pos_only).info["zupt_intervals"]
+    assert len(got) >= 2
+    tr = drive.truth
+    speed = np.linalg.norm(tr.vel_n, axis=1)
+    for a, b in got:
+        m = (tr.t >= a) & (tr.t <= b)
+        assert speed[m].max() < 0.05, (a, b)
+    covered = sum(b - a for a, b in got)
+    assert covered > 0.7 * sum(b - a for a, b in _stops(drive))
+
+
+def test_no_gnss_no_standstill(drive) -> None:
+    from vnav_graph.estimators.zupt import drive_standstill
+    from vnav_graph.sensors.model import sensor_model
+
+    bare = drive.replace(gnss=None)
+    st = drive_standstill(bare, sensor_model(bare))
+    assert not st.still.any() and st.interval_list() == []

@@ -32,34 +32,41 @@ def _still(n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     return f, w
 
 
-def test_statistic_closed_form_constant_offsets() -> None:
-    # noiseless: |f| = g + δ along a tilted axis and a constant rate w0. The accelerometer sum
-    # is Σ||f − g f/|f| ||² = W δ², the gyro's W ||w0||²: T = δ²/σ_a² + ||w0||²/σ_g²
-    n, window, delta = 300, 40, 0.03
-    u = np.array([0.1, -0.2, -1.0]) / np.linalg.norm([0.1, -0.2, -1.0])
-    f = np.tile((G + delta) * u, (n, 1))
-    w0 = np.array([1e-3, -2e-3, 0.5e-3])
-    w = np.tile(w0, (n, 1))
-    stat = shoe_statistic(f, w, SD_A, SD_G, G, window)
+def test_statistic_closed_form() -> None:
+    # noiseless: constant offsets (biases, gravity in any direction) give T = 0; a square
+    # wave ±δ on f_x and ±w0 on ω_z about them gives, over an even window, the variances
+    # δ² and w0²: T = δ²/σ_a² + w0²/σ_g²
+    n, window, delta, w0 = 300, 40, 0.03, 2e-3
+    f = np.tile([0.3, -0.5, -G], (n, 1))
+    w = np.tile([1e-3, -2e-3, 5e-4], (n, 1))
+    stat = shoe_statistic(f, w, SD_A, SD_G, window)
     assert np.all(np.isnan(stat[:window - 1]))
-    expect = delta**2 / SD_A**2 + w0 @ w0 / SD_G**2
-    np.testing.assert_allclose(stat[window - 1:], expect, rtol=1e-6)
-    a, g = shoe_terms(f, w, G, window)
+    np.testing.assert_allclose(stat[window - 1:], 0.0, atol=1e-6)
+    sign = np.where(np.arange(n) % 2 == 0, 1.0, -1.0)
+    f[:, 0] += delta * sign
+    w[:, 2] += w0 * sign
+    stat = shoe_statistic(f, w, SD_A, SD_G, window)
+    np.testing.assert_allclose(stat[window - 1:], delta**2 / SD_A**2 + w0**2 / SD_G**2,
+                               rtol=1e-6)
+    a, g = shoe_terms(f, w, window)
     np.testing.assert_allclose(a[window - 1:], delta**2, rtol=1e-6)
-    np.testing.assert_allclose(g[window - 1:], w0 @ w0, rtol=1e-9)
+    np.testing.assert_allclose(g[window - 1:], w0**2, rtol=1e-6)
 
 
 def test_statistic_at_rest_is_chi2(rng: np.random.Generator) -> None:
-    # white noise at rest: W·T is χ² with 6W − 2 dof (mean 6W − 2); windows refused at the
-    # threshold ≈ 1 − p over disjoint windows (20 000 of them: 1 − p = 0.001 gives 20 ± 4.5)
+    # white noise at rest, with biases: W·T is χ² with 6W − 6 dof (mean 6W − 6); windows
+    # refused at the threshold ≈ 1 − p over disjoint windows (20 000 of them: 1 − p = 0.001
+    # gives 20 ± 4.5)
     window, m = 50, 20000
     f, w = _still(window * m, rng)
-    stat = shoe_statistic(f, w, SD_A, SD_G, G, window)[window - 1::window]
+    f += [0.1, -0.05, 0.15]  # 2-3σ turn-on biases of a consumer MEMS
+    w += [2e-3, -1.5e-3, 1e-3]
+    stat = shoe_statistic(f, w, SD_A, SD_G, window)[window - 1::window]
     assert stat.size == m
-    assert abs(np.mean(window * stat) / (6 * window - 2) - 1.0) < 0.005
+    assert abs(np.mean(window * stat) / (6 * window - 6) - 1.0) < 0.005
     refused = np.mean(stat > shoe_threshold(window))
     assert refused < 3 * (1 - PROB)
-    assert shoe_threshold(window) == pytest.approx(chi2.ppf(PROB, 6 * window - 2) / window)
+    assert shoe_threshold(window) == pytest.approx(chi2.ppf(PROB, 6 * window - 6) / window)
 
 
 def test_moving_imu_is_refused(rng: np.random.Generator) -> None:
@@ -69,7 +76,7 @@ def test_moving_imu_is_refused(rng: np.random.Generator) -> None:
     f, w = _still(n, rng)
     f[:, 0] += 1.5 * np.sin(2 * np.pi * 2.0 * t)
     w[:, 2] += 0.5 * np.sin(2 * np.pi * 2.0 * t)
-    st = detect_standstill(t, f, w, SD_A, SD_G, G)
+    st = detect_standstill(t, f, w, SD_A, SD_G)
     assert not st.still.any()
     assert st.intervals.shape == (0, 2)
 
@@ -97,7 +104,7 @@ def test_stops_detected_within_tolerance(rng: np.random.Generator) -> None:
     moving = (t >= 10.0) & (t < 20.0)
     f[moving, 1] += 2.0 * np.sin(2 * np.pi * 0.5 * (t[moving] - 10.0))
     w[moving, 2] += 0.3 * np.sin(2 * np.pi * 0.5 * (t[moving] - 10.0))
-    st = detect_standstill(t, f, w, SD_A, SD_G, G)
+    st = detect_standstill(t, f, w, SD_A, SD_G)
     assert st.intervals.shape == (2, 2)
     (a0, b0), (a1, b1) = st.intervals
     # starts: one window (0.5 s) and the minimum duration (1 s) after rest begins, ±0.1 s
@@ -122,7 +129,7 @@ def test_gentle_start_is_cut_by_the_steady_force(rng: np.random.Generator) -> No
     tg = np.arange(0.0, 15.0, 0.1)
     vel = np.zeros((tg.size, 3))
     vel[:, 0] = np.interp(tg, t, np.cumsum(acc) / RATE)
-    st = detect_standstill(t, f, w, SD_A, SD_G, G, tg, vel, np.full((tg.size, 3), 0.1))
+    st = detect_standstill(t, f, w, SD_A, SD_G, tg, vel, np.full((tg.size, 3), 0.1))
     # without the cut, the IMU and the GNSS tests alone would give ZUPTs into the start ...
     assert np.mean((st.imu_still & st.gnss_ok)[(t > 10.4) & (t < 11.2)]) > 0.8
     # ... the steady-force cut ends the standstill within 0.5 s of it
@@ -139,7 +146,7 @@ def test_short_rest_is_not_an_interval(rng: np.random.Generator) -> None:
     moving = (t < 4.0) | (t >= 5.2)
     f[moving, 0] += 1.0 * np.sin(2 * np.pi * 1.0 * t[moving])
     w[moving, 2] += 0.3 * np.sin(2 * np.pi * 1.0 * t[moving])
-    st = detect_standstill(t, f, w, SD_A, SD_G, G)
+    st = detect_standstill(t, f, w, SD_A, SD_G)
     assert st.imu_still.any()
     assert not st.still.any()
 
@@ -156,7 +163,7 @@ def test_smooth_creep_is_not_standstill(rng: np.random.Generator, speed: float,
     tg = np.arange(0.0, 20.0, 0.1)
     vel = np.tile([speed, 0.0, 0.0], (tg.size, 1)) + 0.1 * rng.standard_normal((tg.size, 3))
     sd = np.full((tg.size, 3), 0.1)
-    st = detect_standstill(t, f, w, SD_A, SD_G, G, tg, vel, sd)
+    st = detect_standstill(t, f, w, SD_A, SD_G, tg, vel, sd)
     assert np.mean(st.imu_still[t > 1.0]) > 0.99  # the IMU alone: rest throughout
     if detected:
         assert st.intervals.shape[0] >= 1
@@ -171,7 +178,7 @@ def test_outage_gives_no_standstill_with_gnss_velocity(rng: np.random.Generator)
     t = np.arange(n) / RATE
     f, w = _still(n, rng)
     tg = np.arange(0.0, 8.0, 0.1)
-    st = detect_standstill(t, f, w, SD_A, SD_G, G, tg, np.zeros((tg.size, 3)),
+    st = detect_standstill(t, f, w, SD_A, SD_G, tg, np.zeros((tg.size, 3)),
                            np.full((tg.size, 3), 0.1))
     assert st.still[(t > 3.0) & (t < 7.9)].all()
     assert not st.still[t > 9.1].any()
@@ -180,4 +187,4 @@ def test_outage_gives_no_standstill_with_gnss_velocity(rng: np.random.Generator)
 def test_bad_noise_is_an_error() -> None:
     t = np.arange(10) / RATE
     with pytest.raises(ValueError, match="must be > 0"):
-        detect_standstill(t, np.zeros((10, 3)), np.zeros((10, 3)), 0.0, SD_G, G)
+        detect_standstill(t, np.zeros((10, 3)), np.zeros((10, 3)), 0.0, SD_G)

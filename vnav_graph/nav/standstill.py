@@ -1,49 +1,57 @@
 """Standstill detection for zero-velocity updates (ZUPT), shared by both estimator families.
 
-Test statistic: the SHOE / generalised likelihood-ratio detector of Skog et al.
-("Zero-velocity detection — an algorithm evaluation", IEEE T-BME 57(11), 2010), over the
-trailing window of the W IMU samples ending at sample k:
+Test statistic: the generalised likelihood-ratio detector of Skog et al. ("Zero-velocity
+detection — an algorithm evaluation", IEEE T-BME 57(11), 2010) with the specific force and
+the angular rate at rest both unknown constants over the window (the sensors' biases, the
+gravity's direction and magnitude: nuisance parameters), i.e. the moving variance of both
+sensors (their MV and ARE detectors together), over the trailing W IMU samples ending at k:
 
-    T_k = (1/W) Σ_{j=k−W+1..k} [ ||f_j − g·f̄/||f̄|| ||² / σ_a² + ||ω_j||² / σ_g² ],
+    T_k = (1/W) Σ_{j=k−W+1..k} [ ||f_j − f̄||² / σ_a² + ||ω_j − ω̄||² / σ_g² ],
 
-f the specific force in b [m/s²], ω the angular rate in b [rad/s], f̄ the window's mean
-specific force, g the normal gravity at the origin, σ_a and σ_g the per-sample noise σ. At
-rest with white noise of those σ, W·T_k is χ² with 6W − 2 degrees of freedom (two for the
-gravity direction taken from the window), and the IMU test is
+f the specific force in b [m/s²], ω the angular rate in b [rad/s], f̄ and ω̄ the window's
+means, σ_a and σ_g the per-sample white-noise σ. At rest W·T_k is χ² with 6W − 6 degrees of
+freedom whatever the biases, and the IMU test is
 
-    T_k ≤ γ = χ²⁻¹_{6W−2}(p) / W,   p = ``PROB`` (0.999).
+    T_k ≤ γ = χ²⁻¹_{6W−6}(p) / W,   p = ``PROB`` (0.999).
 
-Noise. σ_a, σ_g come from the shared sensor model (``estimators.zupt``: density·√rate, with
-the turn-on bias σ in quadrature: the detector knows no bias). A real log's inferred model
-holds the vibration in motion, so each is capped at ``QUIET_MARGIN`` times the per-axis rms
-of the drive's quietest ``QUIET_QUANTILE`` % windows (``quiet_sd``). On the RTK car drive the
-model's 0.66 m/s² and 0.10 rad/s become 0.32 m/s² and 0.026 rad/s: its stops show 0.10–0.12
-m/s² and 0.006–0.027 rad/s per axis (the idle at the start is the loudest), driving 0.5 m/s²
-and 0.06–0.09 rad/s (medians). White noise at the model's σ (a simulated drive) is not
+(Skog's SHOE form with ||f − g f̄/||f̄|| ||² and ||ω||² reads the turn-on biases as motion: on
+simulated hill-drive seed 1, a consumer IMU's 1–2σ biases put T at 11.4 at rest against
+γ = 7.1, and no stop was found.)
+
+Noise. σ_a, σ_g come from the shared sensor model (``estimators.zupt``: density·√rate). A
+real log's inferred model holds the vibration in motion, so each is capped at
+``QUIET_MARGIN`` times the per-axis rms of the drive's quietest ``QUIET_QUANTILE`` % windows
+(``quiet_sd``): on the RTK car drive the model's 0.56 m/s² and 0.10 rad/s become 0.38 m/s²
+and 0.042 rad/s, on the walk 0.18 m/s² and 0.032 rad/s become 0.026 m/s² and 0.0022 rad/s
+(a phone held by a standing walker moves more than one lying still: the walk's standstills
+are found in part, 14 s of 29 s). White noise at the model's σ (a simulated drive) is not
 changed.
 
-GNSS agreement. An ideal IMU cannot tell a constant-velocity straight motion from rest, so
-where the drive has GNSS velocity a sample is still only if the fixes of the trailing
-``GNSS_WINDOW_S`` (at least 1.5 fix spacings) agree with zero: their inverse-variance mean
-per NED axis passes Σ_axes v̄_a²·Σ_i σ_{i,a}⁻² ≤ χ²⁻¹₃(p) (a 0.2 m/s creep over ten 10 Hz
-fixes of σ 0.1 m/s gives 40 against 16.3), and so does the latest fix alone. Without a fix
-in that window (an outage) no sample is still: the IMU alone would take a smooth cruise for a
-stop. A drive without GNSS velocity is decided by the IMU alone.
+GNSS agreement. An IMU cannot tell a constant-velocity straight motion from rest, so a
+sample is still only if the GNSS velocities of the trailing ``GNSS_WINDOW_S`` (at least 1.5
+fix spacings) agree with zero: their inverse-variance mean per NED axis passes
+Σ_axes v̄_a²·Σ_i σ_{i,a}⁻² ≤ χ²⁻¹₃(p) (a 0.2 m/s creep over ten 10 Hz fixes of σ 0.1 m/s
+gives 40 against 16.3), and so does the latest fix alone. Without a fix in that window (an
+outage) no sample is still: the IMU alone would take a smooth cruise for a stop. A drive with
+GNSS positions only takes velocities from them (``position_velocity``: the displacement over
+``POSITION_SPAN_S``, σ √2·σ_p/2 s = 0.7 m/s for σ_p = 1 m; only the latest is tested, their
+errors being correlated): it refuses a cruise, not a creep. A drive without GNSS gets no
+standstill (``estimators.zupt``): on a simulated IMU without vibration every steady cruise
+reads as rest (a position-only hill-drive's smoother cost rose 42-fold with IMU-only ZUPTs).
 
-Steady specific force. At rest f is constant. A run of still samples is cut where the
-window's mean specific force leaves the one at the run's start, ||f̄_k − f̄_start||² >
-2σ_a²/W · χ²⁻¹₃(1 − ``CUT_ALPHA``) (``steady_runs``). A gentle start tilts f by a/g, which
-T does not see (its gravity direction comes from the same window: it sees |f| − g ≈ a²/2g)
-but the mean does within a fraction of a second: on the RTK car drive the fastest reference
-speed at a ZUPT is 0.12 m/s with the cut, 0.54 m/s without. After the cut a constant
-acceleration is a steady f again (an IMU cannot tell it from a tilted rest): the GNSS speed
-then refuses it.
+Steady means. At rest f̄ and ω̄ are constant. A run of still samples is cut where the window
+means leave those at the run's start, ||f̄_k − f̄_s||²/(2σ_a²/W) + ||ω̄_k − ω̄_s||²/(2σ_g²/W)
+> χ²⁻¹₆(1 − ``CUT_ALPHA``) (``steady_runs``). A gentle start tilts f by a/g and a gentle turn
+moves ω̄, which the variances hardly see but the means do within a fraction of a second: on
+the RTK car drive the fastest reference speed at a ZUPT is 0.16 m/s with the cut, 0.54 m/s
+without. After the cut a constant acceleration is a steady f again (an IMU cannot tell it from
+a tilted rest): the GNSS speed then refuses it.
 
 Minimum duration. A sample gives a ZUPT only once its run has lasted ``MIN_DURATION_S``.
 
-Every test reads data up to t_k only: the decision at t_k is causal (the ekf's and
-graph-isam2's real-time answers stay causal). ``Standstill.intervals`` are the spans where
-ZUPTs apply, [t_start, t_end] in s on the drive clock.
+Every test reads data up to t_k only, but for the noise cap: the decision at t_k is causal
+given the drive's noise settings. ``Standstill.intervals`` are the spans where ZUPTs apply,
+[t_start, t_end] in s on the drive clock.
 
 Measurement. Each ZUPT is the pseudo-measurement v_n = 0 (the IMU's velocity in n) with σ
 per axis ``Standstill.vel_sd``: the velocity that the detector's accelerometer noise leaves
@@ -64,14 +72,19 @@ PROB = 0.999  # probability of the χ² tests (IMU window and GNSS agreement)
 WINDOW_S = 0.5  # SHOE window [s] (at least 2 samples)
 MIN_DURATION_S = 1.0  # a run of still samples gives ZUPTs after this long [s]
 GNSS_WINDOW_S = 1.0  # fixes of this trailing span must agree with zero [s] (≥ 1.5 fix spacings)
+POSITION_SPAN_S = 2.0  # GNSS positions without velocity: displacement over this span [s]
 ZUPT_RATE_HZ = 10.0  # ekf ZUPT rate inside an interval [Hz]
 ZUPT_SD_FLOOR = 0.01  # σ floor of the zero-velocity pseudo-measurement [m/s]
-# false-cut probability of the steady-force test per window pair: it is applied at every
+# false-cut probability of the steady-means test per window pair: it is applied at every
 # sample of a run against one reference, so it must be rare (at 1e-3 the simulated hill-drive's
 # 14 s stop was cut in two by its accelerometer bias's Gauss-Markov drift)
 CUT_ALPHA = 1e-5
 QUIET_QUANTILE = 5.0  # % of the windows taken as rest when scaling the noise down
-QUIET_MARGIN = 3.0  # the noise at rest, at most this times that of the quietest windows
+# the noise at rest, at most this times that of the quietest windows. Detected standstill on
+# the RTK drives (reference: car 61 s, walk 29 s) and the fastest reference speed at a ZUPT:
+# 3: car 59 s (its long opening stop cut in two), 0.10 m/s, walk 9 s; 5: car 61 s, 0.16 m/s,
+# walk 14 s; 10: car 62 s, 0.24 m/s, walk 17 s; no cap: car 62 s, 0.25 m/s, walk 24 s
+QUIET_MARGIN = 5.0
 
 
 @dataclass(frozen=True)
@@ -100,12 +113,13 @@ class Standstill:
         """``intervals`` as a JSON-ready list of [t_start, t_end] [s]."""
         return [[float(a), float(b)] for a, b in self.intervals]
 
-    def summary(self) -> dict[str, float]:
+    def summary(self) -> dict[str, float | None]:
         """JSON-ready detector settings: threshold γ, window [s], per-sample σ, and the
         pseudo-measurement σ."""
         rate = (self.t.size - 1) / float(self.t[-1] - self.t[0]) if self.t.size > 1 else 1.0
-        return {"threshold": self.threshold, "window_s": self.window / rate,
-                "sd_accel": self.sd_accel, "sd_gyro": self.sd_gyro, "vel_sd": self.vel_sd}
+        out = {"threshold": self.threshold, "window_s": self.window / rate,
+               "sd_accel": self.sd_accel, "sd_gyro": self.sd_gyro, "vel_sd": self.vel_sd}
+        return {k: (float(v) if np.isfinite(v) else None) for k, v in out.items()}
 
     def update_times(self, rate_hz: float = ZUPT_RATE_HZ) -> FloatArray:
         """IMU stamps of the ZUPT updates: the first still sample of each 1/``rate_hz`` slot
@@ -118,33 +132,32 @@ class Standstill:
         return self.t[idx[first]]
 
 
-def shoe_terms(accel_b: FloatArray, gyro_b: FloatArray, g: float, window: int
+def shoe_terms(accel_b: FloatArray, gyro_b: FloatArray, window: int
                ) -> tuple[FloatArray, FloatArray]:
-    """The two sums of T_k before weighting, each divided by W: (1/W)Σ||f − g f̄/||f̄|| ||²
-    [m²/s⁴] and (1/W)Σ||ω||² [rad²/s²] over the trailing ``window`` samples, each (N,), NaN
-    for the first window − 1 samples. accel_b (N, 3) [m/s²], gyro_b (N, 3) [rad/s].
+    """The two sums of T_k before weighting, each divided by W: (1/W)Σ||f − f̄||² [m²/s⁴]
+    and (1/W)Σ||ω − ω̄||² [rad²/s²] over the trailing ``window`` samples, each (N,), NaN for
+    the first window − 1 samples. accel_b (N, 3) [m/s²], gyro_b (N, 3) [rad/s].
 
-    With S = Σf, Q = Σ||f||² over the window, Σ||f − g S/||S|| ||² = Q − 2g||S|| + W g²."""
+    With S = Σx, Q = Σ||x||² over the window, Σ||x − S/W||² = Q − ||S||²/W."""
     n = accel_b.shape[0]
-    out_a, out_g = np.full(n, np.nan), np.full(n, np.nan)
-    if n < window:
-        return out_a, out_g
-    cs = np.vstack([np.zeros((1, 3)), np.cumsum(accel_b, axis=0)])
-    cq = np.r_[0.0, np.cumsum(np.sum(accel_b**2, axis=1))]
-    cw = np.r_[0.0, np.cumsum(np.sum(gyro_b**2, axis=1))]
-    s = cs[window:] - cs[:-window]
-    q = cq[window:] - cq[:-window]
-    out_a[window - 1:] = np.maximum(q - 2.0 * g * np.linalg.norm(s, axis=1) + window * g * g,
-                                    0.0) / window
-    out_g[window - 1:] = (cw[window:] - cw[:-window]) / window
-    return out_a, out_g
+    out = []
+    for x in (accel_b, gyro_b):
+        o = np.full(n, np.nan)
+        if n >= window:
+            cs = np.vstack([np.zeros((1, 3)), np.cumsum(x, axis=0)])
+            cq = np.r_[0.0, np.cumsum(np.sum(x**2, axis=1))]
+            sx = cs[window:] - cs[:-window]
+            q = cq[window:] - cq[:-window]
+            o[window - 1:] = np.maximum(q - np.sum(sx**2, axis=1) / window, 0.0) / window
+        out.append(o)
+    return out[0], out[1]
 
 
 def shoe_statistic(accel_b: FloatArray, gyro_b: FloatArray, sd_accel: float, sd_gyro: float,
-                   g: float, window: int) -> FloatArray:
+                   window: int) -> FloatArray:
     """T_k of the module docstring over the trailing ``window`` samples, (N,) (``shoe_terms``
     weighted by the per-sample σ [m/s², rad/s])."""
-    a, w = shoe_terms(accel_b, gyro_b, g, window)
+    a, w = shoe_terms(accel_b, gyro_b, window)
     return a / sd_accel**2 + w / sd_gyro**2
 
 
@@ -158,15 +171,15 @@ def quiet_sd(term: FloatArray) -> float:
 
 
 def shoe_threshold(window: int, prob: float = PROB) -> float:
-    """γ = χ²⁻¹_{6W−2}(p) / W (module docstring)."""
-    return float(chi2.ppf(prob, 6 * window - 2) / window)
+    """γ = χ²⁻¹_{6W−6}(p) / W (module docstring)."""
+    return float(chi2.ppf(prob, 6 * window - 6) / window)
 
 
 def gnss_agrees(t: FloatArray, gnss_t: FloatArray, vel_n: FloatArray, vel_sd: FloatArray,
-                window_s: float, prob: float = PROB) -> np.ndarray:
+                window_s: float, prob: float = PROB, mean_test: bool = True) -> np.ndarray:
     """(N,) bool: the fixes stamped in (t_k − window_s, t_k] exist, their inverse-variance
-    mean velocity and the latest fix alone each pass the χ²₃ test of zero (module docstring).
-    vel_n, vel_sd (G, 3)."""
+    mean velocity (with ``mean_test``; off for correlated velocities) and the latest fix
+    alone each pass the χ²₃ test of zero (module docstring). vel_n, vel_sd (G, 3)."""
     w = 1.0 / np.maximum(vel_sd, 1e-6) ** 2
     cw = np.vstack([np.zeros((1, 3)), np.cumsum(w, axis=0)])
     cv = np.vstack([np.zeros((1, 3)), np.cumsum(w * vel_n, axis=0)])
@@ -178,7 +191,14 @@ def gnss_agrees(t: FloatArray, gnss_t: FloatArray, vel_n: FloatArray, vel_sd: Fl
     gate = chi2.ppf(prob, 3)
     c2 = np.where(have[:, None], sv**2 / np.where(sw > 0, sw, 1.0), np.inf).sum(axis=1)
     last = np.sum(vel_n**2 * w, axis=1)[np.maximum(hi - 1, 0)]
-    return have & (c2 <= gate) & (last <= gate)
+    return have & ((c2 <= gate) | (not mean_test)) & (last <= gate)
+
+
+def no_standstill(t: FloatArray) -> Standstill:
+    """The answer for a drive whose standstill cannot be confirmed (no GNSS): none."""
+    none = np.zeros(t.size, dtype=bool)
+    return Standstill(t, none, np.full(t.size, np.nan), float("nan"), none, none,
+                      np.zeros((0, 2)), ZUPT_SD_FLOOR, float("nan"), float("nan"), 0)
 
 
 def window_mean(x: FloatArray, window: int) -> FloatArray:
@@ -191,21 +211,18 @@ def window_mean(x: FloatArray, window: int) -> FloatArray:
     return out
 
 
-def steady_runs(cand: np.ndarray, f_mean: FloatArray, sd_diff: float, gate: float
-                ) -> np.ndarray:
+def steady_runs(cand: np.ndarray, means: FloatArray, gate: float) -> np.ndarray:
     """(N,) int: the first sample of the run each candidate sample belongs to (N elsewhere).
-    A run of candidates is cut where the window's mean specific force leaves the one at the
-    run's start: ||f̄_k − f̄_start||² / sd_diff² > ``gate`` (sd_diff = σ_a√(2/W), the σ of
-    the difference of two window means). At rest f is constant; a horizontal acceleration a
-    tilts it by a/g, which the window mean resolves long before the SHOE sum does (the
-    module docstring's gentle start). Causal: a cut at k depends on data up to t_k."""
+    A run of candidates is cut where the whitened window means ``means`` (N, d) leave the
+    ones at the run's start: ||m_k − m_start||² > ``gate`` (module docstring). Causal: a
+    cut at k depends on data up to t_k."""
     n = cand.size
     run_start = np.full(n, n, dtype=np.int64)
     edges = np.diff(np.r_[0, cand.astype(np.int8), 0])
     for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1), strict=True):
         s = int(a)
         while s < b:
-            d2 = np.sum((f_mean[s:b] - f_mean[s]) ** 2, axis=1) / sd_diff**2
+            d2 = np.sum((means[s:b] - means[s]) ** 2, axis=1)
             bad = np.flatnonzero(d2 > gate)
             e = s + int(bad[0]) if bad.size else int(b)
             run_start[s:e] = s
@@ -213,24 +230,44 @@ def steady_runs(cand: np.ndarray, f_mean: FloatArray, sd_diff: float, gate: floa
     return run_start
 
 
+def position_velocity(gnss_t: FloatArray, pos_n: FloatArray, pos_sd: FloatArray,
+                      span_s: float = POSITION_SPAN_S) -> tuple[FloatArray, FloatArray,
+                                                                FloatArray]:
+    """Velocities from GNSS positions for a drive without GNSS velocity: at each fix i the
+    displacement from the latest fix at least ``span_s`` before it over their time apart,
+    σ = √(σ_i² + σ_j²)/Δt per axis. pos_n, pos_sd (G, 3) [m]. Returns (stamps (M,), velocity
+    (M, 3) [m/s], σ (M, 3) [m/s]) of the fixes that have such a partner."""
+    j = np.searchsorted(gnss_t, gnss_t - span_s, side="right") - 1
+    ok = j >= 0
+    i, j = np.flatnonzero(ok), j[ok]
+    dt = (gnss_t[i] - gnss_t[j])[:, None]
+    vel = (pos_n[i] - pos_n[j]) / dt
+    sd = np.sqrt(pos_sd[i] ** 2 + pos_sd[j] ** 2) / dt
+    return gnss_t[i], vel, sd
+
+
 def detect_standstill(t: FloatArray, accel_b: FloatArray, gyro_b: FloatArray, sd_accel: float,
-                      sd_gyro: float, g: float, gnss_t: FloatArray | None = None,
+                      sd_gyro: float, gnss_t: FloatArray | None = None,
                       gnss_vel: FloatArray | None = None, gnss_vel_sd: FloatArray | None = None,
                       *, window_s: float = WINDOW_S, min_duration_s: float = MIN_DURATION_S,
-                      gnss_window_s: float = GNSS_WINDOW_S, prob: float = PROB) -> Standstill:
+                      gnss_window_s: float = GNSS_WINDOW_S, prob: float = PROB,
+                      mean_test: bool = True) -> Standstill:
     """Standstill of a drive (module docstring). t (N,) IMU stamps [s]; accel_b, gyro_b
-    (N, 3); sd_accel, sd_gyro: per-sample σ [m/s², rad/s] (turn-on bias included); g [m/s²];
-    gnss_t (G,), gnss_vel (G, 3) in n [m/s], gnss_vel_sd (G, 3) [m/s], all None without GNSS
-    velocity."""
-    if not (sd_accel > 0 and sd_gyro > 0 and g > 0):
-        raise ValueError("detect_standstill: sd_accel, sd_gyro and g must be > 0")
+    (N, 3); sd_accel, sd_gyro: per-sample white-noise σ [m/s², rad/s]; gnss_t (G,),
+    gnss_vel (G, 3) in n [m/s], gnss_vel_sd (G, 3) [m/s]: the GNSS velocities
+    that must agree (``position_velocity`` on a drive without them, with ``mean_test``
+    False: their errors are correlated), all None for the IMU alone."""
+    if not (sd_accel > 0 and sd_gyro > 0):
+        raise ValueError("detect_standstill: sd_accel and sd_gyro must be > 0")
     n = t.size
     rate = (n - 1) / float(t[-1] - t[0]) if n > 1 else 1.0
     window = max(2, int(round(window_s * rate)))
-    term_a, term_g = shoe_terms(accel_b, gyro_b, g, window)
+    term_a, term_g = shoe_terms(accel_b, gyro_b, window)
     # a real log's σ holds the vibration in motion: scaled down to its quiet windows
-    sd_accel = float(np.fmin(sd_accel, quiet_sd(term_a)))
-    sd_gyro = float(np.fmin(sd_gyro, quiet_sd(term_g)))
+    # (a noiseless simulated drive's quiet windows are exactly 0: the model's floors stay)
+    qa, qg = quiet_sd(term_a), quiet_sd(term_g)
+    sd_accel = float(min(sd_accel, qa)) if qa > 0 else sd_accel
+    sd_gyro = float(min(sd_gyro, qg)) if qg > 0 else sd_gyro
     stat = term_a / sd_accel**2 + term_g / sd_gyro**2
     gamma = shoe_threshold(window, prob)
     imu_still = np.isfinite(stat) & (stat <= gamma)
@@ -238,13 +275,14 @@ def detect_standstill(t: FloatArray, accel_b: FloatArray, gyro_b: FloatArray, sd
             and gnss_t.size:
         spacing = float(np.median(np.diff(gnss_t))) if gnss_t.size > 1 else gnss_window_s
         gok = gnss_agrees(t, gnss_t, gnss_vel, gnss_vel_sd,
-                          max(gnss_window_s, 1.5 * spacing), prob)
+                          max(gnss_window_s, 1.5 * spacing), prob, mean_test)
     else:
         gok = np.ones(n, dtype=bool)
     cand = imu_still & gok
-    f_mean = window_mean(accel_b, window)
-    run_start = steady_runs(cand, f_mean, sd_accel * np.sqrt(2.0 / window),
-                            float(chi2.ppf(1.0 - CUT_ALPHA, 3)))
+    # the window means of f and ω, whitened by the σ of a difference of two of them
+    means = np.hstack([window_mean(accel_b, window) / (sd_accel * np.sqrt(2.0 / window)),
+                       window_mean(gyro_b, window) / (sd_gyro * np.sqrt(2.0 / window))])
+    run_start = steady_runs(cand, means, float(chi2.ppf(1.0 - CUT_ALPHA, 6)))
     # causal minimum duration: the run ending at k started at least min_duration_s before t_k
     still = cand & (t - t[np.minimum(run_start, n - 1)] >= min_duration_s)
     edges = np.diff(np.r_[0, still.astype(np.int8), 0])
