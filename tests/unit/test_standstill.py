@@ -9,6 +9,7 @@ import pytest
 from scipy.stats import chi2
 
 from vnav_graph.nav.standstill import (
+    CUT_ALPHA,
     MIN_DURATION_S,
     PROB,
     ZUPT_SD_FLOOR,
@@ -66,6 +67,7 @@ def test_statistic_at_rest_is_chi2(rng: np.random.Generator) -> None:
     assert abs(np.mean(window * stat) / (6 * window - 6) - 1.0) < 0.005
     refused = np.mean(stat > shoe_threshold(window))
     assert refused < 3 * (1 - PROB)
+    assert np.mean(stat > shoe_threshold(window, 1.0 - CUT_ALPHA)) < 3e-4  # 20 000 windows
     assert shoe_threshold(window) == pytest.approx(chi2.ppf(PROB, 6 * window - 6) / window)
 
 
