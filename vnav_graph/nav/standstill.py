@@ -47,9 +47,9 @@ the window's means leave those of the run's n samples in the 2W before it,
 (2–4σ of white noise between 1 s means: its bias walk), and against the run's start hill-drive
 seed 13's four stops came out in nine pieces. A gentle start tilts f by a/g and a gentle turn
 moves ω̄, which the variances hardly see but the means do within a fraction of a second: on
-the RTK car drive the fastest reference speed at a ZUPT is 0.16 m/s with the cut, 0.54 m/s
-without. After the cut a constant acceleration is a steady f again (an IMU cannot tell it from
-a tilted rest): the GNSS speed then refuses it.
+the RTK car drive the fastest reference speed at a ZUPT is 0.15 m/s with the cut, 0.54 m/s
+without (the walk: 0.04 m/s against 0.61 m/s). After the cut a constant acceleration is a
+steady f again (an IMU cannot tell it from a tilted rest): the GNSS speed then refuses it.
 
 Minimum duration. A sample gives a ZUPT only once its run has lasted ``MIN_DURATION_S``.
 
@@ -87,8 +87,8 @@ CUT_ALPHA = 1e-5
 QUIET_QUANTILE = 5.0  # % of the windows taken as rest when scaling the noise down
 # the noise at rest, at most this times that of the quietest windows. Detected standstill on
 # the RTK drives (reference: car 61 s, walk 29 s) and the fastest reference speed at a ZUPT:
-# 3: car 59 s (its long opening stop cut in two), 0.10 m/s, walk 9 s; 5: car 61 s, 0.16 m/s,
-# walk 14 s; 10: car 62 s, 0.24 m/s, walk 17 s; no cap: car 62 s, 0.25 m/s, walk 24 s
+# 3: car 59 s (its long opening stop cut in two), 0.10 m/s, walk 11 s; 5: car 61 s, 0.15 m/s,
+# walk 14 s; 10: car 62 s, 0.22 m/s, walk 18 s; no cap: car 62 s, 0.22 m/s, walk 24 s
 QUIET_MARGIN = 5.0
 
 
