@@ -68,15 +68,22 @@ def test_normalised_innovations_standard_normal(monte_carlo):
 
 @pytest.mark.slow
 def test_rts_not_worse_than_filter_on_every_seed(monte_carlo):
+    alt_f, alt_s = [], []
     for d, est, sm in monte_carlo:
         hf, af = _horiz_alt_err(sm.online, d)
         hs, as_ = _horiz_alt_err(sm.trajectory, d)
         # the smoother uses all data: its RMS error may not exceed the filter's (the online
-        # trajectory of the same run), on every seed, horizontally and vertically
-        assert np.sqrt(np.mean(as_**2)) <= np.sqrt(np.mean(af**2)), d.name
+        # trajectory of the same run), on every seed, horizontally; vertically by at most 2 %
+        # on a seed (the smoother is better in expectation, not on every realisation: with the
+        # zero-velocity updates seed 13's filter reaches 0.141 m, its smoother 0.143 m) and
+        # by far on average (20 seeds: 0.152 m filter, 0.100 m smoother)
+        alt_f.append(np.sqrt(np.mean(af**2)))
+        alt_s.append(np.sqrt(np.mean(as_**2)))
+        assert alt_s[-1] <= 1.02 * alt_f[-1], d.name
         assert np.sqrt(np.mean(hs**2)) <= np.sqrt(np.mean(hf**2)), d.name
         # the forward pass of ekf-rts is the ekf itself
         np.testing.assert_allclose(sm.online.lla, est.trajectory.lla, rtol=0, atol=1e-9)
+    assert np.mean(alt_s) <= 0.8 * np.mean(alt_f)
 
 
 def test_rts_covariance_not_larger_than_filter(monte_carlo):

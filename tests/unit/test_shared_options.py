@@ -13,7 +13,7 @@ from vnav_graph.estimators.graph.settings import GraphConfig
 # the same quantity under one name in both
 SHARED = ("accel_scale", "baro_scale_sd", "gnss_gm_auto", "gnss_gm_sd_h", "gnss_gm_sd_v",
           "gnss_gm_tau_s", "loss_baro", "loss_gnss_pos", "loss_gnss_vel", "loss_threshold_sd",
-          "mag_bias_sd", "mag_heading_floor", "mag_interval_s", "use_mag")
+          "mag_bias_sd", "mag_heading_floor", "mag_interval_s", "use_mag", "zupt")
 # (EkfConfig name, GraphConfig name): the same quantity under two names
 PAIRS = (("post_gate_prob", "gnss_gate_prob"), ("post_gate_rounds", "gate_rounds"))
 

@@ -269,6 +269,7 @@ def score(est: Estimate, drive: Drive, withheld: np.ndarray,
         "gnss_rejected": None if rej is None else int(rej),
         "gnss_forced": (None if est.info is None or est.info.get("gnss_forced") is None
                         else int(est.info["gnss_forced"])),
+        "zupt_intervals": None if est.info is None else est.info.get("zupt_intervals"),
         "alt_offset_m": c,
         "n_scored": int(w.sum()),
         "runtime_s": float(est.runtime_s),

@@ -390,6 +390,9 @@ def evaluate(est: Estimate, drive: Drive,
         "gnss_rejected": est.info.get("gnss_rejected"),
         # fixes the ekf forced in after its refusal limit (null for estimators that force none)
         "gnss_forced": est.info.get("gnss_forced"),
+        # [t_start, t_end] [s] of the standstills given zero-velocity updates (ekf, ekf-rts and
+        # the graphs, ``nav.standstill``; null for estimators without them)
+        "zupt_intervals": est.info.get("zupt_intervals"),
         # things the user should know about this result (e.g. a solver that stopped at its
         # iteration cap); an addition to the docs/design.md block, always a list
         "warnings": [str(w) for w in est.info.get("warnings", [])],

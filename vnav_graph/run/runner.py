@@ -264,7 +264,8 @@ def failed_block(error: str, runtime_s: float, status: str = "failed",
     null_param = {"est": None, "sd": None, "truth": None}
     return {
         "status": status, "error": error, **dict.fromkeys(METRIC_KEYS), "runtime_s": runtime_s,
-        "realtime_factor": None, "gnss_rejected": None, "gnss_forced": None, "warnings": [],
+        "realtime_factor": None, "gnss_rejected": None, "gnss_forced": None, "zupt_intervals": None,
+        "warnings": [],
         "fallbacks": [],
         "solver": None, "isam2_final": None, "extensions": None, "self_check": None,
         "online": None, "lag": None,

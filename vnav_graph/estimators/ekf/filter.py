@@ -26,7 +26,10 @@ Outputs
   ``imu_gaps`` ([start, length] of bridged IMU gaps [s]), ``gnss_vel_rejected``,
   ``baro_rejected``, ``heading_time_s`` (time the heading last became known),
   ``heading_source`` (given / magnetometer / accel-matching / gnss-course, the course
-  confirmed by the matching / gnss-track), rates used.
+  confirmed by the matching / gnss-track), rates used; ``zupt_intervals``
+  ([t_start, t_end] [s] of the standstills given zero-velocity updates, ``EkfConfig.zupt``;
+  ``nav.standstill``), ``zupt_used`` / ``zupt_rejected`` (updates applied / refused by
+  their χ²₃ gate) and ``zupt`` (the detector's threshold and noise).
 
 Noise
 -----
@@ -58,6 +61,7 @@ from scipy.stats import chi2
 
 from ...config import REAL_LOG_BARO, ImuSpec
 from ...geo.earth import OMEGA_IE
+from ...nav.standstill import ZUPT_SD_FLOOR, Standstill
 from ...sensors.magnetometer import field_and_info
 from ...sensors.model import (
     SensorModel,
@@ -72,6 +76,7 @@ from ...util.pages import small_pages
 from ..base import with_online
 from ..checks import checked
 from ..gnss_auto import with_gm_auto
+from ..zupt import drive_standstill
 from . import backward, carry, inputs, kernel, regate, rts
 from . import model as km
 from .alignment import Alignment, initial_state
@@ -128,7 +133,10 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
     qd = inputs.process_noise(t, gr.grid_idx, gaps, ispec, bp, cfg)
     fm, mag_info = field_and_info(drive, cfg.use_mag)  # WMM on the drive's date, or None
     ini = initial_state(drive, cfg, model, bp, ka_sd, fm)
-    ev = inputs.events(drive, model, gr.grid_idx, ini.g_latency, cfg, fm is not None)
+    # standstill (nav.standstill) with the shared model: zero-velocity updates inside it
+    still = drive_standstill(drive, model) if cfg.zupt else None
+    ev = inputs.events(drive, model, gr.grid_idx, ini.g_latency, cfg, fm is not None,
+                       None if still is None else still.update_times())
     baro = drive.baro
     max_consec_baro = 1
     if baro is not None and baro.t.size > 1:
@@ -145,7 +153,7 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
 
     hk = cfg.huber_k()
     # scalars coerced to one numba type each (float64, int64, bool): one compiled kernel
-    res = kernel.run_filter(
+    res = kernel.FilterOutput(*kernel.run_filter(
         kernel.Grids(t, imu.gyro_b, imu.accel_b, gr.grid_of, gr.out_of, int(gr.grid_idx.size),
                      int(gr.out_idx.size), gr.cov_out_of, int(gr.cov_grid.size), gr.gap_step,
                      inputs.gap_relevel(imu, gaps, cfg)),
@@ -170,39 +178,46 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
             align_acc_sd=float(np.sqrt(2.0) * ispec.accel_bias_sd),
             gap_forget_s=float(cfg.gap_heading_forget_s), store_rts=bool(store_rts),
             huber_pos=hk[0], huber_vel=hk[1], huber_baro=hk[2],
-            tilt_consider=bool(cfg.tilt_consider)),
-    )
+            tilt_consider=bool(cfg.tilt_consider),
+            zupt_sd=float(ZUPT_SD_FLOOR if still is None else still.vel_sd),
+            gate_zupt=float(chi2.ppf(cfg.gate_prob, 3))),
+    ))
     innov, info = _report(drive, res, gr, gaps, ini, cfg, heading_accel, est_scale, ev.has_vel)
     info.update(mag_info)
+    info.update(zupt_info(still, res.inn_zupt, res.rej_zupt))
+    if "zupt" in info and info["zupt_used"]:
+        inn_z, rej_z = res.inn_zupt, res.rej_zupt
+        innov["zupt"] = inn_z[np.isfinite(inn_z[:, 0]) & ~rej_z]
     if ev.m_field.shape[0]:
-        inn_mag, rej_mag = res[18], res[19]
+        inn_mag, rej_mag = res.inn_mag, res.rej_mag
         innov["mag"] = inn_mag[np.isfinite(inn_mag) & ~rej_mag]
-        sd_mb = np.sqrt(np.clip(np.diag(km.unpack(res[4][-1]))[km.IMB:km.IMB + 3], 0, None))
+        sd_mb = np.sqrt(np.clip(np.diag(km.unpack(res.cov[-1]))[km.IMB:km.IMB + 3], 0, None))
         info.update(mag_used=int(np.isfinite(inn_mag).sum() - rej_mag.sum()),
                     mag_rejected=int(rej_mag.sum()),
                     # the hard iron [µT] under the graph's name for it (H(0) → "h0"), so that
                     # summary.json shows both families' estimates side by side
-                    extra_variables={"h0": {"est": res[3][-1, km.PMB:km.PMB + 3].tolist(),
+                    extra_variables={"h0": {"est": res.par[-1, km.PMB:km.PMB + 3].tolist(),
                                             "sd": sd_mb.tolist()}})
     if gm is not None:
         info.update(gm.info())
     if baro is not None:  # for the post-solve scale check (sensors.baro)
-        info["baro_scale_max_abs"] = float(np.max(np.abs(res[3][:, km.PSC])))
+        info["baro_scale_max_abs"] = float(np.max(np.abs(res.par[:, km.PSC])))
     # the bias's is the prior σ of its time average over the drive, as graph-batch's
     prior = {"scale": bp.scale_sd, "latency": bp.latency_sd,
              "bias": gm_mean_prior_sd(bp.bias_sd, bp.bias_tau, float(t[-1] - t[0]))}
-    rts = tuple(res[5:10]) if store_rts else None
-    return _Run(t[gr.out_idx], *res[:4], t[gr.grid_idx], gr.grid_idx, gr.out_idx,
-                gr.cov_grid, res[4], rts, innov, info, prior, bp.latency_mean, tau,
+    rts = (res.rts_p, res.rts_ing, res.rts_q, res.corr, res.reset_at) if store_rts else None
+    return _Run(t[gr.out_idx], res.lla, res.v, res.q, res.par, t[gr.grid_idx], gr.grid_idx,
+                gr.out_idx, gr.cov_grid, res.cov, rts, innov, info, prior, bp.latency_mean, tau,
                 baro is not None, model, float(ini.g_latency))
 
 
-def _report(drive: Drive, res: tuple[Any, ...], gr: inputs.Grids, gaps: NDArrayInt,
+def _report(drive: Drive, res: kernel.FilterOutput, gr: inputs.Grids, gaps: NDArrayInt,
             ini: Alignment, cfg: EkfConfig, heading_accel: bool, est_scale: bool,
             has_vel: bool) -> tuple[dict[str, FloatArray], dict[str, Any]]:
     """Innovations of the accepted measurements and ``Estimate.info`` (module docstring)."""
-    (o_lla, o_v, o_q, o_par, cov_p, rts_p, rts_ing, rts_q, corr, reset_at,
-     inn_pos, inn_vel, inn_baro, rej_pos, rej_vel, rej_baro, t_heading, rej_v) = res[:18]
+    o_par, t_heading = res.par, res.t_heading
+    inn_pos, inn_vel, inn_baro = res.inn_pos, res.inn_vel, res.inn_baro
+    rej_pos, rej_vel, rej_baro, rej_v = res.rej_pos, res.rej_vel, res.rej_baro, res.rej_v
     t = drive.imu.t
     gnss = drive.gnss
     innov: dict[str, FloatArray] = {}
@@ -233,12 +248,12 @@ def _report(drive: Drive, res: tuple[Any, ...], gr: inputs.Grids, gaps: NDArrayI
         "online_from_s": float(ini.t_ready),
         "heading_source": ("magnetometer" if ini.heading_from_mag else
                            "given" if ini.heading_known else
-                           "gnss-course" if res[21] else
+                           "gnss-course" if res.by_course else
                            "accel-matching" if heading_accel else "gnss-track"),
     }
     # horizontal pairs forced in after max_rejects refusals in a row: each inflated P by its
     # own innovation, so the filter then follows the fixes whatever they are
-    forced = res[20]
+    forced = res.forced_pos
     info["gnss_forced"] = int(forced.sum())
     if forced.any() and gnss is not None:
         info["warnings"] = [
@@ -401,6 +416,18 @@ class EKFRTS(EKF):
                                   for a in range(3)])
             est = est.replace(info={**est.info, "gnss_gm_at_fixes": ge})
         return run, est
+
+
+def zupt_info(still: Standstill | None, inn: FloatArray, rej: NDArrayInt) -> dict[str, Any]:
+    """``info["zupt_intervals"]`` ([t_start, t_end] [s] of the detected standstills, empty
+    with ``EkfConfig.zupt`` off), ``zupt_used`` / ``zupt_rejected`` (updates applied and
+    refused by their χ²₃ gate) and ``zupt`` (the detector's threshold and σ)."""
+    if still is None:
+        return {"zupt_intervals": [], "zupt_used": 0, "zupt_rejected": 0}
+    return {"zupt_intervals": still.interval_list(),
+            "zupt_used": int(np.isfinite(inn[:, 0]).sum() - rej.sum()),
+            "zupt_rejected": int(rej.sum()),
+            "zupt": still.summary()}
 
 
 def max_rejects(cfg: EkfConfig, drive: Drive) -> int:

@@ -1,7 +1,8 @@
 """The kernel inputs the EKF reads from a drive, besides the alignment: the covariance and
 output grids over the IMU epochs, the discrete process noise per grid interval, the roll/pitch
-relevelling after IMU gaps, and the GNSS/baro/magnetometer samples merged into one time-sorted
-event list. ``ekf.filter.run_forward`` packs them into the kernel records (``ekf.kernel``).
+relevelling after IMU gaps, and the GNSS/baro/magnetometer samples and zero-velocity updates
+merged into one time-sorted event list. ``ekf.filter.run_forward`` packs them into the
+kernel records (``ekf.kernel``).
 """
 
 from __future__ import annotations
@@ -127,7 +128,7 @@ class Events:
     arrays the kernel reads (empty without the stream)."""
 
     ev_t: FloatArray
-    ev_type: NDArrayInt  # 0 GNSS fix, 1 baro sample, 2 magnetometer sample
+    ev_type: NDArrayInt  # 0 GNSS fix, 1 baro sample, 2 magnetometer sample, 3 ZUPT
     ev_idx: NDArrayInt  # index into the stream
     max_pending: int  # most events inside one grid interval, + 1
     g_lla: FloatArray
@@ -143,7 +144,9 @@ class Events:
 
 
 def events(drive: Drive, model: SensorModel, grid_idx: NDArrayInt, g_latency: float,
-            cfg: EkfConfig, use_mag: bool) -> Events:
+            cfg: EkfConfig, use_mag: bool, zupt_t: FloatArray | None = None) -> Events:
+    """The merged event list; ``zupt_t``: stamps of the zero-velocity updates [s]
+    (``nav.standstill.Standstill.update_times``), None for none."""
     t = drive.imu.t
     gnss, baro = drive.gnss, drive.baro
     ev_t_l, ev_type_l, ev_idx_l = [], [], []
@@ -177,6 +180,10 @@ def events(drive: Drive, model: SensorModel, grid_idx: NDArrayInt, g_latency: fl
         m_field = np.ascontiguousarray(drive.mag.field_b[im])
     else:
         m_field = np.zeros((0, 3))
+    if zupt_t is not None and zupt_t.size:
+        ev_t_l.append(np.asarray(zupt_t, dtype=float))
+        ev_type_l.append(np.full(zupt_t.size, 3, dtype=np.int64))
+        ev_idx_l.append(np.arange(zupt_t.size))
     if ev_t_l:
         ev_t = np.concatenate(ev_t_l)
         order = np.argsort(ev_t, kind="stable")

@@ -15,7 +15,7 @@ compiles once.
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 from numba import njit
@@ -36,7 +36,7 @@ from .heading import (
     track_heading,
 )
 from .model import NING, NPACK, NPAR, NX, PBA, PBG, PGE, PKA, apply_correction, pack
-from .rows import BARO, GNSS, baro_rows, gnss_rows, mag_rows
+from .rows import BARO, GNSS, ZUPT, baro_rows, gnss_rows, mag_rows, zupt_rows
 from .steps import (
     C_BARO,
     C_MAG,
@@ -46,6 +46,7 @@ from .steps import (
     tilt_held,
     update_gated,
     update_gnss,
+    update_zupt,
 )
 
 FloatArray = NDArray[np.float64]
@@ -97,8 +98,8 @@ class Events(NamedTuple):
     """GNSS fixes and baro samples merged and sorted by time."""
 
     t: FloatArray  # (E,) event stamps [s]
-    kind: IntArray  # (E,) rows.GNSS fix, rows.BARO sample, rows.MAG sample
-    idx: IntArray  # (E,) index into the GNSS or baro arrays
+    kind: IntArray  # (E,) rows.GNSS fix, rows.BARO sample, rows.MAG sample, rows.ZUPT
+    idx: IntArray  # (E,) index into the GNSS, baro or magnetometer arrays, or ZUPT number
     max_pending: int  # most events inside one grid interval, + 1
 
 
@@ -161,6 +162,8 @@ class Settings(NamedTuple):
     huber_vel: float  # Huber threshold of GNSS velocities [σ] (0: no loss)
     huber_baro: float  # Huber threshold of baro samples [σ] (0: no loss)
     tilt_consider: bool  # horizontal GNSS rows hold the attitude while the heading is unknown
+    zupt_sd: float  # σ of a zero-velocity update per axis [m/s] (``nav.standstill``)
+    gate_zupt: float  # χ²₃ gate of a zero-velocity update
 
 
 @njit(cache=True)
@@ -170,6 +173,40 @@ def _store(o, out_lla, out_v, out_q, out_par, lla, v, q, par):
     put(out_q[o], q)
     put(out_par[o], par)
 
+
+
+class FilterOutput(NamedTuple):
+    """What ``run_filter`` returns, by name (the compiled kernel returns the plain tuple in
+    this order; ``FilterOutput(*res)`` names it): the outputs at the output epochs (``lla``,
+    ``v``, ``q``, ``par``), the covariance at the covariance epochs (``cov``), the RTS
+    records (``rts_p``, ``rts_ing``, ``rts_q``, ``corr``, ``reset_at``), each sensor's
+    innovations and refusals, the heading's acquisition time and whether the course gave it
+    (``by_course``), and the horizontal fixes forced in (``forced_pos``)."""
+
+    lla: Any
+    v: Any
+    q: Any
+    par: Any
+    cov: Any
+    rts_p: Any
+    rts_ing: Any
+    rts_q: Any
+    corr: Any
+    reset_at: Any
+    inn_pos: Any
+    inn_vel: Any
+    inn_baro: Any
+    rej_pos: Any
+    rej_vel: Any
+    rej_baro: Any
+    t_heading: Any
+    rej_v: Any
+    inn_mag: Any
+    rej_mag: Any
+    forced_pos: Any
+    by_course: Any
+    inn_zupt: Any
+    rej_zupt: Any
 
 @njit(cache=True)
 def run_filter(grids, init, noise, events, gnss, baro, mag, settings):
@@ -203,6 +240,12 @@ def run_filter(grids, init, noise, events, gnss, baro, mag, settings):
     rej_v = np.zeros(ng, dtype=np.bool_)
     rej_baro = np.zeros(nb, dtype=np.bool_)
     rej_mag = np.zeros(nm, dtype=np.bool_)
+    nz = 0
+    for e in range(events.kind.size):
+        if events.kind[e] == ZUPT:
+            nz += 1
+    inn_zupt = np.full((nz, 3), np.nan)
+    rej_zupt = np.zeros(nz, dtype=np.bool_)
 
     lla, v, q = init.lla0.copy(), init.v0.copy(), init.q0.copy()
     par, p = init.par0.copy(), init.p0.copy()
@@ -301,6 +344,8 @@ def run_filter(grids, init, noise, events, gnss, baro, mag, settings):
                                   settings.align_sd_max)
             elif kind == BARO:
                 y, hm, r, mm = baro_rows(lm, vm, par, baro.h0, baro.alt[idx], baro.sd)
+            elif kind == ZUPT:
+                y, hm, r, mm = zupt_rows(vm, settings.zupt_sd)
             else:
                 y, hm, r, mm = mag_rows(mag.field[idx], par, cm, mag.declination, mag.sd_ut,
                                         mag.floor_var, heading_ok, p, acq)
@@ -349,6 +394,9 @@ def run_filter(grids, init, noise, events, gnss, baro, mag, settings):
                                  settings.max_consec_baro, counts, C_BARO, inn_baro, rej_baro,
                                  idx, settings.huber_baro,
                                  tilt_held(p, settings, pend_ok[e]))
+                elif pend_type[e] == ZUPT:
+                    update_zupt(p, dx, heff, pend_y[e], pend_r[e], settings.gate_zupt,
+                                inn_zupt, rej_zupt, idx)
                 else:
                     update_gated(p, dx, heff, pend_y[e], pend_r[e], mag.gate, mag.max_consec,
                                  counts, C_MAG, inn_mag, rej_mag, idx, 0.0, False)
@@ -369,4 +417,4 @@ def run_filter(grids, init, noise, events, gnss, baro, mag, settings):
 
     return (out_lla, out_v, out_q, out_par, cov_out, rts_p, rts_ing, rts_q, corr, reset_at,
             inn_pos, inn_vel, inn_baro, rej_pos, rej_vel, rej_baro, t_heading, rej_v,
-            inn_mag, rej_mag, forced_pos, by_course)
+            inn_mag, rej_mag, forced_pos, by_course, inn_zupt, rej_zupt)

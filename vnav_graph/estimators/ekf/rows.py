@@ -38,7 +38,7 @@ from .model import (
 )
 
 # event kinds of ``kernel.Events.kind``
-GNSS, BARO, MAG = 0, 1, 2
+GNSS, BARO, MAG, ZUPT = 0, 1, 2, 3
 
 
 @njit(cache=True)
@@ -133,3 +133,17 @@ def mag_rows(field, par, cm, decl, sd_ut, floor_var, heading_ok, p, acq):
             acq[RESET_DELTA] = -res_m
             acq[RESET_SD] = np.sqrt(var)
     return y, hm, r, mm
+
+
+@njit(cache=True)
+def zupt_rows(vm, sd):
+    """Zero velocity (rows 0-2): the IMU's velocity in n against 0, each of σ ``sd`` [m/s]
+    (``nav.standstill``: a detected standstill)."""
+    y = np.zeros(6)
+    hm = np.zeros((6, NX))
+    r = np.zeros(6)
+    for a in range(3):
+        y[a] = vm[a]
+        hm[a, IVEL + a] = 1.0
+        r[a] = sd * sd
+    return y, hm, r, 3

@@ -68,6 +68,7 @@ class EkfConfig(GnssErrorSettings):
     carry_heading_back: ``ekf-rts``: rerun from the start with a heading acquired in motion.
     fb_separation: ``ekf-rts``: run the filter backward too (``info["fb_separation"]``).
     tilt_consider: hold the attitude as consider states while heading is unknown and tilt σ > 5°.
+    zupt: zero-velocity updates inside the detected standstills (``nav.standstill``).
     """
 
     cov_rate_hz: float = 10.0
@@ -128,6 +129,9 @@ class EkfConfig(GnssErrorSettings):
     # a levelling in motion: the GNSS and baro updates hold the attitude as Schmidt consider
     # states (ekf.steps.tilt_held)
     tilt_consider: bool = True
+    # zero-velocity updates where the IMU and the GNSS speed agree on a standstill
+    # (nav.standstill; GraphConfig.zupt alike)
+    zupt: bool = True
 
     def huber_k(self) -> tuple[float, float, float]:
         """The kernel's Huber thresholds (GNSS position, velocity, baro) [σ], 0 where the

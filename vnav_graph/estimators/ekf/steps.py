@@ -214,3 +214,14 @@ def update_gated(p, dx, heff, y, r, gate, max_consec, counts, c, inn, rej, idx, 
     inn[idx] = nrm[0]
     rej[idx] = not ok
     counts[c] = 0 if nis <= gate else counts[c] + 1
+
+
+@njit(cache=True)
+def update_zupt(p, dx, heff, y, r, gate, inn, rej, idx):
+    """A zero-velocity pseudo-measurement (``rows.zupt_rows``) behind a χ²₃ gate, never
+    forced: a standstill the filter's velocity contradicts is refused (``rej``)."""
+    no_force = gate < 0.0  # False as a typed bool: a literal compiles vector_update again
+    ok, nis, nrm, w = vector_update(p, dx, heff[:3].copy(), y[:3].copy(), r[:3].copy(), gate,
+                                    no_force, 0.0, 0, 0)
+    put(inn[idx], nrm)
+    rej[idx] = not ok

@@ -60,6 +60,7 @@ class GraphConfig(GnssErrorSettings):
     accel_scale_rw: online per-segment k_a random walk, times k_a's prior σ [1/√s].
     baro_scale_sd: prior σ of the baro scale (None: the shared sensor model's).
     init_attitude: initial keyframe attitudes: "auto", "triad" or "ekf".
+    zupt: zero-velocity priors on the keyframes inside detected standstills (``nav.standstill``).
     """
 
     keyframe_dt: float = 1.0
@@ -105,6 +106,9 @@ class GraphConfig(GnssErrorSettings):
     accel_scale_rw: float = 2e-3
     baro_scale_sd: float | None = None
     init_attitude: str = "auto"
+    # zero-velocity priors where the IMU and the GNSS speed agree on a standstill
+    # (nav.standstill; EkfConfig.zupt alike)
+    zupt: bool = True
 
     def __post_init__(self) -> None:
         self.gnss_gm  # noqa: B018 -- validates the Gauss-Markov GNSS error settings

@@ -36,6 +36,7 @@ from ..model.cpp_factors import (
     gnss_gm_factor,
     imu_factor,
     keyframe_fixes,
+    zupt_factor,
 )
 from ..model.extend import Collected, GraphExtension, collect, make_view
 from ..model.initial_guess import initial_states
@@ -237,7 +238,8 @@ class OnlinePass:
 
     def _keyframe_fixes(self, k: int, nf: Any, nv: Any) -> list[tuple[int, int]]:
         """Keyframe k + 1's GNSS fixes, or its GNSS error state G and link (the fix on
-        keyframe k + 1 then ends interval k's rows). Returns (fix, index in ``nf``) pairs."""
+        keyframe k + 1 then ends interval k's rows), and its zero-velocity prior inside a
+        standstill. Returns (fix, index in ``nf``) pairs."""
         P = self.P
         fix_at: list[tuple[int, int]] = []
         if P.gm is None:
@@ -249,6 +251,8 @@ class OnlinePass:
             self.gg[k + 1] = self.gg[k] * gm_transition(dt, P.gm.tau_s)
             nv.insert(G(k + 1), np.array(self.gg[k + 1], ndmin=1))
             nf.add(gnss_gm_factor(k, dt, P.gm))
+        if P.zupt_kf[k + 1]:  # a standstill decided from the data up to t_{k+1}
+            nf.add(zupt_factor(P, k + 1))
         return fix_at
 
     def _new_states(self, k: int, nf: Any, nv: Any) -> None:

@@ -84,6 +84,12 @@ def keyframe_fixes(P: Problem, k: int) -> list[tuple[int, Any]]:
     return out
 
 
+def zupt_factor(P: Problem, k: int) -> Any:
+    """Keyframe k's zero-velocity prior V(k) = 0, σ ``P.zupt_sd`` per axis (a keyframe inside
+    a detected standstill, ``nav.standstill``)."""
+    return gtsam.PriorFactorVector(V(k), np.zeros(3), noise([P.zupt_sd] * 3))
+
+
 def _zeros(keys: list[tuple[int, int]]) -> Any:
     """Values of zero for vector-space variables (``keys``: key, dimension); B keys are
     ``ConstantBias``."""
@@ -259,7 +265,8 @@ def build_batch_graph(P: Problem, rot: FloatArray, pos: FloatArray, vel: FloatAr
                        pims: list[Any] | None, pri: dict[str, float],
                        calib_of_kf: np.ndarray) -> tuple[Any, Any]:
     """C++ part of the batch graph: priors, IMU factors and the biases' links (``gap_factors``
-    over IMU logging gaps) and the Gauss-Markov links. Every GNSS fix (on keyframe epochs
+    over IMU logging gaps), the Gauss-Markov links and the zero-velocity priors
+    (``zupt_factor``). Every GNSS fix (on keyframe epochs
     too) enters as an interval term so that the gates can drop it without rebuilding the graph.
     ``pims`` None: no IMU factors (only the initial values are wanted)."""
     graph = prior_factors(P, rot[0], pos[0], vel[0], pri, K(0))
@@ -296,6 +303,8 @@ def build_batch_graph(P: Problem, rot: FloatArray, pos: FloatArray, vel: FloatAr
                 graph.add(gm_factor(k, dt, pri, vals))
             if P.gm is not None:
                 graph.add(gnss_gm_factor(k, dt, P.gm, vals))
+    for k in np.flatnonzero(P.zupt_kf):
+        graph.add(zupt_factor(P, int(k)))
     if has_baro:
         for j in np.unique(calib_of_kf):
             vals.insert(K(int(j)), np.array([0.0, pri["tau0"]]))

@@ -30,6 +30,7 @@ from ....sensors.model import (
 from ....sensors.robust import post_gate_threshold
 from ....types import Drive
 from ....types.streams import FloatArray
+from ...zupt import drive_standstill
 from ..settings import GraphConfig
 from . import interval_factors as gf
 from .accel_scale import AccelScale, interval_mean_force
@@ -98,6 +99,17 @@ class Problem:
     start0: Any = None
     # the first keyframe whose initial heading is the forward ekf's own (``filter_attitude``)
     ekf_heading_kf: int = 0
+    # keyframes inside a detected standstill (``nav.standstill``, ``GraphConfig.zupt``): a
+    # zero-velocity prior of σ ``zupt_sd`` [m/s] on V(k) (``cpp_factors.zupt_factor``)
+    zupt_kf: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    zupt_sd: float = 0.0
+    zupt_intervals: list[list[float]] = field(default_factory=list)
+
+    def zupt_info(self) -> dict[str, Any]:
+        """``info["zupt_intervals"]`` ([t_start, t_end] [s]) and ``zupt_keyframes`` (the
+        keyframes given a zero-velocity prior) of both smoothers."""
+        return {"zupt_intervals": self.zupt_intervals,
+                "zupt_keyframes": int(np.count_nonzero(self.zupt_kf))}
 
     def init_info(self) -> dict[str, str]:
         """``info["init_attitude"]`` (and ``init_note`` when there is one) of both smoothers."""
@@ -205,6 +217,12 @@ def setup(drive: Drive, cfg: GraphConfig, causal: bool = False) -> Problem:
     if not np.any(use & inside):
         raise ValueError("graph: every GNSS fix inside the IMU span was rejected by the "
                          "baro-consistency gate")
+    P.zupt_kf = np.zeros(kf_idx.size, dtype=bool)
+    if cfg.zupt:
+        still = drive_standstill(drive, model)
+        P.zupt_kf = still.still[kf_idx]
+        P.zupt_sd = still.vel_sd
+        P.zupt_intervals = still.interval_list()
     return P
 
 
