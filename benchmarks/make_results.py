@@ -1,7 +1,7 @@
 """Generate ``docs/results.md`` from benchmark output — never edit that page by hand.
 
 Everything (bench, seed reproductions, graph performance, hard study, online accuracy; 20
-seeds unless ``--seeds`` asks for more), then the page::
+seeds unless ``--seeds`` says otherwise), then the page::
 
     python benchmarks/make_results.py --run [--quick] [--seeds N] --out bench-results
 
@@ -431,7 +431,7 @@ def run_all(out: Path, quick: bool, seeds: int | None) -> None:
     out.mkdir(parents=True, exist_ok=True)
     py = sys.executable
     prov = provenance_module()
-    n = str(max(seeds or 0, 20))
+    n = str(seeds or 20)
 
     def step(name: str, cmd: list[str]) -> int:
         return prov.record(out, name, cmd, lambda: subprocess.run(cmd).returncode)
@@ -462,7 +462,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("results_dir", nargs="?", help="directory with bench.json (+ others)")
     ap.add_argument("--run", action="store_true", help="run the benchmarks first")
     ap.add_argument("--quick", action="store_true", help="with --run: CI-sized benchmarks")
-    ap.add_argument("--seeds", type=int, default=None, help="with --run: seeds for the bench")
+    ap.add_argument("--seeds", type=int, default=None,
+                    help="with --run: seeds of the bench, hard study and online study (20)")
     ap.add_argument("--out", default=None, help="with --run: results directory")
     ap.add_argument("-o", "--output", default=str(REPO / "docs" / "results.md"))
     a = ap.parse_args(argv)
