@@ -425,36 +425,34 @@ def render(results_dir: Path, docs_dir: Path | None = None) -> str:
     return "\n".join(out)
 
 
-def run_all(out: Path, quick: bool, seeds: int | None) -> None:
-    """Run the bench, the seed reproductions, the graph performance, the hard study and the
-    online accuracy study, each recorded in ``provenance.json`` (command, commit, times)."""
+STEPS = ("bench", "hard", "online_accuracy", "reproductions", "graph_perf")
+
+
+def run_all(out: Path, quick: bool, seeds: int | None, steps: tuple[str, ...] = STEPS) -> None:
+    """Run the bench, the hard study, the online accuracy study, the seed reproductions and
+    the graph performance (those of ``steps``), each recorded in ``provenance.json``
+    (command, commit, times); a step left out keeps its earlier output in ``out``."""
     out.mkdir(parents=True, exist_ok=True)
     py = sys.executable
     prov = provenance_module()
     n = str(seeds or 20)
-
-    def step(name: str, cmd: list[str]) -> int:
-        return prov.record(out, name, cmd, lambda: subprocess.run(cmd).returncode)
-
-    cmd = [py, "-m", "vnav_graph", "bench", "--out", str(out)]
-    cmd += ["--quick"] if quick else ["--seeds", n]
-    rc = step("bench", cmd)
-    if rc not in (0, 1):  # 1 = some runs failed: still reported on the page
-        raise SystemExit(f"make_results: bench failed with exit code {rc}")
-    for name, script in (("reproductions", "reproduce_seeds.py"), ("graph_perf", "bench_graph.py")):
-        cmd = [py, str(REPO / "benchmarks" / script), *(["--quick"] if quick else []),
-               "--out", str(out)]
-        if step(name, cmd) != 0:
-            print(f"make_results: {script} failed; its section is omitted", file=sys.stderr)
+    bench = [py, "-m", "vnav_graph", "bench", "--out", str(out)]
     hard = [py, str(REPO / "benchmarks" / "hard_scenarios.py"), "--out", str(out / "hard")]
-    hard += ["--quick"] if quick else ["--seeds", n]
-    if step("hard", hard) != 0:
-        print("make_results: hard_scenarios.py failed; its section is omitted", file=sys.stderr)
     oa = [py, str(REPO / "benchmarks" / "online_accuracy.py"), "--out", str(out)]
-    oa += ["--seeds", "2", "--duration", "240"] if quick else ["--seeds", n]
-    if step("online_accuracy", oa) != 0:
-        print("make_results: online_accuracy.py failed; its section is omitted",
-              file=sys.stderr)
+    cmds = {"bench": bench + (["--quick"] if quick else ["--seeds", n]),
+            "hard": hard + (["--quick"] if quick else ["--seeds", n]),
+            "online_accuracy": oa + (["--seeds", "2", "--duration", "240"] if quick
+                                     else ["--seeds", n])}
+    for name, script in (("reproductions", "reproduce_seeds.py"), ("graph_perf", "bench_graph.py")):
+        cmds[name] = [py, str(REPO / "benchmarks" / script), *(["--quick"] if quick else []),
+                      "--out", str(out)]
+    for name in steps:
+        cmd = cmds[name]
+        rc = prov.record(out, name, cmd, lambda c=cmd: subprocess.run(c).returncode)
+        if name == "bench" and rc not in (0, 1):  # 1: some runs failed, shown on the page
+            raise SystemExit(f"make_results: bench failed with exit code {rc}")
+        if name != "bench" and rc != 0:
+            print(f"make_results: {name} failed; its section is omitted", file=sys.stderr)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -465,12 +463,18 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", type=int, default=None,
                     help="with --run: seeds of the bench, hard study and online study (20)")
     ap.add_argument("--out", default=None, help="with --run: results directory")
+    ap.add_argument("--steps", default=",".join(STEPS),
+                    help=f"with --run: the steps to run, of {', '.join(STEPS)} (default all)")
     ap.add_argument("-o", "--output", default=str(REPO / "docs" / "results.md"))
     a = ap.parse_args(argv)
     if a.run:
         if not a.out:
             ap.error("--run needs --out DIR")
-        run_all(Path(a.out), a.quick, a.seeds)
+        steps = tuple(x.strip() for x in a.steps.split(",") if x.strip())
+        bad = [x for x in steps if x not in STEPS]
+        if bad:
+            ap.error(f"unknown step(s) {', '.join(bad)} (steps: {', '.join(STEPS)})")
+        run_all(Path(a.out), a.quick, a.seeds, steps)
         results = Path(a.out)
     elif a.results_dir:
         results = Path(a.results_dir)
