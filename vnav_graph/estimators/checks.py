@@ -39,10 +39,9 @@ def hard_iron_note(info: dict[str, Any], prior_sd_ut: float) -> str:
     (``info["extra_variables"]["h0"]["est"]``) is plausible under its prior N(0, σ² I)
     (χ²₃ at ``HARD_IRON_GATE_PROB``: 4.0σ in 3 dof), else the note of an estimator that
     drops the magnetometer and solves again. A hard iron far outside its prior means the
-    compass contradicts the heading of GNSS and IMU (interference beyond the model): on
-    181.BIN a batch smoother fitted (17, −18, 2) µT, which cancels most of the horizontal
-    field, so that any heading fits (the corrected horizontal field's median fell from 26 to
-    5 µT, its σ of the bias to 1e-5 µT). Same rule for both families."""
+    compass contradicts the heading of GNSS and IMU (interference beyond the model): a hard
+    iron that cancels most of the horizontal field lets any heading fit (docs/real_logs.md,
+    "Magnetometer noise, field strength and spread"). Same rule for both families."""
     h = (info.get("extra_variables") or {}).get("h0")
     if h is None:
         return ""
@@ -82,11 +81,11 @@ def without_contradicting_mag(result: Estimate, config: Any,
 # height, set by the air's temperature off the standard atmosphere, s ≈ ΔT/T: ±25 % would
 # need air 70 K off it (−55 °C or +85 °C near sea level), beyond any flight or drive. An
 # estimate beyond it means the baro states absorbed something else: an inertial vertical
-# that contradicts the baro (an accelerometer bias step, e.g. vibration rectification on
-# 181.BIN: |f| 7–8 m/s² for 20 s of climb) drives (1 + s) towards 0, the baro's gain on the
-# height vanishes and the height drifts with the accelerometer (a 3 m/s² step in the last
-# 60 s of a 300 s hill-drive without GNSS: s → −1.01 and 3.7 km of altitude error for
-# graph-batch, s = +0.61 for ekf-rts; docs/graph.md, "Baro scale limit").
+# that contradicts the baro (an accelerometer bias step, e.g. vibration rectification:
+# docs/real_logs.md, "Accelerometers that lose specific force") drives (1 + s) towards 0,
+# the baro's gain on the height vanishes and the height drifts with the accelerometer (a
+# 3 m/s² step in the last 60 s of a 300 s hill-drive without GNSS: s → −1.01 and 3.7 km of
+# altitude error for graph-batch, s = +0.61 for ekf-rts; docs/graph.md, "Baro scale limit").
 SCALE_LIMIT = 0.25
 # Prior σ of the scale in the solve that replaces such an estimate: held at the prior mean.
 STIFF_SCALE_SD = 1e-3
@@ -138,10 +137,9 @@ def without_implausible_scale(result: Any, config: Any, rerun: Callable[[Any], A
 # that far out of a Gaussian prior has probability 6e-7, and the estimate's own σ, computed
 # as if the prior held, is then too small. Simulated: a baro whose latency is 1.0 s against
 # the default prior 0.1 ± 0.1 s is estimated at 0.70–0.73 ± 0.06 s by all four estimators
-# (4.5 of their σ from the truth). Real: car 03-01a (1 Hz phone) puts the latency at −0.99 s
-# with ekf-rts and at −0.48 s with graph-batch, each ±0.05 s, and graph-batch run on
-# ekf-rts's 1 s time grid (keyframes every second) gives −1.00 s: the value follows the
-# model's time resolution, not the data (docs/real_logs.md, "Baro latency on 1 Hz logs").
+# (4.5 of their σ from the truth). On a 1 Hz log a latency below the model's time resolution
+# follows the keyframe or propagation grid, not the data, and lands many prior σ out
+# (docs/real_logs.md, "Baro latency on 1 Hz logs").
 PRIOR_CONFLICT_Z = 5.0
 
 

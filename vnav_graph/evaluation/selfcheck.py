@@ -24,19 +24,19 @@ NEES reports).
 
 Measured with every estimator (seed 0 of each shipped scenario, each shared log): the largest
 window median |z| on the scenarios is 43 (the fixed-gain loops on hot-baro, which report no
-σ), on the shared logs 52 (loop2 on 181 and 218; on 218 its residual stays near 51 m). On
-long-outage observer1d reaches |z| 319 (640 m) in the one window after each 180 s outage and
-is back under 1 the window after: a recovering estimator, not a diverged one. None is
-flagged.
+σ), on the shared logs about half of ``Z_DIVERGED`` (docs/real_logs.md, "Self-check on the
+shared logs"). On long-outage observer1d reaches |z| 319 (640 m) in the one window after
+each 180 s outage and is back under 1 the window after: a recovering estimator, not a
+diverged one. None is flagged.
 
 The estimate is ``"diverged"`` when a run of ``DIVERGED_WINDOWS`` consecutive windows each has
 median |z| > ``Z_DIVERGED`` and median |r| > ``RESID_FLOOR_M``, in height or horizontally; or
 when it is *lost*, whatever its σ: every fix for ``LOST_S`` seconds in a row more than
 ``LOST_M`` from it (an estimator that reports σ of kilometres is not overconfident, but an
-answer kilometres from the fixes it was given is still not an answer: vekf7 after a
-10-minute IMU gap on a phone log drifts away at 50 m/s with σ to match). Measured on the
-shared logs: loop2 on 181 (glitched GNSS) is the only estimate ever over 1 km from its fixes,
-for 4.4 s at most.
+answer kilometres from the fixes it was given is still not an answer: an IMU-only answer
+after a long logging gap drifts away at tens of m/s with σ to match). On the shared logs
+only an estimator that follows glitched GNSS comes over ``LOST_M``, for seconds, well under
+``LOST_S`` (docs/real_logs.md, "Self-check on the shared logs").
 
 Every answer
 ------------

@@ -36,10 +36,10 @@ height datum, is moved by the same change over their alignment window.
 
 Measured (ρ ± standard error against the baro / the velocity): simulated scenarios, seeds
 0-2: 0.97-1.09 (hot-baro 1.08-1.09: its scale error) and 0.99-1.01 where they decide
-(urban's multipath: 1.07-1.40 ± 0.15, undecided); the shared logs 0.94-1.00 against the
-baro, 0.83 against the ArduPilot velocity (218.BIN); the Erle 181 log's wrong heights
-5.97 ± 0.17 against the baro over 15 of 25 windows (undecided), 0.84 against its velocity.
-The corpus DataFlash log with heights in feet: 3.28 ± 0.09 and 3.28 ± 0.08.
+(urban's multipath: 1.07-1.40 ± 0.15, undecided); the shared logs near 1, and a receiver
+fault that moves heights and velocity together decides nothing against the baro
+(docs/real_logs.md, "GNSS screens"). The corpus DataFlash log with heights in feet:
+3.28 ± 0.09 and 3.28 ± 0.08.
 """
 
 from __future__ import annotations
@@ -194,9 +194,9 @@ def verdict(found: dict[str, Climb]) -> tuple[str, str]:
 
     kind: "none" (nothing decides), "metres", "feet" / "twice" (convert), "near" / "other"
     (a scale error: warned / refused), "disagree" or "both-feet" (warned). A height that
-    agrees with its own vertical velocity is in metres whatever the baro says (the Erle 181
-    log: heights and velocity wrong together while the baro is right, a receiver fault the
-    estimators gate), unless the baro sees feet (both in feet).
+    agrees with its own vertical velocity is in metres whatever the baro says (a receiver
+    fault moves heights and velocity together while the baro is right, and the estimators
+    gate it), unless the baro sees feet (both in feet).
     """
     dec = {k: v for k, v in found.items() if v.decides}
     what = ", ".join(v.text(k) for k, v in dec.items())

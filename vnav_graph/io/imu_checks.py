@@ -18,8 +18,8 @@ Checks, with the evidence each uses
   other value outside [6, 14] m/s² is refused.
 - gyro units: over 1 s block means of |ω|, a busiest second above ``DEG_BUSY`` rad/s (458°/s
   held for a second) or a quietest second above ``DEG_QUIET`` rad/s (never below 29°/s) is a
-  gyro in deg/s (→ × π/180). Measured on the shared logs in rad/s: busiest ≤ 3.2, quietest
-  ≤ 0.043; in deg/s: busiest ≥ 28 for every log that moves.
+  gyro in deg/s (→ × π/180): a vehicle's rates in rad/s stay a few rad/s at most, the same
+  rates in deg/s are 57 times larger (docs/real_logs.md, "IMU unit and axis checks").
 - axes against each other, ground vehicles (one dominant rotation axis, E[ω̄ω̄ᵀ] eigenvalue
   ratio ≥ ``GROUND_AXIS_RATIO``): a car turns about the vertical, so its principal rotation
   axis more than 45° from the mean specific force means accelerometer and gyro columns are
@@ -33,9 +33,9 @@ Checks, with the evidence each uses
   or 10 points less than about its best axis (``COURSE_R2_GAP``, significant at
   ``COURSE_P``): columns swapped; or when it turns the wrong way (a mirrored axis).
   Measured (r2 about the best axis minus about down): every scenario, seeds 0-2, ≤ 0.06, all
-  pass; the shared car logs 0.001, the ski phone 0.004 (r2 0.55, k 0.51). Gyro x/z swapped:
-  29 of 30 simulated drives refused, the ski phone 0.55 against 0.39 (refused); z inverted:
-  28 of 30 refused (k −0.45 to −1.22). The multirotor logs move too little to decide.
+  pass. Gyro x/z swapped: 29 of 30 simulated drives refused; z inverted: 28 of 30 refused
+  (k −0.45 to −1.22). A hovering multirotor turns too little against its course to decide
+  (docs/real_logs.md, "IMU unit and axis checks").
   A gyro in deg/s turns 57.3 times too far: k = π/180 × the clean k (0.45-1.3 → 0.008-0.023),
   so k in ``DEG_K_BAND`` (0.005-0.05) with ``r2_down`` ≥ 0.5 converts it (the sortie aircraft
   in deg/s: its busiest second is 6 'rad/s', under ``DEG_BUSY``).

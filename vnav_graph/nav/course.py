@@ -17,9 +17,9 @@ to 0.24 m/s), where its first term is at most 1/k = 11.5°. Elsewhere σ_ψ = π
 
 σ_β from the data (``sway_sd``). The angle of the body to its path is measured, up to a
 constant, by the course minus the heading the gyro carries: over the ``SWAY_WINDOW_S``
-before a fix, their circular scatter. A car on a straight road gives a degree or two; the
-hand-held walk ``rtk/walk_0827`` gives 20° (its body swings ±30° at each step against an RTK
-course, graph-batch's heading minus the course: 22° standard deviation). The σ_β used is
+before a fix, their circular scatter. A car on a straight road gives a degree or two; a
+hand-held device tens of degrees, its body swinging at each step about the path
+(docs/real_logs.md, "Standstills and course on the RTK drives"). The σ_β used is
 the larger of the configured floor (``sideslip_sd``: the mean angle, which no scatter shows)
 and that scatter, so a hand-held device gets an honest σ and a car keeps the floor.
 """

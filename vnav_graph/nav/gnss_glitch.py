@@ -13,8 +13,9 @@ side of it is right cannot be told from the positions alone.
 Horizontal and vertical differ: GNSS height has the barometer to be checked against (every
 estimator gates it), horizontal position has nothing but this speed test. Callers therefore
 pass horizontal positions for glitches of any length and take only isolated spikes
-(``max_fixes=1``) from the 3-D positions: a block of wrong heights (the Erle 181 log's 300 m
-swings for 33 s) is left to the estimators' height gates, and reported by the input checks.
+(``max_fixes=1``) from the 3-D positions: a block of wrong heights lasting tens of seconds
+(docs/real_logs.md, "GNSS screens") is left to the estimators' height gates, and reported
+by the input checks.
 
 Used by the input checks (``vnav_graph.io.sanity``: the fixes are dropped with a warning)
 and by the factor graph's GNSS pre-gate (``estimators.graph.problem``), so that a drive that

@@ -22,10 +22,10 @@ simulated hill-drive seed 1, a consumer IMU's 1–2σ biases put T at 11.4 at re
 Noise. σ_a, σ_g come from the shared sensor model (``estimators.zupt``: density·√rate). A
 real log's inferred model holds the vibration in motion, so each is capped at
 ``QUIET_MARGIN`` times the per-axis rms of the drive's quietest ``QUIET_QUANTILE`` % windows
-(``quiet_sd``): on the RTK car drive the model's 0.56 m/s² and 0.10 rad/s become 0.38 m/s²
-and 0.042 rad/s, on the walk 0.18 m/s² and 0.032 rad/s become 0.026 m/s² and 0.0022 rad/s
-(a phone held by a standing walker moves more than one lying still: the walk's standstills
-are found in part, 14 s of 29 s). White noise at the model's σ (a simulated drive) is not
+(``quiet_sd``): the vibration of a running engine or a walker's steps then no longer hides
+a stop (docs/real_logs.md, "Standstills and course on the RTK drives"; a phone held by a
+standing walker moves more than one lying still, so such standstills are found in part).
+White noise at the model's σ (a simulated drive) is not
 changed.
 
 GNSS agreement. An IMU cannot tell a constant-velocity straight motion from rest, so a
@@ -46,9 +46,9 @@ the window's means leave those of the run's n samples in the 2W before it,
 (``steady_runs``). The reference slides: the simulated consumer IMU's means wander at rest
 (2–4σ of white noise between 1 s means: its bias walk), and against the run's start hill-drive
 seed 13's four stops came out in nine pieces. A gentle start tilts f by a/g and a gentle turn
-moves ω̄, which the variances hardly see but the means do within a fraction of a second: on
-the RTK car drive the fastest reference speed at a ZUPT is 0.15 m/s with the cut, 0.54 m/s
-without (the walk: 0.04 m/s against 0.61 m/s). After the cut a constant acceleration is a
+moves ω̄, which the variances hardly see but the means do within a fraction of a second, so
+the cut keeps the ZUPTs off a vehicle that creeps away (docs/real_logs.md, "Standstills and
+course on the RTK drives"). After the cut a constant acceleration is a
 steady f again (an IMU cannot tell it from a tilted rest): the GNSS speed then refuses it.
 
 Minimum duration. A sample gives a ZUPT only once its run has lasted ``MIN_DURATION_S``.

@@ -14,11 +14,10 @@ keyframes × factors
 hill-drive 120 / 480 s without the magnetometer).
 
 The coefficients were measured on a 2-core machine shared with other jobs (one measurement of
-each run, so the load shows: graph-isam2 on 218.BIN took 75 s in one run and 154 s in
-another). The fitted model is within a factor 0.32–1.62 of every measured graph-isam2 run
-(0.32 on the ski log, 1.62 on the default drive) and 0.4–3.3 of the much shorter other
-runs, which is what a hint needs: on every real log graph-isam2 takes most of the run
-(154 of 164 s on 218.BIN, 57 of 61 s on the ski log, 43 of 52 s on the 93-min car log).
+each run, so the load shows: the same run can take twice as long). The fitted model is within
+a factor 0.32–1.62 of every measured graph-isam2 run and 0.4–3.3 of the much shorter other
+runs, which is what a hint needs: on every real log graph-isam2 takes most of the run, as its
+custom terms grow with the keyframes (docs/real_logs.md, "Run-time model").
 """
 
 from __future__ import annotations

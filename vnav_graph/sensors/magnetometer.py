@@ -9,8 +9,8 @@ Model, :mod:`vnav_graph.geo.magfield`), b_m the hard-iron bias (the vehicle's ow
 state of the estimators) and σ_m the noise per axis [µT].
 
 Only the **heading** is used. The field's strength on a vehicle is unreliable (soft iron,
-motor currents, a logger's unknown scale: ArduPilot 218.BIN reads 30.8 µT where the model
-(WMM2010) says 45.7 µT), and its vertical component would pull roll and pitch, which the vertical
+motor currents, a logger's unknown scale; docs/real_logs.md, "Magnetometer noise, field
+strength and spread"), and its vertical component would pull roll and pitch, which the vertical
 channel depends on. The bias-corrected body field is rotated into n with the *estimated*
 attitude; its horizontal azimuth
 
@@ -55,8 +55,9 @@ MAG_BIAS_SD_UT = 3.0  # prior σ of each hard-iron component after the log's cal
 # The Earth's field strength is constant over a drive; a hard-iron offset comparable to it
 # makes |z| swing as the vehicle turns. When the interquartile range of |z| exceeds this
 # fraction of its median the disturbance is beyond the hard-iron prior (≈ 5 µT of a 50 µT
-# field) and the heading is not used (218.BIN 0.03, 181.BIN 0.03; the 1 Hz phone car logs
-# 0.17 and 0.63: a phone next to a car's steel and electrics).
+# field) and the heading is not used: an autopilot's calibrated compass stays well under it, a
+# phone next to a car's steel and electrics well over (docs/real_logs.md, "Magnetometer noise,
+# field strength and spread").
 MAX_FIELD_SPREAD = 0.10
 
 

@@ -147,9 +147,9 @@ INIT_ATTITUDES = ("auto", "triad", "ekf")
 
 # averaged low-rate IMU logs (median IMU spacing ≥ LOW_RATE_DT, e.g. the 1 Hz phone logs):
 # keyframes every LOW_RATE_KEYFRAME_DT. With a keyframe every 0.5 s at 1 Hz, each IMU factor
-# spans one or two averaged samples and the batch ran into a far minimum in the 60 s holdout
-# outages of car 07-18 (48.7 m height / 284 m horizontal RMSE, 242 s); with 5 s keyframes it
-# gives 1.29 m / 2.75 m in 8 s (the keyframes graph-isam2 already used there).
+# spans one or two averaged samples, which hold too little motion to constrain the attitude,
+# and the batch runs into a far minimum in long outages; with 5 s keyframes each factor holds
+# five samples (docs/real_logs.md, "graph-isam2 on the shared logs").
 LOW_RATE_DT = 0.5
 LOW_RATE_KEYFRAME_DT = 5.0
 

@@ -179,7 +179,8 @@ def ahrs_kernel(t, gyro, accel, q0, lla_i, vel_i, sdv_i, t_g, t_av, v_g, g_g, co
         vel_k = np.array([vp[0], vp[1], vel_i[k, 2]])
         if dt > imu_gap:
             # logging gap: no rate samples inside it (the vehicle may have been handled,
-            # e.g. a crash and restart on the loiter log). Re-level roll/pitch from the
+            # e.g. a crash and restart: docs/real_logs.md, "IMU logging gap across a
+            # crash"). Re-level roll/pitch from the
             # samples after the gap when they are static (relevel[k+1] finite), keep the yaw
             # and the bias; otherwise hold the attitude. No velocity matching over any
             # interval that touches the gap.

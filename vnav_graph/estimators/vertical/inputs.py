@@ -41,9 +41,8 @@ stands for "the INS attitude" of the papers:
    interval ending at fix j is matched then (ΔF over [t_{j−1}, t_j] from the stored
    integral), and the heading and the Coriolis velocity use the last velocity known by the
    epoch. A trailing fit ending at the fix would need no wait but its end-point slope has 4×
-   the σ (σ_p·√(192/N)/W); on ski_iphone_100hz (1 Hz fixes, W = 6 s) it left 80 of 119
-   intervals unusable (σ_v > ``sd_v_max``) and the 10 s vertical-acceleration error at
-   2.4 m/s² against 0.068 m/s² with the waited centred fit. Matching intervals are then ≥ W/2,
+   the σ (σ_p·√(192/N)/W), which at 1 Hz fixes leaves most intervals over ``sd_v_max``
+   (docs/real_logs.md, "Vertical attitude reference"). Matching intervals are then ≥ W/2,
    only the horizontal components level (the
    vertical position is noisier and is the quantity the vertical estimators want), and
    there is no gate: the smoothed velocity and the IMU increment see the manoeuvres with
@@ -55,9 +54,9 @@ stands for "the INS attitude" of the papers:
    fakes a course; the vertical specific force does not depend on heading, heading only keeps
    the velocity matching of step 3 consistent in turns).
 
-5. **Robustness rules for GNSS velocity** (the 181 glitch log: heights 318-826 m, vertical
-   speed −55 m/s and ground speed 72 m/s with a 3-D fix; the receiver's own σ_v rises to
-   8-15 m/s there):
+5. **Robustness rules for GNSS velocity** (a receiver fault can report velocities of tens of
+   m/s with a 3-D fix, its own σ_v rising to several m/s; docs/real_logs.md, "Vertical
+   attitude reference"):
 
    - R1 a fix whose horizontal velocity σ exceeds ``sd_v_max`` (3 m/s) is unusable for
      levelling, heading and the Coriolis velocity (``info["levelling_unusable"]``);
@@ -88,11 +87,11 @@ stands for "the INS attitude" of the papers:
    outage tilt the platform by 0.1 rad, hence the long trigger: within a minute the
    bias-corrected gyros are better.
 
-7. **IMU logging gaps** (the shared rule of ``nav.gaps``, e.g. 22 s on
-   erle_pxf_loiter_rtl): no rates inside, so no propagation across it; roll and pitch are
-   re-levelled from the first ``level_s`` after the gap when those samples are static (the
-   loiter quad flipped over at 51.5 s and was set upright during the gap), the yaw and the
-   gyro bias are kept, and no velocity-matching interval may touch the gap.
+7. **IMU logging gaps** (the shared rule of ``nav.gaps``): no rates inside, so no
+   propagation across it; roll and pitch are re-levelled from the first ``level_s`` after the
+   gap when those samples are static (a vehicle may be turned over and set upright during a
+   gap: docs/real_logs.md, "IMU logging gap across a crash"), the yaw and the gyro bias are
+   kept, and no velocity-matching interval may touch the gap.
 
 8. **Coriolis/transport velocity.** The horizontal velocity used for cor_D and ω_en is the
    last usable, non-rejected GNSS velocity propagated with the resolved specific force
@@ -116,12 +115,11 @@ stands for "the INS attitude" of the papers:
      the course interpolated toward the next fix;
    - the nominal fix interval and the usual velocity σ are the medians of the first 20
      fixes (``gnss_reference.nominal_interval``), not of the whole drive;
-   - R5's baro climb rate is a trailing fit (above). Cost: on erle_pxf_218 the vertical
-     component is dropped on 39 of 604 matching intervals (0 with the centred ±1 s line
-     fit) and the 10 s vertical-acceleration error against the baro is unchanged
-     (0.128 m/s²); on erle_pxf_loiter_rtl 6 against 2, 0.054 m/s² both;
-   - position-derived velocities (3b) wait for their window: ski_iphone_100hz's
-     vertical-acceleration error 0.068 m/s² (0.059 when the centred fit is used at the fix).
+   - R5's baro climb rate is a trailing fit (above): it lags the climb, so a few more
+     vertical components are dropped, and the vertical-acceleration error is unchanged;
+   - position-derived velocities (3b) wait for their window, at a small cost in the
+     vertical-acceleration error (both costs measured: docs/real_logs.md, "Vertical attitude
+     reference").
 
 Outputs at the IMU epochs (``VerticalInputs``): the AHRS attitude q_nb, the vertical specific
 force f_D = [C_nb f̃_b]_3 (NED down, m/s², ≈ −g at rest), C33 = C_nb[2, 2], the body-z specific

@@ -69,9 +69,10 @@ and the warm-up restarts (``info["gnss_reinit"]``).
 On clean seed-003 data (bias error 0) the gate rejects 0.106 % of the fixes (p_fa = 0.1 %)
 and the steady σ moves by +0.3 %; ``seed003_monte_carlo`` (the reproduction) stays ungated
 by default. Limitation: the observer has no baro, so during a sustained GNSS failure it can
-only coast on the IMU; on ``erle_pxf_181_gps_glitch`` the in-flight vertical acceleration of
-the AHRS is several m/s² wrong, the coast diverges and the re-initialisation then follows the
-bad GNSS (gate and rejection count work; the altitude is not usable there).
+only coast on the IMU; where the AHRS's in-flight vertical acceleration is m/s² wrong (a
+vibrating multirotor), the coast diverges and the re-initialisation then follows the bad
+GNSS (gate and rejection count work; the altitude is not usable there; docs/real_logs.md,
+"Vertical attitude reference").
 
 Causality: the answer is the online answer; the gate's period and σ_gps come from fixes seen
 before the gate opens (above) and the vertical acceleration from the causal attitude

@@ -163,7 +163,8 @@ def onboard_block(t: FloatArray, alt: FloatArray, name: str, offset_m: float,
 
 
 # Clock ratios within this fraction of 1 are treated as "same clock" (a crystal is good to
-# ~1e-4; the Erle PXF boot clock is off by 7.7 %).
+# ~1e-4; a boot clock off by several % is a board's fault, docs/real_logs.md "ArduPilot
+# DataFlash").
 CLOCK_RATIO_TOL = 1e-3
 
 

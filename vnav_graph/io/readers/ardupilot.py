@@ -20,14 +20,14 @@ Messages used
   frame (forward-right-down, ``COMPASS_ORIENT`` applied) with its calibration offsets
   ``OfsX/Y/Z`` (and motor compensation ``MOfs*``) applied, so only the unit changes
   (× 0.1 → µT). Samples that are exactly (0, 0, 0) (the logger writes a MAG record even
-  without a compass: Loiter_RTL.bin is all zeros) and non-finite ones are dropped and
-  counted; none left → ``Drive.mag`` is None. σ = ``MAG_SD_UT`` (5 µT per axis, the noise
-  ArduPilot's own EKF assumes, ``EK3_MAG_M_NSE`` = 0.05 Ga): the logged values are quantised
-  to 1 mG = 0.1 µT and their sample-to-sample noise is 0.15 µT on 218.BIN (0.6 µT on
-  181.BIN), but on a multirotor the motor-current interference (correlated with throttle,
-  so with the climbs) and the residual hard/soft iron dominate (tilt-compensated heading vs
-  ``ATT.Yaw`` scatters by 5° on 218.BIN, 18° on 181.BIN). With 1 µT the heading factors
-  pulled the tilt, and through it the baro scale, on 181.BIN.
+  without a compass) and non-finite ones are dropped and counted; none left → ``Drive.mag``
+  is None. σ = ``MAG_SD_UT`` (5 µT per axis, the noise ArduPilot's own EKF assumes,
+  ``EK3_MAG_M_NSE`` = 0.05 Ga): the logged values are quantised to 1 mG = 0.1 µT and their
+  sample-to-sample noise is a fraction of a µT, but on a multirotor the motor-current
+  interference (correlated with throttle, so with the climbs) and the residual hard/soft
+  iron dominate, and a σ near the sample noise lets the heading factors pull the tilt and,
+  through it, the baro scale (docs/real_logs.md, "ArduPilot DataFlash" and "Magnetometer
+  noise, field strength and spread").
 - Onboard estimate: ``CTUN.Alt`` (inertial-nav altitude) when ``AHRS_EKF_USE`` = 0, otherwise
   the EKF's ``PD`` from ``XKF1``/``NKF1``/``EKF1`` (first core).
 
@@ -36,10 +36,10 @@ Clock
 Boot time in seconds (``TimeMS/1e3`` or ``TimeUS/1e6``). GNSS fixes are stamped with their
 GPS time of week mapped onto the boot clock by a robust linear fit of the receipt stamps
 ``T`` on GPS time (:func:`._common.fit_clock`: removes the ±20 ms receipt jitter, keeps the
-mean transport latency). The fit's slope r is the boot clock's advance per GPS second. On
-the Erle PXF logs r = 0.9232 (the boot clock runs 7.7 % slow: gyro yaw integrated on GPS
-time matches the magnetometer heading to 0.2 %, on boot time it is 7.9 % short; see
-docs/real_logs.md). With ``clock="auto"`` (default) and |r − 1| > 0.1 % every stream is
+mean transport latency). The fit's slope r is the boot clock's advance per GPS second; a
+board's boot clock can run several % off, which the gyro yaw integrated against the
+magnetometer heading confirms independently of GNSS (docs/real_logs.md, "Boot clock vs GPS
+time" in "ArduPilot DataFlash"). With ``clock="auto"`` (default) and |r − 1| > 0.1 % every stream is
 re-stamped ``t = t_ref + (t_boot − t_ref)/r`` (:func:`._common.local_to_gps_seconds`,
 ``t_ref`` = first IMU stamp; IMU, baro, MAG and onboard alike), so IMU intervals are GPS-time
 intervals; ``meta["clock"]`` records the basis, r, the fit and the evidence.
@@ -211,7 +211,7 @@ def read_dataflash(path: str | Path, clock: str = "auto") -> Drive:
     clock : ``"auto"`` (default) puts every stream on GPS seconds when the boot clock's
         advance per GPS second differs from 1 by more than ``CLOCK_RATIO_TOL`` (0.1 %), else
         keeps the boot clock; ``"gps"`` always maps (when GPS time is logged); ``"boot"``
-        never maps (the reader's behaviour before the Erle clock repair).
+        never maps (the boot clock as logged).
     """
     if clock not in CLOCK_CHOICES:
         raise ValueError(f"clock must be one of {CLOCK_CHOICES}, not {clock!r}")

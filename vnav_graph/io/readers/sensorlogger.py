@@ -27,8 +27,8 @@ accelerometer in g. The sign is taken from ``Metadata.csv`` (``platform``, ``sta
 the unit from the content (median |a| ≈ 1 → g, ≈ 9.8 → m/s²). The merged CSV has no metadata
 and is read in the Android convention (its at-rest specific force must point up: checked by
 the caller of the 1 Hz data only through the resulting (0, 0, −g)). Gyro rates are
-right-handed about the device axes on both platforms (checked on the ski log: the Gravity
-vector obeys dg/dt = −ω × g with correlation 0.999).
+right-handed about the device axes on both platforms (the Gravity vector obeys
+dg/dt = −ω × g; docs/real_logs.md, "Sensor Logger (phones)").
 
 Body frame b (forward-right-down) for a phone
 ---------------------------------------------
@@ -51,12 +51,12 @@ Sensor Logger reports the field in µT in the same device axes on both platforms
 difference, unlike the accelerometer, whose iOS sign is the inertial force). It is mapped
 to b with exactly the accelerometer's mounting matrix, ``B_b = R_bd B_d``, so it shares the
 IMU's axes. Non-finite and exactly-zero samples are dropped and counted; a folder without a
-magnetometer file (the ski log) or a merged CSV without ``mag_*`` columns gives
+magnetometer file or a merged CSV without ``mag_*`` columns gives
 ``Drive.mag = None``. σ = ``MAG_SD_UT`` = 5 µT per axis (the autopilots' EKF default, as in
 the other readers): a phone magnetometer is noisier
 than an autopilot's (≈ 0.5 µT) and in a car the engine, speakers, phone mount and the car's
-steel body add hard/soft-iron and time-varying fields of several µT (the merged car log's
-|B| is 84 µT against a 52 µT Earth field).
+steel body add hard/soft-iron and time-varying fields of several µT, up to more than the
+Earth's own (docs/real_logs.md, "Sensor Logger (phones)").
 
 Heights and sigmas
 ------------------

@@ -36,9 +36,9 @@ from .layout import (
 
 SOLVERS = ("auto", "banded", "general")
 # a stalled full step (gain < abs_tol) counts as convergence only when the quadratic model
-# at the point before it predicted less than this [½χ²] (a 1σ move along the step): on the
-# ski log with 0.25 s keyframes the model predicted 25 there, the step gained 0.04, and the
-# solve stopped 19 above a point 3 m better in altitude (docs/graph.md, "Stopping and damping")
+# at the point before it predicted less than this [½χ²] (a 1σ move along the step): a stalled
+# step where the model predicts more is a model that misses the curvature, not an optimum
+# (docs/graph.md, "Stopping and damping")
 STALL_MAX_PREDICTED = 1.0
 # Levenberg-Marquardt damping μ·diag(H): from 1e-5 on the first refused step, × LM_FACTOR per
 # refused step, ÷ LM_FACTOR per accepted one, plain Gauss-Newton again below LM_PLAIN_BELOW.

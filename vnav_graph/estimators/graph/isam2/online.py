@@ -423,8 +423,8 @@ class OnlinePass:
             try:
                 # the newest keyframe last in the re-elimination, not every key of the rebuilt
                 # terms (iSAM2's default: after a return nearly all of them, one dense root
-                # clique of hundreds of variables; ski holdout drive 58 → 24 s, plain COLAMD
-                # 29 s, holdout scores equal to 0.2 %)
+                # clique of hundreds of variables, whose elimination is cubic in its size;
+                # docs/real_logs.md, "graph-isam2 on the shared logs")
                 ures = self.isam.update(nf, gtsam.Values(), removed,
                                         newest_last(P, self.seg, k + 1, self.b_last))
                 book.record(tags, ures.getNewFactorsIndices())

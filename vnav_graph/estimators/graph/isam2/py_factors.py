@@ -4,10 +4,10 @@ heading factors of ``model.magnetometer``, a user's factors) enters iSAM2 as a
 
 Why: iSAM2 relinearises a ``CustomFactor`` from C++, and pybind11 hands the Python callback
 a copy of iSAM2's whole ``Values`` each time (a ``const Values&`` that no Python object
-owns is copied): ≈ 200 µs per call for 2 000 variables, O(variables) per call. On 218.BIN
-(363 keyframes, one heading factor per second) the 52 600 callbacks of one online pass took
-≈ 13 of its 31 s. Linearised here, the callback gets a ``Values`` of the factor's own keys
-(≈ 20–40 µs per factor, independent of the drive's length).
+owns is copied): ≈ 200 µs per call for 2 000 variables, O(variables) per call, for every
+heading factor of the window at every relinearisation (docs/real_logs.md, "Magnetometer
+noise, field strength and spread"). Linearised here, the callback gets a ``Values`` of the
+factor's own keys (≈ 20–40 µs per factor, independent of the drive's length).
 
 The book does what iSAM2 does for its own factors, per factor: it keeps each factor's
 linearisation point, and after each update (every ``relinearize_skip``-th) checks every

@@ -216,10 +216,9 @@ class TermBook:
         that a component whose step from the segment's last rebuild point reverses that
         rebuild's own step is moved half-way only. Rebuilding at the estimate is an undamped
         Gauss-Newton step in (s, τd); where h(t_s − τd) is strongly curved (a touchdown)
-        and τd weakly determined, it alternates (218.BIN with the accelerometer scale
-        factors: τd between −0.24 and +0.37 s at every update on the ground, against the
-        batch's 0.01 ± 0.05 s, and the final rounds never settled). Halving a reversed step
-        damps such a cycle; monotone steps are taken whole."""
+        and τd weakly determined, it alternates between two values and the final rounds
+        never settle (docs/real_logs.md, "graph-isam2 on the shared logs"). Halving a
+        reversed step damps such a cycle; monotone steps are taken whole."""
         out = dict(cal)
         for j in sorted({int(self.seg[m]) for m in ms}):
             now = np.asarray(cal[j], float)

@@ -77,18 +77,16 @@ from .online import OnlineResult
 from .setup import UpdateFailed, estimate_info
 
 # averaged low-rate IMU logs (median spacing ≥ LOW_RATE_DT, e.g. the 1 Hz phone logs): a
-# keyframe every sample made a 93-min log take 5563 updates (213 s online), and after its 37 s
-# GNSS gap the typed thresholds relinearised ~140 variables per update; 5 s keyframes and
-# looser thresholds (relinearisation every 50 updates) bring it to ~9 s. Applied only when the
-# other settings are the defaults of those fields.
-# Every keyframe is kept there (a 93-min log has ~1100 keyframes, ~150 MB of iSAM2): with the
-# 600 s window (120 keyframes) iSAM2's own estimate on car 03-01a's holdout drive ended 95
-# above the optimum (2·gap 1.1 % of n, the batch check's limit is 1 %: a warning), and car
-# 07-18's baro scale moved from −4.6 to −5.4 % (batch −4.3 %): the heading of a phone with
-# position-only GNSS is weakly held, and keyframes that left are not relinearised.
+# keyframe every sample makes an update per second of drive, and after a GNSS gap the typed
+# thresholds relinearise a large part of the weakly held past at each; 5 s keyframes and
+# looser thresholds (relinearisation every 50 updates) make it a few seconds per hour of
+# drive. Applied only when the other settings are the defaults of those fields.
+# Every keyframe is kept there (a 93-min log has ~1100 keyframes, ~150 MB of iSAM2): the
+# heading of a phone with position-only GNSS is weakly held, and keyframes that left the
+# window are not relinearised, so a window leaves iSAM2's own estimate off the optimum.
 # Nor does the online GNSS gate run there (``online_gate``): it judges after rounds that, with
-# relinearisation every 50 updates, do not converge; on car 03-01a's holdout drive it took the
-# online altitude RMSE from 1.68 to 5.18 m.
+# relinearisation every 50 updates, do not converge (docs/real_logs.md, "graph-isam2 on the
+# shared logs"; docs/graph.md, "Online GNSS gate").
 LOW_RATE_SETTINGS = {"keyframe_dt": LOW_RATE_KEYFRAME_DT, "relinearize_skip": 50,
                      "relinearize_typed": (0.1, 5.0, 2.0, 0.5, 0.02), "isam2_window_s": None,
                      "isam2_gate_s": None}
@@ -259,8 +257,8 @@ class GraphISAM2:
         if cfg.final_batch:
             if robust:
                 # the online pass needed the retry: its estimate is a poor starting point
-                # (ski holdout: 22 m withheld-height RMSE after 12 iterations), so the batch
-                # pass starts where graph-batch starts and therefore equals it
+                # (docs/real_logs.md, "graph-isam2 on the shared logs"), so the batch pass
+                # starts where graph-batch starts and therefore equals it
                 graph, res_vals = build_batch_graph(P, rot_i, pos_i, vel_i,
                                                     pims_for(P, rot_i, pos_i), pri, calib0)
                 if ext is not None:
@@ -308,7 +306,7 @@ class GraphISAM2:
                 if not robust and not restarted:
                     # iSAM2's estimate is not the optimum, so it was a poor start too:
                     # the batch pass from graph-batch's start, when it ends lower
-                    # (loiter_rtl: 11 m horizontal against 22 m from iSAM2's estimate)
+                    # (docs/real_logs.md, "graph-isam2 on the shared logs")
                     res = self._restart(P, init, ext, gate0, res, take_converged=False)
                     restarted = final_batch["restarted"] = True
                     final_batch.update(cost=float(res.cost), iterations=int(res.iterations),
@@ -385,15 +383,14 @@ class GraphISAM2:
         Its priors (keyframe 0's, the gaps') are built from the initial states ``init``, as
         iSAM2's and graph-batch's are: priors built from ``est`` would be centred on iSAM2's
         own estimate, which then pays nothing for them, and the batch pass would optimise a
-        problem pulled toward it (ski's first 200 s: iSAM2's own estimate judged 20.1 above
-        that problem's optimum, the batch pass moving keyframe 0's pose off iSAM2's value at
-        a prior cost of 4.9)."""
+        problem pulled toward it, judging iSAM2's estimate against the wrong optimum
+        (docs/real_logs.md, "graph-isam2 on the shared logs")."""
         nk = P.n_kf
         graph, vals = build_batch_graph(P, *init, pims, pri, np.zeros(nk, dtype=int))
         for k in range(nk):
             # every state from the estimate: build_batch_graph starts the keyframe after an
-            # IMU logging gap at its gap prior (on Loiter_RTL that put X(34) 41 m from
-            # iSAM2's estimate, a false cost gap of 5771 and a fallback to the batch pass)
+            # IMU logging gap at its gap prior, tens of metres from iSAM2's estimate, which
+            # makes a false cost gap (docs/real_logs.md, "IMU logging gap across a crash")
             vals.update(X(k), est.atPose3(X(k)))
             vals.update(V(k), est.atVector(V(k)))
             vals.update(B(k), est.atConstantBias(B(k)))

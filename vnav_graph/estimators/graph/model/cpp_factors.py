@@ -206,15 +206,15 @@ def gap_factors(P: Problem, k: int, rot: FloatArray, pos: FloatArray, vel: Float
     """Weak factors replacing the IMU factor over a logging gap in interval k (both smoothers).
 
     A gap of T seconds with no IMU samples carries no inertial information (one "sample"
-    spanning it is usually a transient — on the Erle log the crash spike — and a
-    CombinedImuFactor built from it asserts a 200 m/s velocity change with a σ of 0.6 m/s; in
-    the batch graph, Loiter_RTL's 24 s gap then pulled the baro scale to −28 %). Instead, with a
+    spanning it is usually a transient, e.g. a crash's spike, and a CombinedImuFactor built
+    from it asserts a velocity change of hundreds of m/s with a σ under 1 m/s, which the baro
+    scale then absorbs; docs/real_logs.md, "IMU logging gap across a crash"). Instead, with a
     = ``GAP_ACCEL_LEVEL``: v_{k+1} − v_k ~ N(0, (a T)²), b_{k+1} − b_k ~ N(0, q_b T)
     with the bias PSD q_b of the preintegration (Forster et al. 2017, Eq. 48), and a re-
     alignment prior on X(k+1): roll and pitch levelled from the mean specific force of the first
-    0.5 s after the gap (σ ``GAP_TILT_SD``; the vehicle may have been flipped — Erle crash log:
-    f_z +9.8 before, −9.8 after — and the weak factors cannot pull a 180° error back inside
-    Gauss-Newton's basin), yaw kept from before the gap (σ ``GAP_YAW_SD``), position at the last
+    0.5 s after the gap (σ ``GAP_TILT_SD``; the vehicle may have been flipped, f_z +g before
+    and −g after, and the weak factors cannot pull a 180° error back inside Gauss-Newton's
+    basin), yaw kept from before the gap (σ ``GAP_YAW_SD``), position at the last
     GNSS fix at or before t_{k+1} (within 1.5 s; else constant velocity) with σ_p = v_sd T + ½ a
     T². Every new variable stays constrained.
 

@@ -197,8 +197,9 @@ def _baro_bridge(P: Problem, gt: FloatArray, has: FloatArray, pos_kf: FloatArray
     in_gap = ~has & (gap_len > 5.0) & (P.t_kf > gt[0]) & (P.t_kf < gt[-1])
     # after the last kept fix (a drive that ends in an outage): IMU propagation horizontally,
     # the baro vertically (as in a gap: a stepped accelerometer carries the propagated height
-    # hundreds of metres away, 181.BIN, and the bilinear baro term (1 + s)·h, linearised
-    # there, then pulls s towards −1; docs/graph.md "Baro scale limit"). Not before the first fix:
+    # hundreds of metres away, docs/real_logs.md "Initial heading and tilt of a hovering
+    # multirotor", and the bilinear baro term (1 + s)·h, linearised there, then pulls s
+    # towards −1; docs/graph.md "Baro scale limit"). Not before the first fix:
     # keyframe 0 starts graph-isam2's causal pass, and the baro's offset is the whole drive's
     outside = ~has & (P.t_kf > gt[-1])
     baro = P.drive.baro
@@ -267,13 +268,11 @@ def filter_attitude(P: Problem, rot: FloatArray) -> bool:
     attitude is carried by the gyro increments from the nearest keyframe where it does not
     (forwards, or backwards before the first): the ekf's placeholder heading there left
     graph-batch 11.7 in ½χ² above its optimum on a simulated drive. TRIAD takes the heading
-    from the course, which a multirotor does not fly along; propagated from there through
-    181.BIN's vibrating gyro (2°/s/√Hz), the initial attitude was 100° off in heading and
-    20–30° in tilt, and Gauss-Newton ended in a far minimum (½χ² 2054 against 1260, 250
-    iterations against 56, the vehicle spinning at 1.6°/s on a gyro bias 3σ from its prior).
-    Where the ekf never acquires its heading (181.BIN's holdout drive: its σ stays at 104°),
-    its attitudes are used as they are: their tilt is what 181 needed. Returns whether the
-    attitudes were replaced."""
+    from the course, which a multirotor does not fly along; propagated from there through a
+    vibrating gyro, a wrong heading turns into a wrong tilt, and Gauss-Newton ends in a far
+    minimum. Where the ekf never acquires its heading, its attitudes are used as they are:
+    their tilt, levelled on the specific force, is right (docs/real_logs.md, "Initial heading
+    and tilt of a hovering multirotor"). Returns whether the attitudes were replaced."""
     mode = P.cfg.init_attitude
     if mode == "triad":
         return False
@@ -327,9 +326,9 @@ def compass_heading(P: Problem, rot: FloatArray) -> bool:
     heading factor. The correction δ_k is the circular median of the keyframes' within
     ±``COMPASS_WINDOW_S`` (noise, motor interference), carried to keyframes without a sample
     from the nearest one. TRIAD's heading is the course, which is the vehicle's heading only
-    for a car: on the Erle quadcopter logs it started the smoothers 39° (218) and 43° (181,
-    a quarter of the keyframes beyond 90°) from the compass, and on 181 Gauss-Newton then
-    crept along the weakly held heading for hundreds of iterations. The ekf aligns its
+    for a car: a multirotor flies in any direction, its start heading is tens of degrees off
+    and Gauss-Newton then creeps along the weakly held heading (docs/real_logs.md, "Initial
+    heading and tilt of a hovering multirotor"). The ekf aligns its
     heading on the compass too (``ekf.magnetometer.initial_heading``). Returns whether the
     attitudes were turned."""
     from ....sensors.magnetometer import usable
@@ -421,9 +420,10 @@ def _gyro_back(P: Problem, r: FloatArray, k: int, dr_t: FloatArray) -> FloatArra
 
 def retilt(r: FloatArray, f_b: FloatArray, f_t: FloatArray) -> FloatArray:
     """``r`` turned by the smallest rotation that takes r·f_b onto f_t: the tilt of the
-    specific force, the heading (nearly) kept, as TRIAD's first vector does. Propagated
-    through 181.BIN's vibrating gyro (2°/s/√Hz) for the 40 s before its first TRIAD keyframe,
-    the initial tilt was 36° at the start, where the autopilot read 5°."""
+    specific force, the heading (nearly) kept, as TRIAD's first vector does. A tilt propagated
+    through a vibrating gyro for tens of seconds before the first TRIAD keyframe is tens of
+    degrees off, while the specific force's tilt is right to a few degrees
+    (docs/real_logs.md, "Initial heading and tilt of a hovering multirotor")."""
     u, v = _unit(r @ f_b), _unit(f_t)
     axis = np.cross(u, v)
     sin = float(np.linalg.norm(axis))

@@ -196,9 +196,9 @@ def interpolate(
     k = np.ascontiguousarray(k, dtype=np.intp)
     dr, dv, dp = dense.at(t_q, k) if incr is None else incr
     # an interval holding an IMU logging gap has no inertial motion to follow (its one
-    # "sample" across the gap is a transient: on Loiter_RTL the crash, whose integral put
-    # the first baro sample after the gap tens of metres off and pulled the baro scale to
-    # −56 %): the linear interpolant between the keyframes, attitude R_k, no
+    # "sample" across the gap is a transient, e.g. a crash, whose integral puts the baro
+    # samples after the gap far off; docs/real_logs.md, "IMU logging gap across a crash"):
+    # the linear interpolant between the keyframes, attitude R_k, no
     # accelerometer-bias dependence (the gap factors link the keyframes loosely)
     gap = dense.gap if dense.gap is not None else np.zeros(dense.kf_idx.size, dtype=bool)
     p, v, rot, alpha, d, dvel, big_t, tau, imu = interpolant(

@@ -47,11 +47,11 @@ KEY = H(0)
 # graph-isam2's relinearisation threshold of H(0) [µT per component]: its heading factors are
 # rebuilt (``isam2.py_factors``) once H(0) moved this far since they were built. Every heading
 # factor holds H(0), so such a move rebuilds all of them and re-eliminates the whole Bayes
-# tree; 0.05 did so at almost every update early in a drive. With 1.0, on 218.BIN's holdout
-# drive, 58 of the 367 rebuilds took more than 80 % of the live heading factors (3 061 of the
-# 15 329 factor builds: the rest follow the keyframes' own rotation threshold); never
-# relinearising on H(0) left a final cost gap of 16.4 to the batch check (hill-drive-mag
-# 300 s, against 0.41).
+# tree. 1 µT is a fifth of a logged magnetometer's σ (5 µT per axis), so the factors stay
+# linearised within a fraction of their noise, while 0.05 µT rebuilds them at almost every
+# update early in a drive (docs/real_logs.md, "Magnetometer noise, field strength and
+# spread"); never relinearising on H(0) left a final cost gap of 16.4 to the batch check
+# (hill-drive-mag 300 s, against 0.41).
 RELIN_THRESHOLD_UT = 1.0
 
 
