@@ -216,6 +216,14 @@ def test_raised_gnss_velocity_sigma_reaches_every_estimator(
     ekf = _ekf_used(drive, "ekf", monkeypatch)
     np.testing.assert_array_equal(ekf["gnss_vel_sd"], model.gnss_vel_sd)
     _check_same(drive, monkeypatch)
+    # reported by both families: info, a warning and a fallback entry
+    from vnav_graph.run.runner import run_captured
+
+    note = model.gnss_vel_note()
+    for name in ("ekf", "graph-batch"):
+        info = run_captured(name, drive).info
+        assert info["gnss_vel_note"] == note, name
+        assert note in info["warnings"] and note in info["fallbacks"], name
 
 
 @pytest.mark.slow

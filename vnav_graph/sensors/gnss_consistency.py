@@ -23,7 +23,7 @@ Measured (``benchmarks/truth_logs.py``'s drives and the simulated scenarios):
   2.62 east, 0.85 down. Its velocity at epoch k is the mean velocity over the interval before
   it: shifted by half an interval (0.125 s) the RMS of r falls from 0.10 to 0.03 m/s. In the
   car park's turns (2–3 m/s²) that is 0.3 m/s against σv 0.04: ekf-rts then refused 610 of
-  the 1513 RTK positions outside the withheld windows and sat up to 1.2 m off the RTK with a
+  the 1513 RTK positions outside the withheld windows and sat up to 1.4 m off the RTK with a
   σ of 4–7 cm at the windows' edges. The rule adds σ 0.10 / 0.12 m/s (north, east).
 - ``rtk/walk_0827`` single-point input (σp ≈ 3 m): R = 0.02–0.06, σ kept.
 - hill-drive and sortie seeds 0–2 (simulated, white errors of the stated σ): R = 0.96–1.06,
