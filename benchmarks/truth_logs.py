@@ -137,7 +137,11 @@ def render(doc: dict[str, Any]) -> str:
              "RMSE; no estimator can remove a bias that the only position input shares, and "
              "NEES/dof far above 1 says the file's σ (about 3 m) does not cover it. The "
              "walk's device is hand-held, so its heading against the course of travel is an "
-             "upper bound, not a heading error.", ""]
+             "upper bound, not a heading error. The car's receiver reports each velocity as "
+             "the mean over the interval before its epoch: the shared sensor model widens "
+             "its velocity σ to what the positions support (sensors/gnss_consistency.py, "
+             "the estimators' gnss_vel_note), and NEES/dof counts the reference velocity's "
+             "own lag (about 0.1 m/s per axis) as error.", ""]
     for folder, d in doc["drives"].items():
         ref = d["reference"]
         qual = ", ".join(f"{k} {v}" for k, v in ref["quality"].items())

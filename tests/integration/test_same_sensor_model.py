@@ -195,6 +195,37 @@ def test_drive_with_imu_gap_same_model(monkeypatch: pytest.MonkeyPatch) -> None:
     _check_same(drive, monkeypatch)
 
 
+def test_raised_gnss_velocity_sigma_reaches_every_estimator(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Fixes at the true positions with σ 1 cm, velocities with 5× their stated 0.1 m/s
+    noise: the shared model raises the velocity σ (``sensors.gnss_consistency``), and the
+    ekf, ekf-rts and both graphs weight the velocities with those raised σ."""
+    from vnav_graph.sensors.model import sensor_model
+
+    drive = simulate("default", 2, duration_s=60.0)
+    g = drive.gnss
+    truth = drive.truth.at(g.t)
+    rng = np.random.default_rng(7)
+    noisy = replace(g, lla=truth.lla, pos_sd=np.full_like(g.pos_sd, 0.01),
+                    vel_n=truth.vel_n + 0.5 * rng.standard_normal(g.vel_n.shape),
+                    vel_sd=np.full_like(g.vel_sd, 0.1))
+    drive = drive.replace(gnss=noisy)
+    model = sensor_model(drive)
+    assert model.gnss_vel_check is not None and model.gnss_vel_check.raised
+    assert np.all(model.gnss_vel_sd > 0.3)
+    ekf = _ekf_used(drive, "ekf", monkeypatch)
+    np.testing.assert_array_equal(ekf["gnss_vel_sd"], model.gnss_vel_sd)
+    _check_same(drive, monkeypatch)
+    # reported by both families: info, a warning and a fallback entry
+    from vnav_graph.run.runner import run_captured
+
+    note = model.gnss_vel_note()
+    for name in ("ekf", "graph-batch"):
+        info = run_captured(name, drive).info
+        assert info["gnss_vel_note"] == note, name
+        assert note in info["warnings"] and note in info["fallbacks"], name
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("rel", LOGS)
 def test_shared_logs_same_model(rel: str, data_dir: Path,

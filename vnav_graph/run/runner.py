@@ -235,8 +235,9 @@ def run_captured(name: str, drive: Drive, config: Any = None) -> Estimate:
 # ``info`` notes of a sensor left out or a re-solve without (or with less of) a sensor: the
 # magnetometer not used (``sensors.magnetometer``: its field strength varies beyond the
 # hard-iron model, or its hard iron contradicted the prior and the estimator solved again
-# without it) and the baro scale held at 0 after an implausible one (``sensors.baro``)
-SENSOR_FALLBACK_NOTES = ("mag_note", "baro_scale_note")
+# without it), the baro scale held at 0 after an implausible one (``sensors.baro``) and the
+# GNSS velocity σ raised above the receiver's (``sensors.gnss_consistency``)
+SENSOR_FALLBACK_NOTES = ("mag_note", "baro_scale_note", "gnss_vel_note")
 
 
 def flag_sensor_fallbacks(est: Estimate) -> Estimate:

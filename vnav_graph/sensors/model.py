@@ -9,9 +9,12 @@
   τd, Gauss-Markov bias b, white noise), from the drive's :class:`BaroSpec` or, on a real
   log, from the package-wide ``REAL_LOG_BARO``.
 - ``gnss_pos_sd`` / ``gnss_vel_sd``: the per-fix GNSS σ [m, m/s] every estimator weights the
-  fixes with (the receiver's σ, floored at ``GNSS_SD_FLOOR``). With an estimator's optional
-  Gauss-Markov GNSS error state (``gnss_gm``: a :class:`~vnav_graph.sensors.gnss_model.GnssGM`),
-  the σ of each carried axis is only the white rest of the receiver's (``GnssGM.split``).
+  fixes with (the receiver's σ, floored at ``GNSS_SD_FLOOR``). Where the velocities disagree
+  with the position differences beyond both σ (``sensors.gnss_consistency``), the velocity σ
+  get the missing variance (``gnss_vel_check``; ``gnss_vel_note`` says so). With an
+  estimator's optional Gauss-Markov GNSS error state (``gnss_gm``: a
+  :class:`~vnav_graph.sensors.gnss_model.GnssGM`), the σ of each carried axis is only the
+  white rest of the receiver's (``GnssGM.split``).
 - ``gaps``: the IMU logging gaps (:mod:`vnav_graph.nav.gaps`).
 
 ekf, ekf-rts, vekf7 and both graph smoothers take every noise parameter from here; the test
@@ -32,6 +35,7 @@ import numpy as np
 from ..config import DEG, IMU_PRESETS, REAL_LOG_BARO, BaroSpec, ImuSpec
 from ..nav.gaps import imu_gaps
 from ..types.streams import FloatArray
+from .gnss_consistency import VelocityConsistency, velocity_consistency
 from .gnss_model import GNSS_SD_FLOOR, GnssGM
 
 # Real-log IMU prior (a phone / autopilot MEMS IMU of unknown make): the consumer preset's
@@ -121,12 +125,27 @@ class SensorModel:
     gnss_pos_sd: FloatArray | None
     gnss_vel_sd: FloatArray | None
     gaps: np.ndarray  # (G,) int: IMU sample i → i+1 is a gap
+    gnss_vel_check: VelocityConsistency | None = None
+
+    def gnss_vel_note(self) -> str:
+        """'' unless the velocity σ were raised (``sensors.gnss_consistency``), else a
+        one-line note with R and the added σ per NED axis."""
+        c = self.gnss_vel_check
+        if c is None or not c.raised:
+            return ""
+        r = ", ".join(f"{x:.2f}" for x in c.ratio)
+        a = ", ".join(f"{x:.3f}" for x in np.sqrt(c.added_var))
+        return (f"GNSS velocity σ raised: the velocities disagree with the position "
+                f"differences {r}× (N, E, D; variance ratio over {c.pairs} pairs) what the "
+                f"receiver's σ allow; added σ ({a}) m/s")
 
     def summary(self) -> dict[str, Any]:
         """JSON-ready parameters (arrays as their min / median / max) for comparisons."""
         out: dict[str, Any] = {"imu": asdict(self.imu), "imu_inferred": self.imu_inferred,
                                "baro": None if self.baro is None else asdict(self.baro),
-                               "gaps": [int(i) for i in self.gaps]}
+                               "gaps": [int(i) for i in self.gaps],
+                               "gnss_vel_check": (None if self.gnss_vel_check is None
+                                                  else self.gnss_vel_check.summary())}
         for name in ("gnss_pos_sd", "gnss_vel_sd"):
             a = getattr(self, name)
             out[name] = None if a is None else [float(np.min(a)), float(np.median(a)),
@@ -304,6 +323,7 @@ def sensor_model(drive: Any, gnss_gm: GnssGM | None = None) -> SensorModel:
     Gauss-Markov GNSS error state, if any (the fixes' σ is then its white rest on the axes it
     carries)."""
     from ..geo.earth import gravity
+    from ..geo.frames import lla_to_ned
 
     imu = drive.imu
     inferred = not isinstance(imu.spec, ImuSpec)
@@ -315,14 +335,21 @@ def sensor_model(drive: Any, gnss_gm: GnssGM | None = None) -> SensorModel:
     bspec = drive_baro_spec(drive)
     gn = drive.gnss
     pos_sd = None if gn is None else _gnss_sd(gn.pos_sd)
+    vel_sd = None if gn is None else _gnss_sd(gn.vel_sd)
+    check = None
+    if gn is not None and vel_sd is not None and pos_sd is not None:
+        # judged on the receiver's whole σ (before a Gauss-Markov state takes its share)
+        check = velocity_consistency(gn.t, lla_to_ned(gn.lla, drive.origin_lla), pos_sd,
+                                     gn.vel_n, vel_sd)
+        if check is not None and check.raised:
+            vel_sd = np.sqrt(vel_sd**2 + check.added_var)
     if pos_sd is not None and gnss_gm is not None:
         pos_sd = gnss_gm.split(pos_sd)
     return SensorModel(
         imu=floor_imu_spec(spec), imu_inferred=inferred,
         baro=None if bspec is None else baro_prior(bspec),
-        gnss_pos_sd=pos_sd,
-        gnss_vel_sd=None if gn is None else _gnss_sd(gn.vel_sd),
-        gaps=imu_gaps(imu.t))
+        gnss_pos_sd=pos_sd, gnss_vel_sd=vel_sd,
+        gaps=imu_gaps(imu.t), gnss_vel_check=check)
 
 
 # Prior σ of the accelerometer scale factors when the IMU model is inferred from a real log

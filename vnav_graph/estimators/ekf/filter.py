@@ -185,6 +185,8 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
     innov, info = _report(drive, res, gr, gaps, ini, cfg, heading_accel, est_scale, ev.has_vel)
     info.update(mag_info)
     info.update(zupt_info(still, res.inn_zupt, res.rej_zupt))
+    if model.gnss_vel_note():  # the velocity σ raised to what the positions support
+        info["gnss_vel_note"] = model.gnss_vel_note()
     if "zupt" in info and info["zupt_used"]:
         inn_z, rej_z = res.inn_zupt, res.rej_zupt
         innov["zupt"] = inn_z[np.isfinite(inn_z[:, 0]) & ~rej_z]

@@ -372,7 +372,7 @@ class GraphBatch:
                 "fallbacks": fallbacks,
                 "singular_damping": res.singular_damping, "cov_damped": out["cov_damping"] > 0,
                 "baro_bias_lag_s": res.bias_lag, "solver": res.solver,
-                **P.init_info(), **P.zupt_info(),
+                **P.init_info(), **P.zupt_info(), **P.sensor_info(),
                 "robust_weights": res.rows.weights,
                 "extra_variables": out["extra"],
                 **out["accel_scale"],

@@ -133,7 +133,7 @@ def estimate_info(P: Any, cfg: GraphConfig, res: Any, out: dict[str, Any], upd_m
         "segments": n_seg,
         "isam2_fallback": fallback,
         # keyframe 0's attitude, where the online pass starts (graph.init.initial_states)
-        **P.init_info(), **P.zupt_info(),
+        **P.init_info(), **P.zupt_info(), **P.sensor_info(),
         "warnings": solver_warnings(res, cfg, "final smoothing pass", name)
         + ([] if fallback is None else [
             f"iSAM2 update failed and was retried with dogleg ({fallback})"]),

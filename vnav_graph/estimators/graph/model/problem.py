@@ -104,12 +104,19 @@ class Problem:
     zupt_kf: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     zupt_sd: float = 0.0
     zupt_intervals: list[list[float]] = field(default_factory=list)
+    # the shared model's note when it raised the GNSS velocity σ (``sensors.gnss_consistency``)
+    gnss_vel_note: str = ""
 
     def zupt_info(self) -> dict[str, Any]:
         """``info["zupt_intervals"]`` ([t_start, t_end] [s]) and ``zupt_keyframes`` (the
         keyframes given a zero-velocity prior) of both smoothers."""
         return {"zupt_intervals": self.zupt_intervals,
                 "zupt_keyframes": int(np.count_nonzero(self.zupt_kf))}
+
+    def sensor_info(self) -> dict[str, str]:
+        """``info["gnss_vel_note"]`` of both smoothers when the shared sensor model raised
+        the GNSS velocity σ (``SensorModel.gnss_vel_note``), else nothing."""
+        return {"gnss_vel_note": self.gnss_vel_note} if self.gnss_vel_note else {}
 
     def init_info(self) -> dict[str, str]:
         """``info["init_attitude"]`` (and ``init_note`` when there is one) of both smoothers."""
@@ -201,6 +208,7 @@ def setup(drive: Drive, cfg: GraphConfig, causal: bool = False) -> Problem:
                 np.asarray(gn.lever_arm_b, float),
                  g_kf, use)
     P.gap = gaps
+    P.gnss_vel_note = model.gnss_vel_note()
     if np.any(P.lever):
         P.g_omega = np.column_stack([np.interp(t_g, imu.t, imu.gyro_b[:, a]) for a in range(3)])
     P.g_rej_pre = P.gnss_rejected
