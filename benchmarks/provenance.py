@@ -35,11 +35,21 @@ def _now() -> str:
     return dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M UTC")
 
 
+def _portable(arg: str, i: int) -> str:
+    """An argument as a reader can run it: the interpreter by name, paths inside the
+    repository relative to it (no machine path in the page)."""
+    if i == 0:
+        return Path(arg).name
+    root = str(REPO) + "/"
+    return arg[len(root):] if arg.startswith(root) else arg
+
+
 def record(results: Path, step: str, cmd: list[str], run: Any) -> int:
     """Run ``run()`` (returns an exit code) as ``step`` and record it in provenance.json."""
-    status = _git("status", "--porcelain", "--untracked-files=no")
+    # the page's own outputs (docs/) do not make the code dirty
+    status = _git("status", "--porcelain", "--untracked-files=no", "--", ".", ":!docs")
     entry: dict[str, Any] = {
-        "cmd": " ".join([Path(cmd[0]).name if i == 0 else c for i, c in enumerate(cmd)]),
+        "cmd": " ".join(_portable(c, i) for i, c in enumerate(cmd)),
         "commit": _git("rev-parse", "HEAD"), "dirty": bool(status) if status is not None
         else None, "started_utc": _now()}
     rc = int(run())

@@ -49,7 +49,9 @@ def test_magnetometer_acquires_heading_and_hard_iron(drive) -> None:
     assert info["mag_declination_deg"] == pytest.approx(decl, abs=0.2)
     # measured (seed 2): forward yaw RMS after 30 s 0.573° without → 0.350° with
     without = EKF(EkfConfig(use_mag=False)).run(drive)
-    assert without.info["heading_source"] == "accel-matching"
+    # without the compass the heading comes from motion: the GNSS course confirmed by the
+    # acceleration matching
+    assert without.info["heading_source"] in ("gnss-course", "accel-matching")
     assert _yaw_rms_deg(with_mag, drive, 30.0) < 0.8 * _yaw_rms_deg(without, drive, 30.0)
 
 

@@ -74,7 +74,7 @@ from gtsam.symbol_shorthand import B, V, X
 
 from vnav_graph.config import IMU_PRESETS
 from vnav_graph.estimators import graph as g
-from vnav_graph.estimators.ekf.filter import EKF, EKFRTS
+from vnav_graph.estimators.ekf.filter import EKF, EKFRTS, EkfConfig
 from vnav_graph.estimators.graph.model import interval_factors as gf
 from vnav_graph.estimators.graph.model import problem as gp
 from vnav_graph.evaluation.metrics import errors_vs_truth
@@ -160,7 +160,7 @@ class VerticalProblem:
         self.t_kf = t_kf = imu.t[kf_idx]
         nk = t_kf.size
         self.T = np.diff(t_kf)
-        self.pri = gp.setup(drive, gp.GraphConfig()).pri
+        self.pri = gp.setup(drive, gp.GraphConfig(zupt=False)).pri
         on = np.isin(est.trajectory.t, t_kf)
         assert on.sum() == nk, "keyframe epochs must be output epochs"
         tr = est.trajectory
@@ -380,7 +380,7 @@ def kf_rts(vp: VerticalProblem, gm_var_factor: float = 1.0, baro_accel_bias: boo
 @pytest.fixture(scope="module")
 def problem():
     drive = simulate(_scenario(), SEED)
-    est = g.GraphBatch().run(drive)
+    est = g.GraphBatch(g.GraphConfig(zupt=False)).run(drive)  # the KF has no ZUPT rows
     vp = VerticalProblem(drive, est)
     assert vp.scale  # the consumer IMU's scale σ: the graph carries κ (the KF needs σ_κ > 0)
     return drive, est, vp, kf_rts(vp)
@@ -449,7 +449,7 @@ def test_isam2_final_equals_batch_on_the_vertical_problem(problem):
     also runs): heights agree with graph-batch to 1 mm (≪ σ ≈ 0.2 m) and s, τd to 1 % of
     their σ."""
     drive, est, _, _ = problem
-    e2 = g.GraphISAM2().run(drive)
+    e2 = g.GraphISAM2(g.GraphConfig(zupt=False)).run(drive)
     assert e2.info["trajectory_source"] == "isam2"
     np.testing.assert_allclose(e2.trajectory.t, est.trajectory.t)
     assert np.max(np.abs(e2.trajectory.alt - est.trajectory.alt)) < 1e-3
@@ -465,7 +465,7 @@ def test_graph_batch_and_ekf_rts_agree_on_the_vertical_problem(problem):
     equality is only statistical: the two smoothed heights differ by much less than either
     error's σ, and both are right — their errors against truth are inside 3σ."""
     drive, est, vp, _ = problem
-    rts = EKFRTS().run(drive)
+    rts = EKFRTS(EkfConfig(zupt=False)).run(drive)
     t = vp.t_kf[1:-1]
     ha = est.trajectory.at(t).alt
     hb = rts.trajectory.at(t).alt
@@ -512,7 +512,8 @@ def test_a_too_short_isam2_window_is_caught_by_the_batch_check(problem):
     ``isam2_batch_fallback`` the batch pass is returned, with a warning, and its heights are
     graph-batch's to 1 mm."""
     drive, est, _, _ = problem
-    cfg = g.GraphConfig(segment_s=15.0, isam2_window_s=30.0, isam2_batch_fallback=True)
+    cfg = g.GraphConfig(segment_s=15.0, isam2_window_s=30.0, isam2_batch_fallback=True,
+                        zupt=False)
     e2 = g.GraphISAM2(cfg).run(drive)
     assert e2.info["isam2_marginalised_keyframes"] > drive.duration_s / 2
     fb = e2.info["final_batch"]
@@ -544,7 +545,7 @@ def test_ekf_rts_sigma_of_the_mean_baro_bias_equals_graph_batch(problem):
     which bounds the σ of a mean from above, and below the forward ekf's (0.40 m). Both
     report the same prior (the GM mean's)."""
     drive, est, _, _ = problem
-    rts = EKFRTS().run(drive)
+    rts = EKFRTS(EkfConfig(zupt=False)).run(drive)
     fwd = EKF().run(drive)
     bg, br, bf = est.baro.bias_m, rts.baro.bias_m, fwd.baro.bias_m
     assert br.sd == pytest.approx(bg.sd, rel=0.05)

@@ -80,18 +80,16 @@ def test_stop_velocity_error_drops(drive, family: str) -> None:
 
 
 def test_position_only_drive(drive) -> None:
-    # without GNSS velocity the fixes' displacement over 2 s confirms the stops; a cruise
-    # is refused (IMU-only ZUPTs on this vibration-free IMU took every steady cruise for rest)
+    # without GNSS velocity the fixes' displacement over 2 s is the only GNSS speed; its σ
+    # (√2·σ_p / 2 s per axis) is above what tells rest from a walking-pace creep
+    # (nav.standstill.CONFIRM_SD_MAX): no standstill is confirmed and none is imposed (with
+    # 1 Hz phone positions such updates held a moving car at rest)
+    from vnav_graph.nav.standstill import CONFIRM_SD_MAX
+
     pos_only = drive.replace(gnss=dataclasses.replace(drive.gnss, vel_n=None, vel_sd=None))
-    got = EKF(EkfConfig()).run(pos_only).info["zupt_intervals"]
-    assert len(got) >= 2
-    tr = drive.truth
-    speed = np.linalg.norm(tr.vel_n, axis=1)
-    for a, b in got:
-        m = (tr.t >= a) & (tr.t <= b)
-        assert speed[m].max() < 0.05, (a, b)
-    covered = sum(b - a for a, b in got)
-    assert covered > 0.7 * sum(b - a for a, b in _stops(drive))
+    sd_v = np.sqrt(2.0) * np.median(pos_only.gnss.pos_sd, axis=0) / 2.0
+    assert np.max(sd_v) > CONFIRM_SD_MAX
+    assert EKF(EkfConfig()).run(pos_only).info["zupt_intervals"] == []
 
 
 def test_no_gnss_no_standstill(drive) -> None:

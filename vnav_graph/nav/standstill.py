@@ -180,6 +180,11 @@ def shoe_threshold(window: int, prob: float = PROB) -> float:
     return float(chi2.ppf(prob, 6 * window - 6) / window)
 
 
+# the largest GNSS velocity σ [m/s] (any axis) of a fix that may confirm a standstill: a
+# 1 m/s creep is then more than 3σ from rest
+CONFIRM_SD_MAX = 0.3
+
+
 def gnss_agrees(t: FloatArray, gnss_t: FloatArray, vel_n: FloatArray, vel_sd: FloatArray,
                 window_s: float, prob: float = PROB, mean_test: bool = True) -> np.ndarray:
     """(N,) bool: the fixes stamped in (t_k − window_s, t_k] exist, their inverse-variance
@@ -195,8 +200,12 @@ def gnss_agrees(t: FloatArray, gnss_t: FloatArray, vel_n: FloatArray, vel_sd: Fl
     have = hi > lo
     gate = chi2.ppf(prob, 3)
     c2 = np.where(have[:, None], sv**2 / np.where(sw > 0, sw, 1.0), np.inf).sum(axis=1)
-    last = np.sum(vel_n**2 * w, axis=1)[np.maximum(hi - 1, 0)]
-    return have & ((c2 <= gate) | (not mean_test)) & (last <= gate)
+    latest = np.maximum(hi - 1, 0)
+    last = np.sum(vel_n**2 * w, axis=1)[latest]
+    # a fix confirms rest only when its σ can tell rest from a walking-pace creep: noisier
+    # velocities (1 Hz phone positions, σ_v of metres per second) pass the χ² test at 1 m/s
+    sharp = np.max(vel_sd, axis=1)[latest] <= CONFIRM_SD_MAX
+    return have & sharp & ((c2 <= gate) | (not mean_test)) & (last <= gate)
 
 
 def no_standstill(t: FloatArray) -> Standstill:
