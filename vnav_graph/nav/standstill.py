@@ -36,7 +36,10 @@ gives 40 against 16.3), and so does the latest fix alone. Without a fix in that 
 outage) no sample is still: the IMU alone would take a smooth cruise for a stop. A drive with
 GNSS positions only takes velocities from them (``position_velocity``: the displacement over
 ``POSITION_SPAN_S``, σ √2·σ_p/2 s = 0.7 m/s for σ_p = 1 m; only the latest is tested, their
-errors being correlated): it refuses a cruise, not a creep. A drive without GNSS gets no
+errors being correlated), but a fix confirms rest only when its velocity σ is at most
+``CONFIRM_SD_MAX`` (0.3 m/s on every axis: a 1 m/s creep is then beyond 3σ), so such
+positions (0.7 m/s for σ_p = 1 m; metres per second on 1 Hz phone logs) confirm none and
+the drive gets no zero-velocity update. A drive without GNSS gets no
 standstill (``estimators.zupt``): on a simulated IMU without vibration every steady cruise
 reads as rest (a position-only hill-drive's smoother cost rose 42-fold with IMU-only ZUPTs).
 
