@@ -301,10 +301,9 @@ def forest_section(results_dir: Path, img_dir: Path | None) -> list[str]:
     from vnav_graph.report.forest import forest_png
 
     rows = []
-    for name, path in (("bench", results_dir / "bench.json"),
-                       ("hard study", results_dir / "hard" / "bench.json")):
+    for path in (results_dir / "bench.json", results_dir / "hard" / "bench.json"):
         if path.is_file():
-            rows += gain_rows(json.loads(path.read_text())["runs"], name)
+            rows += gain_rows(json.loads(path.read_text())["runs"])
     lines = gain_lines(rows)
     if not lines:
         return []
@@ -331,7 +330,7 @@ def render(results_dir: Path, docs_dir: Path | None = None) -> str:
     def stamp(step: str, path: Path, name: str, what: str) -> list[str]:
         kept = (prov.keep(path, data, name) if data is not None
                 else f"JSON `{path.name}` sha256 `{prov.sha256(path)}`")
-        return [prov.stamp(results_dir, step, path, kept, what), ""]
+        return [prov.stamp(results_dir, step, kept, what), ""]
 
     bench_path = results_dir / "bench.json"
     if not bench_path.is_file():

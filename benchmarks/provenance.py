@@ -84,7 +84,7 @@ def keep(path: Path, into: Path, name: str) -> str:
             "commit)")
 
 
-def stamp(results: Path, step: str, json_path: Path, kept: str, what: str) -> str:
+def stamp(results: Path, step: str, kept: str, what: str) -> str:
     """The provenance line of one section: date, commit, command, what it covers (estimators,
     configuration, seeds: ``what``) and its JSON."""
     path = results / "provenance.json"

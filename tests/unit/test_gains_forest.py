@@ -99,11 +99,11 @@ def test_provenance_records_the_step_and_stamps_its_section(tmp_path, monkeypatc
     j.write_text(json.dumps({"x": 1}))
     kept = prov.keep(j, tmp_path / "results_data", "bench.json")
     assert (tmp_path / "results_data" / "bench.json").read_text() == j.read_text()
-    line = prov.stamp(tmp_path, "bench", j, kept, "seeds 3")
+    line = prov.stamp(tmp_path, "bench", kept, "seeds 3")
     assert "`python3 -m vnav_graph bench`" in line and "`0123456789`" in line
     assert "exit 1" in line and prov.sha256(j)[:16] in line
     # a step never recorded says so instead of inventing a commit
-    assert "were not recorded" in prov.stamp(tmp_path, "hard", j, kept, "seeds 3")
+    assert "were not recorded" in prov.stamp(tmp_path, "hard", kept, "seeds 3")
 
 
 def test_a_large_json_is_kept_gzipped(tmp_path, monkeypatch):

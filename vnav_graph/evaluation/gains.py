@@ -52,8 +52,8 @@ def real_time_rows(runs: list[dict[str, Any]], a: str, b: str) -> list[dict[str,
     return out
 
 
-def gain_rows(runs: list[dict[str, Any]], source: str = "") -> list[dict[str, Any]]:
-    """One row per (scenario, comparison, metric) the runs allow: ``{"source", "scenario",
+def gain_rows(runs: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """One row per (scenario, comparison, metric) the runs allow: ``{"scenario",
     "comparison", "a", "b", "key", "label", "n", "gain", "gain_ci95", "verdict", "counts"}``
     (``gain``/``gain_ci95`` None when there is no mean or fewer than two paired seeds)."""
     out = []
@@ -68,7 +68,7 @@ def gain_rows(runs: list[dict[str, Any]], source: str = "") -> list[dict[str, An
                 s = w["stats"]
                 if s["n"] == 0:
                     continue
-                out.append({"source": source, "scenario": sc, "comparison": comp, "a": a,
+                out.append({"scenario": sc, "comparison": comp, "a": a,
                             "b": b, "key": key, "label": label, "n": s["n"],
                             "gain": s["gain"], "gain_ci95": s["gain_ci95"],
                             "verdict": w["verdict"], "counts": w["counts"]})
