@@ -130,3 +130,42 @@ def test_sensor_model_raises_a_lagged_velocity_and_keeps_a_consistent_one() -> N
     assert m2.gnss_vel_check is not None and m2.gnss_vel_check.raised
     assert np.all(m2.gnss_vel_sd[:, :2] > SV)
     assert "GNSS velocity σ raised" in m2.gnss_vel_note()
+
+
+def test_position_outliers_are_left_out(rng) -> None:
+    """10 % of a 10 Hz drive's fixes moved by 10–40 m (σp 1 m): each makes its two pairs
+    opposite 5σ residuals, so they are left out as position spikes and R stays ≈ 1; with
+    them in, the capped R is ≈ 4 on every axis."""
+    n, dt = 3000, 0.1
+    t = np.arange(n) * dt
+    v = np.tile([10.0, 2.0, 0.0], (n, 1))
+    p = np.cumsum(np.vstack([np.zeros((1, 3)), v[1:] * dt]), axis=0)
+    pn = p + rng.standard_normal((n, 3))
+    vn = v + 0.1 * rng.standard_normal((n, 3))
+    bad = rng.choice(np.arange(1, n - 1), size=n // 10, replace=False)
+    off = rng.standard_normal((bad.size, 3))
+    off *= (rng.uniform(10.0, 40.0, bad.size) / np.linalg.norm(off, axis=1))[:, None]
+    pn[bad] += off
+    c = velocity_consistency(t, pn, _sd(n, 1.0), vn, _sd(n, 0.1))
+    assert c is not None and not c.raised
+    # isolated outliers are all found (adjacent pairs of outliers may hide each other)
+    isolated = np.setdiff1d(bad, np.concatenate([bad - 1, bad + 1]))
+    assert c.spikes >= isolated.size
+    np.testing.assert_allclose(c.ratio, 1.0, atol=0.25)
+    r = np.diff(pn, axis=0) / dt - 0.5 * (vn[1:] + vn[:-1])
+    var = 2 * 1.0 / dt**2 + 0.5 * 0.01
+    assert np.all(np.mean(np.minimum(r**2 / var, 25.0), axis=0) > 2 * VEL_CONSISTENCY_LIMIT)
+
+
+def test_excess_is_not_put_on_velocities_that_cannot_carry_it(rng) -> None:
+    """Positions whose real scatter is 3× their stated 1 m at 10 Hz: R ≈ 9, but the
+    velocities' share of var r is 0.25 %, so the excess is reported as unattributed and
+    no σ is added (it would be ≈ 40 m/s)."""
+    n, dt = 2000, 0.1
+    t = np.arange(n) * dt
+    v = np.tile([10.0, 0.0, 0.0], (n, 1))
+    p = np.cumsum(np.vstack([np.zeros((1, 3)), v[1:] * dt]), axis=0)
+    c = velocity_consistency(t, p + 3.0 * rng.standard_normal((n, 3)), _sd(n, 1.0),
+                             v + 0.1 * rng.standard_normal((n, 3)), _sd(n, 0.1))
+    assert c is not None and np.all(c.ratio > 5.0)
+    assert c.unattributed == (True, True, True) and not c.raised

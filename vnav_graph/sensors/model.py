@@ -137,7 +137,8 @@ class SensorModel:
         a = ", ".join(f"{x:.3f}" for x in np.sqrt(c.added_var))
         return (f"GNSS velocity σ raised: the velocities disagree with the position "
                 f"differences {r}× (N, E, D; variance ratio over {c.pairs} pairs) what the "
-                f"receiver's σ allow; added σ ({a}) m/s")
+                f"receiver's σ allow; added σ ({a}) m/s"
+                + (f"; {c.spikes} fixes left out as position spikes" if c.spikes else ""))
 
     def summary(self) -> dict[str, Any]:
         """JSON-ready parameters (arrays as their min / median / max) for comparisons."""
