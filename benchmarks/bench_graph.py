@@ -89,7 +89,7 @@ class StagePeaks:
         return cls.status_mb("VmHWM:")
 
     def start(self) -> None:
-        from vnav_graph.estimators.graph.batch.linalg import trim_heap
+        from vnav_graph.estimators.graph.solver.linalg import trim_heap
 
         gc.collect()
         trim_heap()  # what earlier stages freed goes back to the OS, not into this stage's peak

@@ -24,7 +24,7 @@ def shared_data_dir() -> Path | None:
 def pytest_configure(config: pytest.Config) -> None:
     """Under pytest-xdist with several workers (``addopts``: one per core), each worker's BLAS
     runs one thread, as do the processes the tests start: OpenBLAS's default of one thread
-    per core, in every worker, oversubscribes the cores (``estimators/graph/batch/linalg.py``,
+    per core, in every worker, oversubscribes the cores (``estimators/graph/solver/linalg.py``,
     ``single_thread_blas``). Measured on the 2-core machine with its other core busy:
     test_calibration's seed-001 table test (dense Cholesky) 24.9-29.2 s with OpenBLAS's two
     threads, 2.6 s with one."""

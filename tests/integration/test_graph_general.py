@@ -11,11 +11,11 @@ import pytest
 from gtsam.symbol_shorthand import M, X
 
 from vnav_graph.estimators.graph import GraphBatch, GraphConfig
-from vnav_graph.estimators.graph.batch.solve import gauss_newton
 from vnav_graph.estimators.graph.model import cpp_factors as gb
 from vnav_graph.estimators.graph.model import initial_guess as gi
 from vnav_graph.estimators.graph.model import problem as gp
 from vnav_graph.estimators.graph.model.extend import Terms, Variable
+from vnav_graph.estimators.graph.solver.solve import gauss_newton
 from vnav_graph.simulation.scenario import simulate
 
 # 120 s: two climbs of the hill profile, so s and τd are informed and the solve takes the
@@ -187,7 +187,7 @@ def test_elimination_ordering_is_a_nested_dissection_of_every_key(span_case, mon
     """The general path's ordering holds each key of the linearised graph exactly once (an
     extension's variable and a long-span factor included), keyframes in nested-dissection
     order (each half before its middle keyframe), the other variables last."""
-    from vnav_graph.estimators.graph.batch import general as general
+    from vnav_graph.estimators.graph.solver import general as general
 
     for n in (1, general.ND_LEAF, general.ND_LEAF + 1, 100, 3601):
         assert sorted(general.dissection_order(0, n)) == list(range(n))

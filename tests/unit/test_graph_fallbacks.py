@@ -9,8 +9,8 @@ from types import SimpleNamespace
 import numpy as np
 
 from vnav_graph.estimators.graph import GraphConfig
-from vnav_graph.estimators.graph.batch.layout import factorize
-from vnav_graph.estimators.graph.batch.smoother import fallback_notes
+from vnav_graph.estimators.graph.solver.layout import factorize
+from vnav_graph.estimators.graph.solver.outputs import fallback_notes
 
 
 def test_factorize_reports_the_damping_a_singular_system_needed():

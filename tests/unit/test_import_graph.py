@@ -114,9 +114,31 @@ def test_package_has_no_import_cycle() -> None:
         pytest.fail("import cycle: " + " -> ".join(cycle))
 
 
+def _importers_of(graph: dict[str, set[str]], users: str, used: tuple[str, ...]
+                  ) -> dict[str, list[str]]:
+    """Modules under ``users`` that import a module under one of the ``used`` prefixes."""
+    def under(m: str, prefix: str) -> bool:
+        return m == prefix or m.startswith(prefix + ".")
+
+    return {n: sorted(m for m in deps if any(under(m, u) for u in used))
+            for n, deps in graph.items() if under(n, users)
+            and any(under(m, u) for m in deps for u in used)}
+
+
 def test_evaluation_imports_no_runner_pipeline_or_cli() -> None:
     graph = import_graph()
-    banned = {f"{PACKAGE}.{m}" for m in ("cli", "pipeline", "runner")}
-    bad = {n: sorted(graph[n] & banned) for n in graph
-           if n.startswith(f"{PACKAGE}.evaluation") and graph[n] & banned}
+    banned = (f"{PACKAGE}.cli", f"{PACKAGE}.run")
+    assert all(b in graph for b in banned)  # the rule names modules that exist
+    bad = _importers_of(graph, f"{PACKAGE}.evaluation", banned)
     assert not bad, f"evaluation imports upward: {bad}"
+
+
+def test_graph_rooms_import_nothing_from_batch() -> None:
+    """The model, the shared solver and the incremental front end stand without graph-batch:
+    ``isam2/``, ``model/`` and ``solver/`` import nothing from ``batch/``."""
+    graph = import_graph()
+    g = f"{PACKAGE}.estimators.graph"
+    assert f"{g}.batch.smoother" in graph and f"{g}.solver.outputs" in graph
+    for room in ("isam2", "model", "solver"):
+        bad = _importers_of(graph, f"{g}.{room}", (f"{g}.batch",))
+        assert not bad, f"{room}/ imports batch/: {bad}"

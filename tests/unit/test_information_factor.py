@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from gtsam.symbol_shorthand import B, X
 
-from vnav_graph.estimators.graph.batch.general import first_line, information_factor
+from vnav_graph.estimators.graph.solver.general import first_line, information_factor
 
 BLOCKS = ((0, 6), (6, 6))
 

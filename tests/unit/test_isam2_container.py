@@ -1,5 +1,5 @@
 """``isam2.linear_factors.container`` (one LAPACK Cholesky, a GaussianConditional of any number
-of keys) against ``batch.general.information_factor`` (≤ 3-key Hessian pieces summed and
+of keys) against ``solver.general.information_factor`` (≤ 3-key Hessian pieces summed and
 factored by GTSAM): the same LinearContainerFactor to round-off, for the baro and the
 GNSS-error-state key layouts, and the same fallback for an indefinite block."""
 
@@ -10,13 +10,13 @@ import numpy as np
 import pytest
 from gtsam.symbol_shorthand import B, C, G, K, X
 
-from vnav_graph.estimators.graph.batch.general import information_factor
 from vnav_graph.estimators.graph.isam2.linear_factors import (
     BARO_BLOCKS,
     container,
     containers,
     gnss_gm_blocks,
 )
+from vnav_graph.estimators.graph.solver.general import information_factor
 
 LAYOUTS = {
     "baro": (BARO_BLOCKS, [X(7), X(8), C(7), C(8), K(0), B(7)], (19, 22)),

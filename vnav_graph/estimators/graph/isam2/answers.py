@@ -21,7 +21,7 @@ from gtsam.symbol_shorthand import B, C, V, X
 
 from ....types import ERROR_STATE_DIM
 from ....types.streams import FloatArray
-from ..batch.smoother import cov_18
+from ..solver.outputs import cov_18
 
 
 class IsamMarginals:

@@ -13,9 +13,9 @@ import gtsam
 import numpy as np
 
 from ....geo.frames import mat_to_quat
-from ..batch.linalg import trim_heap
 from ..model.cpp_factors import gap_factors
 from ..model.extend import Collected
+from ..solver.linalg import trim_heap
 from . import linear_factors as terms
 from . import relin
 from .answers import Answers

@@ -15,10 +15,10 @@ import numpy as np
 from gtsam.symbol_shorthand import B, C, G, K, X
 from scipy.linalg import lapack
 
-from ..batch.general import information_factor, pad_information
 from ..model import interval_factors as gf
 from ..model.problem import nav_accel
 from ..model.robust import reweight
+from ..solver.general import information_factor, pad_information
 
 # key blocks (first column, width) of the factors, in their padded columns (B's gyro part
 # zero): baro — X(m), X(m+1), C(m), C(m+1), K(j), B(m) over the 19 ``factors`` columns + 3;

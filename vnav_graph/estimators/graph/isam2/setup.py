@@ -11,10 +11,10 @@ import numpy as np
 from gtsam.symbol_shorthand import A, B, C, G, K, V, X
 
 from ....util.failures import failure_message
-from ..batch.smoother import solver_warnings, value_of
 from ..model.cpp_factors import keyframe_fixes, prior_factors
 from ..model.extend import Collected, key_name
 from ..settings import GraphConfig
+from ..solver.outputs import solver_warnings, value_of
 from .py_factors import LINEAR_ONLY
 
 

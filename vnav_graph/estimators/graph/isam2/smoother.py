@@ -61,16 +61,16 @@ from ....geo.frames import mat_to_quat, ned_to_lla, quat_to_mat
 from ....types import Drive, Estimate, Trajectory
 from ...checks import checked
 from ...gnss_auto import with_gm_auto
-from ..batch.general import first_line
-from ..batch.linalg import solver_context
-from ..batch.smoother import fallback_notes, gnss_gm_info, output_times, outputs, provides
-from ..batch.solve import evaluate_at, gauss_newton
 from ..model import interval_factors as gf
 from ..model.cpp_factors import build_batch_graph, pims_for
 from ..model.extend import GraphExtension, check_extensions
 from ..model.magnetometer import builtin_extensions, mag_info
 from ..model.problem import states_from_values
 from ..settings import LOW_RATE_DT, LOW_RATE_KEYFRAME_DT, GraphConfig
+from ..solver.general import first_line
+from ..solver.linalg import solver_context
+from ..solver.outputs import fallback_notes, gnss_gm_info, output_times, outputs, provides
+from ..solver.solve import evaluate_at, gauss_newton
 from .answers import real_time
 from .causal import causal_pass
 from .online import OnlineResult

@@ -17,7 +17,7 @@ from ....nav.levelling import coarse_level
 from ....sensors.gnss_model import GnssGM
 from ....sensors.noise import gm_process_var, gm_transition, imu_bias_step
 from ....types.streams import FloatArray
-from ..batch.general import information_factor
+from ..solver.general import information_factor
 from . import interval_factors as gf
 from .problem import Problem, gravity_delta, noise, preintegrate
 from .robust import robust_noise

@@ -2,7 +2,7 @@
 tangent frame and its pre-gate, baro priors, IMU logging gaps, the accelerometer scale
 factors), preintegration, and the interval rows of the custom baro/GNSS terms at a
 linearisation point (the settings: ``settings.GraphConfig``). The C++ factors built from it
-are in ``cpp_factors``. Used by ``batch.smoother``, ``batch.solve``, ``isam2.smoother``,
+are in ``cpp_factors``. Used by ``batch.smoother``, ``solver.solve``, ``isam2.smoother``,
 ``isam2.relin`` and ``isam2.linear_factors``."""
 
 from __future__ import annotations

@@ -213,7 +213,7 @@ def gn_core(P: Problem, lay: Layout, graph: Any, vals: Any, calib_of_kf: np.ndar
 def evaluate_at(P: Problem, graph: Any, vals: Any, calib_of_kf: np.ndarray,
                 pri: dict[str, float]) -> BatchResult:
     """The batch problem at ``vals`` without a step: its cost and rows there (what
-    ``batch.outputs`` needs for the trajectory and the covariances at someone else's
+    ``solver.outputs`` needs for the trajectory and the covariances at someone else's
     estimate, e.g. iSAM2's own)."""
     st = states_from_values(P, vals, calib_of_kf)
     lag = float(np.median(st.latency))
