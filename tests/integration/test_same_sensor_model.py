@@ -102,7 +102,7 @@ def _graph_used(drive, name: str, monkeypatch: pytest.MonkeyPatch) -> dict:
         "accel_scale_sd": P.ka.sd if P.ka is not None else 1e-7,
         "bias_tau": (spec.gyro_bias_tau, spec.accel_bias_tau, pri["b_tau"]),
         "baro": (pri["s_sd"], pri["tau0"], pri["tau_sd"], pri["b_sd"], pri["noise"]),
-        "gnss_pos_sd": P.g_pos_sd, "gnss_vel_sd": P.g_vel_sd,
+        "gnss_pos_sd": P.g_pos_sd, "gnss_vel_sd": P.g_vel_sd, "pos_drop": P.g_pos_drop,
         "gap_intervals": np.flatnonzero(problem_mod.imu_gaps(drive.imu.t, P.kf_idx)),
         "kf_idx": P.kf_idx,
     }
@@ -156,7 +156,11 @@ def _check_same(drive, monkeypatch: pytest.MonkeyPatch) -> None:
             assert g[k] == pytest.approx(ekf[k], rel=REL), (name, k)
         assert g["bias_tau"] == pytest.approx(ekf["bias_tau"], rel=REL), name
         assert g["baro"] == pytest.approx(ekf["baro"], rel=REL), name
-        np.testing.assert_array_equal(g["gnss_pos_sd"], ekf["gnss_pos_sd"])
+        # the same σ, except where the graph's pre-gate refused a position and kept the
+        # velocity (its position rows then have σ POS_DROPPED_SD)
+        keep = ~g["pos_drop"]
+        np.testing.assert_array_equal(g["gnss_pos_sd"][keep], ekf["gnss_pos_sd"][keep])
+        assert np.all(g["gnss_pos_sd"][~keep] == problem_mod.POS_DROPPED_SD)
         if ekf["gnss_vel_sd"] is not None:
             np.testing.assert_array_equal(g["gnss_vel_sd"], ekf["gnss_vel_sd"])
         # the same IMU gaps: the keyframe intervals holding the EKF's gap samples

@@ -76,8 +76,9 @@ def keyframe_fixes(P: Problem, k: int) -> list[tuple[int, Any]]:
     out = []
     cfg = P.cfg
     for i in np.flatnonzero((P.g_kf == k) & P.g_use):
-        out.append((int(i), gtsam.GPSFactorArm(X(k), P.g_pos[i], P.lever, robust_noise(
-            noise(P.g_pos_sd[i]), cfg.loss_gnss_pos, cfg.loss_threshold_sd[0]))))
+        if not P.g_pos_drop[i]:
+            out.append((int(i), gtsam.GPSFactorArm(X(k), P.g_pos[i], P.lever, robust_noise(
+                noise(P.g_pos_sd[i]), cfg.loss_gnss_pos, cfg.loss_threshold_sd[0]))))
         if P.g_vel is not None and P.g_vel_sd is not None and not np.any(P.lever):
             out.append((int(i), gtsam.PriorFactorVector(V(k), P.g_vel[i], robust_noise(
                 noise(P.g_vel_sd[i]), cfg.loss_gnss_vel, cfg.loss_threshold_sd[1]))))
@@ -224,7 +225,7 @@ def gap_factors(P: Problem, k: int, rot: FloatArray, pos: FloatArray, vel: Float
     T = float(P.t_kf[k + 1] - P.t_kf[k])
     p1 = pos[k] + vel[k] * T
     v1 = np.array(vel[k], dtype=float)
-    sel = np.flatnonzero(P.g_use & (P.g_t <= P.t_kf[k + 1] + 1e-9)
+    sel = np.flatnonzero(P.g_pos_use & (P.g_t <= P.t_kf[k + 1] + 1e-9)
                          & (P.g_t > P.t_kf[k + 1] - 1.5))
     if sel.size:
         i = sel[-1]

@@ -130,7 +130,7 @@ def _gnss_at_keyframes(P: Problem) -> tuple[FloatArray, FloatArray | None, Float
     """The kept fixes' times, their velocities (None for a position-only receiver), and at
     every keyframe: whether a fix is near, the interpolated position and velocity, the
     GNSS acceleration and whether it is usable (``initial_states``)."""
-    u = P.g_use
+    u = P.g_pos_use
     gt, pos = P.g_t[u], P.g_pos[u]
     vel = None if P.g_vel is None else P.g_vel[u]
     near = nearest_gap(gt, P.t_kf)
@@ -167,7 +167,7 @@ def _course_sd(P: Problem, gt: FloatArray, vel: FloatArray | None, vel_kf: Float
     read at the fix nearest each keyframe. A position-only receiver's velocity is the
     keyframes' central differences, σ_p/(√2·base) of noise, and the sway is measured over
     the keyframes."""
-    u = P.g_use
+    u = P.g_pos_use
     imu = P.drive.imu
     if vel is not None and P.g_vel_sd is not None:
         if gt.size == 0:
@@ -187,7 +187,7 @@ def _baro_bridge(P: Problem, gt: FloatArray, has: FloatArray, pos_kf: FloatArray
     """Keyframes inside long gaps between kept fixes (``in_gap``), and those whose height and
     vertical speed come from the baro (``v_bridge``; ``pos_kf``, ``vel_kf`` set in place)."""
     nk = P.n_kf
-    pos = P.g_pos[P.g_use]
+    pos = P.g_pos[P.g_pos_use]
     # inside gaps > 5 s between kept fixes: linear bridge horizontally, baro height
     # (plus the median GNSS − baro offset) vertically when a barometer is present
     gap_len = np.zeros(nk)

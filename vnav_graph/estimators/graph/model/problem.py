@@ -37,6 +37,9 @@ from .accel_scale import AccelScale, interval_mean_force
 from .gnss_pregate import pregate_gnss
 from .robust import reweight
 
+# σ [m] of a kept fix's refused position (``Problem.g_pos_drop``): its rows then carry no
+# information (1e-12 of a 1 m fix's) and its velocity rows stay
+POS_DROPPED_SD = 1e6
 
 def imu_gaps(t: np.ndarray, kf_idx: np.ndarray) -> np.ndarray:
     """Boolean (n_kf − 1,): interval k contains an IMU logging gap.
@@ -82,6 +85,9 @@ class Problem:
     g_rej_pre: int = 0  # rejected by the pre-gate (baro consistency, position glitches and
     # the velocity screen)
     g_rej_vel: int = 0  # of those, refused by the velocity screen (nav.velocity_screen)
+    # used fixes whose position the pre-gate refused and whose velocity passed the velocity
+    # screen: the velocity is kept, the position carries no information (``POS_DROPPED_SD``)
+    g_pos_drop: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     g_rej_post: int = 0  # rejected by the post-solve residual gate
     g_incr: Any = None  # (fix indices, dense increments at them), see gnss_rows_of
     # body rate at each fix [rad/s] for the lever arm's velocity (None without a lever arm)
@@ -123,13 +129,62 @@ class Problem:
         return {"init_attitude": self.init_attitude,
                 **({"init_note": self.init_note} if self.init_note else {})}
 
+    def __post_init__(self) -> None:
+        if self.g_pos_drop.shape != self.g_use.shape:
+            self.g_pos_drop = np.zeros(self.g_use.shape, dtype=bool)
+
     @property
     def gnss_rejected(self) -> int:
-        return int(np.sum(~self.g_use & (self.g_kf >= -1)))
+        """Fixes inside the keyframe span refused whole or in their position."""
+        return int(np.sum((~self.g_use | self.g_pos_drop) & (self.g_kf >= -1)))
+
+    @property
+    def g_pos_use(self) -> np.ndarray:
+        """The fixes whose position is used (``g_use`` less ``g_pos_drop``)."""
+        return self.g_use & ~self.g_pos_drop
 
     @property
     def n_kf(self) -> int:
         return int(self.t_kf.size)
+
+
+def gnss_gates(drive: Drive, model: Any, cfg: GraphConfig, t_g: FloatArray, pos: FloatArray,
+               t_kf: FloatArray, g_kf: np.ndarray, pri: dict[str, float], g0: float,
+               causal: bool) -> tuple[np.ndarray, np.ndarray, int]:
+    """The pre-solve GNSS gates of ``setup``: the baro height pre-gate, the glitch mask and
+    the velocity screen. Returns the used fixes, those of them whose position is refused
+    (their velocity kept, ``Problem.g_pos_drop``) and the number the velocity screen
+    refused."""
+    gn, imu, spec = drive.gnss, drive.imu, model.imu
+    # the keyframe at which each fix enters graph-isam2's online pass (its data up to then)
+    t_enter = t_kf[np.minimum(np.searchsorted(t_kf, t_g - 1e-6), t_kf.size - 1)]
+    use = pregate_gnss(drive, t_g, gn.lla[:, 2], model.gnss_pos_sd[:, 2], pri,
+                        cfg.gnss_gate_prob,
+                        None if gn.vel_n is None else gn.vel_n[:, 2],
+                        None if gn.vel_sd is None else gn.vel_sd[:, 2],
+                        t_enter if causal else None)
+    if cfg.gnss_gate_prob > 0:
+        # fixes that jump away faster than any vehicle and come back (nav.gnss_glitch): the
+        # post-solve gate cannot take them, the initial guess already follows them (a 10 km
+        # jump held for 5 s left both smoothers 700 m off and graph-isam2's information
+        # blocks indefinite)
+        # heights: the baro gate above
+        use &= ~(causal_glitch_mask if causal else glitch_mask)(t_g, pos[:, :2])
+    n_vel = 0
+    pos_drop = np.zeros(t_g.size, dtype=bool)
+    if cfg.velocity_screen and gn.vel_n is not None and cfg.gnss_gate_prob > 0:
+        # GNSS velocity against the IMU's specific-force integral (attitude-free)
+        ok_v = velocity_screen(t_g, gn.vel_n, model.gnss_vel_sd, imu.t, imu.gyro_b,
+                               imu.accel_b, g0, spec.accel_bias_sd,
+                               accel_scale_sd(model, cfg.accel_scale),
+                               spec.accel_noise_density, cfg.gnss_gate_prob)
+        n_vel = int(np.sum(~ok_v & (g_kf >= -1)))
+        # a fix whose position the gates above refused keeps a velocity that passed this
+        # screen, as the ekf gates position and velocity apart (a multipath burst biases
+        # positions by tens of metres, its Doppler velocities hardly)
+        pos_drop = ~use & ok_v & np.all(np.isfinite(gn.vel_n), axis=1)
+        use = (use | pos_drop) & ok_v
+    return use, pos_drop, n_vel
 
 
 def setup(drive: Drive, cfg: GraphConfig, causal: bool = False) -> Problem:
@@ -180,34 +235,15 @@ def setup(drive: Drive, cfg: GraphConfig, causal: bool = False) -> Problem:
     pri = _baro_priors(bspec)
     if cfg.baro_scale_sd is not None:  # the post-solve scale check's (sensors.baro)
         pri["s_sd"] = float(cfg.baro_scale_sd)
-    # the keyframe at which each fix enters graph-isam2's online pass (its data up to then)
-    t_enter = t_kf[np.minimum(np.searchsorted(t_kf, t_g - 1e-6), t_kf.size - 1)]
-    use = pregate_gnss(drive, t_g, gn.lla[:, 2], model.gnss_pos_sd[:, 2], pri,
-                        cfg.gnss_gate_prob,
-                        None if gn.vel_n is None else gn.vel_n[:, 2],
-                        None if gn.vel_sd is None else gn.vel_sd[:, 2],
-                        t_enter if causal else None)
-    if cfg.gnss_gate_prob > 0:
-        # fixes that jump away faster than any vehicle and come back (nav.gnss_glitch): the
-        # post-solve gate cannot take them, the initial guess already follows them (a 10 km
-        # jump held for 5 s left both smoothers 700 m off and graph-isam2's information
-        # blocks indefinite)
-        # heights: the baro gate above
-        use &= ~(causal_glitch_mask if causal else glitch_mask)(t_g, pos[:, :2])
-    n_vel = 0
-    if cfg.velocity_screen and gn.vel_n is not None and cfg.gnss_gate_prob > 0:
-        # GNSS velocity against the IMU's specific-force integral (attitude-free)
-        ok_v = velocity_screen(t_g, gn.vel_n, model.gnss_vel_sd, imu.t, imu.gyro_b,
-                               imu.accel_b, g0, spec.accel_bias_sd,
-                               accel_scale_sd(model, cfg.accel_scale),
-                               spec.accel_noise_density, cfg.gnss_gate_prob)
-        n_vel = int(np.sum(~ok_v & (g_kf >= -1)))
-        use &= ok_v
+    use, pos_drop, n_vel = gnss_gates(drive, model, cfg, t_g, pos, t_kf, g_kf, pri, g0,
+                                      causal)
     P = Problem(drive, cfg, origin, h0, g0, omega_t, kf_idx, t_kf, dense, p, spec, bspec,
                 t_g, pos, model.gnss_pos_sd, vel, model.gnss_vel_sd,
                 np.asarray(gn.lever_arm_b, float),
                  g_kf, use)
     P.gap = gaps
+    P.g_pos_drop = pos_drop
+    P.g_pos_sd = np.where(pos_drop[:, None], POS_DROPPED_SD, P.g_pos_sd)
     P.gnss_vel_note = model.gnss_vel_note()
     if np.any(P.lever):
         P.g_omega = np.column_stack([np.interp(t_g, imu.t, imu.gyro_b[:, a]) for a in range(3)])
