@@ -52,7 +52,6 @@ with baro and fixes interpolated to the epoch, reading the next sample).
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -62,11 +61,12 @@ from ...config import REAL_LOG_BARO
 from ...nav.arrays import outer, put
 from ...nav.error_state import embed_error_state, selection
 from ...sensors.model import sensor_model
-from ...types import BaroEstimate, Drive, Estimate, ParamEstimate, Trajectory
+from ...types import BaroEstimate, Drive, Estimate, ParamEstimate
 from ...types.streams import FloatArray
+from .base import VerticalEstimator, vertical_estimate
 from .gnss_reference import nominal_interval
 from .inputs import AhrsConfig
-from .loops import LoopInputs, bridge_gaps, loop_estimate, loop_inputs, zoh_nb
+from .loops import LoopInputs, bridge_gaps, loop_inputs, zoh_nb
 from .observer1d import gate_threshold
 
 _FUNCS = {"none": 0, "linear": 1, "exp": 2, "tanh": 3, "sigmoid": 4}
@@ -415,30 +415,27 @@ def to_error_state(p: FloatArray) -> FloatArray:
     return embed_error_state(p, _TO_ERROR_STATE)
 
 
-class AdaptiveLoop3:
+class AdaptiveLoop3(VerticalEstimator):
     """3rd-order baro-inertial loop with adaptive coefficients (``loop3-adaptive``)."""
 
     name = "loop3-adaptive"
+    config_class = AdaptiveConfig
+    needs_baro = True
 
-    def __init__(self, config: AdaptiveConfig | None = None) -> None:
-        self.config = config or AdaptiveConfig()
-
-    def run(self, drive: Drive) -> Estimate:
-        t0 = time.perf_counter()
+    def solve(self, drive: Drive) -> Estimate:
         cfg = self.config
         inp = loop_inputs(drive, cfg.ahrs)
         if cfg.ekf_control:
-            return self._run_ekf(drive, inp, t0)
+            return self._run_ekf(drive, inp)
         x, err, s = run_adaptive(inp, cfg)
         # baro-inertial: GNSS only reaches the attitude reference (vertical.inputs), never the
         # height channel, so no GNSS is gated and no gnss_rejected is claimed
-        return loop_estimate(self.name, inp.t, x[:, 0] + inp.h0, x[:, 1],
-                         time.perf_counter() - t0, cfg,
-                         {"uses": "imu+baro", "speedup_mean": float(np.mean(s)),
-                          "speedup_max": float(np.max(s)),
-                          "accel_bias_up_final": float(x[-1, 2])})
+        return vertical_estimate(self.name, inp.t, x[:, 0] + inp.h0, -x[:, 1], cfg,
+                                 info={"uses": "imu+baro", "speedup_mean": float(np.mean(s)),
+                                       "speedup_max": float(np.max(s)),
+                                       "accel_bias_up_final": float(x[-1, 2])})
 
-    def _run_ekf(self, drive: Drive, inp: LoopInputs, t0: float) -> Estimate:
+    def _run_ekf(self, drive: Drive, inp: LoopInputs) -> Estimate:
         cfg = self.config
         model = sensor_model(drive)
         gn = drive.gnss
@@ -454,10 +451,6 @@ class AdaptiveLoop3:
         h, v, s, err, t_cov, p_cov, x_cov, code, nu = run_adaptive_ekf(
             inp, cfg, t_fix, z_fix, r_fix, imu_spec=model.imu, baro_spec=model.baro,
             baro_dt=bdt)
-        n = inp.t.size
-        nan = np.full(n, np.nan)
-        traj = Trajectory(inp.t, np.column_stack([nan, nan, h + inp.h0]),
-                          np.column_stack([nan, nan, -v]))
         xs = x_cov[-1] if len(x_cov) else np.full(NX, np.nan)
         ps = p_cov[-1] if len(p_cov) else np.full((NX, NX), np.nan)
         p0 = p_cov[0] if len(p_cov) else ps
@@ -466,11 +459,9 @@ class AdaptiveLoop3:
                                 float(np.sqrt(p0[IS, IS]))),
             bias_m=ParamEstimate(float(xs[IB]), float(np.sqrt(ps[IB, IB])),
                                  float(np.sqrt(p0[IB, IB]))))
-        return Estimate(
-            estimator=self.name, trajectory=traj,
-            provides=frozenset({"alt", "vel_d", "baro", "cov"}),
+        return vertical_estimate(
+            self.name, inp.t, h + inp.h0, -v, cfg, frozenset({"alt", "vel_d", "baro", "cov"}),
             cov=to_error_state(p_cov), t_cov=t_cov, baro=baro,
-            runtime_s=time.perf_counter() - t0, config=cfg,
             innovations={"gnss_alt": nu[np.isfinite(nu)]},
             info={"uses": "imu+baro+gnss", "variant": "ekf_control",
                   "gnss_rejected": int(np.sum(code >= 1)),

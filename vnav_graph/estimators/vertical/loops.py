@@ -57,7 +57,6 @@ for the baro's half-sample delay).
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -68,9 +67,10 @@ from scipy.linalg import expm, solve_discrete_are
 from ...geo.earth import gravity, radii
 from ...nav.arrays import put
 from ...nav.gaps import imu_gaps
-from ...types import Drive, Estimate, Trajectory
+from ...types import Drive, Estimate
 from ...types.streams import FloatArray
 from ...util.failures import MissingStream
+from .base import VerticalEstimator, vertical_estimate
 from .inputs import AhrsConfig, vertical_inputs
 
 
@@ -221,15 +221,6 @@ def loop_inputs(drive: Drive, ahrs: AhrsConfig | None = None) -> LoopInputs:
     return LoopInputs(vi.t, a_up, z, h0, schuler_vertical(drive.origin_lla[0], h0))
 
 
-def loop_estimate(name: str, t: FloatArray, h: FloatArray, v_up: FloatArray, runtime: float,
-              config, info) -> Estimate:
-    n = t.size
-    nan = np.full(n, np.nan)
-    traj = Trajectory(t, np.column_stack([nan, nan, h]), np.column_stack([nan, nan, -v_up]))
-    return Estimate(estimator=name, trajectory=traj, provides=frozenset({"alt", "vel_d"}),
-                    runtime_s=runtime, config=config, info=info)
-
-
 @dataclass(frozen=True)
 class Loop2Config:
     """Settings of ``loop2``.
@@ -282,36 +273,32 @@ def run_loop(inp: LoopInputs, gains: tuple[float, ...], scale: FloatArray | None
     return x[orig], err[orig]
 
 
-class _FixedGainLoop:
-    """``run`` shared by the fixed-gain loops: inputs, gains, ``run_loop``, Estimate."""
+class FixedGainLoop(VerticalEstimator):
+    """``solve`` shared by the fixed-gain loops: inputs, gains, ``run_loop``, Estimate."""
 
-    name: str
-    config: Any
+    needs_baro = True
 
     def gains(self, ws2: float) -> tuple[float, ...]:
         raise NotImplementedError
 
-    def _extra_info(self, x: FloatArray) -> dict[str, Any]:
+    def extra_info(self, x: FloatArray) -> dict[str, Any]:
         return {}
 
-    def run(self, drive: Drive) -> Estimate:
-        t0 = time.perf_counter()
+    def solve(self, drive: Drive) -> Estimate:
         inp = loop_inputs(drive, self.config.ahrs)
         g = self.gains(inp.ws2)
         x, err = run_loop(inp, g)
-        info = {"gains": g, "uses": "imu+baro", **self._extra_info(x),
+        info = {"gains": g, "uses": "imu+baro", **self.extra_info(x),
                 "loop_error_rms_m": float(np.sqrt(np.mean(err**2)))}
-        return loop_estimate(self.name, inp.t, x[:, 0] + inp.h0, x[:, 1],
-                         time.perf_counter() - t0, self.config, info)
+        return vertical_estimate(self.name, inp.t, x[:, 0] + inp.h0, -x[:, 1], self.config,
+                                 info=info)
 
 
-class Loop2(_FixedGainLoop):
+class Loop2(FixedGainLoop):
     """Fixed-gain 2nd-order baro-inertial loop (``loop2``)."""
 
     name = "loop2"
-
-    def __init__(self, config: Loop2Config | None = None) -> None:
-        self.config = config or Loop2Config()
+    config_class = Loop2Config
 
     def gains(self, ws2: float) -> tuple[float, float]:
         c = self.config
@@ -333,17 +320,15 @@ class Loop2(_FixedGainLoop):
 
 
 
-class Loop3(_FixedGainLoop):
+class Loop3(FixedGainLoop):
     """Fixed-gain 3rd-order baro-inertial loop (``loop3``)."""
 
     name = "loop3"
-
-    def __init__(self, config: Loop3Config | None = None) -> None:
-        self.config = config or Loop3Config()
+    config_class = Loop3Config
 
     def gains(self, ws2: float) -> tuple[float, float, float]:
         c = self.config
         return c.gains if c.gains is not None else gains3(c.tau, ws2)
 
-    def _extra_info(self, x: FloatArray) -> dict[str, Any]:
+    def extra_info(self, x: FloatArray) -> dict[str, Any]:
         return {"accel_bias_up_final": float(x[-1, 2])}

@@ -88,7 +88,6 @@ References: seed 003 (1-DOF INS + GPS altitude observer); Franklin, Powell, Work
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -99,8 +98,9 @@ from ...config import G0
 from ...geo.earth import gravity, radii
 from ...nav.gaps import gap_threshold
 from ...sensors.model import sensor_model
-from ...types import Drive, Estimate, Trajectory
+from ...types import Drive, Estimate
 from ...types.streams import FloatArray
+from .base import VerticalEstimator, vertical_estimate
 from .inputs import AhrsConfig, vertical_inputs
 
 SEED003_GAIN = (0.4, 0.04, 0.002)
@@ -308,16 +308,13 @@ def _gps_up(drive: Drive) -> tuple[FloatArray, FloatArray]:
     return drive.gnss.t, drive.gnss.lla[:, 2]
 
 
-class Observer1D:
+class Observer1D(VerticalEstimator):
     """Seed-003 observer as a registered estimator (``observer1d``). See module docstring."""
 
     name = "observer1d"
+    config_class = ObserverConfig
 
-    def __init__(self, config: ObserverConfig | None = None) -> None:
-        self.config = config or ObserverConfig()
-
-    def run(self, drive: Drive) -> Estimate:
-        t0 = time.perf_counter()
+    def solve(self, drive: Drive) -> Estimate:
         cfg = self.config
         vi = vertical_inputs(drive, cfg.ahrs)
         h0 = float(drive.origin_lla[2])
@@ -351,15 +348,10 @@ class Observer1D:
             cfg.accel_noise_density, cfg.accel_bias_rw, sd_g**2,
             float(t_first - t_fix[0]) + warm, cfg.reinit_s, gap_dt,
         )
-        n = vi.t.size
-        lla = np.column_stack([np.full(n, np.nan), np.full(n, np.nan), z[0]])
-        vel = np.column_stack([np.full(n, np.nan), np.full(n, np.nan), -v[0]])
-        traj = Trajectory(vi.t, lla, vel)
         s_ss = float(ss.p_prior[0, 0] + sd_g**2)
         ok = np.isfinite(innov[0])
-        return Estimate(
-            estimator=self.name, trajectory=traj, provides=frozenset({"alt", "vel_d"}),
-            runtime_s=time.perf_counter() - t0, config=cfg,
+        return vertical_estimate(
+            self.name, vi.t, z[0], -v[0], cfg,
             innovations={"gnss_alt": innov[0][ok] / np.sqrt(s_ss)},
             info={"accel_bias_up_final": float(-c[0, -1]), "uses": "imu+gnss",
                   "gnss_rejected": int(np.sum(code[0] == 1)),

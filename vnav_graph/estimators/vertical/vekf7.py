@@ -71,7 +71,6 @@ References: seed 001 §3.2 (eqs. 5-6); Groves 2nd ed. §14.2 (closed-loop error-
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -84,10 +83,10 @@ from ...nav.gaps import GAP_ACCEL_SD, cv_bridge_noise, gap_threshold
 from ...nav.gnss_gate import NO_LIMIT, REFUSE, height_gate, new_gate_state
 from ...sensors.baro import baro_jacobian, measure_baro
 from ...sensors.model import SensorModel, sensor_model
-from ...types import BaroEstimate, Drive, Estimate, ParamEstimate, Trajectory
+from ...types import BaroEstimate, Drive, Estimate, ParamEstimate
 from ...types.streams import FloatArray
-from ...util.failures import MissingStream
 from ..checks import with_prior_conflict_notes
+from .base import VerticalEstimator, vertical_estimate
 from .inputs import AhrsConfig, VerticalInputs, vertical_inputs
 from .vekf7_setup import (  # noqa: F401  (the state indices and input_error_psd: this module's API)
     IB,
@@ -344,20 +343,16 @@ def _filter_pass(drive: Drive, vi: VerticalInputs, model: SensorModel, nz: Noise
     return out
 
 
-class VEKF7:
+class VEKF7(VerticalEstimator):
     """Seed-001 7-state vertical EKF (see module docstring)."""
 
     name = "vekf7"
+    config_class = VEKF7Config
+    needs_baro = True
 
-    def __init__(self, config: VEKF7Config | None = None) -> None:
-        self.config = config or VEKF7Config()
-
-    def run(self, drive: Drive) -> Estimate:
+    def solve(self, drive: Drive) -> Estimate:
         """Run the filter over the drive. Needs IMU and baro; GNSS optional but expected."""
-        t_start = time.perf_counter()
         cfg = self.config
-        if drive.baro is None:
-            raise MissingStream("barometer", "vekf7: the drive has no baro stream")
         vi: VerticalInputs = vertical_inputs(drive, cfg.ahrs)
         model = sensor_model(drive)  # shared with ekf and the graphs (sensors.model)
         nz = noise_densities(drive, vi, model, cfg)
@@ -365,10 +360,7 @@ class VEKF7:
         res = _filter_pass(drive, vi, model, nz, nom, p, cfg)
 
         t = drive.imu.t
-        n = t.size
         dur = float(t[-1] - t[0])
-        lla = np.column_stack([np.full(n, np.nan), np.full(n, np.nan), res.h])
-        vel = np.column_stack([np.full(n, np.nan), np.full(n, np.nan), -res.v])
         baro = BaroEstimate(
             scale=ParamEstimate(float(nom[IS]), float(np.sqrt(p[IS, IS])), nz.s_sd, 0.0),
             latency_s=ParamEstimate(float(nom[ITD]), float(np.sqrt(p[ITD, ITD])), nz.td_sd,
@@ -384,14 +376,10 @@ class VEKF7:
             "accel_scale_z_sd": float(np.sqrt(p[IK, IK])),
             "baro_bias_final": float(nom[IBB]),
         }
-        return with_prior_conflict_notes(Estimate(
-            estimator=self.name, trajectory=Trajectory(t, lla, vel),
-            provides=frozenset({"alt", "vel_d", "baro", "cov"}),
+        return with_prior_conflict_notes(vertical_estimate(
+            self.name, t, res.h, -res.v, cfg, frozenset({"alt", "vel_d", "baro", "cov"}),
             cov=_to_error_state(np.array(res.p_cov)), t_cov=np.array(res.t_cov), baro=baro,
-            runtime_s=time.perf_counter() - t_start,
-            innovations={k: np.asarray(v) for k, v in res.innov.items()},
-            info=info, config=cfg,
-        ))
+            innovations={k: np.asarray(v) for k, v in res.innov.items()}, info=info))
 
 
 # ERROR_STATE rows (estimated − true = −x): pos_n[2] down = −h → +δh_i; vel_n[2] = −v_up →

@@ -64,7 +64,6 @@ Reference: seed 004 §6.2 (Reddy & Saraswat, four-state baro-inertial filter); G
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -77,9 +76,9 @@ from ...nav.gaps import GAP_ACCEL_SD, cv_bridge_noise, gap_threshold
 from ...nav.gnss_gate import NO_LIMIT, REFUSE, height_gate
 from ...sensors.model import sensor_model
 from ...sensors.noise import gm_process_var, gm_transition
-from ...types import BaroEstimate, Drive, Estimate, ParamEstimate, Trajectory
+from ...types import BaroEstimate, Drive, Estimate, ParamEstimate
 from ...types.streams import FloatArray
-from ...util.failures import MissingStream
+from .base import VerticalEstimator, vertical_estimate
 from .inputs import AhrsConfig, vertical_inputs
 from .vekf7_setup import initial_fix, input_error_psd
 
@@ -222,20 +221,16 @@ def _run(t, a_in, lat, h_init, v_init, p0, phi3, q3, phi4, q4, a_psd,
     return h_out, v_out, t_cov[:nc], p_cov[:nc], x3_cov[:nc], nu, rejected
 
 
-class VKF4:
+class VKF4(VerticalEstimator):
     """Seed-004 4-state baro-inertial Kalman filter (see module docstring)."""
 
     name = "vkf4"
+    config_class = VKF4Config
+    needs_baro = True
 
-    def __init__(self, config: VKF4Config | None = None) -> None:
-        self.config = config or VKF4Config()
-
-    def run(self, drive: Drive) -> Estimate:
+    def solve(self, drive: Drive) -> Estimate:
         """Run the filter. Needs IMU and baro; GNSS heights are used when present."""
-        t_start = time.perf_counter()
         cfg = self.config
-        if drive.baro is None:
-            raise MissingStream("barometer", "vkf4: the drive has no baro stream")
         vi = vertical_inputs(drive, cfg.ahrs)
         model = sensor_model(drive)  # shared noise model (sensors.model)
         ims, bp = model.imu, model.baro
@@ -295,21 +290,15 @@ class VKF4:
             et, esd, cfg.max_gnss_sd_v, cfg.gnss_probation_s,
             gap_threshold(t), GAP_ACCEL_SD**2)
 
-        lla = np.column_stack([np.full(n, np.nan), np.full(n, np.nan), h_out])
-        vel = np.column_stack([np.full(n, np.nan), np.full(n, np.nan), v_out])
         sd3 = np.sqrt(p_cov[:, 2, 2])
         baro = BaroEstimate(bias_m=ParamEstimate(float(np.mean(x3)), float(np.mean(sd3)), s3))
-        return Estimate(
-            estimator=self.name, trajectory=Trajectory(t, lla, vel),
-            provides=frozenset({"alt", "vel_d", "baro", "cov"}),
+        return vertical_estimate(
+            self.name, t, h_out, v_out, cfg, frozenset({"alt", "vel_d", "baro", "cov"}),
             cov=_to_error_state(p_cov), t_cov=t_cov, baro=baro,
-            runtime_s=time.perf_counter() - t_start,
             innovations={"baro": nu[(ek == 0) & np.isfinite(nu)],
                          "gnss_alt": nu[(ek == 1) & np.isfinite(nu)]},
             info={"gnss_rejected": int(rejected), "accel_psd_mean": float(np.mean(a_psd)),
-                  "baro_slow_sd": s3},
-            config=cfg,
-        )
+                  "baro_slow_sd": s3})
 
 
 def _to_error_state(p: FloatArray) -> FloatArray:
