@@ -18,6 +18,7 @@ import pytest
 CONFIGS = {
     "vnav_graph.config": ("ImuSpec", "GnssSpec", "BaroSpec", "ScenarioConfig"),
     "vnav_graph.sensors.gnss_model": ("GnssErrorSettings",),
+    "vnav_graph.estimators.shared_settings": ("SharedSettings",),
     "vnav_graph.sensors.magnetometer": ("MagSpec",),
     "vnav_graph.estimators.ekf.settings": ("EkfConfig",),
     "vnav_graph.estimators.graph.settings": ("GraphConfig",),

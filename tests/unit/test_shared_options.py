@@ -27,6 +27,18 @@ def test_the_shared_options_are_the_fields_both_have() -> None:
     assert set(SHARED) == set(e) & set(g)
 
 
+def test_each_shared_option_is_declared_once() -> None:
+    """Both configs take the shared options from one block (``SharedSettings``): neither
+    declares one of them again."""
+    from vnav_graph.estimators.shared_settings import SharedSettings
+
+    assert set(SHARED) == {f.name for f in dataclasses.fields(SharedSettings)}
+    for cls in (EkfConfig, GraphConfig):
+        assert issubclass(cls, SharedSettings)
+        own = set(getattr(cls, "__annotations__", {}))
+        assert not own & set(SHARED), (cls.__name__, sorted(own & set(SHARED)))
+
+
 def test_shared_options_have_equal_defaults() -> None:
     e, g = _defaults(EkfConfig), _defaults(GraphConfig)
     differ = {k: (e[k], g[k]) for k in SHARED if e[k] != g[k]}

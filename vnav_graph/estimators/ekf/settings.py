@@ -12,17 +12,16 @@ import numpy as np
 
 from ...config import DEG
 from ...nav.course import SIDESLIP_SD
-from ...sensors.gnss_model import GnssErrorSettings
-from ...sensors.magnetometer import MAG_BIAS_SD_UT, MAG_HEADING_FLOOR, MAG_INTERVAL_S
+from ..shared_settings import SharedSettings
 
 # the EKF's robust losses (the graph has "cauchy" too)
 LOSSES = ("none", "huber")
 
 
 @dataclass(frozen=True)
-class EkfConfig(GnssErrorSettings):
+class EkfConfig(SharedSettings):
     """Settings of ``ekf`` / ``ekf-rts`` (SI units); the gates and gap rules are described in
-    the ``ekf.model`` docstring.
+    the ``ekf.model`` docstring. The fields both families read are ``SharedSettings``'s.
 
     cov_rate_hz: covariance propagation grid [Hz].
     cov_output_hz: rate of ``Estimate.cov`` [Hz].
@@ -35,7 +34,6 @@ class EkfConfig(GnssErrorSettings):
     initial_heading_sd: σ of the given heading [rad].
     heading_speed_min: speed above which the GNSS track gives a heading [m/s].
     sideslip_sd: σ of the track's sideslip against the body heading [rad].
-    accel_scale: estimate accelerometer scale factors (None: the shared rule of sensors.model).
     min_tilt_sd: levelling σ floor besides the accelerometer-bias term [rad].
     max_gnss_sd_v: GNSS heights whose own σ_v exceeds this are not used [m].
     baro_reaccept_s: after this long of refused baro samples (≥ 3) the next is forced in [s].
@@ -49,18 +47,8 @@ class EkfConfig(GnssErrorSettings):
     align_forget_s: acceleration-matching forgetting time [s].
     align_sd_max: heading σ below which the matched heading is accepted [rad].
     gap_heading_forget_s: IMU gaps at least this long make the heading unknown again [s].
-    use_mag: magnetometer headings when the drive has a magnetometer.
-    mag_interval_s: at most one magnetometer heading per this many seconds [s].
-    mag_heading_floor: heading σ floor for declination and soft-iron errors [rad].
-    mag_bias_sd: prior σ of each hard-iron component [µT].
     mag_bias_rw: hard-iron random walk [µT/√s].
     mag_reaccept_s: after this long of refused headings the next is forced in [s].
-    gnss_gm_sd_h, gnss_gm_sd_v, gnss_gm_tau_s: the GNSS error state (``GnssErrorSettings``).
-    baro_scale_sd: prior σ of the baro scale (None: the shared sensor model's).
-    loss_gnss_pos: robust loss of GNSS positions: "none" or "huber" (``ekf.model.huber_weight``).
-    loss_gnss_vel: robust loss of GNSS velocities ("none" or "huber").
-    loss_baro: robust loss of baro samples ("none" or "huber").
-    loss_threshold_sd: Huber thresholds k (GNSS position, GNSS velocity, baro) [σ].
     post_gate: ``ekf-rts``: drop fixes that misfit the smoothed trajectory, rerun (``ekf.regate``).
     post_gate_rounds: at most this many post-smoothing gate rounds.
     post_gate_prob: p of the post-smoothing gate's 1 − (1 − p)² χ² quantile (= graph's).
@@ -68,7 +56,6 @@ class EkfConfig(GnssErrorSettings):
     carry_heading_back: ``ekf-rts``: rerun from the start with a heading acquired in motion.
     fb_separation: ``ekf-rts``: run the filter backward too (``info["fb_separation"]``).
     tilt_consider: hold the attitude as consider states while heading is unknown and tilt σ > 5°.
-    zupt: zero-velocity updates inside the detected standstills (``nav.standstill``).
     """
 
     cov_rate_hz: float = 10.0
@@ -83,7 +70,6 @@ class EkfConfig(GnssErrorSettings):
     initial_heading_sd: float = 2.0 * DEG
     heading_speed_min: float = 0.5
     sideslip_sd: float = SIDESLIP_SD
-    accel_scale: bool | None = None
     min_tilt_sd: float = 1e-4  # rad, levelling residual besides the accel-bias term
     max_gnss_sd_v: float = 15.0
     baro_reaccept_s: float = 1.0
@@ -97,22 +83,8 @@ class EkfConfig(GnssErrorSettings):
     align_forget_s: float = 30.0
     align_sd_max: float = 15.0 * DEG
     gap_heading_forget_s: float = 5.0
-    use_mag: bool = True
-    # magnetometer errors (interference, soft iron) are correlated over seconds: 10 Hz of
-    # headings would be trusted 10× too much
-    mag_interval_s: float = MAG_INTERVAL_S
-    mag_heading_floor: float = MAG_HEADING_FLOOR
-    mag_bias_sd: float = MAG_BIAS_SD_UT
     mag_bias_rw: float = 0.01
     mag_reaccept_s: float = 20.0
-    baro_scale_sd: float | None = None
-    # Huber: rows' variances R/w, w = min(1, k/e), e = √NIS of the horizontal pair and of the
-    # height, each on its own
-    loss_gnss_pos: str = "none"
-    loss_gnss_vel: str = "none"
-    loss_baro: str = "none"
-    # the graph's rule (GraphConfig.loss_threshold_sd): a Mahalanobis norm in σ
-    loss_threshold_sd: tuple[float, float, float] = (2.0, 2.0, 2.0)
     # the graph's post-solve gate for ekf-rts: remove the fixes that do not fit the smoothed
     # trajectory and run the forward and RTS passes again
     post_gate: bool = True
@@ -129,9 +101,6 @@ class EkfConfig(GnssErrorSettings):
     # a levelling in motion: the GNSS and baro updates hold the attitude as Schmidt consider
     # states (ekf.steps.tilt_held)
     tilt_consider: bool = True
-    # zero-velocity updates where the IMU and the GNSS speed agree on a standstill
-    # (nav.standstill; GraphConfig.zupt alike)
-    zupt: bool = True
 
     def huber_k(self) -> tuple[float, float, float]:
         """The kernel's Huber thresholds (GNSS position, velocity, baro) [σ], 0 where the

@@ -7,16 +7,15 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ...sensors.gnss_model import GnssErrorSettings
-from ...sensors.magnetometer import MAG_BIAS_SD_UT, MAG_HEADING_FLOOR, MAG_INTERVAL_S
 from ...types import Drive
+from ..shared_settings import SharedSettings
 from .model.robust import check_loss
 
 
 @dataclass(frozen=True)
-class GraphConfig(GnssErrorSettings):
+class GraphConfig(SharedSettings):
     """Settings of the factor-graph smoothers (SI units); docs/graph.md gives the measurements
-    behind the defaults.
+    behind the defaults. The fields both families read are ``SharedSettings``'s.
 
     keyframe_dt: keyframe spacing [s] (``low_rate_config``: 5 s on averaged ≤ 2 Hz IMU logs).
     bias_lag_tol: re-set the baro bias read lag λ when τd moves further than this [s].
@@ -46,21 +45,9 @@ class GraphConfig(GnssErrorSettings):
     velocity_screen: pre-gate GNSS velocity against the IMU's specific-force integral.
     verbose: print the solver's progress.
     solver: "auto", "banded" (error when the graph does not fit) or "general".
-    loss_gnss_pos: robust loss of a GNSS position fix: "none", "huber" or "cauchy".
-    loss_gnss_vel: robust loss of a GNSS velocity fix.
-    loss_baro: robust loss of a baro sample.
-    loss_threshold_sd: loss thresholds [σ] (GNSS position, GNSS velocity, baro).
-    use_mag: heading factors and a hard-iron variable when the drive has a magnetometer.
-    mag_interval_s: at most one heading factor per this many seconds [s].
-    mag_heading_floor: heading σ floor [rad].
-    mag_bias_sd: prior σ of each hard-iron component [µT].
     mag_loss_sd: Huber threshold of the heading factors [σ].
-    gnss_gm_sd_h, gnss_gm_sd_v, gnss_gm_tau_s: the GNSS error state (``GnssErrorSettings``).
-    accel_scale: carry accelerometer scale factors (None: the shared rule of sensors.model).
     accel_scale_rw: online per-segment k_a random walk, times k_a's prior σ [1/√s].
-    baro_scale_sd: prior σ of the baro scale (None: the shared sensor model's).
     init_attitude: initial keyframe attitudes: "auto", "triad" or "ekf".
-    zupt: zero-velocity priors on the keyframes inside detected standstills (``nav.standstill``).
     """
 
     keyframe_dt: float = 1.0
@@ -93,22 +80,9 @@ class GraphConfig(GnssErrorSettings):
     velocity_screen: bool = True
     verbose: bool = False
     solver: str = "auto"
-    loss_gnss_pos: str = "none"
-    loss_gnss_vel: str = "none"
-    loss_baro: str = "none"
-    loss_threshold_sd: tuple[float, float, float] = (2.0, 2.0, 2.0)
-    use_mag: bool = True
-    mag_interval_s: float = MAG_INTERVAL_S
-    mag_heading_floor: float = MAG_HEADING_FLOOR
-    mag_bias_sd: float = MAG_BIAS_SD_UT
     mag_loss_sd: float = 3.0
-    accel_scale: bool | None = None
     accel_scale_rw: float = 2e-3
-    baro_scale_sd: float | None = None
     init_attitude: str = "auto"
-    # zero-velocity priors where the IMU and the GNSS speed agree on a standstill
-    # (nav.standstill; EkfConfig.zupt alike)
-    zupt: bool = True
 
     def __post_init__(self) -> None:
         self.gnss_gm  # noqa: B018 -- validates the Gauss-Markov GNSS error settings
