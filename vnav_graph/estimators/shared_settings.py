@@ -6,6 +6,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
 from ..sensors.gnss_model import GnssErrorSettings
 from ..sensors.magnetometer import MAG_BIAS_SD_UT, MAG_HEADING_FLOOR, MAG_INTERVAL_S
 
@@ -44,3 +46,17 @@ class SharedSettings(GnssErrorSettings):
     # zero-velocity updates (ekf) or priors (graphs) where the IMU and the GNSS speed agree
     # on a standstill
     zupt: bool = True
+
+    def check_losses(self, allowed: tuple[str, ...]) -> None:
+        """``ValueError`` naming the config class unless each loss is one of ``allowed`` (the
+        family's) and the thresholds are three finite values > 0."""
+        who = type(self).__name__
+        for what in ("loss_gnss_pos", "loss_gnss_vel", "loss_baro"):
+            if getattr(self, what) not in allowed:
+                raise ValueError(f"{who}.{what} must be one of {', '.join(allowed)}, not "
+                                 f"{getattr(self, what)!r}")
+        if len(self.loss_threshold_sd) != 3 or not all(
+                np.isfinite(k) and k > 0 for k in self.loss_threshold_sd):
+            raise ValueError(f"{who}.loss_threshold_sd must be three positive thresholds [σ] "
+                             f"(GNSS position, GNSS velocity, baro), not "
+                             f"{self.loss_threshold_sd!r}")

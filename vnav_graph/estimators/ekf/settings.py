@@ -8,8 +8,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
-
 from ...config import DEG
 from ...nav.course import SIDESLIP_SD
 from ..shared_settings import SharedSettings
@@ -113,13 +111,7 @@ class EkfConfig(SharedSettings):
         self.gnss_gm  # noqa: B018 -- validates the Gauss-Markov GNSS error settings
         if not (self.cov_rate_hz > 0 and self.cov_output_hz > 0):
             raise ValueError("EkfConfig.cov_rate_hz / cov_output_hz: must be > 0")
-        for what in ("loss_gnss_pos", "loss_gnss_vel", "loss_baro"):
-            if getattr(self, what) not in LOSSES:
-                raise ValueError(f"EkfConfig.{what} must be one of {', '.join(LOSSES)}, not "
-                                 f"{getattr(self, what)!r}")
-        if len(self.loss_threshold_sd) != 3 or not all(
-                np.isfinite(k) and k > 0 for k in self.loss_threshold_sd):
-            raise ValueError("EkfConfig.loss_threshold_sd: three thresholds > 0 [σ]")
+        self.check_losses(LOSSES)
         if self.post_huber_rounds < 0:
             raise ValueError("EkfConfig.post_huber_rounds: must be ≥ 0")
         if not 0.5 < self.gate_prob < 1.0:

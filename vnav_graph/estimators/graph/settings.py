@@ -9,7 +9,7 @@ import numpy as np
 
 from ...types import Drive
 from ..shared_settings import SharedSettings
-from .model.robust import check_loss
+from .model.robust import LOSSES
 
 
 @dataclass(frozen=True)
@@ -107,13 +107,7 @@ class GraphConfig(SharedSettings):
         if self.init_attitude not in INIT_ATTITUDES:
             raise ValueError(f"GraphConfig.init_attitude must be one of {INIT_ATTITUDES}, "
                              f"not {self.init_attitude!r}")
-        for f in ("loss_gnss_pos", "loss_gnss_vel", "loss_baro"):
-            check_loss(getattr(self, f), f)
-        if len(self.loss_threshold_sd) != 3 or not all(
-                np.isfinite(k) and k > 0 for k in self.loss_threshold_sd):
-            raise ValueError("GraphConfig.loss_threshold_sd must be three positive thresholds "
-                             "[σ] (GNSS position, GNSS velocity, baro), not "
-                             f"{self.loss_threshold_sd!r}")
+        self.check_losses(LOSSES)
 
 
 INIT_ATTITUDES = ("auto", "triad", "ekf")

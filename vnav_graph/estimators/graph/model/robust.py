@@ -14,12 +14,7 @@ import numpy as np
 from ....sensors.robust import LOSSES, weight_and_loss
 from ....types.streams import FloatArray
 
-__all__ = ["LOSSES", "check_loss", "reweight", "robust_noise", "weight_and_loss"]
-
-
-def check_loss(name: str, what: str) -> None:
-    if name not in LOSSES:
-        raise ValueError(f"GraphConfig.{what} must be one of {', '.join(LOSSES)}, not {name!r}")
+__all__ = ["LOSSES", "reweight", "robust_noise", "weight_and_loss"]
 
 
 def reweight(r: FloatArray, jac: FloatArray, dim: int, loss: str, k: float
