@@ -106,8 +106,8 @@ def velocity_consistency(t: FloatArray, pos_n: FloatArray, pos_sd: FloatArray,
     ok = (dt > 0) & (dt <= MAX_PAIR_DT_S)
     dts = np.where(ok, dt, 1.0)[:, None]
     r = (pos_n[1:] - pos_n[:-1]) / dts - 0.5 * (vel_n[1:] + vel_n[:-1])
-    var = ((pos_sd[1:] ** 2 + pos_sd[:-1] ** 2) / dts**2
-           + 0.25 * (vel_sd[1:] ** 2 + vel_sd[:-1] ** 2))
+    var_v = 0.25 * (vel_sd[1:] ** 2 + vel_sd[:-1] ** 2)  # the velocities' part of var r
+    var = (pos_sd[1:] ** 2 + pos_sd[:-1] ** 2) / dts**2 + var_v
     ok &= np.all(np.isfinite(r), axis=1) & np.all(np.isfinite(var) & (var > 0), axis=1)
     spike = _position_spikes(r, var, ok)
     ok &= ~spike[1:] & ~spike[:-1]  # pairs k−1 → k and k → k+1 of a spike at fix k
@@ -116,12 +116,10 @@ def velocity_consistency(t: FloatArray, pos_n: FloatArray, pos_sd: FloatArray,
         return None
     z = np.minimum(r[ok] ** 2 / var[ok], WINSOR)
     ratio = np.mean(z, axis=0)
-    vel_share = (np.mean(0.25 * (vel_sd[1:] ** 2 + vel_sd[:-1] ** 2)[ok], axis=0)
-                 / np.mean(var[ok], axis=0))
+    mean_var = np.mean(var[ok], axis=0)
     excess = ratio > VEL_CONSISTENCY_LIMIT
-    unattributed = excess & (vel_share < MIN_VEL_SHARE)
-    added = np.where(excess & ~unattributed,
-                     2.0 * (ratio - 1.0) * np.mean(var[ok], axis=0), 0.0)
+    unattributed = excess & (np.mean(var_v[ok], axis=0) / mean_var < MIN_VEL_SHARE)
+    added = np.where(excess & ~unattributed, 2.0 * (ratio - 1.0) * mean_var, 0.0)
     return VelocityConsistency(ratio=ratio, added_var=added, pairs=n,
                                spikes=int(spike.sum()),
                                unattributed=tuple(bool(x) for x in unattributed))

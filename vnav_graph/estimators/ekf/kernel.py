@@ -208,6 +208,7 @@ class FilterOutput(NamedTuple):
     inn_zupt: Any
     rej_zupt: Any
 
+
 @njit(cache=True)
 def _innovation_records(ng, nb, nm, kinds):
     """Each sensor's innovations (NaN until used) and refusal flags: GNSS position, velocity

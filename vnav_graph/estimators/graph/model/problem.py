@@ -41,6 +41,7 @@ from .robust import reweight
 # information (1e-12 of a 1 m fix's) and its velocity rows stay
 POS_DROPPED_SD = 1e6
 
+
 def imu_gaps(t: np.ndarray, kf_idx: np.ndarray) -> np.ndarray:
     """Boolean (n_kf − 1,): interval k contains an IMU logging gap.
 
@@ -238,12 +239,10 @@ def setup(drive: Drive, cfg: GraphConfig, causal: bool = False) -> Problem:
     use, pos_drop, n_vel = gnss_gates(drive, model, cfg, t_g, pos, t_kf, g_kf, pri, g0,
                                       causal)
     P = Problem(drive, cfg, origin, h0, g0, omega_t, kf_idx, t_kf, dense, p, spec, bspec,
-                t_g, pos, model.gnss_pos_sd, vel, model.gnss_vel_sd,
-                np.asarray(gn.lever_arm_b, float),
-                 g_kf, use)
+                t_g, pos, np.where(pos_drop[:, None], POS_DROPPED_SD, model.gnss_pos_sd), vel,
+                model.gnss_vel_sd, np.asarray(gn.lever_arm_b, float), g_kf, use,
+                g_pos_drop=pos_drop)
     P.gap = gaps
-    P.g_pos_drop = pos_drop
-    P.g_pos_sd = np.where(pos_drop[:, None], POS_DROPPED_SD, P.g_pos_sd)
     P.gnss_vel_note = model.gnss_vel_note()
     if np.any(P.lever):
         P.g_omega = np.column_stack([np.interp(t_g, imu.t, imu.gyro_b[:, a]) for a in range(3)])
