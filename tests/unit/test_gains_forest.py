@@ -63,6 +63,25 @@ def test_real_time_gains_come_from_the_online_blocks():
                for s in gain_lines(gain_rows(_runs())))
 
 
+def test_a_gain_ci_that_excludes_zero_on_an_unresolved_difference_says_why():
+    # differences that scale with the filter's error, but one seed the other way: the t
+    # interval of d contains 0, the delta-method interval of the gain does not
+    a = [2.92, 3.56, 1.46, 2.79, 1.88]
+    b = [1.59, 2.27, 1.64, 1.86, 1.38]
+    runs = [_row("ekf-rts", i, x) for i, x in enumerate(a)]
+    runs += [_row("graph-batch", i, x) for i, x in enumerate(b)]
+    row = next(r for r in gain_rows(runs) if r["key"] == "horiz_rmse_m")
+    assert row["diff_ci95"][0] < 0 < row["diff_ci95"][1]
+    assert row["gain_ci95"][0] > 0 and row["verdict"] == "not resolved"
+    d = np.subtract(a, b)
+    line = next(s for s in gain_lines([row]))
+    assert f"d = {d.mean():.3g} [{row['diff_ci95'][0]:+.3g}, " in line
+    assert "contains 0" in line and "excludes it" in line
+    # a resolved or a zero-straddling gain needs no such clause
+    assert not any("contains 0" in s for s in gain_lines(gain_rows(_runs())))
+    assert forest_png([row]) is not None
+
+
 def test_forest_png_is_wide_and_none_without_gains():
     import io
 

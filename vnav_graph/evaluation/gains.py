@@ -26,9 +26,9 @@ FINAL_ONLY = ("alt_p95_m", "horiz_p95_m", "heading_p95_deg", "vel_down_p95_mps")
 # (label, filter, graph, real time?)
 FAMILY_PAIRS = (("real time", "ekf", "graph-isam2", True),
                 ("offline", "ekf-rts", "graph-batch", False))
-# (key, label): the metrics of the forest plot
-GAIN_METRICS = (("alt_rmse_m", "altitude RMSE"), ("horiz_rmse_m", "horizontal RMSE"),
-                ("heading_rmse_deg", "heading RMSE"))
+# (key, label, unit): the metrics of the forest plot
+GAIN_METRICS = (("alt_rmse_m", "altitude RMSE", "m"), ("horiz_rmse_m", "horizontal RMSE", "m"),
+                ("heading_rmse_deg", "heading RMSE", "deg"))
 
 
 def real_time_rows(runs: list[dict[str, Any]], a: str, b: str) -> list[dict[str, Any]]:
@@ -54,8 +54,10 @@ def real_time_rows(runs: list[dict[str, Any]], a: str, b: str) -> list[dict[str,
 
 def gain_rows(runs: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """One row per (scenario, comparison, metric) the runs allow: ``{"scenario",
-    "comparison", "a", "b", "key", "label", "n", "gain", "gain_ci95", "verdict", "counts"}``
-    (``gain``/``gain_ci95`` None when there is no mean or fewer than two paired seeds)."""
+    "comparison", "a", "b", "key", "label", "unit", "n", "gain", "gain_ci95", "diff",
+    "diff_ci95", "verdict", "counts"}`` (``gain``/``gain_ci95`` None when there is no mean or
+    fewer than two paired seeds; ``diff``/``diff_ci95``: the paired difference a − b that the
+    win rule judges)."""
     out = []
     for sc in dict.fromkeys(r["scenario"] for r in runs):
         for comp, a, b, rt in FAMILY_PAIRS:
@@ -63,27 +65,45 @@ def gain_rows(runs: list[dict[str, Any]]) -> list[dict[str, Any]]:
             have = {r["estimator"] for r in rows if r["scenario"] == sc}
             if a not in have or b not in have:
                 continue
-            for key, label in GAIN_METRICS:
+            for key, label, unit in GAIN_METRICS:
                 w = win_rule(rows, sc, a, b, key)
                 s = w["stats"]
                 if s["n"] == 0:
                     continue
                 out.append({"scenario": sc, "comparison": comp, "a": a,
-                            "b": b, "key": key, "label": label, "n": s["n"],
+                            "b": b, "key": key, "label": label, "unit": unit, "n": s["n"],
                             "gain": s["gain"], "gain_ci95": s["gain_ci95"],
+                            "diff": s["diff"], "diff_ci95": s["diff_ci95"],
                             "verdict": w["verdict"], "counts": w["counts"]})
     return out
 
 
+def _excludes_zero(iv: list[float] | None) -> bool:
+    return iv is not None and (iv[0] > 0 or iv[1] < 0)
+
+
 def gain_lines(rows: list[dict[str, Any]]) -> list[str]:
-    """One Markdown bullet per gain row: the gain with its CI, the seeds and the verdict."""
+    """One Markdown bullet per gain row: the gain with its CI, the seeds and the verdict.
+
+    The verdict judges the paired difference (Student t), the gain's CI is the delta
+    method's, which scales each seed's difference by the filter's error on it; where the two
+    disagree (a gain CI that excludes 0 on a difference that is not resolved) the line gives
+    the difference's CI, so the words and the numbers do not contradict each other."""
     out = []
     for r in rows:
         if r["gain"] is None:
             continue
         ci = ("no CI" if r["gain_ci95"] is None else
               f"[{100 * r['gain_ci95'][0]:+.1f} %, {100 * r['gain_ci95'][1]:+.1f} %]")
+        verdict = r["verdict"]
+        dci = r.get("diff_ci95")
+        if verdict == "not resolved" and _excludes_zero(r["gain_ci95"]) and dci is not None:
+            unit = r.get("unit", "")
+            verdict += (f": the win rule's paired difference d = {r['diff']:.3g} "
+                        f"[{dci[0]:+.3g}, {dci[1]:+.3g}] {unit} contains 0; the gain's "
+                        "delta-method CI, which scales each seed by the filter's error, "
+                        "excludes it")
         out.append(f"- {r['scenario']}, {r['comparison']} ({r['a']} → {r['b']}), "
                    f"{r['label']}: gain {100 * r['gain']:+.1f} % {ci} over {r['n']} seeds, "
-                   f"{r['verdict']}")
+                   f"{verdict}")
     return out

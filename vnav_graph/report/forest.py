@@ -4,7 +4,9 @@ each a paired gain g = 1 − mean(graph)/mean(filter) over the seeds with its 95
 (``evaluation.gains.gain_rows``). Positive: the graph lower.
 
 A filled marker is a win the win rule counts (the CI of the paired difference excludes 0 and
-the winner is not bought by overconfidence); a hollow one is not resolved or vetoed. The x
+the winner is not bought by overconfidence); a hollow one is not resolved or vetoed. A dashed
+interval is a gain CI (delta method) that excludes 0 on a paired difference whose CI (the
+rule's test) does not: the two disagree there, and the verdict follows the rule. The x
 axis spans −100 % … +100 %; a gain or an interval end beyond −100 % is drawn at the edge with
 an arrow and its value written beside it, so one large loss does not squeeze the others.
 """
@@ -32,7 +34,7 @@ def forest_png(rows: Sequence[dict[str, Any]], title: str = "") -> bytes | None:
     metrics = list(dict.fromkeys(r["label"] for r in rows))
     labels = list(dict.fromkeys(_row_label(r) for r in rows))
     h = 1.4 + 0.32 * len(labels)
-    fig = canvas.figure(11.0, h, left=0.30, wspace=0.12, right=0.985, bottom_in=0.8,
+    fig = canvas.figure(11.0, h, left=0.35, wspace=0.12, right=0.985, bottom_in=0.8,
                         top_in=0.6 if title else 0.35)
     axes = fig.subplots(1, len(metrics), sharey=True, squeeze=False)[0]
     ypos = {lab: len(labels) - 1 - i for i, lab in enumerate(labels)}
@@ -53,9 +55,11 @@ def forest_png(rows: Sequence[dict[str, Any]], title: str = "") -> bytes | None:
                for k, c in COMPARISON_COLORS.items()]
     handles += [Line2D([], [], marker="o", ls="", color="0.3", label="win counted"),
                 Line2D([], [], marker="o", ls="", mfc="white", color="0.3",
-                       label="not resolved / vetoed")]
-    fig.legend(handles=handles, loc="lower center", ncol=4, fontsize=8, frameon=False,
-               bbox_to_anchor=(0.6, 0.0))
+                       label="not resolved / vetoed"),
+                Line2D([], [], ls="--", color="0.3",
+                       label="gain CI excludes 0, difference CI does not")]
+    fig.legend(handles=handles, loc="lower center", ncol=5, fontsize=8, frameon=False,
+               bbox_to_anchor=(0.5, 0.0))
     if title:
         fig.suptitle(title, fontsize=10)
     return canvas.png(fig)
@@ -69,7 +73,8 @@ def _one(ax: Any, r: dict[str, Any], y: float) -> None:
     if ci is not None:
         lo, hi = max(ci[0], XMIN), min(ci[1], 100.0)
         if hi > XMIN:
-            ax.plot([lo, hi], [y, y], color=color, lw=1.6)
+            split = r.get("verdict") == "not resolved" and (ci[0] > 0 or ci[1] < 0)
+            ax.plot([lo, hi], [y, y], color=color, lw=1.6, ls="--" if split else "-")
     gx = max(g, XMIN)
     ax.plot([gx], [y], marker="<" if g < XMIN else "o", ms=6, color=color,
             mfc=color if r.get("counts") else "white", ls="")
