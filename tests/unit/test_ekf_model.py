@@ -11,19 +11,6 @@ from vnav_graph.estimators.ekf.alignment import level_tilt_bias_jacobian
 from vnav_graph.geo.earth import gravity
 from vnav_graph.geo.frames import attitude_error_n, quat_to_mat, rph_to_quat
 from vnav_graph.nav.levelling import coarse_level
-from vnav_graph.sensors.baro import baro_jacobian, measure_baro
-
-
-def test_baro_twins_equal_shared_model(rng):
-    # the njit twins must be exactly the shared model of sensors/baro.py
-    h0 = 500.0
-    for _ in range(50):
-        h, vup = rng.uniform(0, 3000), rng.normal(0, 10)
-        s, tau, b = rng.normal(0, 0.02), rng.uniform(0, 0.5), rng.normal(0, 5)
-        assert km.baro_predict(h, vup, s, tau, b, h0) == float(
-            measure_baro(h, vup, s, tau, b, h0))
-        np.testing.assert_allclose(km.baro_row(h, vup, s, tau, h0),
-                                   baro_jacobian(h, vup, s, tau, h0), rtol=0, atol=1e-12)
 
 
 def test_coarse_level_closed_form():

@@ -50,7 +50,7 @@ def test_normal_gravity_reference_values():
     assert grad == pytest.approx(-3.086e-6, rel=3e-3)
 
 
-def test_radii_and_scalar_twins():
+def test_radii_and_gravity_compiled_for_scalars_equal_the_array_forms():
     rn, re = earth.radii(0.0)
     assert rn == pytest.approx(6335439.327, abs=1e-3)  # a(1−e²) at the equator
     assert re == pytest.approx(6378137.0, abs=1e-6)

@@ -57,6 +57,22 @@ def test_loop3_removes_constant_bias():
     np.testing.assert_allclose(x2[-1, 0], b / (k[1] - WS2), rtol=5e-3)
 
 
+@pytest.mark.parametrize("order", [2, 3])
+@pytest.mark.parametrize("dt", [0.005, 1.0, 60.0])
+def test_zoh_is_the_matrix_exponential(order, dt):
+    # the loops' compiled Taylor series against scipy's Padé expm of [[A·Δt, B·Δt], [0, 0]]
+    from scipy.linalg import expm
+
+    a = np.array([[0.0, 1.0, 0.0], [WS2, 0.0, -1.0], [0.0, 0.0, 0.0]])[:order, :order]
+    m = np.zeros((order + 1, order + 1))
+    m[:order, :order] = a * dt
+    m[1, order] = dt
+    em = expm(m)
+    phi, gam = discrete_model(dt, WS2, order)
+    np.testing.assert_allclose(phi, em[:order, :order], rtol=1e-13, atol=1e-15)
+    np.testing.assert_allclose(gam, em[:order, order], rtol=1e-13, atol=1e-15)
+
+
 def test_loop3_pole_placement():
     tau = 20.0
     dt = 0.01

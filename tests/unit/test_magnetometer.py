@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from vnav_graph.nav.rotations import skew3
-from vnav_graph.sensors.magnetometer import field_azimuth, heading_sd, mag_heading_row, wrap_pi
+from vnav_graph.sensors.magnetometer import heading_sd, mag_heading_row, wrap_pi
 
 M_N = np.array([20.0, 1.5, 43.0])  # NED [µT], dip 65°, declination 4.3°
 DECL = np.arctan2(M_N[1], M_N[0])
@@ -35,9 +35,7 @@ def test_true_attitude_and_bias_give_the_declination(att: tuple[float, float, fl
     r, h_psi, h_b, hor = mag_heading_row(z, b, c, DECL)
     assert r == pytest.approx(0.0, abs=1e-12)
     assert hor == pytest.approx(np.hypot(M_N[0], M_N[1]), rel=1e-12)
-    az, m_n, _ = field_azimuth(z[None], b, c[None])
-    np.testing.assert_allclose(m_n[0], M_N, atol=1e-12)
-    assert az[0] == pytest.approx(DECL, abs=1e-12)
+    assert mag_heading_row(z, b, c, 0.0)[0] == pytest.approx(DECL, abs=1e-12)  # the azimuth
     # closed form of the tilt and yaw components (module docstring)
     h2 = M_N[0] ** 2 + M_N[1] ** 2
     np.testing.assert_allclose(h_psi, [-M_N[0] * M_N[2] / h2, -M_N[1] * M_N[2] / h2, 1.0],
@@ -64,25 +62,27 @@ def test_ekf_jacobians_match_finite_differences(att: tuple[float, float, float])
         bp = mag_heading_row(z, b + d, c, DECL)[0]
         bm = mag_heading_row(z, b - d, c, DECL)[0]
         assert (bp - bm) / (2 * eps) == pytest.approx(h_b[i], rel=1e-5, abs=1e-9)
-    # vectorised twin: same azimuth and gradient; −g C is the bias row
-    az, m_n, g = field_azimuth(z[None], b, c[None])
-    assert wrap_pi(az[0] - DECL) == pytest.approx(r0, abs=1e-12)
-    np.testing.assert_allclose(-g[0] @ c, h_b, atol=1e-12)
+    # the closed form: azimuth atan2(m_E, m_N) of m = C (z − b), bias row −g C with
+    # g = (−m_E, m_N, 0)/H²
+    m = c @ (z - b)
+    assert wrap_pi(np.arctan2(m[1], m[0]) - DECL) == pytest.approx(r0, abs=1e-12)
+    g = np.array([-m[1], m[0], 0.0]) / (m[0] ** 2 + m[1] ** 2)
+    np.testing.assert_allclose(-g @ c, h_b, atol=1e-12)
 
 
 def test_graph_chain_rule_matches_finite_differences() -> None:
-    """The graph's retraction R Exp(ω): ∂a/∂ω = g · (−R [(z − b)×])."""
+    """The graph's retraction R Exp(ω): ∂a/∂ω = (∂a/∂ψ) R, the row's n-frame column times R."""
     c = _c_nb(0.2, -0.1, 1.2)
     z = c.T @ M_N + np.array([1.0, 2.0, -1.0])
     b = np.array([0.5, 1.5, -0.5])
-    az0, _, g = field_azimuth(z[None], b, c[None])
-    jac = g[0] @ (-c @ skew3(z - b))
+    _, h_psi, _, _ = mag_heading_row(z, b, c, 0.0)
+    jac = h_psi @ c
     eps = 1e-6
     for i in range(3):
         d = np.zeros(3)
         d[i] = eps
-        ap = field_azimuth(z[None], b, (c @ _expm(d))[None])[0][0]
-        am = field_azimuth(z[None], b, (c @ _expm(-d))[None])[0][0]
+        ap = mag_heading_row(z, b, c @ _expm(d), 0.0)[0]
+        am = mag_heading_row(z, b, c @ _expm(-d), 0.0)[0]
         assert (ap - am) / (2 * eps) == pytest.approx(jac[i], rel=1e-6, abs=1e-9)
 
 

@@ -6,7 +6,13 @@ import pytest
 from vnav_graph.config import IMU_PRESETS, BaroSpec
 from vnav_graph.geo.earth import OMEGA_IE, gravity
 from vnav_graph.sensors import noise
-from vnav_graph.sensors.baro import baro_jacobian, measure_baro, simulate_baro
+from vnav_graph.sensors.baro import (
+    baro_jacobian,
+    baro_predict,
+    baro_row,
+    measure_baro,
+    simulate_baro,
+)
 from vnav_graph.sensors.noise import gauss_markov, linear_recurrence, random_walk, white_sd
 from vnav_graph.simulation import simulate
 
@@ -109,6 +115,23 @@ def test_baro_jacobian_matches_finite_differences():
         xm[i] -= eps
         fd.append((measure_baro(*xp, h0=h0) - measure_baro(*xm, h0=h0)) / (2 * eps))
     np.testing.assert_allclose(jac, fd, rtol=1e-7, atol=1e-7)  # model is bilinear: FD exact-ish
+
+
+def test_baro_arrays_map_the_one_compiled_model_over_broadcast_inputs(rng):
+    # the array forms (the graph's) are the scalar model (the filters') sample by sample,
+    # bitwise, and broadcast a scalar scale/latency as numpy would
+    h0 = 500.0
+    h, vup, b = rng.uniform(0, 3000, 40), rng.normal(0, 10, 40), rng.normal(0, 5, 40)
+    s, tau = rng.normal(0, 0.02), rng.uniform(0, 0.5)
+    pred = measure_baro(h, vup, s, tau, b, h0)
+    jac = baro_jacobian(h.reshape(8, 5), vup.reshape(8, 5), s, tau, h0)
+    assert pred.shape == (40,) and jac.shape == (8, 5, 5)
+    for i in range(40):
+        assert pred[i] == baro_predict(h[i], vup[i], s, tau, b[i], h0)
+        np.testing.assert_array_equal(jac.reshape(40, 5)[i], baro_row(h[i], vup[i], s, tau, h0))
+    # the closed form of docs/design.md's model, in the same operation order
+    np.testing.assert_array_equal(pred, h0 + (1.0 + s) * (h - h0 - vup * tau) + b)
+    assert np.ndim(measure_baro(1.0, 2.0, 0.0, 0.0, 0.0, 0.0)) == 0
 
 
 def test_simulation_is_deterministic_per_seed():

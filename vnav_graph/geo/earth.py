@@ -3,12 +3,17 @@
 References: NIMA TR8350.2 (WGS-84, 3rd ed.); Groves, *Principles of GNSS, Inertial and
 Multisensor Integrated Navigation Systems*, 2nd ed., §2.4 and §5.4 (eqs. 2.105-2.106, 2.134,
 5.44). All functions are vectorised over numpy arrays; latitude in radians, height in metres
-above the ellipsoid.
+above the ellipsoid. The radii and gravity are written once, as plain arithmetic
+(``radii_of`` / ``gravity_of``), run by numpy over arrays (``radii``, ``gravity``) and compiled
+by numba for scalars in the mechanisation hot loops (``radii_scalar``, ``gravity_scalar``).
 """
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
+from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 A = 6378137.0  # semi-major axis [m]
@@ -24,11 +29,25 @@ _M = OMEGA_IE**2 * A**2 * B / GM
 G0 = 9.80665  # standard gravity [m/s^2] (ISA, unit conversions only)
 
 
-def radii(lat: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Meridian R_N and transverse (prime vertical) R_E radii of curvature [m] (Groves 2.105-6)."""
-    s2 = np.sin(np.asarray(lat, dtype=float)) ** 2
+def radii_of(lat: Any) -> Any:
+    """Meridian R_N and transverse (prime vertical) R_E radii of curvature [m] (Groves 2.105-6)
+    of a float or float array ``lat`` [rad]: the formula, for numpy and numba alike."""
+    s2 = np.sin(lat) ** 2
     w = np.sqrt(1.0 - E2 * s2)
     return A * (1.0 - E2) / w**3, A / w
+
+
+def radii(lat: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Meridian R_N and transverse (prime vertical) R_E radii of curvature [m] (Groves 2.105-6)."""
+    return radii_of(np.asarray(lat, dtype=float))
+
+
+def gravity_of(lat: Any, h: Any) -> Any:
+    """Normal gravity γ(lat, h) [m/s²] of floats or float arrays: the formula of ``gravity``,
+    for numpy and numba alike."""
+    s2 = np.sin(lat) ** 2
+    g_surf = GAMMA_E * (1.0 + _K_SOM * s2) / np.sqrt(1.0 - E2 * s2)
+    return g_surf * (1.0 - 2.0 / A * (1.0 + F + _M - 2.0 * F * s2) * h + 3.0 / A**2 * h**2)
 
 
 def gravity(lat: ArrayLike, h: ArrayLike) -> NDArray[np.float64]:
@@ -38,11 +57,7 @@ def gravity(lat: ArrayLike, h: ArrayLike) -> NDArray[np.float64]:
     (TR8350.2 eqs. 4-1 and 4-3). Directed along the ellipsoidal normal (the small north
     component, < 1e-5 m/s^2 below 10 km, is neglected everywhere in the package).
     """
-    lat = np.asarray(lat, dtype=float)
-    h = np.asarray(h, dtype=float)
-    s2 = np.sin(lat) ** 2
-    g_surf = GAMMA_E * (1.0 + _K_SOM * s2) / np.sqrt(1.0 - E2 * s2)
-    return g_surf * (1.0 - 2.0 / A * (1.0 + F + _M - 2.0 * F * s2) * h + 3.0 / A**2 * h**2)
+    return gravity_of(np.asarray(lat, dtype=float), np.asarray(h, dtype=float))
 
 
 def earth_rate_n(lat: ArrayLike) -> NDArray[np.float64]:
@@ -76,20 +91,6 @@ def vertical_gravity_gradient(lat: ArrayLike, h: ArrayLike) -> NDArray[np.float6
     return -2.0 * gravity(lat, h) / (np.sqrt(rn * re) + np.asarray(h, dtype=float))
 
 
-# Scalar, numba-compiled twins of ``radii`` and ``gravity`` for the mechanisation hot loops
-# (tested equal to the vectorised versions in tests/unit/test_earth.py).
-from numba import njit  # noqa: E402
-
-
-@njit(cache=True)
-def radii_scalar(lat: float) -> tuple[float, float]:
-    s2 = np.sin(lat) ** 2
-    w = np.sqrt(1.0 - E2 * s2)
-    return A * (1.0 - E2) / w**3, A / w
-
-
-@njit(cache=True)
-def gravity_scalar(lat: float, h: float) -> float:
-    s2 = np.sin(lat) ** 2
-    g_surf = GAMMA_E * (1.0 + _K_SOM * s2) / np.sqrt(1.0 - E2 * s2)
-    return g_surf * (1.0 - 2.0 / A * (1.0 + F + _M - 2.0 * F * s2) * h + 3.0 / A**2 * h**2)
+# the same formulas compiled for scalars (the mechanisation hot loops)
+radii_scalar = njit(cache=True)(radii_of)
+gravity_scalar = njit(cache=True)(gravity_of)

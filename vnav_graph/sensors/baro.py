@@ -6,14 +6,17 @@ h is the true ellipsoidal height, h0 the drive-origin height (the scale acts on 
 it), s a random-constant scale error, τd the latency, b a first-order Gauss-Markov bias and v
 white noise. Linearised in τd (seed 001 eq. 2): h_b ≈ h0 + (1+s)(h − h0 − v_up·τd) + b.
 
-``measure_baro`` is the model an estimator predicts with; ``baro_jacobian`` is its Jacobian
-with respect to (h, v_up, s, τd, b) — the EKF, the 7-state filter and the graph factor all use
-these two functions.
+The model is written once, as two compiled scalar functions: ``baro_predict`` (the predicted
+reading) and ``baro_row`` (its Jacobian with respect to the physical errors (h, v_up, s, τd, b)).
+The EKF's row calls them at one event, the 7-state filter at each sample, and the graph's
+factor over all samples through ``measure_baro`` / ``baro_jacobian``, which map the same
+compiled functions over broadcast arrays.
 """
 
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 from numpy.typing import ArrayLike
 
 from ..config import BaroSpec
@@ -25,30 +28,54 @@ from .noise import gauss_markov
 HPA_PER_M = 1.0 / 8.3  # near sea level, for converting a bias sigma to pressure
 
 
+@njit(cache=True)
+def baro_predict(h, v_up, scale, latency, bias, h0):  # pragma: no cover - numba
+    """Predicted baro altitude [m] from height h [m] and vertical speed v_up [m/s] at the
+    sample time: h0 + (1+s)(h − h0 − v_up·τd) + b, the latency applied by first-order
+    back-extrapolation h(t−τd) ≈ h − v_up·τd."""
+    return h0 + (1.0 + scale) * (h - h0 - v_up * latency) + bias
+
+
+@njit(cache=True)
+def baro_row(h, v_up, scale, latency, h0):  # pragma: no cover - numba
+    """∂h_b/∂(h, v_up, s, τd, b) of ``baro_predict``, shape (5,)."""
+    return np.array([1.0 + scale, -(1.0 + scale) * latency, h - h0 - v_up * latency,
+                     -(1.0 + scale) * v_up, 1.0])
+
+
+@njit(cache=True)
+def _map_baro(h, v_up, scale, latency, bias, h0, pred, jac):  # pragma: no cover - numba
+    for i in range(h.size):
+        pred[i] = baro_predict(h[i], v_up[i], scale[i], latency[i], bias[i], h0)
+        jac[i] = baro_row(h[i], v_up[i], scale[i], latency[i], h0)
+
+
+def _baro_arrays(h: ArrayLike, v_up: ArrayLike, scale: ArrayLike, latency: ArrayLike,
+                 bias: ArrayLike, h0: float) -> tuple[FloatArray, FloatArray]:
+    """``baro_predict`` and ``baro_row`` over the broadcast inputs: shapes (...) and (..., 5)."""
+    args = np.broadcast_arrays(*(np.asarray(x, dtype=float) for x in
+                                 (h, v_up, scale, latency, bias)))
+    shape = args[0].shape
+    flat = [np.ascontiguousarray(a).reshape(-1) for a in args]
+    pred = np.empty(flat[0].size)
+    jac = np.empty((flat[0].size, 5))
+    _map_baro(*flat, float(h0), pred, jac)
+    return pred.reshape(shape), jac.reshape(*shape, 5)
+
+
 def measure_baro(
     h: ArrayLike, v_up: ArrayLike, scale: ArrayLike, latency: ArrayLike, bias: ArrayLike,
     h0: float,
 ) -> FloatArray:
-    """Predicted baro altitude [m] from height h [m] and vertical speed v_up [m/s] at the
-    sample time, with the latency applied by first-order back-extrapolation h(t−τ) ≈ h − v·τ."""
-    h = np.asarray(h, dtype=float)
-    return h0 + (1.0 + np.asarray(scale)) * (h - h0 - np.asarray(v_up) * latency) + bias
+    """``baro_predict`` over broadcast arrays [m]."""
+    return _baro_arrays(h, v_up, scale, latency, bias, h0)[0]
 
 
 def baro_jacobian(
     h: ArrayLike, v_up: ArrayLike, scale: ArrayLike, latency: ArrayLike, h0: float
 ) -> FloatArray:
-    """∂h_b/∂(h, v_up, s, τd, b), shape (..., 5)."""
-    h = np.asarray(h, dtype=float)
-    v_up = np.asarray(v_up, dtype=float)
-    s = np.asarray(scale, dtype=float)
-    tau = np.asarray(latency, dtype=float)
-    one = np.ones(np.broadcast(h, v_up, s, tau).shape)
-    return np.stack(
-        [(1 + s) * one, -(1 + s) * tau * one, (h - h0 - v_up * tau) * one, -(1 + s) * v_up * one,
-         one],
-        axis=-1,
-    )
+    """``baro_row`` over broadcast arrays: ∂h_b/∂(h, v_up, s, τd, b), shape (..., 5)."""
+    return _baro_arrays(h, v_up, scale, latency, 0.0, h0)[1]
 
 
 def draw_baro_truth(spec: BaroSpec, rng: np.random.Generator) -> BaroTruth:

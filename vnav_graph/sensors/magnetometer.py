@@ -119,28 +119,6 @@ def field_and_info(drive: Drive, use: bool) -> tuple[FieldModel | None, dict[str
     return fm, info
 
 
-def field_azimuth(field_b: FloatArray, bias_b: FloatArray,
-                  c_nb: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Azimuth of the bias-corrected field rotated into n, vectorised.
-
-    Parameters
-    ----------
-    field_b : (N, 3) measured field in b [µT]
-    bias_b : (3,) or (N, 3) hard-iron bias in b [µT]
-    c_nb : (N, 3, 3) attitude, body → NED
-
-    Returns
-    -------
-    az : (N,) azimuth atan2(m̂_E, m̂_N) [rad]
-    m_n : (N, 3) the field in n [µT]
-    grad : (N, 3) ∂az/∂m̂_n [rad/µT]
-    """
-    m_n = np.einsum("nij,nj->ni", c_nb, np.asarray(field_b) - bias_b)
-    h2 = m_n[:, 0] ** 2 + m_n[:, 1] ** 2
-    grad = np.stack([-m_n[:, 1], m_n[:, 0], np.zeros(len(m_n))], axis=1) / h2[:, None]
-    return np.arctan2(m_n[:, 1], m_n[:, 0]), m_n, grad
-
-
 def wrap_pi(a: FloatArray | float) -> FloatArray | float:
     """Angle wrapped to [−π, π)."""
     return (np.asarray(a) + np.pi) % (2.0 * np.pi) - np.pi
@@ -155,7 +133,10 @@ def heading_sd(sd_ut: float, horizontal_ut: FloatArray | float,
 
 @njit(cache=True)
 def mag_heading_row(field_b, bias_b, c_nb, declination):  # pragma: no cover - numba
-    """Scalar twin of :func:`field_azimuth` for the EKF kernel.
+    """The heading model, written once: the azimuth a = atan2(m_E, m_N) of the bias-corrected
+    field rotated into n, m = C (z − b_m), against the declination, with its Jacobians in the
+    physical errors. The EKF's row calls it at each sample it uses; the graph's heading factor
+    (``estimators.graph.model.magnetometer``) at each keyframe, chaining ∂r/∂ψ through R.
 
     Returns (r, h_psi, h_bias, horizontal): r = wrap(a − D) [rad]; h_psi (3,) = ∂a/∂ψ for
     C̃ = (I + [ψ×]) C; h_bias (3,) = ∂a/∂b_m [rad/µT]; horizontal = H [µT].

@@ -138,9 +138,8 @@ in n − declination), row ∂y/∂ψ (yaw component 1, tilt components through 
 unknown the first sample acquires it (a heading reset like the track's, σ² = the heading noise
 plus the hard-iron prior and tilt variances projected on it).
 
-The baro prediction/Jacobian ``baro_predict`` / ``baro_row`` are scalar njit twins of
-``vnav_graph.sensors.baro.measure_baro`` / ``baro_jacobian`` (the shared model; tested equal in
-tests/unit/test_ekf_model.py).
+The baro prediction and its Jacobian are the shared model's (``sensors.baro.baro_predict`` /
+``baro_row``), placed into these columns by ``rows.baro_rows``.
 """
 
 from __future__ import annotations
@@ -167,19 +166,6 @@ IGH = IGE + 2  # the GNSS error state's down axis
 PBG, PBA, PKA, PSC, PTD, PBB, PMB, PGE = 0, 3, 6, 9, 10, 11, 12, 15
 PGH = PGE + 2
 NPAR = 18
-
-
-@njit(cache=True)
-def baro_predict(h, v_up, scale, latency, bias, h0):
-    """Scalar twin of ``sensors.baro.measure_baro``: h0 + (1+s)(h − h0 − v_up τ) + b [m]."""
-    return h0 + (1.0 + scale) * (h - h0 - v_up * latency) + bias
-
-
-@njit(cache=True)
-def baro_row(h, v_up, scale, latency, h0):
-    """Scalar twin of ``sensors.baro.baro_jacobian``: ∂h_b/∂(h, v_up, s, τ, b), shape (5,)."""
-    return np.array([1.0 + scale, -(1.0 + scale) * latency, h - h0 - v_up * latency,
-                     -(1.0 + scale) * v_up, 1.0])
 
 
 @njit(cache=True)

@@ -4,7 +4,7 @@ innovation ``y = h(x̃) − z`` (6,), the Jacobian rows ``H`` (6, NX) and the no
 
 The nominal state at the event (``lm``, ``vm``, ``cm`` = C_nb and the radii ``rn``, ``re``) is
 interpolated by ``kernel.run_filter``; the rows follow the shared sensor models
-(``sensors.gnss_model``, ``sensors.baro`` through ``model.baro_predict`` / ``model.baro_row``,
+(``sensors.gnss_model``, ``sensors.baro.baro_predict`` / ``baro_row``,
 ``sensors.magnetometer.mag_heading_row``). Adding a sensor to the filter means a row function
 here, an event kind in ``kernel`` and its gated update in ``steps``.
 """
@@ -15,6 +15,7 @@ import numpy as np
 from numba import njit
 
 from ...nav.strapdown import nav_rates
+from ...sensors.baro import baro_predict, baro_row
 from ...sensors.gnss_model import antenna_position, antenna_velocity
 from ...sensors.magnetometer import MIN_HORIZONTAL_UT, mag_heading_row
 from .heading import RESET_DELTA, RESET_SD
@@ -33,8 +34,6 @@ from .model import (
     PMB,
     PSC,
     PTD,
-    baro_predict,
-    baro_row,
 )
 
 # event kinds of ``kernel.Events.kind``

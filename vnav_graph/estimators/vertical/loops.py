@@ -62,7 +62,7 @@ from typing import Any
 
 import numpy as np
 from numba import njit
-from scipy.linalg import expm, solve_discrete_are
+from scipy.linalg import solve_discrete_are
 
 from ...geo.earth import gravity, radii
 from ...nav.arrays import put
@@ -90,27 +90,12 @@ def gains2(omega_n: float, zeta: float, ws2: float) -> tuple[float, float]:
     return 2.0 * zeta * omega_n, omega_n**2 + ws2
 
 
-def discrete_model(dt: float, ws2: float, order: int) -> tuple[FloatArray, FloatArray]:
-    """ZOH (Φ, Γ) of the free channel; state [h − h0, v] or [h − h0, v, c]."""
-    if order == 2:
-        a = np.array([[0.0, 1.0], [ws2, 0.0]])
-        b = np.array([0.0, 1.0])
-    else:
-        a = np.array([[0.0, 1.0, 0.0], [ws2, 0.0, -1.0], [0.0, 0.0, 0.0]])
-        b = np.array([0.0, 1.0, 0.0])
-    n = a.shape[0]
-    m = np.zeros((n + 1, n + 1))
-    m[:n, :n] = a * dt
-    m[:n, n] = b * dt
-    em = expm(m)
-    return em[:n, :n], em[:n, n]
-
-
 @njit(cache=True)
 def zoh_nb(dt, ws2, order):
-    """Numba twin of ``discrete_model``: (Φ, Γ) = blocks of exp([[A, B], [0, 0]]·Δt) by the
-    Taylor series (A's nilpotent part ends after 3 terms and ω_s²Δt² ≲ 1e-6 at IMU steps,
-    so 40 terms are exact to round-off for any Δt below a few minutes)."""
+    """ZOH (Φ, Γ) of the free channel, state [h − h0, v] (order 2) or [h − h0, v, c]
+    (order 3): the blocks of exp([[A, B], [0, 0]]·Δt) by the Taylor series (A's nilpotent part
+    ends after 3 terms and ω_s²Δt² ≲ 1e-6 at IMU steps, so 40 terms are exact to round-off
+    for any Δt below a few minutes)."""
     n = order
     m = np.zeros((n + 1, n + 1))
     m[0, 1] = dt
@@ -126,6 +111,11 @@ def zoh_nb(dt, ws2, order):
         if np.max(np.abs(term)) < 1e-18:
             break
     return e[:n, :n].copy(), e[:n, n].copy()
+
+
+def discrete_model(dt: float, ws2: float, order: int) -> tuple[FloatArray, FloatArray]:
+    """``zoh_nb`` called from Python (gain design, tests): (Φ, Γ) of the free channel."""
+    return zoh_nb(float(dt), float(ws2), np.int64(order))
 
 
 @njit(cache=True)

@@ -29,8 +29,8 @@ with WGS-84 normal gravity at the filter's own height (the 2g/R feedback of eq. 
 
 Measurements (seed 001 eq. 6, through the package's one baro model)::
 
-    baro:  h_b = measure_baro(h, v_up, dSF, Td, b, h0) + v,
-           H = [∂h_b/∂h, ∂h_b/∂v_up, 0, 0, ∂h_b/∂s, ∂h_b/∂τ, ∂h_b/∂b]  (``baro_jacobian``)
+    baro:  h_b = baro_predict(h, v_up, dSF, Td, b, h0) + v,
+           H = [∂h_b/∂h, ∂h_b/∂v_up, 0, 0, ∂h_b/∂s, ∂h_b/∂τ, ∂h_b/∂b]  (``baro_row``)
     GNSS height:  h_G = h + v_G,             H = [1 0 0 0 0 0 0]
     GNSS vertical velocity (if given):  −v_D,G = v_up + v_V,  H = [0 1 0 0 0 0 0]
 
@@ -81,7 +81,7 @@ from ...nav.arrays import outer, put
 from ...nav.error_state import embed_error_state, selection
 from ...nav.gaps import GAP_ACCEL_SD, cv_bridge_noise, gap_threshold
 from ...nav.gnss_gate import NO_LIMIT, REFUSE, height_gate, new_gate_state
-from ...sensors.baro import baro_jacobian, measure_baro
+from ...sensors.baro import baro_predict, baro_row
 from ...sensors.model import SensorModel, sensor_model
 from ...types import BaroEstimate, Drive, Estimate, ParamEstimate
 from ...types.streams import FloatArray
@@ -319,8 +319,8 @@ def _filter_pass(drive: Drive, vi: VerticalInputs, model: SensorModel, nz: Noise
         if ek[j] == 0:
             i = int(ei[j])
             z = float(baro_alt[i])
-            zhat = float(measure_baro(h_m, nom[IV], nom[IS], nom[ITD], nom[IBB], h0))
-            jac = baro_jacobian(h_m, nom[IV], nom[IS], nom[ITD], h0)
+            zhat = baro_predict(h_m, nom[IV], nom[IS], nom[ITD], nom[IBB], h0)
+            jac = baro_row(h_m, nom[IV], nom[IS], nom[ITD], h0)
             hz[:] = 0.0
             hz[IH], hz[IV], hz[IS], hz[ITD], hz[IBB] = jac
             out.innov["baro"].append(scalar_update(nom, p, hz.copy(), z - zhat, nz.r_baro))

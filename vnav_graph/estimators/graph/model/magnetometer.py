@@ -12,9 +12,9 @@ N(0, ``mag_bias_sd``² I)) per keyframe that has a sample within half a sample s
 most one per ``mag_interval_s`` (the errors are correlated over seconds). D_k is the
 azimuth, in the tangent frame, of the World Magnetic Model's field at the start
 (``geo.magfield``; it is the declination up to the tangent frame's convergence, < 0.05°
-over a few km). Jacobians: ∂e/∂ω_k = g · (−R_k [(z − b_m)×]) for the Pose3 retraction
-R Exp(ω), ∂e/∂b_m = −g R_k, g = (−m̂_E, m̂_N, 0)/H²: the EKF's row ``mag_heading_row``
-(module ``sensors.magnetometer``) at R_k, its tilt column times R_k (the body rotation's).
+over a few km). The error and its Jacobians are the EKF's row ``mag_heading_row`` (module
+``sensors.magnetometer``) at R_k: ∂e/∂b_m as it is, and ∂e/∂ω_k = (∂e/∂ψ) R_k for the Pose3
+retraction R Exp(ω), since the row's attitude error ψ is in n (R̃ = (I + [ψ×]) R, so ψ = R ω).
 σ = √((σ_m/H)² + floor²); a Huber loss at ``mag_loss_sd`` σ stands in for the EKF's gate
 (motor-current and soft-iron bursts).
 
@@ -31,14 +31,13 @@ import numpy as np
 from gtsam.symbol_shorthand import H
 
 from ....nav.arrays import nearest_index
-from ....nav.rotations import skew3
 from ....sensors.magnetometer import (
     MIN_HORIZONTAL_UT,
     drive_field,
     field_and_info,
     heading_sd,
+    mag_heading_row,
     usable,
-    wrap_pi,
 )
 from ....types.streams import FloatArray
 from .extend import GraphView, Terms, Variable, X
@@ -65,20 +64,16 @@ def heading_factor(k: int, z_b: FloatArray, d_ref: float, sd: float, loss_sd: fl
     key_x = X(k)
 
     def error(this: Any, values: Any, jac: Any) -> FloatArray:
-        r_k = values.atPose3(key_x).rotation().matrix()
-        # ``sensors.magnetometer.mag_heading_row`` (the EKF's row) in numpy: the same model,
-        # tested equal to 1e-12 (tests/unit/test_gnss_model.py); calling the compiled row
-        # here rounds differently and moves the graph's results by ~1e-12 relative
-        d = z_b - values.atVector(KEY)
-        m = r_k @ d
-        h2 = m[0] * m[0] + m[1] * m[1]
-        e = wrap_pi(np.arctan2(m[1], m[0]) - d_ref)
+        # the shared model's row (the EKF's) at R_k: its attitude error ψ is in n
+        # (R̃ = (I + [ψ×]) R_k), the Pose3 retraction's ω in body (R_k Exp(ω)), so ψ = R_k ω
+        r_k = np.ascontiguousarray(values.atPose3(key_x).rotation().matrix())
+        e, h_psi, h_bias, _ = mag_heading_row(z_b, np.ascontiguousarray(values.atVector(KEY)),
+                                              r_k, d_ref)
         if jac is not None:
-            g = np.array([-m[1], m[0], 0.0]) / h2
             row = np.zeros((1, 6))
-            row[0, 0:3] = g @ (-r_k @ skew3(d))
+            row[0, 0:3] = h_psi @ r_k
             jac[0] = row
-            jac[1] = (-g @ r_k)[None, :]
+            jac[1] = h_bias[None, :]
         return np.array([e])
 
     return gtsam.CustomFactor(noise, [key_x, KEY], error)
