@@ -29,17 +29,15 @@ Two cases where R says nothing about the velocities:
   error from a position σ too small, and raising σv by R·var r would make the velocities
   worthless (36 m/s in that case): R is reported, nothing is added (``unattributed``).
 
-Measured (``benchmarks/truth_logs.py``'s drives and the simulated scenarios):
-
-- ``rtk/car_drive_0708`` (RTK solution, 4 Hz; σp 1 cm, σv 0.03–0.07 m/s): R = 2.28 north,
-  2.62 east, 0.85 down. Its velocity at epoch k is the mean velocity over the interval before
-  it: shifted by half an interval (0.125 s) the RMS of r falls from 0.10 to 0.03 m/s. In the
-  car park's turns (2–3 m/s²) that is 0.3 m/s against σv 0.04: ekf-rts then refused 610 of
-  the 1513 RTK positions outside the withheld windows and sat up to 1.4 m off the RTK with a
-  σ of 4–7 cm at the windows' edges. The rule adds σ 0.10 / 0.12 m/s (north, east).
-- ``rtk/walk_0827`` single-point input (σp ≈ 3 m): R = 0.02–0.06, σ kept.
-- hill-drive and sortie seeds 0–2 (simulated, white errors of the stated σ): R = 0.96–1.06,
-  σ kept.
+What the rule is for: a receiver that reports the mean velocity over the interval before its
+epoch, not the velocity at it, is late by half an interval, an error of a·Δt/2 at an
+acceleration a. In a vehicle's turns that is several times a centimetre-level RTK velocity
+σ, and an estimator that trusts the velocities then refuses the consistent positions and
+sits off them with a σ of centimetres. A receiver whose errors are correlated in time (a
+single-point solution of metre σp) gives R well below 1, and its σ are kept. Simulated drives
+with white errors of the stated σ (hill-drive and sortie seeds 0–2) give R = 0.96–1.06, σ
+kept. Measured on the RTK drives of ``benchmarks/truth_logs.py``: docs/real_logs.md, "GNSS
+velocity σ against the positions".
 
 Units: SI (m, m/s, s); axes north, east, down.
 """
@@ -57,8 +55,9 @@ from ..types.streams import FloatArray
 # 0.96–1.06, a receiver whose velocity σ holds at ≤ 1.5 has it within its own claim
 VEL_CONSISTENCY_LIMIT = 1.5
 # r²/var is capped at this before the mean (5σ): one position glitch of 100 m at 1 Hz
-# (σp 3 m) among 300 pairs then moves R by 0.17, not by 3.7 (its two pairs); the RTK car's
-# R moves from 2.31 / 2.66 uncapped to 2.28 / 2.62
+# (σp 3 m) among 300 pairs then moves R by 0.17, not by 3.7 (its two pairs); an excess
+# spread over the whole drive, as a late-stamped velocity gives, barely moves (docs/real_logs.md,
+# "GNSS velocity σ against the positions")
 WINSOR = 25.0
 # both pairs of a fix beyond this whitened χ²₃ (5σ) and opposite: a position spike
 SPIKE_Z = 25.0

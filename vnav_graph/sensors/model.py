@@ -60,13 +60,12 @@ REAL_LOG_IMU = ImuSpec(
 )
 
 # Vibration rectification coefficient [1/√s] and the lowest IMU rate at which first
-# differences measure vibration rather than manoeuvres (``infer_imu_spec``). K_VRE = 0.14
-# (set on 181.BIN when the white noise was a robust scale) made an accelerometer bias walk
-# of 0.14·σ_vib; with the variance of the differences as the white noise (which already
-# counts the vibration's heavy tails) that walk double-counts it: holdout altitude RMSE on
-# the shared logs with 0.14 → 0: ekf-rts 218 0.89 → 0.67 m, ski 2.04 → 1.84 m, loiter
-# 1.04 → 1.04 m; graph-batch 218 0.90 → 0.67 m, ski 2.94 → 1.98 m (it stopped converging),
-# loiter 2.13 → 2.20 m. The term is kept for users who model it (``infer_imu_spec(k_vre=)``).
+# differences measure vibration rather than manoeuvres (``infer_imu_spec``). The white noise
+# is the variance of the first differences, which already holds a vibrating IMU's heavy
+# tails; an accelerometer bias walk k_vre·σ_vib on top of it would count the same vibration
+# twice, so by default there is none (measured on the shared logs: docs/real_logs.md,
+# "Vibration rectification"). The term is kept for users who model it
+# (``infer_imu_spec(k_vre=)``).
 K_VRE = 0.0
 VRE_MIN_RATE_HZ = 10.0
 # ... except where the log shows an accelerometer that reads too little specific force. A
@@ -74,12 +73,12 @@ VRE_MIN_RATE_HZ = 10.0
 # only raises a window's mean |f| (mean of norms ≥ norm of means). So over windows of
 # ``DEFICIT_WINDOW_S`` the deficit e = mean|f| − g0 − a_up (a_up the baro's vertical
 # acceleration) is ≥ 0 up to noise; a 5th percentile below −``DEFICIT_LIMIT`` is a sensor
-# that loses specific force in flight (vibration rectification, clipping). On the shared logs
-# (``docs/real_logs.md``): 218 +0.07, Loiter_RTL −0.01, ski +0.02 m/s²; 181.BIN −2.34 m/s²
-# (|f| 7.3–8.9 m/s² for seconds while the baro climbs). There the bias walk ``K_VRE_DEFICIT``
+# that loses specific force in flight (vibration rectification, clipping: for seconds it
+# reads less than gravity while the vehicle climbs). There the bias walk ``K_VRE_DEFICIT``
 # ·σ_robust lets the accelerometer bias follow the loss, instead of every estimator
-# tilting the vehicle by 20–30° and fitting a 5 m/s² horizontal bias to explain it
-# (``rectifying_walk``, used by ``infer_imu_spec`` and reported by ``io.sanity``).
+# explaining the missing force with a tilted vehicle and a large horizontal accelerometer
+# bias (``rectifying_walk``, used by ``infer_imu_spec`` and reported by ``io.sanity``;
+# measured on the shared logs: docs/real_logs.md, "Accelerometers that lose specific force").
 DEFICIT_WINDOW_S = 2.0
 DEFICIT_LIMIT = 0.5  # m/s²
 DEFICIT_QUANTILE = 5.0  # %
@@ -240,8 +239,10 @@ def infer_imu_spec(imu: Any, g0: float, base: ImuSpec = REAL_LOG_IMU,
       a multirotor's vibration is noise at the estimators' time scales);
     - accelerometer bias random walk ≥ k_vre·σ_robust,accel [m/s²/√s] (vibration
       rectification: a vibrating MEMS accelerometer — clipping, asymmetric response — shows
-      bias shifts that grow with the vibration; k_vre = 0.14 /√s is set on 181.BIN, whose |f|
-      averages 7.3-8.9 m/s² for 8 s while the baro climbs, σ_robust = 0.75 m/s²). Only for
+      bias shifts that grow with the vibration; the default ``K_VRE`` is 0, the white noise
+      already holding the vibration, and k_vre = ``K_VRE_DEFICIT`` = 0.14 /√s on the robust
+      scale where the accelerometer reads less specific force than gravity and the climb
+      need, below; docs/real_logs.md, "Vibration rectification"). Only for
       IMUs sampled at ≥ ``VRE_MIN_RATE_HZ``: at 1 Hz (averaged phone logs) the differences
       are the vehicle's own manoeuvres;
     - accelerometer bias σ ≥ 2·|median |f| − g0| [m/s²], the specific-force magnitude error

@@ -33,10 +33,11 @@ altitude 0.83 / 0.71, horizontal 0.55 / 0.60 (its 60 s outage makes the horizont
 separation 40–70 m against 0.9–1.8 m of smoothed error: each filter alone crosses the outage
 dead-reckoning); cold-start-phone, 6 seeds: −0.30 / −0.37 and 0.24 / 0.09 — its seeds' errors
 differ little (altitude 0.7–1.3 m), and the separation does not rank them. It says how hard
-a drive is, not which of two similar drives came out better. On the real ski log (phone,
-1 Hz GNSS) the horizontal separation's p95 is 1.4 km against a withheld-GNSS RMSE of 15 m:
-the backward filter's start there is poor, and the number is best read as "the data do not
-pin the horizontal down without smoothing".
+a drive is, not which of two similar drives came out better. With a consumer IMU and
+sparse GNSS (a phone with 1 Hz position-only fixes) the backward filter's start can be poor,
+and the horizontal separation then orders of magnitude above the smoothed error: the number
+is best read as "the data do not pin the horizontal down without smoothing"
+(docs/real_logs.md, "Forward-backward separation").
 """
 
 from __future__ import annotations

@@ -19,12 +19,13 @@ The heading at t0 is therefore
 
 with the variance of the smoothed yaw at t_h plus the drift of the smoothed bias's error,
 (σ_bD (t_h − t0))², σ_bD² = c_Dᵀ P_bg c_D the largest over [t0, t_h] (c_D the down row of C,
-P_bg the smoothed gyro-bias covariance). The prior σ of the bias in its place (0.5 °/s for a
-real log of unknown make) gave 7.5° over the walk's 15 s standstill (``rtk/walk_0827``),
-above ``CARRY_SD_MAX``: nothing was carried back and ekf-rts started 155° from graph-batch;
-the smoothed bias's σ there is 0.022 °/s (0.3°), and the integral moves the start heading by
-2.7°. The forward and RTS passes are then run again from t0 with that heading given
-(``EkfConfig.initial_heading``): one smoothing over the whole drive, with no reset in it.
+P_bg the smoothed gyro-bias covariance). The smoothed bias's σ belongs there, not its prior's:
+the motion after the acquisition pins the bias down, while the prior σ of a real log of
+unknown make (0.5 °/s) grows to 7.5° over a 15 s standstill at the start, above
+``CARRY_SD_MAX``, and nothing would be carried back (docs/real_logs.md, "Standstills and
+course on the RTK drives"). The forward and RTS passes are then run again from t0 with that
+heading given (``EkfConfig.initial_heading``): one smoothing over the whole drive, with no
+reset in it.
 """
 
 from __future__ import annotations
@@ -40,10 +41,11 @@ from ...types.streams import FloatArray
 from .settings import EkfConfig
 
 # the largest σ of a heading carried back [rad]: 5°, the "heading known" bound of the
-# metrics (evaluation.metrics.HEADING_KNOWN_SD_DEG). A heading that even the smoother knows
-# only to 11° (Loiter_RTL, a multicopter hovering for 40 s before its acquisition) turned
-# the re-run's yaw into a linear state that far off: withheld-GNSS altitude RMSE 1.05 →
-# 2.07 m (horizontal 42 → 24 m); cold-start and default carry 0.4° and 1.2°
+# metrics (evaluation.metrics.HEADING_KNOWN_SD_DEG). A multicopter hovering before its
+# acquisition barely shows its heading, so even the smoother may know it only to about ten
+# degrees, and the re-run would treat a yaw error that large as a linear state, far outside
+# its linear regime (docs/real_logs.md, "Initial heading and tilt of a hovering
+# multirotor"); cold-start and default carry 0.4° and 1.2°
 CARRY_SD_MAX = np.radians(5.0)
 
 

@@ -301,8 +301,8 @@ def run_filter(grids, init, noise, events, gnss, baro, mag, settings):
             v = v_p.copy()
             q = rpy_quat(grids.gap_rp[i + 1, 0], grids.gap_rp[i + 1, 1], yaw_of(q_p))
             if dt >= settings.gap_forget_s:
-                # long gap: the vehicle may have turned (Loiter_RTL: a crash); the heading is
-                # re-acquired afterwards
+                # long gap: the vehicle may have turned (a crash that flips it over); the
+                # heading is re-acquired afterwards
                 heading_ok = False
                 acq[RESET_DELTA] = np.nan
             restart_matching(acq, sf_acc, s_i, ch_u, ch_w)

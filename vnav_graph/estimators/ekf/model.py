@@ -60,11 +60,13 @@ variance to the track's σ²; the RTS smoother sees this step as Φ_eff = J Φ w
 
 Heading by acceleration matching (``heading_accel``: the default when GNSS gives velocity).
 Course over ground is the heading only without sideslip; a multicopter moves in any direction
-(218.BIN: the track reset left the heading 166° off the compass attitude and the z-gyro bias
-absorbed ±1.3 °/s). Instead the horizontal specific-force integral in the nominal frame, U = ∫
-(C̃ f̃)_h dt (yaw still arbitrary), is compared with the GNSS velocity increment W = Δv_h over
-the same interval: W = R_z(δ) U + n (gravity and Coriolis have no horizontal part at this
-accuracy), δ = true − nominal yaw. Per chunk of ≥ ``align_chunk_s`` between velocity fixes,
+(a hovering multicopter's track can point anywhere, so a track reset can leave the heading
+far off, up to opposite, and the z-gyro bias then absorbs the error as a rate;
+docs/real_logs.md, "Initial heading and tilt of a hovering multirotor"). Instead the
+horizontal specific-force integral in the nominal frame, U = ∫ (C̃ f̃)_h dt (yaw still
+arbitrary), is compared with the GNSS velocity increment W = Δv_h over the same interval:
+W = R_z(δ) U + n (gravity and Coriolis have no horizontal part at this accuracy),
+δ = true − nominal yaw. Per chunk of ≥ ``align_chunk_s`` between velocity fixes,
 with σ² = Σ_both fixes (σ²_vN + σ²_vE)/2 + (σ_a T)² (σ_a = √2 × the accelerometer-bias prior:
 tilt and bias per axis), the weighted sums S_c = Σ (U×W)/σ², S_d = Σ U·W/σ², S_uu = Σ |U|²/σ²
 are kept with forgetting exp(−T/``align_forget_s``) (the nominal yaw drifts with the unknown
@@ -77,16 +79,15 @@ with σ 2σ_δ (factor 2: bias drift and tilt in U). A chunk whose |W| and |U| d
 (``heading.confirmed_course``; the σ grown by their difference let the yaw wander 18° on
 the simulated walk of ``test_ekf_walking_start``, against 4.9°). A gentle start gives a
 course long before the matching's 15° (that walk at 0.1 m/s²: 5.9 s after moving instead of
-12 s; the car drive ``rtk/car_drive_0708``: 37.8 s instead of 103 s), and a body that does
-not move along its x axis keeps the matching's heading (the sideways IMU of
-``test_ekf_heading``). A hand-held device is the limit: on the walk ``rtk/walk_0827`` it
-points 86° off its path as it starts and 10–30° while walking; with RTK input the matching
-acquires first (16.0 s), with the single-point input the course is confirmed at 15.6 s and
-the yaw is 15° off until 22 s. Without GNSS velocity the track heading (previous paragraph)
-is used.
-An IMU gap longer than ``gap_forget_s`` makes the
-heading unknown again (the vehicle may have turned: Loiter_RTL's crash); the gap's Φ has a
-zero yaw row and Q gives the uniform variance, and the heading is re-acquired after it.
+12 s; a car drive likewise, docs/real_logs.md, "Standstills and course on the RTK drives"),
+and a body that does not move along its x axis keeps the matching's heading (the sideways IMU
+of ``test_ekf_heading``). A hand-held device is the limit: it need not point along its path
+and swings with each step, so a course confirmed against the matching's early estimate can
+leave the yaw more than ten degrees off for seconds (same section). Without GNSS velocity
+the track heading (previous paragraph) is used.
+An IMU gap longer than ``gap_forget_s`` makes the heading unknown again (the vehicle may have
+turned: a crash that flips it over); the gap's Φ has a zero yaw row and Q gives the uniform
+variance, and the heading is re-acquired after it.
 
 The RTS smoother (Rauch, Tung & Striebel 1965) runs on the same grid. With closed-loop
 feedback, e_k = x⁺_k − x_true has filtered mean 0, and with c_k the correction applied at k:
@@ -98,7 +99,8 @@ GNSS position gating (fault detection and exclusion). The horizontal pair and th
 fix are gated separately: NIS_h = ν_hᵀ S_h⁻¹ ν_h against χ²₂, NIS_v = ν_v²/S_v against χ²₁.
 With a barometer the vertical is well determined without GNSS (baro + bias model), so a
 GNSS height inconsistent with it is a receiver fault, and such faults persist (multipath,
-the 181.BIN glitch: 300 m for a minute while the fix claims 3-D):
+a receiver glitch that moves the heights by hundreds of metres for tens of seconds while
+the fix claims 3-D; docs/real_logs.md, "GNSS screens"):
 - a height whose own σ_v exceeds ``max_sd_v`` is not used (the receiver says it is degraded;
   relative to a baro-aided vertical it carries almost no information);
 - an isolated rejected height (a spike) is just refused; after two consecutive refusals the
@@ -116,20 +118,21 @@ to P (and to the stored Q, so the RTS smoother models the same jump) before the 
 The GNSS vertical velocity is used only with an accepted GNSS height (same receiver
 solution); the horizontal velocity pair is gated on its own (χ²₂). The baro is the
 vertical anchor: after ``max_consec_baro`` consecutive refusals (≈ 1 s) it is accepted (an
-inertial vertical that disagrees with the baro for that long has diverged — 181.BIN's
-vibrating accelerometer — or the baro stepped, and then the new level is the one to follow).
+inertial vertical that disagrees with the baro for that long has diverged — an
+accelerometer that loses specific force under vibration — or the baro stepped, and then the
+new level is the one to follow).
 
 IMU gaps (logging dropouts, ``gap_step``): an IMU interval longer than the gap threshold is
 not integrated as if the end samples held over it. The step is its own grid interval; the
 nominal state moves at constant velocity, F keeps only δṙ = δv and the Gauss-Markov decays,
 and Q adds the unknown motion: σ_a²Δt to velocity, σ_a²Δt³/3 to position (cross term
-omitted), σ_ψ²Δt to yaw. The attitude is not carried over a gap (the 22 s gap of
-Loiter_RTL.bin follows a crash: the vehicle lies upside down before it and stands upright
-after it): roll and pitch are re-levelled from the mean specific force of the first samples
-after the gap (``gap_rp``, coarse levelling as at the start) with the yaw kept; Φ's roll/pitch
-rows are zero there (``step_phi``) and Q gives them the levelling variance, so the RTS smoother
-sees the reset exactly. The next GNSS/baro updates then re-anchor position and velocity with
-the inflated covariance.
+omitted), σ_ψ²Δt to yaw. The attitude is not carried over a gap (a logging gap can follow
+a crash, the vehicle upside down before it and upright after it; docs/real_logs.md, "IMU
+logging gap across a crash"): roll and pitch are re-levelled from the mean specific force
+of the first samples after the gap (``gap_rp``, coarse levelling as at the start) with the
+yaw kept; Φ's roll/pitch rows are zero there (``step_phi``) and Q gives them the levelling
+variance, so the RTS smoother sees the reset exactly. The next GNSS/baro updates then
+re-anchor position and velocity with the inflated covariance.
 
 Magnetometer heading (``sensors.magnetometer``, shared with the graph): at most one sample per
 ``mag_interval_s`` (its errors are correlated over seconds), y = wrap(azimuth of C̃ (z − b̂_m)
