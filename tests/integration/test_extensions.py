@@ -63,6 +63,15 @@ def test_load_configs_overrides_only_the_given_keys(tmp_path):
     assert ekf.max_consecutive_rejects == EkfConfig().max_consecutive_rejects
 
 
+def test_vekf7_takes_the_baro_prior_under_the_shared_names(tmp_path):
+    # one name per quantity: the adaptive loop's and the shared settings' baro_* keys
+    cfg = load_configs(_toml(tmp_path, "[vekf7]\nbaro_latency_mean = 0.2\nbaro_latency_sd = "
+                                       "0.05\nbaro_scale_sd = 0.01\n[loop3-adaptive]\n"
+                                       "baro_scale_sd = 0.01\n"))
+    assert (cfg["vekf7"].baro_latency_mean, cfg["vekf7"].baro_latency_sd) == (0.2, 0.05)
+    assert cfg["vekf7"].baro_scale_sd == cfg["loop3-adaptive"].baro_scale_sd == 0.01
+
+
 def test_load_configs_sets_graph_isam2s_answer_settings(tmp_path):
     cfg = load_configs(_toml(tmp_path, "[graph-isam2]\nisam2_batch_fallback = true\n"
                                        "isam2_lag_s = 5\n"))["graph-isam2"]
@@ -82,6 +91,7 @@ def test_load_configs_sets_graph_isam2s_answer_settings(tmp_path):
     ("[graph-isam2]\nisam2_lag_s = 700.0\n", "must be shorter than isam2_window_s"),
     ("max_iterations = 3\n", "top-level key 'max_iterations' is not an [estimator] table"),
     ("[graph-batch\n", "not valid TOML"),
+    ("[vekf7]\nlatency_prior = 0.2\n", "[vekf7] key 'latency_prior' is now 'baro_latency_mean'"),
 ])
 def test_bad_config_is_one_line_exit_2_before_any_work(tmp_path, capsys, text, needle):
     out = tmp_path / "out"

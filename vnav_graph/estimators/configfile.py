@@ -82,7 +82,10 @@ def override(config: Any, table: dict[str, Any], where: str = "config", prefix: 
     except Exception:  # an annotation that does not resolve at run time: use the value's type
         hints = {n: type(getattr(config, n)) for n in fields}
     changes: dict[str, Any] = {}
+    renamed = getattr(type(config), "RENAMED", {})
     for key, value in table.items():
+        if key in renamed:
+            raise ValueError(f"{where} key {prefix + key!r} is now {prefix + renamed[key]!r}")
         if key not in fields:
             hint = (_hint(key, list(fields))
                     or f" (keys of {type(config).__name__}: {', '.join(fields)})")

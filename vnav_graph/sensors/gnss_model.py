@@ -36,7 +36,6 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from ..geo.frames import skew
 from ..nav.rotations import cross3, skew3
 from ..types.streams import FloatArray
 
@@ -70,18 +69,35 @@ def antenna_velocity(c_nb, lever_b, w_nb_b):
     return u, -skew3(u), c_nb @ skew3(lever_b)
 
 
+@njit(cache=True)
+def _map_antenna(c_nb, lever_b, w_nb_b, d, h_d, u, h_u):  # pragma: no cover - numba
+    for i in range(c_nb.shape[0]):
+        d[i], h_d[i] = antenna_position(c_nb[i], lever_b)
+        if w_nb_b.shape[0]:
+            u[i], h_u[i], _ = antenna_velocity(c_nb[i], lever_b, w_nb_b[i])
+
+
+def _antenna_batch(c_nb: FloatArray, lever_b: FloatArray, w_nb_b: FloatArray
+                   ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    c = np.ascontiguousarray(c_nb, dtype=float)
+    w = np.ascontiguousarray(w_nb_b, dtype=float)
+    m = c.shape[0]
+    d, h_d = np.empty((m, 3)), np.empty((m, 3, 3))
+    u, h_u = np.empty((w.shape[0], 3)), np.empty((w.shape[0], 3, 3))
+    _map_antenna(c, np.ascontiguousarray(lever_b, dtype=float), w, d, h_d, u, h_u)
+    return d, h_d, u, h_u
+
+
 def antenna_position_batch(c_nb: FloatArray, lever_b: FloatArray
                            ) -> tuple[FloatArray, FloatArray]:
-    """``antenna_position`` of M attitudes ``c_nb`` (M, 3, 3): d (M, 3), −[d×] (M, 3, 3)."""
-    d = np.einsum("nij,j->ni", c_nb, lever_b)
-    return d, -skew(d)
+    """``antenna_position`` at each of M attitudes ``c_nb`` (M, 3, 3): d (M, 3), −[d×]."""
+    return _antenna_batch(c_nb, lever_b, np.empty((0, 3)))[:2]
 
 
 def antenna_velocity_batch(c_nb: FloatArray, lever_b: FloatArray, w_nb_b: FloatArray
                            ) -> tuple[FloatArray, FloatArray]:
-    """``antenna_velocity`` of M epochs (``w_nb_b`` (M, 3) [rad/s]): u (M, 3), −[u×]."""
-    u = np.einsum("nij,nj->ni", c_nb, np.cross(w_nb_b, lever_b))
-    return u, -skew(u)
+    """``antenna_velocity`` at each of M epochs (``w_nb_b`` (M, 3) [rad/s]): u (M, 3), −[u×]."""
+    return _antenna_batch(c_nb, lever_b, w_nb_b)[2:]
 
 
 def body_tilt(h_psi: FloatArray, c_nb: FloatArray) -> FloatArray:

@@ -72,6 +72,7 @@ References: seed 001 §3.2 (eqs. 5-6); Groves 2nd ed. §14.2 (closed-loop error-
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 from numba import njit
@@ -120,9 +121,9 @@ class VEKF7Config:
     accel_bias_sd, accel_bias_tau : Gauss-Markov σ [m/s²] and τ [s] of B_z
     accel_bias_rw : random walk floor of B_z [m/s²/√s]
     accel_scale_sd : prior σ of K_z [-]
-    scale_prior_sd : prior σ of dSF [-]
-    latency_prior, latency_prior_sd : prior mean and σ of Td [s]
-    bias_prior_sd, bias_tau : σ [m] and τ [s] of the baro Gauss-Markov bias
+    baro_scale_sd : prior σ of dSF [-]
+    baro_latency_mean, baro_latency_sd : prior mean and σ of Td [s]
+    baro_bias_sd, baro_bias_tau : σ [m] and τ [s] of the baro Gauss-Markov bias
     baro_noise_sd : white baro noise [m]
     gnss_vertical_sd : GNSS height σ when the stream gives none [m]
     use_gnss_velocity : use the GNSS vertical velocity when the receiver gives it
@@ -132,6 +133,11 @@ class VEKF7Config:
     ahrs : attitude-reference gains for ``vertical_inputs``
     """
 
+    # keys of earlier versions: a --config file that uses one is told the new name
+    RENAMED: ClassVar[dict[str, str]] = {
+        "scale_prior_sd": "baro_scale_sd", "latency_prior": "baro_latency_mean",
+        "latency_prior_sd": "baro_latency_sd", "bias_prior_sd": "baro_bias_sd",
+        "bias_tau": "baro_bias_tau"}
     # None: the IMU spec's noise density² + input_error_psd
     accel_psd: float | None = None
     # measured on the sortie scenario (industrial IMU): with GNSS the AHRS makes f_D err by
@@ -147,11 +153,11 @@ class VEKF7Config:
     # eq. 5's state); the shared model's (vibration) walk when larger
     accel_bias_rw: float = 2e-4
     accel_scale_sd: float | None = None
-    scale_prior_sd: float | None = None
-    latency_prior: float | None = None
-    latency_prior_sd: float | None = None
-    bias_prior_sd: float | None = None
-    bias_tau: float | None = None
+    baro_scale_sd: float | None = None
+    baro_latency_mean: float | None = None
+    baro_latency_sd: float | None = None
+    baro_bias_sd: float | None = None
+    baro_bias_tau: float | None = None
     baro_noise_sd: float | None = None
     # the streams always give one
     gnss_vertical_sd: float = 3.0
@@ -362,9 +368,9 @@ class VEKF7(VerticalEstimator):
         t = drive.imu.t
         dur = float(t[-1] - t[0])
         baro = BaroEstimate(
-            scale=ParamEstimate(float(nom[IS]), float(np.sqrt(p[IS, IS])), nz.s_sd, 0.0),
-            latency_s=ParamEstimate(float(nom[ITD]), float(np.sqrt(p[ITD, ITD])), nz.td_sd,
-                                    nz.td0),
+            scale=ParamEstimate(float(nom[IS]), float(np.sqrt(p[IS, IS])), nz.scale_sd, 0.0),
+            latency_s=ParamEstimate(float(nom[ITD]), float(np.sqrt(p[ITD, ITD])), nz.latency_sd,
+                                    nz.latency_mean),
             bias_m=ParamEstimate(float(nom[II] / dur), float(np.sqrt(p[II, II]) / dur),
                                  nz.b_sd),
         )

@@ -84,9 +84,9 @@ class Noise:
     r_baro: float  # baro noise variance [m²]
     ab_sd: float  # prior σ of B_z [m/s²]
     k_sd: float  # prior σ of K_z
-    s_sd: float  # prior σ of dSF
-    td0: float  # prior mean of Td [s]
-    td_sd: float  # prior σ of Td [s]
+    scale_sd: float  # prior σ of dSF
+    latency_mean: float  # prior mean of Td [s]
+    latency_sd: float  # prior σ of Td [s]
     b_sd: float  # prior σ of the baro bias [m]
 
 
@@ -106,8 +106,8 @@ def noise_densities(drive: Drive, vi: VerticalInputs, model: SensorModel, cfg: A
     ab_sd = given(cfg.accel_bias_sd, ims.accel_bias_sd)
     ab_tau = given(cfg.accel_bias_tau, ims.accel_bias_tau)
     ab_rw = max(cfg.accel_bias_rw, ims.accel_bias_rw)
-    b_sd = given(cfg.bias_prior_sd, bp.bias_sd)
-    b_tau = given(cfg.bias_tau, bp.bias_tau)
+    b_sd = given(cfg.baro_bias_sd, bp.bias_sd)
+    b_tau = given(cfg.baro_bias_tau, bp.bias_tau)
     return Noise(
         q_acc=q_acc,
         phi_b=gm_transition(dt, b_tau),
@@ -117,9 +117,9 @@ def noise_densities(drive: Drive, vi: VerticalInputs, model: SensorModel, cfg: A
         r_baro=given(cfg.baro_noise_sd, bp.noise_sd) ** 2,
         ab_sd=ab_sd,
         k_sd=given(cfg.accel_scale_sd, ims.accel_scale_sd),
-        s_sd=given(cfg.scale_prior_sd, bp.scale_sd),
-        td0=given(cfg.latency_prior, bp.latency_mean),
-        td_sd=given(cfg.latency_prior_sd, bp.latency_sd),
+        scale_sd=given(cfg.baro_scale_sd, bp.scale_sd),
+        latency_mean=given(cfg.baro_latency_mean, bp.latency_mean),
+        latency_sd=given(cfg.baro_latency_sd, bp.latency_sd),
         b_sd=b_sd,
     )
 
@@ -171,10 +171,10 @@ def initial_state(drive: Drive, g_psd: FloatArray | None,
     if i0 is not None and gn.vel_n is not None:
         nom[IV] = -float(gn.vel_n[i0, 2])
     p[IV, IV] = 0.5**2
-    nom[ITD] = nz.td0
+    nom[ITD] = nz.latency_mean
     np.fill_diagonal(p, np.diag(p) + np.array(
-        [0.0, 0.0, nz.ab_sd**2 + 1e-12, nz.k_sd**2 + 1e-12, nz.s_sd**2 + 1e-12,
-         nz.td_sd**2, nz.b_sd**2, 0.0]))
+        [0.0, 0.0, nz.ab_sd**2 + 1e-12, nz.k_sd**2 + 1e-12, nz.scale_sd**2 + 1e-12,
+         nz.latency_sd**2, nz.b_sd**2, 0.0]))
     return nom, p
 
 
