@@ -1,7 +1,8 @@
 """Generate ``docs/results.md`` from benchmark output — never edit that page by hand.
 
 Everything (bench, seed reproductions, graph performance, hard study, online accuracy; 20
-seeds unless ``--seeds`` says otherwise), then the page::
+seeds unless ``--seeds`` says otherwise; the RTK-referenced recordings against the peer
+filter), then the page::
 
     python benchmarks/make_results.py --run [--quick] [--seeds N] --out bench-results
 
@@ -9,9 +10,10 @@ Only the page, from output that already exists: ``make_results.py bench-results`
 
 Inputs, from the results directory: ``bench.json`` (``vnav-graph bench``, required),
 ``reproductions.json``, ``graph_perf.json``, ``hard/`` (``hard_scenarios.py``; its plots go to
-``docs/img/``), ``online_accuracy.json`` and ``provenance.json`` (each step's command, commit
-and times: ``provenance.py``), each optional. Every section is stamped with its provenance
-and JSON (committed under ``docs/results_data/`` when small, else named by sha256).
+``docs/img/``), ``online_accuracy.json``, ``truth_logs.json`` (``truth_logs.py``) and
+``provenance.json`` (each step's command, commit and times: ``provenance.py``), each
+optional. Every section is stamped with its provenance and JSON (committed under
+``docs/results_data/`` when small, else named by sha256).
 
 What the page says is computed, not written: for each pair of approaches that isolates one
 effect, the per-seed **paired** differences of each metric give mean(d) and its Student-t
@@ -408,6 +410,14 @@ def render(results_dir: Path, docs_dir: Path | None = None) -> str:
         p = results_dir / "online_accuracy.json"
         out += oa[:2] + stamp("online_accuracy", p, "online_accuracy.json",
                               "estimators ekf, graph-isam2 (online and lag), graph-batch") + oa[2:]
+    tl = results_dir / "truth_logs.json"
+    if tl.is_file():
+        tdoc = json.loads(tl.read_text())
+        if tdoc.get("peer"):
+            sec = bench_module("truth_logs").render_peer(tdoc["peer"], tdoc["estimators"])
+            out += sec[:2] + stamp("truth_logs", tl, "truth_logs.json",
+                                   f"estimators {', '.join(tdoc['estimators'])}; the two "
+                                   "RTK-referenced recordings; configuration: defaults") + sec[2:]
     perf = results_dir / "graph_perf.json"
     out += ["## Factor-graph performance", ""]
     if perf.is_file():
@@ -424,7 +434,7 @@ def render(results_dir: Path, docs_dir: Path | None = None) -> str:
     return "\n".join(out)
 
 
-STEPS = ("bench", "hard", "online_accuracy", "reproductions", "graph_perf")
+STEPS = ("bench", "hard", "online_accuracy", "reproductions", "graph_perf", "truth_logs")
 
 
 def run_all(out: Path, quick: bool, seeds: int | None, steps: tuple[str, ...] = STEPS) -> None:
@@ -445,6 +455,9 @@ def run_all(out: Path, quick: bool, seeds: int | None, steps: tuple[str, ...] = 
     for name, script in (("reproductions", "reproduce_seeds.py"), ("graph_perf", "bench_graph.py")):
         cmds[name] = [py, str(REPO / "benchmarks" / script), *(["--quick"] if quick else []),
                       "--out", str(out)]
+    # the real recordings with an RTK reference (the shared data; exit 2 and no section
+    # without them)
+    cmds["truth_logs"] = [py, str(REPO / "benchmarks" / "truth_logs.py"), "--out", str(out)]
     for name in steps:
         cmd = cmds[name]
         rc = prov.record(out, name, cmd, lambda c=cmd: subprocess.run(c).returncode)

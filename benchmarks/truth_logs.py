@@ -13,6 +13,11 @@ Drives (``rtk/`` of the shared data, read with ``examples/maps/<folder>.toml``):
   against the RTK solution over the whole walk, and inside the source's outages (15 s every
   45 s from 25 s after the first epoch, ending 45 s before the last: 2 windows).
 
+Against the source repository's own filter (``PEER``): both recordings with the RTK solution
+as GNSS input (the walk through ``examples/maps/walk_0827_rtk.toml``), the source's outages
+withheld, scored at the RTK-fixed epochs only; its numbers are quoted, not re-run here (its
+code is not part of this repository), and each goal of ``PEER_GOALS`` is checked cell by cell.
+
 Scores (``evaluation.reference_score``): altitude and horizontal RMSE and maxima against the
 reference at its epochs inside the windows, NEES/dof there, and the heading error against the
 reference's course at its epochs where it moves faster than 1 m/s (the car's body points
@@ -41,6 +46,27 @@ DRIVES = {
     "walk_0827": {"truth": "gnss_1730_sf.pos", "source_outages": (25.0, 45.0)},
 }
 SOURCE_OUTAGE_S, SOURCE_PERIOD_S = 15.0, 45.0
+# The source repository's GNSS/IMU filter (loosely coupled, after Groves; zero-velocity
+# updates, yaw from the GNSS course, noise tuned for this IMU), run with its own configuration
+# on the RTK input with the outages above withheld, scored at the withheld RTK-fixed epochs:
+# (max, RMS) [m] per recording and axis. Quoted from a run of its code at the snapshot the
+# data README names.
+PEER = {
+    "peer forward (causal)": {
+        ("walk", "horizontal"): (5.61, 2.26), ("walk", "vertical"): (2.47, 0.88),
+        ("car", "horizontal"): (12.81, 3.09), ("car", "vertical"): (1.40, 0.41)},
+    "peer forward with velocity matching": {
+        ("walk", "horizontal"): (0.55, 0.29), ("walk", "vertical"): (0.10, 0.04),
+        ("car", "horizontal"): (0.68, 0.30), ("car", "vertical"): (0.32, 0.09)},
+}
+# ours against the peer output it should match or beat, in every cell
+PEER_GOALS = {"ekf": "peer forward (causal)", "ekf-rts": "peer forward with velocity matching",
+              "graph-batch": "peer forward with velocity matching"}
+# recording -> (folder, column map, reference, source outage start/end margins [s])
+PEER_DRIVES = {"walk": ("walk_0827", "walk_0827_rtk", "gnss_1730_sf.pos", (25.0, 45.0)),
+               "car": ("car_drive_0708", "car_drive_0708", "gnss_1934_sf.pos", (40.0, 30.0))}
+PEER_KEYS = {"horizontal": ("horiz_max_m", "horiz_rmse_m"),
+             "vertical": ("alt_max_abs_m", "alt_rmse_m")}
 
 
 def source_windows(t_first: float, t_last: float, start_s: float, end_s: float
@@ -121,6 +147,71 @@ def run_drive(root: Path, folder: str, names: list[str]) -> dict[str, Any]:
     return doc
 
 
+def run_peer_cases(root: Path, names: list[str]) -> dict[str, Any]:
+    """Our estimators on the peer's footing (module docstring): {recording: scored_case}."""
+    from vnav_graph.io.reference import load_scored
+
+    out = {}
+    for rec, (folder, cmap, truth, margins) in PEER_DRIVES.items():
+        path = root / "rtk" / folder
+        if not path.is_dir():
+            continue
+        cm = REPO / "examples" / "maps" / f"{cmap}.toml"
+        # the windows are placed on the file's span (every epoch), the scores use its fixes
+        ref_all = load_scored(path, cm, truth=path / truth).truth
+        drive = load_scored(path, cm, truth=path / truth, fix_only=True)
+        src = source_windows(float(ref_all.t[0]), float(ref_all.t[-1]), *margins)
+        out[rec] = scored_case(drive, src, names, True)
+    return out
+
+
+def _peer_cell(case: dict[str, Any] | None, name: str, axis: str) -> tuple[float, float] | None:
+    b = (case or {}).get("estimators", {}).get(name) or {}
+    if b.get("status") != "ok":
+        return None
+    mx, rms = (b.get(k) for k in PEER_KEYS[axis])
+    return None if mx is None or rms is None else (float(mx), float(rms))
+
+
+def render_peer(peer: dict[str, Any], names: list[str]) -> list[str]:
+    """The table against the peer and one line per goal of ``PEER_GOALS``: met, or each
+    cell where ours is above the peer's."""
+    cells = [(rec, axis) for rec in PEER_DRIVES for axis in PEER_KEYS]
+    n_win = {rec: len((peer.get(rec) or {}).get("windows", [])) for rec in PEER_DRIVES}
+    lines = ["## Against the source repository's filter", "",
+             "Both recordings with the RTK solution as GNSS input, the source's 15 s outages "
+             f"withheld ({n_win['walk']} on the walk, {n_win['car']} on the car), scored at "
+             "the RTK-fixed epochs inside them; max / RMS [m]. The peer's rows are quoted "
+             "from a run of its own code and configuration (``PEER`` in "
+             "`benchmarks/truth_logs.py`); ours are measured by this benchmark.", "",
+             "| in the withheld windows | " + " | ".join(f"{r} {a}" for r, a in cells) + " |",
+             "|---" * (len(cells) + 1) + "|"]
+    for label, vals in PEER.items():
+        lines.append(f"| {label} | " + " | ".join(
+            f"{vals[c][0]:.2f} / {vals[c][1]:.2f}" for c in cells) + " |")
+    for name in names:
+        row = [_peer_cell(peer.get(r), name, a) for r, a in cells]
+        lines.append(f"| {name} | " + " | ".join(
+            "—" if v is None else f"{v[0]:.2f} / {v[1]:.2f}" for v in row) + " |")
+    lines += ["", "Goals (each of ours at or below the named peer output in every cell):", ""]
+    for name, target in PEER_GOALS.items():
+        if name not in names:
+            continue
+        misses = []
+        for rec, axis in cells:
+            ours = _peer_cell(peer.get(rec), name, axis)
+            theirs = PEER[target][(rec, axis)]
+            if ours is None:
+                misses.append(f"{rec} {axis}: no score")
+                continue
+            misses += [f"{rec} {axis} {what} {o:.2f} > {t:.2f} m"
+                       for what, o, t in zip(("max", "RMS"), ours, theirs, strict=True)
+                       if round(o, 2) > t]
+        verdict = "met" if not misses else "missed: " + "; ".join(misses)
+        lines.append(f"- {name} against {target}: {verdict}")
+    return lines + [""]
+
+
 def render(doc: dict[str, Any]) -> str:
     def f(v: Any, spec: str = ".2f") -> str:
         return "—" if v is None else format(v, spec)
@@ -162,6 +253,8 @@ def render(doc: dict[str, Any]) -> str:
                              f"{f(b['heading_rmse_deg'], '.1f')} | {f(nd)} | "
                              f"{f(b['runtime_s'], '.1f')} |")
             lines.append("")
+    if doc.get("peer"):
+        lines += render_peer(doc["peer"], doc["estimators"])
     return "\n".join(lines)
 
 
@@ -181,6 +274,8 @@ def main(argv: list[str] | None = None) -> int:
             continue
         doc["drives"][folder] = run_drive(root, folder, names)
         print(f"rtk/{folder}: done", file=sys.stderr, flush=True)
+    doc["peer"] = run_peer_cases(root, names)
+    print("peer cases: done", file=sys.stderr, flush=True)
     if not doc["drives"]:
         print("no shared RTK drives found", file=sys.stderr)
         return 2

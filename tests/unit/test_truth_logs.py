@@ -23,3 +23,27 @@ def test_source_outage_windows() -> None:
     assert car[0] == (40.0, 55.0) and car[1][0] == pytest.approx(85.0)
     assert car[-1][1] <= 549.0 - 30.0
     assert walk == [(25.0, 40.0), (70.0, 85.0)]
+
+
+def _case(horiz_max, horiz_rms, alt_max, alt_rms, windows=2):
+    return {"windows": [[0.0, 15.0]] * windows, "estimators": {"ekf-rts": {
+        "status": "ok", "horiz_max_m": horiz_max, "horiz_rmse_m": horiz_rms,
+        "alt_max_abs_m": alt_max, "alt_rmse_m": alt_rms}}}
+
+
+def test_peer_goals_are_checked_cell_by_cell() -> None:
+    vm = tl.PEER["peer forward with velocity matching"]
+    # at the peer's values everywhere (equal counts as at or below): met
+    peer = {rec: _case(*vm[(rec, "horizontal")], *vm[(rec, "vertical")])
+            for rec in ("walk", "car")}
+    lines = tl.render_peer(peer, ["ekf-rts"])
+    assert "- ekf-rts against peer forward with velocity matching: met" in lines
+    assert any(ln.startswith("| ekf-rts | 0.55 / 0.29 | 0.10 / 0.04 |") for ln in lines)
+    # one cell above: missed, and only that cell is named
+    peer["car"] = _case(1.16, vm[("car", "horizontal")][1], *vm[("car", "vertical")])
+    miss = next(ln for ln in tl.render_peer(peer, ["ekf-rts"]) if ln.startswith("- ekf-rts"))
+    assert miss.endswith("missed: car horizontal max 1.16 > 0.68 m")
+    # an estimator without a score is a miss, not a pass
+    gone = {"walk": {"windows": [], "estimators": {}}, "car": peer["car"]}
+    miss = next(ln for ln in tl.render_peer(gone, ["ekf-rts"]) if ln.startswith("- ekf-rts"))
+    assert "walk horizontal: no score" in miss
