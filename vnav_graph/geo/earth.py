@@ -84,13 +84,6 @@ def transport_rate_n(lat: ArrayLike, h: ArrayLike, vel_n: ArrayLike) -> NDArray[
     )
 
 
-def vertical_gravity_gradient(lat: ArrayLike, h: ArrayLike) -> NDArray[np.float64]:
-    """∂γ/∂h ≈ -2γ/R [1/s^2]: the positive feedback that makes the free-inertial vertical
-    channel diverge with time constant sqrt(R/2g) ≈ 570 s."""
-    rn, re = radii(lat)
-    return -2.0 * gravity(lat, h) / (np.sqrt(rn * re) + np.asarray(h, dtype=float))
-
-
 # the same formulas compiled for scalars (the mechanisation hot loops)
 radii_scalar = njit(cache=True)(radii_of)
 gravity_scalar = njit(cache=True)(gravity_of)

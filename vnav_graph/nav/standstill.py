@@ -218,16 +218,6 @@ def no_standstill(t: FloatArray) -> Standstill:
                       np.zeros((0, 2)), ZUPT_SD_FLOOR, float("nan"), float("nan"), 0)
 
 
-def window_mean(x: FloatArray, window: int) -> FloatArray:
-    """Mean of x (N, 3) over the trailing ``window`` samples, (N, 3) (NaN before the first
-    full window)."""
-    out = np.full(x.shape, np.nan)
-    if x.shape[0] >= window:
-        c = np.vstack([np.zeros((1, x.shape[1])), np.cumsum(x, axis=0)])
-        out[window - 1:] = (c[window:] - c[:-window]) / window
-    return out
-
-
 def steady_runs(cand: np.ndarray, x: FloatArray, window: int, gate: float) -> np.ndarray:
     """(N,) int: the first sample of the run each candidate sample belongs to (N elsewhere).
     ``x`` (N, d): samples whitened per axis (x/σ). A run of candidates starting at s (its first

@@ -53,9 +53,6 @@ class SmoothProfile:
     def add(self, t_start: float, duration: float, delta: float) -> None:
         self.ramps.append((t_start, duration, delta))
 
-    def value_at(self, t: float) -> float:
-        return float(self.eval(np.array([t]))[0][0])
-
     def eval(self, t: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
         f = np.full(t.shape, self.f0)
         d1 = np.zeros(t.shape)

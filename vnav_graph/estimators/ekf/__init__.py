@@ -7,8 +7,8 @@ start position), ``model`` (the compiled error-state model, whose docstring desc
 filter), ``kernel`` (the forward pass), ``steps`` (prediction and one gated update per
 measurement kind), ``rows`` (the measurement rows per sensor), ``heading`` (heading
 acquisition), ``magnetometer`` (compass set-up), ``rts`` (the smoother), ``carry`` (the
-acquired heading carried back), ``regate`` (post-smoothing gate), ``backward`` and
-``twofilter`` (the filter run backward, forward/backward separation). The public names are
+acquired heading carried back), ``regate`` (post-smoothing gate), ``backward`` (the filter
+run backward, forward/backward separation). The public names are
 imported on first use, so that ``import vnav_graph.estimators.ekf`` compiles nothing.
 """
 

@@ -248,13 +248,6 @@ class CausalStart:
     anchor: int | None
 
 
-def _with_yaw_of(r: FloatArray, r_yaw: FloatArray) -> FloatArray:
-    """``r`` turned about the down axis to the heading of ``r_yaw`` (of their x axes)."""
-    d = (np.arctan2(r_yaw[1, 0], r_yaw[0, 0]) - np.arctan2(r[1, 0], r[0, 0]))
-    c, s = np.cos(d), np.sin(d)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) @ r
-
-
 # vehicles whose GNSS course is not their heading (they hover and fly sideways)
 HOVERING = ("multirotor", "helicopter", "vtol")
 

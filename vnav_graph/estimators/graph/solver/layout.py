@@ -130,14 +130,6 @@ class Layout:
         x = solve(vec)
         return {key: x[self.key_cols[key][0]:sum(self.key_cols[key])] for key in out}
 
-    def from_vector_values(self, vv: Any) -> FloatArray:
-        """Our column vector of a ``gtsam.VectorValues``."""
-        out = np.zeros(self.n_cols)
-        at = vv.at
-        for key, (c, n) in self.key_cols.items():
-            out[c:c + n] = at(key)
-        return out
-
     def fits_band(self) -> bool:
         """Whether the graph last linearised fits the arrow form (see the module docstring)."""
         return (self.n_cols - self.n_band <= MAX_GLOBAL_DIM and self.pattern is not None

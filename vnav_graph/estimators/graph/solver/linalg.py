@@ -78,10 +78,6 @@ class ArrowFactor:
             out[c.size:, c.size:] = self.s_inv
         return out
 
-    def quad_inverse(self, u: FloatArray) -> float:
-        """uᵀ H⁻¹ u for u (n + m,) — e.g. the variance of a linear combination of states."""
-        return float(u @ self.solve(u))
-
 
 @njit(cache=True)
 def _takahashi(cb):
