@@ -8,6 +8,8 @@ positions)."""
 
 from __future__ import annotations
 
+from typing import Any, NamedTuple
+
 import numpy as np
 from numba import njit
 
@@ -103,13 +105,71 @@ def _gate(nu2, gate2, n_rej, t_rej0, t_j, reinit_s, cnt):
     return False, n_rej, t_rej0
 
 
+class AhrsImu(NamedTuple):
+    """The IMU side of ``ahrs_kernel``: epochs t (N,) [s], gyro (N, 3) [rad/s], specific force
+    accel (N, 3) [m/s²], start attitude q0 (4,) and relevel (N, 2): roll/pitch from static
+    samples after an IMU gap ending at that epoch (NaN elsewhere)."""
+
+    t: Any
+    gyro: Any
+    accel: Any
+    q0: Any
+    relevel: Any
+
+
+class AhrsFixes(NamedTuple):
+    """The GNSS side of ``ahrs_kernel`` (``gnss_reference.Matching``): at the IMU epochs the
+    last fix's position, velocity and horizontal velocity σ; at the thinned fixes their
+    times, the times their velocities are known, the velocities, gravity, the Coriolis term,
+    the interval flags, the residual variances, the vertical-trusted and usable flags."""
+
+    lla_i: Any
+    vel_i: Any
+    sdv_i: Any
+    t_g: Any
+    t_av: Any
+    v_g: Any
+    g_g: Any
+    cor_g: Any
+    ok_g: Any
+    r_g: Any
+    vert_g: Any
+    use_g: Any
+
+
+class AhrsGains(NamedTuple):
+    """The settings of ``ahrs_kernel`` (``inputs.AhrsConfig`` turned into gains, SI units)."""
+
+    kp: float
+    ki: float
+    k_yaw: float
+    ki_yaw: float
+    v_min: float
+    max_corr: float
+    max_fb: float
+    a_static: float
+    t_filt: float
+    gap: float
+    gate2: float
+    sd0: float
+    sd_bg: float
+    sd_yaw: float
+    r_nom: float
+    reinit_s: float
+    fb_after: float
+    lvl_win: float
+    lvl_tau: float
+    st_rate: float
+    st_acc: float
+    g_nom: float
+    imu_gap: float
+
+
 @njit(cache=True)
-def ahrs_kernel(t, gyro, accel, q0, lla_i, vel_i, sdv_i, t_g, t_av, v_g, g_g, cor_g, ok_g, r_g,
-          vert_g,
-          use_g, kp, ki, k_yaw, ki_yaw, v_min, max_corr, max_fb, a_static, t_filt, gap,
-          gate2, sd0, sd_bg, sd_yaw, r_nom, reinit_s, fb_after, lvl_win, lvl_tau, st_rate,
-          st_acc, g_nom, imu_gap, relevel):
-    """Numba kernel (module docstring steps 2-8).
+def ahrs_kernel(imu, fixes, gains):
+    """Numba kernel (module docstring steps 2-8) on three records: ``imu`` (``AhrsImu``: the
+    IMU samples, the start attitude and the re-levelling after gaps), ``fixes``
+    (``AhrsFixes``: the GNSS reference) and ``gains`` (``AhrsGains``: the settings).
 
     lla_i, vel_i (N, 3): the last GNSS position / known velocity at or before each IMU epoch
     (latitude, height; vertical velocity); sdv_i (N,) horizontal velocity σ there (inf in
@@ -126,6 +186,11 @@ def ahrs_kernel(t, gyro, accel, q0, lla_i, vel_i, sdv_i, t_g, t_av, v_g, g_g, co
     Returns q (N, 4), f_n (N, 3), b̂_g (N, 3), propagated horizontal velocity (N, 2) and the
     counters [accepted, rejected, reinit, unusable, vertical dropped, accel-level, imu gaps].
     """
+    t, gyro, accel, q0, relevel = imu
+    lla_i, vel_i, sdv_i, t_g, t_av, v_g, g_g, cor_g, ok_g, r_g, vert_g, use_g = fixes
+    (kp, ki, k_yaw, ki_yaw, v_min, max_corr, max_fb, a_static, t_filt, gap, gate2, sd0, sd_bg,
+     sd_yaw, r_nom, reinit_s, fb_after, lvl_win, lvl_tau, st_rate, st_acc, g_nom,
+     imu_gap) = gains
     n = t.size
     m = t_g.size
     q = np.empty((n, 4))

@@ -157,7 +157,7 @@ from ...geo.earth import OMEGA_IE, gravity, radii
 from ...nav.gaps import gap_threshold
 from ...types import Drive
 from ...types.streams import FloatArray
-from .ahrs import ahrs_kernel
+from .ahrs import AhrsFixes, AhrsGains, AhrsImu, ahrs_kernel
 from .ahrs_cache import shared_call
 from .gnss_reference import baro_rate, matching_inputs, velocity_from_positions
 
@@ -369,19 +369,18 @@ def compute_vertical_inputs(drive: Drive, cfg: AhrsConfig) -> VerticalInputs:
                                   cfg.level_s, g_nom, cfg.static_accel, cfg.static_rate)
     # a writable copy of the specific force: its rows reach the shared strapdown step, which
     # then keeps the EKF's compiled specialisation (a read-only row would compile a second)
+    f64 = [np.ascontiguousarray(a, dtype=float) for a in (m.t_g, m.t_av, m.v_g, m.g_g, m.cor_g)]
+    fixes = AhrsFixes(np.ascontiguousarray(m.lla_i), np.ascontiguousarray(m.vel_i),
+                      np.ascontiguousarray(m.sdv_i), *f64, m.ok,
+                      np.ascontiguousarray(m.r_g, dtype=float), m.vert_iv, m.use)
+    gains = AhrsGains(*(float(x) for x in (
+        kp, ki, cfg.yaw_gain, 0.25 * cfg.yaw_gain**2, cfg.v_course_min, cfg.max_correction,
+        cfg.max_tilt_feedback, a_static_eff, cfg.tilt_filter_s, cfg.gap_factor, gate2,
+        cfg.tilt_sd0, cfg.gyro_bias_sd, cfg.heading_sd, m.r_nom, cfg.reinit_s,
+        cfg.fallback_after_s, cfg.accel_level_window_s, cfg.accel_level_tau_s,
+        cfg.static_rate, cfg.static_accel, g_nom, gap_threshold(t))))
     q, f_n, bg, vp, cnt = ahrs_kernel(
-        t, imu.gyro_b, np.array(imu.accel_b), q0, np.ascontiguousarray(m.lla_i),
-        np.ascontiguousarray(m.vel_i), np.ascontiguousarray(m.sdv_i),
-        np.ascontiguousarray(m.t_g, dtype=float), np.ascontiguousarray(m.t_av, dtype=float),
-        np.ascontiguousarray(m.v_g, dtype=float),
-        np.ascontiguousarray(m.g_g, dtype=float), np.ascontiguousarray(m.cor_g, dtype=float), m.ok,
-        np.ascontiguousarray(m.r_g, dtype=float), m.vert_iv, m.use, kp, ki, cfg.yaw_gain,
-        0.25 * cfg.yaw_gain**2, cfg.v_course_min, cfg.max_correction, cfg.max_tilt_feedback,
-        a_static_eff, cfg.tilt_filter_s, cfg.gap_factor, gate2, cfg.tilt_sd0, cfg.gyro_bias_sd,
-        cfg.heading_sd, m.r_nom, cfg.reinit_s, cfg.fallback_after_s, cfg.accel_level_window_s,
-        cfg.accel_level_tau_s, cfg.static_rate, cfg.static_accel, g_nom,
-        gap_threshold(t), relevel,
-    )
+        AhrsImu(t, imu.gyro_b, np.array(imu.accel_b), q0, relevel), fixes, gains)
     for key, val in zip(("levelling_accepted", "levelling_rejected", "levelling_reinit",
                          "levelling_unusable", "vertical_dropped", "accel_level_updates",
                          "imu_gaps"), cnt, strict=True):
