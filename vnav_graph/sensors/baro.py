@@ -21,6 +21,7 @@ from numpy.typing import ArrayLike
 
 from ..config import BaroSpec
 from ..geo.atmosphere import isa_pressure
+from ..nav.arrays import put
 from ..types import BaroTruth
 from ..types.streams import BaroStream, FloatArray
 from .noise import gauss_markov
@@ -47,7 +48,7 @@ def baro_row(h, v_up, scale, latency, h0):  # pragma: no cover - numba
 def _map_baro(h, v_up, scale, latency, bias, h0, pred, jac):  # pragma: no cover - numba
     for i in range(h.size):
         pred[i] = baro_predict(h[i], v_up[i], scale[i], latency[i], bias[i], h0)
-        jac[i] = baro_row(h[i], v_up[i], scale[i], latency[i], h0)
+        put(jac[i], baro_row(h[i], v_up[i], scale[i], latency[i], h0))
 
 
 def _baro_arrays(h: ArrayLike, v_up: ArrayLike, scale: ArrayLike, latency: ArrayLike,

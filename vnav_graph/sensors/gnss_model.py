@@ -36,6 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from ..nav.arrays import put
 from ..nav.rotations import cross3, skew3
 from ..types.streams import FloatArray
 
@@ -72,9 +73,13 @@ def antenna_velocity(c_nb, lever_b, w_nb_b):
 @njit(cache=True)
 def _map_antenna(c_nb, lever_b, w_nb_b, d, h_d, u, h_u):  # pragma: no cover - numba
     for i in range(c_nb.shape[0]):
-        d[i], h_d[i] = antenna_position(c_nb[i], lever_b)
+        di, hi = antenna_position(c_nb[i], lever_b)
+        put(d[i], di)
+        put(h_d[i], hi)
         if w_nb_b.shape[0]:
-            u[i], h_u[i], _ = antenna_velocity(c_nb[i], lever_b, w_nb_b[i])
+            ui, hui, _ = antenna_velocity(c_nb[i], lever_b, w_nb_b[i])
+            put(u[i], ui)
+            put(h_u[i], hui)
 
 
 def _antenna_batch(c_nb: FloatArray, lever_b: FloatArray, w_nb_b: FloatArray

@@ -118,10 +118,17 @@ class AhrsImu(NamedTuple):
 
 
 class AhrsFixes(NamedTuple):
-    """The GNSS side of ``ahrs_kernel`` (``gnss_reference.Matching``): at the IMU epochs the
-    last fix's position, velocity and horizontal velocity σ; at the thinned fixes their
-    times, the times their velocities are known, the velocities, gravity, the Coriolis term,
-    the interval flags, the residual variances, the vertical-trusted and usable flags."""
+    """The GNSS side of ``ahrs_kernel`` (``gnss_reference.Matching``).
+
+    lla_i, vel_i (N, 3): the last GNSS position / known velocity at or before each IMU epoch
+    (latitude, height; vertical velocity); sdv_i (N,) horizontal velocity σ there (inf in
+    outages: no course); t_g (M,) the (thinned) fixes, t_av (M,) ≥ t_g the time each velocity
+    is known (t_g for a receiver's, later for a fit over later fixes: the interval ending at
+    fix j is matched at the first IMU epoch at or after t_av[j]), v_g (M, 3) their reference
+    velocities, g_g (M,) gravity, cor_g (M, 3) (2ω_ie+ω_en)×v, ok_g (M,) interval [j−1, j]
+    not across an outage, r_g (M,) horizontal residual variance per axis of that interval
+    [(m/s²)²], vert_g (M,) its vertical component is trusted, use_g (M,) the fix's velocity is
+    usable (σ ≤ sd_v_max)."""
 
     lla_i: Any
     vel_i: Any
@@ -169,22 +176,11 @@ class AhrsGains(NamedTuple):
 def ahrs_kernel(imu, fixes, gains):
     """Numba kernel (module docstring steps 2-8) on three records: ``imu`` (``AhrsImu``: the
     IMU samples, the start attitude and the re-levelling after gaps), ``fixes``
-    (``AhrsFixes``: the GNSS reference) and ``gains`` (``AhrsGains``: the settings).
-
-    lla_i, vel_i (N, 3): the last GNSS position / known velocity at or before each IMU epoch
-    (latitude, height; vertical velocity); sdv_i (N,) horizontal velocity σ there (inf in
-    outages: no course); the course is that of the propagated velocity after the yaw reset
-    while fixes renew it, else vel_i's; t_g (M,),
-    v_g (M, 3) reference velocities at the (thinned) fixes, t_av (M,) ≥ t_g the time each
-    velocity is known (t_g for a receiver's, later for a fit over later fixes: the interval
-    ending at fix j is matched at the first IMU epoch at or after t_av[j]), g_g (M,)
-    gravity, cor_g (M, 3)
-    (2ω_ie+ω_en)×v, ok_g (M,) interval [j−1, j] not across an outage, r_g (M,) horizontal
-    residual variance per axis of that interval [(m/s²)²], vert_g (M,) its vertical component
-    is trusted, use_g (M,) the fix's velocity is usable (σ ≤ sd_v_max); relevel (N, 2)
-    roll/pitch from static samples after an IMU gap ending at that epoch (NaN elsewhere).
-    Returns q (N, 4), f_n (N, 3), b̂_g (N, 3), propagated horizontal velocity (N, 2) and the
-    counters [accepted, rejected, reinit, unusable, vertical dropped, accel-level, imu gaps].
+    (``AhrsFixes``: the GNSS reference) and ``gains`` (``AhrsGains``: the settings). The
+    course is that of the propagated velocity after the yaw reset while fixes renew it, else
+    ``vel_i``'s. Returns q (N, 4), f_n (N, 3), b̂_g (N, 3), propagated horizontal velocity
+    (N, 2) and the counters [accepted, rejected, reinit, unusable, vertical dropped,
+    accel-level, imu gaps].
     """
     t, gyro, accel, q0, relevel = imu
     lla_i, vel_i, sdv_i, t_g, t_av, v_g, g_g, cor_g, ok_g, r_g, vert_g, use_g = fixes
