@@ -54,10 +54,11 @@ def _map_baro(h, v_up, scale, latency, bias, h0, pred, jac):  # pragma: no cover
 def _baro_arrays(h: ArrayLike, v_up: ArrayLike, scale: ArrayLike, latency: ArrayLike,
                  bias: ArrayLike, h0: float) -> tuple[FloatArray, FloatArray]:
     """``baro_predict`` and ``baro_row`` over the broadcast inputs: shapes (...) and (..., 5)."""
-    args = np.broadcast_arrays(*(np.asarray(x, dtype=float) for x in
-                                 (h, v_up, scale, latency, bias)))
-    shape = args[0].shape
-    flat = [np.ascontiguousarray(a).reshape(-1) for a in args]
+    args = [np.asarray(x, dtype=float) for x in (h, v_up, scale, latency, bias)]
+    shape = np.broadcast_shapes(*(a.shape for a in args))
+    # writable contiguous copies: numba reads a broadcast view's flags, which numpy < 2
+    # answers with a FutureWarning
+    flat = [np.array(np.broadcast_to(a, shape)).reshape(-1) for a in args]
     pred = np.empty(flat[0].size)
     jac = np.empty((flat[0].size, 5))
     _map_baro(*flat, float(h0), pred, jac)
