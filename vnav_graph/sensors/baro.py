@@ -9,8 +9,9 @@ white noise. Linearised in τd (seed 001 eq. 2): h_b ≈ h0 + (1+s)(h − h0 −
 The model is written once, as two compiled scalar functions: ``baro_predict`` (the predicted
 reading) and ``baro_row`` (its Jacobian with respect to the physical errors (h, v_up, s, τd, b)).
 The EKF's row calls them at one event, the 7-state filter at each sample, and the graph's
-factor over all samples through ``measure_baro`` / ``baro_jacobian``, which map the same
-compiled functions over broadcast arrays.
+factor over all samples through ``baro_arrays`` (both at once; ``measure_baro`` /
+``baro_jacobian`` for one of them), which maps the same compiled functions over broadcast
+arrays.
 """
 
 from __future__ import annotations
@@ -51,8 +52,8 @@ def _map_baro(h, v_up, scale, latency, bias, h0, pred, jac):  # pragma: no cover
         put(jac[i], baro_row(h[i], v_up[i], scale[i], latency[i], h0))
 
 
-def _baro_arrays(h: ArrayLike, v_up: ArrayLike, scale: ArrayLike, latency: ArrayLike,
-                 bias: ArrayLike, h0: float) -> tuple[FloatArray, FloatArray]:
+def baro_arrays(h: ArrayLike, v_up: ArrayLike, scale: ArrayLike, latency: ArrayLike,
+                bias: ArrayLike, h0: float) -> tuple[FloatArray, FloatArray]:
     """``baro_predict`` and ``baro_row`` over the broadcast inputs: shapes (...) and (..., 5)."""
     args = [np.asarray(x, dtype=float) for x in (h, v_up, scale, latency, bias)]
     shape = np.broadcast_shapes(*(a.shape for a in args))
@@ -70,14 +71,14 @@ def measure_baro(
     h0: float,
 ) -> FloatArray:
     """``baro_predict`` over broadcast arrays [m]."""
-    return _baro_arrays(h, v_up, scale, latency, bias, h0)[0]
+    return baro_arrays(h, v_up, scale, latency, bias, h0)[0]
 
 
 def baro_jacobian(
     h: ArrayLike, v_up: ArrayLike, scale: ArrayLike, latency: ArrayLike, h0: float
 ) -> FloatArray:
     """``baro_row`` over broadcast arrays: ∂h_b/∂(h, v_up, s, τd, b), shape (..., 5)."""
-    return _baro_arrays(h, v_up, scale, latency, 0.0, h0)[1]
+    return baro_arrays(h, v_up, scale, latency, 0.0, h0)[1]
 
 
 def draw_baro_truth(spec: BaroSpec, rng: np.random.Generator) -> BaroTruth:

@@ -46,7 +46,7 @@ import numpy as np
 
 from ....geo.earth import OMEGA_IE, gravity
 from ....geo.frames import lla_to_ned, ned_to_lla, skew
-from ....sensors.baro import baro_jacobian, measure_baro
+from ....sensors.baro import baro_arrays
 from ....sensors.gnss_model import (
     GM_AXES,
     antenna_position_batch,
@@ -280,8 +280,8 @@ def baro_rows(
     alpha = np.clip((t_s - bias_lag - t_kf[k]) / ip["T"], 0.0, 1.0)
     s = st.scale[k_s]
     b = (1 - alpha) * st.baro_bias[k] + alpha * st.baro_bias[k + 1]
-    pred = measure_baro(h, v_up, s, 0.0, b, h0)
-    jb = baro_jacobian(h, v_up, s, 0.0, h0)  # ∂/∂(h, v_up, s, τd, b) at zero residual delay
+    # the prediction and ∂/∂(h, v_up, s, τd, b) at zero residual delay
+    pred, jb = baro_arrays(h, v_up, s, 0.0, b, h0)
     dh_dtau = -v_up  # h(t_s − τd): ∂h/∂τd = −v_up(t_s − τd)
     if out is None:
         jac = np.zeros((t_s.size, N_COLS))
