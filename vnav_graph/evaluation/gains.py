@@ -55,9 +55,10 @@ def real_time_rows(runs: list[dict[str, Any]], a: str, b: str) -> list[dict[str,
 def gain_rows(runs: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """One row per (scenario, comparison, metric) the runs allow: ``{"scenario",
     "comparison", "a", "b", "key", "label", "unit", "n", "gain", "gain_ci95", "diff",
-    "diff_ci95", "verdict", "counts"}`` (``gain``/``gain_ci95`` None when there is no mean or
-    fewer than two paired seeds; ``diff``/``diff_ci95``: the paired difference a − b that the
-    win rule judges)."""
+    "diff_ci95", "verdict", "counts", "ci_disagree"}`` (``gain``/``gain_ci95`` None when there
+    is no mean or fewer than two paired seeds; ``diff``/``diff_ci95``: the paired difference
+    a − b that the win rule judges; ``ci_disagree``: not resolved by that difference while the
+    gain's CI excludes 0, see ``gain_lines``)."""
     out = []
     for sc in dict.fromkeys(r["scenario"] for r in runs):
         for comp, a, b, rt in FAMILY_PAIRS:
@@ -74,7 +75,10 @@ def gain_rows(runs: list[dict[str, Any]]) -> list[dict[str, Any]]:
                             "b": b, "key": key, "label": label, "unit": unit, "n": s["n"],
                             "gain": s["gain"], "gain_ci95": s["gain_ci95"],
                             "diff": s["diff"], "diff_ci95": s["diff_ci95"],
-                            "verdict": w["verdict"], "counts": w["counts"]})
+                            "verdict": w["verdict"], "counts": w["counts"],
+                            "ci_disagree": (w["verdict"] == "not resolved"
+                                            and s["diff_ci95"] is not None
+                                            and _excludes_zero(s["gain_ci95"]))})
     return out
 
 
@@ -96,9 +100,8 @@ def gain_lines(rows: list[dict[str, Any]]) -> list[str]:
         ci = ("no CI" if r["gain_ci95"] is None else
               f"[{100 * r['gain_ci95'][0]:+.1f} %, {100 * r['gain_ci95'][1]:+.1f} %]")
         verdict = r["verdict"]
-        dci = r.get("diff_ci95")
-        if verdict == "not resolved" and _excludes_zero(r["gain_ci95"]) and dci is not None:
-            unit = r.get("unit", "")
+        if r.get("ci_disagree"):
+            dci, unit = r["diff_ci95"], r.get("unit", "")
             verdict += (f": the win rule's paired difference d = {r['diff']:.3g} "
                         f"[{dci[0]:+.3g}, {dci[1]:+.3g}] {unit} contains 0; the gain's "
                         "delta-method CI, which scales each seed by the filter's error, "

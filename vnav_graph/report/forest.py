@@ -73,8 +73,8 @@ def _one(ax: Any, r: dict[str, Any], y: float) -> None:
     if ci is not None:
         lo, hi = max(ci[0], XMIN), min(ci[1], 100.0)
         if hi > XMIN:
-            split = r.get("verdict") == "not resolved" and (ci[0] > 0 or ci[1] < 0)
-            ax.plot([lo, hi], [y, y], color=color, lw=1.6, ls="--" if split else "-")
+            ax.plot([lo, hi], [y, y], color=color, lw=1.6,
+                    ls="--" if r.get("ci_disagree") else "-")
     gx = max(g, XMIN)
     ax.plot([gx], [y], marker="<" if g < XMIN else "o", ms=6, color=color,
             mfc=color if r.get("counts") else "white", ls="")
