@@ -149,7 +149,7 @@ def run_drive(root: Path, folder: str, names: list[str]) -> dict[str, Any]:
 
 def run_peer_cases(root: Path, names: list[str]) -> dict[str, Any]:
     """Our estimators on the peer's footing (module docstring): {recording: scored_case}."""
-    from vnav_graph.io.reference import load_scored
+    from vnav_graph.io.reference import attach_reference, load_scored
 
     out = {}
     for rec, (folder, cmap, truth, margins) in PEER_DRIVES.items():
@@ -157,9 +157,10 @@ def run_peer_cases(root: Path, names: list[str]) -> dict[str, Any]:
         if not path.is_dir():
             continue
         cm = REPO / "examples" / "maps" / f"{cmap}.toml"
+        base = load_scored(path, cm)  # the logs are read once; the reference twice:
         # the windows are placed on the file's span (every epoch), the scores use its fixes
-        ref_all = load_scored(path, cm, truth=path / truth).truth
-        drive = load_scored(path, cm, truth=path / truth, fix_only=True)
+        ref_all = attach_reference(base, path / truth, path, cm).truth
+        drive = attach_reference(base, path / truth, path, cm, fix_only=True)
         src = source_windows(float(ref_all.t[0]), float(ref_all.t[-1]), *margins)
         out[rec] = scored_case(drive, src, names, True)
     return out
