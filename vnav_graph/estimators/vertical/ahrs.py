@@ -8,7 +8,7 @@ positions)."""
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple
+from collections import namedtuple
 
 import numpy as np
 from numba import njit
@@ -105,71 +105,30 @@ def _gate(nu2, gate2, n_rej, t_rej0, t_j, reinit_s, cnt):
     return False, n_rej, t_rej0
 
 
-class AhrsImu(NamedTuple):
-    """The IMU side of ``ahrs_kernel``: epochs t (N,) [s], gyro (N, 3) [rad/s], specific force
-    accel (N, 3) [m/s²], start attitude q0 (4,) and relevel (N, 2): roll/pitch from static
-    samples after an IMU gap ending at that epoch (NaN elsewhere)."""
+AhrsImu = namedtuple("AhrsImu", "t gyro accel q0 relevel")
+AhrsImu.__doc__ = """The IMU side of ``ahrs_kernel``: epochs t (N,) [s], gyro (N, 3) [rad/s],
+specific force accel (N, 3) [m/s²], start attitude q0 (4,) and relevel (N, 2): roll/pitch from
+static samples after an IMU gap ending at that epoch (NaN elsewhere)."""
 
-    t: Any
-    gyro: Any
-    accel: Any
-    q0: Any
-    relevel: Any
+AhrsFixes = namedtuple("AhrsFixes",
+                       "lla_i vel_i sdv_i t_g t_av v_g g_g cor_g ok_g r_g vert_g use_g")
+AhrsFixes.__doc__ = """The GNSS side of ``ahrs_kernel`` (``gnss_reference.Matching``).
 
+lla_i, vel_i (N, 3): the last GNSS position / known velocity at or before each IMU epoch
+(latitude, height; vertical velocity); sdv_i (N,) horizontal velocity σ there (inf in
+outages: no course); t_g (M,) the (thinned) fixes, t_av (M,) ≥ t_g the time each velocity
+is known (t_g for a receiver's, later for a fit over later fixes: the interval ending at
+fix j is matched at the first IMU epoch at or after t_av[j]), v_g (M, 3) their reference
+velocities, g_g (M,) gravity, cor_g (M, 3) (2ω_ie+ω_en)×v, ok_g (M,) interval [j−1, j]
+not across an outage, r_g (M,) horizontal residual variance per axis of that interval
+[(m/s²)²], vert_g (M,) its vertical component is trusted, use_g (M,) the fix's velocity is
+usable (σ ≤ sd_v_max)."""
 
-class AhrsFixes(NamedTuple):
-    """The GNSS side of ``ahrs_kernel`` (``gnss_reference.Matching``).
-
-    lla_i, vel_i (N, 3): the last GNSS position / known velocity at or before each IMU epoch
-    (latitude, height; vertical velocity); sdv_i (N,) horizontal velocity σ there (inf in
-    outages: no course); t_g (M,) the (thinned) fixes, t_av (M,) ≥ t_g the time each velocity
-    is known (t_g for a receiver's, later for a fit over later fixes: the interval ending at
-    fix j is matched at the first IMU epoch at or after t_av[j]), v_g (M, 3) their reference
-    velocities, g_g (M,) gravity, cor_g (M, 3) (2ω_ie+ω_en)×v, ok_g (M,) interval [j−1, j]
-    not across an outage, r_g (M,) horizontal residual variance per axis of that interval
-    [(m/s²)²], vert_g (M,) its vertical component is trusted, use_g (M,) the fix's velocity is
-    usable (σ ≤ sd_v_max)."""
-
-    lla_i: Any
-    vel_i: Any
-    sdv_i: Any
-    t_g: Any
-    t_av: Any
-    v_g: Any
-    g_g: Any
-    cor_g: Any
-    ok_g: Any
-    r_g: Any
-    vert_g: Any
-    use_g: Any
-
-
-class AhrsGains(NamedTuple):
-    """The settings of ``ahrs_kernel`` (``inputs.AhrsConfig`` turned into gains, SI units)."""
-
-    kp: float
-    ki: float
-    k_yaw: float
-    ki_yaw: float
-    v_min: float
-    max_corr: float
-    max_fb: float
-    a_static: float
-    t_filt: float
-    gap: float
-    gate2: float
-    sd0: float
-    sd_bg: float
-    sd_yaw: float
-    r_nom: float
-    reinit_s: float
-    fb_after: float
-    lvl_win: float
-    lvl_tau: float
-    st_rate: float
-    st_acc: float
-    g_nom: float
-    imu_gap: float
+AhrsGains = namedtuple("AhrsGains", "kp ki k_yaw ki_yaw v_min max_corr max_fb a_static t_filt "
+                       "gap gate2 sd0 sd_bg sd_yaw r_nom reinit_s fb_after lvl_win lvl_tau "
+                       "st_rate st_acc g_nom imu_gap")
+AhrsGains.__doc__ = """The settings of ``ahrs_kernel`` (``inputs.AhrsConfig`` turned into
+gains, SI units, all floats)."""
 
 
 @njit(cache=True)
