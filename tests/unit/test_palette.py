@@ -10,7 +10,6 @@ from vnav_graph.report.palette import (
     CORE_STYLES,
     DASHES,
     estimator_color,
-    estimator_dash,
     estimator_style,
 )
 
@@ -19,13 +18,13 @@ def test_family_members_differ_in_colour_and_dash():
     for family, _, members in FAMILIES:
         for a, b in combinations(members, 2):
             assert estimator_color(a) != estimator_color(b), (family, a, b)
-            assert estimator_dash(a) != estimator_dash(b), (family, a, b)
+            assert estimator_style(a)["ls"] != estimator_style(b)["ls"], (family, a, b)
 
 
 def test_core_pairs_unique_and_every_core_estimator_styled():
     core = [n for _, _, members in FAMILIES for n in members]
     assert set(core) == set(CORE_STYLES)
-    pairs = [(estimator_color(n), estimator_dash(n)) for n in core]
+    pairs = [(estimator_color(n), estimator_style(n)["ls"]) for n in core]
     assert len(set(pairs)) == len(pairs)
     assert len({estimator_color(n) for n in core}) == len(core)  # colours alone are distinct
 

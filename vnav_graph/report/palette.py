@@ -47,11 +47,6 @@ def estimator_color(name: str) -> str:
     return _pair(name)[0]
 
 
-def estimator_dash(name: str) -> str:
-    """The line style name (a key of ``DASHES``) the report draws ``name`` in."""
-    return _pair(name)[1]
-
-
 def estimator_style(name: str) -> dict[str, Any]:
     """Matplotlib keyword arguments ``{"color", "ls"}`` of ``name``'s curves."""
     color, dash = _pair(name)

@@ -27,8 +27,6 @@ from ..types import BaroTruth
 from ..types.streams import BaroStream, FloatArray
 from .noise import gauss_markov
 
-HPA_PER_M = 1.0 / 8.3  # near sea level, for converting a bias sigma to pressure
-
 
 @njit(cache=True)
 def baro_predict(h, v_up, scale, latency, bias, h0):  # pragma: no cover - numba

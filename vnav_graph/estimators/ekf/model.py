@@ -164,10 +164,8 @@ NPACK = NX * (NX + 1) // 2
 NING = 23  # ingredients of F per grid interval (22: IMU-gap flag)
 IPOS, IVEL, IATT, IBG, IBA, ISC, ITD, IBB, IKA, IMB, IGE = (0, 3, 6, 9, 12, 15, 16, 17, 18,
                                                             21, 24)
-IGH = IGE + 2  # the GNSS error state's down axis
 # indices of the nominal parameter vector ``par`` (NPAR,)
 PBG, PBA, PKA, PSC, PTD, PBB, PMB, PGE = 0, 3, 6, 9, 10, 11, 12, 15
-PGH = PGE + 2
 NPAR = 18
 
 

@@ -294,11 +294,6 @@ class VerticalInputs:
     runtime_s: float = 0.0
     info: dict = field(default_factory=dict)
 
-    @property
-    def accel_down(self) -> FloatArray:
-        """Free-inertial vertical acceleration f_D + g(h_ref) + cor_D [m/s², +down]."""
-        return self.f_down + self.gravity + self.coriolis_down
-
 
 def _coarse_level(accel_b: FloatArray) -> FloatArray:
     """Roll/pitch from a mean specific force at rest (Groves eq. 5.101), yaw 0; returns q_nb."""

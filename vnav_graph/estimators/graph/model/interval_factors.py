@@ -66,9 +66,6 @@ COL_B1 = 13
 COL_S = 14
 COL_TAU = 15
 COL_BA = slice(16, 19)
-N_COLS_GM = 21  # with the height-only GNSS error state at keyframes k, k+1 (``n_cols_of(1)``)
-COL_G0 = 19
-COL_G1 = 20
 # key blocks of a group: (first column, width)
 BLOCKS = ((0, 6), (6, 6), (12, 1), (13, 1), (14, 2))
 
@@ -79,8 +76,7 @@ def n_cols_of(gm_dim: int) -> int:
 
 
 def gm_cols(gm_dim: int) -> tuple[slice, slice]:
-    """Columns of the GNSS error state at keyframes k and k+1 (after ``N_COLS``); for the
-    height-only state (d = 1) they are ``COL_G0`` and ``COL_G1``."""
+    """Columns of the GNSS error state at keyframes k and k+1 (after ``N_COLS``)."""
     return slice(N_COLS, N_COLS + gm_dim), slice(N_COLS + gm_dim, N_COLS + 2 * gm_dim)
 
 

@@ -34,7 +34,6 @@ from .layout import (
 # elimination (``general``), chosen from the structure of the graph
 
 
-SOLVERS = ("auto", "banded", "general")
 # a stalled full step (gain < abs_tol) counts as convergence only when the quadratic model
 # at the point before it predicted less than this [½χ²] (a 1σ move along the step): a stalled
 # step where the model predicts more is a model that misses the curvature, not an optimum
