@@ -1,4 +1,4 @@
-"""The ekf's zero-velocity update (``ekf.rows.zupt_rows`` through ``ekf.steps.update_zupt``)
+"""The ekf's zero-velocity update (``ekf.updates.zupt_rows`` through ``ekf.updates.update_zupt``)
 against the closed-form Kalman update on a known covariance."""
 
 from __future__ import annotations
@@ -7,8 +7,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from vnav_graph.estimators.ekf import model as km
-from vnav_graph.estimators.ekf.rows import zupt_rows
-from vnav_graph.estimators.ekf.steps import update_zupt
+from vnav_graph.estimators.ekf.updates import update_zupt, zupt_rows
 
 GATE = float(chi2.ppf(0.9995, 3))
 

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from vnav_graph.estimators.ekf import model as km
-from vnav_graph.estimators.ekf.rows import gnss_rows as ekf_gnss_rows
+from vnav_graph.estimators.ekf.updates import gnss_rows as ekf_gnss_rows
 from vnav_graph.estimators.graph.model import interval_factors as gf
 from vnav_graph.geo.earth import radii_scalar
 from vnav_graph.geo.frames import lla_to_ned, ned_to_lla
@@ -143,7 +143,7 @@ def test_magnetometer_filter_row_and_graph_factor_agree():
     from gtsam.symbol_shorthand import H, X
 
     from vnav_graph.estimators.ekf.heading import new_state
-    from vnav_graph.estimators.ekf.rows import mag_rows
+    from vnav_graph.estimators.ekf.updates import mag_rows
     from vnav_graph.estimators.graph.model.magnetometer import heading_factor
 
     rng = np.random.default_rng(21)

@@ -1,4 +1,4 @@
-"""The filter's measurement rows (``ekf.rows``) against finite differences of their own
+"""The filter's measurement rows (``ekf.updates``) against finite differences of their own
 innovation under the filter's error convention, and the baro row against the shared sensor
 model the graph's factor evaluates (``sensors.baro.measure_baro`` / ``baro_jacobian``).
 
@@ -13,7 +13,7 @@ import pytest
 
 from vnav_graph.estimators.ekf import model as km
 from vnav_graph.estimators.ekf.heading import new_state
-from vnav_graph.estimators.ekf.rows import baro_rows, gnss_rows, mag_rows
+from vnav_graph.estimators.ekf.updates import baro_rows, gnss_rows, mag_rows
 from vnav_graph.geo.earth import radii_scalar
 from vnav_graph.nav.rotations import quat_to_dcm, rpy_quat
 from vnav_graph.sensors.baro import baro_jacobian, measure_baro

@@ -1,6 +1,6 @@
 """The GNSS measurement model of both estimator families, and its Gauss-Markov error state.
 
-One model, two consumers: the filter's rows (``estimators.ekf.rows.gnss_rows``) and the
+One model, two consumers: the filter's rows (``estimators.ekf.updates.gnss_rows``) and the
 graph's GNSS factor (``estimators.graph.model.interval_factors.gnss_rows``) both take the
 predicted antenna position/velocity and their Jacobians from here.
 

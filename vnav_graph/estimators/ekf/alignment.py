@@ -380,8 +380,9 @@ def initial_state(drive: Drive, cfg: EkfConfig, model: SensorModel, bp: BaroPrio
         g_latency = float(getattr(gnss.spec, "latency_s", 0.0))
     lla0, pos_var, v0, vel_var, t_fixes = _start_from_fixes(
         drive, model, bp, c0, lever, heading_known, mv is not None, g_latency)
-    p0[0:3, 0:3] = np.diag(pos_var)
-    p0[3:6, 3:6] = np.diag(vel_var)
+    pos, vel, att, ba = (slice(i, i + 3) for i in (km.IPOS, km.IVEL, km.IATT, km.IBA))
+    p0[pos, pos] = np.diag(pos_var)
+    p0[vel, vel] = np.diag(vel_var)
     p_ba = ispec.accel_bias_sd**2 * np.eye(3)
     m_tilt = level_tilt_bias_jacobian(c0, float(gravity(lla0[0], lla0[2])))
     if np.ndim(tilt_extra_var):  # per body axis (roll, pitch), turned into n by the yaw
@@ -389,17 +390,17 @@ def initial_state(drive: Drive, cfg: EkfConfig, model: SensorModel, bp: BaroPrio
         rz = np.array([[cy, -sy], [sy, cy]])
         p_tilt = np.zeros((3, 3))
         p_tilt[:2, :2] = rz @ np.diag(tilt_extra_var) @ rz.T + cfg.min_tilt_sd**2 * np.eye(2)
-        p0[6:9, 6:9] = m_tilt @ p_ba @ m_tilt.T + p_tilt
+        p0[att, att] = m_tilt @ p_ba @ m_tilt.T + p_tilt
     else:
-        p0[6:9, 6:9] = m_tilt @ p_ba @ m_tilt.T + (
+        p0[att, att] = m_tilt @ p_ba @ m_tilt.T + (
             cfg.min_tilt_sd**2 + tilt_extra_var) * np.diag([1.0, 1.0, 0.0])
     yaw_unknown_var = np.pi**2 / 3.0
-    p0[8, 8] = heading_sd**2 if heading_known else yaw_unknown_var
-    p0[6:9, 12:15] = m_tilt @ p_ba
-    p0[12:15, 6:9] = (m_tilt @ p_ba).T
-    p0[9:12, 9:12] = ispec.gyro_bias_sd**2 * np.eye(3)
-    p0[12:15, 12:15] = p_ba
-    p0[18:21, 18:21] = (ka_sd if ka_sd > 0 else 1e-7) ** 2 * np.eye(3)
+    p0[km.IATT + 2, km.IATT + 2] = heading_sd**2 if heading_known else yaw_unknown_var
+    p0[att, ba] = m_tilt @ p_ba
+    p0[ba, att] = (m_tilt @ p_ba).T
+    p0[km.IBG:km.IBG + 3, km.IBG:km.IBG + 3] = ispec.gyro_bias_sd**2 * np.eye(3)
+    p0[ba, ba] = p_ba
+    p0[km.IKA:km.IKA + 3, km.IKA:km.IKA + 3] = (ka_sd if ka_sd > 0 else 1e-7) ** 2 * np.eye(3)
     p0[km.IMB:km.IMB + 3, km.IMB:km.IMB + 3] = cfg.mag_bias_sd**2 * np.eye(3)
     par0 = np.zeros(km.NPAR)
     par0[km.PTD] = bp.latency_mean
@@ -408,9 +409,9 @@ def initial_state(drive: Drive, cfg: EkfConfig, model: SensorModel, bp: BaroPrio
         jb = int(np.searchsorted(baro.t, t[0]))
         jb = min(jb, baro.t.size - 1)
         par0[km.PBB] = float(baro.altitude[jb]) - lla0[2]
-    p0[15, 15] = bp.scale_sd**2
-    p0[16, 16] = bp.latency_sd**2
-    p0[17, 17] = bp.bias_sd**2
+    p0[km.ISC, km.ISC] = bp.scale_sd**2
+    p0[km.ITD, km.ITD] = bp.latency_sd**2
+    p0[km.IBB, km.IBB] = bp.bias_sd**2
     gm = cfg.gnss_gm
     if gm is not None:
         for ax, sd in zip(gm.axes, gm.sd, strict=True):

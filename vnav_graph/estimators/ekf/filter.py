@@ -274,11 +274,11 @@ def _estimate(name: str, run: _Run, traj: Trajectory, par: FloatArray, cov: Floa
     if run.has_baro:
         last = cov[-1]
         if bias_mean_sd is None:
-            bias_mean_sd = float(np.mean(np.sqrt(np.clip(cov[:, 17, 17], 0, None))))
+            bias_mean_sd = float(np.mean(np.sqrt(np.clip(cov[:, km.IBB, km.IBB], 0, None))))
         baro = BaroEstimate(
-            scale=ParamEstimate(float(par[-1, km.PSC]), float(np.sqrt(last[15, 15])),
+            scale=ParamEstimate(float(par[-1, km.PSC]), float(np.sqrt(last[km.ISC, km.ISC])),
                                 run.prior_sd["scale"], 0.0),
-            latency_s=ParamEstimate(float(par[-1, km.PTD]), float(np.sqrt(last[16, 16])),
+            latency_s=ParamEstimate(float(par[-1, km.PTD]), float(np.sqrt(last[km.ITD, km.ITD])),
                                     run.prior_sd["latency"], run.latency_mean),
             bias_m=ParamEstimate(float(np.mean(par[:, km.PBB])), bias_mean_sd,
                                  run.prior_sd["bias"]),

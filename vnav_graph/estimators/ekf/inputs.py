@@ -24,6 +24,7 @@ from . import model as km
 from .alignment import track_heading
 from .magnetometer import one_per_interval
 from .settings import EkfConfig
+from .updates import BARO, GNSS, MAG, ZUPT
 
 NDArrayInt = Any
 
@@ -152,7 +153,7 @@ def events(drive: Drive, model: SensorModel, grid_idx: NDArrayInt, g_latency: fl
     ev_t_l, ev_type_l, ev_idx_l = [], [], []
     if gnss is not None:
         ev_t_l.append(gnss.t - g_latency)
-        ev_type_l.append(np.zeros(gnss.t.size, dtype=np.int64))
+        ev_type_l.append(np.full(gnss.t.size, GNSS, dtype=np.int64))
         ev_idx_l.append(np.arange(gnss.t.size))
         tr = track_heading(gnss, cfg.sideslip_sd, drive.imu)
         g_lla, g_psd = gnss.lla, model.gnss_pos_sd
@@ -166,7 +167,7 @@ def events(drive: Drive, model: SensorModel, grid_idx: NDArrayInt, g_latency: fl
         tr_yaw = tr_speed = tr_sd = np.zeros(0)
     if baro is not None:
         ev_t_l.append(baro.t)
-        ev_type_l.append(np.ones(baro.t.size, dtype=np.int64))
+        ev_type_l.append(np.full(baro.t.size, BARO, dtype=np.int64))
         ev_idx_l.append(np.arange(baro.t.size))
         b_alt = np.asarray(baro.altitude, dtype=float)
     else:
@@ -175,14 +176,14 @@ def events(drive: Drive, model: SensorModel, grid_idx: NDArrayInt, g_latency: fl
         assert drive.mag is not None
         im = one_per_interval(drive.mag.t, cfg.mag_interval_s)
         ev_t_l.append(drive.mag.t[im])
-        ev_type_l.append(np.full(im.size, 2, dtype=np.int64))
+        ev_type_l.append(np.full(im.size, MAG, dtype=np.int64))
         ev_idx_l.append(np.arange(im.size))
         m_field = np.ascontiguousarray(drive.mag.field_b[im])
     else:
         m_field = np.zeros((0, 3))
     if zupt_t is not None and zupt_t.size:
         ev_t_l.append(np.asarray(zupt_t, dtype=float))
-        ev_type_l.append(np.full(zupt_t.size, 3, dtype=np.int64))
+        ev_type_l.append(np.full(zupt_t.size, ZUPT, dtype=np.int64))
         ev_idx_l.append(np.arange(zupt_t.size))
     if ev_t_l:
         ev_t = np.concatenate(ev_t_l)

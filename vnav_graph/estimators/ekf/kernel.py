@@ -1,9 +1,9 @@
 """The forward EKF kernel: one compiled pass over the whole drive (``run_filter``).
 
 The error-state model is in ``ekf.model`` (whose docstring describes the filter), the
-measurement rows of each sensor in ``ekf.rows``, the heading acquisition in ``ekf.heading``
-and the prediction, heading reset and gated updates in ``ekf.steps``; this module holds only
-the loop that strings them together.
+measurement rows and gated update of each sensor in ``ekf.updates``, the heading acquisition
+in ``ekf.heading`` and the prediction, heading reset and delayed-row mapping in ``ekf.steps``;
+this module holds only the loop that strings them together.
 
 Its inputs are eight typed records (``NamedTuple``s of arrays and scalars, which numba passes
 as tuples: a field read is resolved at compile time and costs nothing): :class:`Grids`,
@@ -36,17 +36,21 @@ from .heading import (
     track_heading,
 )
 from .model import NING, NPACK, NPAR, NX, PBA, PBG, PGE, PKA, apply_correction, pack
-from .rows import BARO, GNSS, ZUPT, baro_rows, gnss_rows, mag_rows, zupt_rows
-from .steps import (
+from .steps import delayed_rows, grid_predict, heading_reset
+from .updates import (
+    BARO,
     C_BARO,
     C_MAG,
-    delayed_rows,
-    grid_predict,
-    heading_reset,
+    GNSS,
+    ZUPT,
+    baro_rows,
+    gnss_rows,
+    mag_rows,
     tilt_held,
     update_gated,
     update_gnss,
     update_zupt,
+    zupt_rows,
 )
 
 FloatArray = NDArray[np.float64]
@@ -98,7 +102,7 @@ class Events(NamedTuple):
     """GNSS fixes and baro samples merged and sorted by time."""
 
     t: FloatArray  # (E,) event stamps [s]
-    kind: IntArray  # (E,) rows.GNSS fix, rows.BARO sample, rows.MAG sample, rows.ZUPT
+    kind: IntArray  # (E,) updates.GNSS fix, BARO sample, MAG sample, ZUPT
     idx: IntArray  # (E,) index into the GNSS, baro or magnetometer arrays, or ZUPT number
     max_pending: int  # most events inside one grid interval, + 1
 
@@ -255,7 +259,7 @@ def run_filter(grids, init, noise, events, gnss, baro, mag, settings):
     heading_ok = init.heading_known
     t_heading = t[0] if heading_ok else np.nan
     by_course = False  # the last heading acquisition was the GNSS course's
-    counts = np.zeros(3, dtype=np.int64)  # the gates' refusal counters (steps.C_*)
+    counts = np.zeros(3, dtype=np.int64)  # the gates' refusal counters (updates.C_*)
     v_gate = np.array([0.0, 0.0, np.nan])  # nav.gnss_gate state
     acq = new_state()  # heading acquisition (ekf.heading)
     sf_acc, s_i, ch_u, ch_w = np.zeros(2), np.zeros(2), np.zeros(2), np.zeros(2)
