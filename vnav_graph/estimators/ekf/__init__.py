@@ -4,8 +4,8 @@ GNSS error state) and ``ekf-rts`` (the same pass plus a Rauch-Tung-Striebel smoo
 Modules: ``settings`` (``EkfConfig``), ``filter`` (set-up from the shared sensor model, the
 estimators, outputs), ``inputs`` (grids, process noise, event list), ``alignment`` (levelling,
 start position), ``model`` (the compiled error-state model, whose docstring describes the
-filter), ``kernel`` (the forward pass), ``steps`` (prediction and one gated update per
-measurement kind), ``rows`` (the measurement rows per sensor), ``heading`` (heading
+filter), ``kernel`` (the forward pass), ``steps`` (prediction, heading reset, delayed rows),
+``updates`` (each measurement's rows and gated update), ``heading`` (heading
 acquisition), ``magnetometer`` (compass set-up), ``rts`` (the smoother), ``carry`` (the
 acquired heading carried back), ``regate`` (post-smoothing gate), ``backward`` (the filter
 run backward, forward/backward separation). The public names are

@@ -2,7 +2,7 @@
 
 Public surface: ``GraphConfig``, ``GraphBatch``, ``GraphISAM2`` and ``check_jacobians`` (a
 factor's Jacobians against central differences), imported on first use so that importing a
-submodule does not load the estimators. Three rooms:
+submodule does not load the estimators. Four rooms:
 
 - ``model/``: the model. ``problem`` (set-up: keyframes, GNSS pre-gate, baro priors, IMU gaps,
   accelerometer scale factors, preintegration, interval rows at a linearisation point),
@@ -12,10 +12,11 @@ submodule does not load the estimators. Three rooms:
   ``interp``), ``initial_guess``, ``robust``, ``magnetometer`` and ``extend`` (the public
   extension point: ``GraphBatch(config, extensions=[...])``, guide in
   ``docs/extending.md``);
-- ``batch/``: the batch solver. ``solve`` (Gauss-Newton / Levenberg-Marquardt, post-solve GNSS
-  gate), ``layout`` + ``linalg`` (the banded-arrow fast path and selected inversion),
-  ``general`` (GTSAM elimination of the linearised graph), ``smoother`` (outputs,
-  ``GraphBatch``);
+- ``solver/``: what both estimators share. ``solve`` (Gauss-Newton / Levenberg-Marquardt,
+  post-solve GNSS gate), ``layout`` + ``linalg`` (the banded-arrow fast path and selected
+  inversion), ``general`` (GTSAM elimination of the linearised graph), ``outputs`` (the
+  estimate of a solved graph);
+- ``batch/``: ``GraphBatch``;
 - ``isam2/``: the incremental front end. ``smoother`` (``GraphISAM2``), ``setup``, ``online``
   (one update per keyframe), ``linear_factors`` + ``relin`` (its interval factors and their
   relinearisation), ``window``.
@@ -25,26 +26,15 @@ Design, measurements and references in ``docs/graph.md``.
 
 from __future__ import annotations
 
+import importlib
 from typing import Any
 
 __all__ = ["GraphBatch", "GraphConfig", "GraphISAM2", "check_jacobians"]
+_HOME = {"GraphConfig": ".settings", "GraphBatch": ".batch.smoother",
+         "GraphISAM2": ".isam2.smoother", "check_jacobians": ".model.jacobians"}
 
 
 def __getattr__(name: str) -> Any:
-    if name == "GraphConfig":
-        from .settings import GraphConfig
-
-        return GraphConfig
-    if name == "GraphBatch":
-        from .batch.smoother import GraphBatch
-
-        return GraphBatch
-    if name == "GraphISAM2":
-        from .isam2.smoother import GraphISAM2
-
-        return GraphISAM2
-    if name == "check_jacobians":
-        from .model.jacobians import check_jacobians
-
-        return check_jacobians
+    if name in _HOME:
+        return getattr(importlib.import_module(_HOME[name], __name__), name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
