@@ -8,7 +8,7 @@ correlated errors, twice the bursts) and each seed: ``ekf-rts`` and ``graph-batc
 configuration of ``benchmarks/hard_scenarios.toml`` (both families at their best), once per
 GNSS error model ``--model`` ("off", or "σ_h,σ_v,τ" [m, m, s] given to both families as
 ``gnss_gm_sd_h`` / ``gnss_gm_sd_v`` / ``gnss_gm_tau_s``). Also the residual diagnostic
-(``evaluation.gnss_residuals``) of each model-off run: what on a real log, without truth,
+(``sensors.gnss_residuals``) of each model-off run: what on a real log, without truth,
 says the GNSS errors are correlated.
 
 ``--diagnostic``: the residual diagnostic alone (ekf-rts, model off) on drives whose GNSS
@@ -91,9 +91,9 @@ def configs(model: tuple[float, float, float] | None, ekf_max_rejects: int | Non
 def run_seed(scenario: str, seed: int, models: list[str], duration: float | None,
              ekf_max_rejects: int | None = None,
              ekf_max_rejected_s: float | None = None) -> dict[str, Any]:
-    from vnav_graph.evaluation.gnss_residuals import gnss_residual_autocorr
     from vnav_graph.evaluation.metrics import evaluate
     from vnav_graph.run.runner import run_one
+    from vnav_graph.sensors.gnss_residuals import gnss_residual_autocorr
     from vnav_graph.simulation.scenario import simulate
 
     over = {} if duration is None else {"duration_s": duration}
@@ -155,9 +155,9 @@ def diagnostic(seeds: int, out: Path) -> int:
     """The residual autocorrelation of ekf-rts (model off) on simulated and real drives."""
     from bench_real_logs import data_root, present_logs
 
-    from vnav_graph.evaluation.gnss_residuals import gnss_residual_autocorr
     from vnav_graph.io import load_drive
     from vnav_graph.run.runner import run_one
+    from vnav_graph.sensors.gnss_residuals import gnss_residual_autocorr
     from vnav_graph.simulation.scenario import simulate
 
     doc: dict[str, Any] = {"simulated": {}, "logs": {}}

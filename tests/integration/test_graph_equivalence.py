@@ -77,6 +77,7 @@ from vnav_graph.estimators import graph as g
 from vnav_graph.estimators.ekf.filter import EKF, EKFRTS, EkfConfig
 from vnav_graph.estimators.graph.model import interval_factors as gf
 from vnav_graph.estimators.graph.model import problem as gp
+from vnav_graph.estimators.graph.model.dense_increments import dense_preintegration
 from vnav_graph.evaluation.metrics import errors_vs_truth
 from vnav_graph.geo.earth import gravity
 from vnav_graph.geo.frames import lla_to_ned, quat_to_mat
@@ -196,7 +197,7 @@ class VerticalProblem:
         self.st = gf.KeyframeStates(
             self.R, pos, vel, ba, self.b_hat, np.full(nk, self.s_hat), np.full(nk, self.tau_hat),
             np.array([0.0, 0.0, g0]) + dg - 2 * np.cross(omega_t, vel))
-        self.dense = gf.dense_preintegration(imu.t, imu.gyro_b, imu.accel_b, kf_idx)
+        self.dense = dense_preintegration(imu.t, imu.gyro_b, imu.accel_b, kf_idx)
         # priors on the first keyframe (builders.prior_factors): translation σ 10 m and velocity
         # σ 2 m/s around the GNSS-initialised state, accel bias σ from the spec
         sp = imu.spec

@@ -17,6 +17,7 @@ import pytest
 from vnav_graph.estimators.ekf import model as km
 from vnav_graph.estimators.ekf.updates import gnss_rows as ekf_gnss_rows
 from vnav_graph.estimators.graph.model import interval_factors as gf
+from vnav_graph.estimators.graph.model.dense_increments import dense_preintegration
 from vnav_graph.geo.earth import radii_scalar
 from vnav_graph.geo.frames import lla_to_ned, ned_to_lla
 from vnav_graph.nav.rotations import quat_to_dcm, rpy_quat, so3_exp
@@ -85,7 +86,7 @@ def _graph_at(lla, c, ge, dim, rng):
     gyro = 0.2 * rng.normal(size=(t.size, 3))
     accel = np.array([0.3, -0.2, -9.8]) + rng.normal(size=(t.size, 3))
     kf = gf.keyframe_indices(t, 1.0)
-    dense = gf.dense_preintegration(t, gyro, accel, kf)
+    dense = dense_preintegration(t, gyro, accel, kf)
     nk = kf.size
     rot = np.array([so3_exp(rng.normal(0.0, 0.3, 3)) for _ in range(nk)])
     rot[1] = c

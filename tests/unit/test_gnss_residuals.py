@@ -1,4 +1,4 @@
-"""The GNSS residual autocorrelation (``evaluation.gnss_residuals``) against closed forms: a
+"""The GNSS residual autocorrelation (``sensors.gnss_residuals``) against closed forms: a
 first-order Gauss-Markov series has ρ(L) = exp(−L/τ), white noise ρ = 0."""
 
 from __future__ import annotations
@@ -6,8 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from vnav_graph.evaluation.gnss_residuals import MIN_PAIRS, autocorr_at
-from vnav_graph.sensors.gnss_residuals import lag_pairs
+from vnav_graph.sensors.gnss_residuals import MIN_PAIRS, autocorr_at, lag_pairs
 from vnav_graph.sensors.noise import gauss_markov
 
 

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from vnav_graph.estimators.graph.model import interval_factors as gf
+from vnav_graph.estimators.graph.model.dense_increments import dense_preintegration
 from vnav_graph.geo.earth import gravity
 from vnav_graph.geo.frames import lla_to_ned, ned_to_lla
 from vnav_graph.nav.rotations import so3_exp
@@ -20,7 +21,7 @@ def _setup(seed=0):
     gyro = 0.2 * rng.normal(size=(t.size, 3))
     accel = np.array([0.5, -0.3, -9.8]) + rng.normal(size=(t.size, 3))
     kf = gf.keyframe_indices(t, 1.0)
-    dense = gf.dense_preintegration(t, gyro, accel, kf)
+    dense = dense_preintegration(t, gyro, accel, kf)
     nk = kf.size
     rot = np.array([so3_exp(rng.normal(size=3)) for _ in range(nk)])
     pos = np.array([[100.0 * k, 50.0 * k, -20.0 * k] for k in range(nk)]) + rng.normal(
@@ -130,7 +131,7 @@ def test_interpolant_hits_keyframes_and_is_exact_for_constant_acceleration():
     closed-form parabola p(t) = p_k + v_k τ + ½(a + R f) τ² at every sample time."""
     t = np.arange(0, 2.0 + 1e-9, 0.005)
     f = np.array([0.3, -0.2, -9.7])
-    dense = gf.dense_preintegration(t, np.zeros((t.size, 3)), np.tile(f, (t.size, 1)),
+    dense = dense_preintegration(t, np.zeros((t.size, 3)), np.tile(f, (t.size, 1)),
                                     gf.keyframe_indices(t, 1.0))
     rot = np.array([so3_exp(np.array([0.1, -0.2, 0.3]))] * 3)
     a = np.array([0.0, 0.0, 9.81])
@@ -232,7 +233,7 @@ def test_gap_interval_is_interpolated_linearly_and_its_jacobians_match():
     g2 = 0.2 * rng.normal(size=(dense.t.size, 3))
     a2 = np.array([0.5, -0.3, -9.8]) + rng.normal(size=(dense.t.size, 3))
     a2[150] += 300.0
-    crash = replace(gf.dense_preintegration(dense.t, g2, a2, dense.kf_idx),
+    crash = replace(dense_preintegration(dense.t, g2, a2, dense.kf_idx),
                     gap=dense_gap.gap)
     tq = np.array([1.0, 1.3, 1.77, 1.99])
     k = np.ones(tq.size, dtype=int)

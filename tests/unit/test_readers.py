@@ -16,7 +16,7 @@ import pytest
 from fuzz.writers import ulog_bytes
 
 from vnav_graph.io.readers import detect_format, read_log
-from vnav_graph.io.readers.sensorlogger import mounting_rotation
+from vnav_graph.io.readers.phone_streams import mounting_rotation
 
 DATA = Path(__file__).resolve().parent.parent / "data"
 SKI_CUT = DATA / "sensorlogger_ski_cut"

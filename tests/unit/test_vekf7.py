@@ -8,17 +8,8 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from vnav_graph.estimators.vertical.vekf7 import (
-    IB,
-    IBB,
-    IH,
-    II,
-    IK,
-    IV,
-    NX,
-    VEKF7,
-    propagate,
-)
+from vnav_graph.estimators.vertical.vekf7 import VEKF7, propagate
+from vnav_graph.estimators.vertical.vekf7_setup import IB, IBB, IH, II, IK, IV, NX
 from vnav_graph.evaluation.metrics import errors_vs_truth, evaluate, nees
 from vnav_graph.geo.earth import gravity, radii
 from vnav_graph.simulation import load_scenario, simulate

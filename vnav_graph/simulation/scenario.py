@@ -30,7 +30,7 @@ from ..sensors.baro import simulate_baro
 from ..sensors.gnss import simulate_gnss
 from ..sensors.imu import apply_imu_errors
 from ..types import Drive, Trajectory
-from . import SCENARIO_DIR, list_scenarios  # noqa: F401  (re-exported)
+from . import SCENARIO_DIR, list_scenarios
 from .trajectories import (
     hill_drive_profiles,
     kinematics,

@@ -89,7 +89,7 @@ from ...types.streams import FloatArray
 from ..checks import with_prior_conflict_notes
 from .base import VerticalEstimator, vertical_estimate
 from .inputs import AhrsConfig, VerticalInputs, vertical_inputs
-from .vekf7_setup import (  # noqa: F401  (the state indices and input_error_psd: this module's API)
+from .vekf7_setup import (
     IB,
     IBB,
     IH,
@@ -100,9 +100,7 @@ from .vekf7_setup import (  # noqa: F401  (the state indices and input_error_psd
     IV,
     NX,
     Noise,
-    given,
     initial_state,
-    input_error_psd,
     lever_arm_dz,
     measurement_events,
     noise_densities,

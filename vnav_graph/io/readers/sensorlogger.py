@@ -85,14 +85,12 @@ from ._common import (
     finite_rows,
     monotonic_mask,
 )
-from .phone_streams import (  # noqa: F401  (MAG_SD_UT, mounting_rotation: this reader's API)
+from .phone_streams import (
     G0,
-    MAG_SD_UT,
     aligned_imu,
     baro_from_pressure,
     gnss_from_fixes,
     mag_from_phone,
-    mounting_rotation,
     time_column,
     time_meta,
 )

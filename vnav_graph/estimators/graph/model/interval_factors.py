@@ -54,7 +54,7 @@ from ....sensors.gnss_model import (
     body_tilt,
 )
 from ....types.streams import FloatArray
-from .dense_increments import DenseIncrements, dense_preintegration  # noqa: F401 (gf.*)
+from .dense_increments import DenseIncrements
 from .interp import interpolant
 
 N_COLS = 19

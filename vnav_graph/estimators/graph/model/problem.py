@@ -34,6 +34,7 @@ from ...zupt import drive_standstill
 from ..settings import GraphConfig
 from . import interval_factors as gf
 from .accel_scale import AccelScale, interval_mean_force
+from .dense_increments import DenseIncrements, dense_preintegration
 from .gnss_pregate import pregate_gnss
 from .robust import reweight
 
@@ -70,7 +71,7 @@ class Problem:
     omega_t: FloatArray
     kf_idx: np.ndarray
     t_kf: FloatArray
-    dense: gf.DenseIncrements
+    dense: DenseIncrements
     params: Any
     imu_spec: ImuSpec
     baro_spec: BaroPrior | None  # the shared baro prior (sensors.model)
@@ -202,7 +203,7 @@ def setup(drive: Drive, cfg: GraphConfig, causal: bool = False) -> Problem:
     spec = model.imu
     bspec = model.baro
     kf_idx = gf.keyframe_indices(imu.t, cfg.keyframe_dt)
-    dense = gf.dense_preintegration(imu.t, imu.gyro_b, imu.accel_b, kf_idx)
+    dense = dense_preintegration(imu.t, imu.gyro_b, imu.accel_b, kf_idx)
     gaps = imu_gaps(imu.t, kf_idx)
     if gaps.any():
         dense = replace(dense, gap=gaps)
