@@ -8,9 +8,10 @@ from the physics in ``docs/design.md`` and the module docstrings, on GTSAM's var
 from GTSAM's own chain rules (``Pose3.translation``/``rotation``, ``Rot3.rotate`` with
 their Jacobian arguments). Its error never calls the product's row functions or sensor models
 (``baro_rows``, ``gnss_rows``, ``interpolate``, ``baro_predict``, ``antenna_*``,
-``mag_heading_row``); its height is pymap3d's, not ``geo.frames``. Its one product input is
+``mag_heading_row``); its height is pymap3d's, not ``geo.frames``. Its product inputs are
 the IMU increments ΔR, Δv, Δp of ``DenseIncrements.at`` — the measurement of the term, as a
-``PreintegratedImuMeasurements`` is that of ``gtsam.ImuFactor``.
+``PreintegratedImuMeasurements`` is that of ``gtsam.ImuFactor`` — and two constants, the
+GNSS error state's axes ``GM_AXES`` and the gap's acceleration level ``GAP_ACCEL_LEVEL``.
 
 Terms covered (the list follows the code: every term the graph linearises itself, and the
 linear factors whose coefficients it computes). This module holds the terms through the
