@@ -71,6 +71,7 @@ from gtsam.symbol_shorthand import B, C, G, K, X
 
 from vnav_graph.estimators.graph import check_jacobians
 from vnav_graph.estimators.graph.model import interval_factors as gf
+from vnav_graph.estimators.graph.model.dense_increments import dense_preintegration
 from vnav_graph.sensors.gnss_model import GM_AXES
 
 ORIGIN = np.array([np.radians(47.0), np.radians(11.0), 500.0])
@@ -95,7 +96,7 @@ def _state(seed: int, gm_dim: int = 0, gap: bool = False):
     t = np.arange(0, 3.0 + 1e-9, 0.01)
     gyro = 0.2 * rng.normal(size=(t.size, 3))
     accel = np.array([0.5, -0.3, -9.8]) + rng.normal(size=(t.size, 3))
-    dense = gf.dense_preintegration(t, gyro, accel, gf.keyframe_indices(t, 1.0))
+    dense = dense_preintegration(t, gyro, accel, gf.keyframe_indices(t, 1.0))
     if gap:
         dense = replace(dense, gap=np.array([False, True, False]))
     nk = dense.t_kf.size
