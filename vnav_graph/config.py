@@ -137,7 +137,7 @@ IMU_PRESETS: dict[str, ImuSpec] = {
 @dataclass(frozen=True)
 class GnssSpec:
     """GNSS receiver error model; the urban part (``gm_*``, ``burst_*``, ``random_outage*``,
-    ``vnav_graph.sensors.gnss``) is off at its defaults and draws from its own generator.
+    ``vnav_graph.simulation.gnss``) is off at its defaults and draws from its own generator.
 
     rate_hz: fix rate [Hz].
     pos_sd_h, pos_sd_v: white position noise per fix, horizontal / vertical [m].

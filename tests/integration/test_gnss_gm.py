@@ -2,7 +2,7 @@
 ``graph-batch`` (the same model: ``sensors.gnss_model.GnssGM``; the graph's G(k) chain).
 
 Drive: hill-drive, 300 s, GNSS height error = white 0.5 m + Gauss-Markov σ 3 m, τ 120 s (the
-receiver reports σ_v = √(0.5² + 3²), as ``sensors.gnss`` does). Treated as white, 10 Hz of
+receiver reports σ_v = √(0.5² + 3²), as ``simulation.gnss`` does). Treated as white, 10 Hz of
 such heights are averaged as if independent: the filter's altitude σ is far too small. With the
 state (σ and τ of the simulation: the test is of the model, not of prior tuning) the altitude
 error is consistent with its σ.

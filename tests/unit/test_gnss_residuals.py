@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from vnav_graph.sensors.gnss_residuals import MIN_PAIRS, autocorr_at, lag_pairs
-from vnav_graph.sensors.noise import gauss_markov
+from vnav_graph.simulation.noise import gauss_markov
 
 
 @pytest.mark.parametrize("tau", [10.0, 30.0, 120.0])

@@ -10,9 +10,9 @@ import pytest
 from vnav_graph.config import BaroSpec, GnssSpec
 from vnav_graph.geo.atmosphere import T0
 from vnav_graph.geo.frames import lla_to_ned
-from vnav_graph.sensors.baro import simulate_baro
-from vnav_graph.sensors.gnss import simulate_gnss
 from vnav_graph.simulation import load_scenario, simulate
+from vnav_graph.simulation.gnss import simulate_gnss
+from vnav_graph.simulation.measurements import simulate_baro
 from vnav_graph.types import Trajectory
 
 ORIGIN = np.array([np.radians(48.1), np.radians(11.6), 520.0])

@@ -9,8 +9,9 @@ import pytest
 from vnav_graph.evaluation.montecarlo import shorten_scenario
 from vnav_graph.geo.frames import quat_to_mat
 from vnav_graph.geo.magfield import earth_field
-from vnav_graph.sensors.magnetometer import MagSpec, simulate_mag
+from vnav_graph.sensors.magnetometer import MagSpec
 from vnav_graph.simulation import list_scenarios, load_scenario, simulate
+from vnav_graph.simulation.measurements import simulate_mag
 from vnav_graph.simulation.scenario import scenario_from_dict
 from vnav_graph.types import Trajectory
 

@@ -5,16 +5,16 @@ import pytest
 
 from vnav_graph.config import IMU_PRESETS, BaroSpec
 from vnav_graph.geo.earth import OMEGA_IE, gravity
-from vnav_graph.sensors import noise
 from vnav_graph.sensors.baro import (
     baro_jacobian,
     baro_predict,
     baro_row,
     measure_baro,
-    simulate_baro,
 )
-from vnav_graph.sensors.noise import gauss_markov, linear_recurrence, random_walk, white_sd
-from vnav_graph.simulation import simulate
+from vnav_graph.sensors.noise import white_sd
+from vnav_graph.simulation import noise, simulate
+from vnav_graph.simulation.measurements import simulate_baro
+from vnav_graph.simulation.noise import gauss_markov, linear_recurrence, random_walk
 
 
 def test_gauss_markov_is_stationary_with_right_correlation(rng):

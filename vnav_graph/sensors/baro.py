@@ -20,12 +20,8 @@ import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike
 
-from ..config import BaroSpec
-from ..geo.atmosphere import isa_pressure
 from ..nav.arrays import put
-from ..types import BaroTruth
-from ..types.streams import BaroStream, FloatArray
-from .noise import gauss_markov
+from ..types.streams import FloatArray
 
 
 @njit(cache=True)
@@ -77,75 +73,3 @@ def baro_jacobian(
 ) -> FloatArray:
     """``baro_row`` over broadcast arrays: ∂h_b/∂(h, v_up, s, τd, b), shape (..., 5)."""
     return baro_arrays(h, v_up, scale, latency, 0.0, h0)[1]
-
-
-def draw_baro_truth(spec: BaroSpec, rng: np.random.Generator) -> BaroTruth:
-    """Draw the random constants (scale, latency) of one simulated altimeter."""
-    s = spec.scale if spec.scale is not None else float(rng.normal(0.0, spec.scale_sd))
-    if spec.latency_range_s is not None:
-        tau = float(rng.uniform(*spec.latency_range_s))
-    else:
-        tau = spec.latency_s
-    return BaroTruth(scale=s, latency_s=tau)
-
-
-def _indicated_scale(h0: float, dT: float) -> float:
-    """Slope − 1 of the standard-law altitude against the true height in an ISA + dT
-    troposphere whose sea-level pressure makes the reading exact at h0 [m] (zero bias).
-
-    With p = c·P0·(1 − L·h/(T0 + dT))^(g/RL) the standard law reads
-    h_i = T0/L·(1 − c'·(1 − L·h/(T0 + dT))), c' = c^(RL/g): affine in h with slope
-    c'·T0/(T0 + dT). c' ≠ 1 moves the slope by ≈ L·(h_i(h0) − h0)/T0 (5e-4 per 25 m), which is
-    why this is ≈ T0/(T0 + dT) − 1 but not exactly.
-    """
-    from ..geo.atmosphere import G0, P0, R_AIR, T0, L
-
-    c = (isa_pressure(h0) / isa_pressure(h0, dT, p0=1.0) / P0) ** (R_AIR * L / G0)
-    return float(c * T0 / (T0 + dT) - 1.0)
-
-
-def simulate_baro(
-    t: FloatArray, t_truth: FloatArray, h_truth: FloatArray, h0: float, spec: BaroSpec,
-    rng: np.random.Generator,
-) -> tuple[BaroStream, BaroTruth, FloatArray]:
-    """Generate baro samples at ``t`` from the true height ``h_truth`` sampled at ``t_truth``.
-
-    Returns the stream, the drawn constants and the bias b(t) at ``t`` [m].
-    In ``physical`` mode the pressure is produced by a non-standard atmosphere (ISA + dT with
-    dT = −s·T0/(1+s), giving scale s exactly at the reference, and a sea-level pressure
-    drifting as a Gauss-Markov process that gives b); the returned bias is then the
-    indicated-altitude error at h0 (exact there; away from h0 the ISA law adds a small
-    nonlinearity that the linear model does not have), and the stream carries pressure [Pa].
-    With ``spec.isa_offset_k`` = ΔT the day is ISA + ΔT on top of the sensor's s:
-    dT = (T0 + ΔT)/(1+s) − T0 = −s·T0/(1+s) + ΔT/(1+s), so T0/(T0 + dT) = (1+s)·T0/(T0 + ΔT).
-    The returned ``BaroTruth.scale`` is then the effective scale an estimator should find: the
-    exact slope − 1 of the reading against the true height (``_indicated_scale``), which the
-    reading's setting at h0 moves from T0/(T0 + dT) − 1 by ≈ −L·h0·dT/(T0 + dT)² (−1.5e-3 at
-    h0 = 890 m for s = −3 %, ΔT = 15 K). In the ISA troposphere the reading is affine in h, so
-    that slope holds at every height. At ΔT = 0 the returned scale stays the drawn s, as
-    before.
-    """
-    truth = draw_baro_truth(spec, rng)
-    t_del = t - truth.latency_s
-    if t_del[0] < t_truth[0]:
-        t_del = np.maximum(t_del, t_truth[0])  # the first τd seconds repeat the first height
-    h_del = np.interp(t_del, t_truth, h_truth)
-    x0 = None if spec.bias_init is None else np.array([spec.bias_init])
-    bias = gauss_markov(t, spec.bias_tau, spec.bias_sd, rng, 1, x0=x0)[:, 0]
-    noise = rng.normal(0.0, spec.noise_sd, t.size) if spec.noise_sd > 0 else np.zeros(t.size)
-    if not spec.physical:
-        alt = h0 + (1.0 + truth.scale) * (h_del - h0) + bias + noise
-        return BaroStream(t, alt=alt, spec=spec), truth, bias
-    from ..geo.atmosphere import R_AIR, T0, isa_temperature
-
-    # ISA + dT with dT = −s·T0/(1+s) makes the standard-law altimeter read (1+s)·h; the day's
-    # offset ΔT enters as ΔT/(1+s) (docstring), and adds exactly 0.0 when it is 0.
-    dT = -truth.scale * T0 / (1.0 + truth.scale) + spec.isa_offset_k / (1.0 + truth.scale)
-    # Sea-level pressure p0(t) chosen so the indicated altitude at h0 is exactly h0 + b(t).
-    p0 = isa_pressure(h0 + bias) / isa_pressure(h0, dT, p0=1.0)
-    if spec.isa_offset_k != 0.0:
-        truth = BaroTruth(scale=_indicated_scale(h0, dT), latency_s=truth.latency_s)
-    p = p0 * isa_pressure(h_del, dT, p0=1.0)
-    # white noise of noise_sd metres through the hydrostatic gradient dp/dh = −p·g/(R·T)
-    p = p - noise * p * 9.80665 / (R_AIR * isa_temperature(h_del, dT))
-    return BaroStream(t, pressure=p, spec=spec), truth, bias

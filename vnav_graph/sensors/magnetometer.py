@@ -44,7 +44,7 @@ from numba import njit
 if TYPE_CHECKING:
     from ..geo.magfield import FieldModel
 
-from ..types import Drive, Trajectory
+from ..types import Drive
 from ..types.streams import FloatArray, MagStream
 
 MIN_HORIZONTAL_UT = 3.0  # weaker horizontal fields give no usable heading (near the poles) [µT]
@@ -163,7 +163,7 @@ def mag_heading_row(field_b, bias_b, c_nb, declination):  # pragma: no cover - n
     return r, h_psi, h_bias, np.sqrt(h2)
 
 
-# --- simulation ---
+# --- the simulated sensor (simulation.measurements.simulate_mag) ---
 
 
 @dataclass(frozen=True)
@@ -192,25 +192,3 @@ class MagSpec:
             raise ValueError(f"MagSpec.sd_ut: must be > 0 µT, got {self.sd_ut!r}")
         if not np.isfinite(self.year):
             raise ValueError(f"MagSpec.year: must be a decimal year, got {self.year!r}")
-
-
-def simulate_mag(truth: Trajectory, spec: MagSpec, field_ned_ut: FloatArray,
-                 rng: np.random.Generator) -> MagStream:
-    """Magnetometer samples z = C_nbᵀ m_n + b_hi + n at ``spec.rate_hz`` over the truth span.
-
-    ``truth`` must carry the attitude q_nb (body → NED, slerped to the sample times);
-    ``field_ned_ut`` (3,) is m_n [µT], north-east-down, taken constant over the drive (the
-    main field changes by ~5 nT/km: nothing over a drive of tens of km); b_hi is
-    ``spec.hard_iron_ut`` and n white, σ ``spec.sd_ut`` per axis, drawn from ``rng`` (one
-    (N, 3) normal draw). Returns the stream in body axes forward-right-down [µT].
-    """
-    from ..geo.frames import quat_to_mat
-
-    if truth.q_nb is None:
-        raise ValueError("simulate_mag: the truth trajectory has no attitude (q_nb)")
-    m_n = np.asarray(field_ned_ut, dtype=float).reshape(3)
-    t = np.arange(truth.t[0], truth.t[-1] + 1e-9, 1.0 / spec.rate_hz)
-    c_nb = quat_to_mat(truth.at(t).q_nb)
-    field_b = np.einsum("nji,j->ni", c_nb, m_n)  # C_nbᵀ m_n
-    field_b += np.asarray(spec.hard_iron_ut) + rng.normal(0.0, spec.sd_ut, (t.size, 3))
-    return MagStream(t, field_b, spec.sd_ut)

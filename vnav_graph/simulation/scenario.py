@@ -26,11 +26,10 @@ from ..config import (
     ScenarioConfig,
     replace_fields,
 )
-from ..sensors.baro import simulate_baro
-from ..sensors.gnss import simulate_gnss
-from ..sensors.imu import apply_imu_errors
 from ..types import Drive, Trajectory
 from . import SCENARIO_DIR, list_scenarios
+from .gnss import simulate_gnss
+from .measurements import apply_imu_errors, simulate_baro
 from .trajectories import (
     hill_drive_profiles,
     kinematics,
@@ -192,7 +191,7 @@ def _simulate_mag(truth: Trajectory, origin: np.ndarray, spec: Any,
     The field is the WMM's at the drive origin (lat, lon [rad], height [m]) in ``spec.year``.
     """
     from ..geo.magfield import earth_field
-    from ..sensors.magnetometer import simulate_mag
+    from .measurements import simulate_mag
 
     f = earth_field(float(origin[0]), float(origin[1]), float(origin[2]), spec.year)
     stream = simulate_mag(truth, spec, f.ned_ut, rng)
