@@ -135,7 +135,7 @@ def test_unused_fixes_are_the_refused_positions_without_a_used_velocity(smoothed
 
 def test_huber_weights_are_the_forward_filters():
     """One threshold rule for the forward filter and the smoothed-residual weights: min(1, k/e)
-    of the Mahalanobis norm e = √χ², the vectorised shared loss (``sensors.robust``, the
+    of the Mahalanobis norm e = √χ², the vectorised shared loss (``estimators.robust``, the
     graphs' IRLS weight) against the forward filter's scalar kernel (``ekf.model``)."""
     from vnav_graph.estimators.ekf.model import huber_weight
 

@@ -100,7 +100,8 @@ MIN_BARO_BIAS_SD = 1e-3  # m
 
 @dataclass(frozen=True)
 class BaroPrior:
-    """Prior of the baro error model h_baro(t) = (1 + s)·h(t − τd) + b(t) + w (docs/design.md).
+    """Prior of the baro error model h_baro(t) = h0 + (1 + s)·(h(t − τd) − h0) + b(t) + w
+    (``sensors.baro``, docs/design.md).
 
     scale_sd [–] (mean 0), latency_mean / latency_sd [s], bias_sd [m] and bias_tau [s] of the
     first-order Gauss-Markov bias, noise_sd [m] of the white noise w.

@@ -324,7 +324,7 @@ def consider_update(p, dx, hrow, y, r, c0, c1):
 @njit(cache=True)
 def huber_weight(e, k):
     """Huber's IRLS weight of a Mahalanobis norm e with threshold k [σ]: 1 for e ≤ k, k/e
-    above (``sensors.robust``); k ≤ 0: no loss, weight 1."""
+    above (``estimators.robust``); k ≤ 0: no loss, weight 1."""
     if k <= 0.0 or e <= k:
         return 1.0
     return k / e

@@ -49,9 +49,9 @@ from ...geo.earth import radii
 from ...geo.frames import quat_to_mat
 from ...sensors.gnss_model import GnssGM
 from ...sensors.model import SensorModel
-from ...sensors.robust import post_gate_threshold, weight_and_loss
 from ...types import Drive, Estimate
 from ...types.streams import FloatArray
+from ..robust import post_gate_threshold, weight_and_loss
 from .settings import EkfConfig
 
 
@@ -91,7 +91,7 @@ def fix_chi2_parts(drive: Drive, est: Estimate, model: SensorModel, g_latency: f
 
 
 def huber_weights(c2: FloatArray, k: float) -> FloatArray:
-    """Huber's IRLS weight min(1, k/e) of each Mahalanobis norm e = √χ² (``sensors.robust``,
+    """Huber's IRLS weight min(1, k/e) of each Mahalanobis norm e = √χ² (``estimators.robust``,
     the graphs' loss; ``ekf.model.huber_weight`` is the forward filter's scalar kernel of it);
     all 1 for k ≤ 0 (no loss)."""
     e = np.sqrt(np.maximum(np.asarray(c2, dtype=float), 0.0))

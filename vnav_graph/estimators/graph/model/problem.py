@@ -27,9 +27,9 @@ from ....sensors.model import (
     baro_prior,
     sensor_model,
 )
-from ....sensors.robust import post_gate_threshold
 from ....types import Drive
 from ....types.streams import FloatArray
+from ...robust import post_gate_threshold
 from ...zupt import drive_standstill
 from ..settings import GraphConfig
 from . import interval_factors as gf
@@ -376,7 +376,7 @@ def post_solve_rejections(P: Problem, st: gf.KeyframeStates) -> np.ndarray:
 def gate_failures(P: Problem, st: gf.KeyframeStates, idx: np.ndarray,
                   k: np.ndarray | None = None) -> np.ndarray:
     """The fixes among ``idx`` whose whitened residual χ² at the states ``st`` exceeds the
-    post-solve threshold of ``gnss_gate_prob`` (``sensors.robust.post_gate_threshold``);
+    post-solve threshold of ``gnss_gate_prob`` (``estimators.robust.post_gate_threshold``);
     empty when none or every one fails (a solution that fits none of them is not one to judge
     them by), or when gating is off. ``k``: each fix's interval (``gnss_chi2``)."""
     if idx.size == 0 or P.cfg.gnss_gate_prob <= 0:

@@ -1,4 +1,4 @@
-"""The graphs' use of the shared robust losses (``sensors.robust``: the losses, their weights
+"""The graphs' use of the shared robust losses (``estimators.robust``: the losses, their weights
 and the references): rows reweighted for Gauss-Newton as IRLS (``reweight``), and the same loss
 as GTSAM's robust noise model for the C++ factors (``robust_noise``; the mEstimator weights
 are tested equal).
@@ -11,8 +11,8 @@ from typing import Any
 import gtsam
 import numpy as np
 
-from ....sensors.robust import LOSSES, weight_and_loss
 from ....types.streams import FloatArray
+from ...robust import LOSSES, weight_and_loss
 
 __all__ = ["LOSSES", "reweight", "robust_noise", "weight_and_loss"]
 
