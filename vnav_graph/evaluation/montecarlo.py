@@ -32,7 +32,7 @@ import json
 import math
 import os
 import tempfile
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -162,21 +162,29 @@ def common_start_blocks(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     ``online`` block. Rows without a causal estimate get ``online_common: null``."""
     from .metrics import causal_metrics
 
+    return _pairwise(rows, CAUSAL_ERRORS_KEY, "online_common", lambda ce, oe: (
+        finite({"from_s": oe.from_s, **causal_metrics(ce, oe.from_s)})
+        if oe.from_s > ce.from_s else None))
+
+
+def _pairwise(rows: list[dict[str, Any]], key: str, out_key: str,
+              score: Callable[[Any, Any], dict[str, Any] | None]) -> list[dict[str, Any]]:
+    """Per (scenario, seed): each ok row with the private field ``key`` gets ``out_key``, the
+    ``score(its value, the other's)`` of every other such row (None: no entry), by estimator;
+    the rows without it get ``out_key: null``. ``key`` is removed from every row."""
     groups: dict[tuple[Any, Any], list[dict[str, Any]]] = {}
     for r in rows:
         groups.setdefault((r.get("scenario"), r.get("seed")), []).append(r)
     for group in groups.values():
-        have = [(r, r.get(CAUSAL_ERRORS_KEY)) for r in group]
-        have = [(r, ce) for r, ce in have if ce is not None and r.get("status") == "ok"]
+        have = [(r, r.get(key)) for r in group]
+        have = [(r, x) for r, x in have if x is not None and r.get("status") == "ok"]
         for r in group:
-            ce = r.pop(CAUSAL_ERRORS_KEY, None)
-            if ce is None or r.get("status") != "ok":
-                r["online_common"] = None
+            x = r.pop(key, None)
+            if x is None or r.get("status") != "ok":
+                r[out_key] = None
                 continue
-            r["online_common"] = {
-                str(o["estimator"]): finite({"from_s": oe.from_s,
-                                             **causal_metrics(ce, oe.from_s)})
-                for o, oe in have if o is not r and oe.from_s > ce.from_s}
+            scores = ((o, score(x, ox)) for o, ox in have if o is not r)
+            r[out_key] = {str(o["estimator"]): sc for o, sc in scores if sc is not None}
     return rows
 
 
@@ -194,21 +202,8 @@ def common_heading_blocks(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     ``{"rmse_deg", "n_epochs", "known_s"}``). Rows without them get ``heading_common: null``."""
     from .metrics import heading_common
 
-    groups: dict[tuple[Any, Any], list[dict[str, Any]]] = {}
-    for r in rows:
-        groups.setdefault((r.get("scenario"), r.get("seed")), []).append(r)
-    for group in groups.values():
-        have = [(r, r.get(HEADING_ERRORS_KEY)) for r in group]
-        have = [(r, h) for r, h in have if h is not None and r.get("status") == "ok"]
-        for r in group:
-            h = r.pop(HEADING_ERRORS_KEY, None)
-            if h is None or r.get("status") != "ok":
-                r["heading_common"] = None
-                continue
-            r["heading_common"] = {
-                str(o["estimator"]): finite(heading_common(h[0], h[1], h[2], oh[0], oh[2]))
-                for o, oh in have if o is not r}
-    return rows
+    return _pairwise(rows, HEADING_ERRORS_KEY, "heading_common", lambda h, oh: finite(
+        heading_common(h[0], h[1], h[2], oh[0], oh[2])))
 
 
 def aggregate(runs: Sequence[dict[str, Any]]) -> dict[str, dict[str, dict[str, Any]]]:
