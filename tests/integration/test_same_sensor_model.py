@@ -56,7 +56,7 @@ def _ekf_used(drive, name: str, monkeypatch: pytest.MonkeyPatch) -> dict:
         create(name).run(drive)
     monkeypatch.undo()
     grids, init, noise = got["grids"], got["init"], got["noise"]
-    gnss, baro = got["gnss"], got["baro"]
+    gnss, baro = got["meas"].gnss, got["meas"].baro
     t, grid_of, qd, p0 = grids.t, grids.grid_of, noise.q_diag, init.p0
     tg = t[grid_of >= 0]
     dtg = np.diff(tg)

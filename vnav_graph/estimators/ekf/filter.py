@@ -61,7 +61,6 @@ from scipy.stats import chi2
 
 from ...config import REAL_LOG_BARO, ImuSpec
 from ...geo.earth import OMEGA_IE
-from ...nav.standstill import ZUPT_SD_FLOOR, Standstill
 from ...sensors.magnetometer import field_and_info
 from ...sensors.model import (
     SensorModel,
@@ -77,10 +76,9 @@ from ..base import with_online
 from ..checks import checked
 from ..gnss_auto import with_gm_auto
 from ..zupt import drive_standstill
-from . import backward, carry, inputs, kernel, regate, rts
+from . import backward, carry, inputs, kernel, regate, rts, updates
 from . import model as km
 from .alignment import Alignment, initial_state
-from .magnetometer import kernel_record
 from .settings import EkfConfig
 
 NDArrayInt = Any
@@ -135,21 +133,18 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
     ini = initial_state(drive, cfg, model, bp, ka_sd, fm)
     # standstill (nav.standstill) with the shared model: zero-velocity updates inside it
     still = drive_standstill(drive, model) if cfg.zupt else None
-    ev = inputs.events(drive, model, gr.grid_idx, ini.g_latency, cfg, fm is not None,
-                       None if still is None else still.update_times())
+    ctx = updates.Context(drive, model, cfg, ini, bp, fm, still)
+    meas, stamps = updates.measurements(ctx)
+    ev = inputs.events(t, gr.grid_idx, stamps)
+    inn = updates.new_innovations(stamps)
     baro = drive.baro
-    max_consec_baro = 1
-    if baro is not None and baro.t.size > 1:
-        max_consec_baro = max(3, round(cfg.baro_reaccept_s / float(np.median(np.diff(baro.t)))))
     gate2 = float(chi2.ppf(cfg.gate_prob, 2))
     gate1 = float(chi2.ppf(cfg.gate_prob, 1))
     tilt_rate_sd = np.sqrt(2.0) * OMEGA_IE * np.cos(ini.lla0[0])
     gm = cfg.gnss_gm
     tau = (ispec.gyro_bias_tau, ispec.accel_bias_tau, bp.bias_tau,
            np.inf if gm is None else gm.tau_s)
-    heading_accel = ev.has_vel and cfg.heading_source in ("auto", "accel")
-    mag_data = kernel_record(drive, ev.m_field, fm, cfg.gate_prob, cfg.mag_reaccept_s,
-                             cfg.mag_interval_s, cfg.mag_heading_floor)
+    heading_accel = meas.gnss.has_vel and cfg.heading_source in ("auto", "accel")
 
     hk = cfg.huber_k()
     # scalars coerced to one numba type each (float64, int64, bool): one compiled kernel
@@ -161,14 +156,10 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
         kernel.Noise(qd, *(float(x) for x in tau), float(ini.yaw_unknown_var),
                      float(tilt_rate_sd), float(bp.bias_sd**2)),
         kernel.Events(ev.ev_t, ev.ev_type, ev.ev_idx, int(ev.max_pending)),
-        kernel.GnssData(ev.g_lla, ev.g_psd, ev.g_vel, ev.g_vsd, bool(ev.has_vel), ini.lever,
-                        ev.tr_yaw, ev.tr_speed, ev.tr_sd),
-        kernel.BaroData(ev.b_alt, float(bp.noise_sd), float(drive.origin_lla[2]),
-                        baro is not None),
-        mag_data,
+        meas,
         kernel.Settings(
-            gate_pos=gate2, gate_vel=gate2, gate_v=gate1, gate_baro=gate1,
-            max_consec=max_rejects(cfg, drive), max_consec_baro=int(max_consec_baro),
+            gate_pos=gate2, gate_vel=gate2, gate_v=gate1,
+            max_consec=max_rejects(cfg, drive),
             max_sd_v=float(cfg.max_gnss_sd_v), probation_s=float(cfg.gnss_probation_s),
             heading_v_min=float(cfg.heading_speed_min), heading_accel=bool(heading_accel),
             heading_course=bool(heading_accel and cfg.heading_source == "auto"),
@@ -177,29 +168,15 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
             align_sd_max=float(cfg.align_sd_max),
             align_acc_sd=float(np.sqrt(2.0) * ispec.accel_bias_sd),
             gap_forget_s=float(cfg.gap_heading_forget_s), store_rts=bool(store_rts),
-            huber_pos=hk[0], huber_vel=hk[1], huber_baro=hk[2],
-            tilt_consider=bool(cfg.tilt_consider),
-            zupt_sd=float(ZUPT_SD_FLOOR if still is None else still.vel_sd),
-            gate_zupt=float(chi2.ppf(cfg.gate_prob, 3))),
+            huber_pos=hk[0], huber_vel=hk[1], tilt_consider=bool(cfg.tilt_consider)),
+        inn,
     ))
-    innov, info = _report(drive, res, gr, gaps, ini, cfg, heading_accel, est_scale, ev.has_vel)
+    innov, info = updates.report(ctx, meas, inn, res.par, res.cov[-1])
+    info.update(_report(drive, res, gr, gaps, ini, cfg, heading_accel, est_scale,
+                        inn.forced_pos))
     info.update(mag_info)
-    info.update(zupt_info(still, res.inn_zupt, res.rej_zupt))
     if model.gnss_vel_note():  # the velocity σ raised to what the positions support
         info["gnss_vel_note"] = model.gnss_vel_note()
-    if "zupt" in info and info["zupt_used"]:
-        inn_z, rej_z = res.inn_zupt, res.rej_zupt
-        innov["zupt"] = inn_z[np.isfinite(inn_z[:, 0]) & ~rej_z]
-    if ev.m_field.shape[0]:
-        inn_mag, rej_mag = res.inn_mag, res.rej_mag
-        innov["mag"] = inn_mag[np.isfinite(inn_mag) & ~rej_mag]
-        sd_mb = np.sqrt(np.clip(np.diag(km.unpack(res.cov[-1]))[km.IMB:km.IMB + 3], 0, None))
-        info.update(mag_used=int(np.isfinite(inn_mag).sum() - rej_mag.sum()),
-                    mag_rejected=int(rej_mag.sum()),
-                    # the hard iron [µT] under the graph's name for it (H(0) → "h0"), so that
-                    # summary.json shows both families' estimates side by side
-                    extra_variables={"h0": {"est": res.par[-1, km.PMB:km.PMB + 3].tolist(),
-                                            "sd": sd_mb.tolist()}})
     if gm is not None:
         info.update(gm.info())
     if baro is not None:  # for the post-solve scale check (sensors.baro)
@@ -215,30 +192,14 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
 
 def _report(drive: Drive, res: kernel.FilterOutput, gr: inputs.Grids, gaps: NDArrayInt,
             ini: Alignment, cfg: EkfConfig, heading_accel: bool, est_scale: bool,
-            has_vel: bool) -> tuple[dict[str, FloatArray], dict[str, Any]]:
-    """Innovations of the accepted measurements and ``Estimate.info`` (module docstring)."""
+            forced: NDArrayInt) -> dict[str, Any]:
+    """``Estimate.info`` besides the measurements' (``updates.report``; module docstring);
+    ``forced``: the GNSS fixes whose horizontal pair was forced in."""
     o_par, t_heading = res.par, res.t_heading
-    inn_pos, inn_vel, inn_baro = res.inn_pos, res.inn_vel, res.inn_baro
-    rej_pos, rej_vel, rej_baro, rej_v = res.rej_pos, res.rej_vel, res.rej_baro, res.rej_v
     t = drive.imu.t
     gnss = drive.gnss
-    innov: dict[str, FloatArray] = {}
-    if gnss is not None:
-        innov["gnss_pos"] = inn_pos[np.isfinite(inn_pos[:, 0]) & ~rej_pos]
-        if has_vel:
-            innov["gnss_vel"] = inn_vel[np.isfinite(inn_vel[:, 0]) & ~rej_vel]
-    if drive.baro is not None:
-        innov["baro"] = inn_baro[np.isfinite(inn_baro) & ~rej_baro]
     info = {
-        "gnss_rejected": int(rej_pos.sum()),
-        "gnss_rejected_t": (gnss.t[rej_pos] if gnss is not None else np.zeros(0)),
-        # fixes of which nothing was used (position refused, and velocity refused or absent)
-        "gnss_unused_t": (gnss.t[rej_pos & (rej_vel | (not has_vel))] if gnss is not None
-                          else np.zeros(0)),
-        "gnss_alt_rejected": int(rej_v.sum()),
-        "gnss_vel_rejected": int(rej_vel.sum()),
         "imu_gaps": [[float(t[i]), float(t[i + 1] - t[i])] for i in gaps],
-        "baro_rejected": int(rej_baro.sum()),
         "heading_time_s": None if np.isnan(t_heading) else float(t_heading),
         "cov_rate_hz": float(drive.imu.rate_hz / gr.m_grid),
         "cov_output_every": int(gr.e_cov),
@@ -255,14 +216,13 @@ def _report(drive: Drive, res: kernel.FilterOutput, gr: inputs.Grids, gaps: NDAr
     }
     # horizontal pairs forced in after max_rejects refusals in a row: each inflated P by its
     # own innovation, so the filter then follows the fixes whatever they are
-    forced = res.forced_pos
     info["gnss_forced"] = int(forced.sum())
     if forced.any() and gnss is not None:
         info["warnings"] = [
             f"ekf: {int(forced.sum())} GNSS fix(es) forced in after "
             f"{max_rejects(cfg, drive)} refusals in a row (the covariance inflated by each "
             f"one's innovation; first at {float(gnss.t[forced][0] - t[0]):.1f} s)"]
-    return innov, info
+    return info
 
 
 def _estimate(name: str, run: _Run, traj: Trajectory, par: FloatArray, cov: FloatArray,
@@ -418,18 +378,6 @@ class EKFRTS(EKF):
                                   for a in range(3)])
             est = est.replace(info={**est.info, "gnss_gm_at_fixes": ge})
         return run, est
-
-
-def zupt_info(still: Standstill | None, inn: FloatArray, rej: NDArrayInt) -> dict[str, Any]:
-    """``info["zupt_intervals"]`` ([t_start, t_end] [s] of the detected standstills, empty
-    with ``EkfConfig.zupt`` off), ``zupt_used`` / ``zupt_rejected`` (updates applied and
-    refused by their χ²₃ gate) and ``zupt`` (the detector's threshold and σ)."""
-    if still is None:
-        return {"zupt_intervals": [], "zupt_used": 0, "zupt_rejected": 0}
-    return {"zupt_intervals": still.interval_list(),
-            "zupt_used": int(np.isfinite(inn[:, 0]).sum() - rej.sum()),
-            "zupt_rejected": int(rej.sum()),
-            "zupt": still.summary()}
 
 
 def max_rejects(cfg: EkfConfig, drive: Drive) -> int:

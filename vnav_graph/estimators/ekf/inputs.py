@@ -1,8 +1,9 @@
-"""The kernel inputs the EKF reads from a drive, besides the alignment: the covariance and
-output grids over the IMU epochs, the discrete process noise per grid interval, the roll/pitch
-relevelling after IMU gaps, and the GNSS/baro/magnetometer samples and zero-velocity updates
-merged into one time-sorted event list. ``ekf.filter.run_forward`` packs them into the
-kernel records (``ekf.kernel``).
+"""The kernel inputs the EKF reads from a drive, besides the alignment and the measurement
+records (``ekf.updates``): the covariance and output grids over the IMU epochs, the discrete
+process noise per grid interval, the roll/pitch relevelling after IMU gaps, and the events of
+every measurement kind merged into one time-sorted list (``events``, from the stamps of
+``updates.measurements``; it knows no kind by name). ``ekf.filter.run_forward`` packs them
+into the kernel records (``ekf.kernel``).
 """
 
 from __future__ import annotations
@@ -16,15 +17,11 @@ from ...config import ImuSpec
 from ...nav.arrays import nearest_index
 from ...nav.gaps import GAP_ACCEL_SD
 from ...nav.levelling import coarse_level
-from ...sensors.model import BaroPrior, SensorModel
+from ...sensors.model import BaroPrior
 from ...sensors.noise import gm_process_var, imu_bias_step, white_sd
-from ...types import Drive
 from ...types.streams import FloatArray, ImuStream
 from . import model as km
-from .alignment import track_heading
-from .magnetometer import one_per_interval
 from .settings import EkfConfig
-from .updates import BARO, GNSS, MAG, ZUPT
 
 NDArrayInt = Any
 
@@ -125,74 +122,25 @@ def gap_relevel(imu: ImuStream, gaps: NDArrayInt, cfg: EkfConfig) -> FloatArray:
 
 @dataclass(frozen=True)
 class Events:
-    """GNSS fixes and baro samples merged into one time-sorted event list, with the per-fix
-    arrays the kernel reads (empty without the stream)."""
+    """The measurement events of every kind merged into one time-sorted list."""
 
     ev_t: FloatArray
-    ev_type: NDArrayInt  # 0 GNSS fix, 1 baro sample, 2 magnetometer sample, 3 ZUPT
-    ev_idx: NDArrayInt  # index into the stream
+    ev_type: NDArrayInt  # event kind: the position of its record in ``updates.Measurements``
+    ev_idx: NDArrayInt  # index into the kind's record
     max_pending: int  # most events inside one grid interval, + 1
-    g_lla: FloatArray
-    g_psd: FloatArray
-    g_vel: FloatArray
-    g_vsd: FloatArray
-    has_vel: bool
-    tr_yaw: FloatArray
-    tr_speed: FloatArray
-    tr_sd: FloatArray
-    b_alt: FloatArray
-    m_field: FloatArray
 
 
-def events(drive: Drive, model: SensorModel, grid_idx: NDArrayInt, g_latency: float,
-            cfg: EkfConfig, use_mag: bool, zupt_t: FloatArray | None = None) -> Events:
-    """The merged event list; ``zupt_t``: stamps of the zero-velocity updates [s]
-    (``nav.standstill.Standstill.update_times``), None for none."""
-    t = drive.imu.t
-    gnss, baro = drive.gnss, drive.baro
-    ev_t_l, ev_type_l, ev_idx_l = [], [], []
-    if gnss is not None:
-        ev_t_l.append(gnss.t - g_latency)
-        ev_type_l.append(np.full(gnss.t.size, GNSS, dtype=np.int64))
-        ev_idx_l.append(np.arange(gnss.t.size))
-        tr = track_heading(gnss, cfg.sideslip_sd, drive.imu)
-        g_lla, g_psd = gnss.lla, model.gnss_pos_sd
-        has_vel = gnss.vel_n is not None and model.gnss_vel_sd is not None
-        g_vel = gnss.vel_n if has_vel else np.zeros((gnss.t.size, 3))
-        g_vsd = model.gnss_vel_sd if has_vel else np.ones((gnss.t.size, 3))
-        tr_yaw, tr_speed, tr_sd = tr.yaw, tr.speed, tr.yaw_sd
-    else:
-        g_lla = g_psd = g_vel = g_vsd = np.zeros((0, 3))
-        has_vel = False
-        tr_yaw = tr_speed = tr_sd = np.zeros(0)
-    if baro is not None:
-        ev_t_l.append(baro.t)
-        ev_type_l.append(np.full(baro.t.size, BARO, dtype=np.int64))
-        ev_idx_l.append(np.arange(baro.t.size))
-        b_alt = np.asarray(baro.altitude, dtype=float)
-    else:
-        b_alt = np.zeros(0)
-    if use_mag:
-        assert drive.mag is not None
-        im = one_per_interval(drive.mag.t, cfg.mag_interval_s)
-        ev_t_l.append(drive.mag.t[im])
-        ev_type_l.append(np.full(im.size, MAG, dtype=np.int64))
-        ev_idx_l.append(np.arange(im.size))
-        m_field = np.ascontiguousarray(drive.mag.field_b[im])
-    else:
-        m_field = np.zeros((0, 3))
-    if zupt_t is not None and zupt_t.size:
-        ev_t_l.append(np.asarray(zupt_t, dtype=float))
-        ev_type_l.append(np.full(zupt_t.size, ZUPT, dtype=np.int64))
-        ev_idx_l.append(np.arange(zupt_t.size))
-    if ev_t_l:
-        ev_t = np.concatenate(ev_t_l)
-        order = np.argsort(ev_t, kind="stable")
-        ev_t = ev_t[order]
-        ev_type = np.concatenate(ev_type_l)[order]
-        ev_idx = np.concatenate(ev_idx_l)[order]
-    else:
-        ev_t, ev_type, ev_idx = np.zeros(0), np.zeros(0, np.int64), np.zeros(0, np.int64)
+def events(t: FloatArray, grid_idx: NDArrayInt, stamps: list[FloatArray]) -> Events:
+    """The merged event list of the stamps [s] of each kind (``updates.measurements``, in
+    the kinds' order), over the IMU stamps ``t`` and the grid epochs ``grid_idx``."""
+    ev_t_l = [np.asarray(s, dtype=float) for s in stamps]
+    ev_type_l = [np.full(s.size, kind, dtype=np.int64) for kind, s in enumerate(stamps)]
+    ev_idx_l = [np.arange(s.size) for s in stamps]
+    ev_t = np.concatenate(ev_t_l)
+    order = np.argsort(ev_t, kind="stable")
+    ev_t = ev_t[order]
+    ev_type = np.concatenate(ev_type_l)[order]
+    ev_idx = np.concatenate(ev_idx_l)[order]
     # events stamped on an IMU sample up to float round-off are put exactly on it, so that a
     # measurement at a grid epoch is processed there without back-propagation
     if ev_t.size:
@@ -200,7 +148,4 @@ def events(drive: Drive, model: SensorModel, grid_idx: NDArrayInt, g_latency: fl
         ev_t = np.where(np.abs(t[j] - ev_t) < 1e-6, t[j], ev_t)
     counts = np.diff(np.searchsorted(ev_t, t[grid_idx], side="right"))
     max_pending = int(counts.max()) + 1 if counts.size else 1
-    return Events(ev_t, ev_type, ev_idx, max_pending, np.ascontiguousarray(g_lla),
-                   np.ascontiguousarray(g_psd), np.ascontiguousarray(g_vel),
-                   np.ascontiguousarray(g_vsd), bool(has_vel), tr_yaw, tr_speed, tr_sd, b_alt,
-                   m_field)
+    return Events(ev_t, ev_type, ev_idx, max_pending)

@@ -1,16 +1,18 @@
 """The forward EKF kernel: one compiled pass over the whole drive (``run_filter``).
 
-The error-state model is in ``ekf.model`` (whose docstring describes the filter), the
-measurement rows and gated update of each sensor in ``ekf.updates``, the heading acquisition
-in ``ekf.heading`` and the prediction, heading reset and delayed-row mapping in ``ekf.steps``;
-this module holds only the loop that strings them together.
+The error-state model is in ``ekf.model`` (whose docstring describes the filter), all
+that is per measurement kind (records, rows, gated updates, innovations) in ``ekf.updates``,
+the heading acquisition in ``ekf.heading`` and the prediction, heading reset and delayed-row
+mapping in ``ekf.steps``; this module holds only the loop that strings them together. It
+does not branch on the measurement kind, except for the heading acquisition from a GNSS fix:
+an event's rows and update are ``updates.event_rows`` / ``updates.event_update``.
 
-Its inputs are eight typed records (``NamedTuple``s of arrays and scalars, which numba passes
-as tuples: a field read is resolved at compile time and costs nothing): :class:`Grids`,
-:class:`Initial`, :class:`Noise`, :class:`Events`, :class:`GnssData`, :class:`BaroData`,
-:class:`MagData` and :class:`Settings`, built by ``ekf.filter``. Every field keeps one numba
-type (float64 arrays, C-contiguous; int64 counts; float scalars; bools) so that the kernel
-compiles once.
+Its inputs are typed records (``NamedTuple``s of arrays and scalars, which numba passes as
+tuples: a field read is resolved at compile time and costs nothing): :class:`Grids`,
+:class:`Initial`, :class:`Noise`, :class:`Events`, ``updates.Measurements`` (one record per
+kind) and :class:`Settings`, built by ``ekf.filter``, and ``updates.Innovations``, which it
+fills in place. Every field keeps one numba type (float64 arrays, C-contiguous; int64 counts;
+float scalars; bools) so that the kernel compiles once.
 """
 
 from __future__ import annotations
@@ -35,23 +37,9 @@ from .heading import (
     restart_matching,
     track_heading,
 )
-from .model import NING, NPACK, NPAR, NX, PBA, PBG, PGE, PKA, apply_correction, pack
+from .model import NING, NPACK, NPAR, NX, PBA, PBG, PKA, apply_correction, pack
 from .steps import delayed_rows, grid_predict, heading_reset
-from .updates import (
-    BARO,
-    C_BARO,
-    C_MAG,
-    GNSS,
-    ZUPT,
-    baro_rows,
-    gnss_rows,
-    mag_rows,
-    tilt_held,
-    update_gated,
-    update_gnss,
-    update_zupt,
-    zupt_rows,
-)
+from .updates import GNSS, event_rows, event_update
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -99,46 +87,12 @@ class Noise(NamedTuple):
 
 
 class Events(NamedTuple):
-    """GNSS fixes and baro samples merged and sorted by time."""
+    """The measurement events of every kind merged and sorted by time (``inputs.events``)."""
 
     t: FloatArray  # (E,) event stamps [s]
-    kind: IntArray  # (E,) updates.GNSS fix, BARO sample, MAG sample, ZUPT
-    idx: IntArray  # (E,) index into the GNSS, baro or magnetometer arrays, or ZUPT number
+    kind: IntArray  # (E,) event kind (``updates.GNSS`` ...: a field of ``updates.Measurements``)
+    idx: IntArray  # (E,) row of the kind's record (``updates.measurements``)
     max_pending: int  # most events inside one grid interval, + 1
-
-
-class GnssData(NamedTuple):
-    """Per-fix GNSS data (G fixes; zero rows without GNSS)."""
-
-    lla: FloatArray  # (G, 3) antenna position [rad, rad, m]
-    pos_sd: FloatArray  # (G, 3) NED position σ [m] (shared model, floored)
-    vel: FloatArray  # (G, 3) velocity in n [m/s]
-    vel_sd: FloatArray  # (G, 3) velocity σ [m/s]
-    has_vel: bool  # the velocity is used
-    lever: FloatArray  # (3,) antenna lever arm in b [m]
-    track_yaw: FloatArray  # (G,) course over ground [rad]
-    track_speed: FloatArray  # (G,) horizontal speed [m/s]
-    track_sd: FloatArray  # (G,) σ of the course as a heading [rad]
-
-
-class BaroData(NamedTuple):
-    """Baro samples (B; zero without a barometer)."""
-
-    alt: FloatArray  # (B,) baro altitude [m]
-    sd: float  # white baro noise σ [m]
-    h0: float  # reference height of the baro model [m]
-    has_baro: bool
-
-
-class MagData(NamedTuple):
-    """Magnetometer samples (M; zero rows without one), heading model ``sensors.magnetometer``."""
-
-    field: FloatArray  # (M, 3) field in b [µT]
-    sd_ut: float  # white noise per axis [µT]
-    declination: float  # of the Earth's field at the origin [rad]
-    floor_var: float  # heading variance floor (declination, soft iron) [rad²]
-    gate: float  # χ²₁ gate of the heading innovation
-    max_consec: int  # refusals after which a heading is forced in
 
 
 class Settings(NamedTuple):
@@ -147,9 +101,7 @@ class Settings(NamedTuple):
     gate_pos: float  # χ²₂ gate of the horizontal position pair
     gate_vel: float  # χ²₂ gate of the horizontal velocity pair
     gate_v: float  # χ²₁ gate of the GNSS height and vertical velocity
-    gate_baro: float  # χ²₁ gate of the baro
     max_consec: int  # refusals after which a horizontal pair is forced in
-    max_consec_baro: int  # refusals after which a baro sample is forced in
     max_sd_v: float  # GNSS heights with a larger σ are not used [m]
     probation_s: float  # GNSS-height probation [s]
     heading_v_min: float  # speed above which the track gives the heading [m/s]
@@ -164,10 +116,7 @@ class Settings(NamedTuple):
     store_rts: bool  # keep what the RTS smoother needs
     huber_pos: float  # Huber threshold of GNSS positions [σ] (0: no loss)
     huber_vel: float  # Huber threshold of GNSS velocities [σ] (0: no loss)
-    huber_baro: float  # Huber threshold of baro samples [σ] (0: no loss)
     tilt_consider: bool  # horizontal GNSS rows hold the attitude while the heading is unknown
-    zupt_sd: float  # σ of a zero-velocity update per axis [m/s] (``nav.standstill``)
-    gate_zupt: float  # χ²₃ gate of a zero-velocity update
 
 
 @njit(cache=True)
@@ -178,14 +127,13 @@ def _store(o, out_lla, out_v, out_q, out_par, lla, v, q, par):
     put(out_par[o], par)
 
 
-
 class FilterOutput(NamedTuple):
     """What ``run_filter`` returns, by name (the compiled kernel returns the plain tuple in
     this order; ``FilterOutput(*res)`` names it): the outputs at the output epochs (``lla``,
     ``v``, ``q``, ``par``), the covariance at the covariance epochs (``cov``), the RTS
-    records (``rts_p``, ``rts_ing``, ``rts_q``, ``corr``, ``reset_at``), each sensor's
-    innovations and refusals, the heading's acquisition time and whether the course gave it
-    (``by_course``), and the horizontal fixes forced in (``forced_pos``)."""
+    records (``rts_p``, ``rts_ing``, ``rts_q``, ``corr``, ``reset_at``), the heading's
+    acquisition time (``t_heading``) and whether the course gave it (``by_course``); the
+    innovations and refusals are in the ``updates.Innovations`` handed to ``run_filter``."""
 
     lla: Any
     v: Any
@@ -197,48 +145,21 @@ class FilterOutput(NamedTuple):
     rts_q: Any
     corr: Any
     reset_at: Any
-    inn_pos: Any
-    inn_vel: Any
-    inn_baro: Any
-    rej_pos: Any
-    rej_vel: Any
-    rej_baro: Any
     t_heading: Any
-    rej_v: Any
-    inn_mag: Any
-    rej_mag: Any
-    forced_pos: Any
     by_course: Any
-    inn_zupt: Any
-    rej_zupt: Any
 
 
 @njit(cache=True)
-def _innovation_records(ng, nb, nm, kinds):
-    """Each sensor's innovations (NaN until used) and refusal flags: GNSS position, velocity
-    (and the horizontal pairs forced in after refusals, and the height), baro, magnetometer
-    and the zero-velocity updates (one per ``ZUPT`` event)."""
-    nz = 0
-    for e in range(kinds.size):
-        if kinds[e] == ZUPT:
-            nz += 1
-    return (np.full((ng, 3), np.nan), np.full((ng, 3), np.nan), np.full(nb, np.nan),
-            np.full(nm, np.nan), np.full((nz, 3), np.nan), np.zeros(ng, dtype=np.bool_),
-            np.zeros(ng, dtype=np.bool_), np.zeros(ng, dtype=np.bool_),
-            np.zeros(ng, dtype=np.bool_), np.zeros(nb, dtype=np.bool_),
-            np.zeros(nm, dtype=np.bool_), np.zeros(nz, dtype=np.bool_))
-
-
-@njit(cache=True)
-def run_filter(grids, init, noise, events, gnss, baro, mag, settings):
+def run_filter(grids, init, noise, events, meas, settings, inn):
     """Forward error-state EKF over the whole drive (see module docstring).
 
-    The records are described by their classes (:class:`Grids` ... :class:`Settings`).
+    The records are described by their classes (:class:`Grids` ... :class:`Settings`,
+    ``updates.Measurements``); ``inn`` (``updates.Innovations``) is filled in place.
     Returns the output trajectory, packed covariances and, when ``settings.store_rts``, what
     the RTS smoother needs.
     """
     t, gyro, accel, gap_step = grids.t, grids.gyro, grids.accel, grids.gap_step
-    n, ng, nb, nm = t.size, gnss.lla.shape[0], baro.alt.size, mag.field.shape[0]
+    n, gnss = t.size, meas.gnss
     store_rts, max_pending = settings.store_rts, events.max_pending
     out_lla = np.empty((grids.n_out, 3))
     out_v = np.empty((grids.n_out, 3))
@@ -251,16 +172,12 @@ def run_filter(grids, init, noise, events, gnss, baro, mag, settings):
     rts_q = np.zeros((ks, NX))
     corr = np.zeros((ks, NX))
     reset_at = np.full(grids.n_grid, np.nan)
-    (inn_pos, inn_vel, inn_baro, inn_mag, inn_zupt, rej_pos, forced_pos, rej_vel, rej_v,
-     rej_baro, rej_mag, rej_zupt) = _innovation_records(ng, nb, nm, events.kind)
 
     lla, v, q = init.lla0.copy(), init.v0.copy(), init.q0.copy()
     par, p = init.par0.copy(), init.p0.copy()
     heading_ok = init.heading_known
     t_heading = t[0] if heading_ok else np.nan
     by_course = False  # the last heading acquisition was the GNSS course's
-    counts = np.zeros(3, dtype=np.int64)  # the gates' refusal counters (updates.C_*)
-    v_gate = np.array([0.0, 0.0, np.nan])  # nav.gnss_gate state
     acq = new_state()  # heading acquisition (ekf.heading)
     sf_acc, s_i, ch_u, ch_w = np.zeros(2), np.zeros(2), np.zeros(2), np.zeros(2)
     # measurements of the current grid interval, updated at its end
@@ -332,10 +249,9 @@ def run_filter(grids, init, noise, events, gnss, baro, mag, settings):
             rn, re = radii_scalar(lm[0])
             idx = events.idx[je]
             kind = events.kind[je]
-            if kind == GNSS:
-                y, hm, r, mm = gnss_rows(lm, vm, cm, rn, re, par[PGE:PGE + 3], gnss.lever,
-                                         gnss.lla[idx], gnss.pos_sd[idx], gnss.vel[idx],
-                                         gnss.vel_sd[idx], gnss.has_vel, heading_ok, w0, w1)
+            y, hm, r, mm = event_rows(kind, idx, lm, vm, cm, rn, re, par, w0, w1, meas,
+                                      heading_ok, p, acq)
+            if kind == GNSS:  # heading acquisition from the fix (``ekf.heading``)
                 if not heading_ok and settings.heading_accel and gnss.has_vel:
                     match_acceleration(acq, sf_acc, s_i, ch_u, ch_w, al, tm, idx, gnss.vel,
                                        gnss.vel_sd, settings.align_chunk_s,
@@ -349,13 +265,6 @@ def run_filter(grids, init, noise, events, gnss, baro, mag, settings):
                     track_heading(acq, gnss.track_speed[idx], gnss.track_yaw[idx],
                                   gnss.track_sd[idx], qm, settings.heading_v_min,
                                   settings.align_sd_max)
-            elif kind == BARO:
-                y, hm, r, mm = baro_rows(lm, vm, par, baro.h0, baro.alt[idx], baro.sd)
-            elif kind == ZUPT:
-                y, hm, r, mm = zupt_rows(vm, settings.zupt_sd)
-            else:
-                y, hm, r, mm = mag_rows(mag.field[idx], par, cm, mag.declination, mag.sd_ut,
-                                        mag.floor_var, heading_ok, p, acq)
             if mm > 0 and n_pend < max_pending:
                 pend_type[n_pend] = kind
                 pend_idx[n_pend] = idx
@@ -391,22 +300,9 @@ def run_filter(grids, init, noise, events, gnss, baro, mag, settings):
                 mm, idx = pend_m[e], pend_idx[e]
                 heff = delayed_rows(pend_h[e], pend_r[e], mm, fmat, qd, t[i + 1] - pend_t[e],
                                     dtg)
-                if pend_type[e] == GNSS:
-                    update_gnss(p, dx, heff, pend_y[e], pend_r[e], mm, idx, pend_t[e], k,
-                                settings, gnss.pos_sd[idx, 2], baro.has_baro,
-                                noise.b_prior_var, v_gate, counts, rts_q, inn_pos, inn_vel,
-                                rej_pos, rej_vel, rej_v, pend_ok[e], forced_pos)
-                elif pend_type[e] == BARO:
-                    update_gated(p, dx, heff, pend_y[e], pend_r[e], settings.gate_baro,
-                                 settings.max_consec_baro, counts, C_BARO, inn_baro, rej_baro,
-                                 idx, settings.huber_baro,
-                                 tilt_held(p, settings, pend_ok[e]))
-                elif pend_type[e] == ZUPT:
-                    update_zupt(p, dx, heff, pend_y[e], pend_r[e], settings.gate_zupt,
-                                inn_zupt, rej_zupt, idx)
-                else:
-                    update_gated(p, dx, heff, pend_y[e], pend_r[e], mag.gate, mag.max_consec,
-                                 counts, C_MAG, inn_mag, rej_mag, idx, 0.0, False)
+                event_update(pend_type[e], idx, p, dx, heff, pend_y[e], pend_r[e], mm,
+                             pend_t[e], k, meas, settings, noise.b_prior_var, rts_q, inn,
+                             pend_ok[e])
             n_pend = 0
             apply_correction(lla, v, q, par, dx)
             if store_rts:
@@ -423,5 +319,4 @@ def run_filter(grids, init, noise, events, gnss, baro, mag, settings):
             _store(grids.out_of[i + 1], out_lla, out_v, out_q, out_par, lla, v, q, par)
 
     return (out_lla, out_v, out_q, out_par, cov_out, rts_p, rts_ing, rts_q, corr, reset_at,
-            inn_pos, inn_vel, inn_baro, rej_pos, rej_vel, rej_baro, t_heading, rej_v,
-            inn_mag, rej_mag, forced_pos, by_course, inn_zupt, rej_zupt)
+            t_heading, by_course)

@@ -2,8 +2,9 @@
 
 - :func:`initial_heading`: compass alignment over the levelling window;
 - :func:`one_per_interval`: the samples the filter uses (the errors are correlated over
-  seconds, so at most one heading per ``mag_interval_s``);
-- :func:`kernel_record`: the ``kernel.MagData`` the forward filter reads.
+  seconds, so at most one heading per ``mag_interval_s``).
+
+The filter's magnetometer record, heading row and update are in ``ekf.updates``.
 """
 
 from __future__ import annotations
@@ -11,13 +12,11 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from scipy.stats import chi2
 
 from ...geo.frames import quat_to_mat, rph_to_quat
 from ...sensors.magnetometer import MIN_HORIZONTAL_UT, wrap_pi
 from ...types import Drive
 from ...types.streams import FloatArray
-from . import kernel
 
 
 def initial_heading(drive: Drive, t_end: float, roll: float, pitch: float, fm: Any,
@@ -52,17 +51,3 @@ def one_per_interval(t: FloatArray, interval_s: float) -> np.ndarray:
     """Indices of the magnetometer samples used: the first of every ``interval_s``."""
     slot = np.floor((t - t[0]) / interval_s).astype(np.int64)
     return np.flatnonzero(np.r_[True, np.diff(slot) > 0])
-
-
-def kernel_record(drive: Drive, field_b: FloatArray, fm: Any, gate_prob: float,
-                  reaccept_s: float, interval_s: float, floor: float) -> kernel.MagData:
-    """The kernel's magnetometer record: the used samples ``field_b`` [µT], the declination
-    of the field reference ``fm`` (None: no magnetometer, an empty record), the χ²₁ gate
-    and the refusals after which a heading is forced in (``reaccept_s``)."""
-    if fm is None:
-        return kernel.MagData(np.zeros((0, 3)), 1.0, 0.0, 0.0, 1.0, 1)
-    assert drive.mag is not None
-    gate1 = float(chi2.ppf(gate_prob, 1))
-    max_consec = max(3, round(reaccept_s / interval_s))
-    return kernel.MagData(field_b, float(drive.mag.sd_ut), float(fm.declination_rad),
-                          float(floor**2), gate1, int(max_consec))

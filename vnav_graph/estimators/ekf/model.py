@@ -47,7 +47,7 @@ heading error. Two effects of the unknown heading are added as process noise: th
 Earth-rate compensation (tilt, rate ≤ 2Ω cos L, rms √2 Ω cos L, treated as a constant rate
 of unknown sign) and the rotation of the horizontal specific force (velocity, rms √2 |f_h|).
 The GNSS and baro updates hold the attitude as Schmidt consider states until the heading is
-known while its tilt σ exceeds 5° (``consider_update``; ``updates.tilt_held``;
+known while its tilt σ exceeds 5° (``consider_update``; ``steps.tilt_held``;
 ``EkfConfig.tilt_consider``): the horizontal rows cannot tell
 tilt from heading then, and a levelling in motion can leave a tilt σ of 15–20° (position-only
 start, ``alignment.moving_start``), far outside the linear regime — on cold-start-phone a

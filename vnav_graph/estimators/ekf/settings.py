@@ -97,7 +97,7 @@ class EkfConfig(SharedSettings):
     # forward/backward separation (ekf.backward)
     fb_separation: bool = True
     # a levelling in motion: the GNSS and baro updates hold the attitude as Schmidt consider
-    # states (ekf.updates.tilt_held)
+    # states (ekf.steps.tilt_held)
     tilt_consider: bool = True
 
     def huber_k(self) -> tuple[float, float, float]:
