@@ -2,13 +2,14 @@
 GNSS error state) and ``ekf-rts`` (the same pass plus a Rauch-Tung-Striebel smoother).
 
 Modules: ``settings`` (``EkfConfig``), ``filter`` (set-up from the shared sensor model, the
-estimators, outputs), ``inputs`` (grids, process noise, event list), ``alignment`` (levelling,
-start position), ``model`` (the compiled error-state model, whose docstring describes the
-filter), ``kernel`` (the forward pass), ``steps`` (prediction, heading reset, delayed rows),
-``updates`` (each measurement's rows and gated update), ``heading`` (heading
-acquisition), ``magnetometer`` (compass set-up), ``rts`` (the smoother), ``carry`` (the
-acquired heading carried back), ``regate`` (post-smoothing gate), ``backward`` (the filter
-run backward, forward/backward separation). The public names are
+estimators, outputs), ``inputs`` (grids, process noise, the merged event list),
+``alignment`` (levelling, start position), ``model`` (the compiled error-state model, whose
+docstring describes the filter), ``kernel`` (the forward pass), ``steps`` (prediction,
+heading reset, delayed rows, shared gating), ``updates`` (everything per measurement kind:
+records, event stamps, rows, gated updates, innovations and their report; a sensor is added
+there), ``heading`` (heading acquisition), ``magnetometer`` (compass set-up), ``rts`` (the
+smoother), ``carry`` (the acquired heading carried back), ``regate`` (post-smoothing gate),
+``backward`` (the filter run backward, forward/backward separation). The public names are
 imported on first use, so that ``import vnav_graph.estimators.ekf`` compiles nothing.
 """
 

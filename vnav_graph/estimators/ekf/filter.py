@@ -3,7 +3,8 @@
 The filter equations, the covariance grid, the measurement timing and the heading handling
 are documented in ``vnav_graph.estimators.ekf.model`` (the numba kernels). This module turns
 a ``Drive`` into the kernel inputs (noise from the drive's specs, alignment, and the grids,
-process noise and event list of ``ekf.inputs``) and the kernel outputs into an ``Estimate``.
+process noise and event list of ``ekf.inputs``, the measurement records of ``ekf.updates``)
+and the kernel outputs into an ``Estimate``.
 
 Outputs
 -------
@@ -19,17 +20,19 @@ Outputs
   epochs' cross-covariances (``rts`` docstring), for ``ekf`` the time average of σ_b(t), an
   upper bound (σ(mean e) ≤ mean σ(e) for any correlation between epochs); its prior σ is
   that of a stationary Gauss-Markov bias's time average over the drive, as in graph-batch.
-- innovations: normalised (z − h(x̃))/√S_ii of every accepted measurement component:
-  ``gnss_pos`` (N, 3), ``gnss_vel`` (N, 3), ``baro`` (N,).
-- info: ``gnss_rejected`` (fixes whose horizontal pair or height was refused: χ² gate,
-  σ_v limit or probation, ``ekf.model`` docstring), ``gnss_alt_rejected`` (height refused),
-  ``imu_gaps`` ([start, length] of bridged IMU gaps [s]), ``gnss_vel_rejected``,
-  ``baro_rejected``, ``heading_time_s`` (time the heading last became known),
+- innovations (``updates.report``): normalised (z − h(x̃))/√S_ii of every accepted
+  measurement component: ``gnss_pos`` (N, 3), ``gnss_vel`` (N, 3), ``baro`` (N,), ``mag``
+  (N,), ``zupt`` (N, 3).
+- info: per measurement kind (``updates.report``) ``gnss_rejected`` (fixes whose horizontal
+  pair or height was refused: χ² gate, σ_v limit or probation, ``ekf.model`` docstring),
+  ``gnss_alt_rejected`` (height refused), ``gnss_vel_rejected``, ``baro_rejected``,
+  ``mag_used`` / ``mag_rejected``, ``zupt_intervals`` ([t_start, t_end] [s] of the
+  standstills given zero-velocity updates, ``EkfConfig.zupt``; ``nav.standstill``),
+  ``zupt_used`` / ``zupt_rejected`` (updates applied / refused by their χ²₃ gate) and
+  ``zupt`` (the detector's threshold and noise); and ``imu_gaps`` ([start, length] of
+  bridged IMU gaps [s]), ``heading_time_s`` (time the heading last became known),
   ``heading_source`` (given / magnetometer / accel-matching / gnss-course, the course
-  confirmed by the matching / gnss-track), rates used; ``zupt_intervals``
-  ([t_start, t_end] [s] of the standstills given zero-velocity updates, ``EkfConfig.zupt``;
-  ``nav.standstill``), ``zupt_used`` / ``zupt_rejected`` (updates applied / refused by
-  their χ²₃ gate) and ``zupt`` (the detector's threshold and noise).
+  confirmed by the matching / gnss-track), ``gnss_forced``, rates used.
 
 Noise
 -----

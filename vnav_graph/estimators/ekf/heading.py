@@ -1,6 +1,6 @@
 """Heading acquisition of the forward EKF (``ekf.model``'s docstring describes the method):
 acceleration matching against GNSS velocity changes, the GNSS course when moving, or the
-magnetometer (``rows.mag_rows``). Each proposes a yaw reset (``RESET_DELTA`` ± ``RESET_SD``)
+magnetometer (``updates.mag_rows``). Each proposes a yaw reset (``RESET_DELTA`` ± ``RESET_SD``)
 that ``steps.heading_reset`` applies at the next grid epoch.
 
 The acquisition state is one float array (``new_state``; layout below) and four (2,)

@@ -117,8 +117,8 @@ a re-initialisation: a position jump with the variance of the observed innovatio
 to P (and to the stored Q, so the RTS smoother models the same jump) before the update.
 The GNSS vertical velocity is used only with an accepted GNSS height (same receiver
 solution); the horizontal velocity pair is gated on its own (χ²₂). The baro is the
-vertical anchor: after ``max_consec_baro`` consecutive refusals (≈ 1 s) it is accepted (an
-inertial vertical that disagrees with the baro for that long has diverged — an
+vertical anchor: after ``updates.BaroData.max_consec`` consecutive refusals (≈ 1 s) it is
+accepted (an inertial vertical that disagrees with the baro for that long has diverged — an
 accelerometer that loses specific force under vibration — or the baro stepped, and then the
 new level is the one to follow).
 

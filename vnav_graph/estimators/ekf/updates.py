@@ -320,7 +320,7 @@ def update_gnss(p, dx, heff, y, r, mm, idx, te, k, settings, sd_v, has_baro, b_p
 
 @njit(cache=True)
 def update_zupt(p, dx, heff, y, r, gate, inn, rej, idx):
-    """A zero-velocity pseudo-measurement (``rows.zupt_rows``) behind a χ²₃ gate, never
+    """A zero-velocity pseudo-measurement (``zupt_rows``) behind a χ²₃ gate, never
     forced: a standstill the filter's velocity contradicts is refused (``rej``)."""
     no_force = gate < 0.0  # False as a typed bool: a literal compiles vector_update again
     ok, nis, nrm, w = vector_update(p, dx, heff[:3].copy(), y[:3].copy(), r[:3].copy(), gate,
