@@ -9,7 +9,7 @@ import pytest
 from scipy.stats import chi2
 
 from vnav_graph.estimators.graph import GraphBatch, GraphConfig
-from vnav_graph.estimators.graph.model.robust import weight_and_loss
+from vnav_graph.estimators.robust import weight_and_loss
 from vnav_graph.evaluation.metrics import evaluate
 from vnav_graph.simulation.scenario import simulate
 

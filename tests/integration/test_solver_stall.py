@@ -51,7 +51,7 @@ def test_a_stall_with_a_large_predicted_decrease_is_not_convergence(data_dir: Pa
     res = solve.gn_core(P, solve.batch_layout(P, graph, vals), graph, vals, calib, P.pri)
     # the model's predicted decrease at the returned point
     st = states_from_values(P, res.values, calib)
-    info = interval_info(res.layout, interval_rows(P, st, P.pri, res.bias_lag), P.n_kf)
+    info = interval_info(res.layout, interval_rows(P, st, P.pri, res.bias_lag))
     system = solve.linear_system(P, res.layout, graph, res.values, info)
     _, dec = system.step()
     if res.converged:  # converged means the model sees (almost) nothing left

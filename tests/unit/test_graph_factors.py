@@ -180,7 +180,7 @@ def test_group_information_equals_dense_normal_equations():
     rng = np.random.default_rng(5)
     k = rng.integers(0, 4, 40)
     rows = gf.IntervalRows(k, rng.normal(size=40), rng.normal(size=(40, gf.N_COLS)))
-    groups, lam, eta, cost = gf.group_information(rows, 4)
+    groups, lam, eta, cost = gf.group_information(rows)
     for gi, g in enumerate(groups):
         m = k == g
         np.testing.assert_allclose(lam[gi], rows.jac[m].T @ rows.jac[m], atol=1e-12)
@@ -197,9 +197,9 @@ def test_group_information_in_chunks_equals_one_block(monkeypatch):
     for kk in (k, rng.permutation(k)):
         rows = gf.IntervalRows(kk, rng.normal(size=300), rng.normal(size=(300, gf.N_COLS)))
         monkeypatch.setattr(gf, "GROUP_CHUNK", 10**6)
-        one = gf.group_information(rows, 23)
+        one = gf.group_information(rows)
         monkeypatch.setattr(gf, "GROUP_CHUNK", 4)
-        chunked = gf.group_information(rows, 23)
+        chunked = gf.group_information(rows)
         np.testing.assert_array_equal(one[0], chunked[0])
         for a, b in zip(one[1:3], chunked[1:3], strict=True):
             np.testing.assert_allclose(a, b, rtol=1e-13, atol=1e-13)

@@ -8,7 +8,8 @@ import pytest
 from gtsam.symbol_shorthand import X
 
 from vnav_graph.estimators.graph import GraphConfig
-from vnav_graph.estimators.graph.model.robust import reweight, robust_noise, weight_and_loss
+from vnav_graph.estimators.graph.model.robust import reweight, robust_noise
+from vnav_graph.estimators.robust import weight_and_loss
 
 E = np.array([0.0, 0.3, 1.0, 1.99, 2.01, 3.0, 10.0, 250.0])
 

@@ -15,7 +15,6 @@ from vnav_graph.nav.standstill import (
     ZUPT_SD_FLOOR,
     detect_standstill,
     gnss_agrees,
-    shoe_statistic,
     shoe_terms,
     shoe_threshold,
 )
@@ -24,6 +23,14 @@ G = 9.81
 RATE = 200.0
 SD_A = 0.04  # m/s² per sample (300 µg/√Hz at 200 Hz, a consumer MEMS)
 SD_G = 2.5e-3  # rad/s per sample (0.01 °/s/√Hz at 200 Hz)
+
+
+def shoe_statistic(accel_b: np.ndarray, gyro_b: np.ndarray, sd_accel: float, sd_gyro: float,
+                   window: int) -> np.ndarray:
+    """T_k of ``nav.standstill``'s docstring: its two sums (``shoe_terms``) weighted by the
+    per-sample σ."""
+    a, w = shoe_terms(accel_b, gyro_b, window)
+    return a / sd_accel**2 + w / sd_gyro**2
 
 
 def _still(n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:

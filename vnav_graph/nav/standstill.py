@@ -161,14 +161,6 @@ def shoe_terms(accel_b: FloatArray, gyro_b: FloatArray, window: int
     return out[0], out[1]
 
 
-def shoe_statistic(accel_b: FloatArray, gyro_b: FloatArray, sd_accel: float, sd_gyro: float,
-                   window: int) -> FloatArray:
-    """T_k of the module docstring over the trailing ``window`` samples, (N,) (``shoe_terms``
-    weighted by the per-sample σ [m/s², rad/s])."""
-    a, w = shoe_terms(accel_b, gyro_b, window)
-    return a / sd_accel**2 + w / sd_gyro**2
-
-
 def quiet_sd(term: FloatArray) -> float:
     """``QUIET_MARGIN`` times the per-axis rms of the ``QUIET_QUANTILE`` % quietest windows
     of a ``shoe_terms`` sum (NaN when there is no full window)."""

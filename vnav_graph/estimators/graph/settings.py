@@ -8,8 +8,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ...types import Drive
+from ..robust import LOSSES
 from ..shared_settings import SharedSettings
-from .model.robust import LOSSES
 
 
 @dataclass(frozen=True)

@@ -123,7 +123,6 @@ class VEKF7Config:
     baro_latency_mean, baro_latency_sd : prior mean and σ of Td [s]
     baro_bias_sd, baro_bias_tau : σ [m] and τ [s] of the baro Gauss-Markov bias
     baro_noise_sd : white baro noise [m]
-    gnss_vertical_sd : GNSS height σ when the stream gives none [m]
     use_gnss_velocity : use the GNSS vertical velocity when the receiver gives it
     gnss_gate_sigma : reject GNSS innovations beyond this many σ
     max_gnss_sd_v, gnss_probation_s : GNSS σ_v limit [m]; consistent span to reuse heights [s]
@@ -157,8 +156,6 @@ class VEKF7Config:
     baro_bias_sd: float | None = None
     baro_bias_tau: float | None = None
     baro_noise_sd: float | None = None
-    # the streams always give one
-    gnss_vertical_sd: float = 3.0
     use_gnss_velocity: bool = True
     gnss_gate_sigma: float = 5.0
     # GNSS heights with σ_v above max_gnss_sd_v are not used; after two consecutive refusals a

@@ -198,7 +198,7 @@ def _gnss_lcf(P: Any, k: int, st: gf.KeyframeStates, bias: Any, r: Any, jac: Any
     lin = lin_values(k, st, bias)
     if P.gm is not None:  # five keys: from the information, as the baro terms
         rows_g = gf.IntervalRows(np.zeros(r.size, dtype=np.intp), r, jac)
-        _, lam, eta, _ = gf.group_information(rows_g, 1)
+        _, lam, eta, _ = gf.group_information(rows_g)
         # X_k, X_k+1, b_a (+ 3 zero gyro columns), G_k, G_k+1
         d = P.gm.dim
         lam_p, eta_p = pad_information(lam[0], eta[0],
@@ -285,7 +285,7 @@ def baro_terms(P: Any, k: int, st: gf.KeyframeStates, bias: Any, cal: dict[int, 
                                          for m, (r, _) in extra.items()])
         rw = np.concatenate([rw] + [r for r, _ in extra.values()])
         jw = np.vstack([jw] + [j for _, j in extra.values()])
-    groups, lam, eta, _ = gf.group_information(gf.IntervalRows(m_all, rw, jw), 1)
+    groups, lam, eta, _ = gf.group_information(gf.IntervalRows(m_all, rw, jw))
     ms = [int(m) for m in groups]
     lin = _baro_lin(ms, st, bias, cal, seg)
     # each interval's samples, in their order in ``sel``

@@ -388,8 +388,8 @@ def gnss_rows(
 GROUP_CHUNK = 256  # keyframe intervals per padded block of ``group_information``
 
 
-def group_information(rows: IntervalRows, n_groups: int) -> tuple[np.ndarray, FloatArray,
-                                                                   FloatArray, FloatArray]:
+def group_information(rows: IntervalRows) -> tuple[np.ndarray, FloatArray, FloatArray,
+                                                   FloatArray]:
     """Per-interval information of the rows: Λ_k = Σ JᵀJ (G, 16, 16), η_k = −Σ Jᵀr (G, 16)
     for the groups that have rows, and the cost ½Σr² (float). Returns (groups, Λ, η, cost).
     The groups are padded and multiplied in chunks of ``GROUP_CHUNK`` (the same products;

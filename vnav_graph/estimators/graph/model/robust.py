@@ -12,9 +12,7 @@ import gtsam
 import numpy as np
 
 from ....types.streams import FloatArray
-from ...robust import LOSSES, weight_and_loss
-
-__all__ = ["LOSSES", "reweight", "robust_noise", "weight_and_loss"]
+from ...robust import weight_and_loss
 
 
 def reweight(r: FloatArray, jac: FloatArray, dim: int, loss: str, k: float

@@ -267,9 +267,9 @@ class IntervalInfo:
     eta: FloatArray
 
 
-def interval_info(lay: Layout, rows: gf.IntervalRows, n_kf: int) -> IntervalInfo:
+def interval_info(lay: Layout, rows: gf.IntervalRows) -> IntervalInfo:
     assert rows.jac.shape[0] == rows.r.size, "interval rows without their Jacobian"
-    groups, lam, eta, _ = gf.group_information(rows, n_kf - 1)
+    groups, lam, eta, _ = gf.group_information(rows)
     tc = lay.term_cols
     return IntervalInfo(groups, lay.block_cols(groups), lam[:, tc[:, None], tc[None, :]],
                         eta[:, tc])

@@ -187,7 +187,7 @@ def outputs(P: Problem, res: BatchResult, pri: dict[str, float],
             # released with the system (graph-isam2's check pass, when it is chosen after
             # iSAM2's own estimate was evaluated): linearised again at the solution
             rows = interval_rows(P, st, pri, res.bias_lag)
-        info = interval_info(lay, rows, P.n_kf)
+        info = interval_info(lay, rows)
         res.rows = rows.without_jac()
         del rows
         system = linear_system(P, lay, res.graph, vals, info)

@@ -138,7 +138,7 @@ def gn_core(P: Problem, lay: Layout, graph: Any, vals: Any, calib_of_kf: np.ndar
         # the information blocks are formed, before the C++ rows are linearised and the
         # system assembled (44 MB on a 1-hour drive; with it this was the solve's peak), and
         # so one set of rows, not two, is alive while the candidate's are evaluated
-        info = interval_info(lay, rows, P.n_kf)
+        info = interval_info(lay, rows)
         rows = rows.without_jac()
         system = linear_system(P, lay, graph, vals, info)
         del info
