@@ -48,6 +48,7 @@ import numpy as np
 
 from ..types import ERROR_STATE, Drive, Estimate, Trajectory
 from ..types.streams import FloatArray
+from .metrics import finite_max, finite_rms
 
 HOLDOUT_SCHEMA = "vnav_graph.holdout/1"
 TAIL_S = 5.0
@@ -171,11 +172,6 @@ def withhold(drive: Drive, windows: Sequence[tuple[float, float]]) -> Drive:
                          meta={**drive.meta, "gnss_holdout_windows": [list(w) for w in windows]})
 
 
-def _rms(x: FloatArray) -> float | None:
-    x = x[np.isfinite(x)]
-    return float(np.sqrt(np.mean(x**2))) if x.size else None
-
-
 def held_forward(tr: Trajectory, t_q: FloatArray, origin_lla: FloatArray) -> Trajectory:
     """``tr`` at times ``t_q`` (each at or after its first epoch) from its latest epoch at or
     before each, carried on at that epoch's velocity: a real-time answer read at an epoch
@@ -234,7 +230,7 @@ def score(est: Estimate, drive: Drive, withheld: np.ndarray,
         d = lla_to_ned(lla_e, drive.origin_lla)[:, :2] - lla_to_ned(
             g.lla[inside][w], drive.origin_lla)[:, :2]
         horiz_err[w] = np.sqrt(np.sum(d**2, axis=1))
-        horiz = _rms(horiz_err[w])
+        horiz = finite_rms(horiz_err[w])
     vd_err = None
     if "vel_d" in est.provides and g.vel_n is not None:
         vd_err = np.interp(t, tr.t, tr.vel_down) - g.vel_n[inside, 2]
@@ -265,7 +261,7 @@ def score(est: Estimate, drive: Drive, withheld: np.ndarray,
         "alt_rmse_m": float(np.sqrt(np.mean(e_w**2))),
         "alt_max_abs_m": float(np.max(np.abs(e_w))),
         "horiz_rmse_m": horiz,
-        "vel_down_rmse_mps": None if vd_err is None else _rms(vd_err[w]),
+        "vel_down_rmse_mps": None if vd_err is None else finite_rms(vd_err[w]),
         "gnss_rejected": None if rej is None else int(rej),
         "gnss_forced": (None if est.info is None or est.info.get("gnss_forced") is None
                         else int(est.info["gnss_forced"])),
@@ -280,8 +276,8 @@ def score(est: Estimate, drive: Drive, withheld: np.ndarray,
             m = w & (t >= a) & (t <= b)
             block["per_window"].append({
                 "t0": float(a), "t1": float(b), "n": int(m.sum()),
-                "alt_rmse_m": _rms(err[m]), "horiz_rmse_m": _rms(horiz_err[m]),
-                "vel_down_rmse_mps": None if vd_err is None else _rms(vd_err[m])})
+                "alt_rmse_m": finite_rms(err[m]), "horiz_rmse_m": finite_rms(horiz_err[m]),
+                "vel_down_rmse_mps": None if vd_err is None else finite_rms(vd_err[m])})
     return Scored(block, t, err, w, sd, horiz_err, vd_err, horiz_sd)
 
 
@@ -304,23 +300,16 @@ def check_run(scored: Scored, est: Estimate, held: Drive, drive: Drive, referenc
         try:
             o = score(view, drive, reference, given=given)
             on_v = o.block["alt_max_abs_m"]
-            on_h = _max_finite(o.horiz_err)
+            on_h = finite_max(o.horiz_err)
         except ValueError:  # covers no withheld fix
             pass
-    maxima = {"height": b["alt_max_abs_m"], "horizontal": _max_finite(scored.horiz_err),
+    maxima = {"height": b["alt_max_abs_m"], "horizontal": finite_max(scored.horiz_err),
               "online_height": on_v, "online_horizontal": on_h}
     b["self_check"] = {**check.as_dict(), "error_max_m": {**maxima, "basis": "withheld GNSS"}}
     b["warnings"] = [*b.get("warnings", []), *check.flags]
     far = far_off(maxima, "the withheld GNSS fixes")
     if check.diverged or far:
         b["status"], b["error"] = DIVERGED, check.reason or far
-
-
-def _max_finite(x: FloatArray | None) -> float | None:
-    if x is None:
-        return None
-    x = x[np.isfinite(x)]
-    return float(np.max(np.abs(x))) if x.size else None
 
 
 def causal_score(est: Estimate, drive: Drive, withheld: np.ndarray, which: str,

@@ -236,10 +236,7 @@ def error_p95(err: Errors) -> dict[str, float | None]:
     """The 95th percentile of |error| over the drive: ``alt_p95_m``, ``horiz_p95_m``,
     ``heading_p95_deg``, ``vel_down_p95_mps`` (None where the estimate lacks the quantity)."""
     def p95(x: FloatArray | None) -> float | None:
-        if x is None:
-            return None
-        x = x[np.isfinite(x)]
-        return float(np.percentile(np.abs(x), 95)) if x.size else None
+        return finite_stat(x, lambda v: np.percentile(np.abs(v), 95))
 
     return {"alt_p95_m": p95(err.alt), "horiz_p95_m": p95(err.horiz),
             "heading_p95_deg": p95(err.heading), "vel_down_p95_mps": p95(err.vel_down)}
@@ -355,6 +352,23 @@ def causal_block_of(ce: CausalErrors, est: Estimate, which: str) -> dict[str, An
 
 def _rms(x: FloatArray | None) -> float | None:
     return None if x is None or x.size == 0 else float(np.sqrt(np.mean(x**2)))
+
+
+def finite_stat(x: FloatArray | None, stat: Any) -> float | None:
+    """``stat`` of the finite entries of ``x`` (None without an array or a finite entry)."""
+    if x is None:
+        return None
+    x = x[np.isfinite(x)]
+    return float(stat(x)) if x.size else None
+
+
+def finite_rms(x: FloatArray | None) -> float | None:
+    return finite_stat(x, lambda v: np.sqrt(np.mean(v**2)))
+
+
+def finite_max(x: FloatArray | None) -> float | None:
+    """The largest |entry| among the finite ones."""
+    return finite_stat(x, lambda v: np.max(np.abs(v)))
 
 
 def evaluate(est: Estimate, drive: Drive,

@@ -26,22 +26,9 @@ import numpy as np
 
 from ..types import Drive, Estimate
 from ..types.streams import FloatArray
+from .metrics import finite_max, finite_rms
 
 __all__ = ["reference_block"]
-
-
-def _rms(x: FloatArray | None) -> float | None:
-    if x is None:
-        return None
-    x = x[np.isfinite(x)]
-    return float(np.sqrt(np.mean(x**2))) if x.size else None
-
-
-def _max(x: FloatArray | None) -> float | None:
-    if x is None:
-        return None
-    x = x[np.isfinite(x)]
-    return float(np.max(np.abs(x))) if x.size else None
 
 
 def _inside(t: FloatArray, windows: Sequence[tuple[float, float]]) -> np.ndarray:
@@ -78,9 +65,9 @@ def reference_block(est: Estimate, drive: Drive,
         vd = np.interp(t, tr.t, tr.vel_down) - ref.vel_n[m, 2]
     out: dict[str, Any] = {
         "n_scored": int(m.sum()),
-        "alt_rmse_m": _rms(alt), "alt_max_abs_m": _max(alt),
-        "horiz_rmse_m": _rms(horiz), "horiz_max_m": _max(horiz),
-        "vel_down_rmse_mps": _rms(vd), "nees_mean": None, "nees_dof": None,
+        "alt_rmse_m": finite_rms(alt), "alt_max_abs_m": finite_max(alt),
+        "horiz_rmse_m": finite_rms(horiz), "horiz_max_m": finite_max(horiz),
+        "vel_down_rmse_mps": finite_rms(vd), "nees_mean": None, "nees_dof": None,
     }
     ne = nees(est, drive)
     if ne is not None and est.t_cov is not None:
@@ -93,7 +80,7 @@ def reference_block(est: Estimate, drive: Drive,
         k = (t >= a) & (t <= b)
         out["per_window"].append({
             "t0": float(a), "t1": float(b), "n": int(k.sum()),
-            "alt_rmse_m": _rms(alt[k]), "horiz_rmse_m": _rms(None if horiz is None
+            "alt_rmse_m": finite_rms(alt[k]), "horiz_rmse_m": finite_rms(None if horiz is None
                                                               else horiz[k]),
-            "horiz_max_m": _max(None if horiz is None else horiz[k])})
+            "horiz_max_m": finite_max(None if horiz is None else horiz[k])})
     return out
