@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -235,9 +236,7 @@ def nees_axes(est: Estimate, drive: Drive, err: Errors | None = None) -> dict[st
 def error_p95(err: Errors) -> dict[str, float | None]:
     """The 95th percentile of |error| over the drive: ``alt_p95_m``, ``horiz_p95_m``,
     ``heading_p95_deg``, ``vel_down_p95_mps`` (None where the estimate lacks the quantity)."""
-    def p95(x: FloatArray | None) -> float | None:
-        return finite_stat(x, lambda v: np.percentile(np.abs(v), 95))
-
+    p95 = partial(finite_stat, stat=lambda v: np.percentile(np.abs(v), 95))
     return {"alt_p95_m": p95(err.alt), "horiz_p95_m": p95(err.horiz),
             "heading_p95_deg": p95(err.heading), "vel_down_p95_mps": p95(err.vel_down)}
 
@@ -362,13 +361,9 @@ def finite_stat(x: FloatArray | None, stat: Any) -> float | None:
     return float(stat(x)) if x.size else None
 
 
-def finite_rms(x: FloatArray | None) -> float | None:
-    return finite_stat(x, lambda v: np.sqrt(np.mean(v**2)))
-
-
-def finite_max(x: FloatArray | None) -> float | None:
-    """The largest |entry| among the finite ones."""
-    return finite_stat(x, lambda v: np.max(np.abs(v)))
+# the RMS and the largest |entry| of the finite entries (None as ``finite_stat``)
+finite_rms = partial(finite_stat, stat=lambda v: np.sqrt(np.mean(v**2)))
+finite_max = partial(finite_stat, stat=lambda v: np.max(np.abs(v)))
 
 
 def evaluate(est: Estimate, drive: Drive,

@@ -47,13 +47,10 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from numpy.typing import NDArray
 
 from ..types import Drive
-from ..types.streams import BaroStream, GnssStream
+from ..types.streams import BaroStream, FloatArray, GnssStream, IntArray
 from .findings import Findings, reject
-
-FloatArray = NDArray[np.float64]
 
 WINDOW_S = 5.0
 MIN_TOTAL_CLIMB_M = 20.0
@@ -101,7 +98,7 @@ class Climb:
 
 
 def _window_means(t: FloatArray, h: FloatArray, t0: float, t1: float, window_s: float
-                  ) -> tuple[NDArray[np.int64], FloatArray]:
+                  ) -> tuple[IntArray, FloatArray]:
     """(window index, mean of ``h``) of every occupied ``window_s`` window in [t0, t1): only
     occupied windows are held (a stamp far in the future costs nothing)."""
     m = (t >= t0) & (t < t1)

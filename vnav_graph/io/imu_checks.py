@@ -58,11 +58,10 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
-from numpy.typing import NDArray
 
 from ..geo.earth import G0
 from ..types import Drive
-from ..types.streams import ImuStream
+from ..types.streams import BoolArray, FloatArray, ImuStream
 from .findings import Findings, reject
 from .imu_units import (
     ACCEL_G2_REASON,
@@ -73,8 +72,6 @@ from .imu_units import (
     block_means,
     gyro_in_degrees,
 )
-
-FloatArray = NDArray[np.float64]
 
 ACCEL_OK = (6.0, 14.0)  # median |f| [m/s²] accepted as "g in m/s²"
 GROUND_AXIS_RATIO = 10.0  # rotation mostly about one axis (cars: 20-120; drones: < 5; skier: 5-15)
@@ -122,7 +119,7 @@ def rotation_stats(t: FloatArray, gyro: FloatArray, accel: FloatArray) -> dict[s
 
 
 def _imu(drive: Drive, gyro: FloatArray, accel: FloatArray,
-         keep: NDArray[np.bool_] | None = None) -> ImuStream:
+         keep: BoolArray | None = None) -> ImuStream:
     i = drive.imu
     if keep is None:
         return ImuStream(i.t, gyro, accel, i.spec)
@@ -411,7 +408,7 @@ def _check_gravity_axis(drive: Drive, f: Findings) -> None:
                      "forward-right-down): axes swapped, or the IMU is mounted on its side")
 
 
-def _clipped(x: FloatArray, floor: float) -> tuple[NDArray[np.bool_], float]:
+def _clipped(x: FloatArray, floor: float) -> tuple[BoolArray, float]:
     """Samples pinned at an axis's extreme |value| (see CLIP_*); and the inferred limit."""
     clip = np.zeros(x.shape[0], dtype=bool)
     lim = 0.0

@@ -49,16 +49,13 @@ from types import MappingProxyType
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
 from ..nav.gnss_glitch import MAX_GLITCH_S, MAX_SPEED, glitch_mask
 from ..types import Drive
-from ..types.streams import BaroStream, GnssStream
+from ..types.streams import BaroStream, BoolArray, FloatArray, GnssStream
 from .findings import Findings, reject
 from .height_units import check_gnss_height_units
 from .imu_checks import IMU_CHECKS
-
-FloatArray = NDArray[np.float64]
 
 WARN_DROP_FRACTION = 0.05
 REFUSE_DROP_FRACTION = 0.90
@@ -174,7 +171,7 @@ def _check_coverage(drive: Drive, f: Findings) -> None:
 
 
 # ---------------------------------------------------------------------------- baro
-def _baro_from_alt(b: BaroStream, alt: FloatArray, keep: NDArray[np.bool_] | None = None
+def _baro_from_alt(b: BaroStream, alt: FloatArray, keep: BoolArray | None = None
                    ) -> BaroStream:
     """The baro stream with a repaired altitude; the raw pressure is dropped so that no
     stream carries a pressure that disagrees with its altitude (estimators use altitude)."""
@@ -291,7 +288,7 @@ def _check_gnss(drive: Drive, f: Findings) -> Drive:
     return drive
 
 
-def _longest_away_s(t: FloatArray, mask: NDArray[np.bool_]) -> float:
+def _longest_away_s(t: FloatArray, mask: BoolArray) -> float:
     """The longest time a run of True entries of ``mask`` kept the stream away: from the last
     False entry before the run to the first after it (a glitch never starts or ends a
     stream)."""

@@ -4,9 +4,8 @@ the simulator draws from them are ``simulation.noise``)."""
 from __future__ import annotations
 
 import numpy as np
-from numpy.typing import NDArray
 
-FloatArray = NDArray[np.float64]
+from ..types.streams import FloatArray
 
 
 def white_sd(density: float, dt: float) -> float:

@@ -32,16 +32,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
 
 from ..config import GnssSpec
 from ..geo.earth import radii
 from ..geo.frames import quat_to_mat
 from ..types import Trajectory
-from ..types.streams import FloatArray, GnssStream
+from ..types.streams import BoolArray, FloatArray, GnssStream
 from .noise import gauss_markov
-
-BoolArray = NDArray[np.bool_]
 
 BURST_MAX_ELEVATION = np.radians(30.0)  # elevation bound of a burst's offset direction [rad]
 BURST_JITTER_FRACTION = 0.2  # jitter σ inside a burst, fraction of the burst's offset [-]

@@ -16,6 +16,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+BoolArray = NDArray[np.bool_]
 
 # Physical plausibility limits used by validation (generous; they catch unit mistakes).
 _MAX_GYRO = 50.0  # rad/s (≈ 2900 deg/s): larger means degrees were passed as radians

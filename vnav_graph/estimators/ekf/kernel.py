@@ -21,12 +21,12 @@ from typing import Any, NamedTuple
 
 import numpy as np
 from numba import njit
-from numpy.typing import NDArray
 
 from ...geo.earth import radii_scalar
 from ...nav.arrays import put
 from ...nav.rotations import quat_to_dcm, rpy_quat, yaw_of
 from ...nav.strapdown import strapdown_step
+from ...types.streams import BoolArray, FloatArray, IntArray
 from .heading import (
     RESET_COURSE,
     RESET_DELTA,
@@ -40,10 +40,6 @@ from .heading import (
 from .model import NING, NPACK, NPAR, NX, PBA, PBG, PKA, apply_correction, pack
 from .steps import delayed_rows, grid_predict, heading_reset
 from .updates import GNSS, event_rows, event_update
-
-FloatArray = NDArray[np.float64]
-IntArray = NDArray[np.int64]
-BoolArray = NDArray[np.bool_]
 
 
 class Grids(NamedTuple):

@@ -25,7 +25,6 @@ from typing import Any, NamedTuple
 
 import numpy as np
 from numba import njit
-from numpy.typing import NDArray
 from scipy.stats import chi2
 
 from ...nav.arrays import put
@@ -37,6 +36,7 @@ from ...sensors.gnss_model import antenna_position, antenna_velocity
 from ...sensors.magnetometer import MIN_HORIZONTAL_UT, mag_heading_row
 from ...sensors.model import BaroPrior, SensorModel
 from ...types import Drive
+from ...types.streams import BoolArray, FloatArray, IntArray
 from .alignment import Alignment, track_heading
 from .heading import RESET_DELTA, RESET_SD
 from .magnetometer import one_per_interval
@@ -64,9 +64,6 @@ from .model import (
 )
 from .settings import EkfConfig
 from .steps import tilt_held, update_gated
-
-FloatArray = NDArray[np.float64]
-BoolArray = NDArray[np.bool_]
 
 # event kinds of ``kernel.Events.kind``: the field order of ``Measurements``
 GNSS, BARO, MAG, ZUPT = 0, 1, 2, 3
@@ -141,7 +138,7 @@ class Innovations(NamedTuple):
     rej_baro: BoolArray  # (B,)
     rej_mag: BoolArray  # (M,)
     rej_zupt: BoolArray  # (Z,)
-    counts: NDArray[np.int64]  # (3,) refusals in a row (``C_*``)
+    counts: IntArray  # (3,) refusals in a row (``C_*``)
     v_gate: FloatArray  # (3,) ``nav.gnss_gate`` state
 
 

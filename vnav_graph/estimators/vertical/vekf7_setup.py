@@ -15,18 +15,14 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
 from ...geo.earth import radii
 from ...sensors.model import SensorModel
 from ...sensors.noise import gm_process_var, gm_transition
 from ...types import Drive
-from ...types.streams import FloatArray
+from ...types.streams import FloatArray, IntArray
 from .gnss_reference import nominal_interval
 from .inputs import VerticalInputs
-
-IntArray = NDArray[np.int64]
-
 
 NX = 8  # 7 filter states + the accumulator I = ∫ b dt
 IH, IV, IB, IK, IS, ITD, IBB, II = range(NX)

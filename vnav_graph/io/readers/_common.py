@@ -11,12 +11,9 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
 from ...geo.atmosphere import isa_altitude
-from ...types.streams import MagStream
-
-FloatArray = NDArray[np.float64]
+from ...types.streams import BoolArray, FloatArray, MagStream
 
 # A gap is reported when consecutive samples are further apart than this many median steps.
 GAP_FACTOR = 5.0
@@ -73,7 +70,7 @@ def imu_in_si(t: FloatArray, gyro: FloatArray, accel: FloatArray,
     return gyro, accel
 
 
-def monotonic_mask(t: FloatArray, stream: str, report: Report) -> NDArray[np.bool_]:
+def monotonic_mask(t: FloatArray, stream: str, report: Report) -> BoolArray:
     """Mask keeping the samples whose stamp is strictly later than every earlier kept one.
 
     Duplicated stamps (``t[k] == t_last``) and stamps that jump backwards are dropped and
@@ -112,7 +109,7 @@ def find_gaps(t: FloatArray, stream: str, report: Report,
         report.gaps[stream] = [[float(t[i]), float(dt[i])] for i in idx]
 
 
-def finite_rows(*arrays: FloatArray) -> NDArray[np.bool_]:
+def finite_rows(*arrays: FloatArray) -> BoolArray:
     """True where every given array (1-D or 2-D) is finite in that row."""
     m = np.ones(np.asarray(arrays[0]).shape[0], dtype=bool)
     for a in arrays:
@@ -150,7 +147,7 @@ def pressure_altitude(pressure_pa: FloatArray) -> FloatArray:
     return isa_altitude(pressure_pa)
 
 
-def valid_pressure(p: FloatArray) -> NDArray[np.bool_]:
+def valid_pressure(p: FloatArray) -> BoolArray:
     """Physically plausible static pressure [Pa] (same range as ``BaroStream``)."""
     return np.isfinite(p) & (p >= 1.0e3) & (p <= 1.2e5)
 
