@@ -21,6 +21,7 @@ from gtsam.symbol_shorthand import B, C, V, X
 
 from ....types import ERROR_STATE_DIM
 from ....types.streams import FloatArray
+from ..model.problem import Problem
 from ..solver.outputs import cov_18
 
 
@@ -42,7 +43,7 @@ class Answers:
     lag_t: the update time it was read at; lag_state: (n, 10) p, v (t frame), quaternion;
     lag_cov: (n, 18, 18)."""
 
-    def __init__(self, P: Any, seg: np.ndarray, lag_s: float) -> None:
+    def __init__(self, P: Problem, seg: np.ndarray, lag_s: float) -> None:
         self.P, self.seg, self.lag_s = P, seg, lag_s
         nk = P.n_kf
         self.online_cov = np.full((nk, ERROR_STATE_DIM, ERROR_STATE_DIM), np.nan)
@@ -93,7 +94,7 @@ class Answers:
 
 
 
-def real_time(P: Any, online: FloatArray, rot: FloatArray, bias: FloatArray,
+def real_time(P: Problem, online: FloatArray, rot: FloatArray, bias: FloatArray,
               online_cov: FloatArray, t_out: FloatArray
               ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     """graph-isam2's real-time output at the output epochs ``t_out``: at a keyframe its

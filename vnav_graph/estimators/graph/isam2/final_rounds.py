@@ -15,6 +15,7 @@ import numpy as np
 from ....geo.frames import mat_to_quat
 from ..model.cpp_factors import gap_factors
 from ..model.extend import Collected
+from ..model.problem import Problem
 from ..solver.linalg import trim_heap
 from . import linear_factors as terms
 from . import relin
@@ -35,7 +36,7 @@ class OnlineResult:
     ``P.g_rej_post`` before iSAM2's own post-solve gate; online_bias: the biases known at each
     keyframe's update."""
 
-    P: Any
+    P: Problem
     est: Any
     extra_online: Any
     t_online: float

@@ -16,7 +16,7 @@ from gtsam.symbol_shorthand import B, C, G, K, X
 from scipy.linalg import lapack
 
 from ..model import interval_factors as gf
-from ..model.problem import nav_accel
+from ..model.problem import Problem, nav_accel
 from ..model.robust import reweight
 from ..solver.general import information_factor, pad_information
 
@@ -109,7 +109,7 @@ def _jacobian_container(keys: list[int], order: tuple[int, ...],
         gtsam.JacobianFactor(gtsam.GaussianConditional(terms, len(keys), d, None)), lin)
 
 
-def keyframe_states(P: Any, k: int | list[int], rot: Any, pos: Any, vel: Any, bias: Any,
+def keyframe_states(P: Problem, k: int | list[int], rot: Any, pos: Any, vel: Any, bias: Any,
                     cb: Any, gg: Any, dg: Any = None) -> gf.KeyframeStates:
     """Keyframe states of the running arrays (views, not copies) for the rows of interval k
     (or of each interval in a list): the nav-frame acceleration of intervals k − 3 … k + 1
@@ -139,7 +139,7 @@ def lin_values(k: int, st: gf.KeyframeStates, bias: Any) -> Any:
     return lin
 
 
-def gnss_factor(P: Any, k: int, st: gf.KeyframeStates, bias: Any, g_idx: Any) -> Any:
+def gnss_factor(P: Problem, k: int, st: gf.KeyframeStates, bias: Any, g_idx: Any) -> Any:
     """The GNSS fixes ``g_idx`` of interval k (strictly inside it; with the GNSS height
     state also the one on keyframe k+1) as one LinearContainerFactor on X(k), X(k+1) and
     B(k) (the accelerometer-bias columns of the interpolant included), and G(k), G(k+1)
@@ -148,7 +148,7 @@ def gnss_factor(P: Any, k: int, st: gf.KeyframeStates, bias: Any, g_idx: Any) ->
     return gnss_factors(P, [k], st, bias, [g_idx])[0]
 
 
-def gnss_factors(P: Any, ks: list[int], st: gf.KeyframeStates, bias: Any,
+def gnss_factors(P: Problem, ks: list[int], st: gf.KeyframeStates, bias: Any,
                  fixes: list[Any]) -> list[Any]:
     """``gnss_factor`` of several intervals ``ks`` (fixes ``fixes[i]`` in interval
     ``ks[i]``) with one row evaluation; None for an interval without fixes."""
@@ -156,7 +156,7 @@ def gnss_factors(P: Any, ks: list[int], st: gf.KeyframeStates, bias: Any,
             for k, rows in zip(ks, gnss_interval_rows(P, ks, st, fixes), strict=True)]
 
 
-def gnss_interval_rows(P: Any, ks: list[int], st: gf.KeyframeStates,
+def gnss_interval_rows(P: Problem, ks: list[int], st: gf.KeyframeStates,
                        fixes: list[Any]) -> list[tuple[Any, Any] | None]:
     """The whitened, reweighted GNSS rows (r, J) of each interval ``ks[i]`` (its fixes
     ``fixes[i]``; position rows, then velocity rows) from one row evaluation; None for an
@@ -193,7 +193,7 @@ def gnss_interval_rows(P: Any, ks: list[int], st: gf.KeyframeStates,
     return out
 
 
-def _gnss_lcf(P: Any, k: int, st: gf.KeyframeStates, bias: Any, r: Any, jac: Any) -> Any:
+def _gnss_lcf(P: Problem, k: int, st: gf.KeyframeStates, bias: Any, r: Any, jac: Any) -> Any:
     """Interval k's whitened GNSS rows (r, J) as its LinearContainerFactor."""
     lin = lin_values(k, st, bias)
     if P.gm is not None:  # five keys: from the information, as the baro terms
@@ -220,7 +220,7 @@ def _gnss_lcf(P: Any, k: int, st: gf.KeyframeStates, bias: Any, r: Any, jac: Any
     return gtsam.LinearContainerFactor(jf, lin)
 
 
-def baro_factors(P: Any, k: int, st: gf.KeyframeStates, bias: Any, cal: dict[int, Any],
+def baro_factors(P: Problem, k: int, st: gf.KeyframeStates, bias: Any, cal: dict[int, Any],
                  seg: Any, bt: Any, bz: Any, baro_next: int, pri: dict[str, float],
                  last: bool = False) -> tuple[list[tuple[int, np.ndarray, Any]], int]:
     """The baro samples stamped since the last update, up to t_{k+1} (all of them when
@@ -244,7 +244,7 @@ def baro_factors(P: Any, k: int, st: gf.KeyframeStates, bias: Any, cal: dict[int
     return baro_terms(P, k, st, bias, cal, seg, bt, bz, sel, pri, lag=tau_now), baro_next
 
 
-def baro_terms(P: Any, k: int, st: gf.KeyframeStates, bias: Any, cal: dict[int, Any],
+def baro_terms(P: Problem, k: int, st: gf.KeyframeStates, bias: Any, cal: dict[int, Any],
                seg: Any, bt: Any, bz: Any, sel: np.ndarray, pri: dict[str, float],
                lag: float | None = None, extra: dict[int, Any] | None = None,
                floor: int = 0) -> list[tuple[int, np.ndarray, Any]]:

@@ -40,7 +40,7 @@ from ..model.cpp_factors import (
 )
 from ..model.extend import Collected, GraphExtension, collect, make_view
 from ..model.initial_guess import initial_states
-from ..model.problem import gravity_delta, noise, preintegrate, setup
+from ..model.problem import Problem, gravity_delta, noise, preintegrate, setup
 from ..settings import GraphConfig
 from . import linear_factors as terms
 from . import relin
@@ -70,7 +70,7 @@ class OnlinePass:
     iSAM2 parameters). ``run()`` does the whole pass; ``update(k)`` is one keyframe."""
 
     def __init__(self, drive: Drive, cfg: GraphConfig, robust: bool,
-                 extensions: Sequence[GraphExtension], P: Any = None,
+                 extensions: Sequence[GraphExtension], P: Problem = None,
                  init: tuple[Any, Any, Any] | None = None, causal: bool = False) -> None:
         """``P``, ``init``: the problem and initial states when already set up (a pass
         started again). ``causal``: keyframe 0 from ``P.start0`` (the causal start, its yaw

@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from ..model import interval_factors as gf
-from ..model.problem import gate_failures
+from ..model.problem import Problem, gate_failures
 from . import linear_factors as terms
 from .relin import TermBook
 
@@ -34,7 +34,7 @@ from .relin import TermBook
 class OnlineGate:
     """The gate of one online pass and what it refused."""
 
-    def __init__(self, P: Any, span_s: float | None) -> None:
+    def __init__(self, P: Problem, span_s: float | None) -> None:
         self.P = P
         self.on = span_s is not None and span_s > 0 and P.cfg.gnss_gate_prob > 0
         self.span_s = float(span_s or 0.0)

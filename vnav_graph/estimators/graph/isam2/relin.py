@@ -34,7 +34,7 @@ import numpy as np
 from gtsam.symbol_shorthand import A, B, C, G, K, V, X
 
 from ..model import interval_factors as gf
-from ..model.problem import nav_accel, noise, post_solve_rejections
+from ..model.problem import Problem, nav_accel, noise, post_solve_rejections
 from . import linear_factors as terms
 
 # relinearisation thresholds of K = (s, τd) for the interval terms: the linearisation error
@@ -68,7 +68,7 @@ class TermBook:
     """Factor indices and linearisation points of one pass's interval terms; picks the due
     ones and rebuilds them (module docstring)."""
 
-    def __init__(self, P: Any, seg: np.ndarray, fixes_of: list[np.ndarray]) -> None:
+    def __init__(self, P: Problem, seg: np.ndarray, fixes_of: list[np.ndarray]) -> None:
         cfg = P.cfg
         self.P = P
         self.seg = seg
@@ -303,7 +303,7 @@ class TermBook:
         return tags, removed
 
 
-def read_states(est: Any, keys_k: Any, arrays: tuple[Any, ...], P: Any,
+def read_states(est: Any, keys_k: Any, arrays: tuple[Any, ...], P: Problem,
                 b_last: int | None = None) -> None:
     """The states of keyframes ``keys_k`` in ``est`` (X, V, B, and C / G when the problem has
     them) into the running arrays (rot, pos, vel, bias, cb, gg). ``b_last``: the last B(k)
@@ -328,7 +328,7 @@ def read_states(est: Any, keys_k: Any, arrays: tuple[Any, ...], P: Any,
             gg[k] = g[0] if gg.ndim == 1 else g
 
 
-def _read_bulk(est: Any, keys_k: Any, arrays: tuple[Any, ...], P: Any,
+def _read_bulk(est: Any, keys_k: Any, arrays: tuple[Any, ...], P: Problem,
                b_last: int | None) -> bool:
     """``read_states`` when ``est`` holds exactly ``state_keys(keys_k)`` (an update's
     read-back): poses and vectors copied out in one call per type (GTSAM's
@@ -357,7 +357,7 @@ def _read_bulk(est: Any, keys_k: Any, arrays: tuple[Any, ...], P: Any,
     return True
 
 
-def state_keys(keys_k: Any, P: Any, b_last: int | None = None) -> Any:
+def state_keys(keys_k: Any, P: Problem, b_last: int | None = None) -> Any:
     """The keys ``read_states`` reads for keyframes ``keys_k`` (``b_last``: see there)."""
     has_baro, has_gm = P.drive.baro is not None, P.gm is not None
     return gtsam.KeyVector([kk for k in keys_k for kk in
@@ -365,7 +365,7 @@ def state_keys(keys_k: Any, P: Any, b_last: int | None = None) -> Any:
                              + ([C(k)] if has_baro else []) + ([G(k)] if has_gm else []))])
 
 
-def settle(isam: Any, book: TermBook, P: Any, seg: Any, rw_idx: list[int],
+def settle(isam: Any, book: TermBook, P: Problem, seg: Any, rw_idx: list[int],
             arrays: tuple[Any, ...], cal: dict[int, Any], bt: Any, bz: Any,
             dg: Any, tie: bool = True, removed: list[int] | None = None,
             pyf: Any = None, swap: tuple[list[int], list[Any]] = ([], [])) -> list[list[int]]:
@@ -447,7 +447,7 @@ def _py_rebuild(pyf: Any, nf: Any, arrays: tuple[Any, ...], removed: list[int]
     return slots, at
 
 
-def post_solve_gate(book: TermBook, P: Any, states: Any) -> list[int]:
+def post_solve_gate(book: TermBook, P: Problem, states: Any) -> list[int]:
     """The batch's post-solve GNSS gate (``solve.gauss_newton``) at iSAM2's estimate, so
     that its own smoothed estimate uses the fixes the batch would keep: fixes whose χ² at
     ``states`` (``KeyframeStates`` of the estimate) exceeds the gate are marked unused
@@ -470,7 +470,7 @@ def post_solve_gate(book: TermBook, P: Any, states: Any) -> list[int]:
     return kf_rm
 
 
-def estimate_states(P: Any, arrays: tuple[Any, ...], k_cal: Any) -> gf.KeyframeStates:
+def estimate_states(P: Problem, arrays: tuple[Any, ...], k_cal: Any) -> gf.KeyframeStates:
     """``KeyframeStates`` of the running arrays (iSAM2's estimate as ``settle`` last read it)
     with one (s, τd) ``k_cal``: what ``problem.states_from_values`` gives for the batch's
     values at that estimate, without building them."""

@@ -13,6 +13,7 @@ from gtsam.symbol_shorthand import A, B, C, G, K, V, X
 from ....util.failures import failure_message
 from ..model.cpp_factors import keyframe_fixes, prior_factors
 from ..model.extend import Collected, key_name
+from ..model.problem import Problem
 from ..settings import GraphConfig
 from ..solver.outputs import solver_warnings, value_of
 from .py_factors import LINEAR_ONLY
@@ -23,7 +24,7 @@ class UpdateFailed(RuntimeError):
     robust settings on this type (and on no other error)."""
 
 
-def update_error(P: Any, k: int, exc: BaseException | None, gap: bool) -> UpdateFailed:
+def update_error(P: Problem, k: int, exc: BaseException | None, gap: bool) -> UpdateFailed:
     """An ``UpdateFailed`` naming the keyframe, its time and the likely cause.
 
     GTSAM's IndeterminantLinearSystemException reaches Python with an empty or generic
@@ -51,7 +52,7 @@ def update_error(P: Any, k: int, exc: BaseException | None, gap: bool) -> Update
         + "; ".join(causes) + ". graph-batch (damped batch solver) may still work.")
 
 
-def segments(P: Any) -> np.ndarray:
+def segments(P: Problem) -> np.ndarray:
     """Calibration segment index of every keyframe, numbered densely (0, 1, 2, ...).
 
     Segments are ``segment_s`` long in time; one with no keyframe (a logging gap longer than
@@ -66,7 +67,7 @@ def segments(P: Any) -> np.ndarray:
     return np.unique(raw, return_inverse=True)[1].astype(int)
 
 
-def segment_span(P: Any, seg: np.ndarray, j: int) -> float:
+def segment_span(P: Problem, seg: np.ndarray, j: int) -> float:
     """Time [s] from the start of segment j-1 to the start of segment j (≥ segment_s when a
     gap swallowed whole segments): the length of the K(j-1) → K(j) random walk."""
     t0 = float(P.t_kf[np.argmax(seg == j - 1)])
@@ -74,7 +75,7 @@ def segment_span(P: Any, seg: np.ndarray, j: int) -> float:
     return max(float(P.cfg.segment_s), t1 - t0)
 
 
-def newest_last(P: Any, seg: np.ndarray, k: int, b_last: int) -> Any:
+def newest_last(P: Problem, seg: np.ndarray, k: int, b_last: int) -> Any:
     """iSAM2's constraint map putting keyframe k's variables (X, V, its B — B(b_last) while
     B(k) has not entered —, C, G) and its segment's K, A last in a re-elimination's
     ordering."""
@@ -112,7 +113,7 @@ def threshold_map(cfg: GraphConfig, ext: Collected | None = None,
     return m
 
 
-def estimate_info(P: Any, cfg: GraphConfig, res: Any, out: dict[str, Any], upd_ms: Any,
+def estimate_info(P: Problem, cfg: GraphConfig, res: Any, out: dict[str, Any], upd_ms: Any,
                   brk: Any, robust: bool, fallback: str | None, times: dict[str, float],
                   isam_k: list[float] | None, n_seg: int, name: str) -> dict[str, Any]:
     """``Estimate.info`` of graph-isam2."""
@@ -158,7 +159,7 @@ def extra_online_of(isam: Any, est: Any, ext: Collected | None) -> dict[str, dic
     return out
 
 
-def first_keyframe(P: Any, r0: Any, p0: Any, v0: Any, k0: Any, yaw_sd: float
+def first_keyframe(P: Problem, r0: Any, p0: Any, v0: Any, k0: Any, yaw_sd: float
                    ) -> tuple[Any, Any, list[tuple[int, int]]]:
     """Factors (priors, fixes) and values of keyframe 0 for the first iSAM2 update, and
     (fix index, position in that graph) of its keyframe-fix factors."""

@@ -65,7 +65,7 @@ from ..model import interval_factors as gf
 from ..model.cpp_factors import build_batch_graph, pims_for
 from ..model.extend import GraphExtension, check_extensions
 from ..model.magnetometer import builtin_extensions, mag_info
-from ..model.problem import states_from_values
+from ..model.problem import Problem, states_from_values
 from ..settings import LOW_RATE_DT, LOW_RATE_KEYFRAME_DT, GraphConfig
 from ..solver.general import first_line
 from ..solver.linalg import solver_context
@@ -245,7 +245,7 @@ class GraphISAM2:
                         lag_cov=lag_cov, info=info, config=self.config)
 
     @classmethod
-    def _check_pass(cls, P: Any, cfg: GraphConfig, on: OnlineResult, robust: bool,
+    def _check_pass(cls, P: Problem, cfg: GraphConfig, on: OnlineResult, robust: bool,
                     own_graph: Any, own_vals: Any, calib0: Any) -> tuple[Any, bool]:
         """With ``final_batch``, the batch pass (Gauss-Newton) from iSAM2's own estimate, or
         from graph-batch's start after a robust retry or when it does not converge; its result
@@ -281,7 +281,7 @@ class GraphISAM2:
             res.rows = res.rows.without_jac()
         return res, restarted
 
-    def _choose(self, P: Any, cfg: GraphConfig, on: OnlineResult, robust: bool, own: Any,
+    def _choose(self, P: Problem, cfg: GraphConfig, on: OnlineResult, robust: bool, own: Any,
                 res: Any, restarted: bool, calib0: Any,
                 ) -> tuple[Any, str, list[str], dict[str, Any] | None, Any, bool]:
         """iSAM2's own estimate ``own`` against the batch pass ``res`` (None without one):
@@ -322,7 +322,7 @@ class GraphISAM2:
         return chosen, source, warn, final_batch, res, restarted
 
     @classmethod
-    def _restart(cls, P: Any, init: tuple[Any, Any, Any], ext: Any, gate0: tuple[Any, int],
+    def _restart(cls, P: Problem, init: tuple[Any, Any, Any], ext: Any, gate0: tuple[Any, int],
                  res: Any, take_converged: bool) -> Any:
         """The batch pass again from graph-batch's starting point (``_from_batch_start``);
         its solution when it ends lower than ``res`` (or, with ``take_converged``, when it
@@ -335,7 +335,7 @@ class GraphISAM2:
         return res
 
     @staticmethod
-    def _from_batch_start(P: Any, init: tuple[Any, Any, Any], ext: Any,
+    def _from_batch_start(P: Problem, init: tuple[Any, Any, Any], ext: Any,
                           gate0: tuple[Any, int]) -> Any:
         """The batch Gauss-Newton from graph-batch's own starting point, with the GNSS fixes
         the gates had accepted before the first batch pass (``gate0``: ``P.g_use`` and
@@ -351,7 +351,7 @@ class GraphISAM2:
         return gauss_newton(P, g2, v2, calib0, P.pri)
 
     @staticmethod
-    def _online_trajectory(P: Any, online: Any, t: Any = None) -> Trajectory:
+    def _online_trajectory(P: Problem, online: Any, t: Any = None) -> Trajectory:
         """(n, 10) p, v (t frame), quaternion at ``t`` (default: the keyframes)."""
         lla = ned_to_lla(online[:, 0:3], P.origin)
         c_tn = gf.rot_t_n(lla, P.origin)
@@ -360,7 +360,7 @@ class GraphISAM2:
         return Trajectory(P.t_kf if t is None else t, lla, vel_n, q)
 
     @classmethod
-    def _lag_outputs(cls, P: Any, on: OnlineResult, cfg: GraphConfig
+    def _lag_outputs(cls, P: Problem, on: OnlineResult, cfg: GraphConfig
                      ) -> tuple[Trajectory | None, Any, dict[str, Any]]:
         """``Estimate.lag`` and ``lag_cov`` from the pass's records, and their info."""
         a = on.answers
@@ -377,7 +377,7 @@ class GraphISAM2:
         return tr, np.asarray(a.lag_cov), info
 
     @staticmethod
-    def _batch_from(P: Any, est: Any, pims: list[Any], pri: dict[str, float],
+    def _batch_from(P: Problem, est: Any, pims: list[Any], pri: dict[str, float],
                     seg: Any, init: tuple[Any, Any, Any]) -> tuple[Any, Any]:
         """The batch problem with iSAM2's factors (``pims``) at iSAM2's estimate ``est``.
         Its priors (keyframe 0's, the gaps') are built from the initial states ``init``, as

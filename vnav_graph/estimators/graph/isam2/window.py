@@ -44,6 +44,7 @@ import numpy as np
 from gtsam.symbol_shorthand import A, B, C, G, K, V, X
 
 from ..model.extend import prior_factor, read_value, tangent_dim
+from ..model.problem import Problem
 
 # marginalise in chunks of this fraction of the window: one elimination per chunk
 CHUNK_FRACTION = 0.1
@@ -62,7 +63,7 @@ class Window:
     """The window of keyframes iSAM2 holds, and the conditionals of the ones it dropped
     (module docstring). ``first``: the oldest keyframe still in iSAM2."""
 
-    def __init__(self, P: Any, seg: np.ndarray, window_s: float, ext: Any) -> None:
+    def __init__(self, P: Problem, seg: np.ndarray, window_s: float, ext: Any) -> None:
         t = P.t_kf
         dt = float(np.median(np.diff(t))) if t.size > 1 else 1.0
         self.P = P

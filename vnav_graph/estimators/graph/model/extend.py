@@ -72,6 +72,7 @@ from ....types.streams import FloatArray
 from ....util.failures import ExtensionError
 from .interval_factors import rot_t_n
 from .jacobians import factor_shapes
+from .problem import Problem
 
 __all__ = ["RESERVED", "GraphExtension", "GraphView", "Terms", "Variable", "B", "C", "V", "X"]
 
@@ -394,7 +395,7 @@ def _check_shapes(col: Collected, factors: list[tuple[Any, str]], view: GraphVie
             raise ExtensionError(f"{who}: its factor on {keys}: {exc}") from None
 
 
-def make_view(P: Any, vals: Any) -> GraphView:
+def make_view(P: Problem, vals: Any) -> GraphView:
     """The view of a problem (``problem.Problem``) at the initial values ``vals``."""
     t_kf = np.array(P.t_kf, dtype=float)
     t_kf.setflags(write=False)
