@@ -48,7 +48,7 @@ import numpy as np
 
 from ..types import ERROR_STATE, Drive, Estimate, Trajectory
 from ..types.streams import FloatArray
-from .metrics import finite_max, finite_rms
+from .metrics import ONLINE_KEYS, causal_view, finite_max, finite_rms, known_after
 
 HOLDOUT_SCHEMA = "vnav_graph.holdout/1"
 TAIL_S = 5.0
@@ -289,7 +289,6 @@ def check_run(scored: Scored, est: Estimate, held: Drive, drive: Drive, referenc
     in both axes against the withheld fixes), its flags added to ``warnings``, and
     ``status`` ``"diverged"`` with its ``error`` when the check fails or an answer is more
     than ``selfcheck.LOST_M`` from the withheld fixes (``selfcheck.far_off``)."""
-    from .metrics import causal_view
     from .selfcheck import DIVERGED, check_answers, far_off
 
     b = scored.block
@@ -321,7 +320,6 @@ def causal_score(est: Estimate, drive: Drive, withheld: np.ndarray, which: str,
     drive's start] from which the estimate's own σ_yaw stays ≤ 5° (``metrics.known_after``,
     the summary's definition; it needs no reference); the lag block has ``lag_s``. None when
     the estimate has none (``causal_view``); null metrics when it covers no withheld fix."""
-    from .metrics import ONLINE_KEYS, causal_view, known_after
 
     view = causal_view(est, which)
     if view is None:

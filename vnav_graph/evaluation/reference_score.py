@@ -26,7 +26,7 @@ import numpy as np
 
 from ..types import Drive, Estimate
 from ..types.streams import FloatArray
-from .metrics import finite_max, finite_rms
+from .metrics import finite_max, finite_rms, nees
 
 __all__ = ["reference_block"]
 
@@ -43,7 +43,6 @@ def reference_block(est: Estimate, drive: Drive,
     """The estimate's errors against ``drive.truth`` inside ``windows`` (module docstring);
     None without a truth or when no reference epoch falls inside a window."""
     from ..geo.frames import lla_to_ned
-    from .metrics import nees
 
     ref = drive.truth
     if ref is None:

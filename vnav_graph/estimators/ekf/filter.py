@@ -178,8 +178,9 @@ def run_forward(drive: Drive, cfg: EkfConfig, store_rts: bool) -> _Run:
     info.update(_report(drive, res, gr, gaps, ini, cfg, heading_accel, est_scale,
                         inn.forced_pos))
     info.update(mag_info)
-    if model.gnss_vel_note():  # the velocity σ raised to what the positions support
-        info["gnss_vel_note"] = model.gnss_vel_note()
+    vel_note = model.gnss_vel_note()
+    if vel_note:  # the velocity σ raised to what the positions support
+        info["gnss_vel_note"] = vel_note
     if gm is not None:
         info.update(gm.info())
     if baro is not None:  # for the post-solve scale check (sensors.baro)

@@ -252,6 +252,8 @@ def zupt_rows(vm, sd):
 
 # the gates' refusal counters (``Innovations.counts``)
 C_POS, C_BARO, C_MAG = 0, 1, 2
+
+
 @njit(cache=True)
 def update_gnss(p, dx, heff, y, r, mm, idx, te, k, settings, sd_v, has_baro, b_prior_var,
                 v_gate, counts, rts_q, inn_pos, inn_vel, rej_pos, rej_vel, rej_v, heading_ok,
