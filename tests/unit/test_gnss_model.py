@@ -23,10 +23,9 @@ from vnav_graph.geo.frames import lla_to_ned, ned_to_lla
 from vnav_graph.nav.rotations import quat_to_dcm, rpy_quat, so3_exp
 from vnav_graph.sensors.gnss_model import (
     GM_AXES,
+    antenna_arrays,
     antenna_position,
-    antenna_position_batch,
     antenna_velocity,
-    antenna_velocity_batch,
 )
 
 LEVER = np.array([0.6, -0.25, -1.1])
@@ -67,8 +66,11 @@ def test_batch_forms_map_the_compiled_ones_exactly():
     rng = np.random.default_rng(8)
     c = np.array([_attitude(rng) for _ in range(4)])
     w = rng.normal(0.0, 0.3, (4, 3))
-    d, h = antenna_position_batch(c, LEVER)
-    u, hv = antenna_velocity_batch(c, LEVER, w)
+    d, h, u, hv = antenna_arrays(c, LEVER, w)
+    d0, h0, u0, _ = antenna_arrays(c, LEVER, np.empty((0, 3)))  # position only
+    np.testing.assert_array_equal(d0, d)
+    np.testing.assert_array_equal(h0, h)
+    assert u0.shape == (0, 3)
     for i in range(4):
         d1, h1 = antenna_position(c[i], LEVER)
         u1, hv1, _ = antenna_velocity(c[i], LEVER, w[i])

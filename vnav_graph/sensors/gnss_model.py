@@ -82,8 +82,11 @@ def _map_antenna(c_nb, lever_b, w_nb_b, d, h_d, u, h_u):  # pragma: no cover - n
             put(h_u[i], hui)
 
 
-def _antenna_batch(c_nb: FloatArray, lever_b: FloatArray, w_nb_b: FloatArray
+def antenna_arrays(c_nb: FloatArray, lever_b: FloatArray, w_nb_b: FloatArray
                    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """``antenna_position`` at each of M attitudes ``c_nb`` (M, 3, 3) and, when ``w_nb_b``
+    has M rows (else 0), ``antenna_velocity`` at each, in one compiled pass:
+    d (M, 3), −[d×], u (M, 3) and −[u×]."""
     c = np.ascontiguousarray(c_nb, dtype=float)
     w = np.ascontiguousarray(w_nb_b, dtype=float)
     m = c.shape[0]
@@ -91,18 +94,6 @@ def _antenna_batch(c_nb: FloatArray, lever_b: FloatArray, w_nb_b: FloatArray
     u, h_u = np.empty((w.shape[0], 3)), np.empty((w.shape[0], 3, 3))
     _map_antenna(c, np.ascontiguousarray(lever_b, dtype=float), w, d, h_d, u, h_u)
     return d, h_d, u, h_u
-
-
-def antenna_position_batch(c_nb: FloatArray, lever_b: FloatArray
-                           ) -> tuple[FloatArray, FloatArray]:
-    """``antenna_position`` at each of M attitudes ``c_nb`` (M, 3, 3): d (M, 3), −[d×]."""
-    return _antenna_batch(c_nb, lever_b, np.empty((0, 3)))[:2]
-
-
-def antenna_velocity_batch(c_nb: FloatArray, lever_b: FloatArray, w_nb_b: FloatArray
-                           ) -> tuple[FloatArray, FloatArray]:
-    """``antenna_velocity`` at each of M epochs (``w_nb_b`` (M, 3) [rad/s]): u (M, 3), −[u×]."""
-    return _antenna_batch(c_nb, lever_b, w_nb_b)[2:]
 
 
 def body_tilt(h_psi: FloatArray, c_nb: FloatArray) -> FloatArray:

@@ -49,8 +49,7 @@ from ....geo.frames import lla_to_ned, ned_to_lla, skew
 from ....sensors.baro import baro_arrays
 from ....sensors.gnss_model import (
     GM_AXES,
-    antenna_position_batch,
-    antenna_velocity_batch,
+    antenna_arrays,
     body_tilt,
 )
 from ....types.streams import FloatArray
@@ -333,13 +332,14 @@ def gnss_rows(
         pos_sd = np.sqrt(pos_sd**2 + bp[:, None] ** 2)
         if vel_sd is not None:
             vel_sd = np.sqrt(vel_sd**2 + bv[:, None] ** 2)
-    h_att = None
+    with_vel = vel_t is not None and vel_sd is not None
+    h_att = u = hv_att = None
     if lever is None:
         p_ant = ip["p"].copy()
-    else:  # the shared model: antenna = p + C l
-        d_l, h_att = antenna_position_batch(ip["rot"], lever)
+    else:  # the shared model: antenna = p + C l and, with velocities, v + C (ω × l)
+        w_b = omega_b if with_vel and omega_b is not None else np.empty((0, 3))
+        d_l, h_att, u, hv_att = antenna_arrays(ip["rot"], lever, w_b)
         p_ant = ip["p"] + d_l
-    with_vel = vel_t is not None and vel_sd is not None
     n_blk = 2 if with_vel else 1
     gm_dim = gm_dim_of(st)
     n_cols = n_cols_of(gm_dim)
@@ -376,7 +376,6 @@ def gnss_rows(
         jv[:, :, COL_BA] = ((0.5 * ip["T"] - ip["tau"]) * ip["imu"])[:, None, None] * rk
         v_ant = ip["v"]
         if lever is not None and omega_b is not None:  # the shared model: + C (ω × l)
-            u, hv_att = antenna_velocity_batch(ip["rot"], lever, omega_b)
             v_ant = v_ant + u
             jv[:, :, 0:3] += body_tilt(hv_att, rk)
         jv /= vel_sd[:, :, None]
