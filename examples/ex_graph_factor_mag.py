@@ -33,7 +33,7 @@ This example *simulates* its magnetometer from the drive's truth attitude
 seeded) on hill-drive, which has none. The package now has its own: the ``hill-drive-mag``
 scenario and the log readers fill ``Drive.mag``, and both graphs then add heading factors with
 a hard-iron variable H(0) themselves
-(``vnav_graph/estimators/graph/model/magnetometer.py``, built on this same extension hook);
+(``vnav_graph/estimators/graph/model/builtin_sensors.py``, built on this same extension hook);
 this example stays as the worked 3-axis ``CustomFactor``.
 
 Run once through the bench (the plugin estimator ``graph-batch-mag`` simulates the

@@ -17,10 +17,10 @@ import pytest
 from gtsam.symbol_shorthand import K
 
 from vnav_graph.estimators.graph import GraphConfig
+from vnav_graph.estimators.graph.model.builtin_sensors import builtin_extensions
 from vnav_graph.estimators.graph.model.cpp_factors import build_batch_graph, pims_for
 from vnav_graph.estimators.graph.model.extend import collect, make_view
 from vnav_graph.estimators.graph.model.initial_guess import initial_states
-from vnav_graph.estimators.graph.model.magnetometer import builtin_extensions
 from vnav_graph.estimators.graph.model.problem import interval_rows, setup, states_from_values
 from vnav_graph.estimators.graph.settings import low_rate_config
 from vnav_graph.estimators.graph.solver import solve as solve

@@ -147,7 +147,7 @@ def test_magnetometer_filter_row_and_graph_factor_agree():
 
     from vnav_graph.estimators.ekf.heading import new_state
     from vnav_graph.estimators.ekf.updates import mag_rows
-    from vnav_graph.estimators.graph.model.magnetometer import heading_factor
+    from vnav_graph.estimators.graph.model.builtin_sensors import mag_heading_factor
 
     rng = np.random.default_rng(21)
     c = _attitude(rng)
@@ -159,7 +159,7 @@ def test_magnetometer_filter_row_and_graph_factor_agree():
     y, hm, _, mm = mag_rows(z, par, c, decl, 0.5, 1e-4, True, np.eye(km.NX) * 1e-4,
                             new_state())
     assert mm == 1
-    f = heading_factor(3, z, decl, sd, 100.0)  # Huber at 100 σ: no re-weighting here
+    f = mag_heading_factor(3, z, decl, sd, 100.0)  # Huber at 100 σ: no re-weighting here
     vals = gtsam.Values()
     vals.insert(X(3), gtsam.Pose3(gtsam.Rot3(c), np.zeros(3)))
     vals.insert(H(0), bias)

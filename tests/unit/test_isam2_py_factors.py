@@ -9,8 +9,11 @@ import numpy as np
 from gtsam.symbol_shorthand import H, X
 
 from vnav_graph.estimators.graph.isam2.py_factors import PyFactorBook
+from vnav_graph.estimators.graph.model.builtin_sensors import (
+    MAG_RELIN_THRESHOLD_UT,
+    mag_heading_factor,
+)
 from vnav_graph.estimators.graph.model.extend import Collected, Variable
-from vnav_graph.estimators.graph.model.magnetometer import RELIN_THRESHOLD_UT, heading_factor
 from vnav_graph.estimators.graph.settings import GraphConfig
 from vnav_graph.geo.frames import quat_to_mat
 
@@ -23,8 +26,8 @@ def _rot_z(a: float) -> np.ndarray:
 
 
 def _book(n_kf: int = 5, k: int = 3) -> tuple[PyFactorBook, tuple, gtsam.CustomFactor]:
-    f = heading_factor(k, np.array([21.0, -4.0, 43.0]), 0.02, 0.05, 3.0)
-    var = Variable(H(0), np.zeros(3), 3.0, relinearize_threshold=RELIN_THRESHOLD_UT)
+    f = mag_heading_factor(k, np.array([21.0, -4.0, 43.0]), 0.02, 0.05, 3.0)
+    var = Variable(H(0), np.zeros(3), 3.0, relinearize_threshold=MAG_RELIN_THRESHOLD_UT)
     ext = Collected(factors=[f], ready=[k], variables={H(0): (var, np.zeros(3))},
                     prior={H(0): gtsam.PriorFactorVector(H(0), np.zeros(3),
                                                          gtsam.noiseModel.Isotropic.Sigma(3, 3.0))},
@@ -75,9 +78,9 @@ def test_due_follows_the_thresholds():
     pos[3] = [0.0, 0.0, 0.5 * TRANS_THR]
     assert book.due(arrays).size == 0
     h0 = book.now[H(0)].copy()
-    book.now[H(0)] = h0 + [0.0, 0.6 * RELIN_THRESHOLD_UT, 0.0]
+    book.now[H(0)] = h0 + [0.0, 0.6 * MAG_RELIN_THRESHOLD_UT, 0.0]
     assert book.due(arrays).size == 0
-    book.now[H(0)] = h0 + [0.0, 1.5 * RELIN_THRESHOLD_UT, 0.0]
+    book.now[H(0)] = h0 + [0.0, 1.5 * MAG_RELIN_THRESHOLD_UT, 0.0]
     assert book.due(arrays).tolist() == [0]
 
 
@@ -85,7 +88,7 @@ def test_rebuild_swaps_and_freeze_stops():
     book, arrays, f = _book()
     book.record([0], [7], [0])
     book.build(f, arrays)
-    book.now[H(0)] = book.now[H(0)] + 2.0 * RELIN_THRESHOLD_UT
+    book.now[H(0)] = book.now[H(0)] + 2.0 * MAG_RELIN_THRESHOLD_UT
     book.pending = book.due(arrays)
     nf = gtsam.NonlinearFactorGraph()
     slots, at, removed = book.rebuild(nf, arrays)

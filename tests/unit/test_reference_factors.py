@@ -32,7 +32,7 @@ by the line's own ``bridge_sd``: ½aτ(T − τ) on positions, a|τ − T/2| on 
    (position: + S((1−α) G_k + α G_{k+1}) on the axes ``GM_AXES``).
 
 ``test_reference_keyframe_factors.py`` holds the terms on keyframe variables: 5. the
-magnetometer heading (``magnetometer.heading_factor``), 6. the Gauss-Markov links
+magnetometer heading (``builtin_sensors.mag_heading_factor``), 6. the Gauss-Markov links
 (``cpp_factors.gm_link``, ``gnss_gm_factor``), 7. the IMU bias link with and without
 accelerometer scale factors (``cpp_factors.bias_link``).
 

@@ -4,7 +4,7 @@ The companion of ``test_reference_factors.py`` (the terms through the keyframe i
 its docstring lists every term and the conventions). Here, each written from the physics in
 the module docstrings, on GTSAM's variable types, never calling the product's models:
 
-5. the magnetometer heading (``graph.model.magnetometer.heading_factor``: a CustomFactor
+5. the magnetometer heading (``graph.model.builtin_sensors.mag_heading_factor``: a CustomFactor
    whose error is the shared row ``sensors.magnetometer.mag_heading_row``), keys X(k), H(0):
    e = wrap(atan2(m_E, m_N) − D), m = R_k (z − b_m); Jacobians from ``Rot3.rotate``'s and
    the gradient of atan2. The product's factor is robust (Huber), so the comparison is of
@@ -35,8 +35,8 @@ from gtsam.symbol_shorthand import A, B, G, H, X
 from vnav_graph.config import ImuSpec
 from vnav_graph.estimators.graph import check_jacobians
 from vnav_graph.estimators.graph.model.accel_scale import AccelScale
+from vnav_graph.estimators.graph.model.builtin_sensors import mag_heading_factor
 from vnav_graph.estimators.graph.model.cpp_factors import bias_link, gm_link, gnss_gm_factor
-from vnav_graph.estimators.graph.model.magnetometer import heading_factor
 from vnav_graph.sensors.gnss_model import GnssGM
 
 SEEDS = (11, 12, 13)
@@ -88,7 +88,7 @@ def _heading_case(seed: int, decl_sign: float = 1.0):
     values = gtsam.Values()
     values.insert(X(k), gtsam.Pose3(gtsam.Rot3.Expmap(rng.normal(size=3)), rng.normal(size=3)))
     values.insert(H(0), 3.0 * rng.normal(size=3))
-    prod = heading_factor(k, z_b, decl_sign * decl, sd, 3.0)
+    prod = mag_heading_factor(k, z_b, decl_sign * decl, sd, 3.0)
     return heading_reference(k, z_b, decl, sd), prod, values
 
 

@@ -19,7 +19,8 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from ..types import Drive, Estimate, Trajectory
+from ..types import Estimate
+from ..types.streams import Drive, Trajectory
 from ..util.failures import failure_message
 
 

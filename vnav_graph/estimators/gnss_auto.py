@@ -32,7 +32,8 @@ import numpy as np
 
 from ..sensors.gnss_model import GM_AUTO_SIGMAS, GM_AUTO_THRESHOLD
 from ..sensors.gnss_residuals import RESIDUAL_LAG_S, gnss_residual_autocorr
-from ..types import Drive, Estimate
+from ..types import Estimate
+from ..types.streams import Drive
 
 
 def gm_decision(est: Estimate, drive: Drive) -> dict[str, Any]:

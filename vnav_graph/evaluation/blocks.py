@@ -9,7 +9,8 @@ from typing import Any
 
 import numpy as np
 
-from ..types import BaroEstimate, Drive
+from ..types import BaroEstimate
+from ..types.streams import Drive
 
 
 def _param(block: Any, truth: float | None) -> dict[str, Any]:

@@ -37,8 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from ..types import Drive
-from ..types.streams import FloatArray
+from ..types.streams import Drive, FloatArray
 
 BARO_HALF_S = 15.0  # s
 K_SIGMA = 5.0

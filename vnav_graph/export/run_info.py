@@ -14,7 +14,8 @@ from typing import Any
 
 import numpy as np
 
-from ..types import Drive, Estimate
+from ..types import Estimate
+from ..types.streams import Drive
 
 DRIVE_INFO = "drive.json"
 TRUTH_TABLE = "truth.parquet"

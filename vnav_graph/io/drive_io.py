@@ -18,8 +18,15 @@ from typing import Any
 import numpy as np
 
 from ..config import BaroSpec, GnssSpec, ImuSpec
-from ..types import BaroTruth, Drive, Trajectory
-from ..types.streams import BaroStream, GnssStream, ImuStream, MagStream
+from ..types.streams import (
+    BaroStream,
+    BaroTruth,
+    Drive,
+    GnssStream,
+    ImuStream,
+    MagStream,
+    Trajectory,
+)
 from ..util.failures import failure_message
 
 FORMAT = "vnav_graph.drive/1"

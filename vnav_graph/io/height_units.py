@@ -48,8 +48,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from ..types import Drive
-from ..types.streams import BaroStream, FloatArray, GnssStream, IntArray
+from ..types.streams import BaroStream, Drive, FloatArray, GnssStream, IntArray
 from .findings import Findings, reject
 
 WINDOW_S = 5.0

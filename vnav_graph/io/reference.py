@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from ..types import Drive, Trajectory
+from ..types.streams import Drive, Trajectory
 
 __all__ = ["COURSE_MIN_SPEED", "attach_reference", "drive_t0_gpst", "load_reference",
            "load_scored", "with_reference"]

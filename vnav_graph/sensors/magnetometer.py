@@ -44,8 +44,7 @@ from numba import njit
 if TYPE_CHECKING:
     from ..geo.magfield import FieldModel
 
-from ..types import Drive
-from ..types.streams import FloatArray, MagStream
+from ..types.streams import Drive, FloatArray, MagStream
 
 MIN_HORIZONTAL_UT = 3.0  # weaker horizontal fields give no usable heading (near the poles) [µT]
 # Defaults shared by ekf/ekf-rts (EkfConfig) and both graphs (GraphConfig):
@@ -136,7 +135,7 @@ def mag_heading_row(field_b, bias_b, c_nb, declination):  # pragma: no cover - n
     """The heading model, written once: the azimuth a = atan2(m_E, m_N) of the bias-corrected
     field rotated into n, m = C (z − b_m), against the declination, with its Jacobians in the
     physical errors. The EKF's row calls it at each sample it uses; the graph's heading factor
-    (``estimators.graph.model.magnetometer``) at each keyframe, chaining ∂r/∂ψ through R.
+    (``estimators.graph.model.builtin_sensors``) at each keyframe, chaining ∂r/∂ψ through R.
 
     Returns (r, h_psi, h_bias, horizontal): r = wrap(a − D) [rad]; h_psi (3,) = ∂a/∂ψ for
     C̃ = (I + [ψ×]) C; h_bias (3,) = ∂a/∂b_m [rad/µT]; horizontal = H [µT].

@@ -18,8 +18,7 @@ from ..config import BaroSpec, ImuSpec
 from ..geo.atmosphere import isa_pressure
 from ..sensors.magnetometer import MagSpec
 from ..sensors.noise import white_sd
-from ..types import BaroTruth, Trajectory
-from ..types.streams import BaroStream, FloatArray, ImuStream, MagStream
+from ..types.streams import BaroStream, BaroTruth, FloatArray, ImuStream, MagStream, Trajectory
 from .noise import gauss_markov, random_walk
 
 

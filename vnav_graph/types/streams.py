@@ -1,80 +1,34 @@
-"""Sensor streams: immutable IMU, GNSS, baro and magnetometer samples on one clock, and the
-checks every data type shares (time stamps, shapes, finite values, plausible units).
+"""Time series on one clock: the immutable IMU, GNSS, baro and magnetometer streams, the
+``Trajectory`` (a drive's truth or an estimator's answer) and the ``Drive`` that bundles the
+streams with its origin and optional truth.
 
-The conventions are those of ``vnav_graph.types`` (which re-exports every stream): one clock
-in seconds, SI units, ``b`` the IMU body frame forward-right-down, ``lla`` geodetic latitude
-and longitude [rad] and height [m]. Each stream validates in ``__post_init__`` and raises a
-``ValueError`` naming the stream and the field; nothing is repaired here.
+The conventions are those of ``vnav_graph.types`` (whose public names include every class
+here): one clock in seconds, SI units, ``b`` the IMU body frame forward-right-down, ``lla``
+geodetic latitude and longitude [rad] and height [m]. Each record validates in
+``__post_init__`` (``types.checks``) and raises a ``ValueError`` naming the stream and the
+field; nothing is repaired here.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from types import MappingProxyType
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from .checks import ALT_RANGE, as_array, check_finite, check_lla, check_shape, check_time
+
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 BoolArray = NDArray[np.bool_]
+
 
 # Physical plausibility limits used by validation (generous; they catch unit mistakes).
 _MAX_GYRO = 50.0  # rad/s (≈ 2900 deg/s): larger means degrees were passed as radians
 _MAX_ACCEL = 2000.0  # m/s^2 (≈ 200 g)
 _PRESSURE_RANGE = (2.0e3, 1.2e5)  # Pa: 20 hPa (≈ 26 km) .. 1200 hPa
-_ALT_RANGE = (-1000.0, 60000.0)  # m
-
-
-def as_array(x: Any, dtype: Any = np.float64) -> FloatArray:
-    # an array that is already read-only, of this dtype and owns its memory (another record's
-    # field, e.g. a drive rebuilt with ``Drive.replace``) cannot change: shared, not copied
-    # (the copies doubled the truth arrays while a simulated drive was assembled)
-    if (isinstance(x, np.ndarray) and x.dtype == dtype and x.base is None
-            and not x.flags.writeable and x.flags.c_contiguous):
-        return x
-    a = np.array(x, dtype=dtype, copy=True)
-    a.setflags(write=False)
-    return a
-
-
-def check_time(name: str, t: FloatArray) -> None:
-    if t.ndim != 1:
-        raise ValueError(f"{name}.t: expected shape (N,), got {t.shape}")
-    if t.size == 0:
-        raise ValueError(f"{name}.t: stream is empty")
-    if not np.all(np.isfinite(t)):
-        raise ValueError(f"{name}.t: contains NaN or inf")
-    d = np.diff(t)
-    if np.any(d == 0):
-        i = int(np.flatnonzero(d == 0)[0])
-        raise ValueError(f"{name}.t: duplicated time stamp {t[i]!r} at index {i + 1}")
-    if np.any(d < 0):
-        i = int(np.flatnonzero(d < 0)[0])
-        raise ValueError(f"{name}.t: not monotonic (t[{i + 1}] = {t[i + 1]!r} < {t[i]!r})")
-
-
-def check_shape(name: str, a: FloatArray | None, shape: tuple[int, ...]) -> None:
-    if a is None:
-        return
-    if a.shape != shape:
-        raise ValueError(f"{name}: expected shape {shape}, got {a.shape}")
-
-
-def check_finite(name: str, a: FloatArray | None) -> None:
-    if a is not None and not np.all(np.isfinite(a)):
-        n_bad = int(np.sum(~np.isfinite(a)))
-        raise ValueError(f"{name}: contains {n_bad} NaN or inf value(s)")
-
-
-def check_lla(name: str, lla: FloatArray) -> None:
-    if np.any(np.abs(lla[:, 0]) > np.pi / 2 + 1e-12) or np.any(np.abs(lla[:, 1]) > 2 * np.pi):
-        raise ValueError(
-            f"{name}: latitude/longitude out of range for radians (degrees passed as radians?)"
-        )
-    lo, hi = _ALT_RANGE
-    if np.any(lla[:, 2] < lo) or np.any(lla[:, 2] > hi):
-        raise ValueError(f"{name}: height outside [{lo:g}, {hi:g}] m")
 
 
 @dataclass(frozen=True)
@@ -230,7 +184,7 @@ class BaroStream:
             object.__setattr__(self, "alt", as_array(self.alt))
             check_shape("baro.alt", self.alt, (n,))
             check_finite("baro.alt", self.alt)
-            lo, hi = _ALT_RANGE
+            lo, hi = ALT_RANGE
             if np.any(self.alt < lo) or np.any(self.alt > hi):
                 raise ValueError(f"baro.alt: outside [{lo:g}, {hi:g}] m (feet or Pa passed?)")
 
@@ -294,3 +248,227 @@ class MagStream:
     def select(self, mask: NDArray[np.bool_]) -> MagStream:
         return MagStream(self.t[mask], self.field_b[mask], self.sd_ut)
 
+
+AT_MEMO = 2  # Trajectory.at results kept per trajectory
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """A navigation trajectory (truth or estimate).
+
+    Parameters
+    ----------
+    t : (N,) [s]
+    lla : (N, 3) latitude [rad], longitude [rad], ellipsoidal height [m]. Estimators that
+        only estimate the vertical channel set latitude/longitude to NaN (``provides`` says so).
+    vel_n : (N, 3) NED velocity [m/s]; NaN north/east for vertical-only estimators.
+    q_nb : (N, 4) or None, attitude quaternion (w, x, y, z) mapping b into n.
+    bias_gyro, bias_accel : (N, 3) or None [rad/s], [m/s^2]
+    bias_baro : (N,) or None, baro Gauss-Markov bias b(t) [m]
+    """
+
+    t: FloatArray
+    lla: FloatArray
+    vel_n: FloatArray
+    q_nb: FloatArray | None = None
+    bias_gyro: FloatArray | None = None
+    bias_accel: FloatArray | None = None
+    bias_baro: FloatArray | None = None
+
+    def __post_init__(self) -> None:
+        for f in ("t", "lla", "vel_n", "q_nb", "bias_gyro", "bias_accel", "bias_baro"):
+            if getattr(self, f) is not None:
+                object.__setattr__(self, f, as_array(getattr(self, f)))
+        check_time("trajectory", self.t)
+        n = self.t.size
+        check_shape("trajectory.lla", self.lla, (n, 3))
+        check_shape("trajectory.vel_n", self.vel_n, (n, 3))
+        check_shape("trajectory.q_nb", self.q_nb, (n, 4))
+        check_shape("trajectory.bias_gyro", self.bias_gyro, (n, 3))
+        check_shape("trajectory.bias_accel", self.bias_accel, (n, 3))
+        check_shape("trajectory.bias_baro", self.bias_baro, (n,))
+        if not np.all(np.isfinite(self.lla[:, 2])):
+            raise ValueError("trajectory.lla: height contains NaN or inf")
+
+    def __len__(self) -> int:
+        return int(self.t.size)
+
+    @property
+    def alt(self) -> FloatArray:
+        """Ellipsoidal height [m, +up]."""
+        return self.lla[:, 2]
+
+    @property
+    def vel_down(self) -> FloatArray:
+        return self.vel_n[:, 2]
+
+    def pos_n(self, origin_lla: FloatArray) -> FloatArray:
+        """Tangent-plane NED position relative to ``origin_lla`` [m], shape (N, 3)."""
+        from ..geo.frames import lla_to_ned
+
+        return lla_to_ned(self.lla, origin_lla)
+
+    def at(self, t_query: FloatArray) -> Trajectory:
+        """Interpolate to ``t_query`` (linear; slerp for attitude). Queries must lie inside.
+
+        The last ``AT_MEMO`` results are kept (evaluating ten estimators interpolates the
+        truth to the same epochs again and again; the slerp costs ~0.1 s per 24,000 epochs);
+        their arrays are read-only."""
+        tq = np.asarray(t_query, dtype=float)
+        import hashlib
+
+        key = (tq.shape, hashlib.blake2b(np.ascontiguousarray(tq).tobytes(),
+                                         digest_size=16).digest())
+        memo: dict[Any, Trajectory] = self.__dict__.setdefault("_at_memo", {})
+        hit = memo.get(key)
+        if hit is None:
+            hit = self._interp(tq)
+            for a in (hit.t, hit.lla, hit.vel_n, hit.q_nb, hit.bias_gyro, hit.bias_accel,
+                      hit.bias_baro):
+                if a is not None:
+                    a.flags.writeable = False
+            while len(memo) >= AT_MEMO:
+                memo.pop(next(iter(memo)))
+            memo[key] = hit
+        return hit
+
+    def __getstate__(self) -> dict[str, Any]:
+        return {k: v for k, v in self.__dict__.items() if k != "_at_memo"}
+
+    def _interp(self, tq: FloatArray) -> Trajectory:
+        if tq.size and (tq[0] < self.t[0] - 1e-9 or tq[-1] > self.t[-1] + 1e-9):
+            raise ValueError("trajectory.at: query times outside the trajectory span")
+        tq = np.clip(tq, self.t[0], self.t[-1])  # absorb round-off at the ends
+
+        def lin(a: FloatArray | None) -> FloatArray | None:
+            if a is None:
+                return None
+            if a.ndim == 1:
+                return np.interp(tq, self.t, a)
+            return np.column_stack([np.interp(tq, self.t, a[:, j]) for j in range(a.shape[1])])
+
+        q = None
+        if self.q_nb is not None:
+            from ..geo.frames import slerp_quat
+
+            q = slerp_quat(self.t, self.q_nb, tq)
+        return Trajectory(
+            tq,
+            lin(self.lla),  # type: ignore[arg-type]
+            lin(self.vel_n),  # type: ignore[arg-type]
+            q,
+            lin(self.bias_gyro),
+            lin(self.bias_accel),
+            lin(self.bias_baro),
+        )
+
+    def slice(self, t0: float, t1: float) -> Trajectory:
+        m = (self.t >= t0) & (self.t <= t1)
+
+        def s(a: FloatArray | None) -> FloatArray | None:
+            return None if a is None else a[m]
+
+        return Trajectory(
+            self.t[m], self.lla[m], self.vel_n[m], s(self.q_nb), s(self.bias_gyro),
+            s(self.bias_accel), s(self.bias_baro),
+        )
+
+    def to_rph(self) -> FloatArray:
+        """Roll, pitch, yaw [rad], shape (N, 3) (requires ``q_nb``)."""
+        if self.q_nb is None:
+            raise ValueError("trajectory.q_nb: no attitude in this trajectory")
+        from ..geo.frames import quat_to_rph
+
+        return quat_to_rph(self.q_nb)
+
+
+# ``Drive.height_reference`` values and what they mean
+HEIGHT_DATUMS = {
+    "ellipsoid": "height above the WGS-84 ellipsoid",
+    "msl": "height above mean sea level (as the log's GNSS reports it)",
+}
+
+
+@dataclass(frozen=True)
+class BaroTruth:
+    """True barometer error parameters of a simulated drive (model of docs/design.md).
+
+    ``h_baro(t) - h0 = (1 + scale) * (h(t - latency_s) - h0) + b(t) + v`` with
+    ``h0 = Drive.origin_lla[2]``; b(t) is stored in ``Drive.truth.bias_baro``.
+    """
+
+    scale: float
+    latency_s: float
+
+
+# The Drive's optional streams (fields named so): each is checked against the IMU's time span
+# and cut by ``Drive.until``; a new sensor's stream is a field and a name here.
+EVENT_STREAMS = ("gnss", "baro", "mag")
+
+
+@dataclass(frozen=True)
+class Drive:
+    """One recorded or simulated test drive: streams on one clock plus optional truth."""
+
+    imu: ImuStream
+    gnss: GnssStream | None
+    baro: BaroStream | None
+    origin_lla: FloatArray
+    truth: Trajectory | None = None
+    baro_truth: BaroTruth | None = None
+    meta: MappingProxyType[str, Any] = field(default_factory=lambda: MappingProxyType({}))
+    mag: MagStream | None = None  # magnetometer, when the log or simulation has one
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "origin_lla", as_array(self.origin_lla))
+        check_shape("drive.origin_lla", self.origin_lla, (3,))
+        check_lla("drive.origin_lla", self.origin_lla[None, :])
+        if not isinstance(self.meta, MappingProxyType):
+            object.__setattr__(self, "meta", MappingProxyType(dict(self.meta)))
+        t0, t1 = self.imu.t[0], self.imu.t[-1]
+        for name in EVENT_STREAMS:
+            s = getattr(self, name)
+            if s is not None and (s.t[-1] < t0 or s.t[0] > t1):
+                raise ValueError(f"drive.{name}: stream does not overlap the IMU time span "
+                                 "(time stamps in different units or clocks?)")
+
+    @property
+    def name(self) -> str:
+        return str(self.meta.get("name", "drive"))
+
+    @property
+    def duration_s(self) -> float:
+        return float(self.imu.t[-1] - self.imu.t[0])
+
+    @property
+    def source(self) -> str:
+        return str(self.meta.get("source", "log"))
+
+    @property
+    def height_reference(self) -> str:
+        """Datum of every height in the drive: ``"ellipsoid"`` (WGS-84; simulated drives,
+        phones, PX4 with an ellipsoidal height) or ``"msl"`` (a log whose GNSS gives heights
+        above mean sea level, e.g. ArduPilot's GPS.Alt); ``height_datum`` says it in words."""
+        return str(self.meta.get("height_reference", "ellipsoid"))
+
+    @property
+    def height_datum(self) -> str:
+        return HEIGHT_DATUMS.get(self.height_reference, self.height_reference)
+
+    def replace(self, **changes: Any) -> Drive:
+        from dataclasses import replace
+
+        return replace(self, **changes)
+
+    def until(self, t1: float) -> Drive:
+        """The drive with every stream and the truth ending at ``t1`` (the drive's clock [s]):
+        what a causal estimator has seen at ``t1``."""
+        t0 = float(self.imu.t[0])
+        kw: dict[str, Any] = {"imu": self.imu.slice(t0, t1)}
+        if self.truth is not None:
+            kw["truth"] = self.truth.slice(t0, t1)
+        for name in EVENT_STREAMS:
+            s = getattr(self, name)
+            if s is not None:
+                kw[name] = s.select(s.t <= t1)
+        return self.replace(**kw)

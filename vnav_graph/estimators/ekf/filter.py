@@ -72,8 +72,8 @@ from ...sensors.model import (
     sensor_model,
 )
 from ...sensors.noise import gm_mean_prior_sd
-from ...types import BaroEstimate, Drive, Estimate, ParamEstimate, Trajectory
-from ...types.streams import FloatArray
+from ...types import BaroEstimate, Estimate, ParamEstimate
+from ...types.streams import Drive, FloatArray, Trajectory
 from ...util.pages import small_pages
 from ..base import with_online
 from ..checks import checked

@@ -10,8 +10,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from ...types import Drive, Estimate, Trajectory
-from ...types.streams import FloatArray
+from ...types import Estimate
+from ...types.streams import Drive, FloatArray, Trajectory
 from ...util.failures import MissingStream
 
 

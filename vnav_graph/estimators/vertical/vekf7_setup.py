@@ -19,8 +19,7 @@ import numpy as np
 from ...geo.earth import radii
 from ...sensors.model import SensorModel
 from ...sensors.noise import gm_process_var, gm_transition
-from ...types import Drive
-from ...types.streams import FloatArray, IntArray
+from ...types.streams import Drive, FloatArray, IntArray
 from .gnss_reference import nominal_interval
 from .inputs import VerticalInputs
 

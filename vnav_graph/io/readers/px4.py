@@ -33,8 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from ...types import Drive
-from ...types.streams import BaroStream, GnssStream, ImuStream, MagStream
+from ...types.streams import BaroStream, Drive, GnssStream, ImuStream, MagStream
 from ._common import (
     Report,
     baro_alt_aligned,

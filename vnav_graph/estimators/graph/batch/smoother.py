@@ -37,13 +37,14 @@ from collections.abc import Sequence
 import numpy as np
 from gtsam.symbol_shorthand import K
 
-from ....types import Drive, Estimate
+from ....types import Estimate
+from ....types.streams import Drive
 from ...checks import checked
 from ...gnss_auto import with_gm_auto
+from ..model.builtin_sensors import builtin_extensions, mag_info
 from ..model.cpp_factors import build_batch_graph, pims_for
 from ..model.extend import GraphExtension, check_extensions, collect, make_view
 from ..model.initial_guess import initial_states
-from ..model.magnetometer import builtin_extensions, mag_info
 from ..model.problem import setup
 from ..settings import GraphConfig, low_rate_config
 from ..solver.linalg import solver_context

@@ -1,5 +1,5 @@
 """Python factors in ``graph-isam2``: each ``gtsam.CustomFactor`` of an extension (the compass
-heading factors of ``model.magnetometer``, a user's factors) enters iSAM2 as a
+heading factors of ``model.builtin_sensors``, a user's factors) enters iSAM2 as a
 ``LinearContainerFactor`` linearised here, and is relinearised by :class:`PyFactorBook`.
 
 Why: iSAM2 relinearises a ``CustomFactor`` from C++, and pybind11 hands the Python callback

@@ -58,13 +58,14 @@ import numpy as np
 from gtsam.symbol_shorthand import A, B, C, G, K, V, X
 
 from ....geo.frames import mat_to_quat, ned_to_lla, quat_to_mat
-from ....types import Drive, Estimate, Trajectory
+from ....types import Estimate
+from ....types.streams import Drive, Trajectory
 from ...checks import checked
 from ...gnss_auto import with_gm_auto
 from ..model import interval_factors as gf
+from ..model.builtin_sensors import builtin_extensions, mag_info
 from ..model.cpp_factors import build_batch_graph, pims_for
 from ..model.extend import GraphExtension, check_extensions
-from ..model.magnetometer import builtin_extensions, mag_info
 from ..model.problem import Problem, states_from_values
 from ..settings import LOW_RATE_DT, LOW_RATE_KEYFRAME_DT, GraphConfig
 from ..solver.general import first_line

@@ -6,8 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ....types import Drive
-from ....types.streams import FloatArray
+from ....types.streams import Drive, FloatArray
 
 
 def pregate_gnss(drive: Drive, t: FloatArray, h: FloatArray, sd_h: FloatArray,

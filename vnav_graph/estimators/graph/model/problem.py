@@ -27,8 +27,7 @@ from ....sensors.model import (
     baro_prior,
     sensor_model,
 )
-from ....types import Drive
-from ....types.streams import FloatArray
+from ....types.streams import Drive, FloatArray
 from ...robust import post_gate_threshold
 from ...zupt import drive_standstill
 from ..settings import GraphConfig

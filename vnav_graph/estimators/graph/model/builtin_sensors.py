@@ -1,9 +1,11 @@
-"""The graph smoothers' magnetometer: heading factors with a hard-iron bias variable.
+"""The graph smoothers' own sensors beyond the IMU, GNSS and baro core: each is a factor
+built on the public extension point (``extend``) that chains its ``sensors/`` model through
+the keyframe variables, and ``builtin_extensions`` lists the ones a drive switches on.
 
-Built on the public extension point (``extend``), switched on by ``GraphConfig.use_mag``
-whenever the drive has a magnetometer. The measurement model is the one the EKF uses
-(``sensors.magnetometer``): the azimuth of the bias-corrected field rotated into the graph's
-frame by the keyframe attitude R_k (body → tangent frame),
+Magnetometer: heading factors with a hard-iron bias variable, switched on by
+``GraphConfig.use_mag`` whenever the drive has a magnetometer. The measurement model is the
+one the EKF uses (``sensors.magnetometer``): the azimuth of the bias-corrected field rotated
+into the graph's frame by the keyframe attitude R_k (body → tangent frame),
 
     e_k = wrap(atan2(m̂_E, m̂_N) − D_k),   m̂ = R_k (z − b_m),
 
@@ -42,7 +44,7 @@ from ....sensors.magnetometer import (
 from ....types.streams import FloatArray
 from .extend import GraphView, Terms, Variable, X
 
-KEY = H(0)
+MAG_KEY = H(0)
 # graph-isam2's relinearisation threshold of H(0) [µT per component]: its heading factors are
 # rebuilt (``isam2.py_factors``) once H(0) moved this far since they were built. Every heading
 # factor holds H(0), so such a move rebuilds all of them and re-eliminates the whole Bayes
@@ -51,10 +53,10 @@ KEY = H(0)
 # update early in a drive (docs/real_logs.md, "Magnetometer noise, field strength and
 # spread"); never relinearising on H(0) left a final cost gap of 16.4 to the batch check
 # (hill-drive-mag 300 s, against 0.41).
-RELIN_THRESHOLD_UT = 1.0
+MAG_RELIN_THRESHOLD_UT = 1.0
 
 
-def heading_factor(k: int, z_b: FloatArray, d_ref: float, sd: float, loss_sd: float) -> Any:
+def mag_heading_factor(k: int, z_b: FloatArray, d_ref: float, sd: float, loss_sd: float) -> Any:
     """Keyframe k's heading factor on X(k) and H(0): sample ``z_b`` (3,) [µT], reference
     azimuth ``d_ref`` [rad], σ ``sd`` [rad], Huber at ``loss_sd`` σ (module docstring)."""
     base = gtsam.noiseModel.Isotropic.Sigma(1, sd)
@@ -67,7 +69,7 @@ def heading_factor(k: int, z_b: FloatArray, d_ref: float, sd: float, loss_sd: fl
         # the shared model's row (the EKF's) at R_k: its attitude error ψ is in n
         # (R̃ = (I + [ψ×]) R_k), the Pose3 retraction's ω in body (R_k Exp(ω)), so ψ = R_k ω
         r_k = np.ascontiguousarray(values.atPose3(key_x).rotation().matrix())
-        e, h_psi, h_bias, _ = mag_heading_row(z_b, np.ascontiguousarray(values.atVector(KEY)),
+        e, h_psi, h_bias, _ = mag_heading_row(z_b, np.ascontiguousarray(values.atVector(MAG_KEY)),
                                               r_k, d_ref)
         if jac is not None:
             row = np.zeros((1, 6))
@@ -76,7 +78,7 @@ def heading_factor(k: int, z_b: FloatArray, d_ref: float, sd: float, loss_sd: fl
             jac[1] = h_bias[None, :]
         return np.array([e])
 
-    return gtsam.CustomFactor(noise, [key_x, KEY], error)
+    return gtsam.CustomFactor(noise, [key_x, MAG_KEY], error)
 
 
 class MagnetometerExtension:
@@ -112,10 +114,10 @@ class MagnetometerExtension:
             last = slot[k]
             ref = fm.ned_ut  # tangent ≈ local level at the start (module docstring)
             sd = float(heading_sd(mag.sd_ut, hor, cfg.mag_heading_floor))
-            factors.append(heading_factor(int(k), z, float(np.arctan2(ref[1], ref[0])), sd,
+            factors.append(mag_heading_factor(int(k), z, float(np.arctan2(ref[1], ref[0])), sd,
                                            cfg.mag_loss_sd))
-        return Terms(factors, [Variable(KEY, np.zeros(3), cfg.mag_bias_sd,
-                                        relinearize_threshold=RELIN_THRESHOLD_UT)])
+        return Terms(factors, [Variable(MAG_KEY, np.zeros(3), cfg.mag_bias_sd,
+                                        relinearize_threshold=MAG_RELIN_THRESHOLD_UT)])
 
 
 def builtin_extensions(drive: Any, config: Any) -> list[Any]:
