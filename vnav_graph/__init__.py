@@ -57,7 +57,7 @@ _LAZY: dict[str, str] = {
     "Estimate": "vnav_graph.types:Estimate",
     "GnssStream": "vnav_graph.types.streams:GnssStream",
     "ImuStream": "vnav_graph.types.streams:ImuStream",
-    "Trajectory": "vnav_graph.types.streams:Trajectory",
+    "Trajectory": "vnav_graph.types.trajectory:Trajectory",
 }
 
 __all__ = [*_LAZY, "__version__"]

@@ -20,7 +20,8 @@ from typing import Any, Protocol
 import numpy as np
 
 from ..types import Estimate
-from ..types.streams import Drive, Trajectory
+from ..types.streams import Drive
+from ..types.trajectory import Trajectory
 from ..util.failures import failure_message
 
 

@@ -47,7 +47,8 @@ from typing import Any
 import numpy as np
 
 from ..types import ERROR_STATE, Estimate
-from ..types.streams import Drive, FloatArray, Trajectory
+from ..types.streams import Drive, FloatArray
+from ..types.trajectory import Trajectory
 from .metrics import ONLINE_KEYS, causal_view, finite_max, finite_rms, known_after
 
 HOLDOUT_SCHEMA = "vnav_graph.holdout/1"

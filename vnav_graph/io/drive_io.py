@@ -18,15 +18,8 @@ from typing import Any
 import numpy as np
 
 from ..config import BaroSpec, GnssSpec, ImuSpec
-from ..types.streams import (
-    BaroStream,
-    BaroTruth,
-    Drive,
-    GnssStream,
-    ImuStream,
-    MagStream,
-    Trajectory,
-)
+from ..types.streams import BaroStream, BaroTruth, Drive, GnssStream, ImuStream, MagStream
+from ..types.trajectory import Trajectory
 from ..util.failures import failure_message
 
 FORMAT = "vnav_graph.drive/1"

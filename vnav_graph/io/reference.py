@@ -27,7 +27,8 @@ from typing import Any
 
 import numpy as np
 
-from ..types.streams import Drive, Trajectory
+from ..types.streams import Drive
+from ..types.trajectory import Trajectory
 
 __all__ = ["COURSE_MIN_SPEED", "attach_reference", "drive_t0_gpst", "load_reference",
            "load_scored", "with_reference"]

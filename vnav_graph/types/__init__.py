@@ -1,6 +1,6 @@
 """Core data types: the estimates and the error-state layout (defined here) and the time
-series on one clock, the sensor streams, ``Trajectory`` and ``Drive``
-(``vnav_graph.types.streams``); all are imported from here (``__all__``).
+series on one clock, the sensor streams and ``Drive`` (``vnav_graph.types.streams``) and
+``Trajectory`` (``vnav_graph.types.trajectory``); all are imported from here (``__all__``).
 
 Conventions (see also the package docstring)
 --------------------------------------------
@@ -35,11 +35,11 @@ from .streams import (
     GnssStream,
     ImuStream,
     MagStream,
-    Trajectory,
 )
+from .trajectory import Trajectory
 
 # The public import path of the core types (``from vnav_graph.types import Drive, Estimate``):
-# the estimates defined here and the time series of ``types.streams``.
+# the estimates defined here and the time series of ``types.streams`` / ``types.trajectory``.
 __all__ = [
     "ERROR_STATE", "ERROR_STATE_DIM", "HEIGHT_DATUMS", "QUANTITIES", "SD_COLUMNS",
     "BaroEstimate", "BaroStream", "BaroTruth", "Drive", "Estimate", "GnssStream", "ImuStream",

@@ -73,7 +73,8 @@ from ...sensors.model import (
 )
 from ...sensors.noise import gm_mean_prior_sd
 from ...types import BaroEstimate, Estimate, ParamEstimate
-from ...types.streams import Drive, FloatArray, Trajectory
+from ...types.streams import Drive, FloatArray
+from ...types.trajectory import Trajectory
 from ...util.pages import small_pages
 from ..base import with_online
 from ..checks import checked

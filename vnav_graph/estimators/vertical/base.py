@@ -11,7 +11,8 @@ from typing import Any, ClassVar
 import numpy as np
 
 from ...types import Estimate
-from ...types.streams import Drive, FloatArray, Trajectory
+from ...types.streams import Drive, FloatArray
+from ...types.trajectory import Trajectory
 from ...util.failures import MissingStream
 
 
