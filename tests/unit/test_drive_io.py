@@ -49,6 +49,19 @@ def test_npz_round_trip_with_magnetometer(tmp_path):
     assert not [w for w in e.meta.get("warnings", []) if w.startswith("mag")]
 
 
+def test_npz_refuses_a_stream_it_does_not_store(tmp_path, monkeypatch):
+    # a Drive stream the file format does not keep (here the magnetometer, as if the format
+    # predated it) is an error naming the stream, not a file that reads back without it
+    from vnav_graph.io import drive_io
+
+    d = _with_mag(simulate("sortie", 4, duration_s=30.0))
+    monkeypatch.setattr(drive_io, "STORED_STREAMS", ("gnss", "baro"))
+    with pytest.raises(ValueError, match=r"drive\.mag: a drive file \(\.npz\) does not store"):
+        save_npz(d, tmp_path / "m.npz")
+    assert not (tmp_path / "m.npz").exists()
+    save_npz(d.replace(mag=None), tmp_path / "m.npz")  # without it the file is written
+
+
 def test_npz_magnetometer_damage_is_a_clean_error(tmp_path):
     d = _with_mag(simulate("hill-drive", 1, duration_s=10.0))
     p = save_npz(d, tmp_path / "m.npz")

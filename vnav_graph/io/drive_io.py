@@ -18,11 +18,20 @@ from typing import Any
 import numpy as np
 
 from ..config import BaroSpec, GnssSpec, ImuSpec
-from ..types.streams import BaroStream, BaroTruth, Drive, GnssStream, ImuStream, MagStream
+from ..types.streams import (
+    EVENT_STREAMS,
+    BaroStream,
+    BaroTruth,
+    Drive,
+    GnssStream,
+    ImuStream,
+    MagStream,
+)
 from ..types.trajectory import Trajectory
 from ..util.failures import failure_message
 
 FORMAT = "vnav_graph.drive/1"
+STORED_STREAMS = ("gnss", "baro", "mag")  # the Drive's optional streams a drive file keeps
 _SPECS = {"ImuSpec": ImuSpec, "GnssSpec": GnssSpec, "BaroSpec": BaroSpec}
 
 
@@ -49,6 +58,9 @@ def _spec_from_json(d: Any) -> Any:
 def save_npz(drive: Drive, path: str | Path) -> Path:
     """Write ``drive`` to ``path`` (.npz). Floats are stored as float64: lossless."""
     p = Path(path)
+    lost = [n for n in EVENT_STREAMS if n not in STORED_STREAMS and getattr(drive, n) is not None]
+    if lost:  # never write a file that reads back without a stream
+        raise ValueError(f"drive.{lost[0]}: a drive file (.npz) does not store this stream")
     arrays: dict[str, np.ndarray] = {
         "imu_t": drive.imu.t, "imu_gyro_b": drive.imu.gyro_b, "imu_accel_b": drive.imu.accel_b,
         "origin_lla": drive.origin_lla,

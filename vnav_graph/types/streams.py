@@ -1,7 +1,7 @@
 """The sensor streams on one clock (immutable IMU, GNSS, baro and magnetometer samples) and
 the ``Drive`` that bundles them with its origin and optional truth (a ``Trajectory``).
 
-The conventions are those of ``vnav_graph.types`` (whose public names include every class
+The conventions are those of ``vnav_graph.types`` (which exports the classes shipped
 here): one clock in seconds, SI units, ``b`` the IMU body frame forward-right-down, ``lla``
 geodetic latitude and longitude [rad] and height [m]. Each record validates in
 ``__post_init__`` (``types.checks``) and raises a ``ValueError`` naming the stream and the
