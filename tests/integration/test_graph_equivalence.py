@@ -38,7 +38,7 @@ through its IMU-shaped interpolant — is an ordinary measurement of the state. 
   b_{k+1} = φ b_k + w, φ = e^{−T/τ_b}, var w = σ_b²(1 − e^{−2T/τ_b}), written here from
   ``sensors.noise``;
 - GNSS heights: vertical row of the GNSS factor on the keyframe;
-- baro samples: the shared model ``measure_baro`` / ``baro_jacobian`` with the height and
+- baro samples: the shared model ``baro_arrays`` with the height and
   vertical speed of the interpolant at the delayed time t_s − τd, the bias b linear between
   b_k and b_{k+1} at the fixed time t_s − λ (λ = ``info["baro_bias_lag_s"]``, the latency at
   the start of the graph's last solve), and Jacobians written here (∂h/∂τd = −v_up,
@@ -81,7 +81,7 @@ from vnav_graph.estimators.graph.model.dense_increments import dense_preintegrat
 from vnav_graph.evaluation.metrics import errors_vs_truth
 from vnav_graph.geo.earth import gravity
 from vnav_graph.geo.frames import lla_to_ned, quat_to_mat
-from vnav_graph.sensors.baro import baro_jacobian, measure_baro
+from vnav_graph.sensors.baro import baro_arrays
 from vnav_graph.sensors.noise import gm_process_var, gm_transition
 from vnav_graph.simulation.scenario import load_scenario, simulate
 
@@ -271,8 +271,7 @@ class VerticalProblem:
         al = tau / big_t
         al_b = np.clip((bt - self.bias_lag - t_kf[k]) / big_t, 0.0, 1.0)
         b = (1 - al_b) * self.b_hat[k] + al_b * self.b_hat[k + 1]
-        pred = measure_baro(h, v_up, self.s_hat, 0.0, b, self.h0)
-        jb = baro_jacobian(h, v_up, self.s_hat, 0.0, self.h0)
+        pred, jb = baro_arrays(h, v_up, self.s_hat, 0.0, b, self.h0)
         # body-z translation tangent of X_k moves p by R_k[:, 2]; h moves by up·that
         dh_pk = np.einsum("ni,ni->n", up, self.R[k][:, :, 2])
         dh_pk1 = np.einsum("ni,ni->n", up, self.R[k + 1][:, :, 2])

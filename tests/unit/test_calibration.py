@@ -14,7 +14,7 @@ from vnav_graph.estimators.vertical.calibration import (
     calibrate_arrays,
     calibrate_baro,
 )
-from vnav_graph.sensors.baro import measure_baro
+from vnav_graph.sensors.baro import baro_arrays
 from vnav_graph.simulation import load_scenario, simulate
 
 FT = 0.3048
@@ -26,7 +26,7 @@ def test_noiseless_model_is_recovered_exactly() -> None:
     t = np.linspace(0.0, 600.0, 1201)
     h = 300.0 + 200.0 * np.sin(2 * np.pi * t / 300.0)
     v = 200.0 * 2 * np.pi / 300.0 * np.cos(2 * np.pi * t / 300.0)
-    hb = measure_baro(h, v, -0.02, 0.15, 4.0, h0=100.0)
+    hb = baro_arrays(h, v, -0.02, 0.15, 4.0, h0=100.0)[0]
     cal = calibrate_arrays(h - 100.0, v, hb - 100.0)
     assert cal.scale == pytest.approx(-0.02, abs=1e-12)
     assert cal.latency_s == pytest.approx(0.15, abs=1e-10)

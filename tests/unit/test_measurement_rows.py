@@ -1,6 +1,6 @@
 """The filter's measurement rows (``ekf.updates``) against finite differences of their own
 innovation under the filter's error convention, and the baro row against the shared sensor
-model the graph's factor evaluates (``sensors.baro.measure_baro`` / ``baro_jacobian``).
+model the graph's factor evaluates (``sensors.baro.baro_arrays``).
 
 For a row function y(x̃) with Jacobian H: removing an error δx from the nominal state
 (``model.apply_correction``, x' = x̃ ⊖ δx) must change the innovation by H δx to first
@@ -16,7 +16,7 @@ from vnav_graph.estimators.ekf.heading import new_state
 from vnav_graph.estimators.ekf.updates import baro_rows, gnss_rows, mag_rows
 from vnav_graph.geo.earth import radii_scalar
 from vnav_graph.nav.rotations import quat_to_dcm, rpy_quat
-from vnav_graph.sensors.baro import baro_jacobian, measure_baro
+from vnav_graph.sensors.baro import baro_arrays
 
 
 def _state(rng):
@@ -53,9 +53,8 @@ def test_baro_row_is_the_shared_model_and_its_derivative():
     y, hm, r, mm = baro_rows(lla, v, par, h0, z, sd)
     assert mm == 1 and r[0] == sd * sd
     # the innovation is the shared model's prediction minus the sample
-    pred = measure_baro(lla[2], -v[2], par[km.PSC], par[km.PTD], par[km.PBB], h0)
+    pred, jb = baro_arrays(lla[2], -v[2], par[km.PSC], par[km.PTD], par[km.PBB], h0)
     assert y[0] == pytest.approx(pred - z, rel=0, abs=1e-12)
-    jb = baro_jacobian(lla[2], -v[2], par[km.PSC], par[km.PTD], h0)
     assert hm[0, km.IPOS + 2] == pytest.approx(-jb[0])  # down error, height up
     assert hm[0, km.ISC] == pytest.approx(jb[2]) and hm[0, km.IBB] == pytest.approx(jb[4])
 

@@ -5,12 +5,7 @@ import pytest
 
 from vnav_graph.config import IMU_PRESETS, BaroSpec
 from vnav_graph.geo.earth import OMEGA_IE, gravity
-from vnav_graph.sensors.baro import (
-    baro_jacobian,
-    baro_predict,
-    baro_row,
-    measure_baro,
-)
+from vnav_graph.sensors.baro import baro_arrays, baro_predict, baro_row
 from vnav_graph.sensors.noise import white_sd
 from vnav_graph.simulation import noise, simulate
 from vnav_graph.simulation.measurements import simulate_baro
@@ -83,7 +78,8 @@ def test_baro_simulation_follows_the_shared_model(rng):
     t = np.arange(1.0, 299.0, 0.1)
     stream, truth, bias = simulate_baro(t, t_truth, h, 500.0, spec, rng)
     v_up = np.interp(t, t_truth, np.gradient(h, t_truth))
-    pred = measure_baro(np.interp(t, t_truth, h), v_up, truth.scale, truth.latency_s, bias, 500.0)
+    pred = baro_arrays(np.interp(t, t_truth, h), v_up, truth.scale, truth.latency_s, bias,
+                       500.0)[0]
     # model vs simulation differ only by the first-order latency expansion:
     # |h''|·τ²/2 ≤ 100·(2π/120)²·0.04/2 ≈ 5.5 mm, times (1+s)
     assert np.max(np.abs(pred - stream.alt)) < 6e-3
@@ -106,14 +102,14 @@ def test_baro_physical_mode_reproduces_scale_and_bias(rng):
 def test_baro_jacobian_matches_finite_differences():
     x = np.array([812.0, -7.5, 0.013, 0.12, -3.0])  # h, v_up, s, tau, b
     h0 = 640.0
-    jac = baro_jacobian(x[0], x[1], x[2], x[3], h0)
+    jac = baro_arrays(*x, h0=h0)[1]
     eps = 1e-6
     fd = []
     for i in range(5):
         xp, xm = x.copy(), x.copy()
         xp[i] += eps
         xm[i] -= eps
-        fd.append((measure_baro(*xp, h0=h0) - measure_baro(*xm, h0=h0)) / (2 * eps))
+        fd.append((baro_arrays(*xp, h0=h0)[0] - baro_arrays(*xm, h0=h0)[0]) / (2 * eps))
     np.testing.assert_allclose(jac, fd, rtol=1e-7, atol=1e-7)  # model is bilinear: FD exact-ish
 
 
@@ -123,15 +119,15 @@ def test_baro_arrays_map_the_one_compiled_model_over_broadcast_inputs(rng):
     h0 = 500.0
     h, vup, b = rng.uniform(0, 3000, 40), rng.normal(0, 10, 40), rng.normal(0, 5, 40)
     s, tau = rng.normal(0, 0.02), rng.uniform(0, 0.5)
-    pred = measure_baro(h, vup, s, tau, b, h0)
-    jac = baro_jacobian(h.reshape(8, 5), vup.reshape(8, 5), s, tau, h0)
+    pred = baro_arrays(h, vup, s, tau, b, h0)[0]
+    jac = baro_arrays(h.reshape(8, 5), vup.reshape(8, 5), s, tau, 0.0, h0)[1]
     assert pred.shape == (40,) and jac.shape == (8, 5, 5)
     for i in range(40):
         assert pred[i] == baro_predict(h[i], vup[i], s, tau, b[i], h0)
         np.testing.assert_array_equal(jac.reshape(40, 5)[i], baro_row(h[i], vup[i], s, tau, h0))
     # the closed form of docs/design.md's model, in the same operation order
     np.testing.assert_array_equal(pred, h0 + (1.0 + s) * (h - h0 - vup * tau) + b)
-    assert np.ndim(measure_baro(1.0, 2.0, 0.0, 0.0, 0.0, 0.0)) == 0
+    assert np.ndim(baro_arrays(1.0, 2.0, 0.0, 0.0, 0.0, 0.0)[0]) == 0
 
 
 def test_simulation_is_deterministic_per_seed():

@@ -9,9 +9,8 @@ white noise. Linearised in τd (seed 001 eq. 2): h_b ≈ h0 + (1+s)(h − h0 −
 The model is written once, as two compiled scalar functions: ``baro_predict`` (the predicted
 reading) and ``baro_row`` (its Jacobian with respect to the physical errors (h, v_up, s, τd, b)).
 The EKF's row calls them at one event, the 7-state filter at each sample, and the graph's
-factor over all samples through ``baro_arrays`` (both at once; ``measure_baro`` /
-``baro_jacobian`` for one of them), which maps the same compiled functions over broadcast
-arrays.
+factor over all samples through ``baro_arrays`` (both at once), which maps the same compiled
+functions over broadcast arrays.
 """
 
 from __future__ import annotations
@@ -59,17 +58,3 @@ def baro_arrays(h: ArrayLike, v_up: ArrayLike, scale: ArrayLike, latency: ArrayL
     _map_baro(*flat, float(h0), pred, jac)
     return pred.reshape(shape), jac.reshape(*shape, 5)
 
-
-def measure_baro(
-    h: ArrayLike, v_up: ArrayLike, scale: ArrayLike, latency: ArrayLike, bias: ArrayLike,
-    h0: float,
-) -> FloatArray:
-    """``baro_predict`` over broadcast arrays [m]."""
-    return baro_arrays(h, v_up, scale, latency, bias, h0)[0]
-
-
-def baro_jacobian(
-    h: ArrayLike, v_up: ArrayLike, scale: ArrayLike, latency: ArrayLike, h0: float
-) -> FloatArray:
-    """``baro_row`` over broadcast arrays: ∂h_b/∂(h, v_up, s, τd, b), shape (..., 5)."""
-    return baro_arrays(h, v_up, scale, latency, 0.0, h0)[1]

@@ -10,7 +10,7 @@ Seed 001 models the baro altitude H_B against the GNSS (DGPS) height H_G as
 which is the package's one baro model (``vnav_graph.sensors.baro``) with the scale acting on
 the height above the drive origin: H_G = h_GNSS − h0, H_B = h_baro − h0, h0 =
 ``Drive.origin_lla[2]``, and V_G the vertical speed (+up). The exact model has the latency
-multiplied by (1 + dSF) (``baro_jacobian``); the regression coefficient θ_Td is therefore
+multiplied by (1 + dSF) (``baro_row``); the regression coefficient θ_Td is therefore
 (1 + dSF)·Td and ``calibrate_baro`` reports Td = θ_Td / (1 + dSF).
 
 ``calibrate_arrays`` without a noise model is the paper's ordinary least squares: standard
