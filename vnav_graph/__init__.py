@@ -53,11 +53,11 @@ _LAZY: dict[str, str] = {
     # core types
     "ERROR_STATE": "vnav_graph.types:ERROR_STATE",
     "BaroStream": "vnav_graph.types.streams:BaroStream",
-    "Drive": "vnav_graph.types.streams:Drive",
+    "Drive": "vnav_graph.types:Drive",
     "Estimate": "vnav_graph.types:Estimate",
     "GnssStream": "vnav_graph.types.streams:GnssStream",
     "ImuStream": "vnav_graph.types.streams:ImuStream",
-    "Trajectory": "vnav_graph.types.trajectory:Trajectory",
+    "Trajectory": "vnav_graph.types:Trajectory",
 }
 
 __all__ = [*_LAZY, "__version__"]

@@ -19,9 +19,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from ..types import Estimate
-from ..types.streams import Drive
-from ..types.trajectory import Trajectory
+from ..types import Drive, Estimate, Trajectory
 from ..util.failures import failure_message
 
 

@@ -32,8 +32,7 @@ import numpy as np
 
 from ..sensors.gnss_model import GM_AUTO_SIGMAS, GM_AUTO_THRESHOLD
 from ..sensors.gnss_residuals import RESIDUAL_LAG_S, gnss_residual_autocorr
-from ..types import Estimate
-from ..types.streams import Drive
+from ..types import Drive, Estimate
 
 
 def gm_decision(est: Estimate, drive: Drive) -> dict[str, Any]:

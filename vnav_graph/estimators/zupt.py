@@ -10,7 +10,7 @@ import numpy as np
 from ..geo.frames import lla_to_ned
 from ..nav.standstill import Standstill, detect_standstill, no_standstill, position_velocity
 from ..sensors.model import SensorModel
-from ..types.streams import Drive
+from ..types import Drive
 
 
 def drive_standstill(drive: Drive, model: SensorModel) -> Standstill:

@@ -9,8 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from ..types import BaroEstimate
-from ..types.streams import Drive
+from ..types import BaroEstimate, Drive
 
 
 def _param(block: Any, truth: float | None) -> dict[str, Any]:

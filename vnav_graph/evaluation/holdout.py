@@ -46,9 +46,8 @@ from typing import Any
 
 import numpy as np
 
-from ..types import ERROR_STATE, Estimate
-from ..types.streams import Drive, FloatArray
-from ..types.trajectory import Trajectory
+from ..types import ERROR_STATE, Drive, Estimate, Trajectory
+from ..types.streams import FloatArray
 from .metrics import ONLINE_KEYS, causal_view, finite_max, finite_rms, known_after
 
 HOLDOUT_SCHEMA = "vnav_graph.holdout/1"

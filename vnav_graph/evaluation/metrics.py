@@ -14,8 +14,8 @@ from typing import Any
 
 import numpy as np
 
-from ..types import ERROR_STATE, Estimate
-from ..types.streams import Drive, FloatArray
+from ..types import ERROR_STATE, Drive, Estimate
+from ..types.streams import FloatArray
 from .blocks import baro_block, extra_variables_block, fb_separation_block
 
 

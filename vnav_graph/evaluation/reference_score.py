@@ -24,8 +24,8 @@ from typing import Any
 
 import numpy as np
 
-from ..types import Estimate
-from ..types.streams import Drive, FloatArray
+from ..types import Drive, Estimate
+from ..types.streams import FloatArray
 from .metrics import finite_max, finite_rms, nees
 
 __all__ = ["reference_block"]

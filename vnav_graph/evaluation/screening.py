@@ -37,7 +37,8 @@ from typing import Any
 
 import numpy as np
 
-from ..types.streams import Drive, FloatArray
+from ..types import Drive
+from ..types.streams import FloatArray
 
 BARO_HALF_S = 15.0  # s
 K_SIGMA = 5.0

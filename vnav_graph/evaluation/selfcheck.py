@@ -75,8 +75,8 @@ from typing import Any
 
 import numpy as np
 
-from ..types import Estimate
-from ..types.streams import Drive, FloatArray
+from ..types import Drive, Estimate
+from ..types.streams import FloatArray
 
 WINDOW_S = 30.0
 MIN_FIXES = 3

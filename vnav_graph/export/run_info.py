@@ -14,8 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from ..types import Estimate
-from ..types.streams import Drive
+from ..types import Drive, Estimate
 
 DRIVE_INFO = "drive.json"
 TRUTH_TABLE = "truth.parquet"

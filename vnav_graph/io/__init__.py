@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..types.streams import Drive
+from ..types import Drive
 from .drive_io import load_npz, save_npz
 
 

@@ -18,16 +18,8 @@ from typing import Any
 import numpy as np
 
 from ..config import BaroSpec, GnssSpec, ImuSpec
-from ..types.streams import (
-    EVENT_STREAMS,
-    BaroStream,
-    BaroTruth,
-    Drive,
-    GnssStream,
-    ImuStream,
-    MagStream,
-)
-from ..types.trajectory import Trajectory
+from ..types import BaroTruth, Drive, Trajectory
+from ..types.streams import EVENT_STREAMS, BaroStream, GnssStream, ImuStream, MagStream
 from ..util.failures import failure_message
 
 FORMAT = "vnav_graph.drive/1"

@@ -48,7 +48,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from ..types.streams import BaroStream, Drive, FloatArray, GnssStream, IntArray
+from ..types import Drive
+from ..types.streams import BaroStream, FloatArray, GnssStream, IntArray
 from .findings import Findings, reject
 
 WINDOW_S = 5.0

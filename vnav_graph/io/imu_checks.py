@@ -60,7 +60,8 @@ from collections.abc import Callable
 import numpy as np
 
 from ..geo.earth import G0
-from ..types.streams import BoolArray, Drive, FloatArray, ImuStream
+from ..types import Drive
+from ..types.streams import BoolArray, FloatArray, ImuStream
 from .findings import Findings, reject
 from .imu_units import (
     ACCEL_G2_REASON,

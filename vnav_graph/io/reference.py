@@ -27,8 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from ..types.streams import Drive
-from ..types.trajectory import Trajectory
+from ..types import Drive, Trajectory
 
 __all__ = ["COURSE_MIN_SPEED", "attach_reference", "drive_t0_gpst", "load_reference",
            "load_scored", "with_reference"]

@@ -51,7 +51,8 @@ from typing import Any
 import numpy as np
 
 from ..nav.gnss_glitch import MAX_GLITCH_S, MAX_SPEED, glitch_mask
-from ..types.streams import BaroStream, BoolArray, Drive, FloatArray, GnssStream
+from ..types import Drive
+from ..types.streams import BaroStream, BoolArray, FloatArray, GnssStream
 from .findings import Findings, reject
 from .height_units import check_gnss_height_units
 from .imu_checks import IMU_CHECKS

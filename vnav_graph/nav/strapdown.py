@@ -25,8 +25,8 @@ import numpy as np
 from numba import njit
 
 from ..geo.earth import OMEGA_IE, gravity_scalar, radii_scalar
+from ..types import Trajectory
 from ..types.streams import FloatArray, ImuStream
-from ..types.trajectory import Trajectory
 from .rotations import cross3 as _cross
 from .rotations import quat_exp, quat_mul, quat_to_dcm
 

@@ -28,7 +28,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from ..types.streams import Drive
+from ..types import Drive
 
 # why an expected figure can be missing (said in the report instead of silently omitting it)
 ABSENT = {"vertical_velocity_error.png": "No vertical-velocity plot: no estimator provides "

@@ -28,8 +28,8 @@ from typing import Any
 
 import numpy as np
 
-from ..types import ERROR_STATE, Estimate
-from ..types.streams import Drive, FloatArray
+from ..types import ERROR_STATE, Drive, Estimate
+from ..types.streams import FloatArray
 
 _ALT = ERROR_STATE["pos_n"].start + 2  # down position row of the error state
 

@@ -21,8 +21,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..geo.frames import lla_to_ned
-from ..types.streams import Drive, FloatArray
-from ..types.trajectory import Trajectory
+from ..types import Drive, Trajectory
+from ..types.streams import FloatArray
 from . import canvas
 from .canvas import decimate
 from .palette import estimator_style

@@ -22,8 +22,8 @@ from typing import Any
 
 import numpy as np
 
-from ..types import ERROR_STATE, Estimate
-from ..types.streams import Drive, FloatArray
+from ..types import ERROR_STATE, Drive, Estimate
+from ..types.streams import FloatArray
 from . import canvas
 from .canvas import decimate
 from .palette import estimator_style

@@ -15,8 +15,7 @@ from typing import Any
 
 from ..evaluation.metrics import causal_view, evaluate
 from ..io.jsonout import dumps_strict
-from ..types import Estimate
-from ..types.streams import Drive
+from ..types import Drive, Estimate
 from ..util.failures import failure_message
 from .outputs import ONLINE_SUFFIX
 from .progress import Mode

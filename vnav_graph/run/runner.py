@@ -54,8 +54,7 @@ from ..evaluation.holdout import (
 )
 from ..evaluation.metrics import METRIC_KEYS
 from ..evaluation.screening import screen_reference
-from ..types import Estimate
-from ..types.streams import Drive
+from ..types import Drive, Estimate
 from ..util.failures import ExtensionError, MissingStream, failure_message
 from ..util.jit import CompileTimer, Prewarm, family_of, mark_warm
 from .progress import Mode, mode_for, say, steps

@@ -26,7 +26,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ..types.streams import Drive
+from ..types import Drive
 
 # seconds per (10⁴ IMU samples, 100 keyframes, 10⁵ keyframe × heading-factor pairs)
 COST: dict[str, tuple[float, float, float]] = {

@@ -44,7 +44,8 @@ from numba import njit
 if TYPE_CHECKING:
     from ..geo.magfield import FieldModel
 
-from ..types.streams import Drive, FloatArray, MagStream
+from ..types import Drive
+from ..types.streams import FloatArray, MagStream
 
 MIN_HORIZONTAL_UT = 3.0  # weaker horizontal fields give no usable heading (near the poles) [µT]
 # Defaults shared by ekf/ekf-rts (EkfConfig) and both graphs (GraphConfig):

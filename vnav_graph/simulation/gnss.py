@@ -36,8 +36,8 @@ import numpy as np
 from ..config import GnssSpec
 from ..geo.earth import radii
 from ..geo.frames import quat_to_mat
+from ..types import Trajectory
 from ..types.streams import BoolArray, FloatArray, GnssStream
-from ..types.trajectory import Trajectory
 from .noise import gauss_markov
 
 BURST_MAX_ELEVATION = np.radians(30.0)  # elevation bound of a burst's offset direction [rad]

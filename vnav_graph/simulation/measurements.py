@@ -18,8 +18,8 @@ from ..config import BaroSpec, ImuSpec
 from ..geo.atmosphere import isa_pressure
 from ..sensors.magnetometer import MagSpec
 from ..sensors.noise import white_sd
-from ..types.streams import BaroStream, BaroTruth, FloatArray, ImuStream, MagStream
-from ..types.trajectory import Trajectory
+from ..types import BaroTruth, Trajectory
+from ..types.streams import BaroStream, FloatArray, ImuStream, MagStream
 from .noise import gauss_markov, random_walk
 
 

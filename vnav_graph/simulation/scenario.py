@@ -26,8 +26,7 @@ from ..config import (
     ScenarioConfig,
     replace_fields,
 )
-from ..types.streams import Drive
-from ..types.trajectory import Trajectory
+from ..types import Drive, Trajectory
 from . import SCENARIO_DIR, list_scenarios
 from .gnss import simulate_gnss
 from .measurements import apply_imu_errors, simulate_baro

@@ -31,8 +31,8 @@ import numpy as np
 
 from ..geo.earth import G0, earth_rate_n, gravity, radii, transport_rate_n
 from ..geo.frames import mat_to_quat, rph_to_quat
+from ..types import Trajectory
 from ..types.streams import FloatArray
-from ..types.trajectory import Trajectory
 
 
 def _smootherstep(x: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:

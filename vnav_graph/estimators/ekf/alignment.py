@@ -35,7 +35,8 @@ from ...geo.frames import lla_to_ned, quat_to_mat, rph_to_quat
 from ...nav.course import COURSE_SNR, course_heading, course_sd, gyro_yaw
 from ...nav.levelling import coarse_level
 from ...sensors.model import BaroPrior, SensorModel
-from ...types.streams import Drive, FloatArray, GnssStream, ImuStream
+from ...types import Drive
+from ...types.streams import FloatArray, GnssStream, ImuStream
 from . import model as km
 from .magnetometer import initial_heading
 from .settings import EkfConfig

@@ -49,9 +49,8 @@ import numpy as np
 
 from ...geo.earth import OMEGA_IE, radii
 from ...geo.frames import quat_to_mat
-from ...types import Estimate
-from ...types.streams import BaroStream, Drive, GnssStream, ImuStream
-from ...types.trajectory import Trajectory
+from ...types import Drive, Estimate, Trajectory
+from ...types.streams import BaroStream, GnssStream, ImuStream
 from .settings import EkfConfig
 
 SERIES_HZ = 1.0  # rate of the separation series kept for the plot [Hz]

@@ -72,9 +72,8 @@ from ...sensors.model import (
     sensor_model,
 )
 from ...sensors.noise import gm_mean_prior_sd
-from ...types import BaroEstimate, Estimate, ParamEstimate
-from ...types.streams import Drive, FloatArray
-from ...types.trajectory import Trajectory
+from ...types import BaroEstimate, Drive, Estimate, ParamEstimate, Trajectory
+from ...types.streams import FloatArray
 from ...util.pages import small_pages
 from ..base import with_online
 from ..checks import checked

@@ -15,7 +15,8 @@ import numpy as np
 
 from ...geo.frames import quat_to_mat, rph_to_quat
 from ...sensors.magnetometer import MIN_HORIZONTAL_UT, wrap_pi
-from ...types.streams import Drive, FloatArray
+from ...types import Drive
+from ...types.streams import FloatArray
 
 
 def initial_heading(drive: Drive, t_end: float, roll: float, pitch: float, fm: Any,

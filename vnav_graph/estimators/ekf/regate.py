@@ -49,8 +49,8 @@ from ...geo.earth import radii
 from ...geo.frames import quat_to_mat
 from ...sensors.gnss_model import GnssGM
 from ...sensors.model import SensorModel
-from ...types import Estimate
-from ...types.streams import Drive, FloatArray
+from ...types import Drive, Estimate
+from ...types.streams import FloatArray
 from ..robust import post_gate_threshold, weight_and_loss
 from .settings import EkfConfig
 

@@ -35,7 +35,8 @@ from ...sensors.baro import baro_predict, baro_row
 from ...sensors.gnss_model import antenna_position, antenna_velocity
 from ...sensors.magnetometer import MIN_HORIZONTAL_UT, mag_heading_row
 from ...sensors.model import BaroPrior, SensorModel
-from ...types.streams import BoolArray, Drive, FloatArray, IntArray
+from ...types import Drive
+from ...types.streams import BoolArray, FloatArray, IntArray
 from .alignment import Alignment, track_heading
 from .heading import RESET_DELTA, RESET_SD
 from .magnetometer import one_per_interval

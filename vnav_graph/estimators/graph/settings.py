@@ -7,7 +7,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ...types.streams import Drive
+from ...types import Drive
 from ..robust import LOSSES
 from ..shared_settings import SharedSettings
 

@@ -61,8 +61,8 @@ from ...config import REAL_LOG_BARO
 from ...nav.arrays import outer, put
 from ...nav.error_state import embed_error_state, selection
 from ...sensors.model import sensor_model
-from ...types import BaroEstimate, Estimate, ParamEstimate
-from ...types.streams import Drive, FloatArray
+from ...types import BaroEstimate, Drive, Estimate, ParamEstimate
+from ...types.streams import FloatArray
 from .base import VerticalEstimator, vertical_estimate
 from .gnss_reference import nominal_interval
 from .inputs import AhrsConfig

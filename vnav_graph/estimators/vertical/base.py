@@ -10,9 +10,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from ...types import Estimate
-from ...types.streams import Drive, FloatArray
-from ...types.trajectory import Trajectory
+from ...types import Drive, Estimate, Trajectory
+from ...types.streams import FloatArray
 from ...util.failures import MissingStream
 
 

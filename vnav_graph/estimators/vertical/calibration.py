@@ -52,7 +52,8 @@ from typing import Any
 
 import numpy as np
 
-from ...types.streams import Drive, FloatArray
+from ...types import Drive
+from ...types.streams import FloatArray
 
 # Seed 001 Table 1: (dSF [%], Td [s], B [ft]) estimated on the paper's seven flight test sets;
 # the reference values the calibration is reproduced against (tests, benchmarks/reproduce_seeds).

@@ -15,7 +15,8 @@ from typing import Any
 import numpy as np
 
 from ...geo.earth import OMEGA_IE, gravity, radii
-from ...types.streams import Drive, FloatArray
+from ...types import Drive
+from ...types.streams import FloatArray
 from .ahrs import poly_velocity, trailing_slope
 
 # the receiver's nominal fix interval (and usual velocity σ) is taken from its first this

@@ -155,7 +155,8 @@ import numpy as np
 
 from ...geo.earth import OMEGA_IE, gravity, radii
 from ...nav.gaps import gap_threshold
-from ...types.streams import Drive, FloatArray
+from ...types import Drive
+from ...types.streams import FloatArray
 from .ahrs import AhrsFixes, AhrsGains, AhrsImu, ahrs_kernel
 from .ahrs_cache import shared_call
 from .gnss_reference import baro_rate, matching_inputs, velocity_from_positions

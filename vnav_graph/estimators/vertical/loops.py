@@ -67,8 +67,8 @@ from scipy.linalg import solve_discrete_are
 from ...geo.earth import gravity, radii
 from ...nav.arrays import put
 from ...nav.gaps import imu_gaps
-from ...types import Estimate
-from ...types.streams import Drive, FloatArray
+from ...types import Drive, Estimate
+from ...types.streams import FloatArray
 from ...util.failures import MissingStream
 from .base import VerticalEstimator, vertical_estimate
 from .inputs import AhrsConfig, vertical_inputs

@@ -98,8 +98,8 @@ from ...config import G0
 from ...geo.earth import gravity, radii
 from ...nav.gaps import gap_threshold
 from ...sensors.model import sensor_model
-from ...types import Estimate
-from ...types.streams import Drive, FloatArray
+from ...types import Drive, Estimate
+from ...types.streams import FloatArray
 from .base import VerticalEstimator, vertical_estimate
 from .inputs import AhrsConfig, vertical_inputs
 

@@ -84,8 +84,8 @@ from ...nav.gaps import GAP_ACCEL_SD, cv_bridge_noise, gap_threshold
 from ...nav.gnss_gate import NO_LIMIT, REFUSE, height_gate, new_gate_state
 from ...sensors.baro import baro_predict, baro_row
 from ...sensors.model import SensorModel, sensor_model
-from ...types import BaroEstimate, Estimate, ParamEstimate
-from ...types.streams import Drive, FloatArray
+from ...types import BaroEstimate, Drive, Estimate, ParamEstimate
+from ...types.streams import FloatArray
 from ..checks import with_prior_conflict_notes
 from .base import VerticalEstimator, vertical_estimate
 from .inputs import AhrsConfig, VerticalInputs, vertical_inputs

@@ -19,7 +19,8 @@ import numpy as np
 from ...geo.earth import radii
 from ...sensors.model import SensorModel
 from ...sensors.noise import gm_process_var, gm_transition
-from ...types.streams import Drive, FloatArray, IntArray
+from ...types import Drive
+from ...types.streams import FloatArray, IntArray
 from .gnss_reference import nominal_interval
 from .inputs import VerticalInputs
 

@@ -76,8 +76,8 @@ from ...nav.gaps import GAP_ACCEL_SD, cv_bridge_noise, gap_threshold
 from ...nav.gnss_gate import NO_LIMIT, REFUSE, height_gate
 from ...sensors.model import sensor_model
 from ...sensors.noise import gm_process_var, gm_transition
-from ...types import BaroEstimate, Estimate, ParamEstimate
-from ...types.streams import Drive, FloatArray
+from ...types import BaroEstimate, Drive, Estimate, ParamEstimate
+from ...types.streams import FloatArray
 from .base import VerticalEstimator, vertical_estimate
 from .inputs import AhrsConfig, vertical_inputs
 from .vekf7_setup import initial_fix, input_error_psd

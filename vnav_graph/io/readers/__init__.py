@@ -23,7 +23,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ...types.streams import Drive
+from ...types import Drive
 
 __all__ = ["detect_format", "read_log"]
 

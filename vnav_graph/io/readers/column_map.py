@@ -38,7 +38,8 @@ from typing import Any
 
 import numpy as np
 
-from ...types.streams import Drive, GnssStream, ImuStream
+from ...types import Drive
+from ...types.streams import GnssStream, ImuStream
 from ._common import Report, find_gaps, monotonic_mask
 from .gpstime import gps_to_unix, unix_to_gps, week_tow_to_gps
 

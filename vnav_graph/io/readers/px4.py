@@ -33,7 +33,8 @@ from typing import Any
 
 import numpy as np
 
-from ...types.streams import BaroStream, Drive, GnssStream, ImuStream, MagStream
+from ...types import Drive
+from ...types.streams import BaroStream, GnssStream, ImuStream, MagStream
 from ._common import (
     Report,
     baro_alt_aligned,

@@ -78,7 +78,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from ...types.streams import Drive
+from ...types import Drive
 from ...util.failures import failure_message
 from ._common import (
     Report,

@@ -37,8 +37,7 @@ from collections.abc import Sequence
 import numpy as np
 from gtsam.symbol_shorthand import K
 
-from ....types import Estimate
-from ....types.streams import Drive
+from ....types import Drive, Estimate
 from ...checks import checked
 from ...gnss_auto import with_gm_auto
 from ..model.builtin_sensors import builtin_extensions, mag_info

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from ....types.streams import Drive
+from ....types import Drive
 from ..model.extend import GraphExtension
 from ..model.initial_guess import initial_states
 from ..model.problem import setup

@@ -23,7 +23,7 @@ import numpy as np
 from gtsam.symbol_shorthand import A, B, C, G, K, V, X
 
 from ....sensors.noise import gm_transition
-from ....types.streams import Drive
+from ....types import Drive
 from ..model import interval_factors as gf
 from ..model.cpp_factors import (
     PRIOR_ATT_SD,

@@ -58,9 +58,7 @@ import numpy as np
 from gtsam.symbol_shorthand import A, B, C, G, K, V, X
 
 from ....geo.frames import mat_to_quat, ned_to_lla, quat_to_mat
-from ....types import Estimate
-from ....types.streams import Drive
-from ....types.trajectory import Trajectory
+from ....types import Drive, Estimate, Trajectory
 from ...checks import checked
 from ...gnss_auto import with_gm_auto
 from ..model import interval_factors as gf

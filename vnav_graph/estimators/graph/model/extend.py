@@ -67,7 +67,8 @@ import numpy as np
 from gtsam.symbol_shorthand import B, C, V, X
 
 from ....geo.frames import lla_to_ned
-from ....types.streams import Drive, FloatArray
+from ....types import Drive
+from ....types.streams import FloatArray
 from ....util.failures import ExtensionError
 from .interval_factors import rot_t_n
 from .jacobians import factor_shapes

@@ -6,7 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ....types.streams import Drive, FloatArray
+from ....types import Drive
+from ....types.streams import FloatArray
 
 
 def pregate_gnss(drive: Drive, t: FloatArray, h: FloatArray, sd_h: FloatArray,

@@ -27,7 +27,8 @@ from ....sensors.model import (
     baro_prior,
     sensor_model,
 )
-from ....types.streams import Drive, FloatArray
+from ....types import Drive
+from ....types.streams import FloatArray
 from ...robust import post_gate_threshold
 from ...zupt import drive_standstill
 from ..settings import GraphConfig

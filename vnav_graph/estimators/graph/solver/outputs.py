@@ -18,9 +18,8 @@ from gtsam.symbol_shorthand import A, B, C, K, V, X
 from ....geo.frames import mat_to_quat, ned_to_lla
 from ....nav.error_state import component, embed_error_state
 from ....sensors.noise import gm_mean_prior_sd
-from ....types import ERROR_STATE, ERROR_STATE_DIM, BaroEstimate, ParamEstimate
-from ....types.streams import Drive, FloatArray
-from ....types.trajectory import Trajectory
+from ....types import ERROR_STATE, ERROR_STATE_DIM, BaroEstimate, Drive, ParamEstimate, Trajectory
+from ....types.streams import FloatArray
 from ..model import interval_factors as gf
 from ..model.problem import Problem, interval_rows, states_from_values
 from ..settings import GraphConfig
