@@ -1,5 +1,6 @@
 """graph-isam2's causal answers, recorded during the online pass (``online.OnlinePass``):
-the newest keyframe's covariance after each update (``Estimate.online_cov``) and the
+the newest keyframe's state and covariance after each update (``Estimate.online``,
+``Estimate.online_cov``) and the
 fixed-lag estimate (``Estimate.lag``, ``Estimate.lag_cov``): after the update at t, the
 latest keyframe at or before t − L (L = ``GraphConfig.isam2_lag_s``) and its covariance.
 
@@ -37,8 +38,11 @@ class IsamMarginals:
 
 
 class Answers:
-    """The online covariances and the fixed-lag records of one pass over ``P``.
+    """The online states and covariances and the fixed-lag records of one pass over ``P``.
 
+    online: (n_kf, 10) p, v (t frame), quaternion (filled from ``online_rot`` after the
+    pass); online_bias: (n_kf, 6) the biases (accel, gyro) known at each keyframe's update,
+    with which the real-time output propagates the IMU between keyframes (``real_time``);
     online_cov: (n_kf, 18, 18), NaN where not computed; lag_kf: keyframe of each lag record;
     lag_t: the update time it was read at; lag_state: (n, 10) p, v (t frame), quaternion;
     lag_cov: (n, 18, 18)."""
@@ -46,6 +50,9 @@ class Answers:
     def __init__(self, P: Problem, seg: np.ndarray, lag_s: float) -> None:
         self.P, self.seg, self.lag_s = P, seg, lag_s
         nk = P.n_kf
+        self.online = np.zeros((nk, 10))
+        self.online_rot = np.zeros((nk, 3, 3))
+        self.online_bias = np.zeros((nk, 6))
         self.online_cov = np.full((nk, ERROR_STATE_DIM, ERROR_STATE_DIM), np.nan)
         self.lag_kf: list[int] = []
         self.lag_t: list[float] = []
@@ -57,11 +64,20 @@ class Answers:
     def cov(self, isam: Any, vals: Any, k: int, kb: int) -> FloatArray:
         return cov_18(self.P, IsamMarginals(isam), vals, k, kb, int(self.seg[k]))
 
-    def after_update(self, isam: Any, k: int, pose_new: Any) -> None:
-        """After the update that created keyframe k + 1 (``pose_new``: its Pose3 as read
-        back): its covariance, and the lag record due at t_{k+1}."""
+    def record(self, k: int, arrays: tuple[Any, ...]) -> None:
+        """Keyframe k's online state: its estimate in the running arrays (rot, pos, vel,
+        bias, ...) right after its update."""
+        rot, pos, vel, bias = arrays[0:4]
+        self.online[k, 0:6] = np.r_[pos[k], vel[k]]
+        self.online_rot[k] = rot[k]
+        self.online_bias[k] = bias[k]
+
+    def after_update(self, isam: Any, k: int, arrays: tuple[Any, ...]) -> None:
+        """After the update that created keyframe k + 1 (``arrays``: the states read back):
+        its state and covariance, and the lag record due at t_{k+1}."""
+        self.record(k + 1, arrays)
         t0 = time.perf_counter()
-        self._after_update(isam, k, pose_new)
+        self._after_update(isam, k, gtsam.Pose3(gtsam.Rot3(arrays[0][k + 1]), arrays[1][k + 1]))
         self.seconds += time.perf_counter() - t0
 
     def _after_update(self, isam: Any, k: int, pose_new: Any) -> None:
@@ -85,7 +101,8 @@ class Answers:
     def keep(self, other: Answers, n: int) -> None:
         """Keyframes 0 … n − 1 and the lag records of the updates that created them from
         ``other`` (the causal start's pass, ``online.causal_pass``)."""
-        self.online_cov[:n] = other.online_cov[:n]
+        for name in ("online", "online_rot", "online_bias", "online_cov"):
+            getattr(self, name)[:n] = getattr(other, name)[:n]
         t_n = float(self.P.t_kf[n]) if n < self.P.n_kf else np.inf
         a = sum(1 for t in other.lag_t if t < t_n)
         b = sum(1 for t in self.lag_t if t < t_n)

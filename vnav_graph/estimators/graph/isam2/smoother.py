@@ -182,9 +182,9 @@ class GraphISAM2:
         calib0 = np.zeros(P.n_kf, dtype=int)
         # the real-time output: each keyframe's online state and, between keyframes, its
         # IMU propagation (``answers.real_time``), at the output epochs
-        t_rt, rt, rt_rot, rt_cov = real_time(P, on.online, quat_to_mat(on.online[:, 6:10]),
-                                             on.online_bias, on.answers.online_cov,
-                                             output_times(P))
+        a = on.answers
+        t_rt, rt, rt_rot, rt_cov = real_time(P, a.online, quat_to_mat(a.online[:, 6:10]),
+                                             a.online_bias, a.online_cov, output_times(P))
         rt[:, 6:10] = mat_to_quat(rt_rot)
         online_traj = self._online_trajectory(P, rt, t_rt)
         # iSAM2's own estimate as a point of the batch problem (one global (s, τd): the
