@@ -20,8 +20,10 @@ import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import B, C, V, X
 
-from ....types import ERROR_STATE_DIM
+from ....geo.frames import mat_to_quat, ned_to_lla, quat_to_mat
+from ....types import ERROR_STATE_DIM, Trajectory
 from ....types.streams import FloatArray
+from ..model import interval_factors as gf
 from ..model.problem import Problem
 from ..solver.outputs import cov_18
 
@@ -109,6 +111,27 @@ class Answers:
         for name in ("lag_kf", "lag_t", "lag_state", "lag_rot", "lag_cov"):
             setattr(self, name, getattr(other, name)[:a] + getattr(self, name)[b:])
 
+    def lag_answer(self) -> tuple[Trajectory | None, Any, dict[str, Any]]:
+        """``Estimate.lag`` and ``lag_cov`` from the records, and their info."""
+        info = {"lag_s": float(self.lag_s), "lag_epochs": len(self.lag_kf),
+                "isam2_marginals_s": self.seconds,
+                "online_cov_epochs": int(np.sum(np.isfinite(self.online_cov[:, 0, 0])))}
+        if not self.lag_kf:
+            return None, None, info
+        arr = np.column_stack([np.asarray(self.lag_state), mat_to_quat(np.asarray(self.lag_rot))])
+        tr = online_trajectory(self.P, arr, self.P.t_kf[np.asarray(self.lag_kf)])
+        # the lag actually realised: update time minus the keyframe's [s]
+        info["lag_realised_max_s"] = float(np.max(np.asarray(self.lag_t) - tr.t))
+        return tr, np.asarray(self.lag_cov), info
+
+
+def online_trajectory(P: Problem, online: FloatArray, t: FloatArray | None = None) -> Trajectory:
+    """(n, 10) p, v (t frame), quaternion at ``t`` (default: the keyframes) as a trajectory."""
+    lla = ned_to_lla(online[:, 0:3], P.origin)
+    c_tn = gf.rot_t_n(lla, P.origin)
+    vel_n = np.einsum("nji,nj->ni", c_tn, online[:, 3:6])
+    q = mat_to_quat(np.swapaxes(c_tn, 1, 2) @ quat_to_mat(online[:, 6:10]))
+    return Trajectory(P.t_kf if t is None else t, lla, vel_n, q)
 
 
 def real_time(P: Problem, online: FloatArray, rot: FloatArray, bias: FloatArray,
@@ -131,7 +154,6 @@ def real_time(P: Problem, online: FloatArray, rot: FloatArray, bias: FloatArray,
     (M, 10) states in ``online``'s layout, the (M, 3, 3) attitudes and the covariances (the
     keyframes', NaN between them: the propagation's own covariance is not computed)."""
     from ....nav.rotations import so3_exp
-    from ..model import interval_factors as gf
 
     t_kf = P.t_kf
     t_q = np.unique(np.r_[t_out[(t_out >= t_kf[0]) & (t_out <= t_kf[-1])], t_kf])
