@@ -113,7 +113,7 @@ def finish(op: Any) -> OnlineResult:
     trim_heap()  # its freed nodes are scattered over the heap: hand them back
     counts = {"isam2_relinearized": book.relinearized,
               "isam2_relinearized_factors": book.swapped_factors,
-              "isam2_calibration_steps_halved": book.damped,
+              "isam2_calibration_steps_halved": book.points.damped,
               "isam2_baro_samples_left_window": book.dropped_at_floor,
               "isam2_gnss_return_rounds": op.gate.return_rounds,
               # the extensions' CustomFactors linearised again (``py_factors``)

@@ -4,11 +4,12 @@ The baro samples and GNSS fixes between keyframes enter iSAM2 as ``LinearContain
 built in numpy (``terms``): a fixed quadratic around the point where they were built (the
 new keyframe at its IMU prediction). iSAM2 relinearises its own C++ factors but cannot
 relinearise these, so :class:`TermBook` does it the way iSAM2 does for its factors: it keeps
-every term's factor index and linearisation point, and after each update checks the terms
-whose variables iSAM2 has just marked (relinearised, or touched by new factors). A term is
-due when its keyframes moved beyond the rotation/translation thresholds iSAM2 uses
-(``GraphConfig.relinearize_typed``, or the scalar threshold), or its segment's baro
-calibration K = (s, τd) beyond ``CALIB_THRESHOLD`` since it was built. Due terms are rebuilt
+every term's factor index and linearisation point (``lin_points.LinPoints``), and after each
+update checks the terms whose variables iSAM2 has just marked (relinearised, or touched by
+new factors). A term is due when its keyframes moved beyond the rotation/translation
+thresholds iSAM2 uses (``GraphConfig.relinearize_typed``, or the scalar threshold), or its
+segment's baro calibration K = (s, τd) beyond ``lin_points.CALIB_THRESHOLD`` since it was
+built. Due terms are rebuilt
 at the current estimate and swapped in at the next update (``removeFactorIndices``), all
 factors of an interval at once; robust losses get fresh IRLS weights there.
 
@@ -36,11 +37,8 @@ from gtsam.symbol_shorthand import A, B, C, G, K, V, X
 from ..model import interval_factors as gf
 from ..model.problem import Problem, nav_accel, noise, post_solve_rejections
 from . import linear_factors as terms
+from .lin_points import LinPoints
 
-# relinearisation thresholds of K = (s, τd) for the interval terms: the linearisation error
-# of (1 + s)·h is δs·δh (≤ 1 cm for δh ≤ 1 m at δs = 0.01), that of h(t_s − τd) is
-# ½·a_up·δτ² (≤ 1.3 mm at 1 m/s² for δτ = 0.05 s)
-CALIB_THRESHOLD = (1e-2, 0.05)
 # σ of (s, τd) between neighbouring segments in the final rounds: one calibration, the
 # batch's model (the random walks of the online pass are removed)
 TIE_SD = (1e-6, 1e-5)
@@ -65,11 +63,10 @@ def marked_keyframes(keys: Any) -> np.ndarray:
 
 
 class TermBook:
-    """Factor indices and linearisation points of one pass's interval terms; picks the due
-    ones and rebuilds them (module docstring)."""
+    """Factor indices of one pass's interval terms and their linearisation points
+    (``points``); picks the due ones and rebuilds them (module docstring)."""
 
     def __init__(self, P: Problem, seg: np.ndarray, fixes_of: list[np.ndarray]) -> None:
-        cfg = P.cfg
         self.P = P
         self.seg = seg
         self.fixes_of = fixes_of
@@ -77,28 +74,14 @@ class TermBook:
         self.gnss_idx = np.full(n, -1, dtype=np.int64)
         self.baro_idx: list[list[int]] = [[] for _ in range(n)]
         self.baro_of: list[list[np.ndarray]] = [[] for _ in range(n)]
-        self.built = np.zeros(n, dtype=bool)
-        self.lin_rot = np.zeros((n, 2, 3, 3))
-        self.lin_pos = np.zeros((n, 2, 3))
-        self.lin_cal = np.full((n, 2), np.nan)  # K of the interval's baro terms when built
-        if cfg.relinearize_threshold <= 0:
-            self.thr: tuple[float, float] | None = None
-        elif cfg.relinearize_typed is None:
-            self.thr = (cfg.relinearize_threshold, cfg.relinearize_threshold)
-        else:
-            self.thr = (cfg.relinearize_typed[0], cfg.relinearize_typed[1])
+        self.points = LinPoints(P, seg)
         self.pending = np.zeros(0, dtype=int)
         # iSAM2 indices of each keyframe fix's factors (fix index → indices; ``record_fixes``)
         self.kf_fix_idx: dict[int, list[int]] = {}
         self.relinearized = 0  # interval terms rebuilt and swapped in
         self.swapped_factors = 0  # iSAM2 factors removed by those swaps
-        # per segment: the (s, τd) its baro terms were last rebuilt at, and that rebuild's
-        # step (``_damped_calibration``)
-        self.seg_lin: dict[int, np.ndarray] = {}
-        self.seg_step: dict[int, np.ndarray] = {}
         # baro samples left out of a rebuild: their delayed time moved before the window
         self.dropped_at_floor = 0
-        self.damped = 0  # rebuilds whose (s, τd) step was halved
         # with a window (``graph.window``): the oldest keyframe and segment still in iSAM2;
         # intervals before ``floor`` were marginalised and are never rebuilt
         self.floor = 0
@@ -116,16 +99,6 @@ class TermBook:
         self.floor, self.first_seg = floor, first_seg
 
     # -- bookkeeping -----------------------------------------------------------------------
-
-    def _note(self, m: int, st: gf.KeyframeStates, cal: dict[int, Any] | None) -> None:
-        """Interval m's linearisation point (kept from its first build until a rebuild; K
-        from its first baro term)."""
-        if not self.built[m]:
-            self.built[m] = True
-            self.lin_rot[m] = st.rot[m:m + 2]
-            self.lin_pos[m] = st.pos[m:m + 2]
-        if cal is not None and np.isnan(self.lin_cal[m, 0]):
-            self.lin_cal[m] = cal[int(self.seg[m])]
 
     def record(self, tags: list[tuple[Any, ...]], new_idx: Any) -> None:
         """Factor indices of the terms just added: ``tags[i]`` describes the i-th new factor
@@ -151,11 +124,11 @@ class TermBook:
         if gcf is not None:
             nf.add(gcf)
             tags.append(("g", m_g))
-            self._note(m_g, st, None)
+            self.points.note(m_g, st, None)
         for m, sel, f in baro:
             nf.add(f)
             tags.append(("b", m, sel))
-            self._note(m, st, cal)
+            self.points.note(m, st, cal)
         return tags
 
     def drop_fixes(self, rej: np.ndarray, ms: Any = None) -> tuple[np.ndarray, list[int]]:
@@ -177,68 +150,10 @@ class TermBook:
 
     def due(self, marked: np.ndarray, k_new: int, rot: Any, pos: Any,
             cal: dict[int, Any] | None, all_segments: bool = False) -> np.ndarray:
-        """Intervals to rebuild: among those touching a marked keyframe (``marked``), the
-        ones whose keyframes (``rot``, ``pos``: current estimate there) moved beyond the
-        thresholds; and the baro intervals of the newest two segments whose K moved beyond
-        ``CALIB_THRESHOLD`` (of every segment with ``all_segments``). Only intervals ending
-        at or before keyframe ``k_new``."""
-        if self.thr is None:
-            return np.zeros(0, dtype=int)
-        ks = np.unique(np.r_[marked, marked - 1]).astype(int)
-        ks = ks[(ks >= self.floor) & (ks < k_new)]
-        ks = ks[self.built[ks]]
-        out = [np.zeros(0, dtype=int)]
-        if ks.size:
-            rot_thr, trans_thr = self.thr
-            r_now = np.stack([rot[ks], rot[ks + 1]], axis=1)
-            d_r = np.einsum("nkji,nkjl->nkil", self.lin_rot[ks], r_now)
-            cosang = np.clip((np.einsum("nkii->nk", d_r) - 1.0) / 2.0, -1.0, 1.0)
-            p_now = np.stack([pos[ks], pos[ks + 1]], axis=1)
-            d_p = np.einsum("nkji,nkj->nki", self.lin_rot[ks], p_now - self.lin_pos[ks])
-            bad = (np.arccos(cosang) > rot_thr).any(1) | (np.abs(d_p) > trans_thr).any((1, 2))
-            out.append(ks[bad])
-        if cal is not None and k_new >= 1:
-            j_new = int(self.seg[k_new - 1])
-            lo = 0 if all_segments else int(np.searchsorted(self.seg, max(j_new - 1, 0),
-                                                            side="left"))
-            m = np.arange(max(lo, self.floor), k_new)
-            m = m[~np.isnan(self.lin_cal[m, 0])]
-            if m.size:
-                k_now = np.array([cal[int(j)] for j in self.seg[m]])
-                bad = (np.abs(k_now - self.lin_cal[m]) > np.asarray(CALIB_THRESHOLD)).any(1)
-                out.append(m[bad])
-        return np.unique(np.concatenate(out))
+        """The intervals to rebuild from ``floor`` on (``LinPoints.due``)."""
+        return self.points.due(marked, k_new, rot, pos, cal, self.floor, all_segments)
 
     # -- rebuilding ------------------------------------------------------------------------
-
-    def _damped_calibration(self, cal: dict[int, Any], ms: list[int]) -> dict[int, Any]:
-        """The (s, τd) to rebuild the baro terms of intervals ``ms`` at: the estimate, except
-        that a component whose step from the segment's last rebuild point reverses that
-        rebuild's own step is moved half-way only. Rebuilding at the estimate is an undamped
-        Gauss-Newton step in (s, τd); where h(t_s − τd) is strongly curved (a touchdown)
-        and τd weakly determined, it alternates between two values and the final rounds
-        never settle (docs/real_logs.md, "graph-isam2 on the shared logs"). Halving a
-        reversed step damps such a cycle; monotone steps are taken whole."""
-        out = dict(cal)
-        for j in sorted({int(self.seg[m]) for m in ms}):
-            now = np.asarray(cal[j], float)
-            if j not in self.seg_lin:
-                lin = self.lin_cal[[m for m in ms if int(self.seg[m]) == j]]
-                lin = lin[~np.isnan(lin[:, 0])]
-                if not lin.size:
-                    continue
-                self.seg_lin[j] = lin[0].copy()
-            d = now - self.seg_lin[j]
-            prev = self.seg_step.get(j)
-            if prev is not None:
-                rev = d * prev < 0
-                if rev.any():
-                    d = np.where(rev, 0.5 * d, d)
-                    self.damped += 1
-            self.seg_step[j] = d
-            self.seg_lin[j] = self.seg_lin[j] + d
-            out[j] = self.seg_lin[j].copy()
-        return out
 
     def rebuild(self, nf: Any, k: int, rot: Any, pos: Any, vel: Any, bias: Any, cb: Any,
                 gg: Any, cal: dict[int, Any] | None, bt: Any, bz: Any,
@@ -275,14 +190,13 @@ class TermBook:
             removed.append(int(self.gnss_idx[m]))
             self.gnss_idx[m] = -1
         if cal is not None:  # before the intervals' points are cleared below
-            cal = self._damped_calibration(cal, ks)
+            cal = self.points.damped_calibration(cal, ks)
         for m in ks:
             if self.baro_idx[m]:
                 removed.extend(self.baro_idx[m])
                 samples.extend(self.baro_of[m])
                 self.baro_idx[m], self.baro_of[m] = [], []
-            self.built[m] = False
-            self.lin_cal[m] = np.nan
+            self.points.clear(m)
         baro_ms: set[int] = set()
         if (samples or extra) and cal is not None:
             sel = np.sort(np.concatenate(samples)) if samples else np.zeros(0, dtype=int)
@@ -296,7 +210,7 @@ class TermBook:
             self.dropped_at_floor += sel.size - n_in
         for m in sorted(set(ks) | baro_ms):
             # a sample that moved into an interval not rebuilt here leaves its point alone
-            self._note(m, st, cal if m in baro_ms else None)
+            self.points.note(m, st, cal if m in baro_ms else None)
         removed = sorted(set(removed))  # a merged factor is both an interval's GNSS and baro
         self.relinearized += len(ks)
         self.swapped_factors += len(removed)

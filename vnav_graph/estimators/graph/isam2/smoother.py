@@ -16,7 +16,7 @@ columns on B(k) (``linear_factors.gnss_factor``, ``linear_factors.baro_factors``
 callback ever runs inside iSAM2. They are relinearised as iSAM2 relinearises its own factors
 (``relin.TermBook``): after each update the terms on the keyframes iSAM2 marked are checked
 against the rotation/translation thresholds (and their segment's (s, τd) against
-``relin.CALIB_THRESHOLD``); the due ones are rebuilt at the current estimate and swapped in at
+``lin_points.CALIB_THRESHOLD``); the due ones are rebuilt at the current estimate and swapped in at
 the next update (``removeFactorIndices``), counted in ``info["isam2_relinearized"]``.
 
 Thresholds: per variable type (``GraphConfig.relinearize_typed``), C/K never (linear
