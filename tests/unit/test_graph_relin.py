@@ -18,6 +18,7 @@ from vnav_graph.estimators.graph.settings import GraphConfig
 from vnav_graph.simulation.scenario import load_scenario, simulate
 
 M = 7  # the interval under test
+ARRAYS = ("rot", "pos", "vel", "bias", "cb", "gg")  # the running arrays, in their order
 
 
 @pytest.fixture(scope="module")
@@ -91,8 +92,7 @@ def test_rebuilt_terms_equal_the_originals_at_their_point(problem):
     book.record(tags, range(nf.size()))
     book.pending = np.array([M])
     nf2 = gtsam.NonlinearFactorGraph()
-    tags2, removed = book.rebuild(nf2, M + 1, a["rot"], a["pos"], a["vel"], a["bias"], a["cb"],
-                                  a["gg"], cal, P.drive.baro.t, P.drive.baro.altitude, P.pri)
+    tags2, removed = book.rebuild(nf2, M + 1, tuple(a[n] for n in ARRAYS), cal)
     assert sorted(removed) == list(range(nf.size()))
     # rebuilt, the interval's GNSS rows go into its baro factor: one factor
     assert [t[:2] for t in tags2] == [("gb", M)]
@@ -131,8 +131,7 @@ def test_rebuilt_terms_follow_a_new_calibration(problem):
     assert book.due(marked, M + 1, a["rot"], a["pos"], cal0).size == 0
     book.pending = due
     nf2 = gtsam.NonlinearFactorGraph()
-    tags2, _ = book.rebuild(nf2, M + 1, a["rot"], a["pos"], a["vel"], a["bias"], a["cb"],
-                            a["gg"], cal1, P.drive.baro.t, P.drive.baro.altitude, P.pri)
+    tags2, _ = book.rebuild(nf2, M + 1, tuple(a[n] for n in ARRAYS), cal1)
     _, _, _, baro1 = _terms_of(P, a, cal1, fixes_of, M, tau_sel=cal0[0][1])
     lin = _lin(P, a, cal1, M)
     i_b = [i for i, t in enumerate(tags2) if t[0] == "b"]

@@ -31,22 +31,15 @@ def check_pass(P: Problem, cfg: GraphConfig, on: OnlineResult, robust: bool, own
     """With ``final_batch``, the batch pass (Gauss-Newton) from iSAM2's own estimate, or
     from graph-batch's start after a robust retry or when it does not converge; its result
     (None without ``final_batch``) and whether it was restarted."""
-    ext, init, gate0, pri = on.ext, on.init, on.gate0, P.pri
-    rot_i, pos_i, vel_i = init
+    ext, init, gate0 = on.ext, on.init, on.gate0
     res = None
     restarted = False
     if cfg.final_batch:
-        if robust:
-            # the online pass needed the retry: its estimate is a poor starting point
-            # (docs/real_logs.md, "graph-isam2 on the shared logs"), so the batch pass
-            # starts where graph-batch starts and therefore equals it
-            graph, res_vals = build_batch_graph(P, rot_i, pos_i, vel_i,
-                                                pims_for(P, rot_i, pos_i), pri, calib0)
-            if ext is not None:
-                ext.add_to_batch(graph, res_vals)
-        else:
-            graph, res_vals = own_graph, own_vals
-        res = gauss_newton(P, graph, res_vals, calib0, pri)
+        # after a retry the online estimate is a poor starting point (docs/real_logs.md,
+        # "graph-isam2 on the shared logs"): the batch pass starts where graph-batch starts
+        # and therefore equals it
+        graph, res_vals = batch_start(P, init, ext) if robust else (own_graph, own_vals)
+        res = gauss_newton(P, graph, res_vals, calib0, P.pri)
         if not robust and not res.converged:
             # the online estimate can sit outside Gauss-Newton's basin after a long
             # outage with a MEMS IMU (long-outage seed 1: 100 iterations, 466 m
@@ -106,31 +99,30 @@ def choose(P: Problem, cfg: GraphConfig, on: OnlineResult, robust: bool, own: An
 
 def restart(P: Problem, init: tuple[Any, Any, Any], ext: Any, gate0: tuple[Any, int],
             res: Any, take_converged: bool) -> Any:
-    """The batch pass again from graph-batch's starting point (``from_batch_start``); its
-    solution when it ends lower than ``res`` (or, with ``take_converged``, when it
-    converged), else ``res`` with the GNSS gate decisions that went with it."""
+    """The batch Gauss-Newton again from graph-batch's own starting point, with the GNSS
+    fixes the gates had accepted before the first batch pass (``gate0``: ``P.g_use`` and
+    ``P.g_rej_post`` then; a pass from a diverged point gates good fixes out); its solution
+    when it ends lower than ``res`` (or, with ``take_converged``, when it converged), else
+    ``res`` with the GNSS gate decisions that went with it."""
     gate1 = (P.g_use.copy(), P.g_rej_post)
-    res2 = from_batch_start(P, init, ext, gate0)
+    P.g_use[:] = gate0[0]
+    P.g_rej_post = gate0[1]
+    res2 = gauss_newton(P, *batch_start(P, init, ext), np.zeros(P.n_kf, dtype=int), P.pri)
     if res2.cost < res.cost or (take_converged and res2.converged):
         return res2
     P.g_use[:], P.g_rej_post = gate1
     return res
 
 
-def from_batch_start(P: Problem, init: tuple[Any, Any, Any], ext: Any,
-                     gate0: tuple[Any, int]) -> Any:
-    """The batch Gauss-Newton from graph-batch's own starting point, with the GNSS fixes
-    the gates had accepted before the first batch pass (``gate0``: ``P.g_use`` and
-    ``P.g_rej_post`` then): a pass from a diverged point gates good fixes out."""
-    P.g_use[:] = gate0[0]
-    P.g_rej_post = gate0[1]
+def batch_start(P: Problem, init: tuple[Any, Any, Any], ext: Any) -> tuple[Any, Any]:
+    """graph-batch's own starting point: its graph and values from the initial states
+    ``init``, with the extensions' factors and variables."""
     rot_i, pos_i, vel_i = init
-    calib0 = np.zeros(P.n_kf, dtype=int)
-    g2, v2 = build_batch_graph(P, rot_i, pos_i, vel_i, pims_for(P, rot_i, pos_i), P.pri,
-                               calib0)
+    graph, vals = build_batch_graph(P, rot_i, pos_i, vel_i, pims_for(P, rot_i, pos_i), P.pri,
+                                    np.zeros(P.n_kf, dtype=int))
     if ext is not None:
-        ext.add_to_batch(g2, v2)
-    return gauss_newton(P, g2, v2, calib0, P.pri)
+        ext.add_to_batch(graph, vals)
+    return graph, vals
 
 
 def batch_from(P: Problem, est: Any, pims: list[Any], pri: dict[str, float], seg: Any,

@@ -58,8 +58,9 @@ def close_last(op: Any) -> None:
     if nk < 2:
         return
     sk = terms.keyframe_states(P, nk - 2, *st.arrays, st.dg_kf)
-    new_baro, op.baro_next = terms.baro_factors(P, nk - 2, sk, st.bias, st.cal, op.seg, op.bt,
-                                                op.bz, op.baro_next, P.pri, last=True)
+    new_baro, op.baro_next = terms.baro_factors(P, nk - 2, sk, st.bias, st.cal, op.seg,
+                                                op.book.bt, op.book.bz, op.baro_next, P.pri,
+                                                last=True)
     nf = gtsam.NonlinearFactorGraph()
     nv = gtsam.Values()
     tags = op.book.new_terms(nk - 2, None, new_baro, sk, st.calibration(), nf)
@@ -77,7 +78,7 @@ def finish(op: Any) -> OnlineResult:
     a.online[:, 6:10] = mat_to_quat(a.online_rot)  # one call (0.4 ms per keyframe)
     t_online = time.perf_counter()
     extra_online = extra_online_of(op.isam, op.isam.calculateEstimate(), op.ext)
-    args = (P, op.seg, st.rw_idx, st.arrays, st.cal, op.bt, op.bz, st.dg_kf)
+    args = (P, op.seg, st.rw_idx, st.arrays, st.cal)
     op.pyf.skip = 1  # the final rounds check at every round, as iSAM2's forced ones
     # the online gap priors (from the online state) give way to graph-batch's (from the
     # initial states); those that left the window stay (counted)
@@ -95,7 +96,7 @@ def finish(op: Any) -> OnlineResult:
         # gap on hill-drive: 7 fixes the batch gated, a cost gap of 26 against the batch
         # pass with them in iSAM2)
         for _ in range(cfg.gate_rounds):
-            k_cal = st.cal[int(op.seg[-1])] if op.has_baro else None
+            k_cal = st.cal[int(op.seg[-1])] if st.has_baro else None
             kf_rm = relin.post_solve_gate(book, P,
                                           relin.estimate_states(P, st.arrays, k_cal))
             if not book.pending.size and not kf_rm:
@@ -118,7 +119,7 @@ def finish(op: Any) -> OnlineResult:
               "isam2_gnss_return_rounds": op.gate.return_rounds,
               # the extensions' CustomFactors linearised again (``py_factors``)
               "isam2_relinearized_custom": op.pyf.rebuilt,
-              "baro_scale_max_abs": st.s_max if op.has_baro else None,
+              "baro_scale_max_abs": st.s_max if st.has_baro else None,
               "isam2_final_rounds": rounds,
               "isam2_gnss_rejected_postsolve": P.g_rej_post - gate0[1],
               # refused by the online pass's gate after its updates (``online_gate``)

@@ -1,10 +1,6 @@
-"""Where ``graph-isam2``'s interval terms were linearised, and when they are due
-(``LinPoints``, the policy of ``relin.TermBook``).
-
-A term is due when its keyframes moved beyond the rotation/translation thresholds iSAM2
-uses (``GraphConfig.relinearize_typed``, or the scalar threshold), or its segment's baro
-calibration K = (s, τd) beyond ``CALIB_THRESHOLD`` since it was built. The baro terms of a
-segment are rebuilt at a damped (s, τd) (``LinPoints.damped_calibration``)."""
+"""Where ``graph-isam2``'s interval terms were linearised, when they are due and the (s, τd)
+they are rebuilt at (``LinPoints``: the policy of ``relin.TermBook``, whose module docstring
+says why)."""
 
 from __future__ import annotations
 

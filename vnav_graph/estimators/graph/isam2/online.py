@@ -60,7 +60,6 @@ class OnlinePass:
         prior ``start0.yaw_sd``) instead of the initial states' keyframe 0."""
         P = self.P = setup(drive, cfg) if P is None else P
         self.cfg = cfg
-        self.has_baro = drive.baro is not None
         self.init = initial_states(P) if init is None else init
         nk = P.n_kf
         self.seg = seg = segments(P)
@@ -80,9 +79,7 @@ class OnlinePass:
         self._add_ext(0, graph0, vals0)
         new0 = self.isam.update(graph0, vals0).getNewFactorsIndices()
         self.pyf.record_new(new0, 0)
-        self.bt = drive.baro.t if self.has_baro else np.zeros(0)
-        self.bz = drive.baro.altitude if self.has_baro else np.zeros(0)
-        self.book = relin.TermBook(P, seg, interval_fixes(P))
+        self.book = relin.TermBook(P, seg, interval_fixes(P), st.dg_kf)
         self.win = (Window(P, seg, cfg.isam2_window_s, self.ext)
                     if cfg.isam2_window_s is not None else None)
         self.win_info: dict[str, Any] = {"isam2_window_s": None}
@@ -127,8 +124,7 @@ class OnlinePass:
         # the interval terms go first in the update (their factor indices come first): the
         # ones due for relinearisation, rebuilt at the current estimate ...
         nf_t = gtsam.NonlinearFactorGraph()
-        tags, removed = book.rebuild(nf_t, k, *arr, st.calibration(), self.bt, self.bz, P.pri,
-                                     st.dg_kf)
+        tags, removed = book.rebuild(nf_t, k, arr, st.calibration())
         n_swap = len(tags)
         # ... then the new ones, at this linearisation: the GNSS fixes inside interval k
         # enter with its end keyframe (no delay to wait for); the baro samples stamped up to
@@ -139,7 +135,7 @@ class OnlinePass:
         st.new_states(k, nf, nv)
         self._add_ext(k + 1, nf, nv)
         new_baro, self.baro_next = terms.baro_factors(P, k, sk, st.bias, st.cal, self.seg,
-                                                      self.bt, self.bz, self.baro_next, P.pri)
+                                                      book.bt, book.bz, self.baro_next, P.pri)
         tags += book.new_terms(k, gcf, new_baro, sk, st.calibration(), nf_t)
         # the extensions' due CustomFactors, rebuilt after everything else
         nf_p = gtsam.NonlinearFactorGraph()
@@ -152,12 +148,10 @@ class OnlinePass:
             # those of the rebuilt terms: with them a large swap leaves a root clique of
             # hundreds of variables
             last = gtsam.KeyGroupMap()
-            for i in range(n_swap, nf_t.size()):
-                for key in nf_t.at(i).keys():
-                    last.insert2(key, 1)
-            for i in range(nf.size()):
-                for key in nf.at(i).keys():
-                    last.insert2(key, 1)
+            for graph, i0 in ((nf_t, n_swap), (nf, 0)):
+                for i in range(i0, graph.size()):
+                    for key in graph.at(i).keys():
+                        last.insert2(key, 1)
         nf_t.push_back(nf)
         nf_t.push_back(nf_p)
         t_lcf = time.perf_counter()
@@ -210,8 +204,7 @@ class OnlinePass:
                 book.pending = np.union1d(book.pending, gated).astype(int)
             nf = gtsam.NonlinearFactorGraph()
             self.pyf.check(self.isam, k + 1, st.arrays)
-            tags, removed = book.rebuild(nf, k, *st.arrays, st.calibration(), self.bt, self.bz,
-                                         P.pri, st.dg_kf)
+            tags, removed = book.rebuild(nf, k, st.arrays, st.calibration())
             ext_removed = self.pyf.rebuild_into(nf, 0, st.arrays)
             n_ext = len(ext_removed)
             removed = sorted(set(removed) | set(ext_removed)

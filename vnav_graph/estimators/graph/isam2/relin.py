@@ -66,10 +66,17 @@ class TermBook:
     """Factor indices of one pass's interval terms and their linearisation points
     (``points``); picks the due ones and rebuilds them (module docstring)."""
 
-    def __init__(self, P: Problem, seg: np.ndarray, fixes_of: list[np.ndarray]) -> None:
+    def __init__(self, P: Problem, seg: np.ndarray, fixes_of: list[np.ndarray],
+                 dg: Any = None) -> None:
+        """``dg``: the gravity anomaly at each keyframe (``linear_factors.keyframe_states``),
+        filled as the pass goes."""
         self.P = P
         self.seg = seg
         self.fixes_of = fixes_of
+        baro = P.drive.baro
+        self.bt = baro.t if baro is not None else np.zeros(0)  # the baro samples
+        self.bz = baro.altitude if baro is not None else np.zeros(0)
+        self.dg = dg
         n = max(P.n_kf - 1, 0)
         self.gnss_idx = np.full(n, -1, dtype=np.int64)
         self.baro_idx: list[list[int]] = [[] for _ in range(n)]
@@ -155,20 +162,19 @@ class TermBook:
 
     # -- rebuilding ------------------------------------------------------------------------
 
-    def rebuild(self, nf: Any, k: int, rot: Any, pos: Any, vel: Any, bias: Any, cb: Any,
-                gg: Any, cal: dict[int, Any] | None, bt: Any, bz: Any,
-                pri: dict[str, float], dg: Any = None
+    def rebuild(self, nf: Any, k: int, arrays: tuple[Any, ...], cal: dict[int, Any] | None
                 ) -> tuple[list[tuple[Any, ...]], list[int]]:
-        """Rebuild the pending intervals' terms at the running arrays (the current estimate;
-        keyframe k+1: its prediction) into ``nf``; returns their tags and the indices of
-        the factors they replace. Samples whose delayed time moved past keyframe k+1 are
-        clipped into interval k, as when they first entered."""
+        """Rebuild the pending intervals' terms at the running arrays (rot, pos, vel, bias,
+        cb, gg: the current estimate; keyframe k+1: its prediction) into ``nf``; returns
+        their tags and the indices of the factors they replace. Samples whose delayed time
+        moved past keyframe k+1 are clipped into interval k, as when they first entered."""
         ks = [int(m) for m in self.pending if self.floor <= m < k + 1]
         self.pending = np.zeros(0, dtype=int)
         if not ks:
             return [], []
         P = self.P
-        st = terms.keyframe_states(P, ks, rot, pos, vel, bias, cb, gg, dg)
+        st = terms.keyframe_states(P, ks, *arrays, self.dg)
+        bias = arrays[3]
         tags: list[tuple[Any, ...]] = []
         removed: list[int] = []
         samples = []
@@ -201,8 +207,8 @@ class TermBook:
         if (samples or extra) and cal is not None:
             sel = np.sort(np.concatenate(samples)) if samples else np.zeros(0, dtype=int)
             n_in = 0
-            for m, s_m, f in terms.baro_terms(P, k, st, bias, cal, self.seg, bt, bz, sel, pri,
-                                              extra=extra, floor=self.floor):
+            for m, s_m, f in terms.baro_terms(P, k, st, bias, cal, self.seg, self.bt, self.bz,
+                                              sel, P.pri, extra=extra, floor=self.floor):
                 n_in += s_m.size
                 nf.add(f)
                 tags.append(("gb" if m in extra else "b", m, s_m))
@@ -280,9 +286,9 @@ def state_keys(keys_k: Any, P: Problem, b_last: int | None = None) -> Any:
 
 
 def settle(isam: Any, book: TermBook, P: Problem, seg: Any, rw_idx: list[int],
-            arrays: tuple[Any, ...], cal: dict[int, Any], bt: Any, bz: Any,
-            dg: Any, tie: bool = True, removed: list[int] | None = None,
-            pyf: Any = None, swap: tuple[list[int], list[Any]] = ([], [])) -> list[list[int]]:
+            arrays: tuple[Any, ...], cal: dict[int, Any], tie: bool = True,
+            removed: list[int] | None = None, pyf: Any = None,
+            swap: tuple[list[int], list[Any]] = ([], [])) -> list[list[int]]:
     """Final rounds after the last keyframe, so that iSAM2's own estimate is the smoothed
     optimum of the batch's model: the segments' (s, τd) and accelerometer scale factors are
     tied into one (their random walks removed, ``TIE_SD`` between neighbours), then
@@ -300,12 +306,11 @@ def settle(isam: Any, book: TermBook, P: Problem, seg: Any, rw_idx: list[int],
     everything = np.arange(book.floor, nk)  # the keyframes iSAM2 holds
     j0 = book.first_seg
     has_baro = P.drive.baro is not None
-    rot, pos, vel, bias, cb, gg = arrays
+    rot, pos = arrays[0:2]
     tags: list[tuple[Any, ...]] = []
     if book.pending.size:  # due intervals (the post-solve gate's) rebuilt in the first round
         # (first in the update: ``record`` pairs the tags with the first new indices)
-        tags, more = book.rebuild(nf, nk - 2, rot, pos, vel, bias, cb, gg,
-                                  cal if has_baro else None, bt, bz, P.pri, dg)
+        tags, more = book.rebuild(nf, nk - 2, arrays, cal if has_baro else None)
         removed = sorted(set(removed) | set(more))
     if tie and n_seg > 1 and (has_baro or P.ka is not None):
         for j in range(j0 + 1, n_seg):
@@ -319,14 +324,16 @@ def settle(isam: Any, book: TermBook, P: Problem, seg: Any, rw_idx: list[int],
         nf.add(f)
     removed = sorted(set(removed) | set(swap[0]))
     out: list[list[int]] = []
-    py_at = _py_rebuild(pyf, nf, arrays, removed)
+    removed = sorted(set(removed) | set(pyf.rebuild_into(nf, 0, arrays) if pyf is not None
+                                         else []))
     for r in range(cfg.final_rounds):
         # an empty constraint map: plain COLAMD for the re-elimination (iSAM2's default
         # puts every key of the new factors, nearly all here, last: one huge root clique)
         ures = isam.update(nf, gtsam.Values(), removed, gtsam.KeyGroupMap(), None, None, True)
         book.record(tags, ures.getNewFactorsIndices())
+        n_py = len(pyf.new[0]) if pyf is not None else 0
         if pyf is not None:
-            pyf.record(py_at[0], ures.getNewFactorsIndices(), py_at[1])
+            pyf.record_new(ures.getNewFactorsIndices(), 0)
         n_relin = int(ures.getVariablesRelinearized())
         est = isam.calculateBestEstimate()
         read_states(est, everything, arrays, P)
@@ -338,27 +345,16 @@ def settle(isam: Any, book: TermBook, P: Problem, seg: Any, rw_idx: list[int],
                 cal[j] = est.atVector(K(j))
         book.pending = book.due(everything, nk - 1, rot, pos, cal if has_baro else None,
                                 all_segments=True)
-        out.append([len(tags) + len(py_at[0]), n_relin])
+        out.append([len(tags) + n_py, n_relin])
         py_due = pyf is not None and pyf.pending.size
         if (not book.pending.size and not py_due and n_relin == 0) \
                 or r == cfg.final_rounds - 1:
             break
         nf = gtsam.NonlinearFactorGraph()
-        tags, removed = book.rebuild(nf, nk - 2, rot, pos, vel, bias, cb, gg,
-                                     cal if has_baro else None, bt, bz, P.pri, dg)
-        py_at = _py_rebuild(pyf, nf, arrays, removed)
+        tags, removed = book.rebuild(nf, nk - 2, arrays, cal if has_baro else None)
+        removed = sorted(set(removed) | set(pyf.rebuild_into(nf, 0, arrays) if pyf is not None
+                                             else []))
     return out
-
-
-def _py_rebuild(pyf: Any, nf: Any, arrays: tuple[Any, ...], removed: list[int]
-                ) -> tuple[list[int], list[int]]:
-    """The extension book's due factors rebuilt at the end of ``nf`` (the factors they
-    replace added to ``removed``, in place); their slots and positions in ``nf``."""
-    if pyf is None or not pyf.pending.size:
-        return [], []
-    slots, at, more = pyf.rebuild(nf, arrays)
-    removed[:] = sorted(set(removed) | set(more))
-    return slots, at
 
 
 def post_solve_gate(book: TermBook, P: Problem, states: Any) -> list[int]:

@@ -148,14 +148,10 @@ class GraphISAM2:
     def _run(self, drive: Drive, cfg: GraphConfig, robust: bool, t_start: float,
              fallback: str | None) -> Estimate:
         with solver_context():
-            return self._run_pass(drive, cfg, robust, t_start, fallback)
-
-    def _run_pass(self, drive: Drive, cfg: GraphConfig, robust: bool, t_start: float,
-                  fallback: str | None) -> Estimate:
-        extensions = (*self.extensions, *builtin_extensions(drive, cfg))
-        on, start_info = causal_pass(drive, cfg, robust, extensions)
-        on.relin_counts["isam2_causal_start"] = start_info
-        return self._finish(drive, cfg, on, robust, fallback, t_start)
+            extensions = (*self.extensions, *builtin_extensions(drive, cfg))
+            on, start_info = causal_pass(drive, cfg, robust, extensions)
+            on.relin_counts["isam2_causal_start"] = start_info
+            return self._finish(drive, cfg, on, robust, fallback, t_start)
 
     def _finish(self, drive: Drive, cfg: GraphConfig, on: OnlineResult, robust: bool,
                 fallback: str | None, t_start: float) -> Estimate:
