@@ -102,7 +102,7 @@ class Answers:
 
     def keep(self, other: Answers, n: int) -> None:
         """Keyframes 0 … n − 1 and the lag records of the updates that created them from
-        ``other`` (the causal start's pass, ``online.causal_pass``)."""
+        ``other`` (the causal start's pass, ``causal.causal_pass``)."""
         for name in ("online", "online_rot", "online_bias", "online_cov"):
             getattr(self, name)[:n] = getattr(other, name)[:n]
         t_n = float(self.P.t_kf[n]) if n < self.P.n_kf else np.inf
