@@ -517,7 +517,7 @@ def test_a_too_short_isam2_window_is_caught_by_the_batch_check(problem):
     e2 = g.GraphISAM2(cfg).run(drive)
     assert e2.info["isam2_marginalised_keyframes"] > drive.duration_s / 2
     fb = e2.info["final_batch"]
-    assert 2 * fb["cost_gap"] > g.isam2.smoother.OWN_GAP_FRACTION * fb["dimension"]
+    assert 2 * fb["cost_gap"] > g.isam2.final_check.OWN_GAP_FRACTION * fb["dimension"]
     assert e2.info["trajectory_source"] == "final_batch"
     assert e2.info["isam2_final"] == "batch"
     assert any("final batch pass's" in f for f in e2.info["fallbacks"])

@@ -48,7 +48,7 @@ def test_own_estimate_is_returned_and_checked_by_the_batch_pass(monkeypatch):
     negative tolerance) that is a warning naming both costs, and the answer stays iSAM2's
     unless ``isam2_batch_fallback`` is set."""
     from vnav_graph.estimators.graph import GraphConfig, GraphISAM2
-    from vnav_graph.estimators.graph.isam2 import smoother as gi
+    from vnav_graph.estimators.graph.isam2 import final_check as gi
 
     drive = simulate(load_scenario("hill-drive", duration_s=120.0), seed=1)
     batch = create("graph-batch").run(drive)

@@ -112,11 +112,11 @@ def test_218_holdout_isam2_keeps_its_own_estimate(data_dir: Path) -> None:
     assert e.info["trajectory_source"] == "isam2", e.info["warnings"]
     assert e.info["accel_scale_estimated"]
     assert len(e.info["isam2_final_rounds"]) < 8
-    # iSAM2 rebuilds its baro terms only when τd moves by more than relin.CALIB_THRESHOLD
+    # iSAM2 rebuilds its baro terms only when τd moves by more than lin_points.CALIB_THRESHOLD
     # (0.05 s, ≈ 1σ here), so its settled τd may differ from the batch's by a fraction of
     # that: measured 0.005 s (0.09σ) with the biases as random walks, 0.012 s (0.23σ) with
     # their Gauss-Markov step; the cycling this test guards against was ±0.3 s
-    from vnav_graph.estimators.graph.isam2.relin import CALIB_THRESHOLD
+    from vnav_graph.estimators.graph.isam2.lin_points import CALIB_THRESHOLD
 
     assert abs(e.baro.latency_s.est - b.baro.latency_s.est) < 0.5 * CALIB_THRESHOLD[1]
     assert abs(e.baro.latency_s.est - b.baro.latency_s.est) < 0.5 * b.baro.latency_s.sd

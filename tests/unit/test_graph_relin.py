@@ -18,6 +18,7 @@ from vnav_graph.estimators.graph.settings import GraphConfig
 from vnav_graph.simulation.scenario import load_scenario, simulate
 
 M = 7  # the interval under test
+ARRAYS = ("rot", "pos", "vel", "bias", "cb", "gg")  # the running arrays, in their order
 
 
 @pytest.fixture(scope="module")
@@ -91,8 +92,7 @@ def test_rebuilt_terms_equal_the_originals_at_their_point(problem):
     book.record(tags, range(nf.size()))
     book.pending = np.array([M])
     nf2 = gtsam.NonlinearFactorGraph()
-    tags2, removed = book.rebuild(nf2, M + 1, a["rot"], a["pos"], a["vel"], a["bias"], a["cb"],
-                                  a["gg"], cal, P.drive.baro.t, P.drive.baro.altitude, P.pri)
+    tags2, removed = book.rebuild(nf2, M + 1, tuple(a[n] for n in ARRAYS), cal)
     assert sorted(removed) == list(range(nf.size()))
     # rebuilt, the interval's GNSS rows go into its baro factor: one factor
     assert [t[:2] for t in tags2] == [("gb", M)]
@@ -131,8 +131,7 @@ def test_rebuilt_terms_follow_a_new_calibration(problem):
     assert book.due(marked, M + 1, a["rot"], a["pos"], cal0).size == 0
     book.pending = due
     nf2 = gtsam.NonlinearFactorGraph()
-    tags2, _ = book.rebuild(nf2, M + 1, a["rot"], a["pos"], a["vel"], a["bias"], a["cb"],
-                            a["gg"], cal1, P.drive.baro.t, P.drive.baro.altitude, P.pri)
+    tags2, _ = book.rebuild(nf2, M + 1, tuple(a[n] for n in ARRAYS), cal1)
     _, _, _, baro1 = _terms_of(P, a, cal1, fixes_of, M, tau_sel=cal0[0][1])
     lin = _lin(P, a, cal1, M)
     i_b = [i for i, t in enumerate(tags2) if t[0] == "b"]
@@ -171,27 +170,27 @@ def test_due_picks_the_moved_intervals_only(problem):
 
 
 def test_a_reversed_calibration_step_is_halved_a_monotone_one_taken_whole(problem):
-    """``TermBook._damped_calibration``: rebuilding the baro terms at the estimate is an
+    """``LinPoints.damped_calibration``: rebuilding the baro terms at the estimate is an
     undamped Gauss-Newton step in (s, τd). Steps in one direction are taken whole; a step
     that reverses the previous rebuild's is moved half-way (the 2-cycle of τd on 218.BIN's
     touchdown, relin module)."""
     P, _, fixes_of = problem
     seg = np.zeros(P.n_kf, dtype=int)
     book = relin.TermBook(P, seg, fixes_of)
-    book.lin_cal[[M, M + 1]] = [0.0, 0.1]  # the terms were first built at (0, 0.1)
+    book.points.lin_cal[[M, M + 1]] = [0.0, 0.1]  # the terms were first built at (0, 0.1)
     ms = [M, M + 1]
-    c1 = book._damped_calibration({0: np.array([0.002, 0.3])}, ms)
+    c1 = book.points.damped_calibration({0: np.array([0.002, 0.3])}, ms)
     np.testing.assert_allclose(c1[0], [0.002, 0.3])  # first rebuild: the estimate
-    c2 = book._damped_calibration({0: np.array([0.004, 0.4])}, ms)
+    c2 = book.points.damped_calibration({0: np.array([0.004, 0.4])}, ms)
     np.testing.assert_allclose(c2[0], [0.004, 0.4])  # same direction: whole
-    assert book.damped == 0
-    c3 = book._damped_calibration({0: np.array([0.006, -0.2])}, ms)
+    assert book.points.damped == 0
+    c3 = book.points.damped_calibration({0: np.array([0.006, -0.2])}, ms)
     # τd reverses (+0.1 then −0.6): half-way, −0.3 → 0.1; s goes on: whole
     np.testing.assert_allclose(c3[0], [0.006, 0.1])
-    assert book.damped == 1
+    assert book.points.damped == 1
     # the estimate passed in is not changed
     cal = {0: np.array([0.006, 0.5])}
-    book._damped_calibration(cal, ms)
+    book.points.damped_calibration(cal, ms)
     np.testing.assert_allclose(cal[0], [0.006, 0.5])
 
 

@@ -1,5 +1,6 @@
 """graph-isam2's causal answers, recorded during the online pass (``online.OnlinePass``):
-the newest keyframe's covariance after each update (``Estimate.online_cov``) and the
+the newest keyframe's state and covariance after each update (``Estimate.online``,
+``Estimate.online_cov``) and the
 fixed-lag estimate (``Estimate.lag``, ``Estimate.lag_cov``): after the update at t, the
 latest keyframe at or before t − L (L = ``GraphConfig.isam2_lag_s``) and its covariance.
 
@@ -19,8 +20,10 @@ import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import B, C, V, X
 
-from ....types import ERROR_STATE_DIM
+from ....geo.frames import mat_to_quat, ned_to_lla, quat_to_mat
+from ....types import ERROR_STATE_DIM, Trajectory
 from ....types.streams import FloatArray
+from ..model import interval_factors as gf
 from ..model.problem import Problem
 from ..solver.outputs import cov_18
 
@@ -37,8 +40,11 @@ class IsamMarginals:
 
 
 class Answers:
-    """The online covariances and the fixed-lag records of one pass over ``P``.
+    """The online states and covariances and the fixed-lag records of one pass over ``P``.
 
+    online: (n_kf, 10) p, v (t frame), quaternion (filled from ``online_rot`` after the
+    pass); online_bias: (n_kf, 6) the biases (accel, gyro) known at each keyframe's update,
+    with which the real-time output propagates the IMU between keyframes (``real_time``);
     online_cov: (n_kf, 18, 18), NaN where not computed; lag_kf: keyframe of each lag record;
     lag_t: the update time it was read at; lag_state: (n, 10) p, v (t frame), quaternion;
     lag_cov: (n, 18, 18)."""
@@ -46,6 +52,9 @@ class Answers:
     def __init__(self, P: Problem, seg: np.ndarray, lag_s: float) -> None:
         self.P, self.seg, self.lag_s = P, seg, lag_s
         nk = P.n_kf
+        self.online = np.zeros((nk, 10))
+        self.online_rot = np.zeros((nk, 3, 3))
+        self.online_bias = np.zeros((nk, 6))
         self.online_cov = np.full((nk, ERROR_STATE_DIM, ERROR_STATE_DIM), np.nan)
         self.lag_kf: list[int] = []
         self.lag_t: list[float] = []
@@ -57,11 +66,20 @@ class Answers:
     def cov(self, isam: Any, vals: Any, k: int, kb: int) -> FloatArray:
         return cov_18(self.P, IsamMarginals(isam), vals, k, kb, int(self.seg[k]))
 
-    def after_update(self, isam: Any, k: int, pose_new: Any) -> None:
-        """After the update that created keyframe k + 1 (``pose_new``: its Pose3 as read
-        back): its covariance, and the lag record due at t_{k+1}."""
+    def record(self, k: int, arrays: tuple[Any, ...]) -> None:
+        """Keyframe k's online state: its estimate in the running arrays (rot, pos, vel,
+        bias, ...) right after its update."""
+        rot, pos, vel, bias = arrays[0:4]
+        self.online[k, 0:6] = np.r_[pos[k], vel[k]]
+        self.online_rot[k] = rot[k]
+        self.online_bias[k] = bias[k]
+
+    def after_update(self, isam: Any, k: int, arrays: tuple[Any, ...]) -> None:
+        """After the update that created keyframe k + 1 (``arrays``: the states read back):
+        its state and covariance, and the lag record due at t_{k+1}."""
+        self.record(k + 1, arrays)
         t0 = time.perf_counter()
-        self._after_update(isam, k, pose_new)
+        self._after_update(isam, k, gtsam.Pose3(gtsam.Rot3(arrays[0][k + 1]), arrays[1][k + 1]))
         self.seconds += time.perf_counter() - t0
 
     def _after_update(self, isam: Any, k: int, pose_new: Any) -> None:
@@ -84,14 +102,36 @@ class Answers:
 
     def keep(self, other: Answers, n: int) -> None:
         """Keyframes 0 … n − 1 and the lag records of the updates that created them from
-        ``other`` (the causal start's pass, ``online.causal_pass``)."""
-        self.online_cov[:n] = other.online_cov[:n]
+        ``other`` (the causal start's pass, ``causal.causal_pass``)."""
+        for name in ("online", "online_rot", "online_bias", "online_cov"):
+            getattr(self, name)[:n] = getattr(other, name)[:n]
         t_n = float(self.P.t_kf[n]) if n < self.P.n_kf else np.inf
         a = sum(1 for t in other.lag_t if t < t_n)
         b = sum(1 for t in self.lag_t if t < t_n)
         for name in ("lag_kf", "lag_t", "lag_state", "lag_rot", "lag_cov"):
             setattr(self, name, getattr(other, name)[:a] + getattr(self, name)[b:])
 
+    def lag_answer(self) -> tuple[Trajectory | None, Any, dict[str, Any]]:
+        """``Estimate.lag`` and ``lag_cov`` from the records, and their info."""
+        info = {"lag_s": float(self.lag_s), "lag_epochs": len(self.lag_kf),
+                "isam2_marginals_s": self.seconds,
+                "online_cov_epochs": int(np.sum(np.isfinite(self.online_cov[:, 0, 0])))}
+        if not self.lag_kf:
+            return None, None, info
+        arr = np.column_stack([np.asarray(self.lag_state), mat_to_quat(np.asarray(self.lag_rot))])
+        tr = online_trajectory(self.P, arr, self.P.t_kf[np.asarray(self.lag_kf)])
+        # the lag actually realised: update time minus the keyframe's [s]
+        info["lag_realised_max_s"] = float(np.max(np.asarray(self.lag_t) - tr.t))
+        return tr, np.asarray(self.lag_cov), info
+
+
+def online_trajectory(P: Problem, online: FloatArray, t: FloatArray | None = None) -> Trajectory:
+    """(n, 10) p, v (t frame), quaternion at ``t`` (default: the keyframes) as a trajectory."""
+    lla = ned_to_lla(online[:, 0:3], P.origin)
+    c_tn = gf.rot_t_n(lla, P.origin)
+    vel_n = np.einsum("nji,nj->ni", c_tn, online[:, 3:6])
+    q = mat_to_quat(np.swapaxes(c_tn, 1, 2) @ quat_to_mat(online[:, 6:10]))
+    return Trajectory(P.t_kf if t is None else t, lla, vel_n, q)
 
 
 def real_time(P: Problem, online: FloatArray, rot: FloatArray, bias: FloatArray,
@@ -114,7 +154,6 @@ def real_time(P: Problem, online: FloatArray, rot: FloatArray, bias: FloatArray,
     (M, 10) states in ``online``'s layout, the (M, 3, 3) attitudes and the covariances (the
     keyframes', NaN between them: the propagation's own covariance is not computed)."""
     from ....nav.rotations import so3_exp
-    from ..model import interval_factors as gf
 
     t_kf = P.t_kf
     t_q = np.unique(np.r_[t_out[(t_out >= t_kf[0]) & (t_out <= t_kf[-1])], t_kf])

@@ -46,15 +46,11 @@ def causal_pass(drive: Drive, cfg: GraphConfig, robust: bool,
     # (m is the last keyframe when the heading never becomes known: the first pass is then
     # the whole online estimate, the second one gives the final estimate)
     n_kept = m + 1 if m == P.n_kf - 1 else m
-    kept, kept_rot = first.online[:n_kept].copy(), first.online_rot[:n_kept].copy()
-    kept_bias = first.online_bias[:n_kept].copy()
     answers = first.answers
     del first  # its iSAM2 is not alive under the second pass
     P.g_use[:], P.g_rej_post = g_use0, rej0
     again = OnlinePass(drive, cfg, robust, extensions, P, init)
     again.run_to(P.n_kf - 1)
-    again.online[:n_kept], again.online_rot[:n_kept] = kept, kept_rot
-    again.online_bias[:n_kept] = kept_bias
     again.answers.keep(answers, n_kept)
     info.update(anchor_keyframe=m, anchor_t_s=float(P.t_kf[m] - P.t_kf[0]))
     return again.finish(), info

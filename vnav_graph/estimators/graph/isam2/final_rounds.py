@@ -29,18 +29,16 @@ class OnlineResult:
 
     est: iSAM2's estimate after the final rounds (gtsam.Values, with the keyframes that left
     its window); extra_online: the user variables after the last keyframe; t_online: when the
-    last update ended (perf_counter); online: (n_kf, 10) p, v (t frame) and quaternion known at
-    each keyframe; init: the initial states; pims: the IMU preintegrations of the intervals;
-    seg: segment of each keyframe; upd_ms / brk: per-update timings and counts;
-    relin_counts: the info entries of the relinearisation; gate0: ``P.g_use`` and
-    ``P.g_rej_post`` before iSAM2's own post-solve gate; online_bias: the biases known at each
-    keyframe's update."""
+    last update ended (perf_counter); init: the initial states; pims: the IMU
+    preintegrations of the intervals; seg: segment of each keyframe; upd_ms / brk: per-update
+    timings and counts; relin_counts: the info entries of the relinearisation; gate0:
+    ``P.g_use`` and ``P.g_rej_post`` before iSAM2's own post-solve gate; answers: the online
+    states and covariances and the lag records."""
 
     P: Problem
     est: Any
     extra_online: Any
     t_online: float
-    online: np.ndarray
     ext: Collected | None
     init: tuple[Any, Any, Any]
     pims: list[Any]
@@ -50,26 +48,24 @@ class OnlineResult:
     relin_counts: dict[str, Any]
     gate0: tuple[Any, int]
     answers: Answers
-    online_bias: np.ndarray  # (n_kf, 6) accel, gyro bias known at each keyframe's update
-
 
 
 def close_last(op: Any) -> None:
     """The baro samples stamped after the last keyframe whose delayed time is inside the
     span, and the last keyframe's B (a continuation of the last interval's: no IMU
     factor)."""
-    P, nk = op.P, op.P.n_kf
+    P, nk, st = op.P, op.P.n_kf, op.st
     if nk < 2:
         return
-    st = terms.keyframe_states(P, nk - 2, *op.arrays, op.dg_kf)
-    new_baro, op.baro_next = terms.baro_factors(P, nk - 2, st, op.bias, op.cal, op.seg, op.bt,
-                                                op.bz, op.baro_next, P.pri, last=True)
+    sk = terms.keyframe_states(P, nk - 2, *st.arrays, st.dg_kf)
+    new_baro, op.baro_next = terms.baro_factors(P, nk - 2, sk, st.bias, st.cal, op.seg,
+                                                op.book.bt, op.book.bz, op.baro_next, P.pri,
+                                                last=True)
     nf = gtsam.NonlinearFactorGraph()
     nv = gtsam.Values()
-    tags = op.book.new_terms(nk - 2, None, new_baro, st, op.calibration(), nf)
-    if op.b_last < nk - 1:
-        op.new_bias(nv, nf, nk - 1)
-        op.b_last = nk - 1
+    tags = op.book.new_terms(nk - 2, None, new_baro, sk, st.calibration(), nf)
+    if st.b_last < nk - 1:
+        st.new_bias(nv, nf, nk - 1)
     if nf.size():
         op.book.record(tags, op.isam.update(nf, nv).getNewFactorsIndices())
 
@@ -77,20 +73,20 @@ def close_last(op: Any) -> None:
 def finish(op: Any) -> OnlineResult:
     """The last baro samples, the final rounds and iSAM2's own post-solve GNSS gate of the
     online pass ``op`` (``online.OnlinePass``); its iSAM2 instance is released afterwards."""
-    P, cfg, book = op.P, op.cfg, op.book
+    P, cfg, book, st, a = op.P, op.cfg, op.book, op.st, op.answers
     close_last(op)
-    op.online[:, 6:10] = mat_to_quat(op.online_rot)  # one call (0.4 ms per keyframe)
+    a.online[:, 6:10] = mat_to_quat(a.online_rot)  # one call (0.4 ms per keyframe)
     t_online = time.perf_counter()
     extra_online = extra_online_of(op.isam, op.isam.calculateEstimate(), op.ext)
-    args = (P, op.seg, op.rw_idx, op.arrays, op.cal, op.bt, op.bz, op.dg_kf)
+    args = (P, op.seg, st.rw_idx, st.arrays, st.cal)
     op.pyf.skip = 1  # the final rounds check at every round, as iSAM2's forced ones
     # the online gap priors (from the online state) give way to graph-batch's (from the
     # initial states); those that left the window stay (counted)
     swap = ([], [])
-    if cfg.final_rounds > 0 and op.gap_prior_idx:
-        swap = (list(op.gap_prior_idx.values()),
-                [gap_factors(P, k, *op.gap_states, op.a_keys(k))[2][0]
-                 for k in op.gap_prior_idx])
+    if cfg.final_rounds > 0 and st.gap_prior_idx:
+        swap = (list(st.gap_prior_idx.values()),
+                [gap_factors(P, k, *st.gap_states, st.a_keys(k))[2][0]
+                 for k in st.gap_prior_idx])
     rounds = (relin.settle(op.isam, book, *args, pyf=op.pyf, swap=swap)
               if cfg.final_rounds > 0 else [])
     gate0 = (P.g_use.copy(), P.g_rej_post)
@@ -100,9 +96,9 @@ def finish(op: Any) -> OnlineResult:
         # gap on hill-drive: 7 fixes the batch gated, a cost gap of 26 against the batch
         # pass with them in iSAM2)
         for _ in range(cfg.gate_rounds):
-            k_cal = op.cal[int(op.seg[-1])] if op.has_baro else None
+            k_cal = st.cal[int(op.seg[-1])] if st.has_baro else None
             kf_rm = relin.post_solve_gate(book, P,
-                                          relin.estimate_states(P, op.arrays, k_cal))
+                                          relin.estimate_states(P, st.arrays, k_cal))
             if not book.pending.size and not kf_rm:
                 break
             rounds += relin.settle(op.isam, book, *args, tie=False, removed=kf_rm,
@@ -118,12 +114,12 @@ def finish(op: Any) -> OnlineResult:
     trim_heap()  # its freed nodes are scattered over the heap: hand them back
     counts = {"isam2_relinearized": book.relinearized,
               "isam2_relinearized_factors": book.swapped_factors,
-              "isam2_calibration_steps_halved": book.damped,
+              "isam2_calibration_steps_halved": book.points.damped,
               "isam2_baro_samples_left_window": book.dropped_at_floor,
-              "isam2_gnss_return_rounds": op.return_rounds,
+              "isam2_gnss_return_rounds": op.gate.return_rounds,
               # the extensions' CustomFactors linearised again (``py_factors``)
               "isam2_relinearized_custom": op.pyf.rebuilt,
-              "baro_scale_max_abs": op.s_max if op.has_baro else None,
+              "baro_scale_max_abs": st.s_max if st.has_baro else None,
               "isam2_final_rounds": rounds,
               "isam2_gnss_rejected_postsolve": P.g_rej_post - gate0[1],
               # refused by the online pass's gate after its updates (``online_gate``)
@@ -134,5 +130,5 @@ def finish(op: Any) -> OnlineResult:
               "isam2_gap_priors_online": int(np.sum(P.gap)) - len(swap[0]),
               **op.win_info,
               "final_rounds_s": time.perf_counter() - t_online}
-    return OnlineResult(P, est, extra_online, t_online, op.online, op.ext, op.init, op.pims,
-                        op.seg, op.upd_ms, op.brk, counts, gate0, op.answers, op.online_bias)
+    return OnlineResult(P, est, extra_online, t_online, op.ext, op.init, st.pims, op.seg,
+                        op.upd_ms, op.brk, counts, gate0, a)

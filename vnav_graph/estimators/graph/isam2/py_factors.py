@@ -63,11 +63,12 @@ class PyFactorBook:
                       if not isinstance(v, (gtsam.Pose3, gtsam.Rot3))]
         d = max(dims)
         self.dim = d
-        self.kind = np.array([_POSE if self._is_pose(int(k)) else _VEC for k in pk], dtype=int)
+        self.kind = np.array([_POSE if _is_pose(int(k), self.now) else _VEC for k in pk],
+                             dtype=int)
         m = pk.size
         self.lin_r = np.tile(np.eye(3), (m, 1, 1))
         self.lin_v = np.zeros((m, d))
-        self.thr_r, self.thr_v = self._thresholds(cfg, d)
+        self.thr_r, self.thr_v = _thresholds(cfg, d, pk, self.kind, self.ext_vars, self.now)
         self.skip = max(int(cfg.relinearize_skip), 1)
         self.checks = 0
         self.pending = np.zeros(0, dtype=int)
@@ -76,40 +77,6 @@ class PyFactorBook:
         self.new: tuple[list[int], list[int]] = ([], [])
 
     # -- keys and values -----------------------------------------------------------------
-
-    def _is_pose(self, key: int) -> bool:
-        if chr(gtsam.Symbol(key).chr()) == "x":
-            return True
-        v = self.now.get(key)
-        return isinstance(v, (gtsam.Pose3, gtsam.Rot3))
-
-    def _thresholds(self, cfg: GraphConfig, d: int) -> tuple[np.ndarray, np.ndarray]:
-        """Per pair: the rotation threshold [rad] and the component thresholds (translation
-        [m] of a pose, or each vector component), inf where never relinearised."""
-        m = self.pair_key.size
-        thr_r, thr_v = np.full(m, np.inf), np.full((m, d), np.inf)
-        if cfg.relinearize_threshold <= 0:
-            return thr_r, thr_v
-        typed = cfg.relinearize_typed
-        scalar = cfg.relinearize_threshold
-        rot, trans, vel, ba, bg = typed if typed is not None else (scalar,) * 5
-        by_ch = {"x": None, "v": np.full(3, vel), "b": np.r_[[ba] * 3, [bg] * 3],
-                 "c": np.full(1, LINEAR_ONLY)}
-        for i, key in enumerate(self.pair_key):
-            key = int(key)
-            ch = chr(gtsam.Symbol(key).chr())
-            if ch == "x":
-                thr_r[i], thr_v[i, 0:3] = rot, trans
-            elif key in self.ext_vars:
-                var = self.ext_vars[key]
-                t = scalar if var.relinearize_threshold is None else var.relinearize_threshold
-                if self.kind[i] == _POSE:
-                    thr_r[i], thr_v[i, 0:3] = t, t
-                else:
-                    thr_v[i, 0:np.asarray(self.now[key]).size] = t
-            else:
-                thr_v[i, 0:by_ch[ch].size] = by_ch[ch]
-        return thr_r, thr_v
 
     def linear_only(self) -> set[str]:
         """Letters of the extension vectors that only these factors and their priors touch:
@@ -265,3 +232,42 @@ def _flat(v: Any, d: int) -> tuple[np.ndarray, np.ndarray]:
         a = np.atleast_1d(np.asarray(v, float))
         out[0:a.size] = a
     return r, out
+
+
+def _is_pose(key: int, now: dict[int, Any]) -> bool:
+    """Whether ``key`` is a keyframe pose X(k) or an extension variable whose value (in
+    ``now``) is a pose or rotation."""
+    if chr(gtsam.Symbol(key).chr()) == "x":
+        return True
+    return isinstance(now.get(key), (gtsam.Pose3, gtsam.Rot3))
+
+
+def _thresholds(cfg: GraphConfig, d: int, pair_key: np.ndarray, kind: np.ndarray,
+                ext_vars: dict[int, Any], now: dict[int, Any]) -> tuple[np.ndarray, np.ndarray]:
+    """Per (factor, key) pair (``pair_key``, ``kind``): the rotation threshold [rad] and the
+    component thresholds (translation [m] of a pose, or each vector component), inf where
+    never relinearised."""
+    m = pair_key.size
+    thr_r, thr_v = np.full(m, np.inf), np.full((m, d), np.inf)
+    if cfg.relinearize_threshold <= 0:
+        return thr_r, thr_v
+    typed = cfg.relinearize_typed
+    scalar = cfg.relinearize_threshold
+    rot, trans, vel, ba, bg = typed if typed is not None else (scalar,) * 5
+    by_ch = {"x": None, "v": np.full(3, vel), "b": np.r_[[ba] * 3, [bg] * 3],
+             "c": np.full(1, LINEAR_ONLY)}
+    for i, key in enumerate(pair_key):
+        key = int(key)
+        ch = chr(gtsam.Symbol(key).chr())
+        if ch == "x":
+            thr_r[i], thr_v[i, 0:3] = rot, trans
+        elif key in ext_vars:
+            var = ext_vars[key]
+            t = scalar if var.relinearize_threshold is None else var.relinearize_threshold
+            if kind[i] == _POSE:
+                thr_r[i], thr_v[i, 0:3] = t, t
+            else:
+                thr_v[i, 0:np.asarray(now[key]).size] = t
+        else:
+            thr_v[i, 0:by_ch[ch].size] = by_ch[ch]
+    return thr_r, thr_v

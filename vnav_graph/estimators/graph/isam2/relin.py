@@ -4,11 +4,12 @@ The baro samples and GNSS fixes between keyframes enter iSAM2 as ``LinearContain
 built in numpy (``terms``): a fixed quadratic around the point where they were built (the
 new keyframe at its IMU prediction). iSAM2 relinearises its own C++ factors but cannot
 relinearise these, so :class:`TermBook` does it the way iSAM2 does for its factors: it keeps
-every term's factor index and linearisation point, and after each update checks the terms
-whose variables iSAM2 has just marked (relinearised, or touched by new factors). A term is
-due when its keyframes moved beyond the rotation/translation thresholds iSAM2 uses
-(``GraphConfig.relinearize_typed``, or the scalar threshold), or its segment's baro
-calibration K = (s, τd) beyond ``CALIB_THRESHOLD`` since it was built. Due terms are rebuilt
+every term's factor index and linearisation point (``lin_points.LinPoints``), and after each
+update checks the terms whose variables iSAM2 has just marked (relinearised, or touched by
+new factors). A term is due when its keyframes moved beyond the rotation/translation
+thresholds iSAM2 uses (``GraphConfig.relinearize_typed``, or the scalar threshold), or its
+segment's baro calibration K = (s, τd) beyond ``lin_points.CALIB_THRESHOLD`` since it was
+built. Due terms are rebuilt
 at the current estimate and swapped in at the next update (``removeFactorIndices``), all
 factors of an interval at once; robust losses get fresh IRLS weights there.
 
@@ -36,11 +37,8 @@ from gtsam.symbol_shorthand import A, B, C, G, K, V, X
 from ..model import interval_factors as gf
 from ..model.problem import Problem, nav_accel, noise, post_solve_rejections
 from . import linear_factors as terms
+from .lin_points import LinPoints
 
-# relinearisation thresholds of K = (s, τd) for the interval terms: the linearisation error
-# of (1 + s)·h is δs·δh (≤ 1 cm for δh ≤ 1 m at δs = 0.01), that of h(t_s − τd) is
-# ½·a_up·δτ² (≤ 1.3 mm at 1 m/s² for δτ = 0.05 s)
-CALIB_THRESHOLD = (1e-2, 0.05)
 # σ of (s, τd) between neighbouring segments in the final rounds: one calibration, the
 # batch's model (the random walks of the online pass are removed)
 TIE_SD = (1e-6, 1e-5)
@@ -65,40 +63,32 @@ def marked_keyframes(keys: Any) -> np.ndarray:
 
 
 class TermBook:
-    """Factor indices and linearisation points of one pass's interval terms; picks the due
-    ones and rebuilds them (module docstring)."""
+    """Factor indices of one pass's interval terms and their linearisation points
+    (``points``); picks the due ones and rebuilds them (module docstring)."""
 
-    def __init__(self, P: Problem, seg: np.ndarray, fixes_of: list[np.ndarray]) -> None:
-        cfg = P.cfg
+    def __init__(self, P: Problem, seg: np.ndarray, fixes_of: list[np.ndarray],
+                 dg: Any = None) -> None:
+        """``dg``: the gravity anomaly at each keyframe (``linear_factors.keyframe_states``),
+        filled as the pass goes."""
         self.P = P
         self.seg = seg
         self.fixes_of = fixes_of
+        baro = P.drive.baro
+        self.bt = baro.t if baro is not None else np.zeros(0)  # the baro samples
+        self.bz = baro.altitude if baro is not None else np.zeros(0)
+        self.dg = dg
         n = max(P.n_kf - 1, 0)
         self.gnss_idx = np.full(n, -1, dtype=np.int64)
         self.baro_idx: list[list[int]] = [[] for _ in range(n)]
         self.baro_of: list[list[np.ndarray]] = [[] for _ in range(n)]
-        self.built = np.zeros(n, dtype=bool)
-        self.lin_rot = np.zeros((n, 2, 3, 3))
-        self.lin_pos = np.zeros((n, 2, 3))
-        self.lin_cal = np.full((n, 2), np.nan)  # K of the interval's baro terms when built
-        if cfg.relinearize_threshold <= 0:
-            self.thr: tuple[float, float] | None = None
-        elif cfg.relinearize_typed is None:
-            self.thr = (cfg.relinearize_threshold, cfg.relinearize_threshold)
-        else:
-            self.thr = (cfg.relinearize_typed[0], cfg.relinearize_typed[1])
+        self.points = LinPoints(P, seg)
         self.pending = np.zeros(0, dtype=int)
         # iSAM2 indices of each keyframe fix's factors (fix index → indices; ``record_fixes``)
         self.kf_fix_idx: dict[int, list[int]] = {}
         self.relinearized = 0  # interval terms rebuilt and swapped in
         self.swapped_factors = 0  # iSAM2 factors removed by those swaps
-        # per segment: the (s, τd) its baro terms were last rebuilt at, and that rebuild's
-        # step (``_damped_calibration``)
-        self.seg_lin: dict[int, np.ndarray] = {}
-        self.seg_step: dict[int, np.ndarray] = {}
         # baro samples left out of a rebuild: their delayed time moved before the window
         self.dropped_at_floor = 0
-        self.damped = 0  # rebuilds whose (s, τd) step was halved
         # with a window (``graph.window``): the oldest keyframe and segment still in iSAM2;
         # intervals before ``floor`` were marginalised and are never rebuilt
         self.floor = 0
@@ -116,16 +106,6 @@ class TermBook:
         self.floor, self.first_seg = floor, first_seg
 
     # -- bookkeeping -----------------------------------------------------------------------
-
-    def _note(self, m: int, st: gf.KeyframeStates, cal: dict[int, Any] | None) -> None:
-        """Interval m's linearisation point (kept from its first build until a rebuild; K
-        from its first baro term)."""
-        if not self.built[m]:
-            self.built[m] = True
-            self.lin_rot[m] = st.rot[m:m + 2]
-            self.lin_pos[m] = st.pos[m:m + 2]
-        if cal is not None and np.isnan(self.lin_cal[m, 0]):
-            self.lin_cal[m] = cal[int(self.seg[m])]
 
     def record(self, tags: list[tuple[Any, ...]], new_idx: Any) -> None:
         """Factor indices of the terms just added: ``tags[i]`` describes the i-th new factor
@@ -151,11 +131,11 @@ class TermBook:
         if gcf is not None:
             nf.add(gcf)
             tags.append(("g", m_g))
-            self._note(m_g, st, None)
+            self.points.note(m_g, st, None)
         for m, sel, f in baro:
             nf.add(f)
             tags.append(("b", m, sel))
-            self._note(m, st, cal)
+            self.points.note(m, st, cal)
         return tags
 
     def drop_fixes(self, rej: np.ndarray, ms: Any = None) -> tuple[np.ndarray, list[int]]:
@@ -177,83 +157,24 @@ class TermBook:
 
     def due(self, marked: np.ndarray, k_new: int, rot: Any, pos: Any,
             cal: dict[int, Any] | None, all_segments: bool = False) -> np.ndarray:
-        """Intervals to rebuild: among those touching a marked keyframe (``marked``), the
-        ones whose keyframes (``rot``, ``pos``: current estimate there) moved beyond the
-        thresholds; and the baro intervals of the newest two segments whose K moved beyond
-        ``CALIB_THRESHOLD`` (of every segment with ``all_segments``). Only intervals ending
-        at or before keyframe ``k_new``."""
-        if self.thr is None:
-            return np.zeros(0, dtype=int)
-        ks = np.unique(np.r_[marked, marked - 1]).astype(int)
-        ks = ks[(ks >= self.floor) & (ks < k_new)]
-        ks = ks[self.built[ks]]
-        out = [np.zeros(0, dtype=int)]
-        if ks.size:
-            rot_thr, trans_thr = self.thr
-            r_now = np.stack([rot[ks], rot[ks + 1]], axis=1)
-            d_r = np.einsum("nkji,nkjl->nkil", self.lin_rot[ks], r_now)
-            cosang = np.clip((np.einsum("nkii->nk", d_r) - 1.0) / 2.0, -1.0, 1.0)
-            p_now = np.stack([pos[ks], pos[ks + 1]], axis=1)
-            d_p = np.einsum("nkji,nkj->nki", self.lin_rot[ks], p_now - self.lin_pos[ks])
-            bad = (np.arccos(cosang) > rot_thr).any(1) | (np.abs(d_p) > trans_thr).any((1, 2))
-            out.append(ks[bad])
-        if cal is not None and k_new >= 1:
-            j_new = int(self.seg[k_new - 1])
-            lo = 0 if all_segments else int(np.searchsorted(self.seg, max(j_new - 1, 0),
-                                                            side="left"))
-            m = np.arange(max(lo, self.floor), k_new)
-            m = m[~np.isnan(self.lin_cal[m, 0])]
-            if m.size:
-                k_now = np.array([cal[int(j)] for j in self.seg[m]])
-                bad = (np.abs(k_now - self.lin_cal[m]) > np.asarray(CALIB_THRESHOLD)).any(1)
-                out.append(m[bad])
-        return np.unique(np.concatenate(out))
+        """The intervals to rebuild from ``floor`` on (``LinPoints.due``)."""
+        return self.points.due(marked, k_new, rot, pos, cal, self.floor, all_segments)
 
     # -- rebuilding ------------------------------------------------------------------------
 
-    def _damped_calibration(self, cal: dict[int, Any], ms: list[int]) -> dict[int, Any]:
-        """The (s, τd) to rebuild the baro terms of intervals ``ms`` at: the estimate, except
-        that a component whose step from the segment's last rebuild point reverses that
-        rebuild's own step is moved half-way only. Rebuilding at the estimate is an undamped
-        Gauss-Newton step in (s, τd); where h(t_s − τd) is strongly curved (a touchdown)
-        and τd weakly determined, it alternates between two values and the final rounds
-        never settle (docs/real_logs.md, "graph-isam2 on the shared logs"). Halving a
-        reversed step damps such a cycle; monotone steps are taken whole."""
-        out = dict(cal)
-        for j in sorted({int(self.seg[m]) for m in ms}):
-            now = np.asarray(cal[j], float)
-            if j not in self.seg_lin:
-                lin = self.lin_cal[[m for m in ms if int(self.seg[m]) == j]]
-                lin = lin[~np.isnan(lin[:, 0])]
-                if not lin.size:
-                    continue
-                self.seg_lin[j] = lin[0].copy()
-            d = now - self.seg_lin[j]
-            prev = self.seg_step.get(j)
-            if prev is not None:
-                rev = d * prev < 0
-                if rev.any():
-                    d = np.where(rev, 0.5 * d, d)
-                    self.damped += 1
-            self.seg_step[j] = d
-            self.seg_lin[j] = self.seg_lin[j] + d
-            out[j] = self.seg_lin[j].copy()
-        return out
-
-    def rebuild(self, nf: Any, k: int, rot: Any, pos: Any, vel: Any, bias: Any, cb: Any,
-                gg: Any, cal: dict[int, Any] | None, bt: Any, bz: Any,
-                pri: dict[str, float], dg: Any = None
+    def rebuild(self, nf: Any, k: int, arrays: tuple[Any, ...], cal: dict[int, Any] | None
                 ) -> tuple[list[tuple[Any, ...]], list[int]]:
-        """Rebuild the pending intervals' terms at the running arrays (the current estimate;
-        keyframe k+1: its prediction) into ``nf``; returns their tags and the indices of
-        the factors they replace. Samples whose delayed time moved past keyframe k+1 are
-        clipped into interval k, as when they first entered."""
+        """Rebuild the pending intervals' terms at the running arrays (rot, pos, vel, bias,
+        cb, gg: the current estimate; keyframe k+1: its prediction) into ``nf``; returns
+        their tags and the indices of the factors they replace. Samples whose delayed time
+        moved past keyframe k+1 are clipped into interval k, as when they first entered."""
         ks = [int(m) for m in self.pending if self.floor <= m < k + 1]
         self.pending = np.zeros(0, dtype=int)
         if not ks:
             return [], []
         P = self.P
-        st = terms.keyframe_states(P, ks, rot, pos, vel, bias, cb, gg, dg)
+        st = terms.keyframe_states(P, ks, *arrays, self.dg)
+        bias = arrays[3]
         tags: list[tuple[Any, ...]] = []
         removed: list[int] = []
         samples = []
@@ -275,20 +196,19 @@ class TermBook:
             removed.append(int(self.gnss_idx[m]))
             self.gnss_idx[m] = -1
         if cal is not None:  # before the intervals' points are cleared below
-            cal = self._damped_calibration(cal, ks)
+            cal = self.points.damped_calibration(cal, ks)
         for m in ks:
             if self.baro_idx[m]:
                 removed.extend(self.baro_idx[m])
                 samples.extend(self.baro_of[m])
                 self.baro_idx[m], self.baro_of[m] = [], []
-            self.built[m] = False
-            self.lin_cal[m] = np.nan
+            self.points.clear(m)
         baro_ms: set[int] = set()
         if (samples or extra) and cal is not None:
             sel = np.sort(np.concatenate(samples)) if samples else np.zeros(0, dtype=int)
             n_in = 0
-            for m, s_m, f in terms.baro_terms(P, k, st, bias, cal, self.seg, bt, bz, sel, pri,
-                                              extra=extra, floor=self.floor):
+            for m, s_m, f in terms.baro_terms(P, k, st, bias, cal, self.seg, self.bt, self.bz,
+                                              sel, P.pri, extra=extra, floor=self.floor):
                 n_in += s_m.size
                 nf.add(f)
                 tags.append(("gb" if m in extra else "b", m, s_m))
@@ -296,7 +216,7 @@ class TermBook:
             self.dropped_at_floor += sel.size - n_in
         for m in sorted(set(ks) | baro_ms):
             # a sample that moved into an interval not rebuilt here leaves its point alone
-            self._note(m, st, cal if m in baro_ms else None)
+            self.points.note(m, st, cal if m in baro_ms else None)
         removed = sorted(set(removed))  # a merged factor is both an interval's GNSS and baro
         self.relinearized += len(ks)
         self.swapped_factors += len(removed)
@@ -366,9 +286,9 @@ def state_keys(keys_k: Any, P: Problem, b_last: int | None = None) -> Any:
 
 
 def settle(isam: Any, book: TermBook, P: Problem, seg: Any, rw_idx: list[int],
-            arrays: tuple[Any, ...], cal: dict[int, Any], bt: Any, bz: Any,
-            dg: Any, tie: bool = True, removed: list[int] | None = None,
-            pyf: Any = None, swap: tuple[list[int], list[Any]] = ([], [])) -> list[list[int]]:
+            arrays: tuple[Any, ...], cal: dict[int, Any], tie: bool = True,
+            removed: list[int] | None = None, pyf: Any = None,
+            swap: tuple[list[int], list[Any]] = ([], [])) -> list[list[int]]:
     """Final rounds after the last keyframe, so that iSAM2's own estimate is the smoothed
     optimum of the batch's model: the segments' (s, τd) and accelerometer scale factors are
     tied into one (their random walks removed, ``TIE_SD`` between neighbours), then
@@ -386,12 +306,11 @@ def settle(isam: Any, book: TermBook, P: Problem, seg: Any, rw_idx: list[int],
     everything = np.arange(book.floor, nk)  # the keyframes iSAM2 holds
     j0 = book.first_seg
     has_baro = P.drive.baro is not None
-    rot, pos, vel, bias, cb, gg = arrays
+    rot, pos = arrays[0:2]
     tags: list[tuple[Any, ...]] = []
     if book.pending.size:  # due intervals (the post-solve gate's) rebuilt in the first round
         # (first in the update: ``record`` pairs the tags with the first new indices)
-        tags, more = book.rebuild(nf, nk - 2, rot, pos, vel, bias, cb, gg,
-                                  cal if has_baro else None, bt, bz, P.pri, dg)
+        tags, more = book.rebuild(nf, nk - 2, arrays, cal if has_baro else None)
         removed = sorted(set(removed) | set(more))
     if tie and n_seg > 1 and (has_baro or P.ka is not None):
         for j in range(j0 + 1, n_seg):
@@ -405,14 +324,16 @@ def settle(isam: Any, book: TermBook, P: Problem, seg: Any, rw_idx: list[int],
         nf.add(f)
     removed = sorted(set(removed) | set(swap[0]))
     out: list[list[int]] = []
-    py_at = _py_rebuild(pyf, nf, arrays, removed)
+    removed = sorted(set(removed) | set(pyf.rebuild_into(nf, 0, arrays) if pyf is not None
+                                         else []))
     for r in range(cfg.final_rounds):
         # an empty constraint map: plain COLAMD for the re-elimination (iSAM2's default
         # puts every key of the new factors, nearly all here, last: one huge root clique)
         ures = isam.update(nf, gtsam.Values(), removed, gtsam.KeyGroupMap(), None, None, True)
         book.record(tags, ures.getNewFactorsIndices())
+        n_py = len(pyf.new[0]) if pyf is not None else 0
         if pyf is not None:
-            pyf.record(py_at[0], ures.getNewFactorsIndices(), py_at[1])
+            pyf.record_new(ures.getNewFactorsIndices(), 0)
         n_relin = int(ures.getVariablesRelinearized())
         est = isam.calculateBestEstimate()
         read_states(est, everything, arrays, P)
@@ -424,27 +345,16 @@ def settle(isam: Any, book: TermBook, P: Problem, seg: Any, rw_idx: list[int],
                 cal[j] = est.atVector(K(j))
         book.pending = book.due(everything, nk - 1, rot, pos, cal if has_baro else None,
                                 all_segments=True)
-        out.append([len(tags) + len(py_at[0]), n_relin])
+        out.append([len(tags) + n_py, n_relin])
         py_due = pyf is not None and pyf.pending.size
         if (not book.pending.size and not py_due and n_relin == 0) \
                 or r == cfg.final_rounds - 1:
             break
         nf = gtsam.NonlinearFactorGraph()
-        tags, removed = book.rebuild(nf, nk - 2, rot, pos, vel, bias, cb, gg,
-                                     cal if has_baro else None, bt, bz, P.pri, dg)
-        py_at = _py_rebuild(pyf, nf, arrays, removed)
+        tags, removed = book.rebuild(nf, nk - 2, arrays, cal if has_baro else None)
+        removed = sorted(set(removed) | set(pyf.rebuild_into(nf, 0, arrays) if pyf is not None
+                                             else []))
     return out
-
-
-def _py_rebuild(pyf: Any, nf: Any, arrays: tuple[Any, ...], removed: list[int]
-                ) -> tuple[list[int], list[int]]:
-    """The extension book's due factors rebuilt at the end of ``nf`` (the factors they
-    replace added to ``removed``, in place); their slots and positions in ``nf``."""
-    if pyf is None or not pyf.pending.size:
-        return [], []
-    slots, at, more = pyf.rebuild(nf, arrays)
-    removed[:] = sorted(set(removed) | set(more))
-    return slots, at
 
 
 def post_solve_gate(book: TermBook, P: Problem, states: Any) -> list[int]:

@@ -1,6 +1,7 @@
 """Set-up pieces of ``graph-isam2`` (``isam2``): its iSAM2 parameters and relinearisation
-thresholds, the baro-calibration segments, keyframe 0's factors, the error raised by a failed
-update (``UpdateFailed``) and the ``Estimate.info`` it reports."""
+thresholds, the baro-calibration segments, the GNSS fixes of each interval, keyframe 0's
+factors, the error raised by a failed update (``UpdateFailed``) and the ``Estimate.info``
+it reports."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ import numpy as np
 from gtsam.symbol_shorthand import A, B, C, G, K, V, X
 
 from ....util.failures import failure_message
+from ..model import interval_factors as gf
 from ..model.cpp_factors import keyframe_fixes, prior_factors
 from ..model.extend import Collected, key_name
 from ..model.problem import Problem
@@ -65,6 +67,21 @@ def segments(P: Problem) -> np.ndarray:
         return np.zeros(P.n_kf, dtype=int)
     raw = np.floor((P.t_kf - P.t_kf[0]) / seg + 1e-9).astype(int)
     return np.unique(raw, return_inverse=True)[1].astype(int)
+
+
+def interval_fixes(P: Problem) -> list[np.ndarray]:
+    """The fixes of each interval, once (fixes and keyframes are in time order): strictly
+    inside it, and — with the GNSS error state — on the keyframe that ends it (the one on
+    keyframe 0 goes with interval 0)."""
+    g_between = np.flatnonzero((P.g_kf == -1) & P.g_use)
+    cuts = np.arange(1, P.n_kf - 1)
+    fixes_of = np.split(g_between, np.searchsorted(
+        gf.interval_of(P.t_kf, P.g_t[g_between]), cuts))
+    if P.gm is not None:
+        on_kf = np.flatnonzero((P.g_kf >= 0) & P.g_use)
+        ends = np.split(on_kf, np.searchsorted(np.maximum(P.g_kf[on_kf] - 1, 0), cuts))
+        fixes_of = [np.r_[a, b] for a, b in zip(fixes_of, ends, strict=True)]
+    return fixes_of
 
 
 def segment_span(P: Problem, seg: np.ndarray, j: int) -> float:
