@@ -3,8 +3,8 @@ GNSS error state) and ``ekf-rts`` (the same pass plus a Rauch-Tung-Striebel smoo
 
 Modules: ``settings`` (``EkfConfig``), ``filter`` (set-up from the shared sensor model, the
 estimators, outputs), ``inputs`` (grids, process noise, the merged event list),
-``alignment`` (levelling, start position), ``model`` (the compiled error-state model, whose
-docstring describes the filter), ``kernel`` (the forward pass), ``steps`` (prediction,
+``alignment`` (levelling, start position), ``model`` (the compiled error-state model;
+the filter is specified in docs/ekf.md), ``kernel`` (the forward pass), ``steps`` (prediction,
 heading reset, delayed rows, shared gating), ``updates`` (everything per measurement kind:
 records, event stamps, rows, gated updates, innovations and their report; a sensor is added
 there), ``heading`` (heading acquisition), ``magnetometer`` (compass set-up), ``rts`` (the

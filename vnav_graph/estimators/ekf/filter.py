@@ -1,7 +1,7 @@
 """Reference INS/GNSS/baro error-state EKF (``ekf``) and its RTS smoother (``ekf-rts``).
 
 The filter equations, the covariance grid, the measurement timing and the heading handling
-are documented in ``vnav_graph.estimators.ekf.model`` (the numba kernels). This module turns
+are specified in docs/ekf.md (the numba kernels are ``ekf.model``). This module turns
 a ``Drive`` into the kernel inputs (noise from the drive's specs, alignment, and the grids,
 process noise and event list of ``ekf.inputs``, the measurement records of ``ekf.updates``)
 and the kernel outputs into an ``Estimate``.
@@ -24,7 +24,7 @@ Outputs
   measurement component: ``gnss_pos`` (N, 3), ``gnss_vel`` (N, 3), ``baro`` (N,), ``mag``
   (N,), ``zupt`` (N, 3).
 - info: per measurement kind (``updates.report``) ``gnss_rejected`` (fixes whose horizontal
-  pair or height was refused: χ² gate, σ_v limit or probation, ``ekf.model`` docstring),
+  pair or height was refused: χ² gate, σ_v limit or probation, docs/ekf.md),
   ``gnss_alt_rejected`` (height refused), ``gnss_vel_rejected``, ``baro_rejected``,
   ``mag_used`` / ``mag_rejected``, ``zupt_intervals`` ([t_start, t_end] [s] of the
   standstills given zero-velocity updates, ``EkfConfig.zupt``; ``nav.standstill``),

@@ -1,4 +1,4 @@
-"""Heading acquisition of the forward EKF (``ekf.model``'s docstring describes the method):
+"""Heading acquisition of the forward EKF (docs/ekf.md describes the method):
 acceleration matching against GNSS velocity changes, the GNSS course when moving, or the
 magnetometer (``updates.mag_rows``). Each proposes a yaw reset (``RESET_DELTA`` ± ``RESET_SD``)
 that ``steps.heading_reset`` applies at the next grid epoch.

@@ -99,7 +99,7 @@ def process_noise(t: FloatArray, grid_idx: NDArrayInt, gaps: NDArrayInt, ispec: 
         for ax, sd in zip(gm.axes, gm.sd, strict=True):
             qd[:, km.IGE + ax] = gm_process_var(dtg, gm.tau_s, float(sd))
     qd[:, km.IMB:km.IMB + 3] = _white_var(cfg.mag_bias_rw, dtg)[:, None]
-    # IMU gaps: the grid interval ending at gap end i+1 is exactly the gap (ekf.model docstring)
+    # IMU gaps: the grid interval ending at gap end i+1 is exactly the gap (docs/ekf.md, "IMU gaps")
     kg = np.searchsorted(grid_idx, gaps + 1)
     dg = dtg[kg]
     qd[kg, km.IPOS:km.IPOS + 3] += (GAP_ACCEL_SD**2 * dg**3 / 3.0)[:, None]

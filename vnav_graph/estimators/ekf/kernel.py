@@ -1,6 +1,6 @@
 """The forward EKF kernel: one compiled pass over the whole drive (``run_filter``).
 
-The error-state model is in ``ekf.model`` (whose docstring describes the filter), all
+The error-state model is in ``ekf.model`` (the filter: docs/ekf.md), all
 that is per measurement kind (records, rows, gated updates, innovations) in ``ekf.updates``,
 the heading acquisition in ``ekf.heading`` and the prediction, heading reset and delayed-row
 mapping in ``ekf.steps``; this module holds only the loop that strings them together. It
@@ -209,7 +209,7 @@ def run_filter(grids, init, noise, events, meas, settings, inn):
         lla_p, v_p, q_p = lla, v, q
         if gap_step[i]:
             # IMU gap: constant velocity, attitude re-levelled from the first samples after
-            # it with the yaw kept (module docstring)
+            # it with the yaw kept (docs/ekf.md, "IMU gaps")
             rn0, re0 = radii_scalar(lla_p[0])
             lla = lla_p.copy()
             lla[0] += v_p[0] * dt / (rn0 + lla_p[2])

@@ -11,138 +11,9 @@ the first 18 are exactly the shared layout):
     variance on the axes ``EkfConfig.gnss_gm_sd_h`` / ``gnss_gm_sd_v`` leave at 0:
     ``sensors.gnss_model``).
 
-Error dynamics (Groves, 2nd ed., eqs. 14.64-14.65 reduced to local-level NED; Titterton &
-Weston §12.3), with f_n the specific force in n and ω_in = ω_ie + ω_en:
-
-    δṙ = δv
-    δv̇ = −[f_n×] ψ − C δb_a − C diag(f_b) δk_a − [(2ω_ie + ω_en)×] δv + (2g/R) δr_D e_D
-    ψ̇  = −[ω_in×] ψ − C δb_g − (∂ω_en/∂v) δv − (∂ω_ie/∂L) δr_N/(R_N+h)
-    δḃ_g = −δb_g/τ_g + w,  δḃ_a = −δb_a/τ_a + w,  δḃ = −δb/τ_b + w,  δṡ = δτ̇ = δk̇_a = 0,
-    δḃ_m = w,  δė = −δe/τ_e + w.
-
-GNSS with the Gauss-Markov error state: the antenna position is predicted as r + C l + ê
-(``sensors.gnss_model``, shared with the graph), so each position row carries ∂/∂δe = 1 on
-its axis; the fix's own σ is then split into that state's σ and the white rest
-(``GnssGM.split``).
-
-The nominal state runs at the IMU rate through the shared ``strapdown.strapdown_step``. The
-covariance is propagated on a coarser grid (every M IMU samples, ≈ 10 Hz): Φ = I + FΔt +
-½(FΔt)² with F built from interval means of f_n, f_b and the end-of-interval nominal state.
-Justification: the error dynamics are slow (Schuler 84 min, vertical 570 s, bias τ ≥ minutes);
-over 0.1 s the neglected terms are O((‖F‖Δt)³) ≈ 1e-9.
-
-Measurements inside a grid interval are predicted from the nominal state interpolated to
-their own time t_m; they are applied at the next grid epoch t_k with H_eff = H(I − F(t_k −
-t_m)), the first-order back-propagation δx(t_m) = Φ(t_m, t_k) δx(t_k). Updates are sequential
-scalar updates (R is diagonal) in Joseph form, expanded to O(n²):
-P⁺ = (I − K h) P (I − K h)ᵀ + K r Kᵀ = P − K aᵀ − a Kᵀ + (h a + r) K Kᵀ, a = P hᵀ (valid for
-any gain K). Each GNSS position / velocity vector is chi-square gated first on its joint
-NIS = νᵀ S⁻¹ ν. After the updates the estimate is fed back into the nominal state (closed
-loop) and δx is reset to zero.
-
-Heading before it is known (no given heading, not yet acquired): the yaw error ψ_D is
-decoupled — its row and column of Φ and of H are zero and its variance stays at
-``yaw_unknown_var`` (uniform heading, π²/3) — so the linear filter is never fed a large
-heading error. Two effects of the unknown heading are added as process noise: the horizontal
-Earth-rate compensation (tilt, rate ≤ 2Ω cos L, rms √2 Ω cos L, treated as a constant rate
-of unknown sign) and the rotation of the horizontal specific force (velocity, rms √2 |f_h|).
-The GNSS and baro updates hold the attitude as Schmidt consider states until the heading is
-known while its tilt σ exceeds 5° (``consider_update``; ``steps.tilt_held``;
-``EkfConfig.tilt_consider``): the horizontal rows cannot tell
-tilt from heading then, and a levelling in motion can leave a tilt σ of 15–20° (position-only
-start, ``alignment.moving_start``), far outside the linear regime — on cold-start-phone a
-single baro sample moved the pitch by 16° (true error 3.8°) and a heading 10° off at its
-acquisition was taken up as 12° of roll, each sending the forward filter hundreds of metres
-off.
-The first GNSS fix with track speed above the threshold resets the nominal yaw to the track
-(q ← q_z(Δ) ⊗ q), rotates the tilt covariance with it (ψ' = R_z(Δ) ψ) and sets the yaw
-variance to the track's σ²; the RTS smoother sees this step as Φ_eff = J Φ with Q_eff[8] = σ².
-
-Heading by acceleration matching (``heading_accel``: the default when GNSS gives velocity).
-Course over ground is the heading only without sideslip; a multicopter moves in any direction
-(a hovering multicopter's track can point anywhere, so a track reset can leave the heading
-far off, up to opposite, and the z-gyro bias then absorbs the error as a rate;
-docs/real_logs.md, "Initial heading and tilt of a hovering multirotor"). Instead the
-horizontal specific-force integral in the nominal frame, U = ∫ (C̃ f̃)_h dt (yaw still
-arbitrary), is compared with the GNSS velocity increment W = Δv_h over the same interval:
-W = R_z(δ) U + n (gravity and Coriolis have no horizontal part at this accuracy),
-δ = true − nominal yaw. Per chunk of ≥ ``align_chunk_s`` between velocity fixes,
-with σ² = Σ_both fixes (σ²_vN + σ²_vE)/2 + (σ_a T)² (σ_a = √2 × the accelerometer-bias prior:
-tilt and bias per axis), the weighted sums S_c = Σ (U×W)/σ², S_d = Σ U·W/σ², S_uu = Σ |U|²/σ²
-are kept with forgetting exp(−T/``align_forget_s``) (the nominal yaw drifts with the unknown
-z-gyro bias); δ̂ = atan2(S_c, S_d) is the maximum-likelihood rotation, its Fisher information
-is S_uu, σ_δ = 1/√S_uu. After ≥ 3 chunks and σ_δ ≤ ``align_sd_max`` the heading is reset by δ̂
-with σ 2σ_δ (factor 2: bias drift and tilt in U). A chunk whose |W| and |U| differ by > 4σ
-(rotation keeps the norm) is a GNSS velocity fault and is skipped. With "auto" the GNSS course
-(σ by ``nav.course``) is taken before that once the matching's running estimate (≥ 1 chunk,
-σ_δ ≤ ``course_confirm_sd``) agrees with it within 3 σ of both, with the course's σ
-(``heading.confirmed_course``; the σ grown by their difference let the yaw wander 18° on
-the simulated walk of ``test_ekf_walking_start``, against 4.9°). A gentle start gives a
-course long before the matching's 15° (that walk at 0.1 m/s²: 5.9 s after moving instead of
-12 s; a car drive likewise, docs/real_logs.md, "Standstills and course on the RTK drives"),
-and a body that does not move along its x axis keeps the matching's heading (the sideways IMU
-of ``test_ekf_heading``). A hand-held device is the limit: it need not point along its path
-and swings with each step, so a course confirmed against the matching's early estimate can
-leave the yaw more than ten degrees off for seconds (same section). Without GNSS velocity
-the track heading (previous paragraph) is used.
-An IMU gap longer than ``gap_forget_s`` makes the heading unknown again (the vehicle may have
-turned: a crash that flips it over); the gap's Φ has a zero yaw row and Q gives the uniform
-variance, and the heading is re-acquired after it.
-
-The RTS smoother (Rauch, Tung & Striebel 1965) runs on the same grid. With closed-loop
-feedback, e_k = x⁺_k − x_true has filtered mean 0, and with c_k the correction applied at k:
-ê^s_k = G_k (ê^s_{k+1} + c_{k+1}),  P^s_k = P⁺_k + G_k (P^s_{k+1} − P⁻_{k+1}) G_kᵀ,
-G_k = P⁺_k Φ_kᵀ (P⁻_{k+1})⁻¹, ê^s_N = 0. P⁻_{k+1} is recomputed from the stored packed P⁺_k,
-Φ_k (from its stored ingredients) and Q_k, so only ≈ 300 numbers per grid epoch are kept.
-
-GNSS position gating (fault detection and exclusion). The horizontal pair and the height of a
-fix are gated separately: NIS_h = ν_hᵀ S_h⁻¹ ν_h against χ²₂, NIS_v = ν_v²/S_v against χ²₁.
-With a barometer the vertical is well determined without GNSS (baro + bias model), so a
-GNSS height inconsistent with it is a receiver fault, and such faults persist (multipath,
-a receiver glitch that moves the heights by hundreds of metres for tens of seconds while
-the fix claims 3-D; docs/real_logs.md, "GNSS screens"):
-- a height whose own σ_v exceeds ``max_sd_v`` is not used (the receiver says it is degraded;
-  relative to a baro-aided vertical it carries almost no information);
-- an isolated rejected height (a spike) is just refused; after two consecutive refusals the
-  GNSS height is on probation (a persistent fault): it is used again only once it has passed
-  the gate (and been usable) for ``probation_s`` without a break;
-- after ``max_consec`` consecutive vertical refusals the probation gate is widened by the
-  baro-bias prior variance (S_v + σ²_b,prior: "consistent with the baro if we forget what we
-  learned about its bias"), and the fix that completes probation is applied with σ²_b,prior
-  added to the baro-bias variance, so a genuinely moved baro datum is re-learned;
-- without a barometer the old rule applies: after ``max_consec`` refusals the height is
-  accepted (GNSS is the only height reference; a diverged filter must recover).
-The horizontal pair is accepted after ``max_consec`` refusals (nothing else observes it), as
-a re-initialisation: a position jump with the variance of the observed innovation is added
-to P (and to the stored Q, so the RTS smoother models the same jump) before the update.
-The GNSS vertical velocity is used only with an accepted GNSS height (same receiver
-solution); the horizontal velocity pair is gated on its own (χ²₂). The baro is the
-vertical anchor: after ``updates.BaroData.max_consec`` consecutive refusals (≈ 1 s) it is
-accepted (an inertial vertical that disagrees with the baro for that long has diverged — an
-accelerometer that loses specific force under vibration — or the baro stepped, and then the
-new level is the one to follow).
-
-IMU gaps (logging dropouts, ``gap_step``): an IMU interval longer than the gap threshold is
-not integrated as if the end samples held over it. The step is its own grid interval; the
-nominal state moves at constant velocity, F keeps only δṙ = δv and the Gauss-Markov decays,
-and Q adds the unknown motion: σ_a²Δt to velocity, σ_a²Δt³/3 to position (cross term
-omitted), σ_ψ²Δt to yaw. The attitude is not carried over a gap (a logging gap can follow
-a crash, the vehicle upside down before it and upright after it; docs/real_logs.md, "IMU
-logging gap across a crash"): roll and pitch are re-levelled from the mean specific force
-of the first samples after the gap (``gap_rp``, coarse levelling as at the start) with the
-yaw kept; Φ's roll/pitch rows are zero there (``step_phi``) and Q gives them the levelling
-variance, so the RTS smoother sees the reset exactly. The next GNSS/baro updates then
-re-anchor position and velocity with the inflated covariance.
-
-Magnetometer heading (``sensors.magnetometer``, shared with the graph): at most one sample per
-``mag_interval_s`` (its errors are correlated over seconds), y = wrap(azimuth of C̃ (z − b̂_m)
-in n − declination), row ∂y/∂ψ (yaw component 1, tilt components through the dip) and
-∂y/∂δb_m, χ²₁-gated and forced in after ``mag_reaccept_s`` of refusals. While the heading is
-unknown the first sample acquires it (a heading reset like the track's, σ² = the heading noise
-plus the hard-iron prior and tilt variances projected on it).
-
-The baro prediction and its Jacobian are the shared model's (``sensors.baro.baro_predict`` /
-``baro_row``), placed into these columns by ``rows.baro_rows``.
+The error dynamics, the propagation and update scheme, the heading before and at its
+acquisition, GNSS gating, IMU gaps, the magnetometer row and the RTS smoother are specified in
+docs/ekf.md.
 """
 
 from __future__ import annotations
@@ -192,7 +63,7 @@ def unpack(v):
 
 @njit(cache=True)
 def build_f(ing, tau_g, tau_a, tau_b, tau_h):
-    """Continuous error-dynamics matrix F (NX, NX) of one grid interval (module docstring)."""
+    """Continuous error-dynamics matrix F (NX, NX) of one grid interval (docs/ekf.md)."""
     f = np.zeros((NX, NX))
     c = ing[0:9].copy().reshape(3, 3)
     fn = ing[9:12]
@@ -231,7 +102,7 @@ def build_f(ing, tau_g, tau_a, tau_b, tau_h):
         for i in range(3):
             f[IGE + i, IGE + i] = -1.0 / tau_h
     if ing[22] > 0.5:
-        # IMU gap (module docstring): no inertial data, constant-velocity nominal; only
+        # IMU gap (docs/ekf.md, "IMU gaps"): no inertial data, constant-velocity nominal; only
         # δṙ = δv and the Gauss-Markov decays remain
         g2 = np.zeros((NX, NX))
         for i in range(3):
@@ -295,7 +166,7 @@ def reset_jacobian(delta):
 
 @njit(cache=True)
 def scalar_update(p, dx, hrow, y, r):
-    """Sequential scalar update, Joseph form expanded (module docstring). y = h(x̃) − z:
+    """Sequential scalar update, Joseph form expanded (docs/ekf.md). y = h(x̃) − z:
     ``consider_update`` with no consider states."""
     consider_update(p, dx, hrow, y, r, 0, 0)
 

@@ -1,7 +1,7 @@
 """Rauch-Tung-Striebel smoothing of the forward EKF pass (``ekf-rts``).
 
 ``rts_smooth`` runs backward over the covariance grid with the transition matrices and
-process noise the forward kernel stored (``ekf.model`` docstring); ``smooth_corrections``
+process noise the forward kernel stored (docs/ekf.md, "RTS smoother"); ``smooth_corrections``
 carries the smoothed errors to every output epoch and ``apply_error`` removes them from the
 nominal states.
 

@@ -126,7 +126,7 @@ TILT_HELD_VAR = np.radians(5.0) ** 2
 @njit(cache=True)
 def tilt_held(p, settings, heading_ok):
     """Whether the GNSS and baro updates hold the attitude as Schmidt consider states
-    (``EkfConfig.tilt_consider``; ``model`` docstring, "Heading before it is known")."""
+    (``EkfConfig.tilt_consider``; docs/ekf.md, "Heading before it is known")."""
     if not settings.tilt_consider or heading_ok:
         return False
     return max(p[IATT, IATT], p[IATT + 1, IATT + 1]) > TILT_HELD_VAR
