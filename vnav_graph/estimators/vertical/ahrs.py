@@ -1,9 +1,9 @@
 """Numba kernels of the GNSS-aided AHRS that feeds the classical vertical estimators.
 
-The method, its parameters and its tested accuracy are described in ``vertical.inputs`` (which
-assembles the kernel inputs and owns ``AhrsConfig``); this module holds only the compiled
-loops: ``ahrs_kernel`` (levelling, gyro integration with the shared strapdown step,
-velocity-matching tilt feedback, gap handling) and ``poly_velocity`` (GNSS velocity from
+The method, its parameters and its tested accuracy are described in docs/vertical_loops.md §1
+(``vertical.inputs`` assembles the kernel inputs and owns ``AhrsConfig``); this module holds
+only the compiled loops: ``ahrs_kernel`` (levelling, gyro integration with the shared strapdown
+step, velocity-matching tilt feedback, gap handling) and ``poly_velocity`` (GNSS velocity from
 positions)."""
 
 from __future__ import annotations
@@ -133,14 +133,13 @@ gains, SI units, all floats)."""
 
 @njit(cache=True)
 def ahrs_kernel(imu, fixes, gains):
-    """Numba kernel (module docstring steps 2-8) on three records: ``imu`` (``AhrsImu``: the
-    IMU samples, the start attitude and the re-levelling after gaps), ``fixes``
+    """Numba kernel (docs/vertical_loops.md §1, steps 2-8) on three records: ``imu`` (``AhrsImu``:
+    the IMU samples, the start attitude and the re-levelling after gaps), ``fixes``
     (``AhrsFixes``: the GNSS reference) and ``gains`` (``AhrsGains``: the settings). The
-    course is that of the propagated velocity after the yaw reset while fixes renew it, else
-    ``vel_i``'s. Returns q (N, 4), f_n (N, 3), b̂_g (N, 3), propagated horizontal velocity
-    (N, 2) and the counters [accepted, rejected, reinit, unusable, vertical dropped,
-    accel-level, imu gaps].
-    """
+    course is that of the propagated velocity after the yaw reset while fixes renew it,
+    else ``vel_i``'s. Returns q (N, 4), f_n (N, 3), b̂_g (N, 3), propagated horizontal
+    velocity (N, 2) and the counters [accepted, rejected, reinit, unusable, vertical
+    dropped, accel-level, imu gaps]."""
     t, gyro, accel, q0, relevel = imu
     lla_i, vel_i, sdv_i, t_g, t_av, v_g, g_g, cor_g, ok_g, r_g, vert_g, use_g = fixes
     (kp, ki, k_yaw, ki_yaw, v_min, max_corr, max_fb, a_static, t_filt, gap, gate2, sd0, sd_bg,

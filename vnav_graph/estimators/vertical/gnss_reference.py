@@ -1,4 +1,4 @@
-"""The GNSS reference of the vertical estimators' AHRS (``vertical.inputs``, steps 3-5).
+"""The GNSS reference of the vertical estimators' AHRS (docs/vertical_loops.md §1, steps 3-5).
 
 ``gnss_reference`` gives the reference velocity at each fix, from the receiver or, without
 one, from the positions (``velocity_from_positions``: a weighted quadratic fit over a
@@ -53,7 +53,7 @@ def ned_offsets(lla: FloatArray) -> FloatArray:
 
 def velocity_from_positions(t: FloatArray, lla: FloatArray, pos_sd: FloatArray,
                             window_s: float, gap_s: float) -> tuple[FloatArray, FloatArray]:
-    """Reference velocity from GNSS positions alone (``vertical.inputs`` step 3b).
+    """Reference velocity from GNSS positions alone (docs/vertical_loops.md §1, step 3b).
 
     Parameters
     ----------
@@ -126,7 +126,7 @@ def gnss_reference(drive: Drive, cfg: Any) -> tuple:
 
 @dataclass(frozen=True)
 class Matching:
-    """What the AHRS kernel needs from the GNSS (``vertical.inputs`` module docstring, steps
+    """What the AHRS kernel needs from the GNSS (docs/vertical_loops.md §1, steps
     3-5): at the thinned fixes ``t_g`` the reference velocity ``v_g``, the time ``t_av`` it
     is known (``t_g``, or half the fit window later for position-derived velocities), gravity
     ``g_g``, the

@@ -1,149 +1,17 @@
 """Inputs of the classical vertical-channel estimators: vertical specific force, gravity, C33.
 
-The seed papers (000, 001, 003, 004) all assume that "the INS" hands the vertical channel its
-specific force resolved along the local vertical: seed 001 eq. 5 uses C_b(3,3)^n·F_z and the
-vertical specific force, seed 003 "the acceleration component along the gravity vector". To
-produce it the vertical estimators need an attitude. They must not use the simulator's truth,
-so this module provides a small **GNSS-aided attitude and heading reference (AHRS)** that
-stands for "the INS attitude" of the papers:
-
-1. **Coarse levelling.** The mean specific force f̄_b over the first ``level_s`` seconds
-   (the vehicle must be at rest or unaccelerated there; every simulated scenario begins with a
-   10-20 s static period) gives roll φ = atan2(−f̄_y, −f̄_z),
-   pitch θ = atan2(f̄_x, √(f̄_y² + f̄_z²)); yaw starts at 0 and is reset once to the GNSS course
-   the first time the ground speed exceeds ``v_course_min``.
-2. **Gyro integration** with the shared Earth-rate- and transport-rate-aware mechanisation
-   (``strapdown.strapdown_step``; its position/velocity outputs are discarded, the last
-   GNSS position/velocity at or before the IMU epoch, held, feed its ω_ie, ω_en), with the gyro
-   corrected by an estimated bias b̂_g and a complementary feedback rate:
-   ω_used = ω̃ − b̂_g − C_bn·K_p·ψ̂,   d b̂_g/dt = C_bn·K_i·ψ̂   (Mahony-type PI law), with
-   K_p = diag(k_p, k_p, k_y), K_i = diag(k_i, k_i, k_y²/4).
-3. **Tilt error by velocity matching.** Over each interval [t_j, t_{j+1}] between consecutive
-   GNSS fixes (thinned to intervals ≥ ``match_interval_s``), the integral of the measured
-   specific force resolved with the AHRS attitude,
-   ΔF = ∫ C_nb f̃_b dt (IMU epochs, trapezoid, linearly interpolated to the fix times), is
-   compared with what the GNSS velocities imply (Groves eq. 5.54 rearranged):
-   f̄_ref = Δv_gnss/Δt − g_n + (2ω_ie + ω_en) × v̄,   δf = ΔF/Δt − f̄_ref ≈ ψ × f̄_ref.
-   The tilt estimate is the component of ψ perpendicular to f̄_ref,
-   ψ̂_{x,y} = [f̄_ref × δf]_{x,y} / |f̄_ref|².
-   The raw ψ̂ is low-passed with time constant T_f (``tilt_filter_s``) and held as a
-   feedback rate until the next fix (zeroed once ``gap_factor`` matching intervals pass
-   without an update). An interval is matched at the first IMU epoch at or after its end
-   fix, so the correction uses nothing later than that epoch. Because successive Δv
-   telescope, GNSS velocity noise σ_v enters the tilt only as ≈ k_p·σ_v/g (no
-   differentiation noise build-up).
-3b. **Without receiver velocity** (phones; GnssStream.vel_n None) the reference velocity at
-   each fix is the slope of a 1/σ²-weighted quadratic least-squares fit of the GNSS positions
-   over a window W = max(``pos_vel_window_s``, (``pos_vel_min_fixes`` − 1)·T_fix), never
-   across an outage (``velocity_from_positions``; σ_v = σ_p/√Στ², e.g. 0.135 m/s for 41 fixes
-   of σ_p = 1 m over 4 s, against σ_p/(√2·T) ≈ 7 m/s for a central difference at 10 Hz).
-   The window is centred on the fix, so that velocity is known only W/2 after it: the
-   interval ending at fix j is matched then (ΔF over [t_{j−1}, t_j] from the stored
-   integral), and the heading and the Coriolis velocity use the last velocity known by the
-   epoch. A trailing fit ending at the fix would need no wait but its end-point slope has 4×
-   the σ (σ_p·√(192/N)/W), which at 1 Hz fixes leaves most intervals over ``sd_v_max``
-   (docs/real_logs.md, "Vertical attitude reference"). Matching intervals are then ≥ W/2,
-   only the horizontal components level (the
-   vertical position is noisier and is the quantity the vertical estimators want), and
-   there is no gate: the smoothed velocity and the IMU increment see the manoeuvres with
-   different kernels, and only an unbroken sequence of intervals telescopes that mismatch
-   away (a skier's turns; gating them biased the tilt).
-4. **Heading** ψ̂_z = wrap(ψ_est − χ_gnss), the yaw minus the GNSS course over ground, when the
-   ground speed exceeds ``v_course_min`` (assumes no sideslip/crab: true for the simulated car
-   and aircraft; the threshold is raised to 5σ of the GNSS velocity noise so noise never
-   fakes a course; the vertical specific force does not depend on heading, heading only keeps
-   the velocity matching of step 3 consistent in turns).
-
-5. **Robustness rules for GNSS velocity** (a receiver fault can report velocities of tens of
-   m/s with a 3-D fix, its own σ_v rising to several m/s; docs/real_logs.md, "Vertical
-   attitude reference"):
-
-   - R1 a fix whose horizontal velocity σ exceeds ``sd_v_max`` (3 m/s) is unusable for
-     levelling, heading and the Coriolis velocity (``info["levelling_unusable"]``);
-   - R2 χ²₂ gate on the horizontal residual d_h = (ΔF/Δt − f̄_ref)_h against its predicted
-     spread S = R_j + g²σ_ψ(τ)² + σ_yaw²|a_h|², R_j = (σ²_v,j + σ²_v,j−1)/Δt² per axis,
-     σ_ψ(τ) = ``tilt_sd0`` + ``gyro_bias_sd``·τ growing since the last accepted update;
-     reject when |d_h|²/S > −2 ln p (13.8 at p = 10⁻³; ``info["levelling_rejected"]``);
-     rejections spanning ``reinit_s`` let the next interval through (a real drift cannot
-     lock the GNSS out). Receiver velocities only (3b);
-   - R3 inverse-variance weighting: the low-pass gain Δt/T_f is multiplied by
-     min(1, R_nom/R_j), R_nom the residual variance at σ_v = ``sd_v_nominal`` (1 m/s):
-     noisy fixes (σ_v = 10 m/s → weight 0.01) barely move the tilt;
-   - R4 the low-passed tilt error fed back is clamped to ``max_tilt_feedback`` (0.2 rad);
-   - R5 the receiver's vertical velocity is compared with the baro climb rate at the fix
-     (``baro_rate``: slope at t_j of a quadratic fitted to the baro samples of the trailing
-     2 s, σ_ḣ from that fit's residuals; no sample after the fix); where
-     |v_D + ḣ_baro| > 3√(σ²_vD + σ²_ḣ) + 0.3 m/s + 0.1|ḣ| the
-     vertical component is dropped (nominal f_ref,D = −g, residual d_D = 0:
-     horizontal-only levelling; ``info["vertical_dropped"]``).
-
-6. **Accelerometer-levelling fallback.** After ``fallback_after_s`` (90 s) without an
-   accepted GNSS levelling update, every 0.2·``accel_level_window_s`` the mean specific force
-   over that window (10 s), resolved in n, is compared with (0, 0, −g): ψ_x = f̄_E/g,
-   ψ_y = −f̄_N/g, gain 0.2·window/``accel_level_tau_s``, applied only when the window is
-   unaccelerated by the body-frame test |mean(ω̃ − b̂_g)| < ``static_rate`` and
-   | |f̄_b| − g | < ``static_accel``. It assumes no sustained horizontal acceleration; on the
-   simulated hill-drive a 5 s trigger made a 1 m/s² straight-line acceleration in the 60 s
-   outage tilt the platform by 0.1 rad, hence the long trigger: within a minute the
-   bias-corrected gyros are better.
-
-7. **IMU logging gaps** (the shared rule of ``nav.gaps``): no rates inside, so no
-   propagation across it; roll and pitch are re-levelled from the first ``level_s`` after the
-   gap when those samples are static (a vehicle may be turned over and set upright during a
-   gap: docs/real_logs.md, "IMU logging gap across a crash"), the yaw and the gyro bias are
-   kept, and no velocity-matching interval may touch the gap.
-
-8. **Coriolis/transport velocity.** The horizontal velocity used for cor_D and ω_en is the
-   last usable, non-rejected GNSS velocity propagated with the resolved specific force
-   (v_h ← v_h + ∫f_n,h dt), reset at each such fix; so cor_D stays right in outages (it was
-   zero there before: up to ≈ 0.01 m/s² for a fast aircraft).
-
-9. **Causality.** Every output at an IMU epoch t is computed from data stamped ≤ t (the
-   vertical estimators' answers are their online answers, ``estimators.base.CAUSAL``;
-   ``tests/integration/test_causality_cases.py`` cuts drives and compares):
-
-   - the GNSS position and velocity at t are those of the last fix at or before t, held
-     (linear interpolation to t would read the next fix, across an outage the fix after
-     it); the held latitude and height move gravity by < 1e-6 m/s²;
-   - an outage is decided from the time since the last fix (> ``gap_factor`` nominal
-     intervals: no course, no GNSS velocity), not from knowing where the next fix comes;
-   - the course for the heading (step 4) is that of the last fix's velocity until the
-     one-time yaw reset, then that of the velocity propagated from the last usable fix
-     (step 8): a held fix's course lags in turns. Sortie, industrial IMU, seed 2, 600 s,
-     tilt RMS: 2.27 mrad; 4.8 with the held course throughout; 7.7 with the propagated one
-     before the reset too (its specific force is then in a frame of unknown yaw); 2.27 with
-     the course interpolated toward the next fix;
-   - the nominal fix interval and the usual velocity σ are the medians of the first 20
-     fixes (``gnss_reference.nominal_interval``), not of the whole drive;
-   - R5's baro climb rate is a trailing fit (above): it lags the climb, so a few more
-     vertical components are dropped, and the vertical-acceleration error is unchanged;
-   - position-derived velocities (3b) wait for their window, at a small cost in the
-     vertical-acceleration error (both costs measured: docs/real_logs.md, "Vertical attitude
-     reference").
+The seed papers assume that "the INS" hands the vertical channel its specific force resolved
+along the local vertical. Without reading truth, ``vertical_inputs`` provides it from a small
+GNSS-aided attitude and heading reference (AHRS): coarse levelling, gyro integration with the
+shared mechanisation, a Mahony-type PI tilt correction by velocity matching against GNSS
+velocity increments, heading from the GNSS course, robustness rules for bad GNSS velocity,
+an accelerometer-levelling fallback, IMU-gap re-levelling, and causal outputs. Its
+specification, with the steps (1–9) and rules (R1–R5) the code names, its outputs and its
+measured accuracy, is docs/vertical_loops.md, section 1.
 
 Outputs at the IMU epochs (``VerticalInputs``): the AHRS attitude q_nb, the vertical specific
-force f_D = [C_nb f̃_b]_3 (NED down, m/s², ≈ −g at rest), C33 = C_nb[2, 2], the body-z specific
-force F_z = f̃_b,z (so f_D ≈ C33·F_z + C31·F_x + C32·F_y), the latitude, the normal gravity
-g(lat, h_ref), and the vertical Coriolis/transport term, so that the free-inertial vertical
-channel reads
-
-    dv_D/dt = f_D + g(lat, h) + cor_D,   cor_D = −[(2ω_ie + ω_en) × v]_D.
-
-Vertical estimators integrate their own height and should evaluate g at *their* height
-(``gravity_scalar(lat, h)``) — that is where the 2g/R positive feedback of the vertical channel
-comes from; ``gravity`` holds g at the reference (GNSS) height for convenience only. None of
-the outputs uses truth; the accelerometer biases are *not* removed (the vertical estimators
-estimate them).
-
-The expected accuracy (tested in ``tests/integration/test_vertical_input.py``): the tilt
-error is dominated by the horizontal accelerometer bias, |ψ_h| ≈ |b_a,h|/g (a tilted
-platform cancels a horizontal bias: the classical levelling limit), i.e. ≈ 7 mrad for the
-consumer preset (5 mg per axis), ≈ 1.4 mrad for the industrial one. The attitude-induced
-error in f_D is ≈ |ψ_h|·|a_h| + g·|ψ_h|²/2, i.e. millimetres per second squared.
-
-References: Groves, 2nd ed., §5.4-5.6 (mechanisation, coarse levelling eq. 5.101-5.102),
-§12.3 (vector matching); Mahony, Hamel, Pflimlin (2008) IEEE TAC 53(5) (complementary PI
-attitude filter).
+force f_D (NED down, m/s², ≈ −g at rest), C33, F_z, the latitude, the normal gravity at the
+reference height and the vertical Coriolis/transport term: dv_D/dt = f_D + g(lat, h) + cor_D.
 """
 
 from __future__ import annotations

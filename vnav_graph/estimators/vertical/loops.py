@@ -47,7 +47,7 @@ equivalence test). Logging gaps (steps > 5 × the median) are bridged at the med
 with zero vertical acceleration and the baro interpolated across the gap (``bridge_gaps``).
 
 Causality: the loops' answer is their online answer; at each IMU epoch it uses the baro
-samples and the attitude reference (``vertical.inputs``, item 9) up to that epoch. Altitude
+samples and the attitude reference (step 9 of docs/vertical_loops.md §1) up to that epoch. Altitude
 RMSE against truth, hill-drive seeds 0/1/2 and sortie seeds 0/1/2: loop2 23.52/52.35/31.58
 and 5.27/3.23/3.51 m; loop3 3.67/7.58/3.16 and 2.52/8.79/5.62 m. With the baro and the fixes
 interpolated to the epoch (reading the next sample): loop2 23.51/52.36/31.57 and

@@ -76,7 +76,7 @@ GNSS (gate and rejection count work; the altitude is not usable there; docs/real
 
 Causality: the answer is the online answer; the gate's period and σ_gps come from fixes seen
 before the gate opens (above) and the vertical acceleration from the causal attitude
-reference (``vertical.inputs``, item 9). Altitude RMSE against truth, hill-drive seeds
+reference (step 9 of docs/vertical_loops.md §1). Altitude RMSE against truth, hill-drive seeds
 0/1/2: 2.11/16.80/5.94 m; sortie seeds 0/1/2: 6.20/5.31/4.58 m (2.11/16.78/5.96 and
 6.20/5.35/4.58 m with whole-drive medians and fixes interpolated toward the next one). Not
 causal: the state starts at the first fix at or after the first IMU epoch (the observer has

@@ -57,7 +57,7 @@ attitude reference's f_D is wrong by ≈ 1 m/s² on the hill-drive and this filt
 
 Causality: the answer is the online answer; measurements are processed at the first IMU
 epoch at or after their stamp, the inputs come from the causal attitude reference
-(``vertical.inputs``, item 9), the transport-rate term from the last fix's velocity, held
+(step 9 of docs/vertical_loops.md §1), the transport-rate term from the last fix's velocity, held
 (``vekf7_setup.transport_rate2``), and the filter starts from the last fix at or before its
 first epoch (``vekf7_setup.initial_fix``; else the baro there with the bias prior).
 Altitude RMSE, hill-drive seeds 0/1/2: 0.493/0.222/0.178 m; sortie seeds 0/1/2:

@@ -51,7 +51,7 @@ level change inside the 60 s outage) the outage altitude RMSE is 9.4 m against 1
 
 Causality: the answer is the online answer; measurements are processed at the first IMU
 epoch at or after their stamp, the inputs come from the causal attitude reference
-(``vertical.inputs``, item 9) and the filter starts from the last fix at or before its first
+(step 9 of docs/vertical_loops.md §1) and the filter starts from the last fix at or before its first
 epoch (``vekf7_setup.initial_fix``; else the baro there with the slow baro error's σ).
 Altitude RMSE, hill-drive seeds 0/1/2: 0.686/0.450/0.475 m; sortie seeds 0/1/2:
 0.909/0.999/0.799 m (0.686/0.448/0.477 and 0.905/1.001/0.792 m when the inputs are
