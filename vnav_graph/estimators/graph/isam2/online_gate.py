@@ -3,9 +3,9 @@ returns, and the post-solve GNSS gate (``GraphConfig.isam2_gate_s``).
 
 When GNSS returns after at least ``RETURN_GAP_S`` without a fix, the fix pulls the
 dead-reckoned states metres to tens of metres, and one Gauss-Newton step from there leaves
-the online estimate short of the filtering optimum (long-outage seed 0: 11.4 m horizontal
-error at the first fix after the 180 s outage, the forward ekf 0.7 m): that update runs up
-to ``RETURN_ROUNDS`` more relinearise-and-solve rounds (``OnlinePass.solve_rounds``).
+the online estimate short of the filtering optimum (measured in docs/graph.md, "When GNSS
+returns"): that update runs up to ``RETURN_ROUNDS`` more relinearise-and-solve rounds
+(``OnlinePass.solve_rounds``).
 
 The batch's post-solve gate (``problem.post_solve_rejections``) refuses the fixes whose
 whitened residual χ² *at the solution* exceeds the ``1 − (1 − p)²`` quantile, then solves
