@@ -9,8 +9,8 @@ submodule does not load the estimators. Four rooms:
   ``cpp_factors`` (priors, keyframe fixes, IMU factor and the biases' Gauss-Markov link,
   Gauss-Markov chains, IMU-gap factors, the batch's C++ graph), ``interval_factors`` (the
   custom baro/GNSS factors between keyframes, linearised in vectorised numpy, with
-  ``interp``), ``initial_guess``, ``robust``, ``magnetometer`` and ``extend`` (the public
-  extension point: ``GraphBatch(config, extensions=[...])``, guide in
+  ``interp``), ``initial_guess``, ``robust``, ``builtin_sensors`` (the magnetometer) and
+  ``extend`` (the public extension point: ``GraphBatch(config, extensions=[...])``, guide in
   ``docs/extending.md``);
 - ``solver/``: what both estimators share. ``solve`` (Gauss-Newton / Levenberg-Marquardt,
   post-solve GNSS gate), ``layout`` + ``linalg`` (the banded-arrow fast path and selected
@@ -18,8 +18,9 @@ submodule does not load the estimators. Four rooms:
   estimate of a solved graph);
 - ``batch/``: ``GraphBatch``;
 - ``isam2/``: the incremental front end. ``smoother`` (``GraphISAM2``), ``setup``, ``online``
-  (one update per keyframe), ``linear_factors`` + ``relin`` (its interval factors and their
-  relinearisation), ``window``.
+  (one update per keyframe; ``states``, ``online_gate``, ``answers``), ``linear_factors`` +
+  ``relin`` + ``lin_points`` (its interval factors and their relinearisation),
+  ``py_factors``, ``window``, ``causal``, ``final_rounds``, ``final_check``.
 
 Design, measurements and references in ``docs/graph.md``.
 """

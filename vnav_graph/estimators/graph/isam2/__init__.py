@@ -1,2 +1,2 @@
-"""The incremental front end of ``graph-isam2``: the iSAM2 online pass (``online``), its
-relinearised interval factors (``linear_factors``, ``relin``) and window (``window``)."""
+"""The incremental front end of ``graph-isam2``; its modules are listed in
+``vnav_graph.estimators.graph`` and docs/design.md."""
