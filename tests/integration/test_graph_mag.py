@@ -1,4 +1,4 @@
-"""graph-batch / graph-isam2 with the built-in magnetometer (``graph.magnetometer``)."""
+"""graph-batch / graph-isam2 with the built-in magnetometer (``graph.model.builtin_sensors``)."""
 
 from __future__ import annotations
 

@@ -27,7 +27,7 @@ filtering optimum inside a 60 s GNSS outage; with these it stays within ~1 m
 deltas of *old* variables are left stale by it (the newest keyframes sit in the root clique
 and are always exact). Measurements in ``docs/graph.md``.
 
-User extensions (``extend``, the compass of ``magnetometer`` among them): a ``CustomFactor``
+User extensions (``extend``, the compass of ``builtin_sensors`` among them): a ``CustomFactor``
 enters as a ``LinearContainerFactor`` linearised in Python and is relinearised by
 ``py_factors.PyFactorBook`` (iSAM2's C++ would hand each callback a copy of its whole
 ``Values``); each factor enters the update that creates the last keyframe it

@@ -313,7 +313,7 @@ FILTER_YAW_SD_MAX = np.radians(10.0)
 
 def compass_heading(P: Problem, rot: FloatArray) -> bool:
     """With a magnetometer the graph uses (``GraphConfig.use_mag`` and a usable compass,
-    ``graph.magnetometer``), turn the keyframe attitudes ``rot`` (in place) about the down
+    ``graph.model.builtin_sensors``), turn the keyframe attitudes ``rot`` (in place) about the down
     axis so that their heading is the compass's: the azimuth of R_k·z (z the measured field,
     hard iron zero, as the hard-iron prior's mean) equals the field reference's, as in the
     heading factor. The correction δ_k is the circular median of the keyframes' within
