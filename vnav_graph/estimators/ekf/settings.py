@@ -19,7 +19,7 @@ LOSSES = ("none", "huber")
 @dataclass(frozen=True)
 class EkfConfig(SharedSettings):
     """Settings of ``ekf`` / ``ekf-rts`` (SI units); the gates and gap rules are described in
-    the ``ekf.model`` docstring. The fields both families read are ``SharedSettings``'s.
+    docs/ekf.md. The fields both families read are ``SharedSettings``'s.
 
     cov_rate_hz: covariance propagation grid [Hz].
     cov_output_hz: rate of ``Estimate.cov`` [Hz].
