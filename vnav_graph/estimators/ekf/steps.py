@@ -50,8 +50,8 @@ def decay_gm(par, dt, tau_g, tau_a, tau_b, tau_h):
 def grid_predict(p, q, lla, v, par, acc_fn, acc_fb, acc_n, heading_ok, gap, dtg, elapsed,
                  qd_k, noise):
     """Covariance over one grid interval: P ← Φ P Φᵀ + Q_d, with the unknown-heading
-    inflation of tilt and horizontal velocity (``model``'s docstring); the nominal
-    Gauss-Markov states decay alike. Returns (P, F's ingredients, F, Q_d)."""
+    inflation of tilt and horizontal velocity (docs/ekf.md, "Heading before it is known");
+    the nominal Gauss-Markov states decay alike. Returns (P, F's ingredients, F, Q_d)."""
     ing = np.zeros(NING)
     put(ing[0:9], quat_to_dcm(q).copy().reshape(9))
     put(ing[9:12], acc_fn / max(acc_n, 1))
